@@ -1,0 +1,1 @@
+"""Analyses that drive the simulated plant and return plain, inspectable results."""

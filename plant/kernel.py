@@ -1,0 +1,542 @@
+"""The compiled per-tick path of the EHA plant (numba).
+
+Model (thesis Eq. 2.28-2.31, piston-equivalent coordinates), with the effects of
+``effects.*`` switched by flags in the parameter array:
+
+    J_p dv_p/dt = tau_p - d_p v_p - F_cp(v_p) - g(theta) tau_q       pump
+    d tau_q/dt  = k_s(x) (g(theta) v_p - tau_q / d_s - v_c)          leakage + elasticity
+    J_c dv_c/dt = tau_q - d_c v_c - F_seal(v_c) - f_rod + f_ext      piston
+
+``tau_q`` (= k_c p, N) is a state, so Eq. 2.29-2.30 become one rate equation; with a
+constant k_s this is exactly the thesis's model. ``g = 1 + a sin(N theta_rotor + phi)`` is
+the trochoid's displacement ripple; it scales flow and reaction torque alike, so the pump
+still converts power losslessly. ``d_p, d_s, d_c`` scale with oil viscosity mu(T).
+
+The motor is a surface-magnet machine in the dq frame (amplitude-invariant transform):
+
+    L di_d/dt = v_d - R i_d + w_e L i_q
+    L di_q/dt = v_q - R i_q - w_e L i_d - w_e psi
+    torque    = 1.5 p psi i_q                       (motor Nm; times k_c/k_p -> piston N)
+
+fed by an average-value inverter: leg voltage (d - 1/2) V_dc less the dead-time error
+sign(i) t_dead f_pwm V_dc. In ``MODE_CURRENT`` the currents follow their references exactly;
+in ``MODE_FORCE`` tau_p is given directly.
+
+Integration: classic RK4 over ``n_sub`` equal sub-steps per tick, inputs held (the PWM
+average is constant over a carrier period). ``plant.model`` picks ``n_sub`` from the
+stiffest mode so that h * omega stays below 0.5.
+
+Everything here works on flat float64 arrays addressed by :mod:`plant.layout` constants:
+no allocation per tick, no string lookups, no Python objects.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from plant.layout import (
+    LOAD_CART,
+    LOAD_CONROD,
+    LOAD_FIXED,
+    LOAD_FREE,
+    N_STATES,
+    P_C_CART,
+    P_C_ROD,
+    P_COOL_G,
+    P_DC,
+    P_DEAD_CURRENT,
+    P_DEAD_FRAC,
+    P_DP,
+    P_DRIFT_K,
+    P_DRIFT_ON,
+    P_DS,
+    P_DUTY_MAX,
+    P_DUTY_MIN,
+    P_FLUX,
+    P_H_SUB,
+    P_HALF_STROKE,
+    P_HEAT_CAP,
+    P_JC,
+    P_JP,
+    P_K_ROD,
+    P_KC,
+    P_KC_OVER_KP,
+    P_KS_AVG,
+    P_KS_FLUID_GAIN,
+    P_KS_PIPE,
+    P_KSX_ON,
+    P_KT_EQ,
+    P_L,
+    P_LOAD_KIND,
+    P_M_CART,
+    P_N_SUB,
+    P_NOISE_F,
+    P_NOISE_ON,
+    P_NOISE_P,
+    P_NOISE_T,
+    P_PC_EPS,
+    P_PC_FORCE,
+    P_PC_ON,
+    P_POLE_PAIRS,
+    P_PRECHARGE,
+    P_PULS_AMP,
+    P_PULS_ON,
+    P_PULS_ORDER,
+    P_PULS_PHASE,
+    P_Q_MOTOR,
+    P_Q_PISTON,
+    P_Q_PRESSURE,
+    P_Q_STRAIN,
+    P_Q_TEMP,
+    P_QUANT_ON,
+    P_R,
+    P_ROD_TAU,
+    P_SF_COULOMB,
+    P_SF_EPS,
+    P_SF_ON,
+    P_SF_STATIC,
+    P_SF_VS,
+    P_SIDE_V0,
+    P_T_REF,
+    P_TEMP_ON,
+    P_VDC,
+    P_VISC_COEFF,
+    P_X_ANCHOR,
+    S_EDISS,
+    S_EEXT,
+    S_EIN,
+    S_ID,
+    S_IQ,
+    S_THC,
+    S_THP,
+    S_TOIL,
+    S_TQ,
+    S_TROD,
+    S_VC,
+    S_VL,
+    S_VP,
+    S_XL,
+    U_DA,
+    U_DB,
+    U_DC,
+    U_F_EXT,
+    U_ID_REF,
+    U_IQ_REF,
+    U_MODE,
+    U_T_AMB,
+    U_TAU_REF,
+    Y_E_DISS,
+    Y_E_EXT,
+    Y_E_IN,
+    Y_E_STORED,
+    Y_F_ROD,
+    Y_F_STRAIN,
+    Y_IA,
+    Y_IB,
+    Y_IC,
+    Y_ID,
+    Y_IQ,
+    Y_OMEGA_M,
+    Y_P_ACC,
+    Y_P_CYL_A,
+    Y_P_CYL_B,
+    Y_P_PUMP_A,
+    Y_P_PUMP_B,
+    Y_T_OIL,
+    Y_TAU_P,
+    Y_TAU_Q,
+    Y_TEMP,
+    Y_THETA_M,
+    Y_V_PISTON,
+    Y_VP,
+    Y_X_CART,
+    Y_X_PISTON,
+)
+
+TWO_PI_3 = 2.0 * math.pi / 3.0
+SQRT3 = math.sqrt(3.0)
+
+
+@njit(cache=True, inline="always")
+def viscosity_ratio(p, t_oil):
+    """mu(T)/mu(T_ref): 1 when the oil-temperature effect is off."""
+    if p[P_TEMP_ON] > 0.5:
+        return math.exp(-p[P_VISC_COEFF] * (t_oil - p[P_T_REF]))
+    return 1.0
+
+
+@njit(cache=True, inline="always")
+def series_stiffness(p, x_c):
+    """k_s in N/m: Eq. 2.25-2.27 at piston position x_c when ks_position is on."""
+    if p[P_KSX_ON] > 0.5:
+        kc = p[P_KC]
+        v1 = p[P_SIDE_V0] + kc * (p[P_HALF_STROKE] + x_c)
+        v2 = p[P_SIDE_V0] + kc * (p[P_HALF_STROKE] - x_c)
+        k_fluid = p[P_KS_FLUID_GAIN] * (1.0 / v1 + 1.0 / v2)
+        return k_fluid * p[P_KS_PIPE] / (k_fluid + p[P_KS_PIPE])
+    return p[P_KS_AVG]
+
+
+@njit(cache=True, inline="always")
+def seal_friction(p, v):
+    """Rod-seal friction force in N opposing v: Coulomb + Stribeck, tanh-regularised."""
+    if p[P_SF_ON] > 0.5:
+        vs = v / p[P_SF_VS]
+        level = p[P_SF_COULOMB] + (p[P_SF_STATIC] - p[P_SF_COULOMB]) * math.exp(-vs * vs)
+        return level * math.tanh(v / p[P_SF_EPS])
+    return 0.0
+
+
+@njit(cache=True, inline="always")
+def _rod_force(p, x):
+    """Force the rod (or the fixing) takes from the piston, N; compression positive."""
+    kind = p[P_LOAD_KIND]
+    if kind == LOAD_CONROD:
+        return p[P_K_ROD] * (x[S_THC] - p[P_X_ANCHOR]) + p[P_C_ROD] * x[S_VC]
+    if kind == LOAD_CART:
+        return p[P_K_ROD] * (x[S_THC] - x[S_XL]) + p[P_C_ROD] * (x[S_VC] - x[S_VL])
+    return 0.0
+
+
+@njit(cache=True, inline="always")
+def _dead_time_error(p, i):
+    """Leg-voltage error in V from dead time: -sign(i) t_d f_pwm V_dc, faded near i = 0."""
+    s = i / p[P_DEAD_CURRENT]
+    if s > 1.0:
+        s = 1.0
+    elif s < -1.0:
+        s = -1.0
+    return -s * p[P_DEAD_FRAC] * p[P_VDC]
+
+
+@njit(cache=True, inline="always")
+def _clamp_duty(p, d):
+    if d < p[P_DUTY_MIN]:
+        return p[P_DUTY_MIN]
+    if d > p[P_DUTY_MAX]:
+        return p[P_DUTY_MAX]
+    return d
+
+
+@njit(cache=True)
+def derivatives(x, p, u, dx):
+    """Write dx/dt of every integrated state into ``dx`` (see :mod:`plant.layout`)."""
+    r = viscosity_ratio(p, x[S_TOIL])
+    dp = p[P_DP] * r
+    ds = p[P_DS] * r
+    dc = p[P_DC] * r
+    vp = x[S_VP]
+    vc = x[S_VC]
+    tq = x[S_TQ]
+    kc_kp = p[P_KC_OVER_KP]
+    pole_pairs = p[P_POLE_PAIRS]
+    theta_rotor = x[S_THP] * kc_kp
+
+    # --- motor and inverter ---
+    mode = u[U_MODE]
+    p_elec = 0.0
+    p_copper = 0.0
+    if mode == 0.0:
+        i_d = x[S_ID]
+        i_q = x[S_IQ]
+        th = pole_pairs * theta_rotor
+        c = math.cos(th)
+        s = math.sin(th)
+        c2 = math.cos(th - TWO_PI_3)
+        s2 = math.sin(th - TWO_PI_3)
+        i_a = i_d * c - i_q * s
+        i_b = i_d * c2 - i_q * s2
+        i_c = -i_a - i_b
+        vdc = p[P_VDC]
+        v_a = (_clamp_duty(p, u[U_DA]) - 0.5) * vdc + _dead_time_error(p, i_a)
+        v_b = (_clamp_duty(p, u[U_DB]) - 0.5) * vdc + _dead_time_error(p, i_b)
+        v_c = (_clamp_duty(p, u[U_DC]) - 0.5) * vdc + _dead_time_error(p, i_c)
+        # Clarke (amplitude invariant); the common-mode voltage of a star winding drops out.
+        v_alpha = (2.0 * v_a - v_b - v_c) / 3.0
+        v_beta = (v_b - v_c) / SQRT3
+        v_d = v_alpha * c + v_beta * s
+        v_q = -v_alpha * s + v_beta * c
+        w_e = pole_pairs * vp * kc_kp
+        res = p[P_R]
+        ind = p[P_L]
+        dx[S_ID] = (v_d - res * i_d + w_e * ind * i_q) / ind
+        dx[S_IQ] = (v_q - res * i_q - w_e * ind * i_d - w_e * p[P_FLUX]) / ind
+        p_elec = 1.5 * (v_d * i_d + v_q * i_q)
+        p_copper = 1.5 * res * (i_d * i_d + i_q * i_q)
+        tau_p = p[P_KT_EQ] * i_q
+    elif mode == 1.0:
+        dx[S_ID] = 0.0
+        dx[S_IQ] = 0.0
+        tau_p = p[P_KT_EQ] * u[U_IQ_REF]
+    else:
+        dx[S_ID] = 0.0
+        dx[S_IQ] = 0.0
+        tau_p = u[U_TAU_REF]
+
+    # --- pump ---
+    g = 1.0
+    if p[P_PULS_ON] > 0.5:
+        g = 1.0 + p[P_PULS_AMP] * math.sin(p[P_PULS_ORDER] * theta_rotor + p[P_PULS_PHASE])
+    f_cp = 0.0
+    if p[P_PC_ON] > 0.5:
+        f_cp = p[P_PC_FORCE] * math.tanh(vp / p[P_PC_EPS])
+    dx[S_THP] = vp
+    dx[S_VP] = (tau_p - dp * vp - f_cp - g * tq) / p[P_JP]
+
+    # --- leakage damper and series elasticity ---
+    ks = series_stiffness(p, x[S_THC])
+    dx[S_TQ] = ks * (g * vp - tq / ds - vc)
+
+    # --- piston and load ---
+    kind = p[P_LOAD_KIND]
+    f_seal = seal_friction(p, vc)
+    f_ext = u[U_F_EXT]
+    loss_load = 0.0
+    p_ext = 0.0
+    if kind == LOAD_FIXED:
+        dx[S_THC] = 0.0
+        dx[S_VC] = 0.0
+        dx[S_XL] = 0.0
+        dx[S_VL] = 0.0
+    else:
+        f_rod = _rod_force(p, x)
+        dx[S_THC] = vc
+        dx[S_VC] = (tq - dc * vc - f_seal - f_rod + (f_ext if kind == LOAD_FREE else 0.0)) / p[
+            P_JC
+        ]
+        if kind == LOAD_CART:
+            vl = x[S_VL]
+            dx[S_XL] = vl
+            dx[S_VL] = (f_rod + f_ext - p[P_C_CART] * vl) / p[P_M_CART]
+            rel = vc - vl
+            loss_load = p[P_C_ROD] * rel * rel + p[P_C_CART] * vl * vl
+            p_ext = f_ext * vl
+        else:
+            dx[S_XL] = 0.0
+            dx[S_VL] = 0.0
+            if kind == LOAD_CONROD:
+                loss_load = p[P_C_ROD] * vc * vc
+            elif kind == LOAD_FREE:
+                p_ext = f_ext * vc
+
+    # --- energy and heat ---
+    heat_oil = dp * vp * vp + f_cp * vp + tq * tq / ds + dc * vc * vc + f_seal * vc
+    if mode == 0.0:
+        dx[S_EIN] = p_elec
+    else:
+        dx[S_EIN] = tau_p * vp
+    dx[S_EDISS] = heat_oil + loss_load + p_copper
+    dx[S_EEXT] = p_ext
+    t_amb = u[U_T_AMB]
+    if p[P_TEMP_ON] > 0.5:
+        dx[S_TOIL] = (heat_oil - p[P_COOL_G] * (x[S_TOIL] - t_amb)) / p[P_HEAT_CAP]
+    else:
+        dx[S_TOIL] = 0.0
+    dx[S_TROD] = (t_amb - x[S_TROD]) / p[P_ROD_TAU]
+
+
+@njit(cache=True)
+def _end_stops(p, x):
+    """Inelastic end stops at +/- stroke/2: hold the piston, drop its outward velocity."""
+    half = p[P_HALF_STROKE]
+    if x[S_THC] > half:
+        x[S_THC] = half
+        if x[S_VC] > 0.0:
+            x[S_VC] = 0.0
+    elif x[S_THC] < -half:
+        x[S_THC] = -half
+        if x[S_VC] < 0.0:
+            x[S_VC] = 0.0
+
+
+@njit(cache=True)
+def rk4_tick(x, p, u, work):
+    """Advance the states ``x`` by one tick: ``n_sub`` RK4 sub-steps of ``h_sub`` s."""
+    h = p[P_H_SUB]
+    k1 = work[0]
+    k2 = work[1]
+    k3 = work[2]
+    k4 = work[3]
+    xt = work[4]
+    n_sub = int(p[P_N_SUB])
+    fixed = p[P_LOAD_KIND] == LOAD_FIXED
+    for _ in range(n_sub):
+        derivatives(x, p, u, k1)
+        for i in range(N_STATES):
+            xt[i] = x[i] + 0.5 * h * k1[i]
+        derivatives(xt, p, u, k2)
+        for i in range(N_STATES):
+            xt[i] = x[i] + 0.5 * h * k2[i]
+        derivatives(xt, p, u, k3)
+        for i in range(N_STATES):
+            xt[i] = x[i] + h * k3[i]
+        derivatives(xt, p, u, k4)
+        for i in range(N_STATES):
+            x[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
+        if not fixed:
+            _end_stops(p, x)
+
+
+@njit(cache=True, inline="always")
+def _next_uniform(rng):
+    """xorshift64* -> float in (0, 1]. ``rng`` is a uint64 array of length 1."""
+    s = rng[0]
+    s ^= s >> np.uint64(12)
+    s ^= s << np.uint64(25)
+    s ^= s >> np.uint64(27)
+    rng[0] = s
+    r = s * np.uint64(0x2545F4914F6CDD1D)
+    return (float(r >> np.uint64(11)) + 1.0) * (1.0 / 9007199254740992.0)
+
+
+@njit(cache=True, inline="always")
+def _gauss(rng):
+    """Standard normal sample (Box-Muller, one of the pair)."""
+    u1 = _next_uniform(rng)
+    u2 = _next_uniform(rng)
+    return math.sqrt(-2.0 * math.log(u1)) * math.cos(2.0 * math.pi * u2)
+
+
+@njit(cache=True, inline="always")
+def _quantise(v, lsb):
+    return math.floor(v / lsb + 0.5) * lsb
+
+
+@njit(cache=True)
+def stored_energy(x, p, u):
+    """Kinetic + elastic + magnetic energy held by the plant, J."""
+    e = 0.5 * p[P_JP] * x[S_VP] ** 2 + 0.5 * p[P_JC] * x[S_VC] ** 2
+    e += x[S_TQ] ** 2 / (2.0 * series_stiffness(p, x[S_THC]))
+    kind = p[P_LOAD_KIND]
+    if kind == LOAD_CONROD:
+        e += 0.5 * p[P_K_ROD] * (x[S_THC] - p[P_X_ANCHOR]) ** 2
+    elif kind == LOAD_CART:
+        e += 0.5 * p[P_K_ROD] * (x[S_THC] - x[S_XL]) ** 2 + 0.5 * p[P_M_CART] * x[S_VL] ** 2
+    if u[U_MODE] == 0.0:
+        e += 0.75 * p[P_L] * (x[S_ID] ** 2 + x[S_IQ] ** 2)
+    return e
+
+
+@njit(cache=True)
+def outputs(x, p, u, rng, y):
+    """Fill the output row ``y`` from the states: sensors, then truth."""
+    kc = p[P_KC]
+    kc_kp = p[P_KC_OVER_KP]
+    r = viscosity_ratio(p, x[S_TOIL])
+    mode = u[U_MODE]
+    if mode == 1.0:
+        i_q = u[U_IQ_REF]
+        i_d = u[U_ID_REF]
+        tau_p = p[P_KT_EQ] * i_q
+    elif mode == 2.0:
+        tau_p = u[U_TAU_REF]
+        i_q = tau_p / p[P_KT_EQ]
+        i_d = 0.0
+    else:
+        i_q = x[S_IQ]
+        i_d = x[S_ID]
+        tau_p = p[P_KT_EQ] * i_q
+    theta_rotor = x[S_THP] * kc_kp
+    th = p[P_POLE_PAIRS] * theta_rotor
+    i_a = i_d * math.cos(th) - i_q * math.sin(th)
+    i_b = i_d * math.cos(th - TWO_PI_3) - i_q * math.sin(th - TWO_PI_3)
+
+    tq = x[S_TQ]
+    vc = x[S_VC]
+    f_cyl = tq - p[P_DC] * r * vc  # k_c * cylinder differential pressure
+    kind = p[P_LOAD_KIND]
+    if kind == LOAD_FIXED:
+        f_rod = f_cyl
+    else:
+        f_rod = _rod_force(p, x)
+
+    pre = p[P_PRECHARGE]
+    dp_pump = tq / kc
+    dp_cyl = f_cyl / kc
+    # Check valves keep the low side at the accumulator precharge.
+    p_pa = pre + (dp_pump if dp_pump > 0.0 else 0.0)
+    p_pb = pre + (-dp_pump if dp_pump < 0.0 else 0.0)
+    p_ca = pre + (dp_cyl if dp_cyl > 0.0 else 0.0)
+    p_cb = pre + (-dp_cyl if dp_cyl < 0.0 else 0.0)
+    p_acc = pre
+    f_strain = f_rod
+    if p[P_DRIFT_ON] > 0.5:
+        f_strain += p[P_DRIFT_K] * (x[S_TROD] - p[P_T_REF])
+    temp = x[S_TOIL]
+    if p[P_NOISE_ON] > 0.5:
+        sp = p[P_NOISE_P]
+        p_acc += sp * _gauss(rng)
+        p_pa += sp * _gauss(rng)
+        p_pb += sp * _gauss(rng)
+        p_ca += sp * _gauss(rng)
+        p_cb += sp * _gauss(rng)
+        f_strain += p[P_NOISE_F] * _gauss(rng)
+        temp += p[P_NOISE_T] * _gauss(rng)
+    theta_m = theta_rotor
+    x_pis = x[S_THC]
+    if p[P_QUANT_ON] > 0.5:
+        # Encoders floor to their count; converters round to their nearest code.
+        theta_m = math.floor(theta_m / p[P_Q_MOTOR]) * p[P_Q_MOTOR]
+        x_pis = math.floor(x_pis / p[P_Q_PISTON]) * p[P_Q_PISTON]
+        lsb = p[P_Q_PRESSURE]
+        p_acc = _quantise(p_acc, lsb)
+        p_pa = _quantise(p_pa, lsb)
+        p_pb = _quantise(p_pb, lsb)
+        p_ca = _quantise(p_ca, lsb)
+        p_cb = _quantise(p_cb, lsb)
+        f_strain = _quantise(f_strain, p[P_Q_STRAIN])
+        temp = _quantise(temp, p[P_Q_TEMP])
+
+    y[Y_THETA_M] = theta_m
+    y[Y_OMEGA_M] = x[S_VP] * kc_kp
+    y[Y_X_PISTON] = x_pis
+    y[Y_P_ACC] = p_acc
+    y[Y_P_PUMP_A] = p_pa
+    y[Y_P_PUMP_B] = p_pb
+    y[Y_P_CYL_A] = p_ca
+    y[Y_P_CYL_B] = p_cb
+    y[Y_F_STRAIN] = f_strain
+    y[Y_TEMP] = temp
+    y[Y_V_PISTON] = vc
+    y[Y_TAU_P] = tau_p
+    y[Y_TAU_Q] = tq
+    y[Y_F_ROD] = f_rod
+    y[Y_IQ] = i_q
+    y[Y_ID] = i_d
+    y[Y_IA] = i_a
+    y[Y_IB] = i_b
+    y[Y_IC] = -i_a - i_b
+    y[Y_VP] = x[S_VP]
+    y[Y_T_OIL] = x[S_TOIL]
+    y[Y_X_CART] = x[S_XL]
+    y[Y_E_IN] = x[S_EIN]
+    y[Y_E_DISS] = x[S_EDISS]
+    y[Y_E_EXT] = x[S_EEXT]
+    y[Y_E_STORED] = stored_energy(x, p, u)
+
+
+@njit(cache=True)
+def advance(x, p, u, n_ticks, y, rec, row0, every, tick0, rng, work):
+    """Advance ``n_ticks`` ticks with inputs ``u`` held; return the next free record row.
+
+    After each tick the output row ``y`` is refreshed; when ``rec`` has rows, ticks whose
+    index (``tick0`` + k + 1, the tick just reached) is a multiple of ``every`` are copied
+    into ``rec[row]`` for row = ``row0``, ``row0 + 1``, ...
+    """
+    if u[U_MODE] == 1.0:
+        x[S_IQ] = u[U_IQ_REF]
+        x[S_ID] = u[U_ID_REF]
+    row = row0
+    n_rows = rec.shape[0]
+    n_out = y.shape[0]
+    for k in range(n_ticks):
+        rk4_tick(x, p, u, work)
+        outputs(x, p, u, rng, y)
+        if n_rows > 0 and (tick0 + k + 1) % every == 0 and row < n_rows:
+            for j in range(n_out):
+                rec[row, j] = y[j]
+            row += 1
+    return row
