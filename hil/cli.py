@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from hil.tables import table
-from plant.config import ConfigError, load_config, preset_names
+from plant.config import ConfigError, linearised, load_config, preset_names
 
 EXIT_USAGE = 2
 
@@ -182,9 +182,11 @@ def cmd_main(args: argparse.Namespace) -> int:
     if show:
         print("F1: exciting the plant (piston fixed) ...", file=sys.stderr)
     f1 = simulate_bode(cfg, "fixed", freqs)
-    in_band = (freqs >= 1) & (freqs <= 300)
-    ge = float(np.abs(f1.gain_error_db()[in_band]).max())
-    pe = float(np.abs(f1.phase_error_deg()[in_band]).max())
+    f1_lin = simulate_bode(linearised(cfg), "fixed", freqs)
+    ge = float(np.abs(f1.gain_error_db()).max())
+    pe = float(np.abs(f1.phase_error_deg()).max())
+    ge_lin = float(np.abs(f1_lin.gain_error_db()).max())
+    pe_lin = float(np.abs(f1_lin.phase_error_deg()).max())
     f2 = simulate_tn_curve(cfg, 18.0, 17, progress=_progress("F2: T-N sweep", show))
     pk = f2.peak()
     sim_f2 = {
@@ -196,6 +198,8 @@ def cmd_main(args: argparse.Namespace) -> int:
         **info,
         "F1": {"simulated_peak_hz": f1.peak_hz(), "model_peak_hz": f1.peak_hz("analytic"),
                "thesis": THESIS_F1, "max_gain_error_db": ge, "max_phase_error_deg": pe,
+               "linear_simulated_peak_hz": f1_lin.peak_hz(),
+               "linear_max_gain_error_db": ge_lin, "linear_max_phase_error_deg": pe_lin,
                "dc_gain_simulated": float(abs(f1.simulated[0]))},
         "F2": {"simulated": sim_f2, "thesis": THESIS_F2,
                "bands": {k: list(v) for k, v in F2_BANDS.items()},
@@ -215,8 +219,11 @@ def cmd_main(args: argparse.Namespace) -> int:
                 ("DC gain tau_q/tau_p", f"{abs(f1.simulated[0]):.3f}",
                  f"{abs(f1.analytic[0]):.3f}", "d_s/(d_p+d_s)"),
                 ("max |sim - model| 1-300 Hz", f"{ge:.3f} dB / {pe:.2f} deg", "", ""),
+                ("  same, all effects off", f"{ge_lin:.4f} dB / {pe_lin:.3f} deg", "", ""),
             ],
         ),
+        "  With effects on, k_s(x) at mid-stroke (the minimum of Eq. 2.27) sits below the",
+        "  average k_s of the model, which lowers the simulated resonance.",
         "  The ~25 Hz measured resonance is not in the linear model; the thesis attributes",
         "  it to pump-friction nonlinearity (try: eha-hil plant bode -c hydra_nonlinear).",
         "",

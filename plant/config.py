@@ -101,6 +101,12 @@ class Config:
         return Config(data, [*self.sources, source])
 
 
+def linearised(cfg: Config) -> Config:
+    """The same actuator with every effect switched off: the thesis's linear model."""
+    off = {f"effects.{name}.enabled": False for name in cfg.section("effects")}
+    return cfg.with_overrides(off, source="all effects off")
+
+
 def preset_names() -> list[str]:
     """Names of the presets shipped in :mod:`plant.presets`."""
     files = resources.files("plant.presets").iterdir()

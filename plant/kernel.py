@@ -342,14 +342,15 @@ def derivatives(x, p, u, dx):
 def _end_stops(p, x):
     """Inelastic end stops at +/- stroke/2: hold the piston, drop its outward velocity."""
     half = p[P_HALF_STROKE]
+    v = x[S_VC]
+    if (x[S_THC] > half and v > 0.0) or (x[S_THC] < -half and v < 0.0):
+        # The impact's kinetic energy is lost; book it so the energy balance still closes.
+        x[S_EDISS] += 0.5 * p[P_JC] * v * v
+        x[S_VC] = 0.0
     if x[S_THC] > half:
         x[S_THC] = half
-        if x[S_VC] > 0.0:
-            x[S_VC] = 0.0
     elif x[S_THC] < -half:
         x[S_THC] = -half
-        if x[S_VC] < 0.0:
-            x[S_VC] = 0.0
 
 
 @njit(cache=True)

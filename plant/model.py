@@ -143,7 +143,9 @@ def choose_substeps(p: np.ndarray, tick_s: float) -> int:
     # Viscous terms get larger when the oil is cold; allow 40 degC below reference.
     cold = math.exp(p[P_VISC_COEFF] * 40.0) if p[P_TEMP_ON] > 0.5 else 1.0
     omega = math.sqrt(ks_max / p[P_JP])
-    rates = [ks_max / (p[P_DS] / cold), p[P_DP] * cold / p[P_JP], p[P_R] / p[P_L]]
+    # The dead-time error fading over +/- dead_current acts like a resistor at low current.
+    r_dead = p[P_DEAD_FRAC] * p[P_VDC] / p[P_DEAD_CURRENT]
+    rates = [ks_max / (p[P_DS] / cold), p[P_DP] * cold / p[P_JP], (p[P_R] + r_dead) / p[P_L]]
     if p[P_LOAD_KIND] != LOAD_FIXED:
         k_load = p[P_K_ROD] if p[P_LOAD_KIND] in (LOAD_CONROD, LOAD_CART) else 0.0
         omega = max(omega, math.sqrt((ks_max + k_load) / p[P_JC]))
