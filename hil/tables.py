@@ -14,7 +14,7 @@ def _cell(value: object, fmt: str) -> str:
 def table(
     headers: Sequence[str], rows: Sequence[Sequence[object]], fmt: str = ".4g", title: str = ""
 ) -> str:
-    """Render rows under headers; floats use ``fmt``. Returns the text without a newline."""
+    """Render rows under headers; floats use ``fmt``. Returns the text without a final newline."""
     cells = [[_cell(v, fmt) for v in row] for row in rows]
     widths = [len(h) for h in headers]
     for row in cells:
@@ -23,8 +23,13 @@ def table(
     lines = []
     if title:
         lines.append(title)
-    lines.append("  ".join(h.rjust(w) for h, w in zip(headers, widths, strict=True)))
+    def line(items: Sequence[str]) -> str:
+        # The first column names the row: left-aligned; the rest are values: right-aligned.
+        parts = [items[0].ljust(widths[0])]
+        parts += [c.rjust(w) for c, w in zip(items[1:], widths[1:], strict=True)]
+        return "  ".join(parts).rstrip()
+
+    lines.append(line(list(headers)))
     lines.append("  ".join("-" * w for w in widths))
-    for row in cells:
-        lines.append("  ".join(c.rjust(w) for c, w in zip(row, widths, strict=True)))
+    lines.extend(line(row) for row in cells)
     return "\n".join(lines)
