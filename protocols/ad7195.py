@@ -35,7 +35,7 @@ from typing import Any, ClassVar, NamedTuple, TypeVar
 
 import numpy as np
 
-from protocols.errors import CrcError, FrameError, RangeError
+from protocols.errors import CrcError, FrameError, RangeError, finite_number
 
 # --------------------------------------------------------------------------------------
 # Declarative bit registers
@@ -236,14 +236,6 @@ def comms_byte(address: int, read: bool, cread: bool = False) -> int:
 # --------------------------------------------------------------------------------------
 
 
-def _finite(x: float, what: str) -> float:
-    try:
-        v = float(x)
-    except (TypeError, ValueError, OverflowError) as exc:
-        raise RangeError(f"{what}: {x!r} is not a number") from exc
-    if not math.isfinite(v):
-        raise RangeError(f"{what}: {v} is not finite")
-    return v
 
 
 def voltage_to_code(
@@ -255,8 +247,8 @@ def voltage_to_code(
     vref``; rounded to nearest (half up). Returns ``(code, clamped)``: like the part, an input
     beyond the range gives all 0s or all 1s and ``clamped`` (the part's ERR bit) is True.
     """
-    ain = _finite(ain_v, "ain_v")
-    vref = _finite(vref_v, "vref_v")
+    ain = finite_number(ain_v, "ain_v")
+    vref = finite_number(vref_v, "vref_v")
     if vref <= 0 or gain not in GAIN_OF_CODE.values():
         raise RangeError(f"vref {vref} V / gain {gain} invalid")
     ratio = ain * gain / vref
@@ -298,7 +290,7 @@ def force_to_code(force_n: float, full_scale_n: float = DEFAULT_FULL_SCALE_N) ->
     Raises :class:`RangeError` if the force lies outside what the code can carry
     (about -3000 N .. +3000 N minus one LSB at the default scale).
     """
-    f = _finite(force_n, "force_n")
+    f = finite_number(force_n, "force_n")
     x = f * (MIDSCALE / full_scale_n) + MIDSCALE
     if not -0.5 <= x < CODE_MAX + 0.5:
         raise RangeError(f"{f} N is outside +/-{full_scale_n} N")
@@ -309,7 +301,7 @@ def clamp_force_to_code(
     force_n: float, full_scale_n: float = DEFAULT_FULL_SCALE_N
 ) -> tuple[int, bool]:
     """Like :func:`force_to_code` but saturating as the ADC does; returns ``(code, clamped)``."""
-    f = _finite(force_n, "force_n")
+    f = finite_number(force_n, "force_n")
     x = f * (MIDSCALE / full_scale_n) + MIDSCALE
     if x < -0.5:
         return 0, True

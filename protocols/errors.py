@@ -22,3 +22,14 @@ class CrcError(CodecError):
 
 class RangeError(CodecError):
     """A value to encode lies outside what the field can carry."""
+
+
+def finite_number(x: object, what: str) -> float:
+    """``x`` as a finite float, or :class:`RangeError` naming ``what``."""
+    try:
+        v = float(x)  # type: ignore[arg-type]
+    except (TypeError, ValueError, OverflowError) as exc:
+        raise RangeError(f"{what}: {x!r} is not a number") from exc
+    if v != v or v in (float("inf"), float("-inf")):
+        raise RangeError(f"{what}: {v} is not finite")
+    return v

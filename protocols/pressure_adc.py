@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from protocols.errors import FrameError, RangeError
+from protocols.errors import FrameError, RangeError, finite_number
 
 
 class PressureFlag(enum.IntFlag):
@@ -88,29 +88,21 @@ class PressureReading:
         return self.flags == PressureFlag.OK
 
 
-def _finite(x: float, what: str) -> float:
-    try:
-        v = float(x)
-    except (TypeError, ValueError, OverflowError) as exc:
-        raise RangeError(f"{what}: {x!r} is not a number") from exc
-    if not math.isfinite(v):
-        raise RangeError(f"{what}: {v} is not finite")
-    return v
 
 
 def pressure_to_voltage(pressure_pa: float, cfg: PressureAdcConfig = DEFAULT) -> float:
     """Sensor + amplifier output (V) for a gauge pressure (Pa); linear, unclamped."""
-    return cfg.v_at_zero + _finite(pressure_pa, "pressure_pa") / cfg.pa_per_v
+    return cfg.v_at_zero + finite_number(pressure_pa, "pressure_pa") / cfg.pa_per_v
 
 
 def voltage_to_pressure(voltage_v: float, cfg: PressureAdcConfig = DEFAULT) -> float:
     """Gauge pressure (Pa) for a sensor output voltage (V); linear, unclamped."""
-    return (_finite(voltage_v, "voltage_v") - cfg.v_at_zero) * cfg.pa_per_v
+    return (finite_number(voltage_v, "voltage_v") - cfg.v_at_zero) * cfg.pa_per_v
 
 
 def voltage_to_code(voltage_v: float, cfg: PressureAdcConfig = DEFAULT) -> int:
     """ADC code for an input voltage: nearest code, clamped to the ADC range like the part."""
-    x = _finite(voltage_v, "voltage_v") / cfg.lsb_v
+    x = finite_number(voltage_v, "voltage_v") / cfg.lsb_v
     if x < 0.5:
         return 0
     if x >= cfg.code_max - 0.5:
