@@ -3,8 +3,8 @@
 >>> from plant.config import load_config
 >>> plant = Plant(load_config("hydra_linear"))
 >>> plant.set_current(18.0)
->>> plant.advance(2000)        # 0.1 s at 50 us ticks
->>> round(plant.y[Y_TAU_Q])    # pressure force at stall, N
+>>> _ = plant.advance(2000)    # 0.1 s at 50 us ticks
+>>> round(plant.y[L.Y_TAU_Q])    # pressure force at stall, N
 1761
 """
 
@@ -15,96 +15,8 @@ import math
 import numpy as np
 
 from plant import kernel
+from plant import layout as L
 from plant.config import Config
-from plant.layout import (
-    LOAD_CART,
-    LOAD_CONROD,
-    LOAD_FIXED,
-    LOAD_KINDS,
-    MODE_CURRENT,
-    MODE_DUTY,
-    MODE_FORCE,
-    N_INPUTS,
-    N_OUTPUTS,
-    N_PARAMS,
-    N_STATES,
-    OUTPUT_NAMES,
-    P_C_CART,
-    P_C_ROD,
-    P_COOL_G,
-    P_DC,
-    P_DEAD_CURRENT,
-    P_DEAD_FRAC,
-    P_DP,
-    P_DRIFT_K,
-    P_DRIFT_ON,
-    P_DS,
-    P_DUTY_MAX,
-    P_DUTY_MIN,
-    P_FLUX,
-    P_H_SUB,
-    P_HALF_STROKE,
-    P_HEAT_CAP,
-    P_JC,
-    P_JP,
-    P_K_ROD,
-    P_KC,
-    P_KC_OVER_KP,
-    P_KS_AVG,
-    P_KS_FLUID_GAIN,
-    P_KS_PIPE,
-    P_KSX_ON,
-    P_KT_EQ,
-    P_L,
-    P_LOAD_KIND,
-    P_M_CART,
-    P_N_SUB,
-    P_NOISE_F,
-    P_NOISE_ON,
-    P_NOISE_P,
-    P_NOISE_T,
-    P_PC_EPS,
-    P_PC_FORCE,
-    P_PC_ON,
-    P_POLE_PAIRS,
-    P_PRECHARGE,
-    P_PULS_AMP,
-    P_PULS_ON,
-    P_PULS_ORDER,
-    P_PULS_PHASE,
-    P_Q_MOTOR,
-    P_Q_PISTON,
-    P_Q_PRESSURE,
-    P_Q_STRAIN,
-    P_Q_TEMP,
-    P_QUANT_ON,
-    P_R,
-    P_ROD_TAU,
-    P_SF_COULOMB,
-    P_SF_EPS,
-    P_SF_ON,
-    P_SF_STATIC,
-    P_SF_VS,
-    P_SIDE_V0,
-    P_T_REF,
-    P_TEMP_ON,
-    P_VDC,
-    P_VISC_COEFF,
-    P_X_ANCHOR,
-    S_THC,
-    S_TOIL,
-    S_TROD,
-    S_XL,
-    U_DA,
-    U_DB,
-    U_DC,
-    U_F_EXT,
-    U_ID_REF,
-    U_IQ_REF,
-    U_MODE,
-    U_T_AMB,
-    U_TAU_REF,
-)
 
 # Stability margins for the RK4 sub-step h: h*omega for oscillatory modes and h*rate for
 # real (damping) modes. RK4 is stable to about 2.8 on both axes; these keep it accurate.
@@ -122,8 +34,8 @@ def motor_torque_constant(cfg: Config) -> float:
 def stiffness_range(cfg: Config) -> tuple[float, float]:
     """(min, max) of k_s(x) over the stroke by Eq. 2.25-2.27, N/m."""
     p = build_params(cfg, substeps=1)
-    xs = np.linspace(-p[P_HALF_STROKE], p[P_HALF_STROKE], 201)
-    p[P_KSX_ON] = 1.0
+    xs = np.linspace(-p[L.P_HALF_STROKE], p[L.P_HALF_STROKE], 201)
+    p[L.P_KSX_ON] = 1.0
     ks = [kernel.series_stiffness(p, float(x)) for x in xs]
     return min(ks), max(ks)
 
@@ -134,26 +46,30 @@ def _flag(section: dict) -> float:
 
 def choose_substeps(p: np.ndarray, tick_s: float) -> int:
     """RK4 sub-steps per tick so that the stiffest mode stays inside the accuracy margins."""
-    kc = p[P_KC]
-    v0 = p[P_SIDE_V0]
-    ks_max = p[P_KS_AVG]
-    if p[P_KSX_ON] > 0.5:
-        k_end = p[P_KS_FLUID_GAIN] * (1.0 / v0 + 1.0 / (v0 + 2 * kc * p[P_HALF_STROKE]))
-        ks_max = max(ks_max, k_end * p[P_KS_PIPE] / (k_end + p[P_KS_PIPE]))
+    kc = p[L.P_KC]
+    v0 = p[L.P_SIDE_V0]
+    ks_max = p[L.P_KS_AVG]
+    if p[L.P_KSX_ON] > 0.5:
+        k_end = p[L.P_KS_FLUID_GAIN] * (1.0 / v0 + 1.0 / (v0 + 2 * kc * p[L.P_HALF_STROKE]))
+        ks_max = max(ks_max, k_end * p[L.P_KS_PIPE] / (k_end + p[L.P_KS_PIPE]))
     # Viscous terms get larger when the oil is cold; allow 40 degC below reference.
-    cold = math.exp(p[P_VISC_COEFF] * 40.0) if p[P_TEMP_ON] > 0.5 else 1.0
-    omega = math.sqrt(ks_max / p[P_JP])
+    cold = math.exp(p[L.P_VISC_COEFF] * 40.0) if p[L.P_TEMP_ON] > 0.5 else 1.0
+    omega = math.sqrt(ks_max / p[L.P_JP])
     # The dead-time error fading over +/- dead_current acts like a resistor at low current.
-    r_dead = p[P_DEAD_FRAC] * p[P_VDC] / p[P_DEAD_CURRENT]
-    rates = [ks_max / (p[P_DS] / cold), p[P_DP] * cold / p[P_JP], (p[P_R] + r_dead) / p[P_L]]
-    if p[P_LOAD_KIND] != LOAD_FIXED:
-        k_load = p[P_K_ROD] if p[P_LOAD_KIND] in (LOAD_CONROD, LOAD_CART) else 0.0
-        omega = max(omega, math.sqrt((ks_max + k_load) / p[P_JC]))
-        rates.append(p[P_DC] * cold / p[P_JC])
-        if p[P_SF_ON] > 0.5:
-            rates.append(max(p[P_SF_STATIC], p[P_SF_COULOMB]) / (p[P_SF_EPS] * p[P_JC]))
-    if p[P_PC_ON] > 0.5:
-        rates.append(p[P_PC_FORCE] / (p[P_PC_EPS] * p[P_JP]))
+    r_dead = p[L.P_DEAD_FRAC] * p[L.P_VDC] / p[L.P_DEAD_CURRENT]
+    rates = [
+        ks_max / (p[L.P_DS] / cold),
+        p[L.P_DP] * cold / p[L.P_JP],
+        (p[L.P_R] + r_dead) / p[L.P_L],
+    ]
+    if p[L.P_LOAD_KIND] != L.LOAD_FIXED:
+        k_load = p[L.P_K_ROD] if p[L.P_LOAD_KIND] in (L.LOAD_CONROD, L.LOAD_CART) else 0.0
+        omega = max(omega, math.sqrt((ks_max + k_load) / p[L.P_JC]))
+        rates.append(p[L.P_DC] * cold / p[L.P_JC])
+        if p[L.P_SF_ON] > 0.5:
+            rates.append(max(p[L.P_SF_STATIC], p[L.P_SF_COULOMB]) / (p[L.P_SF_EPS] * p[L.P_JC]))
+    if p[L.P_PC_ON] > 0.5:
+        rates.append(p[L.P_PC_FORCE] / (p[L.P_PC_EPS] * p[L.P_JP]))
     n = max(
         1,
         math.ceil(tick_s * omega / _OSC_MARGIN),
@@ -169,87 +85,87 @@ def build_params(cfg: Config, substeps: int | None = None) -> np.ndarray:
     inv = cfg.section("inverter")
     load = cfg.section("load")
     eff = cfg.section("effects")
-    p = np.zeros(N_PARAMS)
+    p = np.zeros(L.N_PARAMS)
     kc = h["kc_m2"]
     kp = h["kp_m3_per_rad"]
-    p[P_JP] = h["jp_kg"]
-    p[P_JC] = h["jc_kg"]
-    p[P_DP] = h["dp_ns_per_m"]
-    p[P_DC] = h["dc_ns_per_m"]
-    p[P_DS] = h["ds_ns_per_m"]
-    p[P_KS_AVG] = h["ks_n_per_m"]
-    p[P_KS_FLUID_GAIN] = h["bulk_modulus_pa"] * kc * kc
-    p[P_SIDE_V0] = h["dead_volume_m3"] + h["pipe_volume_m3"]
-    p[P_KC] = kc
-    p[P_KS_PIPE] = h["ks_pipe_n_per_m"]
-    p[P_HALF_STROKE] = h["stroke_m"] / 2.0
-    p[P_KC_OVER_KP] = kc / kp
-    p[P_PRECHARGE] = h["precharge_pa"]
+    p[L.P_JP] = h["jp_kg"]
+    p[L.P_JC] = h["jc_kg"]
+    p[L.P_DP] = h["dp_ns_per_m"]
+    p[L.P_DC] = h["dc_ns_per_m"]
+    p[L.P_DS] = h["ds_ns_per_m"]
+    p[L.P_KS_AVG] = h["ks_n_per_m"]
+    p[L.P_KS_FLUID_GAIN] = h["bulk_modulus_pa"] * kc * kc
+    p[L.P_SIDE_V0] = h["dead_volume_m3"] + h["pipe_volume_m3"]
+    p[L.P_KC] = kc
+    p[L.P_KS_PIPE] = h["ks_pipe_n_per_m"]
+    p[L.P_HALF_STROKE] = h["stroke_m"] / 2.0
+    p[L.P_KC_OVER_KP] = kc / kp
+    p[L.P_PRECHARGE] = h["precharge_pa"]
 
     kt = motor_torque_constant(cfg)
-    p[P_KT_EQ] = kt * kc / kp
-    p[P_POLE_PAIRS] = m["pole_pairs"]
-    p[P_R] = m["resistance_ohm"]
-    p[P_L] = m["inductance_h"]
-    p[P_FLUX] = kt / (1.5 * m["pole_pairs"])
+    p[L.P_KT_EQ] = kt * kc / kp
+    p[L.P_POLE_PAIRS] = m["pole_pairs"]
+    p[L.P_R] = m["resistance_ohm"]
+    p[L.P_L] = m["inductance_h"]
+    p[L.P_FLUX] = kt / (1.5 * m["pole_pairs"])
 
-    p[P_VDC] = inv["dc_bus_v"]
-    p[P_DEAD_FRAC] = inv["dead_time_s"] * inv["pwm_hz"]
-    p[P_DUTY_MIN] = inv["duty_min"]
-    p[P_DUTY_MAX] = inv["duty_max"]
-    p[P_DEAD_CURRENT] = max(inv["dead_time_current_a"], 1e-6)
+    p[L.P_VDC] = inv["dc_bus_v"]
+    p[L.P_DEAD_FRAC] = inv["dead_time_s"] * inv["pwm_hz"]
+    p[L.P_DUTY_MIN] = inv["duty_min"]
+    p[L.P_DUTY_MAX] = inv["duty_max"]
+    p[L.P_DEAD_CURRENT] = max(inv["dead_time_current_a"], 1e-6)
 
-    p[P_LOAD_KIND] = LOAD_KINDS.index(load["kind"])
-    p[P_K_ROD] = load["conrod_stiffness_n_per_m"]
-    p[P_C_ROD] = load["conrod_damping_ns_per_m"]
-    p[P_M_CART] = load["cart_mass_kg"]
-    p[P_C_CART] = load["cart_damping_ns_per_m"]
-    p[P_X_ANCHOR] = load["x0_m"]
+    p[L.P_LOAD_KIND] = L.LOAD_KINDS.index(load["kind"])
+    p[L.P_K_ROD] = load["conrod_stiffness_n_per_m"]
+    p[L.P_C_ROD] = load["conrod_damping_ns_per_m"]
+    p[L.P_M_CART] = load["cart_mass_kg"]
+    p[L.P_C_CART] = load["cart_damping_ns_per_m"]
+    p[L.P_X_ANCHOR] = load["x0_m"]
 
     e = eff["pulsation"]
-    p[P_PULS_ON] = _flag(e)
-    p[P_PULS_ORDER] = e["order"]
-    p[P_PULS_AMP] = e["amplitude"]
-    p[P_PULS_PHASE] = e["phase_rad"]
+    p[L.P_PULS_ON] = _flag(e)
+    p[L.P_PULS_ORDER] = e["order"]
+    p[L.P_PULS_AMP] = e["amplitude"]
+    p[L.P_PULS_PHASE] = e["phase_rad"]
     e = eff["pump_coulomb"]
-    p[P_PC_ON] = _flag(e)
-    p[P_PC_FORCE] = e["force_n"]
-    p[P_PC_EPS] = e["velocity_eps_m_per_s"]
+    p[L.P_PC_ON] = _flag(e)
+    p[L.P_PC_FORCE] = e["force_n"]
+    p[L.P_PC_EPS] = e["velocity_eps_m_per_s"]
     e = eff["seal_friction"]
-    p[P_SF_ON] = _flag(e)
-    p[P_SF_COULOMB] = e["coulomb_n"]
-    p[P_SF_STATIC] = e["static_n"]
-    p[P_SF_VS] = e["stribeck_velocity_m_per_s"]
-    p[P_SF_EPS] = e["velocity_eps_m_per_s"]
-    p[P_KSX_ON] = _flag(eff["ks_position"])
+    p[L.P_SF_ON] = _flag(e)
+    p[L.P_SF_COULOMB] = e["coulomb_n"]
+    p[L.P_SF_STATIC] = e["static_n"]
+    p[L.P_SF_VS] = e["stribeck_velocity_m_per_s"]
+    p[L.P_SF_EPS] = e["velocity_eps_m_per_s"]
+    p[L.P_KSX_ON] = _flag(eff["ks_position"])
     e = eff["oil_temperature"]
-    p[P_TEMP_ON] = _flag(e)
-    p[P_T_REF] = e["reference_c"]
-    p[P_VISC_COEFF] = e["viscosity_coeff_per_c"]
-    p[P_HEAT_CAP] = e["heat_capacity_j_per_k"]
-    p[P_COOL_G] = e["cooling_w_per_k"]
+    p[L.P_TEMP_ON] = _flag(e)
+    p[L.P_T_REF] = e["reference_c"]
+    p[L.P_VISC_COEFF] = e["viscosity_coeff_per_c"]
+    p[L.P_HEAT_CAP] = e["heat_capacity_j_per_k"]
+    p[L.P_COOL_G] = e["cooling_w_per_k"]
     e = eff["strain_drift"]
-    p[P_DRIFT_ON] = _flag(e)
-    p[P_DRIFT_K] = e["n_per_c"]
-    p[P_ROD_TAU] = e["rod_time_constant_s"]
+    p[L.P_DRIFT_ON] = _flag(e)
+    p[L.P_DRIFT_K] = e["n_per_c"]
+    p[L.P_ROD_TAU] = e["rod_time_constant_s"]
     e = eff["sensor_noise"]
-    p[P_NOISE_ON] = _flag(e)
-    p[P_NOISE_P] = e["pressure_pa"]
-    p[P_NOISE_F] = e["strain_n"]
-    p[P_NOISE_T] = e["temperature_c"]
+    p[L.P_NOISE_ON] = _flag(e)
+    p[L.P_NOISE_P] = e["pressure_pa"]
+    p[L.P_NOISE_F] = e["strain_n"]
+    p[L.P_NOISE_T] = e["temperature_c"]
     e = eff["quantisation"]
-    p[P_QUANT_ON] = _flag(e)
-    p[P_Q_MOTOR] = 2.0 * math.pi / e["motor_counts_per_rev"]
+    p[L.P_QUANT_ON] = _flag(e)
+    p[L.P_Q_MOTOR] = 2.0 * math.pi / e["motor_counts_per_rev"]
     # A zero LSB would divide by zero; treat it as "this channel is not quantised".
-    p[P_Q_PISTON] = e["piston_lsb_m"] or 1e-300
-    p[P_Q_PRESSURE] = e["pressure_lsb_pa"] or 1e-300
-    p[P_Q_STRAIN] = e["strain_lsb_n"] or 1e-300
-    p[P_Q_TEMP] = e["temperature_lsb_c"] or 1e-300
+    p[L.P_Q_PISTON] = e["piston_lsb_m"] or 1e-300
+    p[L.P_Q_PRESSURE] = e["pressure_lsb_pa"] or 1e-300
+    p[L.P_Q_STRAIN] = e["strain_lsb_n"] or 1e-300
+    p[L.P_Q_TEMP] = e["temperature_lsb_c"] or 1e-300
 
     tick_s = cfg.get("sim.tick_ns") * 1e-9
     n_sub = substeps or cfg.get("sim.substeps") or choose_substeps(p, tick_s)
-    p[P_N_SUB] = n_sub
-    p[P_H_SUB] = tick_s / n_sub
+    p[L.P_N_SUB] = n_sub
+    p[L.P_H_SUB] = tick_s / n_sub
     return p
 
 
@@ -266,7 +182,7 @@ class Plant:
     """Fixed-step EHA plant: motor, inverter, pump, hydraulics, cylinder, load, sensors.
 
     Inputs are held over each tick; ``y`` holds the outputs after the latest tick, indexed
-    by :mod:`plant.layout` ``Y_*`` constants (names in ``OUTPUT_NAMES``).
+    by :mod:`plant.layout` ``Y_*`` constants (names in ``L.OUTPUT_NAMES``).
     """
 
     def __init__(self, cfg: Config, substeps: int | None = None) -> None:
@@ -274,27 +190,27 @@ class Plant:
         self.params = build_params(cfg, substeps)
         self.tick_ns: int = cfg.get("sim.tick_ns")
         self.tick_s = self.tick_ns * 1e-9
-        self.x = np.zeros(N_STATES)
+        self.x = np.zeros(L.N_STATES)
         x0 = cfg.get("load.x0_m")
-        self.x[S_THC] = x0
-        self.x[S_XL] = x0
-        self.x[S_TOIL] = cfg.get("effects.oil_temperature.initial_c")
+        self.x[L.S_THC] = x0
+        self.x[L.S_XL] = x0
+        self.x[L.S_TOIL] = cfg.get("effects.oil_temperature.initial_c")
         ambient = cfg.get("effects.oil_temperature.ambient_c")
-        self.x[S_TROD] = ambient
-        self.u = np.zeros(N_INPUTS)
-        self.u[U_MODE] = MODE_CURRENT
-        self.u[U_T_AMB] = ambient
-        self.y = np.zeros(N_OUTPUTS)
+        self.x[L.S_TROD] = ambient
+        self.u = np.zeros(L.N_INPUTS)
+        self.u[L.U_MODE] = L.MODE_CURRENT
+        self.u[L.U_T_AMB] = ambient
+        self.y = np.zeros(L.N_OUTPUTS)
         self.rng = np.array([_splitmix64(cfg.get("sim.seed"))], dtype=np.uint64)
-        self._work = np.zeros((5, N_STATES))
-        self._no_rec = np.zeros((0, N_OUTPUTS))
+        self._work = np.zeros((5, L.N_STATES))
+        self._no_rec = np.zeros((0, L.N_OUTPUTS))
         self.tick = 0
         kernel.outputs(self.x, self.params, self.u, self.rng, self.y)
 
     @property
     def substeps(self) -> int:
         """RK4 sub-steps per tick in use."""
-        return int(self.params[P_N_SUB])
+        return int(self.params[L.P_N_SUB])
 
     @property
     def time_s(self) -> float:
@@ -305,30 +221,30 @@ class Plant:
     def set_duty(self, duty_a: float, duty_b: float, duty_c: float) -> None:
         """Drive the inverter with phase duty cycles 0..1 (average over a PWM period)."""
         u = self.u
-        u[U_MODE] = MODE_DUTY
-        u[U_DA] = duty_a
-        u[U_DB] = duty_b
-        u[U_DC] = duty_c
+        u[L.U_MODE] = L.MODE_DUTY
+        u[L.U_DA] = duty_a
+        u[L.U_DB] = duty_b
+        u[L.U_DC] = duty_c
 
     def set_current(self, iq_a: float, id_a: float = 0.0) -> None:
         """Ideal current source: the dq currents follow these values exactly, A."""
         u = self.u
-        u[U_MODE] = MODE_CURRENT
-        u[U_IQ_REF] = iq_a
-        u[U_ID_REF] = id_a
+        u[L.U_MODE] = L.MODE_CURRENT
+        u[L.U_IQ_REF] = iq_a
+        u[L.U_ID_REF] = id_a
 
     def set_force(self, tau_p_n: float) -> None:
         """Ideal pump force input tau_p (piston-equivalent), N."""
-        self.u[U_MODE] = MODE_FORCE
-        self.u[U_TAU_REF] = tau_p_n
+        self.u[L.U_MODE] = L.MODE_FORCE
+        self.u[L.U_TAU_REF] = tau_p_n
 
     def set_external_force(self, f_n: float) -> None:
         """External force on the load body (free piston or cart), +x, N."""
-        self.u[U_F_EXT] = f_n
+        self.u[L.U_F_EXT] = f_n
 
     def set_ambient(self, t_c: float) -> None:
         """Ambient / coolant temperature, degC."""
-        self.u[U_T_AMB] = t_c
+        self.u[L.U_T_AMB] = t_c
 
     # --- stepping -----------------------------------------------------------------------
     def advance(
@@ -348,7 +264,7 @@ class Plant:
 
     def output(self, name: str) -> float:
         """Latest value of an output by name (convenience; not for per-tick use)."""
-        return float(self.y[OUTPUT_NAMES.index(name)])
+        return float(self.y[L.OUTPUT_NAMES.index(name)])
 
 
 __all__ = ["Plant", "build_params", "choose_substeps", "motor_torque_constant"]
