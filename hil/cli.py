@@ -286,8 +286,11 @@ def cmd_bench_codecs(args: argparse.Namespace) -> int:
             elapsed = time.perf_counter() - t0
             n = min(n * 2, 10_000_000)
         fps = frames / elapsed
-        ok = "ok" if fps >= case.target_fps else "BELOW"
-        rows.append((case.name, case.kind, f"{fps:,.0f}", f"{case.target_fps:,.0f}", ok))
+        if case.target_fps:
+            target, ok = f"{case.target_fps:,.0f}", "ok" if fps >= case.target_fps else "BELOW"
+        else:
+            target, ok = "-", ""
+        rows.append((case.name, case.kind, f"{fps:,.0f}", target, ok))
         data.append({"name": case.name, "kind": case.kind, "frames_per_s": fps,
                      "target_frames_per_s": case.target_fps})
         if not args.json:

@@ -59,6 +59,14 @@ def test_bench_plant(capsys):
     assert all(r["real_time_factor"] > 0 for r in data["results"])
 
 
+def test_bench_codecs_covers_every_codec(capsys):
+    code, out, _ = run(capsys, "bench", "codecs", "--seconds", "0.02", "--json")
+    names = " ".join(r["name"] for r in json.loads(out)["results"]).lower()
+    for codec in ("ssi", "biss", "lvds", "ad7195", "pressure", "ethercat"):
+        assert codec in names
+    assert code == 0
+
+
 def test_config_show_and_presets(capsys):
     code, out, _ = run(capsys, "config", "show", "--set", "load.kind=cart")
     assert code == 0 and 'kind = "cart"' in out
