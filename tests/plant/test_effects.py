@@ -74,14 +74,13 @@ def test_pulsation_order_is_configurable(default_cfg, on):
 def test_pump_coulomb_friction_offsets_the_force_speed_line(default_cfg, on):
     """Piston fixed: pump force vs pump speed is a line whose intercept is the Coulomb force."""
     cfg = _with(default_cfg, "pump_coulomb", on)
-    speeds, friction = [], []
+    friction = []
     for iq in (6.0, 12.0):
         plant = Plant(cfg)
         plant.set_current(iq)
         plant.advance(3000)
         vp = plant.y[Y_VP]
         # Pump-side balance at steady state: tau_p = d_p v_p + F_c + tau_q.
-        speeds.append(vp)
         dp = cfg.get("hydraulics.dp_ns_per_m")
         friction.append(plant.y[Y_TAU_P] - plant.y[Y_TAU_Q] - dp * vp)
     coulomb = cfg.get("effects.pump_coulomb.force_n")
