@@ -20,7 +20,8 @@ The motor is a surface-magnet machine in the dq frame (amplitude-invariant trans
 
 fed by an average-value inverter: leg voltage (d - 1/2) V_dc less the dead-time error
 sign(i) t_dead f_pwm V_dc. In ``MODE_CURRENT`` the currents follow their references exactly;
-in ``MODE_FORCE`` tau_p is given directly.
+in ``MODE_FORCE`` tau_p is given directly; in ``MODE_OFF`` the gates are open and the
+currents are zero.
 
 Integration: classic RK4 over ``n_sub`` equal sub-steps per tick, inputs held (the PWM
 average is constant over a carrier period). ``plant.model`` picks ``n_sub`` from the
@@ -271,6 +272,12 @@ def derivatives(x, p, u, dx):
         dx[S_ID] = 0.0
         dx[S_IQ] = 0.0
         tau_p = p[P_KT_EQ] * u[U_IQ_REF]
+    elif mode == 3.0:
+        # Gates off: the winding current has already decayed through the diodes (see
+        # MODE_OFF in plant.layout), so there is no torque.
+        dx[S_ID] = 0.0
+        dx[S_IQ] = 0.0
+        tau_p = 0.0
     else:
         dx[S_ID] = 0.0
         dx[S_IQ] = 0.0
@@ -519,6 +526,13 @@ def outputs(x, p, u, rng, y):
     y[Y_E_STORED] = stored_energy(x, p, u)
 
 
+@njit(cache=True, inline="always")
+def gates_off(x):
+    """Enter MODE_OFF: the phase currents are zero from here on."""
+    x[S_ID] = 0.0
+    x[S_IQ] = 0.0
+
+
 @njit(cache=True)
 def advance(x, p, u, n_ticks, y, rec, row0, every, tick0, rng, work):
     """Advance ``n_ticks`` ticks with inputs ``u`` held; return the next free record row.
@@ -530,6 +544,8 @@ def advance(x, p, u, n_ticks, y, rec, row0, every, tick0, rng, work):
     if u[U_MODE] == 1.0:
         x[S_IQ] = u[U_IQ_REF]
         x[S_ID] = u[U_ID_REF]
+    elif u[U_MODE] == 3.0:
+        gates_off(x)
     row = row0
     n_rows = rec.shape[0]
     n_out = y.shape[0]

@@ -67,7 +67,7 @@ N_STATES = len(STATE_NAMES)
 
 # --- inputs (U_*), held over a tick -------------------------------------------------------
 INPUT_NAMES = (
-    "mode",           # MODE_DUTY, MODE_CURRENT or MODE_FORCE
+    "mode",           # MODE_DUTY, MODE_CURRENT, MODE_FORCE or MODE_OFF
     "duty_a", "duty_b", "duty_c",  # phase duty cycles 0..1 (MODE_DUTY)
     "iq_ref_a", "id_ref_a",        # ideal currents (MODE_CURRENT)
     "tau_p_ref_n",    # ideal pump force, piston-equivalent N (MODE_FORCE)
@@ -78,6 +78,12 @@ INPUT_NAMES = (
     len(INPUT_NAMES))
 N_INPUTS = len(INPUT_NAMES)
 MODE_DUTY, MODE_CURRENT, MODE_FORCE = 0.0, 1.0, 2.0
+#: All six gates open (driver board tripped or disabled). The winding current then flows
+#: back to the bus through the free-wheeling diodes against about V_dc, so it dies within
+#: L i / V_dc (40 uH * 18 A / 48 V = 15 us), inside one 50 us tick: the model sets it to
+#: zero at once. Not modelled: the diode-rectifier regime, where a back-EMF above V_dc
+#: (line-line) drives current into the bus; at 48 V that needs > 0.35 m/s of piston speed.
+MODE_OFF = 3.0
 
 # --- outputs (Y_*), one row per tick --------------------------------------------------------
 OUTPUT_NAMES = (

@@ -233,6 +233,10 @@ class Plant:
         u[L.U_IQ_REF] = iq_a
         u[L.U_ID_REF] = id_a
 
+    def set_gates_off(self) -> None:
+        """Open all inverter gates: no current, no motor torque (``MODE_OFF``)."""
+        self.u[L.U_MODE] = L.MODE_OFF
+
     def set_force(self, tau_p_n: float) -> None:
         """Ideal pump force input tau_p (piston-equivalent), N."""
         self.u[L.U_MODE] = L.MODE_FORCE
