@@ -266,6 +266,60 @@ def cmd_bench_plant(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_bench_fpga(args: argparse.Namespace) -> int:
+    from hil.bench import bench_fpga
+
+    if not 0 < args.seconds <= 600:
+        raise UsageError("--seconds: need 0 < seconds <= 600")
+    if not 0 < args.bit_seconds <= 60:
+        raise UsageError("--bit-seconds: need 0 < seconds <= 60")
+    cfg = _config(args)
+    results = [bench_fpga(cfg, args.seconds, bit_level=False)]
+    if not args.json:
+        print("value level done; bit level ...", file=sys.stderr)
+    results.append(bench_fpga(cfg, args.bit_seconds, bit_level=True))
+    rows = [(r.mode, r.simulated_s, r.wall_s, r.real_time_factor, r.ticks_per_s)
+            for r in results]
+    text = table(["sensor and link path", "simulated [s]", "wall [s]", "real-time factor",
+                  "ticks/s"], rows, fmt=".3g",
+                 title=f"plant + driver board + LVDS link, {cfg.sources[-1]}, 20 kHz, MCU-rate "
+                 "task writing iq_ref (target >= 5x real time, value level)")
+    data = {"config": cfg.sources, "results": [
+        {"path": r.mode, "simulated_s": r.simulated_s, "wall_s": r.wall_s,
+         "real_time_factor": r.real_time_factor, "ticks_per_s": r.ticks_per_s}
+        for r in results]}
+    _emit(args, text, data)
+    return 0
+
+
+# --- run -------------------------------------------------------------------------------------
+def cmd_run(args: argparse.Namespace) -> int:
+    from hil import scenarios
+
+    try:
+        scenario = scenarios.get(args.scenario)
+    except KeyError as exc:
+        raise UsageError(str(exc.args[0])) from None
+    _check_plot_path(args.plot)
+    cfg = _config(args)
+    res = scenario.run(cfg, _progress(scenario.name, not args.json))
+    rows = [(m.name, m.value, m.unit, m.requirement,
+             "" if m.ok is None else ("ok" if m.ok else "MISSED")) for m in res.metrics]
+    text = table(["metric", "value", "unit", "requirement", ""], rows, fmt=".4g",
+                 title=f"{res.name}: {res.title} ({cfg.sources[-1]})")
+    if res.notes:
+        text += "\n" + "\n".join(f"note: {n}" for n in res.notes)
+    if args.plot and res.plot:
+        res.plot(res, Path(args.plot))
+        text += f"\nplot written to {args.plot}"
+    data = {"scenario": res.name, "title": res.title, "config": cfg.sources, "ok": res.ok,
+            "metrics": [{"name": m.name, "value": m.value, "unit": m.unit,
+                         "requirement": m.requirement, "ok": m.ok} for m in res.metrics],
+            "notes": res.notes}
+    _emit(args, text, data)
+    return 0 if res.ok else 1
+
+
 def cmd_bench_codecs(args: argparse.Namespace) -> int:
     import time
 
@@ -383,11 +437,28 @@ def build_parser() -> argparse.ArgumentParser:
                         help="real-time factor of the plant alone, default effects on")
     p.add_argument("--seconds", type=float, default=5.0, help="simulated seconds (default 5)")
     p.set_defaults(func=cmd_bench_plant)
+    p = bsub.add_parser("fpga", parents=[_common(plot=False)],
+                        help="real-time factor of plant + driver board + LVDS link")
+    p.add_argument("--seconds", type=float, default=2.0,
+                   help="simulated seconds, value-level path (default 2)")
+    p.add_argument("--bit-seconds", type=float, default=0.05,
+                   help="simulated seconds, bit-level path (default 0.05)")
+    p.set_defaults(func=cmd_bench_fpga)
     p = bsub.add_parser("codecs", parents=[_common(plot=False)],
                         help="encode+decode throughput of every protocol codec")
     p.add_argument("--seconds", type=float, default=0.5,
                    help="wall seconds per codec (default 0.5)")
     p.set_defaults(func=cmd_bench_codecs)
+
+    from hil.scenarios import SCENARIOS, names
+
+    scen = names()
+    p = sub.add_parser("run", parents=[_common()],
+                       help="run a scenario on the simulated stack (" + ", ".join(scen) + ")",
+                       epilog="Scenarios: " + "; ".join(
+                           f"{n}: {SCENARIOS[n].summary}" for n in scen))
+    p.add_argument("scenario", metavar="SCENARIO", help="scenario name")
+    p.set_defaults(func=cmd_run)
 
     cfgp = sub.add_parser("config", help="inspect configurations")
     csub = cfgp.add_subparsers(dest="config_command", metavar="ACTION", required=True)

@@ -28,6 +28,8 @@ SIGNED_KEYS = frozenset(
         "effects.oil_temperature.reference_c",
         "effects.oil_temperature.initial_c",
         "effects.oil_temperature.ambient_c",
+        "sensors.ssi_mount_rad",
+        "sensors.hall_offset_rad",
     }
 )
 
@@ -61,6 +63,17 @@ POSITIVE_KEYS = frozenset(
         "effects.oil_temperature.heat_capacity_j_per_k",
         "effects.strain_drift.rod_time_constant_s",
         "effects.quantisation.motor_counts_per_rev",
+        "fpga.clock_hz",
+        "fpga.current_full_scale_a",
+        "fpga.watchdog_s",
+        "fpga.speed_window_ticks",
+        "fpga.lvds_bit_rate_hz",
+        "sensors.ssi_bits",
+        "sensors.abi_counts_per_rev",
+        "sensors.biss_bits",
+        "sensors.strain_full_scale_n",
+        "sensors.strain_odr_hz",
+        "sensors.temperature_v_per_c",
     }
 )
 
@@ -196,6 +209,18 @@ def _check_consistency(data: dict[str, Any], where: str) -> None:
         raise ConfigError(f"{where}: inverter.duty_min/duty_max: need 0 <= min < max <= 1")
     if inv["dead_time_s"] * inv["pwm_hz"] >= 0.5:
         raise ConfigError(f"{where}: inverter.dead_time_s: longer than half a PWM period")
+    fpga = data["fpga"]
+    window = fpga["speed_window_ticks"]
+    if window & (window - 1) or window > 256:
+        raise ConfigError(f"{where}: fpga.speed_window_ticks: need a power of two <= 256")
+    sens = data["sensors"]
+    if not 1 <= sens["ssi_bits"] <= 16:
+        raise ConfigError(f"{where}: sensors.ssi_bits: need 1..16")
+    if sens["biss_bits"] not in (18, 26, 32, 36):
+        raise ConfigError(f"{where}: sensors.biss_bits: need 18, 26, 32 or 36")
+    if sens["biss_zero_count"] >= 1 << sens["biss_bits"]:
+        raise ConfigError(f"{where}: sensors.biss_zero_count: beyond the {sens['biss_bits']}"
+                          "-bit scale")
     half = data["hydraulics"]["stroke_m"] / 2
     if abs(data["load"]["x0_m"]) > half:
         raise ConfigError(f"{where}: load.x0_m: outside the stroke (+/- {half} m)")

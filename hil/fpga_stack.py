@@ -1,0 +1,168 @@
+"""Plant + driver board + LVDS link + the MCU side's link memory, stepped together.
+
+:class:`FpgaStack` looks like a :class:`plant.model.Plant` to the scheduler (``advance``,
+``y``, ``tick``, ``tick_ns``), so tasks at lower rates (an MCU model, a scenario's
+reference generator) run between its compiled stretches and talk to the board only through
+``stack.mcu`` (the MCU-side memories), as the real MCU does.
+
+Per tick t (plant integrated to t): sensor chips digitise the plant outputs -> downstream
+link words of the tick reach the board -> the board's control tick -> upstream words ->
+the compare counts (or gates off) drive the inverter over [t, t+1]. The inverter is the
+plant's average model: duty = count / top; sampling at the carrier's centre sees the
+average current, which is what the average model gives.
+
+``bit_level=True`` runs the same per tick in Python with the sensor links and the LVDS
+words as real bits (:mod:`hil.sensor_lines`, :mod:`firmware_model.fpga.masters`,
+:class:`hil.lvds_link.BitLevelLink`); it is ~100x slower and gives identical words.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from firmware_model.fpga import layout as B
+from firmware_model.fpga.board import control_tick
+from firmware_model.fpga.driver_board import DriverBoard, LinkMemory
+from hil import lvds_link as LK
+from hil.sensor_chips import chip_params, digitise
+from plant import kernel
+from plant import layout as L
+from plant.config import Config
+from plant.model import Plant
+
+
+@njit(cache=True)
+def advance_stack(n_ticks, x, p, u, y, rec, row0, every, tick0, rng, work,
+                  k, raw, c, st, down, up, mdown, mup, lk):
+    """``n_ticks`` ticks of the whole stack at value level; returns the next record row."""
+    row = row0
+    n_rows = rec.shape[0]
+    n_out = y.shape[0]
+    inv_top = 1.0 / c[B.C_PWM_TOP]
+    for j in range(n_ticks):
+        t = tick0 + j
+        digitise(y, k, t, raw)
+        LK.sweep_down(lk, mdown, st, down)
+        on = control_tick(c, st, down, up, raw)
+        LK.sweep_up(lk, up, mup)
+        if on != 0:
+            u[L.U_MODE] = L.MODE_DUTY
+            u[L.U_DA] = st[B.F_DUTY_A] * inv_top
+            u[L.U_DB] = st[B.F_DUTY_B] * inv_top
+            u[L.U_DC] = st[B.F_DUTY_C] * inv_top
+        else:
+            if u[L.U_MODE] != L.MODE_OFF:
+                u[L.U_MODE] = L.MODE_OFF
+                kernel.gates_off(x)
+        kernel.rk4_tick(x, p, u, work)
+        kernel.outputs(x, p, u, rng, y)
+        if n_rows > 0 and (t + 1) % every == 0 and row < n_rows:
+            for i in range(n_out):
+                rec[row, i] = y[i]
+            row += 1
+    return row
+
+
+class FpgaStack:
+    """One actuator below the MCU: plant, sensor chips, driver board, LVDS link."""
+
+    def __init__(self, cfg: Config, bit_level: bool = False, substeps: int | None = None
+                 ) -> None:
+        self.config = cfg
+        self.plant = Plant(cfg, substeps)
+        self.plant.set_gates_off()
+        self.board = DriverBoard(cfg)
+        self.mcu = LinkMemory(cfg)
+        self.link = LK.link_state(cfg)
+        self.chips = chip_params(cfg)
+        self.raw = np.zeros(B.N_RAW, dtype=np.int64)
+        self.tick_ns = self.plant.tick_ns
+        self.tick_s = self.plant.tick_s
+        self.bit_level = bit_level
+        self._no_rec = np.zeros((0, L.N_OUTPUTS))
+        self._bits = None
+        if bit_level:
+            from firmware_model.fpga.masters import BitLevelMasters
+
+            from hil.sensor_lines import SensorLines
+
+            self._bits = (SensorLines(cfg), BitLevelMasters(cfg), LK.BitLevelLink())
+
+    # --- Plant-like interface for the scheduler ---------------------------------------------
+    @property
+    def y(self) -> np.ndarray:
+        return self.plant.y
+
+    @property
+    def tick(self) -> int:
+        return self.plant.tick
+
+    @property
+    def time_s(self) -> float:
+        return self.plant.time_s
+
+    def advance(self, n_ticks: int, rec: np.ndarray | None = None, row0: int = 0,
+                every: int = 1) -> int:
+        """Advance the stack ``n_ticks`` ticks; record plant outputs like Plant.advance."""
+        rows = self._no_rec if rec is None else rec
+        pl = self.plant
+        bd = self.board
+        if self._bits is None:
+            row = advance_stack(n_ticks, pl.x, pl.params, pl.u, pl.y, rows, row0, every,
+                                pl.tick, pl.rng, pl._work, self.chips, self.raw,
+                                bd.params, bd.state, bd.down, bd.up, self.mcu.down,
+                                self.mcu.up, self.link)
+            pl.tick += n_ticks
+            return row
+        return self._advance_bits(n_ticks, rows, row0, every)
+
+    def _advance_bits(self, n_ticks: int, rows: np.ndarray, row0: int, every: int) -> int:
+        lines, masters, link = self._bits
+        pl = self.plant
+        bd = self.board
+        inv_top = 1.0 / bd.pwm_top
+        row = row0
+        for _ in range(n_ticks):
+            t = pl.tick
+            lines.update(pl.y, t)
+            masters.read(lines, t, self.raw)
+            link.sweep_down(self.link, self.mcu.down, bd.state, bd.down)
+            on = bd.tick(self.raw)
+            link.sweep_up(self.link, bd.up, self.mcu.up)
+            if on:
+                a, b, c = bd.duty_counts()
+                pl.set_duty(a * inv_top, b * inv_top, c * inv_top)
+            else:
+                pl.set_gates_off()
+            row = pl.advance(1, rows, row, every)
+        return row
+
+    # --- fault injection on the link --------------------------------------------------------
+    def link_fault(self, direction: str = "down", stopped: bool | None = None,
+                   corrupt_every: int | None = None) -> None:
+        """Stop a direction of the link or corrupt every N-th word (1 = all, 0 = none)."""
+        if direction not in ("down", "up"):
+            raise ValueError(f"link direction {direction!r}: expected 'down' or 'up'")
+        i_stop, i_every = ((LK.LK_DOWN_STOPPED, LK.LK_DOWN_CORRUPT) if direction == "down"
+                           else (LK.LK_UP_STOPPED, LK.LK_UP_CORRUPT))
+        if stopped is not None:
+            self.link[i_stop] = int(stopped)
+        if corrupt_every is not None:
+            if corrupt_every < 0:
+                raise ValueError("corrupt_every must be >= 0")
+            self.link[i_every] = corrupt_every
+
+    # --- the boot sequence the PC and MCU perform ---------------------------------------------
+    def boot(self, mode: int = B.MODE_CURRENT, settle_ticks: int = 40) -> None:
+        """Send the calibrated angle offset, select ``mode``, enable, and run until the board
+        reports ENABLED; RuntimeError (with the status bits) if it refuses."""
+        self.mcu.write("angle_offset", self.board.calibrated_offset)
+        self.mcu.write("mode", mode)
+        self.mcu.write("control", B.CTRL_ENABLE)
+        self.advance(settle_ticks)
+        if "ENABLED" not in self.mcu.status():
+            raise RuntimeError(f"driver board did not enable: {sorted(self.mcu.status())}")
+
+
+__all__ = ["FpgaStack", "advance_stack"]

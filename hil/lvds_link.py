@@ -1,0 +1,172 @@
+"""The LVDS link between the MCU board and one driver board: the word-by-word sweep of the
+two shared memories, its timing, and fault injection.
+
+Both ends send their memory round-robin, one 45-bit word (start | address | data | CRC)
+after the other, without gaps (thesis 6.3.1). At ``lvds_bit_rate_hz`` = 10 MHz one word
+takes 4.5 us: 11.1 words per 50 us tick, so a sweep of the 16-word downstream memory takes
+72 us and of the 32-word upstream memory 144 us. Bits are accounted exactly with an integer
+accumulator; a word counts as received in the tick in which its last bit arrives.
+
+Order inside a tick (``hil.fpga_stack``): downstream words of the tick reach the driver's
+memory, the driver computes, then the upstream words of the tick carry its fresh values.
+
+Value level: words travel as (address, data) with a CRC verdict decided by the fault
+settings. Bit level (:class:`BitLevelLink`): words are encoded by :mod:`protocols.lvds`,
+corrupted bits are flipped on the wire and an :class:`~protocols.lvds.LvdsStreamDecoder`
+recovers them, as the receiving FPGA's deserialiser does.
+
+Fault settings per direction (``LK_*``): ``stopped`` (no bits at all: cable pulled),
+``corrupt_every`` N (every N-th word has one bit flipped; 1 = all words, 0 = none).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from firmware_model.fpga import layout as B
+from firmware_model.fpga.board import receive_word
+from plant.config import Config
+from protocols import lvds
+
+LINK_NAMES = (
+    "bits_num",        # bit-rate * tick_ns: bits per tick, times 1e9
+    "down_acc", "down_ptr", "down_stopped", "down_corrupt_every", "down_phase",
+    "up_acc", "up_ptr", "up_stopped", "up_corrupt_every", "up_phase",
+    "down_words", "up_words", "master_crc_failures",
+)
+(LK_BITS_NUM, LK_DOWN_ACC, LK_DOWN_PTR, LK_DOWN_STOPPED, LK_DOWN_CORRUPT, LK_DOWN_PHASE,
+ LK_UP_ACC, LK_UP_PTR, LK_UP_STOPPED, LK_UP_CORRUPT, LK_UP_PHASE, LK_DOWN_WORDS, LK_UP_WORDS,
+ LK_MASTER_CRC) = range(len(LINK_NAMES))
+N_LINK = len(LINK_NAMES)
+WORD_BITS = lvds.WORD_BITS
+_WORD_DEN = WORD_BITS * 1_000_000_000
+
+
+def link_state(cfg: Config) -> np.ndarray:
+    """A fresh link state: both sweeps at address 0, no faults."""
+    lk = np.zeros(N_LINK, dtype=np.int64)
+    lk[LK_BITS_NUM] = int(cfg.get("fpga.lvds_bit_rate_hz")) * int(cfg.get("sim.tick_ns"))
+    return lk
+
+
+def sweep_time_s(cfg: Config, words: int) -> float:
+    """Time to send ``words`` words back to back, s."""
+    return words * WORD_BITS / cfg.get("fpga.lvds_bit_rate_hz")
+
+
+@njit(cache=True, inline="always")
+def _words_this_tick(lk, acc_index):
+    acc = lk[acc_index] + lk[LK_BITS_NUM]
+    n = acc // _WORD_DEN
+    lk[acc_index] = acc - n * _WORD_DEN
+    return n
+
+
+@njit(cache=True, inline="always")
+def _corrupted(lk, every_index, phase_index):
+    every = lk[every_index]
+    if every <= 0:
+        return False
+    ph = lk[phase_index] + 1
+    if ph >= every:
+        lk[phase_index] = 0
+        return True
+    lk[phase_index] = ph
+    return False
+
+
+@njit(cache=True)
+def sweep_down(lk, master_down, st, down):
+    """Downstream words of one tick: MCU memory -> driver endpoint (value level)."""
+    n = _words_this_tick(lk, LK_DOWN_ACC)
+    if lk[LK_DOWN_STOPPED] != 0:
+        return
+    size = master_down.shape[0]
+    for _ in range(n):
+        addr = lk[LK_DOWN_PTR]
+        lk[LK_DOWN_PTR] = (addr + 1) % size
+        bad = _corrupted(lk, LK_DOWN_CORRUPT, LK_DOWN_PHASE)
+        receive_word(st, down, addr, master_down[addr], not bad)
+        lk[LK_DOWN_WORDS] += 1
+
+
+@njit(cache=True)
+def sweep_up(lk, up, master_up):
+    """Upstream words of one tick: driver memory -> MCU memory (value level)."""
+    n = _words_this_tick(lk, LK_UP_ACC)
+    if lk[LK_UP_STOPPED] != 0:
+        return
+    size = up.shape[0]
+    for _ in range(n):
+        addr = lk[LK_UP_PTR]
+        lk[LK_UP_PTR] = (addr + 1) % size
+        if _corrupted(lk, LK_UP_CORRUPT, LK_UP_PHASE):
+            lk[LK_MASTER_CRC] += 1
+        else:
+            master_up[addr] = up[addr]
+        lk[LK_UP_WORDS] += 1
+
+
+def _flip(word: int) -> int:
+    """One bit error in a data bit of a line word (the CRC catches every single-bit error)."""
+    return word ^ (1 << 12)
+
+
+class BitLevelLink:
+    """The same link with real line bits: :mod:`protocols.lvds` encoder and stream decoder.
+
+    Uses the value-level link state ``lk`` for the timing and the fault settings, so both
+    paths sweep the same words in the same ticks.
+    """
+
+    def __init__(self) -> None:
+        self.down_rx = lvds.LvdsStreamDecoder()
+        self.up_rx = lvds.LvdsStreamDecoder()
+        self._down_crc_seen = 0
+        self._up_crc_seen = 0
+
+    def _send(self, lk: np.ndarray, acc: int, ptr: int, stopped: int, every: int, phase: int,
+              mem: np.ndarray) -> list[int] | None:
+        n = int(_words_this_tick(lk, acc))
+        if lk[stopped]:
+            return None
+        bits: list[int] = []
+        size = mem.shape[0]
+        for _ in range(n):
+            addr = int(lk[ptr])
+            lk[ptr] = (addr + 1) % size
+            word = lvds.encode_word(addr, int(mem[addr]))
+            if _corrupted(lk, every, phase):
+                word = _flip(word)
+            bits.extend((word >> i) & 1 for i in range(WORD_BITS - 1, -1, -1))
+        return bits
+
+    def sweep_down(self, lk: np.ndarray, master_down: np.ndarray, st: np.ndarray,
+                   down: np.ndarray) -> None:
+        """Downstream words of one tick through the line code into the driver endpoint."""
+        bits = self._send(lk, LK_DOWN_ACC, LK_DOWN_PTR, LK_DOWN_STOPPED, LK_DOWN_CORRUPT,
+                          LK_DOWN_PHASE, master_down)
+        if bits is None:
+            return
+        lk[LK_DOWN_WORDS] += len(bits) // WORD_BITS
+        for w in self.down_rx.feed(bits):
+            receive_word(st, down, w.addr, w.data, True)
+        new_fail = self.down_rx.crc_failures - self._down_crc_seen
+        self._down_crc_seen = self.down_rx.crc_failures
+        for _ in range(new_fail):
+            receive_word(st, down, 0, 0, False)
+
+    def sweep_up(self, lk: np.ndarray, up: np.ndarray, master_up: np.ndarray) -> None:
+        """Upstream words of one tick through the line code into the MCU's memory."""
+        bits = self._send(lk, LK_UP_ACC, LK_UP_PTR, LK_UP_STOPPED, LK_UP_CORRUPT,
+                          LK_UP_PHASE, up)
+        if bits is None:
+            return
+        lk[LK_UP_WORDS] += len(bits) // WORD_BITS
+        for w in self.up_rx.feed(bits):
+            if w.addr < B.UP_WORDS:
+                master_up[w.addr] = w.data
+        new_fail = self.up_rx.crc_failures - self._up_crc_seen
+        self._up_crc_seen = self.up_rx.crc_failures
+        lk[LK_MASTER_CRC] += new_fail

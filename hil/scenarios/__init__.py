@@ -1,0 +1,98 @@
+"""Scenarios: named experiments on the simulated stack, run by ``eha-hil run NAME``.
+
+A scenario takes a configuration and returns a :class:`ScenarioResult`: metrics (value,
+unit, the requirement it is held to), the time series or frequency response behind them,
+and a plot. Figures always come out of the simulation; requirements are stated beside them.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from plant.config import Config
+
+
+@dataclass
+class Metric:
+    """One figure of a scenario: ``value`` in ``unit``; ``ok`` is None when not judged."""
+
+    name: str
+    value: float
+    unit: str
+    requirement: str = ""
+    ok: bool | None = None
+
+
+@dataclass
+class ScenarioResult:
+    """What a scenario run produced."""
+
+    name: str
+    title: str
+    metrics: list[Metric]
+    series: dict[str, Any] = field(default_factory=dict)
+    plot: Callable[[ScenarioResult, Path], None] | None = None
+    notes: list[str] = field(default_factory=list)
+
+    def metric(self, name: str) -> Metric:
+        """A metric by name; KeyError lists the names there are."""
+        for m in self.metrics:
+            if m.name == name:
+                return m
+        raise KeyError(f"{self.name}: no metric {name!r} (have {[m.name for m in self.metrics]})")
+
+    @property
+    def ok(self) -> bool:
+        """True when no judged metric failed its requirement."""
+        return all(m.ok is not False for m in self.metrics)
+
+
+Progress = Callable[[int, int], None] | None
+Runner = Callable[[Config, Progress], ScenarioResult]
+
+
+@dataclass(frozen=True)
+class Scenario:
+    name: str
+    summary: str
+    run: Runner
+
+
+SCENARIOS: dict[str, Scenario] = {}
+
+
+def register(name: str, summary: str) -> Callable[[Runner], Runner]:
+    """Decorator adding a scenario runner to :data:`SCENARIOS`."""
+
+    def deco(fn: Runner) -> Runner:
+        SCENARIOS[name] = Scenario(name, summary, fn)
+        return fn
+
+    return deco
+
+
+def get(name: str) -> Scenario:
+    """A scenario by name; KeyError with the list of known names."""
+    _load_all()
+    try:
+        return SCENARIOS[name]
+    except KeyError:
+        raise KeyError(f"unknown scenario {name!r} (known: {', '.join(sorted(SCENARIOS))})"
+                       ) from None
+
+
+def names() -> list[str]:
+    """Names of all scenarios."""
+    _load_all()
+    return sorted(SCENARIOS)
+
+
+def _load_all() -> None:
+    # Importing the modules registers their scenarios.
+    from hil.scenarios import current  # noqa: F401
+
+
+__all__ = ["Metric", "SCENARIOS", "Scenario", "ScenarioResult", "get", "names", "register"]
