@@ -89,11 +89,13 @@ class LinkMemory:
 
     def write(self, name: str, value: int) -> None:
         """Set a downstream register; it reaches the board with the next sweep."""
-        self.down[B.down_address(name)] = to_word(value, _DOWN_TYPE[name], name)
+        addr = B.down_address(name)
+        self.down[addr] = to_word(value, _DOWN_TYPE[name], name)
 
     def read(self, name: str) -> int:
         """An upstream register as last received from the board."""
-        return from_word(self.up[B.up_address(name)], _UP_TYPE[name])
+        addr = B.up_address(name)
+        return from_word(self.up[addr], _UP_TYPE[name])
 
     def status(self) -> set[str]:
         """Names of the status bits set in the last received status word."""

@@ -1,0 +1,103 @@
+"""The LVDS link: sweep timing and latency, CRC discards, value level vs bit level."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from firmware_model.fpga import layout as B
+from firmware_model.fpga.board import control_tick
+from firmware_model.fpga.driver_board import DriverBoard, LinkMemory
+from hil import lvds_link as LK
+from hil.fpga_stack import FpgaStack
+from hil.sensor_chips import chip_params, digitise
+from plant.config import load_config
+from plant.model import Plant
+
+
+@pytest.fixture(scope="module")
+def cfg():
+    return load_config(None, ["load.kind=fixed"])
+
+
+def test_words_per_tick_follow_the_bit_rate_exactly(cfg):
+    stack = FpgaStack(cfg)
+    stack.advance(900)
+    bits = cfg.get("fpga.lvds_bit_rate_hz") * 900 * cfg.get("sim.tick_ns") * 1e-9
+    assert stack.link[LK.LK_DOWN_WORDS] == int(bits // LK.WORD_BITS)
+    assert stack.link[LK.LK_UP_WORDS] == int(bits // LK.WORD_BITS)
+
+
+@pytest.mark.parametrize("rate", [2_000_000, 10_000_000])
+def test_round_trip_latency_is_bounded_by_the_two_sweeps(cfg, rate):
+    cfg = cfg.with_overrides({"fpga.lvds_bit_rate_hz": rate})
+    stack = FpgaStack(cfg)
+    stack.advance(50)
+    tick_s = stack.tick_s
+    worst = 0
+    for seq in range(1, 30):
+        stack.mcu.write("sequence", seq)
+        k = 0
+        while stack.mcu.read("sequence_echo") != seq:
+            stack.advance(1)
+            k += 1
+            assert k < 1000
+        worst = max(worst, k)
+    bound = (LK.sweep_time_s(cfg, B.DOWN_WORDS) + LK.sweep_time_s(cfg, B.UP_WORDS)) / tick_s
+    assert worst <= int(np.ceil(bound)) + 2
+    # At the slow rate the sweeps take many ticks: the latency really comes from the link.
+    if rate == 2_000_000:
+        assert worst >= bound / 2
+
+
+def test_bit_level_link_gives_the_same_memories_and_counts(cfg):
+    """Same board, same sensors: value-level words vs words through protocols.lvds."""
+    plant = Plant(cfg)
+    k = chip_params(cfg)
+    raw = np.zeros(B.N_RAW, dtype=np.int64)
+    boards = [DriverBoard(cfg), DriverBoard(cfg)]
+    mems = [LinkMemory(cfg), LinkMemory(cfg)]
+    links = [LK.link_state(cfg), LK.link_state(cfg)]
+    bit = LK.BitLevelLink()
+    for m in mems:
+        m.write("mode", B.MODE_VOLTAGE)
+        m.write("control", B.CTRL_ENABLE)
+        m.write("vq_ref", 1500)
+    for t in range(300):
+        if t == 150:
+            for lk in links:
+                lk[LK.LK_DOWN_CORRUPT] = 3
+                lk[LK.LK_UP_CORRUPT] = 4
+        digitise(plant.y, k, t, raw)
+        for j in range(2):
+            b, m, lk = boards[j], mems[j], links[j]
+            if j == 0:
+                LK.sweep_down(lk, m.down, b.state, b.down)
+            else:
+                bit.sweep_down(lk, m.down, b.state, b.down)
+            control_tick(b.params, b.state, b.down, b.up, raw)
+            if j == 0:
+                LK.sweep_up(lk, b.up, m.up)
+            else:
+                bit.sweep_up(lk, b.up, m.up)
+        np.testing.assert_array_equal(boards[0].down, boards[1].down, err_msg=f"tick {t}")
+        assert boards[0].duty_counts() == boards[1].duty_counts()
+        a, b = boards[0].state[B.F_ERR_LINK_CRC], boards[1].state[B.F_ERR_LINK_CRC]
+        # The stream decoder confirms a failed word with the one after it: at most one
+        # word later than the value level.
+        assert 0 <= a - b <= 1, f"tick {t}: crc counts {a} vs {b}"
+        a, b = links[0][LK.LK_MASTER_CRC], links[1][LK.LK_MASTER_CRC]
+        assert 0 <= a - b <= 1
+        plant.advance(1)
+    assert boards[0].state[B.F_ERR_LINK_CRC] > 100
+    np.testing.assert_array_equal(mems[0].up[:B.U_TICK], mems[1].up[:B.U_TICK])
+
+
+def test_register_access_checks_ranges(cfg):
+    m = LinkMemory(cfg)
+    m.write("iq_ref", -5000)
+    assert m.down[B.D_IQ_REF] == (-5000) & 0xFFFF
+    with pytest.raises(ValueError, match="iq_ref"):
+        m.write("iq_ref", 40000)
+    with pytest.raises(KeyError, match="no downstream register"):
+        m.write("nonsense", 1)
