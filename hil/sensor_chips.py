@@ -9,7 +9,8 @@ the FPGA identical raw words. Conventions:
 * ABI: quadrature count = floor(theta_m N_abi / 2 pi), kept as a 16-bit counter value;
 * BiSS (RESOLUTE): count = floor(x / 5 nm) + zero count, modulo 2^bits;
 * AD7195: bipolar code = floor(F 2^23 / F_FS + 2^23 + 1/2), saturated (as
-  :func:`protocols.ad7195.clamp_force_to_code`), a new conversion every 1/ODR;
+  :func:`protocols.ad7195.clamp_force_to_code`), a new conversion every 1/ODR; a clamped
+  conversion carries the ERR status bit, so the master rejects it (strain_ok = 0);
 * pressure and temperature ADC: code = floor(V / LSB + 1/2), saturated (as
   :func:`protocols.pressure_adc.voltage_to_code`);
 * phase currents: 12-bit offset binary over +/- I_FS, same rounding;
@@ -128,6 +129,14 @@ def strain_code(force_n, k):
 
 
 @njit(cache=True)
+def strain_clamped(force_n, k):
+    """True when the AD7195 clamps this force to 0 or CODE_MAX: the part then sets ERR in
+    its status byte and the board's master rejects the read (strain_ok = 0)."""
+    x = force_n * k[K_STRAIN_SCALE] + MIDSCALE
+    return x < -0.5 or x >= CODE_MAX + 0.5
+
+
+@njit(cache=True)
 def pressure_code(p_pa, k):
     v = k[K_P_V0] + p_pa / k[K_P_PA_PER_V]
     return adc_code(v / k[K_ADC_LSB], k[K_ADC_MAX])
@@ -163,8 +172,12 @@ def digitise(y, k, tick, raw):
     new = strain_conversions(tick, k) != strain_conversions(tick - 1, k)
     raw[B.R_STRAIN_NEW] = 1 if new else 0
     if new:
-        raw[B.R_STRAIN] = strain_code(y[L.Y_F_STRAIN], k)
-        raw[B.R_STRAIN_OK] = 1
+        f = y[L.Y_F_STRAIN]
+        if strain_clamped(f, k):
+            raw[B.R_STRAIN_OK] = 0  # ERR set: the read is rejected, the last code held
+        else:
+            raw[B.R_STRAIN] = strain_code(f, k)
+            raw[B.R_STRAIN_OK] = 1
     for j in range(5):
         raw[B.R_P_ACC + j] = pressure_code(y[PRESSURE_ROWS[j]], k)
     raw[B.R_TEMP] = temperature_code(y[L.Y_TEMP], k)
