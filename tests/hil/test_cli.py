@@ -85,6 +85,10 @@ def test_config_show_and_presets(capsys):
         (["plant", "bode", "--fmin", "10", "--fmax", "5"], "--fmin"),
         (["plant", "bode", "--linear", "-c", "hydra_default"], "--linear"),
         (["bench", "plant", "--seconds", "-1"], "--seconds"),
+        (["bench", "fpga", "--bit-seconds", "0"], "--bit-seconds"),
+        (["run", "no-such-scenario"], "no-such-scenario"),
+        (["run", "current-step", "--set", "fpga.speed_window_ticks=24"], "speed_window"),
+        (["run", "current-step", "--set", "sensors.biss_bits=20"], "biss_bits"),
     ],
 )
 def test_user_mistakes_give_one_line_and_exit_2(capsys, argv, fragment):
@@ -109,3 +113,29 @@ def test_unknown_verb_is_a_usage_error(capsys):
     with pytest.raises(SystemExit) as exc:
         main(["frobnicate"])
     assert exc.value.code == 2
+
+
+def test_run_current_step_table_json_and_plot(capsys, tmp_path):
+    png = tmp_path / "step.png"
+    code, out, _ = run(capsys, "run", "current-step", "--plot", str(png))
+    assert code == 0 and "rise time 10-90 %" in out and "overshoot" in out
+    assert png.stat().st_size > 10_000
+    code, out, _ = run(capsys, "run", "current-step", "--json")
+    data = json.loads(out)
+    names = {m["name"] for m in data["metrics"]}
+    assert {"rise time 10-90 %", "overshoot", "steady-state error"} <= names
+
+
+def test_run_current_bode_meets_its_requirement(capsys):
+    code, out, _ = run(capsys, "run", "current-bode", "--json")
+    data = json.loads(out)
+    assert code == 0 and data["ok"]
+
+
+def test_bench_fpga_reports_both_paths(capsys):
+    code, out, _ = run(capsys, "bench", "fpga", "--seconds", "0.05", "--bit-seconds", "0.002",
+                       "--json")
+    data = json.loads(out)
+    assert code == 0
+    assert [r["path"] for r in data["results"]] == ["value-level", "bit-level"]
+    assert all(r["real_time_factor"] > 0 for r in data["results"])
