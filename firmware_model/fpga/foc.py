@@ -61,7 +61,8 @@ def sin_cos(theta_e: int) -> tuple[int, int]:
     """(sin, cos) of an electrical angle (u16, 2**16 per turn) in Q1.15.
 
     The angle is rounded to the nearest of 1024 table steps (error <= pi/1024 rad), so
-    |sin - sin_true| <= pi/1024 + 2**-16 (table rounding).
+    |sin - sin_true| <= pi/1024 + 2**-15 (table rounding; the +/-1 entries saturate to
+    32767, which costs 2**-15 where the sine is flat).
     """
     k = (theta_e + (1 << (SINE_SHIFT - 1))) >> SINE_SHIFT
     return _quarter_sine(k), _quarter_sine(k + SINE_STEPS // 4)
@@ -136,11 +137,12 @@ def pi_step(
     if u > limit:
         u = limit
         if error > 0:
-            i_new = integ if integ < i_lim else i_lim
+            # Hold the integrator, but inside the clamp: the limit may have shrunk since.
+            i_new = clamp(integ, -i_lim, i_lim)
     elif u < -limit:
         u = -limit
         if error < 0:
-            i_new = integ if integ > -i_lim else -i_lim
+            i_new = clamp(integ, -i_lim, i_lim)
     return u, i_new
 
 
