@@ -92,10 +92,6 @@ from firmware_model.fpga.layout import (
     R_IA,
     R_IB,
     R_P_ACC,
-    R_P_CYL_A,
-    R_P_CYL_B,
-    R_P_PUMP_A,
-    R_P_PUMP_B,
     R_SSI,
     R_SSI_OK,
     R_STRAIN,
@@ -126,10 +122,6 @@ from firmware_model.fpga.layout import (
     U_IQ,
     U_OC_TRIPS,
     U_P_ACC,
-    U_P_CYL_A,
-    U_P_CYL_B,
-    U_P_PUMP_A,
-    U_P_PUMP_B,
     U_PISTON_HI,
     U_PISTON_LO,
     U_SEQ_ECHO,
@@ -402,11 +394,8 @@ def control_tick(c, st, down, up, raw):
     up[U_ID] = _u16(sat_s(mul_shift(i_d, i_to_ma, 15), 16))
     up[U_IA] = _u16(sat_s(mul_shift(i_a, i_to_ma, 15), 16))
     up[U_IB] = _u16(sat_s(mul_shift(i_b, i_to_ma, 15), 16))
-    up[U_P_ACC] = raw[R_P_ACC]
-    up[U_P_PUMP_A] = raw[R_P_PUMP_A]
-    up[U_P_PUMP_B] = raw[R_P_PUMP_B]
-    up[U_P_CYL_A] = raw[R_P_CYL_A]
-    up[U_P_CYL_B] = raw[R_P_CYL_B]
+    for j in range(5):  # the five pressure channels, in the same order in both layouts
+        up[U_P_ACC + j] = raw[R_P_ACC + j]
     up[U_TEMPERATURE] = raw[R_TEMP]
     up[U_HALL] = raw[R_HALL]
     v_to_mv = c[C_V_TO_MV]
