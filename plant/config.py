@@ -34,7 +34,11 @@ SIGNED_KEYS = frozenset(
 )
 
 #: Keys that take one of a fixed set of strings.
-CHOICES: dict[str, tuple[str, ...]] = {"load.kind": ("fixed", "free", "conrod", "cart")}
+CHOICES: dict[str, tuple[str, ...]] = {
+    "load.kind": ("fixed", "free", "conrod", "cart"),
+    "mcu.controller": ("current", "velocity"),
+    "mcu.force_feedback": ("pressure", "strain", "complementary"),
+}
 
 #: Keys that must be strictly positive (a zero would divide or stall the clock).
 POSITIVE_KEYS = frozenset(
@@ -74,6 +78,10 @@ POSITIVE_KEYS = frozenset(
         "sensors.strain_full_scale_n",
         "sensors.strain_odr_hz",
         "sensors.temperature_v_per_c",
+        "mcu.period_ticks",
+        "mcu.derivative_filter_hz",
+        "mcu.complementary_cutoff_hz",
+        "mcu.command_timeout_s",
     }
 )
 

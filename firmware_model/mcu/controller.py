@@ -1,0 +1,161 @@
+"""The actuator controller the MCU runs at 5 kHz, in float32.
+
+Force feedback ``f_fb`` (N, piston force) is, by ``mcu.force_feedback``:
+* "pressure": f_pres = k_c (p_cyl_a - p_cyl_b);
+* "strain": f_strain = cos(alpha) * strain-gauge force (Eq. 6.5);
+* "complementary": f_fil = f_pres + HP(f_strain - f_pres) (Eq. 4.4), a first-order
+  high-pass with cutoff ``complementary_cutoff_hz``.
+
+Current-based controller (Fig. 5.2, ``controller = "current"``), pump force command tau_p:
+
+    tau_p = tau_ref + K_p (tau_ref - f_fb) - K_d d/dt f_fb - r
+    i_q,ref = tau_p / K_t,eq,   v_q,ff = omega_m K_t / 1.5   (back-EMF of the dq model)
+
+The derivative acts on the measurement (no kick on command steps) through a first-order
+filter. ``r`` is a momentum-based observer of the pump side's disturbance (friction,
+displacement ripple): with P = J_p v_p, r = K_o (P - P_0 - sum (tau_p,meas - tau_q + r) dt),
+where tau_p,meas = K_t,eq i_q (measured) and tau_q = k_c (p_pump_a - p_pump_b); subtracting
+it cancels what the model J_p dv_p/dt = tau_p - tau_q leaves out.
+
+Velocity-based controller (Fig. 5.1, ``controller = "velocity"``): a PI force loop gives a
+pump velocity reference, a PI velocity loop gives tau_p; the pump's friction and inertia are
+handled by the velocity loop, not by the force loop.
+
+Commands: force (tau_ref, N) or position (tau_ref = K_pos (x_ref - x), the low-gain local
+position loop of thesis 4.4). Limits: |tau_ref| <= min(force limit, k_c * pressure limit),
+|i_q,ref| <= current limit. All state and arithmetic are ``numpy.float32``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from firmware_model.mcu.measure import Measurements
+from plant.config import Config
+
+F32 = np.float32
+ZERO = F32(0.0)
+
+FEEDBACKS = ("pressure", "strain", "complementary")
+LIMIT_FORCE = 1
+LIMIT_CURRENT = 2
+LIMIT_PRESSURE = 4
+
+
+def _clamp(x: np.float32, lim: np.float32) -> np.float32:
+    if x > lim:
+        return lim
+    if x < -lim:
+        return -lim
+    return x
+
+
+class ActuatorController:
+    """One actuator's force/pressure controller (float32 state)."""
+
+    def __init__(self, cfg: Config) -> None:
+        m = cfg.section("mcu")
+        kc = cfg.get("hydraulics.kc_m2")
+        kp_pump = cfg.get("hydraulics.kp_m3_per_rad")
+        dt = m["period_ticks"] * cfg.get("sim.tick_ns") * 1e-9
+        kt = cfg.get("motor.force_at_rated_n") * (kp_pump / kc) / cfg.get("motor.iq_rated_a")
+        self.dt = F32(dt)
+        self.velocity_based = m["controller"] == "velocity"
+        self.feedback = m["force_feedback"]
+        self.kt_eq = F32(cfg.get("motor.force_at_rated_n") / cfg.get("motor.iq_rated_a"))
+        self.jp = F32(cfg.get("hydraulics.jp_kg"))
+        self.kp = F32(m["kp_force"])
+        self.kd = F32(m["kd_force_s"])
+        self.a_d = F32(1.0 - math.exp(-2.0 * math.pi * m["derivative_filter_hz"] * dt))
+        self.ko = F32(2.0 * math.pi * m["friction_observer_hz"])
+        self.bemf = F32(kt / 1.5) if m["backemf_ff"] else ZERO
+        self.kv = F32(m["vel_kp_n_per_m_s"])
+        self.kvi = F32(m["vel_ki_n_per_m"])
+        self.kf = F32(m["vel_force_kp_m_s_per_n"])
+        self.kfi = F32(m["vel_force_ki_m_per_n"])
+        # Eq. 4.4 high-pass as a first-order discrete filter: y = a (y + u - u_prev).
+        self.a_hp = F32(1.0 / (1.0 + 2.0 * math.pi * m["complementary_cutoff_hz"] * dt))
+        self.k_pos = F32(m["position_kp_n_per_m"])
+        length, offset = m["conrod_length_m"], m["conrod_offset_m"]
+        self.cos_alpha = F32(math.sqrt(1.0 - (offset / length) ** 2) if length > 0 else 1.0)
+        self.f_lim = F32(min(m["force_limit_n"], kc * m["pressure_limit_pa"]))
+        self.p_lim = F32(m["pressure_limit_pa"])
+        self.i_lim = F32(m["current_limit_a"])
+        self.reset()
+
+    def reset(self) -> None:
+        """Zero every state (at enable)."""
+        self.f_prev = ZERO
+        self.d_filt = ZERO
+        self.obs_sum = ZERO
+        self.obs_p0 = F32(math.nan)
+        self.r = ZERO
+        self.hp_y = ZERO
+        self.hp_u = F32(math.nan)
+        self.int_force = ZERO
+        self.int_vel = ZERO
+        self.tau_p = ZERO
+        self.f_fb = ZERO
+        self.f_fil = ZERO
+        self.limits = 0
+
+    def feedback_force(self, m: Measurements) -> np.float32:
+        """Update the complementary filter; return the force the loop is closed on, N."""
+        f_strain = self.cos_alpha * m.f_strain_raw
+        u = f_strain - m.f_pres
+        if self.hp_u != self.hp_u:  # first sample: start the high-pass at rest
+            self.hp_u = u
+        self.hp_y = self.a_hp * (self.hp_y + u - self.hp_u)
+        self.hp_u = u
+        self.f_fil = m.f_pres + self.hp_y
+        if self.feedback == "pressure":
+            return m.f_pres
+        if self.feedback == "strain":
+            return f_strain
+        return self.f_fil
+
+    def step(self, m: Measurements, tau_ref: np.float32) -> tuple[np.float32, np.float32]:
+        """One 5 kHz step: (i_q reference in A, v_q feed-forward in V)."""
+        self.limits = 0
+        lim = self.f_lim
+        if tau_ref > lim or tau_ref < -lim:
+            tau_ref = _clamp(tau_ref, lim)
+            self.limits |= LIMIT_FORCE
+        if (m.p_cyl_a > self.p_lim or m.p_cyl_b > self.p_lim or m.p_pump_a > self.p_lim
+                or m.p_pump_b > self.p_lim):
+            self.limits |= LIMIT_PRESSURE
+        f = self.feedback_force(m)
+        self.f_fb = f
+        dt = self.dt
+        e = tau_ref - f
+        if self.velocity_based:
+            v_ref = self.kf * e + self.int_force
+            tau_p = self.kv * (v_ref - m.v_pump) + self.int_vel
+        else:
+            self.d_filt += self.a_d * ((f - self.f_prev) / dt - self.d_filt)
+            self.f_prev = f
+            tau_p = tau_ref + self.kp * e - self.kd * self.d_filt - self.r
+        i_ref = tau_p / self.kt_eq
+        saturated = i_ref > self.i_lim or i_ref < -self.i_lim
+        if saturated:
+            i_ref = _clamp(i_ref, self.i_lim)
+            self.limits |= LIMIT_CURRENT
+        if self.velocity_based:
+            # Integrate only while the current is not limited (no wind-up).
+            if not saturated:
+                self.int_force += self.kfi * e * dt
+                self.int_vel += self.kvi * (self.kf * e + self.int_force - m.v_pump) * dt
+        else:
+            self._observe(m)
+        self.tau_p = i_ref * self.kt_eq
+        return i_ref, self.bemf * m.omega_m
+
+    def _observe(self, m: Measurements) -> None:
+        """Momentum observer of the pump side's disturbance (friction, ripple), N."""
+        momentum = self.jp * m.v_pump
+        if self.obs_p0 != self.obs_p0:
+            self.obs_p0 = momentum
+        self.obs_sum += (self.kt_eq * m.iq - m.tau_q + self.r) * self.dt
+        self.r = self.ko * (momentum - self.obs_p0 - self.obs_sum)

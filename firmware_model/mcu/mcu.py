@@ -1,0 +1,137 @@
+"""The MCU board: up to five actuator controllers, each talking to its driver board through
+that board's link memory, with the command watchdog and a status word per actuator.
+
+The PC side hands commands in with :meth:`Mcu.command` (at 1 kHz over the fieldbus); each
+5 kHz :meth:`Mcu.step` reads the boards' upstream memories, runs the controllers and writes
+the downstream registers (iq_ref in mA, vq_ff in mV, a sequence counter).
+
+Safety: no fresh command for ``command_timeout_s`` -> the force command is zero
+(``CMD_TIMEOUT``); ``safe_off_delay_s`` later the board is disabled (``SAFE_OFF``). Limits
+hit and board/link trouble are reported in the status word.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from firmware_model.fpga import layout as B
+from firmware_model.fpga.driver_board import LinkMemory
+from firmware_model.mcu.controller import (
+    LIMIT_CURRENT,
+    LIMIT_FORCE,
+    LIMIT_PRESSURE,
+    ActuatorController,
+)
+from firmware_model.mcu.measure import Measurements
+from plant.config import Config
+
+F32 = np.float32
+MAX_BOARDS = 5
+
+STATUS_BITS = (
+    (0, "CMD_TIMEOUT", "no fresh command within command_timeout_s: force command zero"),
+    (1, "SAFE_OFF", "timeout lasted safe_off_delay_s more: driver board disabled"),
+    (2, "FORCE_LIMITED", "force command clamped to the force/pressure limit"),
+    (3, "CURRENT_LIMITED", "current reference clamped to the current limit"),
+    (4, "PRESSURE_HIGH", "a measured pressure above the pressure limit"),
+    (5, "BOARD_FAULT", "the driver board reports FAULT"),
+    (6, "LINK_ERROR", "the driver board lost the link, or upstream words failed CRC"),
+    (7, "BOARD_ENABLED", "the driver board reports ENABLED"),
+)
+(CMD_TIMEOUT, SAFE_OFF, FORCE_LIMITED, CURRENT_LIMITED, PRESSURE_HIGH, BOARD_FAULT,
+ LINK_ERROR, BOARD_ENABLED) = (1 << b for b, _, _ in STATUS_BITS)
+
+MODE_OFF, MODE_FORCE, MODE_POSITION = "off", "force", "position"
+
+
+class Mcu:
+    """The STM32F4 program for ``len(links)`` actuators (1..5)."""
+
+    def __init__(self, cfg: Config, links: list[LinkMemory]) -> None:
+        if not 1 <= len(links) <= MAX_BOARDS:
+            raise ValueError(f"an MCU board serves 1..{MAX_BOARDS} driver boards, "
+                             f"got {len(links)}")
+        m = cfg.section("mcu")
+        tick_s = cfg.get("sim.tick_ns") * 1e-9
+        self.links = links
+        self.period = m["period_ticks"]
+        self.meas = [Measurements(cfg) for _ in links]
+        self.ctrl = [ActuatorController(cfg) for _ in links]
+        n = len(links)
+        self.mode = [MODE_OFF] * n
+        self.value = [F32(0.0)] * n
+        self.last_cmd_tick = [0] * n
+        self.status = [0] * n
+        self.tau_ref = [F32(0.0)] * n
+        self.iq_ref = [F32(0.0)] * n
+        self.timeout_ticks = round(m["command_timeout_s"] / tick_s)
+        self.off_ticks = self.timeout_ticks + round(m["safe_off_delay_s"] / tick_s)
+        self._seq = 0
+        self._crc_seen = [0] * n
+
+    def command(self, i: int, mode: str, value: float, tick: int) -> None:
+        """A fresh command for actuator ``i``: mode "force" (N), "position" (m) or "off"."""
+        if mode not in (MODE_OFF, MODE_FORCE, MODE_POSITION):
+            raise ValueError(f"unknown command mode {mode!r}")
+        self.mode[i] = mode
+        self.value[i] = F32(value)
+        self.last_cmd_tick[i] = tick
+
+    def enable(self, i: int, angle_offset: int) -> None:
+        """Boot actuator ``i``'s board: calibrated offset, current mode, enable."""
+        link = self.links[i]
+        link.write("angle_offset", angle_offset)
+        link.write("mode", B.MODE_CURRENT)
+        link.write("control", B.CTRL_ENABLE)
+        self.ctrl[i].reset()
+
+    def step(self, tick: int) -> None:
+        """One 5 kHz cycle for every actuator."""
+        self._seq = (self._seq + 1) & 0xFFFF
+        for i, link in enumerate(self.links):
+            m = self.meas[i]
+            m.update(link.up)
+            ctrl = self.ctrl[i]
+            age = tick - self.last_cmd_tick[i]
+            status = 0
+            mode = self.mode[i]
+            if age > self.timeout_ticks and mode != MODE_OFF:
+                status |= CMD_TIMEOUT
+                tau_ref = F32(0.0)
+                if age > self.off_ticks:
+                    status |= SAFE_OFF
+                    link.down[B.D_CONTROL] = 0
+            elif mode == MODE_FORCE:
+                tau_ref = self.value[i]
+            elif mode == MODE_POSITION:
+                tau_ref = ctrl.k_pos * (self.value[i] - m.x_piston)
+            else:
+                tau_ref = F32(0.0)
+            if mode == MODE_OFF:
+                i_ref, v_ff = F32(0.0), F32(0.0)
+                ctrl.reset()
+            else:
+                i_ref, v_ff = ctrl.step(m, tau_ref)
+            self.tau_ref[i] = tau_ref
+            self.iq_ref[i] = i_ref
+            down = link.down
+            down[B.D_IQ_REF] = int(np.rint(i_ref * F32(1000.0))) & 0xFFFF
+            down[B.D_VQ_FF] = int(np.rint(v_ff * F32(1000.0))) & 0xFFFF
+            down[B.D_SEQUENCE] = self._seq
+            lim = ctrl.limits
+            if lim & LIMIT_FORCE:
+                status |= FORCE_LIMITED
+            if lim & LIMIT_CURRENT:
+                status |= CURRENT_LIMITED
+            if lim & LIMIT_PRESSURE:
+                status |= PRESSURE_HIGH
+            board = m.status
+            if board & B.ST_FAULT:
+                status |= BOARD_FAULT
+            if board & B.ST_ENABLED:
+                status |= BOARD_ENABLED
+            crc = int(link.up[B.U_ERR_LINK_CRC])
+            if board & B.ST_LINK_LOST or crc != self._crc_seen[i]:
+                status |= LINK_ERROR
+            self._crc_seen[i] = crc
+            self.status[i] = status
