@@ -23,6 +23,7 @@ $(TSTAMP): $(BIN)/python pyproject.toml
 
 run: $(STAMP)
 	$(BIN)/eha-hil main
+	$(BIN)/eha-hil run thesis
 
 test: $(TSTAMP)
 	$(BIN)/python -m pytest -q
@@ -30,6 +31,8 @@ test: $(TSTAMP)
 bench: $(STAMP)
 	$(BIN)/eha-hil bench plant
 	$(BIN)/eha-hil bench codecs
+	$(BIN)/eha-hil bench fpga
+	$(BIN)/eha-hil bench stack
 
 lint: $(TSTAMP)
 	$(BIN)/ruff check .

@@ -292,10 +292,72 @@ def cmd_bench_fpga(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_bench_stack(args: argparse.Namespace) -> int:
+    from hil.bench import bench_stack
+
+    if not 0 < args.seconds <= 600:
+        raise UsageError("--seconds: need 0 < seconds <= 600")
+    cfg = _config(args)
+    r = bench_stack(cfg, args.seconds)
+    text = table(["path", "simulated [s]", "wall [s]", "real-time factor", "ticks/s"],
+                 [(r.mode, r.simulated_s, r.wall_s, r.real_time_factor, r.ticks_per_s)],
+                 fmt=".3g", title=f"plant + driver board + LVDS + MCU (5 kHz, float32) + 1 kHz "
+                 f"PC task, value-level sensors, {cfg.sources[-1]} (target >= 2x real time)")
+    _emit(args, text, {"config": cfg.sources, "simulated_s": r.simulated_s,
+                       "wall_s": r.wall_s, "real_time_factor": r.real_time_factor})
+    return 0
+
+
 # --- run -------------------------------------------------------------------------------------
+def cmd_run_thesis(args: argparse.Namespace) -> int:
+    import time
+
+    from hil import scenarios
+
+    names = [n for n in scenarios.THESIS if n in scenarios.names()]
+    out_dir = Path(args.plot_dir)
+    if not out_dir.parent.is_dir():
+        raise UsageError(f"--plot-dir {out_dir}: parent directory does not exist")
+    out_dir.mkdir(exist_ok=True)
+    cfg = _config(args)
+    rows = []
+    results = []
+    notes = []
+    for name in names:
+        t0 = time.perf_counter()
+        if not args.json:
+            print(f"{name} ...", file=sys.stderr, flush=True)
+        res = scenarios.get(name).run(cfg, None)
+        wall = time.perf_counter() - t0
+        results.append((res, wall))
+        if res.plot:
+            res.plot(res, out_dir / f"{name}.png")
+        for m in res.metrics:
+            diff = "" if m.thesis is None else f"{(m.value - m.thesis) / m.thesis * 100:+.0f} %"
+            mark = "" if m.ok is None else ("ok" if m.ok else "MISSED")
+            rows.append((f"{name.upper()} {m.name}", "" if m.thesis is None else m.thesis,
+                         m.value, m.unit, diff, m.requirement, mark))
+        notes += [f"{name.upper()}: {n}" for n in res.notes]
+    text = table(["figure", "thesis", "ours", "unit", "diff", "required", ""], rows,
+                 fmt=".3g", title=f"thesis experiments on the full stack ({cfg.sources[-1]})")
+    if notes:
+        text += "\n" + "\n".join(f"note: {n}" for n in notes)
+    text += f"\nplots written to {out_dir}/ ({', '.join(n + '.png' for n in names)})"
+    ok = all(r.ok for r, _ in results)
+    data = {"config": cfg.sources, "ok": ok, "scenarios": [
+        {"scenario": r.name, "title": r.title, "wall_s": w, "ok": r.ok, "notes": r.notes,
+         "metrics": [{"name": m.name, "value": m.value, "unit": m.unit, "thesis": m.thesis,
+                      "requirement": m.requirement, "ok": m.ok} for m in r.metrics]}
+        for r, w in results]}
+    _emit(args, text, data)
+    return 0 if ok else 1
+
+
 def cmd_run(args: argparse.Namespace) -> int:
     from hil import scenarios
 
+    if args.scenario == "thesis":
+        return cmd_run_thesis(args)
     try:
         scenario = scenarios.get(args.scenario)
     except KeyError as exc:
@@ -444,6 +506,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--bit-seconds", type=float, default=0.05,
                    help="simulated seconds, bit-level path (default 0.05)")
     p.set_defaults(func=cmd_bench_fpga)
+    p = bsub.add_parser("stack", parents=[_common(plot=False)],
+                        help="real-time factor of the full actuator stack (plant to MCU)")
+    p.add_argument("--seconds", type=float, default=2.0, help="simulated seconds (default 2)")
+    p.set_defaults(func=cmd_bench_stack)
     p = bsub.add_parser("codecs", parents=[_common(plot=False)],
                         help="encode+decode throughput of every protocol codec")
     p.add_argument("--seconds", type=float, default=0.5,
@@ -457,7 +523,11 @@ def build_parser() -> argparse.ArgumentParser:
                        help="run a scenario on the simulated stack (" + ", ".join(scen) + ")",
                        epilog="Scenarios: " + "; ".join(
                            f"{n}: {SCENARIOS[n].summary}" for n in scen))
-    p.add_argument("scenario", metavar="SCENARIO", help="scenario name")
+    p.add_argument("scenario", metavar="SCENARIO",
+                   help="scenario name, or 'thesis' for all thesis experiments (F3-F8)")
+    p.add_argument("--plot-dir", default="thesis-plots",
+                   help="with 'thesis': directory for one plot per scenario "
+                   "(default thesis-plots)")
     p.set_defaults(func=cmd_run)
 
     cfgp = sub.add_parser("config", help="inspect configurations")

@@ -87,6 +87,7 @@ from plant.layout import (
     P_PULS_ON,
     P_PULS_ORDER,
     P_PULS_PHASE,
+    P_PULS_TORQUE,
     P_Q_MOTOR,
     P_Q_PISTON,
     P_Q_PRESSURE,
@@ -285,11 +286,15 @@ def derivatives(x, p, u, dx):
 
     # --- pump ---
     g = 1.0
-    if p[P_PULS_ON] > 0.5:
-        g = 1.0 + p[P_PULS_AMP] * math.sin(p[P_PULS_ORDER] * theta_rotor + p[P_PULS_PHASE])
     f_cp = 0.0
     if p[P_PC_ON] > 0.5:
         f_cp = p[P_PC_FORCE] * math.tanh(vp / p[P_PC_EPS])
+    if p[P_PULS_ON] > 0.5:
+        ripple = math.sin(p[P_PULS_ORDER] * theta_rotor + p[P_PULS_PHASE])
+        g = 1.0 + p[P_PULS_AMP] * ripple
+        # Meshing torque ripple: a load torque that depends on where the teeth mesh. It
+        # stays in f_cp, so its work is booked with the pump losses (zero on average).
+        f_cp += p[P_PULS_TORQUE] * ripple
     dx[S_THP] = vp
     dx[S_VP] = (tau_p - dp * vp - f_cp - g * tq) / p[P_JP]
 

@@ -24,6 +24,7 @@ class Metric:
     unit: str
     requirement: str = ""
     ok: bool | None = None
+    thesis: float | None = None  # the thesis's figure in the same unit, when there is one
 
 
 @dataclass
@@ -90,9 +91,18 @@ def names() -> list[str]:
     return sorted(SCENARIOS)
 
 
+#: The thesis experiments ``eha-hil run thesis`` runs, in order.
+THESIS = ("f3", "f4", "f5", "f6", "f7", "f8")
+
+
 def _load_all() -> None:
     # Importing the modules registers their scenarios.
-    from hil.scenarios import current  # noqa: F401
+    from hil.scenarios import current, thesis  # noqa: F401
+    try:
+        from hil.scenarios import strain  # noqa: F401
+    except ImportError:  # pragma: no cover - only while F7/F8 are being written
+        pass
 
 
-__all__ = ["Metric", "SCENARIOS", "Scenario", "ScenarioResult", "get", "names", "register"]
+__all__ = ["THESIS", "Metric", "SCENARIOS", "Scenario", "ScenarioResult", "get", "names",
+           "register"]
