@@ -70,6 +70,23 @@ def test_pulsation_order_is_configurable(default_cfg, on):
     assert (a6 > 20 * a4) if on else (a6 < 1e-3)
 
 
+@pytest.mark.parametrize("torque", [0.0, 150.0])
+def test_meshing_torque_ripple_drives_the_pump_speed_at_order_4(default_cfg, torque):
+    """With the displacement ripple at zero, only the meshing torque ripple can make the
+    pump speed ripple at 4 x rotor angle; its size follows the configured torque."""
+    cfg = _with(default_cfg, "pulsation", True, **{"effects.pulsation.amplitude": 0.0,
+                                                  "effects.pulsation.torque_n": torque})
+    rec = _run(cfg, 20000, lambda p: p.set_current(10.0))[8000:]
+    v = rec[:, Y_VP] - rec[:, Y_VP].mean()
+    theta = rec[:, Y_THETA_M]
+    a4 = 2 * np.abs(np.mean(v * np.exp(-4j * theta)))
+    a3 = 2 * np.abs(np.mean(v * np.exp(-3j * theta)))
+    if torque:
+        assert a4 > 1e-5 and a4 > 20 * a3
+    else:
+        assert a4 < 1e-9
+
+
 @pytest.mark.parametrize("on", [True, False])
 def test_pump_coulomb_friction_offsets_the_force_speed_line(default_cfg, on):
     """Piston fixed: pump force vs pump speed is a line whose intercept is the Coulomb force."""
