@@ -84,7 +84,6 @@ class FpgaStack:
         self._bits = None
         if bit_level:
             from firmware_model.fpga.masters import BitLevelMasters
-
             from hil.sensor_lines import SensorLines
 
             self._bits = (SensorLines(cfg), BitLevelMasters(cfg), LK.BitLevelLink())
@@ -114,8 +113,10 @@ class FpgaStack:
                                 bd.params, bd.state, bd.down, bd.up, self.mcu.down,
                                 self.mcu.up, self.link)
             pl.tick += n_ticks
-            return row
-        return self._advance_bits(n_ticks, rows, row0, every)
+        else:
+            row = self._advance_bits(n_ticks, rows, row0, every)
+        self.mcu.up_crc_errors = int(self.link[LK.LK_MASTER_CRC])
+        return row
 
     def _advance_bits(self, n_ticks: int, rows: np.ndarray, row0: int, every: int) -> int:
         lines, masters, link = self._bits

@@ -86,6 +86,8 @@ class LinkMemory:
     def __init__(self, cfg: Config) -> None:
         self.down = down_defaults(cfg)
         self.up = np.zeros(B.UP_WORDS, dtype=np.int64)
+        #: Upstream words this side discarded for CRC (the MCU board FPGA's counter).
+        self.up_crc_errors = 0
 
     def write(self, name: str, value: int) -> None:
         """Set a downstream register; it reaches the board with the next sweep."""

@@ -42,6 +42,7 @@ FEEDBACKS = ("pressure", "strain", "complementary")
 LIMIT_FORCE = 1
 LIMIT_CURRENT = 2
 LIMIT_PRESSURE = 4
+V_FF_MAX = F32(32.767)
 
 
 def _clamp(x: np.float32, lim: np.float32) -> np.float32:
@@ -97,6 +98,7 @@ class ActuatorController:
         self.int_force = ZERO
         self.int_vel = ZERO
         self.tau_p = ZERO
+        self.tau_used = ZERO
         self.f_fb = ZERO
         self.f_fil = ZERO
         self.limits = 0
@@ -123,6 +125,7 @@ class ActuatorController:
         if tau_ref > lim or tau_ref < -lim:
             tau_ref = _clamp(tau_ref, lim)
             self.limits |= LIMIT_FORCE
+        self.tau_used = tau_ref
         if (m.p_cyl_a > self.p_lim or m.p_cyl_b > self.p_lim or m.p_pump_a > self.p_lim
                 or m.p_pump_b > self.p_lim):
             self.limits |= LIMIT_PRESSURE
@@ -150,7 +153,8 @@ class ActuatorController:
         else:
             self._observe(m)
         self.tau_p = i_ref * self.kt_eq
-        return i_ref, self.bemf * m.omega_m
+        # The board's register holds +/-32.767 V; clamp rather than let the word wrap.
+        return i_ref, _clamp(self.bemf * m.omega_m, V_FF_MAX)
 
     def _observe(self, m: Measurements) -> None:
         """Momentum observer of the pump side's disturbance (friction, ripple), N."""

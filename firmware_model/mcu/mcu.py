@@ -67,7 +67,7 @@ class Mcu:
         self.timeout_ticks = round(m["command_timeout_s"] / tick_s)
         self.off_ticks = self.timeout_ticks + round(m["safe_off_delay_s"] / tick_s)
         self._seq = 0
-        self._crc_seen = [0] * n
+        self._crc_seen = [(0, 0)] * n
 
     def command(self, i: int, mode: str, value: float, tick: int) -> None:
         """A fresh command for actuator ``i``: mode "force" (N), "position" (m) or "off"."""
@@ -112,6 +112,7 @@ class Mcu:
                 ctrl.reset()
             else:
                 i_ref, v_ff = ctrl.step(m, tau_ref)
+                tau_ref = ctrl.tau_used  # after the force/pressure limit
             self.tau_ref[i] = tau_ref
             self.iq_ref[i] = i_ref
             down = link.down
@@ -130,7 +131,8 @@ class Mcu:
                 status |= BOARD_FAULT
             if board & B.ST_ENABLED:
                 status |= BOARD_ENABLED
-            crc = int(link.up[B.U_ERR_LINK_CRC])
+            # Downstream words the board discarded, upstream words this side discarded.
+            crc = (int(link.up[B.U_ERR_LINK_CRC]), link.up_crc_errors)
             if board & B.ST_LINK_LOST or crc != self._crc_seen[i]:
                 status |= LINK_ERROR
             self._crc_seen[i] = crc
