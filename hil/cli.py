@@ -31,6 +31,10 @@ F2_BANDS = {
 }
 
 
+#: Preset the thesis scenarios run on unless -c is given (calibrated effect magnitudes).
+THESIS_PRESET = "hydra_thesis"
+
+
 class UsageError(Exception):
     """A mistake in the command line that argparse cannot see (e.g. a bad --plot path)."""
 
@@ -356,6 +360,8 @@ def cmd_run_thesis(args: argparse.Namespace) -> int:
 def cmd_run(args: argparse.Namespace) -> int:
     from hil import scenarios
 
+    if args.config is None and (args.scenario == "thesis" or args.scenario in scenarios.THESIS):
+        args.config = THESIS_PRESET
     if args.scenario == "thesis":
         return cmd_run_thesis(args)
     try:
@@ -524,7 +530,8 @@ def build_parser() -> argparse.ArgumentParser:
                        epilog="Scenarios: " + "; ".join(
                            f"{n}: {SCENARIOS[n].summary}" for n in scen))
     p.add_argument("scenario", metavar="SCENARIO",
-                   help="scenario name, or 'thesis' for all thesis experiments (F3-F8)")
+                   help="scenario name, or 'thesis' for all thesis experiments (F3-F8); "
+                   "these default to -c hydra_thesis")
     p.add_argument("--plot-dir", default="thesis-plots",
                    help="with 'thesis': directory for one plot per scenario "
                    "(default thesis-plots)")

@@ -10,7 +10,7 @@ from plant.config import load_config
 
 @pytest.fixture(scope="module")
 def cfg():
-    return load_config()
+    return load_config("hydra_thesis")
 
 
 def test_f3_rise_times(cfg):
