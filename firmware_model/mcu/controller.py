@@ -105,6 +105,10 @@ class ActuatorController:
 
     def feedback_force(self, m: Measurements) -> np.float32:
         """Update the complementary filter; return the force the loop is closed on, N."""
+        if m.strain_samples == 0:
+            # No AD7195 conversion read yet: its register still says code 0 (-3000 N).
+            self.f_fil = m.f_pres
+            return m.f_pres
         f_strain = self.cos_alpha * m.f_strain_raw
         u = f_strain - m.f_pres
         if self.hp_u != self.hp_u:  # first sample: start the high-pass at rest
