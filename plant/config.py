@@ -81,6 +81,7 @@ POSITIVE_KEYS = frozenset(
         "mcu.period_ticks",
         "mcu.derivative_filter_hz",
         "mcu.complementary_cutoff_hz",
+        "mcu.seal_observer_hz",
         "mcu.command_timeout_s",
     }
 )

@@ -11,7 +11,8 @@
   filtered force of Eq. 4.4 (thesis 15.1 N, 6.58 N, 4.18 N).
 
 Both run on the configuration they are given (``eha-hil run`` uses ``hydra_thesis``) with
-the load, the seal friction of :data:`SEAL_COULOMB_N` and the feedback set here. The PC
+the load and the feedback set here, and the configuration's rod-seal friction switched on
+(its magnitude is calibrated in the hydra_thesis preset, whose comment says how). The PC
 keeps the MCU's command "off" for :data:`STARTUP_OFF_S` after enable, so that the
 controllers start on valid sensor samples (see :data:`STARTUP_OFF_S`).
 """
@@ -28,16 +29,6 @@ from hil.scheduler import Record
 from hil.stack import PC_PERIOD_TICKS, ActuatorStack
 from plant import layout as L
 from plant.config import Config
-
-#: Rod-seal Coulomb friction, N. Calibrated once against F7's 12.1 N (pressure-feedback
-#: run of this module's hand motion, hydra_thesis preset): the preset's 20 N gives 21.5 N
-#: there. The breakaway force is scaled with it (preset ratio static/Coulomb = 1.75, i.e.
-#: 18.9 N), so one magnitude is calibrated and the Stribeck shape is the preset's.
-#: Plausibility: thesis 2.4.2 (Fig. 2.9) linearises the seal's friction as d_c with minus
-#: without seals = 549 - 414 = 135 N/(m/s) over the no-load speed range; a Coulomb force
-#: F_c fitted by a line through zero over 0..v_max has slope 1.5 F_c / v_max, so
-#: F_c = 135 v_max / 1.5 = 9-12.6 N for v_max = 0.10-0.14 m/s (no-load speed 0.14 m/s).
-SEAL_COULOMB_N = 10.8
 
 #: The PC sends "off" for this long after enable (the MCU then holds its controller in
 #: reset), then the experiment's command. Reason: ``ActuatorController.feedback_force``
@@ -93,9 +84,12 @@ def _fade(t: float, fade_s: float) -> float:
     return 0.5 - 0.5 * math.cos(math.pi * max(t, 0.0) / fade_s)
 
 
-def seal_overrides(cfg: Config, coulomb_n: float = SEAL_COULOMB_N) -> dict[str, object]:
-    """Seal friction on, Coulomb force ``coulomb_n``, breakaway scaled by the same factor."""
+def seal_overrides(cfg: Config, coulomb_n: float | None = None) -> dict[str, object]:
+    """Seal friction on; with ``coulomb_n`` (N) its Coulomb force replaced and the breakaway
+    force scaled by the same factor, so the Stribeck shape stays the configuration's."""
     static, coulomb = (cfg.get(f"effects.seal_friction.{k}") for k in ("static_n", "coulomb_n"))
+    if coulomb_n is None:
+        return {"effects.seal_friction.enabled": True}
     ratio = static / coulomb if coulomb > 0 else 1.0
     return {"effects.seal_friction.enabled": True,
             "effects.seal_friction.coulomb_n": coulomb_n,
@@ -125,7 +119,7 @@ def _lowpass_split(x: np.ndarray, dt: float, f_cut: float) -> tuple[float, float
 
 
 # === F7 ======================================================================================
-def f7_run(cfg: Config, feedback: str, coulomb_n: float = SEAL_COULOMB_N) -> dict[str, object]:
+def f7_run(cfg: Config, feedback: str, coulomb_n: float | None = None) -> dict[str, object]:
     """One F7 run closing the force loop on ``feedback``; errors and decimated series."""
     over = {"load.kind": "cart", "mcu.force_feedback": feedback, **seal_overrides(cfg, coulomb_n)}
     cfg = cfg.with_overrides(over, f"F7 {feedback} feedback")
@@ -201,21 +195,21 @@ def f7(cfg: Config, progress: Progress = None) -> ScenarioResult:
         notes.append(
             f"pressure-feedback error {ep:.1f} N misses 12.1 +/- {F7_PRESSURE_TOL_N:g} N by "
             f"{abs(ep - F7_THESIS['pressure']) - F7_PRESSURE_TOL_N:.1f} N: it is set by the "
-            f"rod-seal friction (Coulomb {SEAL_COULOMB_N:g} N, calibrated on the hydra_thesis "
+            f"rod-seal friction (Coulomb {cfg.get('effects.seal_friction.coulomb_n'):g} N, "
+            "calibrated in the hydra_thesis "
             "preset; another preset's meshing ripple or loop gains shift it)")
     if not ok_s:
         notes.append(
             f"strain-feedback error {es:.1f} N misses <= {F7_STRAIN_MAX_N:g} N by "
             f"{es - F7_STRAIN_MAX_N:.1f} N ({es / F7_THESIS['strain']:.1f}x the thesis's "
             f"1.3 N); {runs['strain']['rms_low']:.1f} N of it below 5 Hz, "
-            f"{runs['strain']['rms_high']:.1f} N above. Below 5 Hz it is the piston-side "
-            f"disturbance (seal friction, d_c v, (J_p + J_c) a) divided by 1 + kp_force = "
-            f"{1 + kp:g}: the Fig. 5.2 loop is proportional and its observer sees only the "
-            f"pump side, so strain feedback can cut the seal friction by {1 + kp:g}x, not the "
-            "thesis's "
-            f"{F7_THESIS['pressure'] / F7_THESIS['strain']:.0f}x. Missing is low-frequency loop "
-            "gain on the strain error (integral action, as in the velocity-based Fig. 5.1 PI "
-            "loop the thesis's chapter-4 experiments may have used); above 5 Hz it is the "
+            f"{runs['strain']['rms_high']:.1f} N above. The strain feedback removes the seal "
+            f"friction (observer at {cfg.get('mcu.seal_observer_hz'):g} Hz); below 5 Hz what is "
+            "left is the pressure loop's own tracking error while the hand backdrives the pump: "
+            "the pump-side inertia J_p a (118 kg seen from the piston) and the momentum observer's "
+            f"lag on d_p v, divided by 1 + kp_force = {1 + kp:g}; Fig. 5.2 has no inertia "
+            "feed-forward, and integral action on the strain error destabilises this "
+            "low-gain position loop (docs/mcu.md). Above 5 Hz it is the "
             f"meshing torque ripple (effects.pulsation.torque_n = "
             f"{cfg.get('effects.pulsation.torque_n'):g} N) at 4x the rotor speed, up to "
             f"{ripple_hz:.0f} Hz while backdriven, which neither the "

@@ -517,3 +517,44 @@ def test_controller_is_float32_from_a_fresh_object(cfg):
     ctrl = ActuatorController(cfg)
     bad = [n for n in CTRL_FLOATS if type(getattr(ctrl, n)) is not np.float32]
     assert not bad
+
+
+def _meas(cfg: Config, f_pres: float, f_strain: float) -> Measurements:
+    """Measurements with a steady pressure force and strain force, the rest at rest."""
+    m = Measurements(cfg)
+    for name in ("p_acc", "p_pump_a", "p_pump_b", "p_cyl_a", "p_cyl_b", "tau_q", "omega_m",
+                 "v_pump", "x_piston", "iq", "theta_rotor", "temperature_c"):
+        setattr(m, name, F32(0.0))
+    m.f_pres = F32(f_pres)
+    m.f_strain_raw = F32(f_strain)
+    m.strain_samples = 1
+    return m
+
+
+def test_seal_observer_learns_the_seal_force_and_adds_it_to_the_reference(cfg):
+    """Strain feedback: a steady 12 N gap between pressure and rod force (seal friction)
+    is estimated at the observer's rate and added to the pressure reference."""
+    c_cfg = cfg.with_overrides({"mcu.force_feedback": "strain"})
+    ctrl = ActuatorController(c_cfg)
+    fc = c_cfg.get("mcu.seal_observer_hz")
+    m = _meas(c_cfg, f_pres=100.0, f_strain=88.0)
+    n_tau = int(round(1.0 / (2 * np.pi * fc) / float(ctrl.dt)))
+    for _ in range(n_tau):
+        ctrl.step(m, F32(100.0))
+    assert 0.55 < float(ctrl.seal) / 12.0 < 0.7  # one time constant: 1 - 1/e
+    for _ in range(20 * n_tau):
+        i_ref, _ = ctrl.step(m, F32(100.0))
+    assert abs(float(ctrl.seal) - 12.0) < 0.01
+    # The loop now asks for 112 N of pressure force: PD error (112 - 100) times kp on top.
+    kp = c_cfg.get("mcu.kp_force")
+    expect = (112.0 + kp * 12.0 - float(ctrl.r)) / float(ctrl.kt_eq)
+    assert float(i_ref) == pytest.approx(expect, rel=1e-4)
+    assert type(ctrl.seal) is np.float32
+
+
+def test_pressure_feedback_has_no_seal_term(cfg):
+    ctrl = ActuatorController(cfg)
+    m = _meas(cfg, f_pres=100.0, f_strain=88.0)
+    for _ in range(500):
+        ctrl.step(m, F32(100.0))
+    assert float(ctrl.seal) == 0.0
