@@ -1,0 +1,150 @@
+"""The fieldbus master (PC side): one cyclic logical read-write per millisecond.
+
+The master keeps the process image (outputs it writes, inputs it read), builds the cycle's
+frames from the :class:`~hil.fieldbus.chain.CyclePlan` (one LRW datagram per frame, the
+cycle number mod 256 in ``idx``), and checks every reply: a frame with a bad FCS, from
+another cycle, or with a working counter other than the plan's is counted and its inputs
+are NOT applied (the previous cycle's stay, marked stale). A frame that does not come back
+within the timeout is counted as lost.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from hil.fieldbus import pdo, wire
+from hil.fieldbus.chain import CyclePlan
+from hil.fieldbus.topology import Topology
+from protocols import ethercat as ec
+
+
+@dataclass
+class MasterStats:
+    cycles: int = 0
+    frames_sent: int = 0
+    frames_ok: int = 0
+    wkc_errors: int = 0      # reply with the wrong working counter: inputs not applied
+    bad_frames: int = 0      # FCS/PDU failure: discarded
+    stale_frames: int = 0    # reply from another cycle (delayed/duplicated): discarded
+    lost_frames: int = 0     # no reply of this cycle came back for the frame (or only bad ones)
+
+    def as_dict(self) -> dict[str, int]:
+        return asdict(self)
+
+
+class Master:
+    """Process image and frame handling; no I/O of its own (the bus system moves frames)."""
+
+    def __init__(self, topo: Topology) -> None:
+        self.topology = topo
+        self.plan = CyclePlan.build(topo)
+        self.image = bytearray(self.plan.image_bytes)
+        self.stats = MasterStats()
+        self.cycle = 0
+        #: Per actuator (chain order): (output offset, input offset) in the image.
+        self.act_offsets: list[tuple[int, int]] = []
+        self.names = topo.actuator_names()
+        for w, box in zip(self.plan.windows, topo.boxes, strict=True):
+            o, i = w.lad, w.lad + w.out_len
+            for s in box.slots:
+                so, si = s.sizes
+                if s.kind == "actuator":
+                    self.act_offsets.append((o, i))
+                o += so
+                i += si
+        #: Per frame of the plan: did its inputs arrive this cycle?
+        self.fresh = [False] * len(self.plan.frames)
+        self._answered = [False] * len(self.plan.frames)
+        self._frame_of_actuator = [self._frame_index(i) for _, i in self.act_offsets]
+
+    def _frame_index(self, offset: int) -> int:
+        for k, (lad, n, _) in enumerate(self.plan.frames):
+            if lad <= offset < lad + n:
+                return k
+        raise AssertionError(offset)
+
+    # --- outputs -------------------------------------------------------------------------
+    def set_actuator(self, j: int, mode: str, value: float, enable: bool = True,
+                     clear_fault: bool = False, kp_position: float = 0.0,
+                     kp_force: float = 0.0) -> None:
+        """Output record of actuator ``j``: mode "off"/"force" (N)/"position" (m)."""
+        if mode not in pdo.MODE_CODES:
+            raise ValueError(f"unknown mode {mode!r}")
+        lsb = pdo.POSITION_CMD_LSB if mode == "position" else pdo.FORCE_CMD_LSB
+        rec = np.zeros(1, dtype=pdo.ACTUATOR_OUT_DTYPE)
+        rec["mode"] = pdo.MODE_CODES[mode]
+        rec["flags"] = (pdo.FLAG_ENABLE if enable else 0) | (
+            pdo.FLAG_CLEAR_FAULT if clear_fault else 0)
+        rec["command"] = pdo.to_counts(value, lsb, "i4")
+        rec["kp_position"] = pdo.to_counts(kp_position, 10.0, "u2")
+        rec["kp_force"] = pdo.to_counts(kp_force, 1e-3, "u2")
+        o = self.act_offsets[j][0]
+        self.image[o:o + rec.itemsize] = rec.tobytes()
+
+    # --- inputs ---------------------------------------------------------------------------
+    def actuator_inputs(self, j: int) -> dict[str, float]:
+        """Latest inputs of actuator ``j`` in SI units (plus ``fresh``: this cycle's?)."""
+        i = self.act_offsets[j][1]
+        rec = np.frombuffer(bytes(self.image[i:i + pdo.ACTUATOR_IN_DTYPE.itemsize]),
+                            dtype=pdo.ACTUATOR_IN_DTYPE)[0]
+        out = {f.name: float(rec[f.name]) * (f.lsb if f.lsb else 1.0) for f in pdo.ACTUATOR_IN}
+        for f in ("status", "err_link_down", "err_link_up"):
+            out[f] = int(rec[f])
+        out["fresh"] = self.fresh[self._frame_of_actuator[j]]
+        return out
+
+    # --- frames ---------------------------------------------------------------------------
+    def frames(self) -> list[bytes]:
+        """This cycle's sealed frames (call once per cycle, then :meth:`receive` replies)."""
+        self.fresh = [False] * len(self.plan.frames)
+        self._answered = [False] * len(self.plan.frames)
+        idx = self.cycle & 0xFF
+        out = []
+        for lad, n, _ in self.plan.frames:
+            d = ec.Datagram.logical(ec.Command.LRW, lad, bytes(self.image[lad:lad + n]), idx=idx)
+            out.append(wire.seal(ec.encode_pdu([d])))
+        self.stats.frames_sent += len(out)
+        return out
+
+    def receive(self, frame: bytes) -> bool:
+        """Check one reply; apply its inputs if it is good. True if applied."""
+        dgs = wire.open_frame(frame)
+        if dgs is None or len(dgs) != 1 or dgs[0].cmd != ec.Command.LRW:
+            self.stats.bad_frames += 1
+            return False
+        d = dgs[0]
+        if d.idx != self.cycle & 0xFF:
+            self.stats.stale_frames += 1
+            return False
+        for k, (lad, n, wkc) in enumerate(self.plan.frames):  # noqa: B007 (used after break)
+            if d.lad == lad and len(d.data) == n:
+                break
+        else:
+            self.stats.bad_frames += 1
+            return False
+        if self._answered[k]:
+            self.stats.stale_frames += 1  # a duplicate of a reply already seen
+            return False
+        self._answered[k] = True
+        if d.wkc != wkc:
+            self.stats.wkc_errors += 1
+            return False
+        for w in self.plan.windows:
+            i0 = w.lad + w.out_len
+            if lad <= i0 and w.end <= lad + n and w.in_len:
+                self.image[i0:w.end] = d.data[i0 - lad:w.end - lad]
+        self.fresh[k] = True
+        self.stats.frames_ok += 1
+        return True
+
+    def end_cycle(self) -> None:
+        """Count the frames that did not come back and move to the next cycle."""
+        self.stats.lost_frames += self._answered.count(False)
+        self.stats.cycles += 1
+        self.cycle += 1
+
+    def input_image(self) -> bytes:
+        """The input part of the image (all windows' inputs, concatenated), for records."""
+        return b"".join(bytes(self.image[w.lad + w.out_len:w.end]) for w in self.plan.windows)

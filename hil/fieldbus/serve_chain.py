@@ -1,0 +1,55 @@
+"""Run the chain of boxes as its own process, answering frames on a transport.
+
+``python -m hil.fieldbus.serve_chain --transport udp --port 0 --topology hydra_full``
+prints ``READY <port or path>`` on stdout once it listens, then serves until killed or
+until the transport closes.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+from hil.fieldbus.chain import Chain
+from hil.fieldbus.topology import load_topology
+from hil.transports import TransportError, open_transport
+from plant.config import Config
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m hil.fieldbus.serve_chain")
+    ap.add_argument("--transport", required=True, choices=("udp", "serial", "can"))
+    ap.add_argument("--port", required=True, help="UDP port (0: any free) or serial device")
+    ap.add_argument("--topology", default="hydra_full")
+    ap.add_argument("--model", default="stack", choices=("stack", "echo"))
+    ap.add_argument("--config-json", required=True)
+    args = ap.parse_args(argv)
+    cfg = Config(json.loads(args.config_json), ["chain process"])
+    chain = Chain(load_topology(args.topology), cfg, args.model)
+    if args.transport == "udp":
+        end = open_transport("udp", "slave", port=int(args.port))
+        where = str(end.address[1])
+    elif args.transport == "serial":
+        end = open_transport("serial", "slave", url=args.port)
+        where = args.port
+    else:
+        end = open_transport("can", "slave", channel=args.port)
+        where = args.port
+    print(f"READY {where}", flush=True)
+    try:
+        while True:
+            frame = end.recv(timeout=1.0)
+            if frame is None:
+                continue
+            reply = chain.handle(frame)
+            if reply is not None:
+                end.send(reply)
+    except (TransportError, KeyboardInterrupt):
+        return 0
+    finally:
+        end.close()
+
+
+if __name__ == "__main__":
+    sys.exit(main())

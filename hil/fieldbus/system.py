@@ -1,0 +1,165 @@
+"""The bus system: PC loop + master on one side of a transport, the chain of boxes on the
+other, stepped cycle by cycle (1 kHz) in lockstep.
+
+The chain runs in this process for ``inproc`` (and for ``serial`` over ``loop://``-style
+pairs and ``can`` on python-can's virtual bus), or in a separate process for ``udp`` and
+``serial`` over a pseudo-terminal (``python -m hil.fieldbus.serve_chain``). The master
+waits for each cycle's replies (``reply_timeout_s`` of wall time), so the same scenario
+gives the same bytes on every transport when nothing is lost.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from hil.fieldbus.chain import CYCLE_TICKS, Chain
+from hil.fieldbus.master import Master
+from hil.fieldbus.topology import Topology
+from plant.config import Config
+
+#: pc(cycle, master): sets the outputs for this cycle from the inputs of the last one.
+PcFn = Callable[[int, Master], None]
+#: Called with (cycle, tick, frame bytes, direction "tx"/"rx") for logs and captures.
+TapFn = Callable[[int, int, bytes, str], None]
+
+
+@dataclass
+class BusRecord:
+    """What a run leaves: the input image after every cycle and the counters."""
+
+    inputs: np.ndarray          # (cycles, input bytes) uint8
+    master: dict[str, int]
+    chain: dict[str, int] | None
+    transport: dict[str, int]
+
+
+class BusSystem:
+    """Master + transport + chain; :meth:`run` steps cycles."""
+
+    def __init__(self, topo: Topology, cfg: Config, transport: str = "inproc",
+                 model: str = "stack", reply_timeout_s: float = 2.0,
+                 remote: bool | None = None, tap: TapFn | None = None,
+                 transport_options: dict | None = None) -> None:
+        from hil.transports import open_transport, transport_pair
+
+        self.topology = topo
+        self.master = Master(topo)
+        self.transport = transport
+        #: In-process chain on a pty/CAN pair: how long to wait for a sent frame to arrive.
+        self.inline_wait_s = 0.5
+        self.reply_timeout_s = reply_timeout_s
+        self.tap = tap
+        self.proc: subprocess.Popen | None = None
+        self.chain: Chain | None = None
+        opts = dict(transport_options or {})
+        if remote is None:
+            remote = transport == "udp"
+        if not remote:
+            self.chain = Chain(topo, cfg, model)
+            self.m_end, self.s_end = transport_pair(transport, **opts)
+        elif transport == "udp":
+            self.proc = _spawn_chain(["--transport", "udp", "--port", "0"], topo, cfg, model)
+            port = int(_ready_line(self.proc))
+            self.m_end = open_transport("udp", "master", remote_port=port, **opts)
+            self.s_end = None
+        elif transport == "serial":
+            from hil.transports import pty_pair
+
+            pty = pty_pair()
+            self._pty = pty
+            self.proc = _spawn_chain(["--transport", "serial", "--port", pty.path], topo, cfg,
+                                     model)
+            _ready_line(self.proc)
+            self.m_end = open_transport("serial", "master", fd=pty.master_fd, **opts)
+            self.s_end = None
+        else:
+            raise ValueError(f"transport {transport!r} cannot run the chain in another process")
+
+    def run(self, cycles: int, pc: PcFn) -> BusRecord:
+        """Run ``cycles`` fieldbus cycles; the input image is recorded after each."""
+        m = self.master
+        rows = np.zeros((cycles, len(m.input_image())), dtype=np.uint8)
+        for k in range(cycles):
+            pc(m.cycle, m)
+            frames = m.frames()
+            tick = m.cycle * CYCLE_TICKS
+            for f in frames:
+                if self.tap:
+                    self.tap(m.cycle, tick, f, "tx")
+                self.m_end.send(f)
+            if self.chain is not None:
+                self._serve_inline(len(frames))
+            for _ in frames:
+                reply = self.m_end.recv(timeout=self.reply_timeout_s if self.proc else 0.05)
+                if reply is None:
+                    break
+                if self.tap:
+                    self.tap(m.cycle, tick, reply, "rx")
+                m.receive(reply)
+            m.end_cycle()
+            rows[k] = np.frombuffer(m.input_image(), dtype=np.uint8)
+        return BusRecord(rows, m.stats.as_dict(),
+                         None if self.chain is None else self.chain.stats.__dict__.copy(),
+                         self.m_end.stats.as_dict())
+
+    def _serve_inline(self, expected: int) -> None:
+        """Answer the frames the master just sent. In-process queues deliver at once; a pty
+        or a CAN bus takes a moment, so wait (briefly) for as many frames as were sent."""
+        wait = 0.0 if self.transport == "inproc" else self.inline_wait_s
+        got = 0
+        while True:
+            frame = self.s_end.recv(timeout=wait if got < expected else 0.0)
+            if frame is None:
+                return
+            got += 1
+            reply = self.chain.handle(frame)
+            if reply is not None:
+                self.s_end.send(reply)
+
+    def close(self) -> None:
+        for end in (self.m_end, self.s_end):
+            if end is not None:
+                end.close()
+        if self.proc is not None:
+            self.proc.terminate()
+            try:
+                self.proc.wait(5)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+            self.proc = None
+
+    def __enter__(self) -> BusSystem:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def _spawn_chain(args: list[str], topo: Topology, cfg: Config, model: str) -> subprocess.Popen:
+    cmd = [sys.executable, "-m", "hil.fieldbus.serve_chain", *args, "--topology",
+           topo.source if topo.source.endswith(".toml") else topo.source.split()[-1],
+           "--model", model, "--config-json", cfg_to_json(cfg)]
+    env = dict(os.environ)
+    return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env=env)
+
+
+def _ready_line(proc: subprocess.Popen) -> str:
+    line = proc.stdout.readline()
+    if not line.startswith("READY"):
+        err = proc.stderr.read() if proc.poll() is not None else ""
+        raise RuntimeError(f"chain process did not start: {line.strip()} {err.strip()}")
+    return line.split()[1]
+
+
+def cfg_to_json(cfg: Config) -> str:
+    """A configuration as JSON (handed to the chain process)."""
+    import json
+
+    return json.dumps(cfg.data)
