@@ -1,0 +1,15 @@
+"""Frame logs: every frame that crosses a link, with its simulated time, in an MCAP file.
+
+See ``docs/framelog.md``. Writing: :class:`FrameLogWriter`; reading: :class:`FrameLogReader`
+(``info``, ``frames``, ``blocks``); decoding: :mod:`hil.framelog.decoders`; the CLI verbs
+``eha-hil log info|export``: :mod:`hil.framelog.cli`.
+"""
+
+from hil.framelog.formats import LEVELS, level_includes, lvds_topic, sensor_topic, signal_topic
+from hil.framelog.reader import Blocks, ChannelInfo, FrameLogError, FrameLogReader, LogInfo
+from hil.framelog.writer import FrameLogWriter
+
+__all__ = [
+    "LEVELS", "Blocks", "ChannelInfo", "FrameLogError", "FrameLogReader", "FrameLogWriter",
+    "LogInfo", "level_includes", "lvds_topic", "sensor_topic", "signal_topic",
+]

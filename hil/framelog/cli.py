@@ -1,0 +1,75 @@
+"""``eha-hil log info|export``: the frame-log verbs, to be hung under the main parser.
+
+``configure_log(parser)`` adds the subcommands to a (sub)parser; ``run_log(args)`` runs the
+chosen one and returns the exit code: 0, or 2 after one line ``eha-hil log: ...`` on stderr
+for a bad file or option (never a traceback).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from hil.framelog.export import export_csv, summary_text
+from hil.framelog.reader import FrameLogError, FrameLogReader
+
+EXIT_USAGE = 2
+
+
+def configure_log(parser: argparse.ArgumentParser) -> None:
+    """Add ``info LOG [--json]`` and ``export LOG OUT [--topic T ...] [--field F ...]``."""
+    sub = parser.add_subparsers(dest="log_command", metavar="ACTION", required=True)
+    p = sub.add_parser("info", help="summarise a frame log (channels, counts, time range, "
+                       "whether it is complete)")
+    p.add_argument("log", metavar="LOG", help="MCAP frame log")
+    p.add_argument("--json", action="store_true", help="print JSON instead of text")
+    p = sub.add_parser("export", help="decode frames to CSV (t_s, topic, decoded fields)")
+    p.add_argument("log", metavar="LOG", help="MCAP frame log")
+    p.add_argument("out", metavar="OUT", help="CSV file to write ('-': stdout)")
+    p.add_argument("--topic", action="append", metavar="T",
+                   help="export only this topic (repeatable; default all)")
+    p.add_argument("--field", action="append", metavar="F",
+                   help="export only this decoded field (repeatable; default all)")
+
+
+def _info(args: argparse.Namespace) -> int:
+    info = FrameLogReader(args.log).info()
+    if args.json:
+        print(json.dumps(info.to_dict(), indent=2))
+    else:
+        print(summary_text(info))
+    return 0
+
+
+def _export(args: argparse.Namespace) -> int:
+    out = Path(args.out)
+    if args.out != "-":
+        parent = out.parent if str(out.parent) else Path(".")
+        if not parent.is_dir():
+            raise FrameLogError(f"{args.out}: directory {parent} does not exist")
+        if out.is_dir():
+            raise FrameLogError(f"{args.out}: is a directory; give a .csv file name")
+    n = export_csv(args.log, args.out, topics=args.topic, fields=args.field)
+    if args.out != "-":
+        print(f"wrote {n} rows to {args.out}")
+    return 0
+
+
+def run_log(args: argparse.Namespace) -> int:
+    """Run ``args.log_command``; 0 on success, 2 with one line on stderr on a user error."""
+    try:
+        if args.log_command == "info":
+            return _info(args)
+        if args.log_command == "export":
+            return _export(args)
+        raise FrameLogError(f"unknown action {args.log_command!r}")
+    except FrameLogError as exc:
+        print(f"eha-hil log: {exc}", file=sys.stderr)
+    except BrokenPipeError:  # e.g. piped into head: not an error
+        return 0
+    except OSError as exc:  # e.g. the CSV cannot be written
+        name = exc.filename if exc.filename is not None else ""
+        print(f"eha-hil log: {name}: {exc.strerror or exc}", file=sys.stderr)
+    return EXIT_USAGE

@@ -1,0 +1,387 @@
+"""Write frame logs: every frame that crosses a link, with its simulated time, to MCAP.
+
+A log is an MCAP file (https://mcap.dev) written with the official ``mcap`` library:
+
+* the header's profile is ``"eha-hil"``; a Metadata record named ``"eha-hil"`` written
+  first holds the level of detail, the package version and whatever the run adds (the
+  configuration as TOML text, the seed, ...);
+* one channel per link and direction (``/lvds/<board>/up``, ``/fieldbus/frames``, ...);
+  a channel's *encoding* says what one frame's bytes mean (``eha-hil/lvds-up``, ...);
+* a *single* channel carries one frame per MCAP message; a *block* channel packs many
+  fixed-width frames into one message (:func:`hil.framelog.formats.pack_block`), so a 5 kHz
+  link costs one message per block instead of one per frame;
+* JSON signal channels (``message_encoding="json"`` with a JSON schema) plot in Foxglove.
+
+Crash safety: records go straight to the operating system (no Python-side buffer), so a
+run that is killed leaves every chunk completed before the kill on disk; the reader returns
+those and reports the file as truncated. ``chunk_size`` (bytes) and ``flush_every_ns``
+(simulated ns) bound how much a kill loses. An OS crash or power loss is not covered (no
+fsync).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from dataclasses import dataclass
+from importlib.metadata import PackageNotFoundError, version
+from pathlib import Path
+from types import TracebackType
+from typing import Literal
+
+import numpy as np
+from mcap.exceptions import UnsupportedCompressionError
+from mcap.writer import CompressionType, Writer
+
+from hil.framelog.formats import (
+    BLOCK_MESSAGE_ENCODING,
+    DTYPE_CODES,
+    ENC_JSON,
+    LEVELS,
+    META_DTYPE,
+    META_FRAME_ENCODING,
+    META_FRAMING,
+    META_WIDTH,
+    METADATA_NAME,
+    PROFILE,
+    dtype_code,
+    level_includes,
+    pack_block,
+)
+
+Compression = Literal["zstd", "lz4", "none"]
+_COMPRESSION = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4,
+                "none": CompressionType.NONE}
+_JSON_TYPES = ("number", "integer")
+#: Keys of the "eha-hil" metadata record that the writer sets itself.
+RESERVED_METADATA = ("level", "version", "time")
+
+
+def package_version() -> str:
+    """Installed version of eha-hil ("unknown" when run from a source tree)."""
+    try:
+        return version("eha-hil")
+    except PackageNotFoundError:
+        return "unknown"
+
+
+class _DirectFile:
+    """A write-only file without a Python buffer: every ``write`` is an ``os.write``.
+
+    The mcap Writer hands over whole records (a chunk and its indexes, a metadata record),
+    so unbuffered writes are few and large; what matters is that a record the Writer has
+    written is in the kernel's page cache, where it survives the process being killed.
+    """
+
+    def __init__(self, path: str | os.PathLike[str]) -> None:
+        self._fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+        self._pos = 0
+
+    def write(self, data: bytes | bytearray | memoryview) -> int:
+        view = memoryview(data)
+        while view:
+            n = os.write(self._fd, view)
+            view = view[n:]
+            self._pos += n
+        return len(data)
+
+    def tell(self) -> int:
+        return self._pos
+
+    def flush(self) -> None:
+        pass  # nothing is buffered here
+
+    def close(self) -> None:
+        if self._fd >= 0:
+            os.close(self._fd)
+            self._fd = -1
+
+
+@dataclass
+class _Channel:
+    topic: str
+    encoding: str
+    block: bool
+    dtype: np.dtype | None = None
+    width: int = 0
+    json_fields: frozenset[str] | None = None
+    last_ns: int = 0
+    count: int = 0
+
+
+class FrameLogWriter:
+    """Context manager writing one frame log (an MCAP file).
+
+    ``level`` is the level of detail the run logs at (``bus``, ``mcu``, ``full``; see
+    :data:`hil.framelog.formats.LEVELS` and :meth:`logs`); it is recorded in the file, the
+    writer does not filter. ``metadata`` goes into the ``"eha-hil"`` Metadata record with
+    ``level`` and ``version`` (values are converted with ``str``). ``chunk_size`` is the
+    uncompressed chunk size in bytes at which a chunk is closed and written;
+    ``flush_every_ns`` also closes the chunk when that much simulated time has passed since
+    the last one (None: by size only). ``compression``: ``zstd`` (default), ``lz4`` or
+    ``none``; the mcap library depends on ``zstandard`` and ``lz4``, so all three work out
+    of the box.
+
+    Times must be integers >= 0 (ns of simulated time) and non-decreasing per channel, so
+    that each channel reads back in time order.
+    """
+
+    def __init__(
+        self,
+        path: str | os.PathLike[str],
+        *,
+        level: str = "mcu",
+        profile: str = PROFILE,
+        metadata: dict[str, str] | None = None,
+        chunk_size: int = 1 << 20,
+        compression: Compression = "zstd",
+        flush_every_ns: int | None = None,
+    ) -> None:
+        if level not in LEVELS:
+            raise ValueError(f"unknown log level {level!r} (use {', '.join(LEVELS)})")
+        if compression not in _COMPRESSION:
+            raise ValueError(f"compression {compression!r} is not one of zstd, lz4, none")
+        if chunk_size < 1:
+            raise ValueError(f"chunk_size must be >= 1 byte, got {chunk_size}")
+        if flush_every_ns is not None and flush_every_ns <= 0:
+            raise ValueError(f"flush_every_ns must be > 0, got {flush_every_ns}")
+        meta = {str(k): str(v) for k, v in (metadata or {}).items()}
+        clash = [k for k in RESERVED_METADATA if k in meta]
+        if clash:
+            raise ValueError(f"metadata key {clash[0]!r} is set by the writer")
+        self.path = Path(path)
+        self.level = level
+        self._file = _DirectFile(path)
+        try:
+            self._writer = Writer(
+                self._file,  # type: ignore[arg-type]  # duck-typed stream
+                chunk_size=chunk_size,
+                compression=_COMPRESSION[compression],
+                enable_crcs=True,
+                enable_data_crcs=True,
+            )
+        except UnsupportedCompressionError as exc:
+            self._file.close()
+            raise ValueError(f"compression {compression!r} unavailable ({exc}); "
+                             "use compression='none'") from None
+        self._writer.start(profile=profile, library=f"eha-hil/{package_version()}")
+        self._writer.add_metadata(METADATA_NAME, {
+            "level": level, "version": package_version(), "time": "ns of simulated time",
+            **meta})
+        self._channels: dict[int, _Channel] = {}
+        self._topics: set[str] = set()
+        self._schemas: dict[tuple[str, str, bytes], int] = {}
+        self._flush_every = flush_every_ns
+        self._last_flush_ns = 0
+        self._closed = False
+
+    # -- context manager -----------------------------------------------------------------
+    def __enter__(self) -> FrameLogWriter:
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        # Also on an exception: a log that ends where the run failed is what one wants to see.
+        self.close()
+
+    def logs(self, kind: str) -> bool:
+        """True if this log's level includes links of ``kind`` (fieldbus, lvds, sensors, ...)."""
+        return level_includes(self.level, kind)
+
+    # -- channels ------------------------------------------------------------------------
+    def _schema(self, name: str, encoding: str, data: bytes) -> int:
+        if not name:
+            return 0  # MCAP: schema id 0 = no schema
+        key = (name, encoding, bytes(data))
+        if key not in self._schemas:
+            self._schemas[key] = self._writer.register_schema(name, encoding, bytes(data))
+        return self._schemas[key]
+
+    def _register(self, topic: str, message_encoding: str, schema_id: int,
+                  metadata: dict[str, str], ch: _Channel) -> int:
+        self._check_open()
+        if topic in self._topics:
+            raise ValueError(f"topic {topic!r} already has a channel")
+        cid = self._writer.register_channel(topic, message_encoding, schema_id,
+                                            {str(k): str(v) for k, v in metadata.items()})
+        self._topics.add(topic)
+        self._channels[cid] = ch
+        return cid
+
+    def add_channel(self, topic: str, encoding: str, *, schema_name: str,
+                    schema_data: bytes = b"", schema_encoding: str = "",
+                    metadata: dict[str, str] | None = None) -> int:
+        """A channel with one frame per message; returns its id for :meth:`write`.
+
+        ``encoding`` is the MCAP message encoding and names the frame layout (the key of
+        :mod:`hil.framelog.decoders`). ``schema_name`` "" means no schema record.
+        """
+        meta = {**(metadata or {}), META_FRAMING: "single", META_FRAME_ENCODING: encoding}
+        sid = self._schema(schema_name, schema_encoding, schema_data)
+        return self._register(topic, encoding, sid, meta, _Channel(topic, encoding, False))
+
+    def add_block_channel(self, topic: str, encoding: str, *, dtype: np.dtype | str | type,
+                          width: int, schema_name: str = "", schema_data: bytes = b"",
+                          schema_encoding: str = "",
+                          metadata: dict[str, str] | None = None) -> int:
+        """A channel of fixed-width frames logged in blocks (:meth:`write_block`).
+
+        One frame is ``width`` elements of ``dtype`` (little endian), e.g. an upstream LVDS
+        snapshot is 31 x uint16. The frame encoding goes into the channel metadata; the
+        MCAP message encoding is ``eha-hil/block``.
+        """
+        code = dtype_code(dtype)
+        if width < 1:
+            raise ValueError(f"block frame width must be >= 1, got {width}")
+        dt = DTYPE_CODES[code]
+        meta = {**(metadata or {}), META_FRAMING: "block", META_FRAME_ENCODING: encoding,
+                META_DTYPE: dt.name, META_WIDTH: str(width)}
+        sid = self._schema(schema_name, schema_encoding, schema_data)
+        return self._register(topic, BLOCK_MESSAGE_ENCODING, sid, meta,
+                              _Channel(topic, encoding, True, dt, width))
+
+    def add_json_channel(self, topic: str, fields: dict[str, str],
+                         metadata: dict[str, str] | None = None) -> int:
+        """A JSON signals channel (``json`` messages, ``jsonschema`` schema) for Foxglove.
+
+        ``fields`` maps a signal name to ``"number"`` or ``"integer"``. A value that is not
+        finite is written as ``null`` (JSON has no NaN; a plot shows a gap). The schema
+        keeps plain ``"type": "number"`` all the same: Foxglove's JSON-schema parser
+        rejects a type list such as ``["number", "null"]`` for the whole channel.
+        """
+        bad = {k: v for k, v in fields.items() if v not in _JSON_TYPES}
+        if bad:
+            k, v = next(iter(bad.items()))
+            raise ValueError(f"field {k!r}: type {v!r} is not 'number' or 'integer'")
+        schema = {"type": "object", "title": topic,
+                  "properties": {k: {"type": v} for k, v in fields.items()}}
+        sid = self._schema(topic.strip("/").replace("/", ".") or "signals", "jsonschema",
+                           json.dumps(schema, sort_keys=True).encode())
+        meta = {**(metadata or {}), META_FRAMING: "single", META_FRAME_ENCODING: ENC_JSON}
+        return self._register(topic, ENC_JSON, sid, meta,
+                              _Channel(topic, ENC_JSON, False, json_fields=frozenset(fields)))
+
+    # -- messages ------------------------------------------------------------------------
+    def _channel(self, channel_id: int) -> _Channel:
+        self._check_open()
+        try:
+            return self._channels[channel_id]
+        except KeyError:
+            raise ValueError(f"no channel with id {channel_id}") from None
+
+    def _advance(self, ch: _Channel, first_ns: int, last_ns: int) -> None:
+        if first_ns < ch.last_ns:
+            raise ValueError(f"{ch.topic}: time {first_ns} ns is before the previous frame's "
+                             f"{ch.last_ns} ns (times must not decrease per channel)")
+        ch.last_ns = last_ns
+        if self._flush_every is not None and last_ns - self._last_flush_ns >= self._flush_every:
+            self._writer.flush()
+            self._last_flush_ns = last_ns
+
+    def write(self, channel_id: int, t_ns: int, data: bytes, *,
+              publish_ns: int | None = None) -> None:
+        """Log one frame ``data`` at simulated time ``t_ns`` (int ns, >= 0).
+
+        ``publish_ns`` (default ``t_ns``) goes to the MCAP publish time, e.g. when the frame
+        was sent as opposed to received.
+        """
+        ch = self._channel(channel_id)
+        if ch.block:
+            raise ValueError(f"{ch.topic} is a block channel: use write_block")
+        t = int(t_ns)
+        if t < 0:
+            raise ValueError(f"{ch.topic}: time {t} ns is negative")
+        self._advance(ch, t, t)
+        self._writer.add_message(channel_id, t, bytes(data),
+                                 t if publish_ns is None else int(publish_ns),
+                                 ch.count & 0xFFFFFFFF)
+        ch.count += 1
+
+    def write_block(self, channel_id: int, t_ns: np.ndarray, frames: np.ndarray) -> None:
+        """Log ``len(t_ns)`` frames as one message: ``frames[i]`` at ``t_ns[i]`` (int ns).
+
+        ``frames`` has shape (n, width) (or (n,) for width 1) and the channel's dtype, or
+        any integer dtype whose values fit it (ValueError otherwise, never a silent wrap),
+        or a dtype that casts to it safely; ``t_ns`` must be non-decreasing. An empty block is
+        not written. The message's log time is the first frame's, its publish time the
+        last frame's.
+        """
+        ch = self._channel(channel_id)
+        if not ch.block:
+            raise ValueError(f"{ch.topic} was added with add_channel: use write, or "
+                             "add_block_channel for blocks")
+        assert ch.dtype is not None
+        t = np.asarray(t_ns)
+        f = np.asarray(frames)
+        if f.ndim == 1 and ch.width == 1:
+            f = f.reshape(-1, 1)
+        if t.ndim != 1 or f.ndim != 2 or f.shape != (t.shape[0], ch.width):
+            raise ValueError(f"{ch.topic}: need t_ns (n,) and frames (n, {ch.width}), got "
+                             f"{t.shape} and {f.shape}")
+        if t.dtype.kind not in "iu":
+            raise ValueError(f"{ch.topic}: t_ns must be integer ns, got dtype {t.dtype}")
+        if f.dtype != ch.dtype:
+            f = self._cast(ch, f)
+        n = t.shape[0]
+        if n == 0:
+            return
+        t = t.astype(np.int64, copy=False)
+        if t[0] < 0:
+            raise ValueError(f"{ch.topic}: time {int(t[0])} ns is negative")
+        if n > 1 and bool(np.any(t[1:] < t[:-1])):
+            raise ValueError(f"{ch.topic}: block times decrease")
+        first, last = int(t[0]), int(t[-1])
+        self._advance(ch, first, last)
+        self._writer.add_message(channel_id, first, pack_block(t, f), last,
+                                 ch.count & 0xFFFFFFFF)
+        ch.count += 1
+
+    @staticmethod
+    def _cast(ch: _Channel, f: np.ndarray) -> np.ndarray:
+        # Integer state arrays are int64 in the models: accept any integer array whose
+        # values fit, rather than make every caller cast (and risk a silent wrap-around).
+        assert ch.dtype is not None
+        if f.dtype.kind in "iub" and ch.dtype.kind in "iu":
+            info = np.iinfo(ch.dtype)
+            if f.size and (int(f.min()) < info.min or int(f.max()) > info.max):
+                raise ValueError(f"{ch.topic}: frame values {int(f.min())}..{int(f.max())} "
+                                 f"do not fit the channel's {ch.dtype}")
+        elif not np.can_cast(f.dtype, ch.dtype, "safe"):
+            raise ValueError(f"{ch.topic}: frames of dtype {f.dtype} do not fit the "
+                             f"channel's {ch.dtype}")
+        return f.astype(ch.dtype)
+
+    def write_json(self, channel_id: int, t_ns: int, values: dict[str, float | int]) -> None:
+        """Log one sample of signals on a JSON channel; keys must be declared fields."""
+        ch = self._channel(channel_id)
+        if ch.json_fields is None:
+            raise ValueError(f"{ch.topic} is not a JSON channel (add_json_channel)")
+        out: dict[str, float | int | None] = {}
+        for k, v in values.items():
+            if k not in ch.json_fields:
+                raise ValueError(f"{ch.topic}: field {k!r} was not declared")
+            if isinstance(v, np.generic):
+                v = v.item()
+            out[k] = None if isinstance(v, float) and not math.isfinite(v) else v
+        self.write(channel_id, t_ns, json.dumps(out, separators=(",", ":")).encode())
+
+    # -- end -----------------------------------------------------------------------------
+    def flush(self) -> None:
+        """Close the chunk in progress and write it: everything so far survives a kill."""
+        self._check_open()
+        self._writer.flush()
+
+    def close(self) -> None:
+        """Write the last chunk, the summary and the footer; idempotent."""
+        if self._closed:
+            return
+        self._closed = True
+        try:
+            self._writer.finish()
+        finally:
+            self._file.close()
+
+    def _check_open(self) -> None:
+        if self._closed:
+            raise ValueError(f"frame log {self.path} is closed")
