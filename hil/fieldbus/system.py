@@ -56,6 +56,7 @@ class BusSystem:
         self.reply_timeout_s = reply_timeout_s
         self.tap = tap
         self.proc: subprocess.Popen | None = None
+        self._pty = None
         self.chain: Chain | None = None
         opts = dict(transport_options or {})
         if remote is None:
@@ -73,8 +74,8 @@ class BusSystem:
 
             pty = pty_pair()
             self._pty = pty
-            self.proc = _spawn_chain(["--transport", "serial", "--port", pty.path], topo, cfg,
-                                     model)
+            self.proc = _spawn_chain(["--transport", "serial", "--port", pty.slave_path], topo,
+                                     cfg, model)
             _ready_line(self.proc)
             self.m_end = open_transport("serial", "master", fd=pty.master_fd, **opts)
             self.s_end = None
@@ -133,6 +134,9 @@ class BusSystem:
             except subprocess.TimeoutExpired:
                 self.proc.kill()
             self.proc = None
+        if self._pty is not None:
+            self._pty.close()
+            self._pty = None
 
     def __enter__(self) -> BusSystem:
         return self

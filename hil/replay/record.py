@@ -1,0 +1,163 @@
+"""Logging a fieldbus run at the MCU boundary (MCAP, :mod:`hil.framelog`).
+
+Channels per box ``b`` (blocks of fixed-width frames, times in ns of simulated time):
+
+* ``/mcu/b/outputs``  uint8 x out_bytes: the box's fieldbus output record, each cycle;
+* ``/mcu/b/inputs``   uint8 x in_bytes: the input record the box gave back, each cycle;
+* ``/lvds/b.k/up``    uint32 x 32: board k's upstream memory (31 words) + the MCU side's
+  upstream CRC-error count, before each MCU step;
+* ``/lvds/b.k/down``  uint16 x 13: board k's downstream registers after each MCU step;
+* ``/fieldbus/frames`` (level "bus" and up): every frame as sent/received, single messages.
+
+The Metadata record holds the configuration (JSON), the topology, the box model and each
+board's calibrated angle offset, so a replay needs nothing but the file.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from firmware_model.fpga import layout as B
+from hil.fieldbus.boxes import StackBox
+from hil.fieldbus.chain import CYCLE_TICKS
+from hil.fieldbus.master import Master
+from hil.fieldbus.system import BusRecord, BusSystem
+from hil.fieldbus.topology import Topology
+from hil.framelog import FrameLogWriter
+from plant.config import Config
+
+UP_WIDTH = B.UP_WORDS + 1
+ENC_MCU_UP = "eha-hil/mcu-up"        # 31 upstream words + CRC-error count, uint32
+ENC_MCU_DOWN = "eha-hil/lvds-down-registers"  # 13 downstream registers, uint16
+ENC_RECORD = "eha-hil/process-record"  # a box's fieldbus record, bytes
+FLUSH_CYCLES = 100  # one block per channel per 100 ms of simulated time
+
+
+def topics(box: int, board: int | None = None) -> dict[str, str]:
+    """Topic names of box ``box`` (and of its board ``board``)."""
+    t = {"outputs": f"/mcu/{box}/outputs", "inputs": f"/mcu/{box}/inputs"}
+    if board is not None:
+        t["up"] = f"/lvds/{box}.{board}/up"
+        t["down"] = f"/lvds/{box}.{board}/down"
+    return t
+
+
+class RecordingStackBox(StackBox):
+    """A :class:`StackBox` that logs the MCU's inputs and outputs."""
+
+    def __init__(self, box, cfg: Config, log: FrameLogWriter) -> None:  # noqa: ANN001
+        super().__init__(box, cfg)
+        self.log = log
+        self.tick_ns = cfg.get("sim.tick_ns")
+        b = box.id
+        tp = topics(b)
+        self.ch_out = log.add_block_channel(tp["outputs"], ENC_RECORD, dtype=np.uint8,
+                                            width=max(self.out_dtype.itemsize, 1))
+        self.ch_in = log.add_block_channel(tp["inputs"], ENC_RECORD, dtype=np.uint8,
+                                           width=self.in_dtype.itemsize)
+        self.ch_up, self.ch_down = [], []
+        for k in range(len(self.stacks)):
+            tk = topics(b, k)
+            self.ch_up.append(log.add_block_channel(tk["up"], ENC_MCU_UP, dtype=np.uint32,
+                                                    width=UP_WIDTH))
+            self.ch_down.append(log.add_block_channel(tk["down"], ENC_MCU_DOWN,
+                                                      dtype=np.uint16, width=B.DOWN_WORDS))
+        self._reset_buffers()
+
+    def _reset_buffers(self) -> None:
+        self.buf_out: list[tuple[int, bytes]] = []
+        self.buf_in: list[tuple[int, bytes]] = []
+        self.buf_up: list[list[tuple[int, np.ndarray]]] = [[] for _ in self.stacks]
+        self.buf_down: list[list[tuple[int, np.ndarray]]] = [[] for _ in self.stacks]
+
+    def apply(self, data: bytes) -> None:
+        self.buf_out.append((self.tick, bytes(data)))
+        super().apply(data)
+
+    def advance(self, ticks: int) -> None:
+        end = self.tick + ticks
+        while self.tick < end:
+            if self.mcu is not None:
+                for k, s in enumerate(self.stacks):
+                    up = np.empty(UP_WIDTH, dtype=np.uint32)
+                    up[:-1] = s.mcu.up
+                    up[-1] = s.mcu.up_crc_errors
+                    self.buf_up[k].append((self.tick, up))
+                self.mcu.step(self.tick)
+                for k, s in enumerate(self.stacks):
+                    self.buf_down[k].append((self.tick, s.mcu.down.astype(np.uint16)))
+            for s in self.stacks:
+                s.advance(self.period)
+            self.tick += self.period
+        self._fill(ticks)
+        self.buf_in.append((self.tick, self.inputs()))
+        if len(self.buf_in) >= FLUSH_CYCLES:
+            self.flush()
+
+    def flush(self) -> None:
+        """Write the buffered frames as one block per channel."""
+        ns = self.tick_ns
+
+        def put(ch: int, rows: list, as_bytes: bool) -> None:
+            if not rows:
+                return
+            t = np.array([r[0] for r in rows], dtype=np.int64) * ns
+            if as_bytes:
+                f = np.frombuffer(b"".join(r[1] for r in rows), dtype=np.uint8).reshape(
+                    len(rows), -1)
+            else:
+                f = np.stack([r[1] for r in rows])
+            self.log.write_block(ch, t, f)
+
+        if self.out_dtype.itemsize:
+            put(self.ch_out, self.buf_out, True)
+        put(self.ch_in, self.buf_in, True)
+        for k in range(len(self.stacks)):
+            put(self.ch_up[k], self.buf_up[k], False)
+            put(self.ch_down[k], self.buf_down[k], False)
+        self._reset_buffers()
+
+
+def run_logged(topo: Topology, cfg: Config, cycles: int, pc: Callable[[int, Master], None],
+               log_path: str | Path, level: str = "mcu",
+               progress: Callable[[int, int], None] | None = None) -> BusRecord:
+    """Run ``cycles`` cycles in-process with the stack model and log them to ``log_path``."""
+    with FrameLogWriter(log_path, level=level, flush_every_ns=FLUSH_CYCLES * CYCLE_TICKS
+                        * cfg.get("sim.tick_ns")) as log:
+        ch_bus = None
+        if level in ("bus", "mcu", "full"):
+            ch_bus = log.add_channel("/fieldbus/frames", "eha-hil/ethercat-fcs",
+                                     schema_name="eha-hil/ethercat-fcs")
+        tick_ns = cfg.get("sim.tick_ns")
+
+        def tap(cycle: int, tick: int, frame: bytes, direction: str) -> None:
+            log.write(ch_bus, tick * tick_ns + (1 if direction == "rx" else 0), frame)
+
+        with BusSystem(topo, cfg, "inproc", model="stack", tap=tap if ch_bus else None) as bs:
+            boxes = [RecordingStackBox(b, cfg, log) for b in topo.boxes]
+            bs.chain.boxes = boxes
+            offsets = {f"{b.box.id}.{k}": int(s.board.calibrated_offset)
+                       for b in boxes for k, s in enumerate(b.stacks)}
+            log._writer.add_metadata("eha-hil.replay", {
+                "config": json.dumps(cfg.data), "topology": topo.source,
+                "model": "stack", "offsets": json.dumps(offsets),
+                "cycles": str(cycles)})
+            step = max(cycles // 20, 1)
+            rec = None
+            done = 0
+            while done < cycles:
+                n = min(step, cycles - done)
+                part = bs.run(n, pc)
+                rec = part if rec is None else BusRecord(
+                    np.concatenate([rec.inputs, part.inputs]), part.master, part.chain,
+                    part.transport)
+                done += n
+                if progress:
+                    progress(done, cycles)
+            for b in boxes:
+                b.flush()
+        return rec
