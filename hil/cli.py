@@ -455,6 +455,47 @@ def cmd_config_presets(args: argparse.Namespace) -> int:
     return 0
 
 
+# --- commands of other modules ----------------------------------------------------------------
+def _bus_command(fn, config_fn, use_log_config: bool = False):
+    """Adapt a bus_cli command: config from -c/--set (for replay: only if given), and its
+    one-line usage errors to exit 2."""
+    from hil.bus_cli import BusUsageError
+
+    def run(args: argparse.Namespace) -> int:
+        given = args.config is not None or bool(args.set)
+        cfg = config_fn(args) if (given or not use_log_config) else None
+        try:
+            return fn(args, cfg)
+        except BusUsageError as exc:
+            raise UsageError(str(exc)) from None
+
+    return run
+
+
+def _add_external(sub, bsub) -> None:
+    """``log`` (frame logs) and ``identify`` (measured data): their modules own the options."""
+    from hil.framelog.cli import configure_log, run_log
+
+    p = sub.add_parser("log", help="frame logs (MCAP): info, export to CSV")
+    configure_log(p)
+    p.set_defaults(func=run_log)
+    try:
+        from hil.identify import cli as ident
+    except ImportError:  # pragma: no cover - the package is optional while it is built
+        return
+    p = sub.add_parser("identify", help="fit the model to measured data, find the residual's "
+                       "missing effect, report the error before and after")
+    ident.configure_identify(p)
+    p.set_defaults(func=ident.run_identify)
+    p = sub.add_parser("identify-synth", help="write a synthetic measured-data CSV from the "
+                       "plant, with an effect the fitted model does not declare")
+    ident.configure_synth(p)
+    p.set_defaults(func=ident.run_synth)
+    p = bsub.add_parser("identify", help="time to identify a 16 s, 5 kHz dataset (<= 60 s)")
+    ident.configure_bench(p)
+    p.set_defaults(func=ident.run_bench)
+
+
 # --- parser ----------------------------------------------------------------------------------
 def _common(json_plot: bool = True, plot: bool = True) -> argparse.ArgumentParser:
     parent = argparse.ArgumentParser(add_help=False)
@@ -521,6 +562,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seconds", type=float, default=0.5,
                    help="wall seconds per codec (default 0.5)")
     p.set_defaults(func=cmd_bench_codecs)
+
+    from hil import bus_cli
+
+    bus_cli.add_parsers(sub, bsub, _common, _config, _bus_command)
+    _add_external(sub, bsub)
 
     from hil.scenarios import SCENARIOS, names
 
