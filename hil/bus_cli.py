@@ -122,23 +122,12 @@ def cmd_replay(args: argparse.Namespace, cfg) -> int:
 
 
 def cmd_bench_bus(args: argparse.Namespace, cfg) -> int:
-    from hil.fieldbus.system import BusSystem
+    from hil.fieldbus.bench import bench_bus, format_table
     from hil.fieldbus.topology import load_topology
 
-    topo = load_topology("hydra_full")
-    rows, data = [], {}
-    for name in args.backends:
-        with BusSystem(topo, cfg, name, model="echo") as bs:
-            bs.run(20, demo_pc())  # warm-up (process start, first allocations)
-            t0 = time.perf_counter()
-            bs.run(args.cycles, demo_pc())
-            wall = time.perf_counter() - t0
-        rate = args.cycles / wall
-        data[name] = rate
-        rows.append([name, f"{rate:,.0f}", f"{rate / 1000:.2f}x"])
-    print(f"full robot (hydra_full: {len(topo.boxes)} boxes, {topo.n_actuators} actuators, "
-          f"echo boxes), {args.cycles} cycles per backend")
-    print(table(["backend", "cycles/s", "vs 1 kHz"], rows))
+    print(f"full robot (hydra_full, echo boxes), {args.cycles} cycles per backend; "
+          "bench_one_box with the full stack on inproc")
+    print(format_table(bench_bus(args.backends, args.cycles, 1000)))
     if args.replay:
         import tempfile
 

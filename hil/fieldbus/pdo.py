@@ -94,12 +94,18 @@ def slot_sizes(kind: str) -> tuple[int, int]:
     return record_dtype(out).itemsize, record_dtype(inp).itemsize
 
 
+_BOUNDS: dict[str, tuple[int, int]] = {}
+
+
 def to_counts(value: float, lsb: float, dtype: str) -> int:
     """SI value -> integer count, rounded half away from zero and saturated to ``dtype``."""
-    info = np.iinfo(np.dtype(dtype))
+    bounds = _BOUNDS.get(dtype)
+    if bounds is None:  # np.iinfo is slow; the per-cycle path calls this per field
+        info = np.iinfo(np.dtype(dtype))
+        bounds = _BOUNDS[dtype] = (int(info.min), int(info.max))
     c = value / lsb
     c = int(c + 0.5) if c >= 0 else -int(-c + 0.5)
-    return min(max(c, int(info.min)), int(info.max))
+    return min(max(c, bounds[0]), bounds[1])
 
 
 def markdown_table(fields: tuple[Field, ...]) -> str:

@@ -37,6 +37,7 @@ class BusRecord:
     master: dict[str, int]
     chain: dict[str, int] | None
     transport: dict[str, int]
+    faults: dict[str, int] | None = None  # what the fieldbus faults did (hil.fieldbus.faults)
 
 
 class BusSystem:
@@ -45,7 +46,7 @@ class BusSystem:
     def __init__(self, topo: Topology, cfg: Config, transport: str = "inproc",
                  model: str = "stack", reply_timeout_s: float = 2.0,
                  remote: bool | None = None, tap: TapFn | None = None,
-                 transport_options: dict | None = None) -> None:
+                 transport_options: dict | None = None, faults: object = None) -> None:
         from hil.transports import open_transport, transport_pair
 
         self.topology = topo
@@ -81,6 +82,29 @@ class BusSystem:
             self.s_end = None
         else:
             raise ValueError(f"transport {transport!r} cannot run the chain in another process")
+        self.faults = None
+        if faults is not None:
+            self._install_faults(faults)
+
+    def _install_faults(self, faults: object) -> None:
+        """Fieldbus faults around the master's end; LVDS/sensor faults on the chain's boxes
+        (which must then run in this process). See :mod:`hil.fieldbus.faults`."""
+        from hil.fieldbus.faults import (
+            FaultError,
+            FaultyTransport,
+            install_box_faults,
+            parse_faults,
+        )
+
+        plan = parse_faults(faults)
+        self.faults = plan
+        if plan.box_faults:
+            if self.chain is None:
+                raise FaultError(f"{plan.where}: {plan.box_faults[0].name}: LVDS and sensor "
+                                 "faults need the chain in this process (not remote)")
+            install_box_faults(self.chain, plan)
+        if plan.fieldbus:
+            self.m_end = FaultyTransport(self.m_end, plan, lambda: self.master.cycle)
 
     def run(self, cycles: int, pc: PcFn) -> BusRecord:
         """Run ``cycles`` fieldbus cycles; the input image is recorded after each."""
@@ -90,14 +114,22 @@ class BusSystem:
             pc(m.cycle, m)
             frames = m.frames()
             tick = m.cycle * CYCLE_TICKS
+            wire = getattr(self.m_end, "inner", self.m_end).stats  # below any fault wrapper
+            sent0 = wire.frames_sent
             for f in frames:
                 if self.tap:
                     self.tap(m.cycle, tick, f, "tx")
                 self.m_end.send(f)
             if self.chain is not None:
-                self._serve_inline(len(frames))
-            for _ in frames:
-                reply = self.m_end.recv(timeout=self.reply_timeout_s if self.proc else 0.05)
+                self._serve_inline(wire.frames_sent - sent0)
+            if self.proc:
+                timeout = self.reply_timeout_s
+            else:
+                timeout = 0.0 if self.transport == "inproc" else 0.05
+            # Until every frame of the cycle is answered: stale replies (duplicated or
+            # delayed ones) are read and counted, they do not stand for this cycle's.
+            while not all(m._answered):
+                reply = self.m_end.recv(timeout=timeout)
                 if reply is None:
                     break
                 if self.tap:
@@ -107,14 +139,19 @@ class BusSystem:
             rows[k] = np.frombuffer(m.input_image(), dtype=np.uint8)
         return BusRecord(rows, m.stats.as_dict(),
                          None if self.chain is None else self.chain.stats.__dict__.copy(),
-                         self.m_end.stats.as_dict())
+                         self.m_end.stats.as_dict(),
+                         None if not hasattr(self.m_end, "fault_stats")
+                         else self.m_end.fault_stats.as_dict())
 
     def _serve_inline(self, expected: int) -> None:
         """Answer the frames the master just sent. In-process queues deliver at once; a pty
-        or a CAN bus takes a moment, so wait (briefly) for as many frames as were sent."""
+        or a CAN bus takes a moment, so wait (briefly) for as many frames as were sent.
+        On an echoing port (serial ``loop://``: one end for both sides) the chain would read
+        its own replies back, so it takes exactly the frames that were sent."""
         wait = 0.0 if self.transport == "inproc" else self.inline_wait_s
+        shared = self.s_end is getattr(self.m_end, "inner", self.m_end)
         got = 0
-        while True:
+        while not (shared and got >= expected):
             frame = self.s_end.recv(timeout=wait if got < expected else 0.0)
             if frame is None:
                 return
