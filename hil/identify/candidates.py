@@ -1,0 +1,286 @@
+"""The library of candidate effects and the test of each against the residual.
+
+Each candidate is a set of parameters of the fast model (:mod:`hil.identify.model`) that are
+zero in the linear model. Its *signature* is the sensitivity of every output channel to those
+parameters, taken by simulating the current model with each parameter stepped by a quarter
+of its nominal size (so the effect acts through the model's own dynamics, feedback included).
+The test is a score-type regression of the weighted output-error residual on the signature:
+
+1. **Partial out** what the model already declares: the signature is projected off the
+   Jacobian of the fitted parameters (Frisch-Waugh), so an effect that a refit of d_s, d_p,
+   k_s ... would absorb explains nothing.
+2. **Refuse** what the data cannot identify: a column that keeps less than 1 % of its norm
+   after the projection is *collinear* with a declared parameter (named); a candidate whose
+   realistic-size effect would stand less than 3 standard errors out of the noise is
+   *not excited*; columns of one candidate that are collinear with each other are dropped.
+3. **Test**: least-squares coefficients ``beta`` of the residual on the projected signature,
+   their covariance by Newey-West (HAC) on the per-sample scores, Wald chi^2 and its p-value;
+   Holm's correction over all candidates tested in a round.
+4. **Rank**: by the share of the *held-out validation* residual variance the effect removes
+   (with ``beta`` from the estimation part), then by the Wald statistic.
+
+A candidate is *selected* when its Holm-adjusted p-value is below ``alpha`` (0.01) and it
+removes at least 0.5 % of the validation residual's variance and its estimated size is at
+least a fifth of the realistic size for one of its parameters: with long records a
+statistically significant but negligible term (a delay of a fraction of a microsecond, a
+ripple of a hundredth of a newton) would otherwise soak up the model's own small
+imperfections.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from hil.identify import stats
+from hil.identify.experiment import Experiment
+from hil.identify.model import N_ORDERS, SAT_CHANNELS, map_threads
+
+ALPHA = 0.01
+#: Retained norm share below which a signature column is collinear with declared terms.
+MIN_RETAINED = 0.01
+#: A realistic-size effect must stand this many standard errors out to be identifiable.
+MIN_DETECTABLE_Z = 3.0
+MAX_SELF_COND = 1e3
+#: Practical significance: least share of the validation residual variance removed.
+MIN_SHARE = 0.005
+#: ... and least size relative to the realistic (nominal) one, for at least one parameter.
+MIN_MAGNITUDE = 0.2
+
+
+@dataclass(frozen=True)
+class EffectDef:
+    """One library entry: the model parameters it switches on and their nominal sizes."""
+
+    name: str  # library name, e.g. "pump_pulsation"
+    label: str  # instance label, e.g. "pump_pulsation[order=4]"
+    params: tuple[str, ...]
+    nominal: tuple[float, ...]  # realistic magnitude of each parameter (its unit)
+    description: str
+    applicable: Callable[[Experiment], str | None] = field(default=lambda exp: None,
+                                                           compare=False)
+
+
+def _needs_temperature(exp: Experiment) -> str | None:
+    if exp.temperature is None:
+        return "no temp_c column"
+    return None
+
+
+def _needs_strain(exp: Experiment) -> str | None:
+    return None if "f_strain" in exp.channels else "no f_strain column"
+
+
+def _needs_moving_piston(exp: Experiment) -> str | None:
+    return "piston fixed: the seal never slides" if exp.load == "fixed" else None
+
+
+def library(exp: Experiment) -> list[EffectDef]:
+    """Every candidate instance for this experiment (pulsation: one per order 1..8;
+    saturation: one per channel that shows a plateau)."""
+    out: list[EffectDef] = []
+    for n in range(1, N_ORDERS + 1):
+        out.append(EffectDef(
+            "pump_pulsation", f"pump_pulsation[order={n}]",
+            (f"puls{n}_flow_s", f"puls{n}_flow_c", f"puls{n}_torque_s", f"puls{n}_torque_c"),
+            (0.01, 0.01, 50.0, 50.0),
+            f"displacement ripple (flow and reaction torque) and meshing torque ripple at "
+            f"order {n} of the rotor angle",
+        ))
+    out += [
+        EffectDef("pump_coulomb_friction", "pump_coulomb_friction", ("pc_force_n",), (40.0,),
+                  "Coulomb friction of the pump shaft seal, F_c tanh(v_p/eps)"),
+        EffectDef("seal_friction", "seal_friction", ("sf_coulomb_n", "sf_static_n"),
+                  (15.0, 15.0),
+                  "rod-seal Coulomb + Stribeck friction on the piston",
+                  _needs_moving_piston),
+        EffectDef("stiffness_vs_position", "stiffness_vs_position", ("ks_k1", "ks_k2"),
+                  (0.1, 0.1),
+                  "k_s(x) = k_s (1 + k1 x/h + k2 (x/h)^2), h the half stroke (Eq. 2.27)"),
+        EffectDef("viscosity_temperature", "viscosity_temperature", ("visc_coeff_per_c",),
+                  (0.02,), "d_s, d_p, d_c scale with mu(T) = exp(-c (T - T_ref))",
+                  _needs_temperature),
+        EffectDef("strain_thermal_drift", "strain_thermal_drift",
+                  ("drift_lin_n", "drift_quad_n"), (2.0, 2.0),
+                  "slow drift of the strain reading (linear + quadratic in time)",
+                  _needs_strain),
+        EffectDef("input_delay", "input_delay", ("delay_s",), (100e-6,),
+                  "delay between the logged and the applied current"),
+    ]
+    sat = [c for c in SAT_CHANNELS if c in exp.plateaus and c in exp.channels]
+    if not sat:
+        out.append(EffectDef("sensor_saturation", "sensor_saturation", (), (),
+                             "a channel clipped at a level",
+                             lambda exp: "no channel sits on a plateau at its maximum"))
+    for c in sat:
+        out.append(EffectDef("sensor_saturation", f"sensor_saturation[{c}]", (f"sat_{c}",),
+                             (1.0,), f"{c} clipped at {exp.plateaus[c]:.6g}"))
+    return out
+
+
+@dataclass
+class CandidateTest:
+    """The outcome of testing one candidate against the current residual."""
+
+    label: str
+    name: str
+    params: list[str]
+    status: str  # "tested" | "collinear" | "not_excited" | "not_applicable"
+    reason: str = ""
+    beta: dict[str, float] = field(default_factory=dict)
+    se: dict[str, float] = field(default_factory=dict)
+    nominal: dict[str, float] = field(default_factory=dict)
+    wald: float = 0.0
+    dof: int = 0
+    p_value: float = 1.0
+    p_holm: float = 1.0
+    share_est: float = 0.0
+    share_val: float = 0.0
+    selected: bool = False
+
+    @property
+    def significant(self) -> bool:
+        return self.status == "tested" and self.p_holm < ALPHA
+
+
+def _weighted(outputs: dict[str, np.ndarray], exp: Experiment, sigma: dict[str, float],
+              mask: np.ndarray) -> np.ndarray:
+    return np.concatenate([np.nan_to_num(outputs[c][mask] / sigma[c]) for c in exp.channels])
+
+
+def test_candidates(
+    defs: list[EffectDef],
+    simulate: Callable[[np.ndarray], dict[str, np.ndarray]],
+    theta: np.ndarray,
+    index: dict[str, int],
+    exp: Experiment,
+    sigma: dict[str, float],
+    residual: dict[str, np.ndarray],
+    est_mask: np.ndarray,
+    val_mask: np.ndarray,
+    jac_names: list[str],
+) -> list[CandidateTest]:
+    """Test every candidate in ``defs`` against ``residual`` (measured - model per channel).
+
+    ``simulate(theta)`` returns the model channels; ``jac_names`` are the fitted (declared)
+    parameters whose sensitivities are projected off each signature, on the estimation
+    samples ``est_mask`` and, with the same coefficients, on the validation samples.
+    """
+    base_out = simulate(theta)
+    r_est = _weighted(residual, exp, sigma, est_mask)
+    r_val = _weighted(residual, exp, sigma, val_mask)
+    n_ch = len(exp.channels)
+    n_t = int(est_mask.sum())
+    # every perturbed simulation at once, on all cores: declared parameters, then signatures
+    jobs: list[tuple[str, float]] = [(p, 1e-4 * abs(theta[index[p]]) or 1e-4)
+                                     for p in jac_names]
+    for d in defs:
+        if not d.applicable(exp) and d.params:
+            jobs += [(p, 0.25 * nom) for p, nom in zip(d.params, d.nominal, strict=True)]
+
+    def sens(job: tuple[str, float]) -> tuple[np.ndarray, np.ndarray]:
+        p, step = job
+        th = theta.copy()
+        th[index[p]] += step
+        out = simulate(th)
+        diff = {c: (out[c] - base_out[c]) / step for c in exp.channels}
+        return _weighted(diff, exp, sigma, est_mask), _weighted(diff, exp, sigma, val_mask)
+
+    done = dict(zip(jobs, map_threads(sens, jobs), strict=True))
+    j_est = [done[j][0] for j in jobs[: len(jac_names)]]
+    j_val = [done[j][1] for j in jobs[: len(jac_names)]]
+    jac = np.column_stack(j_est) if j_est else np.zeros((r_est.size, 0))
+    jac_v = np.column_stack(j_val) if j_val else np.zeros((r_val.size, 0))
+    jac_pinv = np.linalg.pinv(jac)
+    results: list[CandidateTest] = []
+    for d in defs:
+        t = CandidateTest(d.label, d.name, list(d.params), "tested")
+        reason = d.applicable(exp)
+        if reason or not d.params:
+            t.status, t.reason = "not_applicable", reason or "no parameters"
+            results.append(t)
+            continue
+        cols_est, cols_val, steps = [], [], []
+        for p, nom in zip(d.params, d.nominal, strict=True):
+            col_e, col_v = done[(p, 0.25 * nom)]
+            cols_est.append(col_e)
+            cols_val.append(col_v)
+            steps.append(nom)
+        x = np.column_stack(cols_est)
+        xv = np.column_stack(cols_val)
+        norms = np.linalg.norm(x, axis=0)
+        proj = jac_pinv @ x
+        xp = x - jac @ proj
+        xvp = xv - jac_v @ proj
+        kept_norm = np.linalg.norm(xp, axis=0)
+        keep = []
+        for j, p in enumerate(d.params):
+            if norms[j] == 0.0:
+                continue
+            if kept_norm[j] ** 2 < MIN_RETAINED * norms[j] ** 2:
+                corr = np.abs(jac.T @ x[:, j]) / (np.linalg.norm(jac, axis=0) * norms[j] + 1e-300)
+                who = jac_names[int(np.argmax(corr))] if jac_names else "the model"
+                t.reason = f"{p} collinear with declared {who} (|corr| {corr.max():.3f})"
+                continue
+            keep.append(j)
+        if not keep:
+            t.status = "collinear" if t.reason else "not_excited"
+            t.reason = t.reason or "signature is zero: the data do not excite it"
+            results.append(t)
+            continue
+        # drop columns collinear with each other inside the candidate
+        while len(keep) > 1:
+            sub = xp[:, keep] / kept_norm[keep]
+            sv = np.linalg.svd(sub, compute_uv=False)
+            if sv[0] / max(sv[-1], 1e-300) < MAX_SELF_COND:
+                break
+            keep.remove(min(keep, key=lambda j: kept_norm[j] / norms[j]))
+        xk = xp[:, keep]
+        beta, *_ = np.linalg.lstsq(xk, r_est, rcond=None)
+        fitted = xk @ beta
+        e_alt = r_est - fitted
+        scores = np.einsum("ctp,ct->tp", xk.reshape(n_ch, n_t, len(keep)),
+                           e_alt.reshape(n_ch, n_t))
+        corr_len = stats.correlation_length(e_alt.reshape(n_ch, n_t).sum(axis=0), 400)
+        lags = stats.nw_lags(n_t, corr_len)
+        s = stats.newey_west(scores, lags)
+        hinv = np.linalg.pinv(xk.T @ xk)
+        cov = hinv @ s @ hinv
+        se = np.sqrt(np.maximum(np.diag(cov), 0.0))
+        names = [d.params[j] for j in keep]
+        noms = np.array([steps[j] for j in keep])
+        t.params = names
+        t.beta = {n: float(b) for n, b in zip(names, beta, strict=True)}
+        t.se = {n: float(v) for n, v in zip(names, se, strict=True)}
+        t.nominal = {n: float(v) for n, v in zip(names, noms, strict=True)}
+        detect = float(np.max(np.abs(noms) / np.maximum(se, 1e-300)))
+        if detect < MIN_DETECTABLE_Z:
+            t.status = "not_excited"
+            t.reason = (f"a realistic-size effect would stand only {detect:.1f} standard "
+                        f"errors out of the residual")
+            results.append(t)
+            continue
+        t.wald, t.p_value, t.dof = stats.wald(beta, cov)
+        rr = float(r_est @ r_est)
+        t.share_est = float(1.0 - e_alt @ e_alt / rr) if rr > 0 else 0.0
+        fv = xvp[:, keep] @ beta
+        rv = float(r_val @ r_val)
+        t.share_val = float(1.0 - np.sum((r_val - fv) ** 2) / rv) if rv > 0 else 0.0
+        results.append(t)
+    tested = [t for t in results if t.status == "tested"]
+    if tested:
+        for t, p in zip(tested, stats.holm([t.p_value for t in tested]), strict=True):
+            t.p_holm = p
+    return results
+
+
+def rank(tests: list[CandidateTest]) -> list[CandidateTest]:
+    """Significant candidates, best first (validation share, then Wald statistic)."""
+    sig = [t for t in tests if t.significant and t.share_val >= MIN_SHARE
+           and max(abs(t.beta[p]) / abs(t.nominal[p]) for p in t.beta) >= MIN_MAGNITUDE]
+    return sorted(sig, key=lambda t: (t.share_val, t.wald), reverse=True)
+
+
+__all__ = ["ALPHA", "CandidateTest", "EffectDef", "library", "rank", "test_candidates"]

@@ -1,0 +1,237 @@
+"""Output-error fit of the fast model by simulation, with HAC confidence intervals.
+
+The cost is the sum over channels and estimation samples of ``((y - y_hat) / sigma_c)^2``:
+the model is simulated from the logged current alone (output error, no measured state fed
+back), so what it fits is the whole input-to-output behaviour. ``sigma_c`` (the noise of
+channel c) is unknown: a first fit weights each channel by its signal scale, then every
+channel by the rms of its own residual, and the fit is repeated (maximum likelihood with
+unknown per-channel variances, in two passes).
+
+Positive physical parameters (d_s, d_p, d_c, k_s, K, k_rod, c_rod) are fitted as logarithms;
+effect parameters linearly, scaled by their nominal size. ``scipy.optimize.least_squares``
+(trust-region reflective, two-point Jacobian) does the work.
+
+Confidence intervals come from the Jacobian ``J`` at the optimum: ``cov = H^-1 S H^-1`` with
+``H = J'J`` and ``S`` the Newey-West long-run covariance of the per-sample scores (the sum
+over channels of ``J_k' e_k``), so autocorrelated residuals widen the interval rather than
+make it falsely tight. With white residuals this reduces to ``(J'J)^-1``.
+
+A baseline parameter the data cannot pin down (relative standard error above 50 %, e.g. d_c
+with the piston fixed, or k_s when the pressure barely moves) is held at the preset's value
+and named in :attr:`FitResult.held`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from hil.identify import stats
+from hil.identify.experiment import Experiment
+from hil.identify.model import IDX, FastModel, map_threads
+
+#: Baseline parameters that can be fitted per load kind (others have no effect there).
+BASELINE_FREE: dict[str, tuple[str, ...]] = {
+    "fixed": ("gain_n_per_a", "ds", "dp", "ks"),
+    "free": ("gain_n_per_a", "ds", "dp", "dc", "ks"),
+    "conrod": ("gain_n_per_a", "ds", "dp", "dc", "ks", "k_rod", "c_rod"),
+}
+LOG_PARAMS = frozenset({"gain_n_per_a", "ds", "dp", "dc", "ks", "k_rod", "c_rod"})
+#: Relative standard error above which a baseline parameter is held at the preset value.
+MAX_REL_SE = 0.5
+Z95 = 1.959963984540054
+
+
+@dataclass
+class FitResult:
+    """Outcome of one output-error fit."""
+
+    theta: np.ndarray  # full parameter vector (model.PARAM_NAMES)
+    free: list[str]
+    se: dict[str, float]  # HAC standard errors of the free parameters
+    sigma: dict[str, float]  # per-channel residual rms on the estimation part (weights)
+    outputs: dict[str, np.ndarray]
+    states: np.ndarray
+    held: dict[str, str] = field(default_factory=dict)  # parameter -> reason
+    n_sims: int = 0
+    cov: np.ndarray | None = None  # HAC covariance of the free parameters (their units)
+    jac: np.ndarray | None = None  # weighted Jacobian (estimation samples x free), x-space
+    weights: dict[str, float] = field(default_factory=dict)  # sigma the Jacobian is scaled by
+
+    def value(self, name: str) -> float:
+        return float(self.theta[IDX[name]])
+
+    def ci95(self, name: str) -> tuple[float, float]:
+        v = self.value(name)
+        s = self.se.get(name, float("nan"))
+        return v - Z95 * s, v + Z95 * s
+
+
+class OutputErrorFit:
+    """Fits a :class:`FastModel` to its experiment (see the module docstring)."""
+
+    def __init__(self, model: FastModel, scales: dict[str, float] | None = None) -> None:
+        self.model = model
+        self.exp: Experiment = model.exp
+        self.scales = scales or {}
+        self.n_sims = 0
+
+    # --- parameter transforms ------------------------------------------------------------
+    def _to_theta(self, x: np.ndarray, free: list[str], base: np.ndarray) -> np.ndarray:
+        theta = base.copy()
+        for xi, name in zip(x, free, strict=True):
+            if name in LOG_PARAMS:
+                theta[IDX[name]] = self._ref[name] * np.exp(xi)
+            else:
+                theta[IDX[name]] = xi * self.scales.get(name, 1.0)
+        return theta
+
+    def _to_x(self, theta: np.ndarray, free: list[str]) -> np.ndarray:
+        x = []
+        for name in free:
+            if name in LOG_PARAMS:
+                x.append(np.log(theta[IDX[name]] / self._ref[name]))
+            else:
+                x.append(theta[IDX[name]] / self.scales.get(name, 1.0))
+        return np.array(x)
+
+    def _dtheta_dx(self, theta: np.ndarray, free: list[str]) -> np.ndarray:
+        return np.array([theta[IDX[n]] if n in LOG_PARAMS else self.scales.get(n, 1.0)
+                         for n in free])
+
+    # --- residuals -------------------------------------------------------------------------
+    def residual_channels(self, outputs: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """Measured minus model, per channel, full length (NaN where undefined)."""
+        return {c: self.exp.measured[c] - outputs[c] for c in self.exp.channels}
+
+    def _stack(self, theta: np.ndarray, sigma: dict[str, float], mask: np.ndarray) -> np.ndarray:
+        self.n_sims += 1
+        out = self.model.outputs(theta)
+        parts = []
+        for c in self.exp.channels:
+            e = (self.exp.measured[c] - out[c])[mask] / sigma[c]
+            parts.append(np.nan_to_num(e))
+        return np.concatenate(parts)
+
+    def _problem(self, free: list[str], theta0: np.ndarray, sigma: dict[str, float],
+                 mask: np.ndarray):
+        """Residual function and its forward-difference Jacobian (columns in parallel)."""
+        cache: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+
+        def fun(x: np.ndarray) -> np.ndarray:
+            r = self._stack(self._to_theta(x, free, theta0), sigma, mask)
+            cache["last"] = (x.copy(), r)
+            return r
+
+        def jac(x: np.ndarray) -> np.ndarray:
+            last = cache.get("last")
+            r0 = last[1] if last is not None and np.array_equal(last[0], x) else fun(x)
+            steps = 1e-6 * np.maximum(1.0, np.abs(x))
+
+            def column(i: int) -> np.ndarray:
+                xx = x.copy()
+                xx[i] += steps[i]
+                return (self._stack(self._to_theta(xx, free, theta0), sigma, mask) - r0) / steps[i]
+
+            return np.column_stack(map_threads(column, range(x.size)))
+
+        return fun, jac
+
+    def fit_mask(self) -> np.ndarray:
+        """Estimation samples where every channel is defined."""
+        mask = self.exp.est.copy()
+        for c in self.exp.channels:
+            mask &= np.isfinite(self.exp.measured[c])
+        return mask
+
+    def fit(self, theta0: np.ndarray, free: list[str], sigma: dict[str, float] | None = None,
+            passes: int = 2, max_nfev: int = 40) -> FitResult:
+        """Fit the parameters ``free`` starting from ``theta0``; others stay as given."""
+        self._ref = {n: max(abs(theta0[IDX[n]]), 1e-12) for n in free if n in LOG_PARAMS}
+        mask = self.fit_mask()
+        sigma = dict(sigma or self.exp.sigma0)
+        theta = theta0.copy()
+        x = self._to_x(theta, free)
+        used = sigma
+        for k in range(passes):
+            if k > 0 and all(abs(sigma[c] / used[c] - 1.0) < 0.2 for c in sigma):
+                break  # weights settled: a second pass would not move the optimum
+            fun, jac = self._problem(free, theta0, sigma, mask)
+            sol = least_squares(fun, x, jac=jac, method="trf", x_scale=1.0, ftol=1e-8,
+                                xtol=1e-8, gtol=1e-8, max_nfev=max_nfev)
+            x = sol.x
+            used = sigma
+            theta = self._to_theta(x, free, theta0)
+            out = self.model.outputs(theta)
+            res = self.residual_channels(out)
+            sigma = {c: float(np.sqrt(np.nanmean(res[c][mask] ** 2))) or 1.0
+                     for c in self.exp.channels}
+        jac = sol.jac
+        states = self.model.states(theta)
+        out = self.model.outputs(theta, states)
+        e = self._stack(theta, used, mask)
+        se, cov = self.hac_se(jac, e, mask.sum(), theta, free)
+        return FitResult(theta, list(free), se, sigma, out, states, n_sims=self.n_sims, cov=cov,
+                         jac=jac, weights=dict(used))
+
+    def hac_se(self, jac: np.ndarray, e: np.ndarray, n_t: int, theta: np.ndarray,
+               free: list[str]) -> tuple[dict[str, float], np.ndarray]:
+        """HAC standard errors in parameter units (see the module docstring)."""
+        n_ch = len(self.exp.channels)
+        p = jac.shape[1]
+        j3 = jac.reshape(n_ch, n_t, p)
+        e2 = e.reshape(n_ch, n_t)
+        scores = np.einsum("ctp,ct->tp", j3, e2)
+        corr = stats.correlation_length(e2.sum(axis=0), 400)
+        lags = stats.nw_lags(n_t, corr)
+        s = stats.newey_west(scores, lags)
+        h = jac.T @ jac
+        try:
+            hinv = np.linalg.inv(h)
+        except np.linalg.LinAlgError:
+            hinv = np.linalg.pinv(h)
+        cov_x = hinv @ s @ hinv
+        d = self._dtheta_dx(theta, free)
+        cov = cov_x * np.outer(d, d)
+        se = {n: float(np.sqrt(max(cov[i, i], 0.0))) for i, n in enumerate(free)}
+        return se, cov
+
+
+def fit_baseline(model: FastModel, theta0: np.ndarray | None = None,
+                 extra_free: tuple[str, ...] = (), scales: dict[str, float] | None = None
+                 ) -> FitResult:
+    """Fit the linear model of thesis ch. 2 (plus ``extra_free`` effect parameters).
+
+    Baseline parameters that come out with a relative standard error above
+    :data:`MAX_REL_SE` are held at their preset values and the fit is repeated.
+    """
+    exp = model.exp
+    theta = model.start_vector() if theta0 is None else theta0.copy()
+    free = list(BASELINE_FREE[exp.load])
+    if "f_strain" in exp.channels:
+        free.append("strain_offset_n")
+    free += [p for p in extra_free if p not in free]
+    scales = {"strain_offset_n": 1.0, **(scales or {})}
+    fitter = OutputErrorFit(model, scales)
+    held: dict[str, str] = {}
+    result = fitter.fit(theta, free)
+    for _ in range(2):
+        weak = [n for n in free if n in LOG_PARAMS
+                and result.se[n] > MAX_REL_SE * abs(result.value(n))]
+        if not weak:
+            break
+        start = model.start_vector()
+        for n in weak:
+            held[n] = (f"not identifiable from this record (relative standard error "
+                       f"{result.se[n] / abs(result.value(n)):.0%}); held at the preset value")
+            free.remove(n)
+            result.theta[IDX[n]] = start[IDX[n]]
+        result = fitter.fit(result.theta, free, sigma=result.sigma, passes=1)
+    result.held = held
+    result.n_sims = fitter.n_sims
+    return result
+
+
+__all__ = ["BASELINE_FREE", "FitResult", "OutputErrorFit", "fit_baseline"]

@@ -1,0 +1,390 @@
+"""The fast model the fit simulates: thesis ch. 2 linear EHA, exactly discretised, plus effects.
+
+States ``z = [theta_p, v_p, tau_q, x_c, v_c]`` (piston-equivalent m, m/s, N, m, m/s), inputs
+``u = [tau_p, f_pump, q_rate, f_piston]`` (N, N, N/s, N):
+
+    J_p dv_p/dt   = tau_p - d_p v_p - tau_q + f_pump                 (Eq. 2.28)
+    d tau_q/dt    = k_s (v_p - tau_q / d_s - v_c) + q_rate           (Eq. 2.29-2.30)
+    J_c dv_c/dt   = tau_q - (d_c + c_rod) v_c - k_rod x_c + f_piston (Eq. 2.31 + load)
+
+with ``tau_p = K i_q`` (K the current-to-force gain, N/A). Piston fixed: ``x_c = v_c = 0``;
+free: ``k_rod = c_rod = 0``; conrod: the rod to a fixed point. The linear part is discretised
+exactly (zero-order hold, matrix exponential) over ``n_sub`` sub-steps per sample, so its
+stiff modes (leakage ``k_s/d_s``, the piston on ``k_s`` near 1.4 kHz) cost nothing in
+accuracy. The effect terms enter through ``f_pump``, ``q_rate``, ``f_piston``, evaluated
+from the state at the start of each sub-step; the Coulomb frictions are solved implicitly
+for the end-of-sub-step velocity (a scalar root per friction), so a small regularisation
+velocity does not chatter. Output-side effects (strain drift, sensor saturation) and the
+input delay act outside the loop.
+
+Parameters live in one flat vector addressed by :data:`PARAM_NAMES`; all effect parameters
+at zero is the linear model.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Callable, Iterable
+from concurrent.futures import ThreadPoolExecutor
+from typing import TypeVar
+
+import numpy as np
+from numba import njit
+from scipy.linalg import expm
+
+from hil.identify.experiment import Experiment
+
+N_ORDERS = 8
+BASE_NAMES = ("gain_n_per_a", "ds", "dp", "dc", "ks", "k_rod", "c_rod", "strain_offset_n")
+_PULS = tuple(
+    f"puls{n}_{part}" for n in range(1, N_ORDERS + 1)
+    for part in ("flow_s", "flow_c", "torque_s", "torque_c")
+)
+SAT_CHANNELS = ("p_pump_a", "p_pump_b", "p_cyl_a", "p_cyl_b", "f_strain")
+EFFECT_NAMES = _PULS + (
+    "pc_force_n", "sf_coulomb_n", "sf_static_n", "ks_k1", "ks_k2", "visc_coeff_per_c",
+    "drift_lin_n", "drift_quad_n", "delay_s",
+) + tuple(f"sat_{c}" for c in SAT_CHANNELS)
+PARAM_NAMES = BASE_NAMES + EFFECT_NAMES
+IDX = {name: i for i, name in enumerate(PARAM_NAMES)}
+N_PARAMS = len(PARAM_NAMES)
+
+# Indices into the flat effect array the kernel reads.
+_E_PULS = 0  # 8 orders x (flow_s, flow_c, torque_s, torque_c)
+_E_PC, _E_PC_EPS = 32, 33
+_E_SF_C, _E_SF_S, _E_SF_VS, _E_SF_EPS = 34, 35, 36, 37
+_E_K1, _E_K2, _E_HALF = 38, 39, 40
+_E_VISC = 41
+_E_KC_KP = 42
+_E_H_SUB = 43
+_E_ALPHA = 44  # per-sample gain of the angle complementary filter
+_N_EFF = 45
+#: Crossover of the complementary filter that ties the simulated rotor angle to the
+#: measured one: below it the encoder (no drift), above it the simulation (no quantisation).
+ANGLE_CROSSOVER_HZ = 10.0
+
+
+_T = TypeVar("_T")
+_R = TypeVar("_R")
+_POOL: ThreadPoolExecutor | None = None
+
+
+def map_threads(fn: Callable[[_T], _R], items: Iterable[_T]) -> list[_R]:
+    """``[fn(i) for i in items]`` on a thread per core (the simulation kernel drops the GIL)."""
+    global _POOL
+    items = list(items)
+    workers = min(os.cpu_count() or 1, 8)
+    if workers < 2 or len(items) < 2:
+        return [fn(i) for i in items]
+    if _POOL is None:
+        _POOL = ThreadPoolExecutor(max_workers=workers)
+    return list(_POOL.map(fn, items))
+
+
+def discretise(a: np.ndarray, b: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:
+    """Exact zero-order-hold discretisation: (A_d, B_d) for step ``h`` s."""
+    n, m = b.shape
+    big = np.zeros((n + m, n + m))
+    big[:n, :n] = a
+    big[:n, n:] = b
+    e = expm(big * h)
+    return e[:n, :n].copy(), e[:n, n:].copy()
+
+
+def continuous(theta: np.ndarray, exp: Experiment) -> tuple[np.ndarray, np.ndarray]:
+    """Continuous-time (A, B) of the linear model for the parameter vector ``theta``."""
+    c = exp.const
+    ds, dp, dc, ks = (theta[IDX[k]] for k in ("ds", "dp", "dc", "ks"))
+    a = np.zeros((5, 5))
+    b = np.zeros((5, 4))
+    a[0, 1] = 1.0
+    a[1, 1] = -dp / c.jp
+    a[1, 2] = -1.0 / c.jp
+    b[1, 0] = 1.0 / c.jp
+    b[1, 1] = 1.0 / c.jp
+    a[2, 1] = ks
+    a[2, 2] = -ks / ds
+    b[2, 2] = 1.0
+    if exp.load != "fixed":
+        k_rod = theta[IDX["k_rod"]] if exp.load == "conrod" else 0.0
+        c_rod = theta[IDX["c_rod"]] if exp.load == "conrod" else 0.0
+        a[2, 4] = -ks
+        a[3, 4] = 1.0
+        a[4, 2] = 1.0 / c.jc
+        a[4, 3] = -k_rod / c.jc
+        a[4, 4] = -(dc + c_rod) / c.jc
+        b[4, 3] = 1.0 / c.jc
+    return a, b
+
+
+def _initial_state(a: np.ndarray, b: np.ndarray, u0: np.ndarray, load: str) -> np.ndarray:
+    """Equilibrium for the first input (integrators excluded), as the start state."""
+    keep = [1, 2] if load == "fixed" else ([1, 2, 4] if load == "free" else [1, 2, 3, 4])
+    sub = a[np.ix_(keep, keep)]
+    rhs = -(b @ u0)[keep]
+    z = np.zeros(5)
+    sol, *_ = np.linalg.lstsq(sub, rhs, rcond=None)
+    z[keep] = sol
+    return z
+
+
+@njit(cache=True, nogil=True)
+def _solve_friction(v_free, b, level_c, level_s, vs, eps):
+    """Root v of v = v_free - b * F(v), F(v) = (Fc + (Fs - Fc) exp(-(v/vs)^2)) tanh(v/eps).
+
+    Bisection on the bracket [v_free - b Fmax, v_free + b Fmax] refined by Newton steps;
+    returns (v, F(v)).
+    """
+    fmax = max(abs(level_c), abs(level_s))
+    lo = v_free - b * fmax - 1e-15
+    hi = v_free + b * fmax + 1e-15
+    v = v_free
+    for _ in range(60):
+        if vs > 0.0:
+            q = v / vs
+            lev = level_c + (level_s - level_c) * math.exp(-q * q)
+        else:
+            lev = level_c
+        th = math.tanh(v / eps)
+        g = v - v_free + b * lev * th
+        if abs(g) < 1e-13 + 1e-10 * abs(v_free):
+            break
+        if g > 0.0:
+            hi = v
+        else:
+            lo = v
+        dg = 1.0 + b * lev * (1.0 - th * th) / eps
+        if vs > 0.0:
+            dg += b * th * (level_s - level_c) * math.exp(-q * q) * (-2.0 * q / vs)
+        vn = v - g / dg if dg > 0.0 else 0.5 * (lo + hi)
+        if not (lo < vn < hi):
+            vn = 0.5 * (lo + hi)
+        v = vn
+    if vs > 0.0:
+        q = v / vs
+        lev = level_c + (level_s - level_c) * math.exp(-q * q)
+    else:
+        lev = level_c
+    return v, lev * math.tanh(v / eps)
+
+
+@njit(cache=True, nogil=True)
+def _simulate(ad, bd, z0, tau_p, ks, ds, dp, dc, eff, angle, has_angle, xs, has_x, temp,
+              has_temp, t_ref, n_sub, fixed, out):
+    """Run the model over the record; ``out[k]`` gets the state at sample ``k``.
+
+    ``tau_p`` holds one value per sub-step; ``angle``, ``xs``, ``temp`` one per sample. The
+    pulsation terms use the simulated rotor angle plus an offset that tracks the measured
+    angle with the first-order gain ``alpha`` per sample.
+    """
+    n = out.shape[0]
+    z = z0.copy()
+    zn = np.zeros(5)
+    u = np.zeros(4)
+    puls_on = False
+    for i in range(32):
+        if eff[_E_PULS + i] != 0.0:
+            puls_on = True
+    pc = eff[_E_PC]
+    sf_c = eff[_E_SF_C]
+    sf_s = eff[_E_SF_S]
+    sf_on = (sf_c != 0.0 or sf_s != 0.0) and not fixed
+    k1 = eff[_E_K1]
+    k2 = eff[_E_K2]
+    ksx_on = k1 != 0.0 or k2 != 0.0
+    visc = eff[_E_VISC]
+    kc_kp = eff[_E_KC_KP]
+    half = eff[_E_HALF]
+    h_sub = eff[_E_H_SUB]
+    alpha = eff[_E_ALPHA]
+    offset = angle[0] - z[0] * kc_kp if has_angle else 0.0
+    for k in range(n):
+        for i in range(5):
+            out[k, i] = z[i]
+        if k == n - 1:
+            break
+        for j in range(n_sub):
+            vp = z[1]
+            tq = z[2]
+            vc = z[4]
+            f_pump = 0.0
+            f_pist = 0.0
+            g = 1.0
+            if puls_on:
+                # rotor angle at the sub-step's midpoint: simulated, plus the slowly
+                # tracked offset to the measured angle (complementary filter)
+                th = (z[0] + 0.5 * h_sub * vp) * kc_kp + offset
+                ripple = 0.0
+                torque = 0.0
+                for m in range(8):
+                    o = m + 1.0
+                    s = math.sin(o * th)
+                    c = math.cos(o * th)
+                    base = _E_PULS + 4 * m
+                    ripple += eff[base] * s + eff[base + 1] * c
+                    torque += eff[base + 2] * s + eff[base + 3] * c
+                g = 1.0 + ripple
+                f_pump -= ripple * tq + torque
+            r = 1.0
+            if visc != 0.0 and has_temp:
+                r = math.exp(-visc * (temp[k] - t_ref))
+                f_pump -= dp * (r - 1.0) * vp
+                f_pist -= dc * (r - 1.0) * vc
+            ks_eff = ks
+            if ksx_on:
+                xpos = xs[k] if has_x else z[3]
+                xn = xpos / half
+                ks_eff = ks * (1.0 + k1 * xn + k2 * xn * xn)
+            q_rate = ks_eff * (g * vp - tq / (ds * r) - vc) - ks * (vp - tq / ds - vc)
+            u[0] = tau_p[k * n_sub + j]
+            u[1] = f_pump
+            u[2] = q_rate
+            u[3] = f_pist
+            for i in range(5):
+                acc = 0.0
+                for m in range(5):
+                    acc += ad[i, m] * z[m]
+                for m in range(4):
+                    acc += bd[i, m] * u[m]
+                zn[i] = acc
+            fp = 0.0
+            fs = 0.0
+            if pc != 0.0:
+                vnew, fp = _solve_friction(zn[1], bd[1, 1], pc, pc, 0.0, eff[_E_PC_EPS])
+                for i in range(5):
+                    zn[i] -= bd[i, 1] * fp
+            if sf_on:
+                vnew, fs = _solve_friction(zn[4], bd[4, 3], sf_c, sf_s, eff[_E_SF_VS],
+                                           eff[_E_SF_EPS])
+                for i in range(5):
+                    zn[i] -= bd[i, 3] * fs
+            for i in range(5):
+                z[i] = zn[i]
+        if has_angle:
+            offset += alpha * (angle[k + 1] - z[0] * kc_kp - offset)
+
+
+class FastModel:
+    """Simulates an :class:`Experiment` for a parameter vector and maps states to channels."""
+
+    def __init__(self, exp: Experiment, n_sub: int | None = None) -> None:
+        self.exp = exp
+        if n_sub is None:
+            n_sub = max(1, int(math.ceil(exp.dt / 50e-6 - 1e-9)))
+        self.n_sub = n_sub
+        iq = exp.iq
+        self._iq_cum = np.concatenate([[0.0], np.cumsum(iq)]) * exp.dt  # A s at sample edges
+        self._t_edges = np.arange(iq.size + 1) * exp.dt
+        frac = (np.arange(n_sub) + 0.5) / n_sub
+        self._t_sub = (np.arange(iq.size)[:, None] + frac[None, :]).ravel() * exp.dt
+        self._iq_sub0 = np.repeat(iq, n_sub)
+        self._empty = np.zeros(1)
+
+    def start_vector(self) -> np.ndarray:
+        """Parameter vector at the preset's values, every effect off."""
+        theta = np.zeros(N_PARAMS)
+        for k, v in self.exp.start.items():
+            theta[IDX[k]] = v
+        return theta
+
+    def applied_current(self, delay_s: float) -> np.ndarray:
+        """The logged current delayed by ``delay_s``, averaged over each sub-step, A."""
+        if delay_s == 0.0:
+            return self._iq_sub0
+        h = self.exp.dt / self.n_sub
+        a = self._t_sub - 0.5 * h - delay_s
+        b = a + h
+        ia = np.interp(a, self._t_edges, self._iq_cum, left=0.0)
+        ib = np.interp(b, self._t_edges, self._iq_cum, left=0.0)
+        # before t = 0 the first logged value is assumed to have been applied
+        iq0 = self.exp.iq[0]
+        ia = np.where(a < 0, a * iq0, ia)
+        ib = np.where(b < 0, b * iq0, ib)
+        return (ib - ia) / h
+
+    def states(self, theta: np.ndarray) -> np.ndarray:
+        """State trajectory (n x 5) for the parameter vector ``theta``."""
+        exp = self.exp
+        a, b = continuous(theta, exp)
+        h = exp.dt / self.n_sub
+        ad, bd = discretise(a, b, h)
+        gain = theta[IDX["gain_n_per_a"]]
+        tau_p = gain * self.applied_current(theta[IDX["delay_s"]])
+        u0 = np.array([tau_p[0], 0.0, 0.0, 0.0])
+        z0 = _initial_state(a, b, u0, exp.load)
+        eff = np.zeros(_N_EFF)
+        eff[:32] = theta[IDX["puls1_flow_s"]: IDX["puls1_flow_s"] + 32]
+        eff[_E_PC] = theta[IDX["pc_force_n"]]
+        eff[_E_PC_EPS] = exp.const.eps_pump
+        eff[_E_SF_C] = theta[IDX["sf_coulomb_n"]]
+        eff[_E_SF_S] = theta[IDX["sf_static_n"]]
+        eff[_E_SF_VS] = exp.const.vs_seal
+        eff[_E_SF_EPS] = exp.const.eps_seal
+        eff[_E_K1] = theta[IDX["ks_k1"]]
+        eff[_E_K2] = theta[IDX["ks_k2"]]
+        eff[_E_HALF] = exp.const.half_stroke
+        eff[_E_VISC] = theta[IDX["visc_coeff_per_c"]]
+        eff[_E_KC_KP] = exp.const.rotor_per_m
+        eff[_E_H_SUB] = h
+        eff[_E_ALPHA] = 1.0 - math.exp(-2.0 * math.pi * ANGLE_CROSSOVER_HZ * exp.dt)
+        out = np.zeros((exp.n, 5))
+        e = self._empty
+        _simulate(ad, bd, z0, tau_p, theta[IDX["ks"]], theta[IDX["ds"]], theta[IDX["dp"]],
+                  theta[IDX["dc"]], eff,
+                  exp.angle if exp.angle is not None else e, exp.angle is not None,
+                  exp.position if exp.position is not None else e, exp.position is not None,
+                  exp.temperature if exp.temperature is not None else e,
+                  exp.temperature is not None, exp.t_ref, self.n_sub, exp.load == "fixed", out)
+        return out
+
+    def outputs(self, theta: np.ndarray, z: np.ndarray | None = None) -> dict[str, np.ndarray]:
+        """Model channels (same names and units as :attr:`Experiment.measured`)."""
+        exp = self.exp
+        if z is None:
+            z = self.states(theta)
+        c = exp.const
+        tq = z[:, 2]
+        vc = z[:, 4]
+        dc = theta[IDX["dc"]]
+        if exp.temperature is not None and theta[IDX["visc_coeff_per_c"]] != 0.0:
+            dc = dc * np.exp(-theta[IDX["visc_coeff_per_c"]] * (exp.temperature - exp.t_ref))
+        f_cyl = tq - dc * vc
+        if exp.load == "fixed":
+            f_rod = f_cyl
+        elif exp.load == "conrod":
+            f_rod = theta[IDX["k_rod"]] * z[:, 3] + theta[IDX["c_rod"]] * vc
+        else:
+            f_rod = np.zeros_like(tq)
+        out: dict[str, np.ndarray] = {}
+        pre = exp.precharge
+        for ch in exp.channels:
+            if ch == "p_pump_a":
+                y = pre + np.maximum(tq, 0.0) / c.kc
+            elif ch == "p_pump_b":
+                y = pre + np.maximum(-tq, 0.0) / c.kc
+            elif ch == "p_cyl_a":
+                y = pre + np.maximum(f_cyl, 0.0) / c.kc
+            elif ch == "p_cyl_b":
+                y = pre + np.maximum(-f_cyl, 0.0) / c.kc
+            elif ch == "f_strain":
+                tn = (exp.data.t - exp.data.t[0]) / (exp.data.t[-1] - exp.data.t[0]) * 2 - 1
+                y = (f_rod + theta[IDX["strain_offset_n"]] + theta[IDX["drift_lin_n"]] * tn
+                     + theta[IDX["drift_quad_n"]] * (tn * tn - 1.0 / 3.0))
+            elif ch == "omega_m":
+                y = exp.window_diff(z[:, 0] * c.rotor_per_m)
+            elif ch == "v_piston":
+                y = exp.window_diff(z[:, 3])
+            else:  # pragma: no cover - channels come from prepare()
+                raise KeyError(ch)
+            if ch in SAT_CHANNELS:
+                beta = theta[IDX[f"sat_{ch}"]]
+                level = exp.plateaus.get(ch)
+                if beta != 0.0 and level is not None:
+                    y = y + beta * (np.minimum(y, level) - y)
+            out[ch] = y
+        return out
+
+
+__all__ = ["BASE_NAMES", "EFFECT_NAMES", "FastModel", "IDX", "N_PARAMS", "PARAM_NAMES",
+           "continuous", "discretise", "map_threads"]

@@ -1,0 +1,387 @@
+"""The identification loop: baseline fit, residual tests, attribution, refit, report.
+
+1. Fit the linear model of thesis ch. 2 (d_s, d_p, d_c, k_s, the current-to-force gain K; the
+   rod stiffness with the conrod) by output-error simulation on the estimation part.
+2. Analyse the residual on the held-out validation part (:mod:`hil.identify.residuals`).
+3. Test every library candidate against the residual (:mod:`hil.identify.candidates`).
+4. Add the best-supported one, refit everything by simulation, and keep it only if the
+   validation cost drops by at least 0.5 %; repeat until no candidate is significant (several
+   pulsation orders come in one per round).
+5. Report NRMSE per channel before and after (validation part), the effects added with
+   parameters and 95 % confidence intervals, the residual tests before and after, and the
+   verdict ``unexplained`` when the residual still has structure no candidate explains.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from hil.identify.candidates import (
+    MIN_SHARE,
+    CandidateTest,
+    EffectDef,
+    library,
+    rank,
+    test_candidates,
+)
+from hil.identify.csvdata import MeasuredData
+from hil.identify.experiment import Experiment, prepare
+from hil.identify.fit import Z95, FitResult, OutputErrorFit, fit_baseline
+from hil.identify.model import IDX, FastModel
+from hil.identify.residuals import ResidualAnalysis, analyse
+from plant.config import Config
+
+#: Baseline parameters shown in the report, with units and thesis symbols.
+BASELINE_LABELS = {
+    "gain_n_per_a": ("K", "N/A", "current-to-force gain, piston-equivalent"),
+    "ds": ("d_s", "N/(m/s)", "internal-leakage series damper"),
+    "dp": ("d_p", "N/(m/s)", "pump viscous friction"),
+    "dc": ("d_c", "N/(m/s)", "piston-side viscous friction"),
+    "ks": ("k_s", "N/m", "series elasticity"),
+    "k_rod": ("k_rod", "N/m", "connecting-rod stiffness"),
+    "c_rod": ("c_rod", "N/(m/s)", "connecting-rod damping"),
+    "strain_offset_n": ("f_0", "N", "strain-gauge offset"),
+}
+
+
+@dataclass
+class ParamEstimate:
+    """A parameter with its 95 % confidence interval (HAC, delta method where derived)."""
+
+    name: str
+    value: float
+    ci_low: float
+    ci_high: float
+    unit: str = ""
+
+    def as_dict(self) -> dict:
+        return {"value": self.value, "ci95": [self.ci_low, self.ci_high], "unit": self.unit}
+
+
+@dataclass
+class EffectAdded:
+    """An effect the loop added, with its parameters (derived, physical form)."""
+
+    name: str
+    label: str
+    params: dict[str, ParamEstimate]
+    round: int
+    p_holm: float
+    share_val: float
+
+    def as_dict(self) -> dict:
+        return {"name": self.name, "label": self.label, "round": self.round,
+                "p_holm": self.p_holm, "share_of_residual_variance": self.share_val,
+                "params": {k: v.as_dict() for k, v in self.params.items()}}
+
+
+@dataclass
+class ChannelError:
+    """Validation error of one channel before and after the effects were added."""
+
+    channel: str
+    nrmse_before: float
+    nrmse_after: float
+
+    @property
+    def fit_before(self) -> float:
+        return 100.0 * (1.0 - self.nrmse_before)
+
+    @property
+    def fit_after(self) -> float:
+        return 100.0 * (1.0 - self.nrmse_after)
+
+
+@dataclass
+class IdentifyReport:
+    """Everything the identification found (see the module docstring)."""
+
+    path: str
+    load: str
+    n_samples: int
+    sample_rate_hz: float
+    baseline: dict[str, ParamEstimate]
+    final: dict[str, ParamEstimate]
+    held: dict[str, str]
+    effects_added: list[EffectAdded]
+    rounds: list[list[CandidateTest]]
+    channels: list[ChannelError]
+    residual_before: ResidualAnalysis
+    residual_after: ResidualAnalysis
+    unexplained: bool
+    unexplained_detail: str
+    notes: list[str] = field(default_factory=list)
+    rejected: list[str] = field(default_factory=list)
+    wall_s: float = 0.0
+    # arrays for plots
+    experiment: Experiment | None = None
+    outputs_before: dict[str, np.ndarray] = field(default_factory=dict)
+    outputs_after: dict[str, np.ndarray] = field(default_factory=dict)
+
+    def candidate_table(self) -> list[dict]:
+        """One row per candidate: the round it was selected in, else the last round."""
+        selected = {e.label for e in self.effects_added}
+        rows: dict[str, dict] = {}
+        for i, tests in enumerate(self.rounds):
+            for t in tests:
+                if t.label in rows and rows[t.label]["selected"]:
+                    continue
+                rows[t.label] = {
+                    "name": t.name, "label": t.label, "round": i, "status": t.status,
+                    "reason": t.reason, "statistic": t.wald, "dof": t.dof,
+                    "p_value": t.p_value, "p_holm": t.p_holm,
+                    "share_est": t.share_est, "share_val": t.share_val,
+                    "significant": t.significant,
+                    "selected": t.label in selected and t.selected,
+                }
+        return list(rows.values())
+
+
+def nrmse(y: np.ndarray, yhat: np.ndarray) -> float:
+    """||y - yhat|| / ||y - mean(y)|| over the finite samples (0 = perfect)."""
+    ok = np.isfinite(y) & np.isfinite(yhat)
+    y, yhat = y[ok], yhat[ok]
+    den = float(np.linalg.norm(y - y.mean()))
+    return float(np.linalg.norm(y - yhat) / den) if den > 0 else float("nan")
+
+
+def _val_cost(exp: Experiment, out: dict[str, np.ndarray], sigma: dict[str, float]) -> float:
+    cost = 0.0
+    for c in exp.channels:
+        e = (exp.measured[c] - out[c])[exp.val]
+        cost += float(np.nansum(e * e)) / sigma[c] ** 2
+    return cost
+
+
+def _estimates(fit: FitResult, names: list[str]) -> dict[str, ParamEstimate]:
+    out = {}
+    for n in names:
+        sym, unit, _ = BASELINE_LABELS[n]
+        v = fit.value(n)
+        if n in fit.se:
+            lo, hi = fit.ci95(n)
+        else:
+            lo = hi = v
+        out[sym] = ParamEstimate(sym, v, lo, hi, unit)
+    return out
+
+
+def _delta(fit: FitResult, fn: Callable[[np.ndarray], float], params: list[str]
+           ) -> tuple[float, float]:
+    """Value of ``fn(theta)`` and its standard error by the delta method."""
+    theta = fit.theta
+    v = fn(theta)
+    idx = [fit.free.index(p) for p in params if p in fit.free]
+    if fit.cov is None or not idx:
+        return v, float("nan")
+    grad = np.zeros(len(idx))
+    for k, i in enumerate(idx):
+        p = fit.free[i]
+        step = max(abs(theta[IDX[p]]) * 1e-4, 1e-9)
+        th = theta.copy()
+        th[IDX[p]] += step
+        grad[k] = (fn(th) - v) / step
+    cov = fit.cov[np.ix_(idx, idx)]
+    return v, float(np.sqrt(max(grad @ cov @ grad, 0.0)))
+
+
+def _pe(name: str, fit: FitResult, fn: Callable[[np.ndarray], float], params: list[str],
+        unit: str) -> ParamEstimate:
+    v, se = _delta(fit, fn, params)
+    return ParamEstimate(name, v, v - Z95 * se, v + Z95 * se, unit)
+
+
+def describe_effect(d: EffectDef, fit: FitResult, exp: Experiment) -> dict[str, ParamEstimate]:
+    """Physical parameters of an added effect with 95 % confidence intervals."""
+    ps = list(d.params)
+    g = IDX
+    if d.name == "pump_pulsation":
+        fs_, fc_, ts_, tc_ = ps
+        order = int(d.label.split("=")[1].rstrip("]"))
+        return {
+            "order": ParamEstimate("order", order, order, order, ""),
+            "amplitude": _pe("amplitude", fit, lambda t: math.hypot(t[g[fs_]], t[g[fc_]]),
+                             [fs_, fc_], "1"),
+            "phase_rad": _pe("phase_rad", fit, lambda t: math.atan2(t[g[fc_]], t[g[fs_]]),
+                             [fs_, fc_], "rad"),
+            "torque_n": _pe("torque_n", fit, lambda t: math.hypot(t[g[ts_]], t[g[tc_]]),
+                            [ts_, tc_], "N"),
+            "torque_phase_rad": _pe("torque_phase_rad", fit,
+                                    lambda t: math.atan2(t[g[tc_]], t[g[ts_]]), [ts_, tc_],
+                                    "rad"),
+        }
+    if d.name == "pump_coulomb_friction":
+        return {"force_n": _pe("force_n", fit, lambda t: t[g["pc_force_n"]], ps, "N")}
+    if d.name == "seal_friction":
+        return {"coulomb_n": _pe("coulomb_n", fit, lambda t: t[g["sf_coulomb_n"]], ps, "N"),
+                "static_n": _pe("static_n", fit, lambda t: t[g["sf_static_n"]], ps, "N")}
+    if d.name == "stiffness_vs_position":
+        x = exp.position if exp.position is not None else np.zeros(1)
+        h = exp.const.half_stroke
+        lo, hi = float(x.min()) / h, float(x.max()) / h
+        mid = 0.5 * (lo + hi)
+
+        def span(t: np.ndarray) -> float:
+            k = lambda xn: 1 + t[g["ks_k1"]] * xn + t[g["ks_k2"]] * xn * xn  # noqa: E731
+            return 0.5 * (k(lo) + k(hi)) / k(mid) - 1.0
+
+        return {"ks_k1": _pe("ks_k1", fit, lambda t: t[g["ks_k1"]], ps, "1"),
+                "ks_k2": _pe("ks_k2", fit, lambda t: t[g["ks_k2"]], ps, "1"),
+                "ks_relative_span": _pe("ks_relative_span", fit, span, ps, "1")}
+    if d.name == "viscosity_temperature":
+        return {"coeff_per_c": _pe("coeff_per_c", fit, lambda t: t[g["visc_coeff_per_c"]],
+                                   ps, "1/degC"),
+                "t_ref_c": ParamEstimate("t_ref_c", exp.t_ref, exp.t_ref, exp.t_ref, "degC")}
+    if d.name == "strain_thermal_drift":
+        out = {"drift_n": _pe("drift_n", fit, lambda t: 2.0 * t[g["drift_lin_n"]], ps, "N"),
+               "curvature_n": _pe("curvature_n", fit, lambda t: t[g["drift_quad_n"]], ps, "N")}
+        if exp.temperature is not None:
+            d_t = float(exp.temperature[-1] - exp.temperature[0])
+            if abs(d_t) > 0.5:
+                out["n_per_c_oil"] = _pe("n_per_c_oil", fit,
+                                         lambda t: 2.0 * t[g["drift_lin_n"]] / d_t, ps, "N/degC")
+        return out
+    if d.name == "input_delay":
+        return {"delay_s": _pe("delay_s", fit, lambda t: t[g["delay_s"]], ps, "s")}
+    if d.name == "sensor_saturation":
+        ch = d.label.split("[")[1].rstrip("]")
+        lvl = exp.plateaus[ch]
+        return {"level": ParamEstimate("level", lvl, lvl, lvl, "Pa" if ch != "f_strain" else "N"),
+                "clip_fraction": _pe("clip_fraction", fit, lambda t: t[g[ps[0]]], ps, "1")}
+    return {p: _pe(p, fit, lambda t, p=p: t[g[p]], [p], "") for p in ps}
+
+
+def identify(
+    data: MeasuredData,
+    cfg: Config,
+    max_effects: int = 6,
+    progress: Callable[[str], None] | None = None,
+) -> IdentifyReport:
+    """Run the whole loop on one record (see the module docstring)."""
+    import time
+
+    t_start = time.perf_counter()
+    say = progress or (lambda msg: None)
+    exp = prepare(data, cfg)
+    model = FastModel(exp)
+    say(f"baseline fit ({exp.load}, {exp.n} samples, channels {', '.join(exp.channels)})")
+    base = fit_baseline(model)
+    names = [n for n in BASELINE_LABELS if n in base.free or n in base.held]
+    baseline_est = _estimates(base, names)
+    residual0 = {c: exp.measured[c] - base.outputs[c] for c in exp.channels}
+    analysis0 = analyse(exp, residual0, exp.val)
+    sigma_ref = dict(base.sigma)
+    current = base
+    defs_all = {d.label: d for d in library(exp)}
+    added: list[EffectAdded] = []
+    added_labels: set[str] = set()
+    rejected: list[str] = []
+    excluded: set[str] = set()
+    rounds: list[list[CandidateTest]] = []
+    fitter = OutputErrorFit(model)
+    est_mask = fitter.fit_mask()
+    for rnd in range(max_effects + 1):
+        defs = [d for lbl, d in defs_all.items()
+                if lbl not in added_labels and lbl not in excluded]
+        residual = {c: exp.measured[c] - current.outputs[c] for c in exp.channels}
+        say(f"round {rnd}: testing {len(defs)} candidates")
+        tests = test_candidates(defs, model.outputs, current.theta, IDX, exp, current.weights,
+                                residual, est_mask, exp.val, current.free)
+        rounds.append(tests)
+        ranked = rank(tests)
+        if not ranked or len(added) >= max_effects:
+            break
+        best = ranked[0]
+        group = [best]
+        theta0 = current.theta.copy()
+        new_free = list(current.free)
+        scales = {}
+        for t in group:
+            d = defs_all[t.label]
+            for p in t.params:
+                theta0[IDX[p]] += t.beta.get(p, 0.0)
+                new_free.append(p)
+            for p, nom in zip(d.params, d.nominal, strict=True):
+                scales[p] = nom
+        say(f"round {rnd}: adding {', '.join(t.label for t in group)}; refit")
+        fitter = OutputErrorFit(model, {"strain_offset_n": 1.0, **_all_scales(defs_all),
+                                        **scales})
+        new = fitter.fit(theta0, new_free, sigma=current.sigma, passes=2)
+        before = _val_cost(exp, current.outputs, sigma_ref)
+        after = _val_cost(exp, new.outputs, sigma_ref)
+        if not after < (1.0 - MIN_SHARE) * before:
+            for t in group:
+                excluded.add(t.label)
+                rejected.append(f"{t.label}: refit lowered the validation cost by less than "
+                                f"{MIN_SHARE:.1%} ({after:.6g} vs {before:.6g})")
+            continue
+        new.held = current.held
+        current = new
+        for t in group:
+            t.selected = True
+            added_labels.add(t.label)
+            added.append(EffectAdded(t.name, t.label, {}, rnd, t.p_holm, t.share_val))
+    # describe the added effects with the final fit's covariance
+    for e in added:
+        e.params = describe_effect(defs_all[e.label], current, exp)
+    residual1 = {c: exp.measured[c] - current.outputs[c] for c in exp.channels}
+    analysis1 = analyse(exp, residual1, exp.val)
+    channels = [ChannelError(c, nrmse(exp.measured[c][exp.val], base.outputs[c][exp.val]),
+                             nrmse(exp.measured[c][exp.val], current.outputs[c][exp.val]))
+                for c in exp.channels]
+    unexplained, detail = _verdict(analysis1)
+    final_est = _estimates(current, names)
+    return IdentifyReport(
+        data.path, data.load, exp.n, data.sample_rate_hz, baseline_est, final_est,
+        base.held, added, rounds, channels, analysis0, analysis1, unexplained, detail,
+        notes=list(exp.notes) + [f"ignored column {c}" for c in data.ignored],
+        rejected=rejected, wall_s=time.perf_counter() - t_start, experiment=exp,
+        outputs_before=base.outputs, outputs_after=current.outputs,
+    )
+
+
+def _all_scales(defs: dict[str, EffectDef]) -> dict[str, float]:
+    out = {}
+    for d in defs.values():
+        for p, nom in zip(d.params, d.nominal, strict=True):
+            out[p] = nom
+    return out
+
+
+#: Share of a judged channel's residual variance predictable from its own past above which
+#: non-white structure counts as material (see :mod:`hil.identify.residuals`).
+MATERIAL_SHARE = 0.01
+
+
+def _verdict(a: ResidualAnalysis) -> tuple[bool, str]:
+    """``unexplained`` when a judged channel's residual still holds material structure:
+    not white and more than 1 % of its variance predictable from its past (pressures and
+    strain), or more than 1.5 x the quantisation floor (encoder speeds)."""
+    bad = [r for r in a.channels.values() if r.judged and not r.white
+           and (r.floor_ratio > 0 or r.predictable_share > MATERIAL_SHARE)]
+    if not bad:
+        return False, ""
+    parts = []
+    for r in bad:
+        if r.floor_ratio > 0:
+            parts.append(f"{r.channel}: residual {r.floor_ratio:.1f} x the encoder's "
+                         "quantisation floor")
+            continue
+        what = (f"{r.channel}: Ljung-Box p={r.ljung_box_p:.2g}, "
+                f"{r.predictable_share:.1%} of the residual predictable")
+        if r.peak_hz_ratio > 20:
+            what += f", narrow-band peak at {r.peak_hz:.1f} Hz"
+            if r.peak_order_ratio > 8:
+                what += f" (rotor-angle order {r.peak_order:g} also stands out)"
+            else:
+                what += " not locked to the rotor angle"
+        parts.append(what)
+    return True, "residual structure no candidate explains: " + "; ".join(parts)
+
+
+__all__ = ["ChannelError", "EffectAdded", "IdentifyReport", "ParamEstimate", "identify",
+           "nrmse"]

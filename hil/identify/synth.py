@@ -1,0 +1,280 @@
+"""Synthetic identification datasets from the project's plant, with effects switched on.
+
+Used by the tests, the benchmark, the docs and ``eha-hil identify-synth``. The plant
+(:class:`plant.model.Plant`, 20 kHz ticks) is driven by a logged q-axis current (an ideal
+current source) and its sensor outputs are recorded every ``tick_per_sample``-th tick, as the
+MCU logs them (5 kHz by default). Row ``k`` holds ``t_k``, the current logged at ``t_k`` and
+the sensor values at ``t_k``; the logged current is applied from ``t_k`` on (plus the delay
+of the ``input_delay`` effect).
+
+Effects of the library that live in the plant are switched on through its configuration;
+the others are applied around it:
+
+* ``input_delay``: the applied current lags the logged one by whole ticks (50 us);
+* ``sensor_saturation``: pressure channels clip at a level (a sensor or ADC rail);
+* outside the library: ``mains_hum`` (a 50 Hz sinusoid on ``p_pump_a``) and ``backlash``
+  (a dead band in the motor-angle reading, as a loose encoder coupling gives).
+
+The base is ``hydra_linear`` with sensor noise and quantisation on, so the fitted linear model
+is exact for the null dataset.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from hil.identify.csvdata import LOAD_CASES, MeasuredData
+from plant import layout as L
+from plant.config import Config, load_config
+from plant.model import Plant, stiffness_range  # noqa: F401  (re-exported for docs)
+
+#: Realistic default magnitudes of each library effect (the plant's preset values where
+#: there is one). ``order`` of the pulsation is the 4-tooth trochoid's.
+DEFAULT_MAGNITUDES: dict[str, dict[str, float]] = {
+    "pump_pulsation": {"order": 4, "amplitude": 0.02, "torque_n": 150.0},
+    "pump_coulomb_friction": {"force_n": 80.0},
+    "seal_friction": {"coulomb_n": 20.0, "static_n": 35.0},
+    "stiffness_vs_position": {},
+    "viscosity_temperature": {"coeff_per_c": 0.03, "initial_c": 15.0, "ambient_c": 25.0},
+    "strain_thermal_drift": {"n_per_c": 2.5, "ambient_c": 35.0},
+    "input_delay": {"delay_ticks": 5},
+    "sensor_saturation": {"level_pa": 4.0e6},
+    "mains_hum": {"amplitude_pa": 1.0e4, "freq_hz": 50.0},
+    "backlash": {"width_rad": 0.05},
+}
+
+PLANT_EFFECTS = ("pump_pulsation", "pump_coulomb_friction", "seal_friction",
+                 "stiffness_vs_position", "viscosity_temperature", "strain_thermal_drift")
+WRAPPER_EFFECTS = ("input_delay", "sensor_saturation")
+OUTSIDE_EFFECTS = ("mains_hum", "backlash")
+ALL_SYNTH_EFFECTS = PLANT_EFFECTS + WRAPPER_EFFECTS + OUTSIDE_EFFECTS
+
+
+@dataclass
+class SynthResult:
+    """A generated record and what was put into it."""
+
+    data: MeasuredData
+    truth: dict[str, dict[str, float]]
+    config: Config
+    iq_applied: np.ndarray
+    states: dict[str, np.ndarray] = field(default_factory=dict)
+
+
+def multisine(n: int, fs: float, rms: float, f_lo: float, f_hi: float, n_lines: int,
+              seed: int) -> np.ndarray:
+    """Random-phase multisine, log-spaced lines between ``f_lo`` and ``f_hi`` Hz, scaled to
+    ``rms``; amplitudes fall as 1/sqrt(f) so that slow components (and so pump reversals
+    and rotor travel) dominate while the resonance band stays excited."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) / fs
+    freqs = np.geomspace(f_lo, f_hi, n_lines)
+    amps = 1.0 / np.sqrt(freqs)
+    phases = rng.uniform(0, 2 * np.pi, n_lines)
+    u = (amps[None, :] * np.sin(2 * np.pi * t[:, None] * freqs[None, :] + phases)).sum(axis=1)
+    return u * (rms / np.sqrt(np.mean(u * u)))
+
+
+def synth_config(load: str, effects: dict[str, dict[str, float]], preset: str = "hydra_linear",
+                 seed: int = 1, noise: bool = True) -> Config:
+    """Plant configuration for a dataset: the preset, the load, the plant-side effects."""
+    cfg = load_config(preset)
+    ov: dict[str, Any] = {
+        "load.kind": LOAD_CASES[load],
+        "sim.seed": int(seed),
+        "effects.sensor_noise.enabled": noise,
+        "effects.quantisation.enabled": noise,
+    }
+    for name, mag in effects.items():
+        if name == "pump_pulsation":
+            ov.update({"effects.pulsation.enabled": True,
+                       "effects.pulsation.order": int(mag["order"]),
+                       "effects.pulsation.amplitude": float(mag["amplitude"]),
+                       "effects.pulsation.torque_n": float(mag["torque_n"]),
+                       "effects.pulsation.phase_rad": float(mag.get("phase_rad", 0.0))})
+        elif name == "pump_coulomb_friction":
+            ov.update({"effects.pump_coulomb.enabled": True,
+                       "effects.pump_coulomb.force_n": float(mag["force_n"])})
+        elif name == "seal_friction":
+            ov.update({"effects.seal_friction.enabled": True,
+                       "effects.seal_friction.coulomb_n": float(mag["coulomb_n"]),
+                       "effects.seal_friction.static_n": float(mag["static_n"])})
+        elif name == "stiffness_vs_position":
+            ov["effects.ks_position.enabled"] = True
+        elif name == "viscosity_temperature":
+            ov.update({"effects.oil_temperature.enabled": True,
+                       "effects.oil_temperature.viscosity_coeff_per_c":
+                           float(mag["coeff_per_c"]),
+                       "effects.oil_temperature.initial_c": float(mag["initial_c"]),
+                       "effects.oil_temperature.ambient_c": float(mag["ambient_c"])})
+        elif name == "strain_thermal_drift":
+            ov.update({"effects.strain_drift.enabled": True,
+                       "effects.strain_drift.n_per_c": float(mag["n_per_c"])})
+    return cfg.with_overrides(ov, source="identify synth")
+
+
+def generate(
+    load: str = "fixed_piston",
+    effects: dict[str, dict[str, float]] | list[str] | tuple[str, ...] = (),
+    seconds: float = 8.0,
+    seed: int = 1,
+    preset: str = "hydra_linear",
+    sample_rate_hz: float = 5000.0,
+    rms_a: float | None = None,
+    noise: bool = True,
+    excitation: np.ndarray | None = None,
+) -> SynthResult:
+    """Simulate one identification experiment and return the record as it would be logged.
+
+    ``effects`` maps effect names (library names, or ``mains_hum`` / ``backlash``) to
+    magnitude overrides; a list takes :data:`DEFAULT_MAGNITUDES`. ``excitation`` (A, one
+    value per sample) replaces the default multisine. With the piston free, a weak position
+    loop (300 A/m, about 0.4 Hz) keeps the piston inside its stroke; its output is
+    part of the logged current, and its reference sweeps the piston over +-18 mm at 0.125 Hz.
+    """
+    if load not in LOAD_CASES:
+        raise ValueError(f"unknown load {load!r}")
+    if not isinstance(effects, dict):
+        effects = {name: {} for name in effects}
+    mags: dict[str, dict[str, float]] = {}
+    for name, over in effects.items():
+        if name not in DEFAULT_MAGNITUDES:
+            raise ValueError(f"unknown effect {name!r} (known: {', '.join(ALL_SYNTH_EFFECTS)})")
+        mags[name] = {**DEFAULT_MAGNITUDES[name], **over}
+    cfg = synth_config(load, {k: v for k, v in mags.items() if k in PLANT_EFFECTS}, preset,
+                       seed, noise)
+    plant = Plant(cfg)
+    every = int(round(1.0 / (sample_rate_hz * plant.tick_s)))
+    if every < 1 or abs(every * plant.tick_s * sample_rate_hz - 1.0) > 1e-9:
+        raise ValueError("sample rate must divide the 20 kHz tick rate")
+    fs = 1.0 / (every * plant.tick_s)
+    n = int(round(seconds * fs))
+    if rms_a is None:
+        rms_a = 2.5 if load == "free_piston" else 5.0
+    if excitation is None:
+        f_hi = 2000.0 if load == "free_piston" else 300.0
+        exc = multisine(n, fs, rms_a, 0.3, f_hi, 100, seed + 1000)
+    else:
+        exc = np.asarray(excitation, dtype=float)
+        if exc.size < n:
+            raise ValueError("excitation shorter than the record")
+    if "strain_thermal_drift" in mags:
+        plant.set_ambient(mags["strain_thermal_drift"]["ambient_c"])
+    delay_ticks = int(mags.get("input_delay", {}).get("delay_ticks", 0))
+    q, r = divmod(delay_ticks, every)
+    # Piston free: a slow position loop sweeps the piston over +-18 mm of its stroke (so
+    # position-dependent effects are excited) and keeps it off the end stops.
+    kx = 300.0 if load == "free_piston" else 0.0
+    t_all = np.arange(n) / fs
+    x_sweep = 0.018 * np.sin(2 * np.pi * 0.125 * t_all) if load == "free_piston" else 0 * t_all
+    rec = np.zeros((n, L.N_OUTPUTS))
+    iq_log = np.zeros(n)
+    iq_app = np.zeros(n)
+    rec[0] = plant.y
+    x_ref = float(plant.y[L.Y_X_PISTON])
+    for k in range(n):
+        iq_log[k] = exc[k] - kx * (rec[k, L.Y_X_PISTON] - x_ref - x_sweep[k])
+        if k == n - 1:
+            break
+        i_prev = iq_log[k - q - 1] if k - q - 1 >= 0 else 0.0
+        i_now = iq_log[k - q] if k - q >= 0 else 0.0
+        if r:
+            plant.set_current(i_prev)
+            plant.advance(r)
+        plant.set_current(i_now)
+        plant.advance(every - r)
+        iq_app[k] = i_now
+        rec[k + 1] = plant.y
+    t = np.arange(n) / fs
+    cols = {
+        "iq": iq_log,
+        "theta_m": rec[:, L.Y_THETA_M].copy(),
+        "p_pump_a": rec[:, L.Y_P_PUMP_A].copy(),
+        "p_pump_b": rec[:, L.Y_P_PUMP_B].copy(),
+        "p_cyl_a": rec[:, L.Y_P_CYL_A].copy(),
+        "p_cyl_b": rec[:, L.Y_P_CYL_B].copy(),
+        "p_acc": rec[:, L.Y_P_ACC].copy(),
+        "x_piston": rec[:, L.Y_X_PISTON].copy(),
+        "f_strain": rec[:, L.Y_F_STRAIN].copy(),
+        "temp_c": rec[:, L.Y_TEMP].copy(),
+    }
+    truth: dict[str, dict[str, float]] = {}
+    for name, mag in mags.items():
+        truth[name] = _truth(name, mag, cfg, rec, fs)
+    if "sensor_saturation" in mags:
+        level = mags["sensor_saturation"]["level_pa"]
+        for c in ("p_pump_a", "p_pump_b", "p_cyl_a", "p_cyl_b", "p_acc"):
+            cols[c] = np.minimum(cols[c], level)
+    if "mains_hum" in mags:
+        m = mags["mains_hum"]
+        cols["p_pump_a"] = cols["p_pump_a"] + m["amplitude_pa"] * np.sin(
+            2 * np.pi * m["freq_hz"] * t + 0.3)
+    if "backlash" in mags:
+        # the dead band sits between rotor and encoder disc, so the reading stays on the
+        # encoder's count grid
+        q = 2 * math.pi / cfg.get("effects.quantisation.motor_counts_per_rev")
+        true_angle = np.cumsum(rec[:, L.Y_OMEGA_M]) / fs
+        cols["theta_m"] = np.floor(_backlash(true_angle, mags["backlash"]["width_rad"]) / q) * q
+    data = MeasuredData(path=f"<synth {load} {'+'.join(mags) or 'null'} seed {seed}>",
+                        load=load, sample_rate_hz=fs, t=t, columns=cols,
+                        header={"source": "eha-hil identify synth"})
+    states = {"v_p": rec[:, L.Y_VP].copy(), "tau_q": rec[:, L.Y_TAU_Q].copy(),
+              "t_oil": rec[:, L.Y_T_OIL].copy(), "v_piston": rec[:, L.Y_V_PISTON].copy()}
+    return SynthResult(data, truth, cfg, iq_app, states)
+
+
+def _backlash(theta: np.ndarray, width: float) -> np.ndarray:
+    """A dead band of ``width`` rad between the rotor and the encoder disc."""
+    out = np.empty_like(theta)
+    pos = theta[0]
+    half = width / 2
+    for i, th in enumerate(theta):
+        if th - pos > half:
+            pos = th - half
+        elif pos - th > half:
+            pos = th + half
+        out[i] = pos
+    return out
+
+
+def _truth(name: str, mag: dict[str, float], cfg: Config, rec: np.ndarray,
+           fs: float) -> dict[str, float]:
+    """The effect's parameters in the identification library's terms."""
+    if name == "stiffness_vs_position":
+        x = rec[:, L.Y_X_PISTON]
+        return {"ks_relative_span": _ks_span(cfg, float(x.min()), float(x.max()))}
+    if name == "strain_thermal_drift":
+        from plant.model import build_params
+
+        p = build_params(cfg)
+        tau = p[L.P_ROD_TAU]
+        t_end = (rec.shape[0] - 1) / fs
+        t_amb0 = cfg.get("effects.oil_temperature.ambient_c")
+        step = mag["ambient_c"] - t_amb0
+        return {"drift_n": mag["n_per_c"] * step * (1 - math.exp(-t_end / tau)),
+                "n_per_c": mag["n_per_c"]}
+    if name == "input_delay":
+        return {"delay_s": mag["delay_ticks"] * cfg.get("sim.tick_ns") * 1e-9}
+    if name == "viscosity_temperature":
+        return {"coeff_per_c": mag["coeff_per_c"]}
+    return {k: float(v) for k, v in mag.items()}
+
+
+def _ks_span(cfg: Config, x_lo: float, x_hi: float) -> float:
+    """(k_s(x_hi) + k_s(x_lo)) / 2 / k_s(mid-range) - 1 over the visited range (Eq. 2.27)."""
+    from plant import kernel
+    from plant.model import build_params
+
+    p = build_params(cfg, substeps=1)
+    p[L.P_KSX_ON] = 1.0
+    mid = 0.5 * (x_lo + x_hi)
+    k_mid = kernel.series_stiffness(p, mid)
+    return 0.5 * (kernel.series_stiffness(p, x_lo) + kernel.series_stiffness(p, x_hi)) / k_mid - 1
+
+
+__all__ = ["ALL_SYNTH_EFFECTS", "DEFAULT_MAGNITUDES", "SynthResult", "generate", "multisine",
+           "synth_config"]

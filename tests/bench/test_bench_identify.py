@@ -1,0 +1,18 @@
+"""pytest-benchmark case for the identification tool (no timing asserted).
+
+The suite runs with ``--benchmark-disable`` (each case once, as a smoke test); time it with
+``.venv/bin/python -m pytest tests/bench/test_bench_identify.py --benchmark-enable``. The
+16 s budget figure comes from ``eha-hil bench identify`` (docs/identify.md).
+"""
+
+from __future__ import annotations
+
+from hil.identify.pipeline import identify
+from hil.identify.synth import generate
+
+
+def test_identify_pulsation_record(benchmark, default_cfg):
+    data = generate("fixed_piston", ["pump_pulsation"], seconds=4.0, seed=5).data
+    identify(data, default_cfg, max_effects=1)  # compile outside the measurement
+    rep = benchmark(identify, data, default_cfg)
+    assert [e.name for e in rep.effects_added] == ["pump_pulsation"]

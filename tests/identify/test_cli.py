@@ -1,0 +1,96 @@
+"""The identify verbs through a throwaway argparse built with the configure_* functions."""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+import pytest
+
+from hil.identify import cli
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="eha-hil")
+    sub = p.add_subparsers(dest="cmd", required=True)
+    a = sub.add_parser("identify")
+    cli.configure_identify(a)
+    a.set_defaults(func=cli.run_identify)
+    s = sub.add_parser("identify-synth")
+    cli.configure_synth(s)
+    s.set_defaults(func=cli.run_synth)
+    b = sub.add_parser("bench-identify")
+    cli.configure_bench(b)
+    b.set_defaults(func=cli.run_bench)
+    return p
+
+
+def run(capsys, *argv: str) -> tuple[int, str, str]:
+    args = _parser().parse_args(list(argv))
+    code = args.func(args)
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+@pytest.fixture(scope="module")
+def coulomb_csv(tmp_path_factory):
+    path = tmp_path_factory.mktemp("id") / "coulomb.csv"
+    args = _parser().parse_args(["identify-synth", str(path), "--effect",
+                                 "pump_coulomb_friction", "--seconds", "4",
+                                 "--magnitude", "pump_coulomb_friction.force_n=60"])
+    assert args.func(args) == 0
+    return path
+
+
+def test_synth_then_identify_json(capsys, coulomb_csv):
+    code, out, err = run(capsys, "identify", str(coulomb_csv), "--json", "--quiet")
+    assert code == 0, err
+    data = json.loads(out)
+    for key in ("effects_added", "candidates", "channels", "residual_white_before",
+                "residual_white_after", "unexplained"):
+        assert key in data
+    assert [e["name"] for e in data["effects_added"]] == ["pump_coulomb_friction"]
+    force = data["effects_added"][0]["params"]["force_n"]["value"]
+    assert abs(force - 60.0) < 6.0
+    assert all({"nrmse_before", "nrmse_after"} <= set(c) for c in data["channels"])
+    assert any(c["selected"] and "statistic" in c for c in data["candidates"])
+    assert data["residual_white_after"] and not data["residual_white_before"]
+    assert data["unexplained"] is False
+
+
+def test_identify_text_and_report_dir(capsys, coulomb_csv, tmp_path):
+    rdir = tmp_path / "rep"
+    code, out, err = run(capsys, "identify", str(coulomb_csv), "--report", str(rdir))
+    assert code == 0
+    assert "effects added" in out and "pump_coulomb_friction" in out and "NRMSE" in out
+    assert "round 0" in err  # progress on stderr
+    for name in ("summary.json", "channels.csv", "candidates.csv", "effects.csv",
+                 "overlay.png", "residual_before.png", "residual_after.png",
+                 "order_spectrum_acf.png"):
+        assert (rdir / name).stat().st_size > 100, name
+
+
+def test_malformed_csv_exit_2(capsys, tmp_path):
+    bad = tmp_path / "bad.csv"
+    bad.write_text("# load: fixed_piston\n# sample_rate_hz: 5000\nt,iq,p_pump_a,p_pump_b\n"
+                   + "".join(f"{k * 2e-4},1,2,3\n" for k in range(5))
+                   + "0.001,1,x,3\n" + "".join(f"{k * 2e-4},1,2,3\n" for k in range(6, 20)))
+    code, out, err = run(capsys, "identify", str(bad))
+    assert code == 2 and out == ""
+    assert err.count("\n") == 1 and err.startswith("eha-hil identify: ")
+    assert "bad.csv:9: column 'p_pump_a'" in err and "Traceback" not in err
+
+
+def test_unknown_preset_and_bad_report(capsys, coulomb_csv, tmp_path):
+    code, _, err = run(capsys, "identify", str(coulomb_csv), "--preset", "nope")
+    assert code == 2 and err.startswith("eha-hil identify: --preset nope")
+    f = tmp_path / "file"
+    f.write_text("x")
+    code, _, err = run(capsys, "identify", str(coulomb_csv), "--report", str(f))
+    assert code == 2 and "not a directory" in err
+
+
+def test_synth_bad_magnitude(capsys, tmp_path):
+    code, _, err = run(capsys, "identify-synth", str(tmp_path / "x.csv"), "--effect",
+                       "input_delay", "--magnitude", "input_delay.speed=3")
+    assert code == 2 and err.startswith("eha-hil identify-synth: ") and "unknown key" in err

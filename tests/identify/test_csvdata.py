@@ -1,0 +1,94 @@
+"""Malformed measured-data CSVs: one-line errors naming file, line and column."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from hil.identify.csvdata import CsvError, read_measured
+
+HEADER = "# load: fixed_piston\n# sample_rate_hz: 5000\n"
+COLS = "t,iq,p_pump_a,p_pump_b\n"
+
+
+def _rows(n: int = 20) -> list[str]:
+    return [f"{k * 2e-4:.6f},{np.sin(k):.4f},{5e5 + k},{5e5}\n" for k in range(n)]
+
+
+def _write(tmp_path, text: str):
+    p = tmp_path / "data.csv"
+    p.write_text(text)
+    return p
+
+
+def test_reads_valid_file(tmp_path):
+    d = read_measured(_write(tmp_path, HEADER + COLS + "".join(_rows())))
+    assert d.load == "fixed_piston" and d.n == 20 and d.sample_rate_hz == 5000
+    assert set(d.columns) == {"iq", "p_pump_a", "p_pump_b"}
+
+
+def _error(tmp_path, text: str) -> CsvError:
+    with pytest.raises(CsvError) as info:
+        read_measured(_write(tmp_path, text))
+    msg = str(info.value)
+    assert "\n" not in msg and msg.startswith(str(tmp_path / "data.csv"))
+    return info.value
+
+
+def test_missing_column(tmp_path):
+    e = _error(tmp_path, HEADER + "t,p_pump_a,p_pump_b\n" + "0,1,2\n" * 20)
+    assert e.line == 3 and e.column == "iq" and "missing" in str(e)
+
+
+def test_missing_output_for_load(tmp_path):
+    e = _error(tmp_path, HEADER + "t,iq,theta_m\n" + "".join(
+        f"{k * 2e-4},0,0\n" for k in range(20)))
+    assert e.line == 3 and e.column == "p_pump_a" and "fixed_piston needs" in str(e)
+
+
+def test_non_numeric_cell(tmp_path):
+    rows = _rows()
+    rows[5] = "0.001000,abc,500005,500000\n"
+    e = _error(tmp_path, HEADER + COLS + "".join(rows))
+    assert e.line == 9 and e.column == "iq" and "'abc' is not a number" in str(e)
+    assert ":9: column 'iq':" in str(e)
+
+
+def test_non_finite_cell(tmp_path):
+    rows = _rows()
+    rows[2] = "0.000400,nan,500005,500000\n"
+    e = _error(tmp_path, HEADER + COLS + "".join(rows))
+    assert e.line == 6 and e.column == "iq"
+
+
+def test_non_monotonic_time(tmp_path):
+    rows = _rows()
+    rows[7], rows[8] = rows[8], rows[7]
+    e = _error(tmp_path, HEADER + COLS + "".join(rows))
+    assert e.column == "t" and e.line == 12 and "does not increase" in str(e)
+
+
+def test_unknown_load(tmp_path):
+    e = _error(tmp_path, "# load: hanging\n# sample_rate_hz: 5000\n" + COLS + "".join(_rows()))
+    assert e.line == 1 and "unknown load 'hanging'" in str(e)
+
+
+def test_missing_load_and_rate(tmp_path):
+    assert "load" in str(_error(tmp_path, "# sample_rate_hz: 5000\n" + COLS + "".join(_rows())))
+    assert "sample_rate_hz" in str(_error(tmp_path, "# load: free_piston\n"
+                                          "t,iq,x_piston\n" + "".join(
+                                              f"{k},0,0\n" for k in range(20))))
+
+
+def test_wrong_cell_count_and_rate_mismatch(tmp_path):
+    rows = _rows()
+    rows[3] = "0.0006,1,2\n"
+    e = _error(tmp_path, HEADER + COLS + "".join(rows))
+    assert e.line == 7 and "expected 4 cells" in str(e)
+    bad = "# load: fixed_piston\n# sample_rate_hz: 1000\n" + COLS + "".join(_rows())
+    assert "disagrees with sample_rate_hz" in str(_error(tmp_path, bad))
+
+
+def test_missing_file(tmp_path):
+    with pytest.raises(CsvError, match="no such file"):
+        read_measured(tmp_path / "nope.csv")
