@@ -13,6 +13,7 @@ input record bytes (:meth:`inputs`) and advance by whole ticks (:meth:`advance`)
 from __future__ import annotations
 
 import math
+import struct
 
 import numpy as np
 
@@ -50,41 +51,46 @@ class _BoxBase:
         self.tick_s = cfg.get("sim.tick_ns") * 1e-9
         self.out_dtype = _out_dtype(box)
         self.in_dtype = _in_dtype(box)
-        self.in_rec = np.zeros(1, dtype=self.in_dtype)
+        # The per-cycle path packs and unpacks with precompiled structs into one buffer:
+        # numpy structured-record field access costs ~1 us a field.
+        self._in_buf = bytearray(self.in_dtype.itemsize)
+        self._in_off = {k: self.in_dtype.fields[f"s{k}"][1] for k in box.actuators}
+        self._out_off = {k: self.out_dtype.fields[f"s{k}"][1] for k in box.actuators}
         self.tick = 0
         #: Per actuator slot: last decoded (mode, value SI, flags, kp_position, kp_force).
         self.act = box.actuators
         self.cycle_ticks = 20
 
     def decode(self, data: bytes) -> list[tuple[str, float, int, float, float]]:
-        rec = np.frombuffer(data, dtype=self.out_dtype, count=1)[0]
         out = []
         for k in self.act:
-            r = rec[f"s{k}"]
-            mode = pdo.MODE_NAMES.get(int(r["mode"]), "off")
+            mode_code, flags, command, kpos, kpf = _OUT.unpack_from(data, self._out_off[k])
+            mode = pdo.MODE_NAMES.get(mode_code, "off")
             lsb = pdo.POSITION_CMD_LSB if mode == "position" else pdo.FORCE_CMD_LSB
-            out.append((mode, int(r["command"]) * lsb, int(r["flags"]),
-                        int(r["kp_position"]) * 10.0, int(r["kp_force"]) * 1e-3))
+            out.append((mode, command * lsb, flags, kpos * 10.0, kpf * 1e-3))
         return out
 
     def inputs(self) -> bytes:
         """The box's input record as it stands now."""
-        return self.in_rec.tobytes()
+        return bytes(self._in_buf)
 
     def _pack_actuator(self, k: int, x: float, v: float, f_pres: float, f_strain: float,
                        f_fil: float, iq: float, temp: float, status: int, err_down: int,
                        err_up: int) -> None:
-        r = self.in_rec[0][f"s{k}"]
-        r["x_piston"] = _sat(x, 1e-9, "i4")
-        r["v_piston"] = _sat(v, 1e-5, "i2")
-        r["f_pressure"] = _sat(f_pres, 0.1, "i2")
-        r["f_strain"] = _sat(f_strain, 0.1, "i2")
-        r["f_filtered"] = _sat(f_fil, 0.1, "i2")
-        r["iq"] = _sat(iq, 1e-3, "i2")
-        r["temperature"] = _sat(temp, 0.01, "i2")
-        r["status"] = status & 0xFFFF
-        r["err_link_down"] = min(err_down, 0xFFFF)
-        r["err_link_up"] = min(err_up, 0xFFFF)
+        _IN.pack_into(self._in_buf, self._in_off[k],
+                      _sat(x, 1e-9, "i4"), _sat(v, 1e-5, "i2"), _sat(f_pres, 0.1, "i2"),
+                      _sat(f_strain, 0.1, "i2"), _sat(f_fil, 0.1, "i2"), _sat(iq, 1e-3, "i2"),
+                      _sat(temp, 0.01, "i2"), status & 0xFFFF, min(err_down, 0xFFFF),
+                      min(err_up, 0xFFFF))
+
+
+#: Struct layouts equal to the pdo declarations (checked at import below).
+_OUT = struct.Struct("<" + "".join({"u1": "B", "u2": "H", "i2": "h", "i4": "i"}[f.dtype]
+                                   for f in pdo.ACTUATOR_OUT))
+_IN = struct.Struct("<" + "".join({"u1": "B", "u2": "H", "i2": "h", "i4": "i"}[f.dtype]
+                                  for f in pdo.ACTUATOR_IN))
+assert _OUT.size == pdo.ACTUATOR_OUT_DTYPE.itemsize and _IN.size == pdo.ACTUATOR_IN_DTYPE.itemsize
+assert [f.name for f in pdo.ACTUATOR_IN][:3] == ["x_piston", "v_piston", "f_pressure"]
 
 
 class StackBox(_BoxBase):
