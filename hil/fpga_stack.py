@@ -31,12 +31,43 @@ from plant import layout as L
 from plant.config import Config
 from plant.model import Plant
 
+#: Columns of a driver-board trace row (:func:`advance_stack` ``trace``): what the board
+#: took in (raw sensor words; its downstream memory, link-watchdog count and CRC-error
+#: count as the LVDS receive endpoint left them this tick) and gave out (its upstream
+#: memory, PWM on, the three compare counts), one row per tick.
+TRACE_RAW = 0
+TRACE_DOWN = TRACE_RAW + B.N_RAW
+TRACE_LINK = TRACE_DOWN + B.DOWN_WORDS   # F_SINCE_VALID, F_ERR_LINK_CRC
+TRACE_UP = TRACE_LINK + 2
+TRACE_ON = TRACE_UP + B.UP_WORDS
+TRACE_DUTY = TRACE_ON + 1
+TRACE_WIDTH = TRACE_DUTY + 3
+
+
+@njit(cache=True)
+def _trace_row(tr, j, raw, down, link_since, link_crc, up, on, st):
+    for i in range(raw.shape[0]):
+        tr[j, TRACE_RAW + i] = raw[i]
+    for i in range(down.shape[0]):
+        tr[j, TRACE_DOWN + i] = down[i]
+    tr[j, TRACE_LINK] = link_since
+    tr[j, TRACE_LINK + 1] = link_crc
+    for i in range(up.shape[0]):
+        tr[j, TRACE_UP + i] = up[i]
+    tr[j, TRACE_ON] = on
+    tr[j, TRACE_DUTY] = st[B.F_DUTY_A]
+    tr[j, TRACE_DUTY + 1] = st[B.F_DUTY_B]
+    tr[j, TRACE_DUTY + 2] = st[B.F_DUTY_C]
+
 
 @njit(cache=True)
 def advance_stack(n_ticks, x, p, u, y, rec, row0, every, tick0, rng, work,
-                  k, raw, c, st, down, up, mdown, mup, lk):
-    """``n_ticks`` ticks of the whole stack at value level; returns the next record row."""
+                  k, raw, c, st, down, up, mdown, mup, lk, trace):
+    """``n_ticks`` ticks of the whole stack at value level; returns the next record row.
+    With a ``trace`` of ``n_ticks`` rows, the board's inputs and outputs of every tick are
+    written into it (columns ``TRACE_*``)."""
     row = row0
+    tracing = trace.shape[0] >= n_ticks
     n_rows = rec.shape[0]
     n_out = y.shape[0]
     inv_top = 1.0 / c[B.C_PWM_TOP]
@@ -44,7 +75,10 @@ def advance_stack(n_ticks, x, p, u, y, rec, row0, every, tick0, rng, work,
         t = tick0 + j
         digitise(y, k, t, raw)
         LK.sweep_down(lk, mdown, st, down)
+        since, crc = st[B.F_SINCE_VALID], st[B.F_ERR_LINK_CRC]
         on = control_tick(c, st, down, up, raw)
+        if tracing:
+            _trace_row(trace, j, raw, down, since, crc, up, on, st)
         LK.sweep_up(lk, up, mup)
         if on != 0:
             u[L.U_MODE] = L.MODE_DUTY
@@ -81,6 +115,7 @@ class FpgaStack:
         self.tick_s = self.plant.tick_s
         self.bit_level = bit_level
         self._no_rec = np.zeros((0, L.N_OUTPUTS))
+        self._no_trace = np.zeros((0, TRACE_WIDTH), dtype=np.int64)
         self._bits = None
         if bit_level:
             from firmware_model.fpga.masters import BitLevelMasters
@@ -102,8 +137,13 @@ class FpgaStack:
         return self.plant.time_s
 
     def advance(self, n_ticks: int, rec: np.ndarray | None = None, row0: int = 0,
-                every: int = 1) -> int:
-        """Advance the stack ``n_ticks`` ticks; record plant outputs like Plant.advance."""
+                every: int = 1, trace: np.ndarray | None = None) -> int:
+        """Advance the stack ``n_ticks`` ticks; record plant outputs like Plant.advance.
+
+        ``trace``: an int64 array of (n_ticks, TRACE_WIDTH) that receives the driver board's
+        inputs and outputs of every tick (value-level path only), for FPGA replay."""
+        if trace is not None and self._bits is not None:
+            raise ValueError("trace: only the value-level path records board traces")
         rows = self._no_rec if rec is None else rec
         pl = self.plant
         bd = self.board
@@ -111,7 +151,8 @@ class FpgaStack:
             row = advance_stack(n_ticks, pl.x, pl.params, pl.u, pl.y, rows, row0, every,
                                 pl.tick, pl.rng, pl._work, self.chips, self.raw,
                                 bd.params, bd.state, bd.down, bd.up, self.mcu.down,
-                                self.mcu.up, self.link)
+                                self.mcu.up, self.link,
+                                self._no_trace if trace is None else trace)
             pl.tick += n_ticks
         else:
             row = self._advance_bits(n_ticks, rows, row0, every)

@@ -7,7 +7,10 @@ Channels per box ``b`` (blocks of fixed-width frames, times in ns of simulated t
 * ``/lvds/b.k/up``    uint32 x 32: board k's upstream memory (31 words) + the MCU side's
   upstream CRC-error count, before each MCU step;
 * ``/lvds/b.k/down``  uint16 x 13: board k's downstream registers after each MCU step;
-* ``/fieldbus/frames`` (level "bus" and up): every frame as sent/received, single messages.
+* ``/fieldbus/frames`` (level "bus" and up): every frame as sent/received, single messages;
+* ``/fpga/b.k/trace`` (level "full"): int64 x TRACE_WIDTH per tick: board k's raw sensor
+  words and received downstream memory (its inputs) and its upstream memory, PWM on and
+  compare counts (its outputs), for the FPGA replay (:mod:`hil.replay.fpga_replay`).
 
 The Metadata record holds the configuration (JSON), the topology, the box model and each
 board's calibrated angle offset, so a replay needs nothing but the file.
@@ -27,6 +30,7 @@ from hil.fieldbus.chain import CYCLE_TICKS
 from hil.fieldbus.master import Master
 from hil.fieldbus.system import BusRecord, BusSystem
 from hil.fieldbus.topology import Topology
+from hil.fpga_stack import TRACE_WIDTH
 from hil.framelog import FrameLogWriter
 from plant.config import Config
 
@@ -43,6 +47,7 @@ def topics(box: int, board: int | None = None) -> dict[str, str]:
     if board is not None:
         t["up"] = f"/lvds/{box}.{board}/up"
         t["down"] = f"/lvds/{box}.{board}/down"
+        t["trace"] = f"/fpga/{box}.{board}/trace"
     return t
 
 
@@ -66,9 +71,14 @@ class RecordingStackBox(StackBox):
                                                     width=UP_WIDTH))
             self.ch_down.append(log.add_block_channel(tk["down"], ENC_MCU_DOWN,
                                                       dtype=np.uint16, width=B.DOWN_WORDS))
+        self.traced = log.level == "full"
+        self.ch_trace = [log.add_block_channel(topics(b, k)["trace"], "eha-hil/fpga-trace",
+                                               dtype=np.int64, width=TRACE_WIDTH)
+                         for k in range(len(self.stacks))] if self.traced else []
         self._reset_buffers()
 
     def _reset_buffers(self) -> None:
+        self.buf_trace: list[list[tuple[int, np.ndarray]]] = [[] for _ in self.stacks]
         self.buf_out: list[tuple[int, bytes]] = []
         self.buf_in: list[tuple[int, bytes]] = []
         self.buf_up: list[list[tuple[int, np.ndarray]]] = [[] for _ in self.stacks]
@@ -90,8 +100,13 @@ class RecordingStackBox(StackBox):
                 self.mcu.step(self.tick)
                 for k, s in enumerate(self.stacks):
                     self.buf_down[k].append((self.tick, s.mcu.down.astype(np.uint16)))
-            for s in self.stacks:
-                s.advance(self.period)
+            for k, s in enumerate(self.stacks):
+                if self.traced:
+                    tr = np.zeros((self.period, TRACE_WIDTH), dtype=np.int64)
+                    s.advance(self.period, trace=tr)
+                    self.buf_trace[k].append((self.tick, tr))
+                else:
+                    s.advance(self.period)
             self.tick += self.period
         self._fill(ticks)
         self.buf_in.append((self.tick, self.inputs()))
@@ -119,6 +134,11 @@ class RecordingStackBox(StackBox):
         for k in range(len(self.stacks)):
             put(self.ch_up[k], self.buf_up[k], False)
             put(self.ch_down[k], self.buf_down[k], False)
+            if self.traced and self.buf_trace[k]:
+                t0 = np.array([r[0] for r in self.buf_trace[k]], dtype=np.int64)
+                t = (t0[:, None] + np.arange(self.period)).ravel() * ns
+                self.log.write_block(self.ch_trace[k], t,
+                                     np.concatenate([r[1] for r in self.buf_trace[k]]))
         self._reset_buffers()
 
 

@@ -134,3 +134,45 @@ def test_bus_run_cli_exit_codes(tmp_path, capsys):
     bad.write_text("[[box]]\nid = 3\nslots = ['a']\n")
     assert main(["bus", "run", "--topology", str(bad)]) == 2
     assert "box #0" in capsys.readouterr().err
+
+
+@pytest.fixture(scope="module")
+def logged_full(tmp_path_factory):
+    cfg = load_config("hydra_default")
+    path = tmp_path_factory.mktemp("replay_full") / "full.mcap"
+    run_logged(load_topology("bench_one_box"), cfg, 150, _pc(50), path, level="full")
+    return cfg, path
+
+
+def test_full_log_replays_the_driver_board_too(logged_full):
+    _, path = logged_full
+    res = replay_mcu(path)
+    assert res.ok, res.divergence
+    trace = FrameLogReader(path).blocks(topics(0, 0)["trace"])
+    assert res.fpga_ticks == len(trace.t_ns) > 2900  # every tick of 150 cycles compared
+
+
+def test_changed_board_parameter_is_caught_on_the_board_trace(logged_full):
+    """A longer ABI speed window changes the board's speed register first: the FPGA replay
+    names that register."""
+    from hil.replay.fpga_replay import column_name, replay_board
+
+    cfg, path = logged_full
+    trace = FrameLogReader(path).blocks(topics(0, 0)["trace"]).frames
+    row, col = replay_board(cfg.with_overrides({"fpga.speed_window_ticks": 64}), trace)
+    assert row > 0 and column_name(col) == "speed"
+    assert replay_board(cfg, trace) == (-1, -1)
+
+
+def test_tampered_sensor_word_changes_the_board_outputs(logged_full):
+    """Flip a bit of the SSI word of one tick while the loop runs: the board's outputs
+    diverge at that very tick, so the logged sensor words really drive the replay."""
+    from firmware_model.fpga import layout as B
+    from hil.fpga_stack import TRACE_RAW
+    from hil.replay.fpga_replay import replay_board
+
+    cfg, path = logged_full
+    trace = FrameLogReader(path).blocks(topics(0, 0)["trace"]).frames.copy()
+    trace[2000, TRACE_RAW + B.RAW_NAMES.index("ssi_count")] ^= 0x40
+    row, _ = replay_board(cfg, trace)
+    assert row == 2000
