@@ -566,6 +566,9 @@ def build_parser() -> argparse.ArgumentParser:
     from hil import bus_cli
 
     bus_cli.add_parsers(sub, bsub, _common, _config, _bus_command)
+    from hil import serve
+
+    serve.add_parser(sub, _common, _config, _bus_command)
     _add_external(sub, bsub)
 
     from hil.scenarios import SCENARIOS, names

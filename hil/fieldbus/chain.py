@@ -11,6 +11,11 @@ arrives (the datagram ``idx`` carries the cycle number mod 256), so the same fra
 the same results whether the chain runs in the master's process or in another one, and a
 lost cycle still advances time. A frame from an older cycle (delayed or duplicated) is
 discarded and counted.
+
+Paced mode (``Chain(..., paced=True)``, used by ``eha-hil serve``, :mod:`hil.serve`): the
+owner advances the boxes by calling :meth:`Chain.advance` once per millisecond of wall time,
+and frames never move time; ``idx`` only serves to discard a frame older than the newest
+one seen (mod 256, as above). A frame is answered with the inputs as they stand.
 """
 
 from __future__ import annotations
@@ -87,8 +92,12 @@ class ChainStats:
 class Chain:
     """All boxes of a topology, with their models, answering frames."""
 
-    def __init__(self, topo: Topology, cfg: Config, model: str = "stack") -> None:
+    def __init__(self, topo: Topology, cfg: Config, model: str = "stack",
+                 paced: bool = False) -> None:
         self.topology = topo
+        #: True: time moves only by :meth:`advance` (wall-clock pacing), not by frame idx.
+        self.paced = paced
+        self.last_idx = 0
         self.plan = CyclePlan.build(topo)
         self.boxes = [make_box(model, b, cfg) for b in topo.boxes]
         self.cycle = 0
@@ -103,7 +112,12 @@ class Chain:
             return None
         self.stats.frames += 1
         idx = dgs[0].idx
-        if self.started:
+        if self.paced:
+            if self.started and (idx - self.last_idx) & 0xFF >= 128:
+                self.stats.stale_frames += 1
+                return None
+            self.last_idx = idx
+        elif self.started:
             ahead = (idx - self.cycle) & 0xFF
             if ahead >= 128:
                 self.stats.stale_frames += 1
@@ -113,6 +127,10 @@ class Chain:
         self.started = True
         out = [self._process(d) for d in dgs]
         return wire.seal(ec.encode_pdu(out))
+
+    def advance(self) -> None:
+        """Paced mode: move every box on by one fieldbus cycle (20 ticks)."""
+        self._advance()
 
     def _advance(self) -> None:
         for b in self.boxes:

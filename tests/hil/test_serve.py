@@ -1,0 +1,170 @@
+"""``eha-hil serve`` in its own process on a pseudo-terminal, paced to the wall clock, with
+a 1 kHz master in this process: the loop closes (the commanded force shows in f_pressure
+of the stack model) and no frame is lost or damaged on either side."""
+
+from __future__ import annotations
+
+import json
+import os
+import queue
+import signal
+import subprocess
+import sys
+import threading
+import time
+
+import pytest
+
+from firmware_model.mcu.mcu import BOARD_ENABLED, SAFE_OFF
+from hil.fieldbus.master import Master
+from hil.fieldbus.topology import load_topology
+
+SECONDS = 3.0
+STEP_AT = 1000          # cycle of the force step 0 -> FORCE_N
+FORCE_N = 300.0
+REPLY_TIMEOUT_S = 0.4   # generous: the machine may be loaded; no timing is asserted
+
+
+@pytest.fixture
+def pty():
+    if not hasattr(os, "openpty"):
+        pytest.skip("os.openpty is not available on this platform (no pseudo-terminals)")
+    from hil.transports import pty_pair
+
+    try:
+        p = pty_pair()
+    except OSError as exc:
+        pytest.skip(f"cannot open a pseudo-terminal: {exc}")
+    yield p
+    p.close()
+
+
+def _reader(stream, lines: queue.Queue) -> None:
+    for line in stream:
+        lines.put(line)
+    lines.put(None)
+
+
+def _wait_ready(proc: subprocess.Popen, lines: queue.Queue, stderr: list[str]) -> None:
+    deadline = time.monotonic() + 60.0
+    while time.monotonic() < deadline:
+        try:
+            line = lines.get(timeout=0.5)
+        except queue.Empty:
+            continue
+        if line is None:
+            break
+        stderr.append(line)
+        if "ready on serial" in line:
+            return
+    proc.kill()
+    pytest.fail("eha-hil serve did not become ready:\n" + "".join(stderr))
+
+
+def _master_loop(end, topo) -> tuple[Master, list[tuple[int, float, int]], int]:
+    """1 kHz, paced to the wall clock; per cycle (cycle, f_pressure, status) of fresh
+    inputs. A board switched off by the command watchdog (this process stalled for > 60 ms)
+    is re-enabled, as a PC would do."""
+    m = Master(topo)
+    seen: list[tuple[int, float, int]] = []
+    reenables = 0
+    enable = True
+    cycles = int(SECONDS * 1000)
+    t0 = time.perf_counter()
+    for k in range(cycles):
+        m.set_actuator(0, "force", FORCE_N if k >= STEP_AT else 0.0, enable=enable)
+        for f in m.frames():
+            end.send(f)
+        deadline = time.perf_counter() + REPLY_TIMEOUT_S
+        while not all(m._answered):
+            reply = end.recv(timeout=max(0.0, deadline - time.perf_counter()))
+            if reply is None:
+                break
+            m.receive(reply)
+        inp = m.actuator_inputs(0)
+        m.end_cycle()
+        if inp["fresh"]:
+            seen.append((k, inp["f_pressure"], inp["status"]))
+        if not enable:
+            enable = True
+        elif inp["status"] & SAFE_OFF:
+            enable, reenables = False, reenables + 1
+        wait = t0 + (k + 1) * 1e-3 - time.perf_counter()
+        if wait > 0:
+            time.sleep(wait)
+    return m, seen, reenables
+
+
+def test_serve_closes_the_loop_over_a_pty(pty):
+    from hil.transports import open_transport
+
+    topo = load_topology("bench_one_box")
+    cmd = [sys.executable, "-m", "hil.cli", "serve", "--transport", "serial", "--port",
+           pty.slave_path, "--topology", "bench_one_box", "--model", "stack", "--json"]
+    t_start = time.perf_counter()
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    lines: queue.Queue = queue.Queue()
+    stderr: list[str] = []
+    threading.Thread(target=_reader, args=(proc.stderr, lines), daemon=True).start()
+    end = open_transport("serial", "master", fd=pty.master_fd)
+    try:
+        _wait_ready(proc, lines, stderr)
+        m, seen, reenables = _master_loop(end, topo)
+        proc.send_signal(signal.SIGINT)  # "until Ctrl-C": the summary follows
+        out, _ = proc.communicate(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        end.close()
+    while (line := lines.get(timeout=5)) is not None:
+        stderr.append(line)
+    err = "".join(stderr)
+    assert out.strip(), f"no summary on stdout; stderr:\n{err}"
+    summary = json.loads(out)
+    elapsed = time.perf_counter() - t_start
+
+    # No frame lost or damaged, on either side.
+    n = int(SECONDS * 1000)
+    assert m.stats.as_dict() == {"cycles": n, "frames_sent": n, "frames_ok": n,
+                                 "wkc_errors": 0, "bad_frames": 0, "stale_frames": 0,
+                                 "lost_frames": 0}, err
+    assert (end.stats.crc_errors, end.stats.framing_errors, end.stats.oversize) == (0, 0, 0)
+    assert summary["frames_received"] == summary["frames_served"] == n
+    for key in ("bad_frames", "stale_frames", "missed_cycles", "incomplete_cycles",
+                "send_errors"):
+        assert summary[key] == 0, (key, summary)
+    ts = summary["transport_stats"]
+    assert (ts["crc_errors"], ts["framing_errors"], ts["oversize"]) == (0, 0, 0)
+    assert summary["sessions"] == 1
+
+    # The loop closed: the board came up and f_pressure followed the commanded force.
+    assert len(seen) == n
+    assert any(s & BOARD_ENABLED for _, _, s in seen)
+    before = [f for k, f, _ in seen if 200 <= k < STEP_AT]
+    after = [f for k, f, _ in seen if k >= STEP_AT]
+    assert sum(abs(f) < 0.1 * FORCE_N for f in before) > 0.9 * len(before), before[-20:]
+    tracking = sum(abs(f - FORCE_N) < 0.1 * FORCE_N for f in after)
+    assert tracking > 0.5 * len(after), (tracking, after[-20:], reenables)
+
+    # The server paced itself and says how well: overruns counted, exit code consistent.
+    assert summary["cycles"] >= 0.8 * SECONDS * 1000
+    assert isinstance(summary["overruns"], int) and summary["overruns"] >= 0
+    assert summary["worst_late_ms"] >= 0.0 and summary["real_time_factor"] > 0.5
+    assert summary["ok"] == (not summary["overrun_limit_exceeded"]), summary["failures"]
+    assert proc.returncode == (1 if summary["overrun_limit_exceeded"] else 0), err
+    assert "ready on serial" in err and "serve:" in err  # ready line + status lines
+    print(f"serve test: {elapsed:.1f} s; server overruns {summary['overruns']} "
+          f"(worst {summary['worst_late_ms']:.2f} ms), load {100 * summary['load']:.1f}%, "
+          f"re-enables {reenables}")
+
+
+def test_serve_usage_errors_are_one_line(capsys):
+    from hil.cli import main
+
+    assert main(["serve", "--port", "/dev/no-such-tty-here", "--seconds", "1"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "/dev/no-such-tty-here" in err
+    assert main(["serve", "--transport", "udp", "--port", "x"]) == 2
+    assert "udp needs a port number" in capsys.readouterr().err
+    assert main(["serve", "--port", "pty", "--seconds", "0"]) == 2
