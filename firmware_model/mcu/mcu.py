@@ -69,6 +69,11 @@ class Mcu:
         self._seq = 0
         self._crc_seen = [(0, 0)] * n
 
+    def link_error_counts(self, i: int) -> tuple[int, int]:
+        """(downstream words board ``i`` discarded, upstream words this side discarded) as
+        read at the last step."""
+        return self._crc_seen[i]
+
     def command(self, i: int, mode: str, value: float, tick: int) -> None:
         """A fresh command for actuator ``i``: mode "force" (N), "position" (m) or "off"."""
         if mode not in (MODE_OFF, MODE_FORCE, MODE_POSITION):

@@ -141,14 +141,15 @@ class StackBox(_BoxBase):
         if self.mcu is None:
             return
         for i, k in enumerate(self.act):
-            m, c, link = self.mcu.meas[i], self.mcu.ctrl[i], self.stacks[i].mcu
+            m, c = self.mcu.meas[i], self.mcu.ctrl[i]
             x = float(m.x_piston)
             v = (x - self._x_prev[i]) / (ticks * self.tick_s) if ticks else 0.0
             self._x_prev[i] = x
+            # The error counts as the MCU read them at its last step (what it reports).
+            err_down, err_up = self.mcu.link_error_counts(i)
             self._pack_actuator(k, x, v, float(m.f_pres), float(c.cos_alpha * m.f_strain_raw),
                                 float(c.f_fil), float(m.iq), float(m.temperature_c),
-                                self.mcu.status[i], int(link.up[B.U_ERR_LINK_CRC]),
-                                link.up_crc_errors)
+                                self.mcu.status[i], err_down, err_up)
 
 
 class EchoBox(_BoxBase):

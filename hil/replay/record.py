@@ -144,8 +144,13 @@ class RecordingStackBox(StackBox):
 
 def run_logged(topo: Topology, cfg: Config, cycles: int, pc: Callable[[int, Master], None],
                log_path: str | Path, level: str = "mcu",
-               progress: Callable[[int, int], None] | None = None) -> BusRecord:
-    """Run ``cycles`` cycles in-process with the stack model and log them to ``log_path``."""
+               progress: Callable[[int, int], None] | None = None,
+               faults: object = None) -> BusRecord:
+    """Run ``cycles`` cycles in-process with the stack model and log them to ``log_path``.
+
+    ``faults``: a fault declaration (:func:`hil.fieldbus.faults.parse_faults`); the log holds
+    what the master sent and received and what each MCU took in and gave out, faults and
+    all, so the replay reproduces a faulty run too."""
     with FrameLogWriter(log_path, level=level, flush_every_ns=FLUSH_CYCLES * CYCLE_TICKS
                         * cfg.get("sim.tick_ns")) as log:
         ch_bus = None
@@ -160,6 +165,8 @@ def run_logged(topo: Topology, cfg: Config, cycles: int, pc: Callable[[int, Mast
         with BusSystem(topo, cfg, "inproc", model="stack", tap=tap if ch_bus else None) as bs:
             boxes = [RecordingStackBox(b, cfg, log) for b in topo.boxes]
             bs.chain.boxes = boxes
+            if faults is not None:
+                bs._install_faults(faults)  # after the recording boxes replaced the plain ones
             offsets = {f"{b.box.id}.{k}": int(s.board.calibrated_offset)
                        for b in boxes for k, s in enumerate(b.stacks)}
             log._writer.add_metadata("eha-hil.replay", {

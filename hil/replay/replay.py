@@ -150,9 +150,16 @@ def replay_mcu(path: str | Path, config_override: Config | None = None) -> Repla
         up_crc = [u.frames[:, -1].tolist() for u in ups]
         down_exp = [d.frames.tolist() for d in downs]
         links = rbox.links
+        # Outputs by the tick they were applied at: a cycle whose frame was lost applied
+        # none, a duplicated frame applied its record twice.
+        applied: dict[int, list[bytes]] = {}
+        if outs is not None:
+            for t_ns, frame in zip(outs.t_ns.tolist(), outs.frames, strict=True):
+                applied.setdefault(t_ns // tick_ns, []).append(frame.tobytes())
         for c in range(n_cycles):
-            if outs is not None and c < len(outs.t_ns):
-                rbox.apply(outs.frames[c].tobytes())
+            start = ticks[s] if s < len(ticks) else rbox.tick
+            for frame in applied.get(start, ()):
+                rbox.apply(frame)
             for _ in range(per):
                 tick = ticks[s]
                 for k, link in enumerate(links):
