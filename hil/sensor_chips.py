@@ -45,10 +45,11 @@ CHIP_NAMES = (
     "t_v0", "t_v_per_c",
     "i_lsb_a", "i_mid", "i_code_max",
     "pole_pairs", "hall_offset_rad",
+    "motor_encoder_dead", "piston_encoder_dead",  # fault injection: 1 = no valid frame
 )
 (K_SSI_N, K_SSI_MOUNT, K_ABI_N, K_BISS_ZERO, K_BISS_MOD, K_STRAIN_SCALE, K_ODR, K_TICK_NS,
  K_ADC_LSB, K_ADC_MAX, K_P_V0, K_P_PA_PER_V, K_T_V0, K_T_V_PER_C, K_I_LSB, K_I_MID,
- K_I_MAX, K_POLE_PAIRS, K_HALL_OFFSET) = range(len(CHIP_NAMES))
+ K_I_MAX, K_POLE_PAIRS, K_HALL_OFFSET, K_MOTOR_DEAD, K_PISTON_DEAD) = range(len(CHIP_NAMES))
 N_CHIP = len(CHIP_NAMES)
 
 HALL_SEQUENCE = np.asarray(hall.SEQUENCE, dtype=np.int64)
@@ -162,13 +163,21 @@ def hall_code(theta_m, k):
 @njit(cache=True)
 def digitise(y, k, tick, raw):
     """Fill the raw sensor words (``firmware_model.fpga.layout.R_*``) from plant outputs
-    ``y`` at ``tick``: every link delivers a valid frame (no faults injected)."""
+    ``y`` at ``tick``. Every link delivers a valid frame unless an encoder is marked dead
+    (``K_MOTOR_DEAD``/``K_PISTON_DEAD``, fault injection): its master then sees no valid
+    frame (OK = 0) and its counts hold."""
     theta = y[L.Y_THETA_M]
-    raw[B.R_SSI] = ssi_count(theta, k)
-    raw[B.R_SSI_OK] = 1
-    raw[B.R_ABI] = abi_count(theta, k) & 0xFFFF
-    raw[B.R_BISS] = biss_count(y[L.Y_X_PISTON], k)
-    raw[B.R_BISS_OK] = 1
+    if k[K_MOTOR_DEAD] > 0.5:
+        raw[B.R_SSI_OK] = 0
+    else:
+        raw[B.R_SSI] = ssi_count(theta, k)
+        raw[B.R_SSI_OK] = 1
+        raw[B.R_ABI] = abi_count(theta, k) & 0xFFFF
+    if k[K_PISTON_DEAD] > 0.5:
+        raw[B.R_BISS_OK] = 0
+    else:
+        raw[B.R_BISS] = biss_count(y[L.Y_X_PISTON], k)
+        raw[B.R_BISS_OK] = 1
     new = strain_conversions(tick, k) != strain_conversions(tick - 1, k)
     raw[B.R_STRAIN_NEW] = 1 if new else 0
     if new:

@@ -30,10 +30,9 @@ Where each link is hit:
   ``stuck`` holds the value at ``start_s`` (or ``value``, SI units), ``noisy`` adds Gaussian
   noise of standard deviation ``sigma`` (SI units) every tick, ``dead`` pins the chip's
   output code at 0 (lines low): the ADC channels read code 0, the AD7195 strain gauge
-  reports a clamped conversion that the board rejects (ERR). ``dead`` is refused for the
-  encoders (``theta_m``, ``x_piston``): the value-level encoder model always delivers a
-  valid frame (its OK flag is set in compiled code), so a dead encoder cannot be shown
-  without changing that code; use ``stuck``.
+  reports a clamped conversion that the board rejects (ERR); a dead encoder (``theta_m``,
+  ``x_piston``) delivers no valid frame (the chip's dead flag, ``hil.sensor_chips``): the
+  board's master sees OK = 0 and the counts hold.
 
 Deterministic: every random entry draws from its own ``numpy.random.Generator`` seeded with
 its ``seed``, once per frame of its window (fieldbus) or once per tick (noisy sensor), so
@@ -65,7 +64,8 @@ KINDS: dict[str, tuple[str, ...]] = {
     "lvds.up": ("dead", "bitflip"),
     "sensor": ("stuck", "noisy", "dead"),
 }
-#: Sensor signal name -> (plant output row name, chip). Encoders cannot be ``dead``.
+#: Sensor signal name -> (plant output row name, chip). A dead encoder delivers no valid
+#: frame (its master's OK flag drops, the counts hold); other dead chips read code 0.
 SENSOR_SIGNALS: dict[str, tuple[str, str]] = {
     "theta_m": ("Y_THETA_M", "encoder"),
     "x_piston": ("Y_X_PISTON", "encoder"),
@@ -260,10 +260,6 @@ def _parse_one(n: int, raw: Any, where: str, base_seed: int) -> Fault:
         if sig not in SENSOR_SIGNALS:
             raise FaultError(f"{at}: key 'signal': {sig!r} is not one of "
                              f"{', '.join(SENSOR_SIGNALS)}")
-        if kind == "dead" and SENSOR_SIGNALS[sig][1] == "encoder":
-            raise FaultError(f"{at}: key 'signal': a dead encoder ({sig}) cannot be modelled "
-                             "(the value-level encoder always delivers a valid frame); "
-                             "use kind = \"stuck\"")
         kw["signal"] = sig
     if "sigma" in allowed:
         if "sigma" not in raw:
@@ -458,8 +454,15 @@ class FaultyStack:
         self._rows = [getattr(L, SENSOR_SIGNALS[f.signal][0]) for f in self.sensors]
         self._rngs = [np.random.default_rng(f.seed) for f in self.sensors]
         self._stuck: list[float | None] = [f.value for f in self.sensors]
-        self._dead = [_dead_value(f.signal, stack.chips) if f.kind == "dead" else 0.0
+        self._dead = [_dead_value(f.signal, stack.chips)
+                      if f.kind == "dead" and SENSOR_SIGNALS[f.signal][1] != "encoder" else 0.0
                       for f in self.sensors]
+        # Dead encoders are a chip flag (no valid frame), not a plant value.
+        from hil import sensor_chips as sc
+
+        self._enc_flag = [(sc.K_MOTOR_DEAD if f.signal == "theta_m" else sc.K_PISTON_DEAD)
+                          if f.kind == "dead" and SENSOR_SIGNALS[f.signal][1] == "encoder"
+                          else -1 for f in self.sensors]
         self._lvds_on = [False] * len(self.lvds)
         self.sensor_ticks = 0  # ticks run with a sensor fault applied
 
@@ -485,15 +488,22 @@ class FaultyStack:
         if not self.sensors:
             return st.advance(n_ticks, *args, **kw)
         row = 0
-        for _ in range(n_ticks):
+        trace = kw.get("trace")
+        for j in range(n_ticks):
+            one = {} if trace is None else {"trace": trace[j:j + 1]}
             cycle = st.tick // CYCLE_TICKS
             active = [i for i, f in enumerate(self.sensors) if f.active(cycle)]
+            for i, flag in enumerate(self._enc_flag):
+                if flag >= 0:
+                    st.chips[flag] = 1.0 if i in active else 0.0
             if not active:
-                row = st.advance(1)
+                row = st.advance(1, **one)
                 continue
             y = st.plant.y
             for i in active:
                 f, r = self.sensors[i], self._rows[i]
+                if self._enc_flag[i] >= 0:
+                    continue
                 if f.kind == "stuck":
                     if self._stuck[i] is None:
                         self._stuck[i] = float(y[r])
@@ -502,7 +512,7 @@ class FaultyStack:
                     y[r] = y[r] + f.sigma * self._rngs[i].standard_normal()
                 else:
                     y[r] = self._dead[i]
-            row = st.advance(1)
+            row = st.advance(1, **one)
             self.sensor_ticks += 1
         return row
 

@@ -211,3 +211,19 @@ def test_faulty_run_log_loses_no_record_and_still_replays(tmp_path):
     res = replay_mcu(path)
     assert res.ok, res.divergence
     assert res.mcu_steps == 5 * cycles
+
+
+def test_full_log_with_sensor_faults_replays_the_board(tmp_path):
+    """Sensor faults step the stack tick by tick; the board trace still covers every tick
+    and the FPGA replay (dead encoder: frames rejected) is bit for bit."""
+    cfg = load_config("hydra_default")
+    faults = [{"link": "sensor", "kind": "dead", "box": 0, "slot": 0, "signal": "theta_m",
+               "start_s": 0.06, "end_s": 0.07},
+              {"link": "sensor", "kind": "noisy", "box": 0, "slot": 0, "signal": "p_cyl_a",
+               "sigma": 5e4, "start_s": 0.05, "end_s": 0.09, "seed": 3}]
+    path = tmp_path / "sensors.mcap"
+    run_logged(load_topology("bench_one_box"), cfg, 120, _pc(40), path, level="full",
+               faults=faults)
+    res = replay_mcu(path)
+    assert res.ok, res.divergence
+    assert res.fpga_ticks == 20 * 119
