@@ -24,9 +24,16 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--topology", default="hydra_full")
     ap.add_argument("--model", default="stack", choices=("stack", "echo"))
     ap.add_argument("--config-json", required=True)
+    ap.add_argument("--faults-json", help="LVDS and sensor faults to put on the boxes")
     args = ap.parse_args(argv)
     cfg = Config(json.loads(args.config_json), ["chain process"])
     chain = Chain(load_topology(args.topology), cfg, args.model)
+    if args.faults_json:
+        from hil.fieldbus.faults import install_box_faults, parse_faults
+
+        plan = parse_faults(json.loads(args.faults_json), "faults (from the master)")
+        if plan.box_faults:
+            install_box_faults(chain, plan)
     if args.transport == "udp":
         end = open_transport("udp", "slave", port=int(args.port))
         where = str(end.address[1])

@@ -10,6 +10,7 @@ gives the same bytes on every transport when nothing is lost.
 
 from __future__ import annotations
 
+import json
 import os
 import subprocess
 import sys
@@ -62,11 +63,25 @@ class BusSystem:
         opts = dict(transport_options or {})
         if remote is None:
             remote = transport == "udp"
+        # A remote chain gets the LVDS/sensor faults as the raw declaration (JSON).
+        self._remote_faults = None
+        if remote and faults is not None:
+            from hil.fieldbus.faults import check_topology, parse_faults
+
+            plan = parse_faults(faults)  # validate here: errors name the caller's entry
+            check_topology(plan, topo)
+            if plan.box_faults:
+                try:
+                    self._remote_faults = json.dumps(faults)
+                except TypeError:
+                    raise ValueError("faults for a remote chain must be a plain declaration "
+                                     "(dict or list), not a FaultPlan") from None
         if not remote:
             self.chain = Chain(topo, cfg, model)
             self.m_end, self.s_end = transport_pair(transport, **opts)
         elif transport == "udp":
-            self.proc = _spawn_chain(["--transport", "udp", "--port", "0"], topo, cfg, model)
+            self.proc = _spawn_chain(["--transport", "udp", "--port", "0"], topo, cfg, model,
+                                     self._remote_faults)
             port = int(_ready_line(self.proc))
             self.m_end = open_transport("udp", "master", remote_port=port, **opts)
             self.s_end = None
@@ -76,7 +91,7 @@ class BusSystem:
             pty = pty_pair()
             self._pty = pty
             self.proc = _spawn_chain(["--transport", "serial", "--port", pty.slave_path], topo,
-                                     cfg, model)
+                                     cfg, model, self._remote_faults)
             _ready_line(self.proc)
             self.m_end = open_transport("serial", "master", fd=pty.master_fd, **opts)
             self.s_end = None
@@ -98,7 +113,7 @@ class BusSystem:
 
         plan = parse_faults(faults)
         self.faults = plan
-        if plan.box_faults:
+        if plan.box_faults and self._remote_faults is None:
             if self.chain is None:
                 raise FaultError(f"{plan.where}: {plan.box_faults[0].name}: LVDS and sensor "
                                  "faults need the chain in this process (not remote)")
@@ -182,10 +197,13 @@ class BusSystem:
         self.close()
 
 
-def _spawn_chain(args: list[str], topo: Topology, cfg: Config, model: str) -> subprocess.Popen:
+def _spawn_chain(args: list[str], topo: Topology, cfg: Config, model: str,
+                 faults_json: str | None = None) -> subprocess.Popen:
     cmd = [sys.executable, "-m", "hil.fieldbus.serve_chain", *args, "--topology",
            topo.source if topo.source.endswith(".toml") else topo.source.split()[-1],
            "--model", model, "--config-json", cfg_to_json(cfg)]
+    if faults_json:
+        cmd += ["--faults-json", faults_json]
     env = dict(os.environ)
     return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             env=env)

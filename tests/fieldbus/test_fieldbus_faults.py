@@ -81,9 +81,27 @@ def test_box_faults_checked_against_topology(cfg, bench, full):
     with pytest.raises(FaultError, match="stack box model"):
         BusSystem(full, cfg, model="echo", faults=[{"link": "lvds.down", "kind": "dead",
                                                     "box": 0, "slot": 0}])
-    with pytest.raises(FaultError, match="in this process"):
+    with pytest.raises(FaultError, match="'box'"):  # validated before the chain starts
         BusSystem(bench, cfg, "udp", faults=[{"link": "lvds.down", "kind": "dead",
-                                              "box": 0, "slot": 0}])
+                                              "box": 5, "slot": 0}])
+
+
+def test_box_faults_reach_a_chain_in_another_process(cfg, bench):
+    """LVDS and sensor faults are handed to a remote chain: the same declaration gives the
+    same bytes on inproc and on udp (chain in another process)."""
+    faults = [{"link": "lvds.up", "kind": "bitflip", "rate": 0.02, "box": 0, "slot": 0,
+               "start_s": 0.02, "end_s": 0.05},
+              {"link": "sensor", "kind": "noisy", "box": 0, "slot": 0, "signal": "p_cyl_a",
+               "sigma": 1e5, "start_s": 0.03, "end_s": 0.06, "seed": 5}]
+    out = {}
+    for tr in ("inproc", "udp"):
+        with BusSystem(bench, cfg, tr, faults=faults) as bs:
+            out[tr] = bs.run(80, lambda c, m: force_profile(c + 100, m)).inputs
+    clean = BusSystem(bench, cfg, "inproc")
+    base = clean.run(80, lambda c, m: force_profile(c + 100, m)).inputs
+    clean.close()
+    assert np.array_equal(out["inproc"], out["udp"])
+    assert not np.array_equal(out["inproc"], base)
 
 
 # --- fieldbus faults -------------------------------------------------------------------------
