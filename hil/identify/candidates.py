@@ -98,7 +98,8 @@ def library(exp: Experiment) -> list[EffectDef]:
                   _needs_moving_piston),
         EffectDef("stiffness_vs_position", "stiffness_vs_position", ("ks_k1", "ks_k2"),
                   (0.1, 0.1),
-                  "k_s(x) = k_s (1 + k1 x/h + k2 (x/h)^2), h the half stroke (Eq. 2.27)"),
+                  "k_s(x) = k_s / (1 + c1 x/h + c2 (x/h)^2), h the half stroke: Eq. "
+                  "2.25-2.27 make the series compliance exactly quadratic in x"),
         EffectDef("viscosity_temperature", "viscosity_temperature", ("visc_coeff_per_c",),
                   (0.02,), "d_s, d_p, d_c scale with mu(T) = exp(-c (T - T_ref))",
                   _needs_temperature),

@@ -83,7 +83,7 @@ def run_identify(args: argparse.Namespace) -> int:
 
 def configure_synth(parser: argparse.ArgumentParser) -> None:
     """Arguments of ``eha-hil identify-synth``."""
-    from hil.identify.synth import ALL_SYNTH_EFFECTS
+    from hil.identify.synth import ALL_SYNTH_EFFECTS, PROFILES
 
     parser.add_argument("out", metavar="OUT.csv", help="CSV file to write")
     parser.add_argument("--load", default="fixed_piston",
@@ -95,6 +95,11 @@ def configure_synth(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seconds", type=float, default=8.0)
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--preset", default="hydra_linear", help="plant preset (base)")
+    parser.add_argument("--profile", default="multisine", choices=PROFILES,
+                        help="excitation: multisine (default); resonance (piston free: "
+                        "strong 0.7-2 kHz band over a 0.5 Hz position sweep, makes k_s(x) "
+                        "identifiable); slide (piston free: triangle sweep at constant "
+                        "speed, quick reversals, avoids the seal's stick-slip)")
 
 
 def run_synth(args: argparse.Namespace) -> int:
@@ -124,7 +129,7 @@ def run_synth(args: argparse.Namespace) -> int:
         return _err("identify-synth", f"{args.out}: directory {out.parent} does not exist")
     try:
         res = generate(args.load, effects, seconds=args.seconds, seed=args.seed,
-                       preset=args.preset)
+                       preset=args.preset, profile=args.profile)
     except (ConfigError, ValueError) as exc:
         return _err("identify-synth", str(exc))
     truth = "; ".join(f"{k} {v}" for k, v in res.truth.items()) or "none"

@@ -48,6 +48,7 @@ class Constants:
     eps_pump: float  # tanh regularisation of the pump Coulomb friction, m/s
     eps_seal: float  # tanh regularisation of the seal friction, m/s
     vs_seal: float  # Stribeck velocity, m/s
+    bulk_modulus: float = 0.0  # kappa, Pa (only to express k_s(x) as an oil volume)
 
     @property
     def rotor_per_m(self) -> float:
@@ -141,6 +142,7 @@ def prepare(data: MeasuredData, cfg: Config) -> Experiment:
         eps_pump=eff["pump_coulomb"]["velocity_eps_m_per_s"],
         eps_seal=eff["seal_friction"]["velocity_eps_m_per_s"],
         vs_seal=eff["seal_friction"]["stribeck_velocity_m_per_s"],
+        bulk_modulus=h["bulk_modulus_pa"],
     )
     gain = motor_torque_constant(cfg) * const.kc / const.kp  # N/A, piston-equivalent
     start = {

@@ -233,9 +233,10 @@ def _simulate(ad, bd, z0, tau_p, ks, ds, dp, dc, eff, angle, has_angle, xs, has_
                 f_pist -= dc * (r - 1.0) * vc
             ks_eff = ks
             if ksx_on:
+                # Eq. 2.25-2.27: the series compliance is exactly quadratic in x
                 xpos = xs[k] if has_x else z[3]
                 xn = xpos / half
-                ks_eff = ks * (1.0 + k1 * xn + k2 * xn * xn)
+                ks_eff = ks / max(1.0 + k1 * xn + k2 * xn * xn, 0.05)
             q_rate = ks_eff * (g * vp - tq / (ds * r) - vc) - ks * (vp - tq / ds - vc)
             u[0] = tau_p[k * n_sub + j]
             u[1] = f_pump

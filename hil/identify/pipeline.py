@@ -220,18 +220,32 @@ def describe_effect(d: EffectDef, fit: FitResult, exp: Experiment) -> dict[str, 
         return {"coulomb_n": _pe("coulomb_n", fit, lambda t: t[g["sf_coulomb_n"]], ps, "N"),
                 "static_n": _pe("static_n", fit, lambda t: t[g["sf_static_n"]], ps, "N")}
     if d.name == "stiffness_vs_position":
+        # k_s(x) = k_s / (1 + c1 x/h + c2 (x/h)^2): Eq. 2.25-2.27 make the compliance exactly
+        # quadratic, 1/k_s(x) = 1/k_s(0) - x^2 / (2 A kappa) with A = V_side + k_c h, so
+        # c2 = -h^2 k_s / (2 A kappa) gives the oil volume per side (dead volume + pipe).
         x = exp.position if exp.position is not None else np.zeros(1)
-        h = exp.const.half_stroke
+        c = exp.const
+        h = c.half_stroke
         lo, hi = float(x.min()) / h, float(x.max()) / h
         mid = 0.5 * (lo + hi)
 
         def span(t: np.ndarray) -> float:
-            k = lambda xn: 1 + t[g["ks_k1"]] * xn + t[g["ks_k2"]] * xn * xn  # noqa: E731
+            def k(xn: float) -> float:
+                return 1.0 / (1.0 + t[g["ks_k1"]] * xn + t[g["ks_k2"]] * xn * xn)
+
             return 0.5 * (k(lo) + k(hi)) / k(mid) - 1.0
 
-        return {"ks_k1": _pe("ks_k1", fit, lambda t: t[g["ks_k1"]], ps, "1"),
-                "ks_k2": _pe("ks_k2", fit, lambda t: t[g["ks_k2"]], ps, "1"),
-                "ks_relative_span": _pe("ks_relative_span", fit, span, ps, "1")}
+        out = {"ks_c1": _pe("ks_c1", fit, lambda t: t[g["ks_k1"]], ps, "1"),
+               "ks_c2": _pe("ks_c2", fit, lambda t: t[g["ks_k2"]], ps, "1"),
+               "ks_relative_span": _pe("ks_relative_span", fit, span, ps, "1")}
+        if fit.value("ks_k2") < 0.0 and c.bulk_modulus > 0.0:
+            def side_volume(t: np.ndarray) -> float:
+                a = -h * h * t[g["ks"]] / (2.0 * c.bulk_modulus * t[g["ks_k2"]])
+                return a - c.kc * h
+
+            out["side_volume_m3"] = _pe("side_volume_m3", fit, side_volume,
+                                        [*ps, "ks"], "m^3")
+        return out
     if d.name == "viscosity_temperature":
         return {"coeff_per_c": _pe("coeff_per_c", fit, lambda t: t[g["visc_coeff_per_c"]],
                                    ps, "1/degC"),

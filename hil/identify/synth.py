@@ -12,6 +12,10 @@ the others are applied around it:
 
 * ``input_delay``: the applied current lags the logged one by whole ticks (50 us);
 * ``sensor_saturation``: pressure channels clip at a level (a sensor or ADC rail);
+* ``pump_pulsation_extra``: the meshing torque ripple of a second pulsation order
+  ``T sin(n theta + phi)`` (the plant has one order): every tick the applied current is the
+  logged one minus ``T sin(n theta + phi) / K``, with ``theta`` the plant's rotor angle at
+  the tick's midpoint, which is exactly a load torque of that form on the pump;
 * outside the library: ``mains_hum`` (a 50 Hz sinusoid on ``p_pump_a``) and ``backlash``
   (a dead band in the motor-angle reading, as a loose encoder coupling gives).
 
@@ -42,6 +46,7 @@ DEFAULT_MAGNITUDES: dict[str, dict[str, float]] = {
     "viscosity_temperature": {"coeff_per_c": 0.03, "initial_c": 15.0, "ambient_c": 25.0},
     "strain_thermal_drift": {"n_per_c": 2.5, "ambient_c": 35.0},
     "input_delay": {"delay_ticks": 5},
+    "pump_pulsation_extra": {"order": 2, "torque_n": 100.0, "phase_rad": 0.7},
     "sensor_saturation": {"level_pa": 4.0e6},
     "mains_hum": {"amplitude_pa": 1.0e4, "freq_hz": 50.0},
     "backlash": {"width_rad": 0.05},
@@ -49,9 +54,11 @@ DEFAULT_MAGNITUDES: dict[str, dict[str, float]] = {
 
 PLANT_EFFECTS = ("pump_pulsation", "pump_coulomb_friction", "seal_friction",
                  "stiffness_vs_position", "viscosity_temperature", "strain_thermal_drift")
-WRAPPER_EFFECTS = ("input_delay", "sensor_saturation")
+WRAPPER_EFFECTS = ("input_delay", "sensor_saturation", "pump_pulsation_extra")
 OUTSIDE_EFFECTS = ("mains_hum", "backlash")
 ALL_SYNTH_EFFECTS = PLANT_EFFECTS + WRAPPER_EFFECTS + OUTSIDE_EFFECTS
+#: Excitation profiles of :func:`generate`.
+PROFILES = ("multisine", "resonance", "slide")
 
 
 @dataclass
@@ -127,6 +134,9 @@ def generate(
     rms_a: float | None = None,
     noise: bool = True,
     excitation: np.ndarray | None = None,
+    profile: str = "multisine",
+    sweep_m: float | None = None,
+    sweep_hz: float | None = None,
 ) -> SynthResult:
     """Simulate one identification experiment and return the record as it would be logged.
 
@@ -135,7 +145,16 @@ def generate(
     value per sample) replaces the default multisine. With the piston free, a weak position
     loop (300 A/m, about 0.4 Hz) keeps the piston inside its stroke; its output is
     part of the logged current, and its reference sweeps the piston over +-18 mm at 0.125 Hz.
+
+    ``profile="resonance"`` is the experiment that makes ``k_s(x)`` identifiable with the
+    piston free (see docs/identify.md): a weak broadband multisine (1 A rms, 0.3-300 Hz)
+    plus a strong one over the piston-on-``k_s`` resonance (4 A rms, 700-2000 Hz, about
+    1.3 kHz), while the position loop sweeps the piston at 0.5 Hz over most of the stroke
+    (reference +-30 mm, about +-19 mm reached), so every part of the record sees the
+    resonance move with the position. ``sweep_m`` / ``sweep_hz`` override the sweep.
     """
+    if profile not in PROFILES:
+        raise ValueError(f"unknown profile {profile!r} (known: {', '.join(PROFILES)})")
     if load not in LOAD_CASES:
         raise ValueError(f"unknown load {load!r}")
     if not isinstance(effects, dict):
@@ -155,7 +174,12 @@ def generate(
     n = int(round(seconds * fs))
     if rms_a is None:
         rms_a = 2.5 if load == "free_piston" else 5.0
-    if excitation is None:
+    if excitation is None and profile == "slide":
+        exc = multisine(n, fs, 0.5, 0.3, 300.0, 50, seed + 1000)
+    elif excitation is None and profile == "resonance":
+        exc = (multisine(n, fs, 1.0, 0.3, 300.0, 50, seed + 1000)
+               + multisine(n, fs, 4.0, 700.0, 2000.0, 60, seed + 2000))
+    elif excitation is None:
         f_hi = 2000.0 if load == "free_piston" else 300.0
         exc = multisine(n, fs, rms_a, 0.3, f_hi, 100, seed + 1000)
     else:
@@ -170,23 +194,51 @@ def generate(
     # position-dependent effects are excited) and keeps it off the end stops.
     kx = 300.0 if load == "free_piston" else 0.0
     t_all = np.arange(n) / fs
-    x_sweep = 0.018 * np.sin(2 * np.pi * 0.125 * t_all) if load == "free_piston" else 0 * t_all
+    if sweep_m is None:
+        sweep_m = {"resonance": 0.030}.get(profile, 0.018)
+    if sweep_hz is None:
+        sweep_hz = {"resonance": 0.5, "slide": 0.5}.get(profile, 0.125)
+    if profile == "slide":
+        # triangle: constant piston speed 4 A f, reversed within the pump's J_p/d_p ~ 8 ms;
+        # the current that holds that speed against d_p + d_c is fed forward
+        phase = (sweep_hz * t_all + 0.25) % 1.0
+        x_sweep = sweep_m * (4.0 * np.abs(phase - 0.5) - 1.0) if kx else 0.0 * t_all
+        v_ref = np.gradient(x_sweep, t_all)
+        pp = plant.params
+        exc = exc + (pp[L.P_DP] + pp[L.P_DC]) * np.sign(np.round(v_ref, 6)) \
+            * 4.0 * sweep_m * sweep_hz / pp[L.P_KT_EQ]
+    else:
+        x_sweep = sweep_m * np.sin(2 * np.pi * sweep_hz * t_all) if kx else 0.0 * t_all
     rec = np.zeros((n, L.N_OUTPUTS))
     iq_log = np.zeros(n)
     iq_app = np.zeros(n)
     rec[0] = plant.y
     x_ref = float(plant.y[L.Y_X_PISTON])
+    extra = mags.get("pump_pulsation_extra")
+    if extra is not None:
+        p = plant.params
+        ex_order, ex_phase = float(extra["order"]), float(extra["phase_rad"])
+        ex_amp = float(extra["torque_n"]) / p[L.P_KT_EQ]  # A of current per N of torque
+        kc_kp, half_tick = p[L.P_KC_OVER_KP], 0.5 * plant.tick_s
     for k in range(n):
         iq_log[k] = exc[k] - kx * (rec[k, L.Y_X_PISTON] - x_ref - x_sweep[k])
         if k == n - 1:
             break
         i_prev = iq_log[k - q - 1] if k - q - 1 >= 0 else 0.0
         i_now = iq_log[k - q] if k - q >= 0 else 0.0
-        if r:
-            plant.set_current(i_prev)
-            plant.advance(r)
-        plant.set_current(i_now)
-        plant.advance(every - r)
+        if extra is None:
+            if r:
+                plant.set_current(i_prev)
+                plant.advance(r)
+            plant.set_current(i_now)
+            plant.advance(every - r)
+        else:
+            for tick in range(every):
+                x = plant.x
+                theta = (x[L.S_THP] + half_tick * x[L.S_VP]) * kc_kp
+                ripple = ex_amp * math.sin(ex_order * theta + ex_phase)
+                plant.set_current((i_prev if tick < r else i_now) - ripple)
+                plant.advance(1)
         iq_app[k] = i_now
         rec[k + 1] = plant.y
     t = np.arange(n) / fs
@@ -246,7 +298,9 @@ def _truth(name: str, mag: dict[str, float], cfg: Config, rec: np.ndarray,
     """The effect's parameters in the identification library's terms."""
     if name == "stiffness_vs_position":
         x = rec[:, L.Y_X_PISTON]
-        return {"ks_relative_span": _ks_span(cfg, float(x.min()), float(x.max()))}
+        return {"ks_relative_span": _ks_span(cfg, float(x.min()), float(x.max())),
+                "side_volume_m3": cfg.get("hydraulics.dead_volume_m3")
+                + cfg.get("hydraulics.pipe_volume_m3")}
     if name == "strain_thermal_drift":
         from plant.model import build_params
 
@@ -259,6 +313,8 @@ def _truth(name: str, mag: dict[str, float], cfg: Config, rec: np.ndarray,
                 "n_per_c": mag["n_per_c"]}
     if name == "input_delay":
         return {"delay_s": mag["delay_ticks"] * cfg.get("sim.tick_ns") * 1e-9}
+    if name == "pump_pulsation_extra":
+        return {"order": mag["order"], "amplitude": 0.0, "torque_n": mag["torque_n"]}
     if name == "viscosity_temperature":
         return {"coeff_per_c": mag["coeff_per_c"]}
     return {k: float(v) for k, v in mag.items()}
@@ -276,5 +332,5 @@ def _ks_span(cfg: Config, x_lo: float, x_hi: float) -> float:
     return 0.5 * (kernel.series_stiffness(p, x_lo) + kernel.series_stiffness(p, x_hi)) / k_mid - 1
 
 
-__all__ = ["ALL_SYNTH_EFFECTS", "DEFAULT_MAGNITUDES", "SynthResult", "generate", "multisine",
-           "synth_config"]
+__all__ = ["ALL_SYNTH_EFFECTS", "DEFAULT_MAGNITUDES", "PROFILES", "SynthResult", "generate",
+           "multisine", "synth_config"]

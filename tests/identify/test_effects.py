@@ -8,25 +8,32 @@ import numpy as np
 import pytest
 
 # effect -> (load case, {parameter: (truth key, relative tolerance)}, largest allowed
-# NRMSE ratio after/before on the channel the effect shows most on). The viscosity effect
-# is small (the oil warms ~2 degC in 6 s): it lowers the motor-speed error by a few %.
+# NRMSE ratio after/before on the channel the effect shows most on, excitation profile,
+# seconds). The viscosity effect is small (the oil warms ~2 degC in 6 s): it lowers the
+# motor-speed error by a few %. Seal friction is run with the "slide" profile (constant
+# piston speed, quick reversals): under the default multisine the Stribeck dip drives a
+# stick-slip limit cycle whose phase no output-error simulation can follow (docs).
 CASES = {
-    "pump_coulomb_friction": ("fixed_piston", {"force_n": ("force_n", 0.10)}, 0.2),
+    "pump_coulomb_friction": ("fixed_piston", {"force_n": ("force_n", 0.10)}, 0.2,
+                              "multisine", 6.0),
     "pump_pulsation": ("fixed_piston", {"amplitude": ("amplitude", 0.10),
-                                        "torque_n": ("torque_n", 0.10)}, 0.2),
-    "viscosity_temperature": ("fixed_piston", {"coeff_per_c": ("coeff_per_c", 0.20)}, 0.98),
-    "strain_thermal_drift": ("fixed_piston", {"drift_n": ("drift_n", 0.15)}, 0.5),
-    "input_delay": ("fixed_piston", {"delay_s": ("delay_s", 0.10)}, 0.5),
-    "sensor_saturation": ("fixed_piston", {"level": ("level_pa", 0.001)}, 0.2),
-    "seal_friction": ("free_piston", {"coulomb_n": ("coulomb_n", 0.25),
-                                      "static_n": ("static_n", 0.25)}, 0.5),
+                                        "torque_n": ("torque_n", 0.10)}, 0.2, "multisine", 6.0),
+    "viscosity_temperature": ("fixed_piston", {"coeff_per_c": ("coeff_per_c", 0.20)}, 0.98,
+                              "multisine", 6.0),
+    "strain_thermal_drift": ("fixed_piston", {"drift_n": ("drift_n", 0.15)}, 0.5,
+                             "multisine", 6.0),
+    "input_delay": ("fixed_piston", {"delay_s": ("delay_s", 0.10)}, 0.5, "multisine", 6.0),
+    "sensor_saturation": ("fixed_piston", {"level": ("level_pa", 0.001)}, 0.2, "multisine",
+                          6.0),
+    "seal_friction": ("free_piston", {"coulomb_n": ("coulomb_n", 0.10),
+                                      "static_n": ("static_n", 0.10)}, 0.2, "slide", 4.0),
 }
 
 
 @pytest.mark.parametrize("effect", list(CASES))
 def test_effect_named_recovered_and_error_drops(identified, effect):
-    load, tolerances, max_ratio = CASES[effect]
-    syn, rep = identified(load, (effect,))
+    load, tolerances, max_ratio, profile, seconds = CASES[effect]
+    syn, rep = identified(load, (effect,), seconds=seconds, profile=profile)
     names = [e.name for e in rep.effects_added]
     assert names and names[0] == effect, (names, rep.unexplained_detail)
     # nothing from outside the truth is added
@@ -46,6 +53,7 @@ def test_effect_named_recovered_and_error_drops(identified, effect):
     assert after.mean() < before.mean() and np.all(after <= before * 1.01), (before, after)
     assert np.min(after / before) < max_ratio, after / before
     assert not rep.residual_before.white  # the effect leaves structure in the linear fit
+    assert not rep.unexplained, rep.unexplained_detail
 
 
 def test_selected_candidate_is_significant_and_ranked_first(identified):
@@ -58,9 +66,12 @@ def test_selected_candidate_is_significant_and_ranked_first(identified):
 
 
 def test_stiffness_vs_position_refused_when_unidentifiable(identified):
-    """k_s(x) (Eq. 2.27) with the piston free: the piston sweeps +-18 mm, but with no load
-    k_s carries almost no force, so the data cannot tell a realistic k_s(x) from a constant
-    one. The tool must say so rather than attribute anything."""
+    """k_s(x) (Eq. 2.27) with the piston free under the default multisine: the piston sweeps
+    +-18 mm, but with no load k_s carries only the piston's inertia and damping force, and
+    the weak 1-2 kHz lines of the multisine barely excite the piston-on-k_s resonance, so
+    the data cannot tell a realistic k_s(x) from a constant one. The tool must say so
+    rather than attribute anything (the "resonance" profile makes it identifiable, see
+    test_stiffness_vs_position.py)."""
     syn, rep = identified("free_piston", ("stiffness_vs_position",))
     assert syn.truth["stiffness_vs_position"]["ks_relative_span"] > 0.1
     row = next(r for r in rep.candidate_table() if r["name"] == "stiffness_vs_position")

@@ -43,7 +43,7 @@ def test_outside_effect_is_unexplained(identified, outside):
 
 def test_two_effects_at_once(identified):
     """A mix: pulsation and pump Coulomb friction together are both found."""
-    _, rep = identified("fixed_piston", ("pump_coulomb_friction", "pump_pulsation"))
+    _, rep = identified("fixed_piston", ("pump_coulomb_friction", "pump_pulsation"), seconds=4.0)
     names = {e.name for e in rep.effects_added}
     assert names == {"pump_coulomb_friction", "pump_pulsation"}
     assert not rep.unexplained
