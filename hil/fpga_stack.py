@@ -182,18 +182,32 @@ class FpgaStack:
 
     # --- fault injection on the link --------------------------------------------------------
     def link_fault(self, direction: str = "down", stopped: bool | None = None,
-                   corrupt_every: int | None = None) -> None:
-        """Stop a direction of the link or corrupt every N-th word (1 = all, 0 = none)."""
+                   corrupt_every: int | None = None, drop_every: int | None = None,
+                   dup_every: int | None = None, delay_ticks: int | None = None) -> None:
+        """Fault one direction of the link (None leaves a setting as it is): ``stopped``;
+        every N-th word corrupted (1 = all, 0 = none); and, value level only, every N-th
+        word dropped or sent twice, and a latency of ``delay_ticks`` (docs/fpga.md)."""
         if direction not in ("down", "up"):
             raise ValueError(f"link direction {direction!r}: expected 'down' or 'up'")
-        i_stop, i_every = ((LK.LK_DOWN_STOPPED, LK.LK_DOWN_CORRUPT) if direction == "down"
+        down = direction == "down"
+        i_stop, i_every = ((LK.LK_DOWN_STOPPED, LK.LK_DOWN_CORRUPT) if down
                            else (LK.LK_UP_STOPPED, LK.LK_UP_CORRUPT))
         if stopped is not None:
             self.link[i_stop] = int(stopped)
-        if corrupt_every is not None:
-            if corrupt_every < 0:
-                raise ValueError("corrupt_every must be >= 0")
-            self.link[i_every] = corrupt_every
+        extra = {"corrupt_every": (corrupt_every, i_every),
+                 "drop_every": (drop_every, LK.LK_DOWN_DROP if down else LK.LK_UP_DROP),
+                 "dup_every": (dup_every, LK.LK_DOWN_DUP if down else LK.LK_UP_DUP),
+                 "delay_ticks": (delay_ticks, LK.LK_DOWN_DELAY if down else LK.LK_UP_DELAY)}
+        for name, (value, index) in extra.items():
+            if value is None:
+                continue
+            if value < 0:
+                raise ValueError(f"{name} must be >= 0")
+            if name == "delay_ticks" and value >= LK.HIST_TICKS:
+                raise ValueError(f"delay_ticks must be < {LK.HIST_TICKS}")
+            if name != "corrupt_every" and value and self._bits is not None:
+                raise ValueError(f"{name}: the bit-level link models stop and corruption only")
+            self.link[index] = value
 
     # --- the boot sequence the PC and MCU perform ---------------------------------------------
     def boot(self, mode: int = B.MODE_CURRENT, settle_ticks: int = 40) -> None:

@@ -16,7 +16,13 @@ corrupted bits are flipped on the wire and an :class:`~protocols.lvds.LvdsStream
 recovers them, as the receiving FPGA's deserialiser does.
 
 Fault settings per direction (``LK_*``): ``stopped`` (no bits at all: cable pulled),
-``corrupt_every`` N (every N-th word has one bit flipped; 1 = all words, 0 = none).
+``corrupt_every`` N (every N-th word has one bit flipped; 1 = all words, 0 = none). Value
+level only: ``drop_every`` N (every N-th word is lost: the receiver sees no start bit, so
+nothing is stored and nothing counted at the receiver; ``*_dropped`` counts them),
+``dup_every`` N (every N-th word is sent twice: it takes the next word's slot, so the sweep
+falls one word behind), ``delay`` D ticks (the words carry the sender's memory as it was D
+ticks earlier: a latency of D ticks, up to ``HIST_TICKS`` - 1). The sender's memory of each
+tick is kept in a ring at the end of the state array for that.
 """
 
 from __future__ import annotations
@@ -34,18 +40,32 @@ LINK_NAMES = (
     "down_acc", "down_ptr", "down_stopped", "down_corrupt_every", "down_phase",
     "up_acc", "up_ptr", "up_stopped", "up_corrupt_every", "up_phase",
     "down_words", "up_words", "master_crc_failures",
+    "down_drop_every", "down_drop_phase", "down_dup_every", "down_dup_phase", "down_delay",
+    "down_dropped", "down_t",
+    "up_drop_every", "up_drop_phase", "up_dup_every", "up_dup_phase", "up_delay",
+    "up_dropped", "up_t",
 )
 (LK_BITS_NUM, LK_DOWN_ACC, LK_DOWN_PTR, LK_DOWN_STOPPED, LK_DOWN_CORRUPT, LK_DOWN_PHASE,
  LK_UP_ACC, LK_UP_PTR, LK_UP_STOPPED, LK_UP_CORRUPT, LK_UP_PHASE, LK_DOWN_WORDS, LK_UP_WORDS,
- LK_MASTER_CRC) = range(len(LINK_NAMES))
+ LK_MASTER_CRC,
+ LK_DOWN_DROP, LK_DOWN_DROP_PHASE, LK_DOWN_DUP, LK_DOWN_DUP_PHASE, LK_DOWN_DELAY,
+ LK_DOWN_DROPPED, LK_DOWN_T,
+ LK_UP_DROP, LK_UP_DROP_PHASE, LK_UP_DUP, LK_UP_DUP_PHASE, LK_UP_DELAY,
+ LK_UP_DROPPED, LK_UP_T) = range(len(LINK_NAMES))
 N_LINK = len(LINK_NAMES)
+#: Ticks of sender memory kept for the ``delay`` fault, and the ring's row width (words).
+HIST_TICKS = 64
+HIST_W = 32
+LK_DOWN_HIST = N_LINK
+LK_UP_HIST = N_LINK + HIST_TICKS * HIST_W
+N_LINK_STATE = N_LINK + 2 * HIST_TICKS * HIST_W
 WORD_BITS = lvds.WORD_BITS
 _WORD_DEN = WORD_BITS * 1_000_000_000
 
 
 def link_state(cfg: Config) -> np.ndarray:
     """A fresh link state: both sweeps at address 0, no faults."""
-    lk = np.zeros(N_LINK, dtype=np.int64)
+    lk = np.zeros(N_LINK_STATE, dtype=np.int64)
     lk[LK_BITS_NUM] = int(cfg.get("fpga.lvds_bit_rate_hz")) * int(cfg.get("sim.tick_ns"))
     return lk
 
@@ -76,36 +96,60 @@ def _corrupted(lk, every_index, phase_index):
     return False
 
 
+@njit(cache=True, inline="always")
+def _remember(lk, t_index, hist, mem):
+    """Keep the sender's memory of this tick; return the ring row holding the memory
+    ``delay`` ticks ago (this tick's when there is no delay or not enough history)."""
+    t = lk[t_index]
+    row = hist + (t % HIST_TICKS) * HIST_W
+    for i in range(mem.shape[0]):
+        lk[row + i] = mem[i]
+    lk[t_index] = t + 1
+    d = lk[t_index + (LK_DOWN_DELAY - LK_DOWN_T)]
+    back = t - d if t >= d else 0
+    return hist + (back % HIST_TICKS) * HIST_W
+
+
 @njit(cache=True)
 def sweep_down(lk, master_down, st, down):
     """Downstream words of one tick: MCU memory -> driver endpoint (value level)."""
     n = _words_this_tick(lk, LK_DOWN_ACC)
+    src = _remember(lk, LK_DOWN_T, LK_DOWN_HIST, master_down)
     if lk[LK_DOWN_STOPPED] != 0:
         return
     size = master_down.shape[0]
     for _ in range(n):
         addr = lk[LK_DOWN_PTR]
-        lk[LK_DOWN_PTR] = (addr + 1) % size
-        bad = _corrupted(lk, LK_DOWN_CORRUPT, LK_DOWN_PHASE)
-        receive_word(st, down, addr, master_down[addr], not bad)
+        if not _corrupted(lk, LK_DOWN_DUP, LK_DOWN_DUP_PHASE):
+            lk[LK_DOWN_PTR] = (addr + 1) % size
         lk[LK_DOWN_WORDS] += 1
+        if _corrupted(lk, LK_DOWN_DROP, LK_DOWN_DROP_PHASE):
+            lk[LK_DOWN_DROPPED] += 1
+            continue
+        bad = _corrupted(lk, LK_DOWN_CORRUPT, LK_DOWN_PHASE)
+        receive_word(st, down, addr, lk[src + addr], not bad)
 
 
 @njit(cache=True)
 def sweep_up(lk, up, master_up):
     """Upstream words of one tick: driver memory -> MCU memory (value level)."""
     n = _words_this_tick(lk, LK_UP_ACC)
+    src = _remember(lk, LK_UP_T, LK_UP_HIST, up)
     if lk[LK_UP_STOPPED] != 0:
         return
     size = up.shape[0]
     for _ in range(n):
         addr = lk[LK_UP_PTR]
-        lk[LK_UP_PTR] = (addr + 1) % size
+        if not _corrupted(lk, LK_UP_DUP, LK_UP_DUP_PHASE):
+            lk[LK_UP_PTR] = (addr + 1) % size
+        lk[LK_UP_WORDS] += 1
+        if _corrupted(lk, LK_UP_DROP, LK_UP_DROP_PHASE):
+            lk[LK_UP_DROPPED] += 1
+            continue
         if _corrupted(lk, LK_UP_CORRUPT, LK_UP_PHASE):
             lk[LK_MASTER_CRC] += 1
         else:
-            master_up[addr] = up[addr]
-        lk[LK_UP_WORDS] += 1
+            master_up[addr] = lk[src + addr]
 
 
 def _flip(word: int) -> int:

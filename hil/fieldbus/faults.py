@@ -22,8 +22,12 @@ Where each link is hit:
 * ``lvds.down`` / ``lvds.up``: the LVDS link of one actuator (``box``, ``slot``) of a
   :class:`~hil.fieldbus.boxes.StackBox`, through :meth:`hil.fpga_stack.FpgaStack.link_fault`:
   ``dead`` stops the direction (no word passes), ``bitflip`` corrupts every N-th word with
-  N = round(1 / rate) (deterministic: the link's own counter, ``seed`` is not used).
-  Switched on and off at fieldbus cycle boundaries.
+  N = round(1 / rate) (deterministic: the link's own counter, ``seed`` is not used; the
+  receiver discards and counts it), ``drop`` loses every N-th word (no start bit: nothing
+  stored, nothing counted at the receiver), ``duplicate`` sends every N-th word twice (it
+  takes the next word's slot), ``delay`` gives the direction a latency of ``delay_ticks``
+  50 us ticks (1..63: each word carries the sender's memory as it was then). Switched on and
+  off at fieldbus cycle boundaries.
 * ``sensor``: one plant signal a sensor chip of one actuator (``box``, ``slot``) reads
   (``signal``, see :data:`SENSOR_SIGNALS`), upstream of the FPGA: the chip digitises the
   faulted value, so the board, the LVDS link and the MCU see what they would see.
@@ -60,8 +64,8 @@ LINKS = ("fieldbus.down", "fieldbus.up", "lvds.down", "lvds.up", "sensor")
 KINDS: dict[str, tuple[str, ...]] = {
     "fieldbus.down": ("bitflip", "drop", "duplicate", "delay"),
     "fieldbus.up": ("bitflip", "drop", "duplicate", "delay"),
-    "lvds.down": ("dead", "bitflip"),
-    "lvds.up": ("dead", "bitflip"),
+    "lvds.down": ("dead", "bitflip", "drop", "duplicate", "delay"),
+    "lvds.up": ("dead", "bitflip", "drop", "duplicate", "delay"),
     "sensor": ("stuck", "noisy", "dead"),
 }
 #: Sensor signal name -> (plant output row name, chip). A dead encoder delivers no valid
@@ -90,6 +94,9 @@ for _l in ("fieldbus.down", "fieldbus.up"):
 for _l in ("lvds.down", "lvds.up"):
     _EXTRA[(_l, "dead")] = {"box", "slot"}
     _EXTRA[(_l, "bitflip")] = {"box", "slot", "rate"}
+    _EXTRA[(_l, "drop")] = {"box", "slot", "rate"}
+    _EXTRA[(_l, "duplicate")] = {"box", "slot", "rate"}
+    _EXTRA[(_l, "delay")] = {"box", "slot", "delay_ticks"}
 _EXTRA[("sensor", "stuck")] = {"box", "slot", "signal", "value"}
 _EXTRA[("sensor", "noisy")] = {"box", "slot", "signal", "sigma"}
 _EXTRA[("sensor", "dead")] = {"box", "slot", "signal"}
@@ -112,6 +119,7 @@ class Fault:
     frame: int | None = None
     bits: int = 1
     delay_cycles: int = 1
+    delay_ticks: int = 1
     box: int | None = None
     slot: int | None = None
     signal: str | None = None
@@ -249,6 +257,11 @@ def _parse_one(n: int, raw: Any, where: str, base_seed: int) -> Fault:
         kw["bits"] = integer("bits", 1, 1)
     if "delay_cycles" in allowed:
         kw["delay_cycles"] = integer("delay_cycles", 1, 1)
+    if "delay_ticks" in allowed:
+        kw["delay_ticks"] = integer("delay_ticks", 1, 1)
+        if kw["delay_ticks"] > 63:
+            raise FaultError(f"{at}: key 'delay_ticks' = {kw['delay_ticks']} exceeds the 63 "
+                             "ticks of sender memory the link keeps")
     if "box" in allowed:
         for key in ("box", "slot"):
             if key not in raw:
@@ -476,11 +489,17 @@ class FaultyStack:
                 continue
             self._lvds_on[i] = on
             direction = f.link.split(".")[1]
+            every = max(1, round(1.0 / f.rate)) if on else 0
             if f.kind == "dead":
                 self._stack.link_fault(direction, stopped=on)
+            elif f.kind == "bitflip":
+                self._stack.link_fault(direction, corrupt_every=every)
+            elif f.kind == "drop":
+                self._stack.link_fault(direction, drop_every=every)
+            elif f.kind == "duplicate":
+                self._stack.link_fault(direction, dup_every=every)
             else:
-                every = max(1, round(1.0 / f.rate))
-                self._stack.link_fault(direction, corrupt_every=every if on else 0)
+                self._stack.link_fault(direction, delay_ticks=f.delay_ticks if on else 0)
 
     def advance(self, n_ticks: int, *args: Any, **kw: Any) -> int:
         st = self._stack

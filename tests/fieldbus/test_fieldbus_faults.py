@@ -54,6 +54,8 @@ BAD = [
     ({"link": "fieldbus.up", "kind": "delay", "delay_cycles": 0}, "'delay_cycles'"),
     ({"link": "fieldbus.up", "kind": "bitflip", "bits": 1.5}, "'bits'"),
     ({"link": "lvds.down", "kind": "dead", "slot": 0}, "'box'"),
+    ({"link": "lvds.up", "kind": "delay", "box": 0, "slot": 0, "delay_ticks": 64},
+     "'delay_ticks'"),
     ({"link": "lvds.down", "kind": "bitflip", "box": 0, "slot": 0, "rate": 0.0}, "'rate'"),
     ({"link": "sensor", "kind": "noisy", "box": 0, "slot": 0, "signal": "p_cyl_a"}, "'sigma'"),
     ({"link": "sensor", "kind": "stuck", "box": 0, "slot": 0, "signal": "smell"}, "'signal'"),
@@ -278,6 +280,39 @@ def test_lvds_down_dead_trips_board_watchdog(cfg, bench):
     assert status[53] & (LINK_ERROR | BOARD_FAULT) == LINK_ERROR | BOARD_FAULT
     assert not status[53] & BOARD_ENABLED
     assert status[-1] & BOARD_FAULT  # latched after the window, until a clear
+
+
+def _lvds_run(cfg, bench, faults, cycles=60):
+    rows = []
+
+    def pc(cycle, m):
+        rows.append(m.actuator_inputs(0))
+        force_profile(cycle + 100, m)
+
+    with BusSystem(bench, cfg, "inproc", faults=faults) as bs:
+        bs.run(cycles, pc)
+        link = bs.chain.boxes[0].stacks[0].link.copy()
+    return rows, link
+
+
+def test_lvds_word_drop_duplicate_delay(cfg, bench):
+    """Value-level word faults in a window: every word dropped on the down link trips the
+    board's watchdog like a dead cable, with no CRC count; duplicated and delayed upstream
+    words change what the MCU measures but never count as link errors."""
+    from hil import lvds_link as LK
+
+    win = {"box": 0, "slot": 0, "start_s": 0.02, "end_s": 0.03}
+    rows, link = _lvds_run(cfg, bench, [{"link": "lvds.down", "kind": "drop", "rate": 1.0,
+                                         **win}])
+    assert link[LK.LK_DOWN_DROPPED] > 0
+    assert any(r["status"] & BOARD_FAULT for r in rows[22:35])
+    assert all(r["err_link_down"] == 0 for r in rows)
+    clean, _ = _lvds_run(cfg, bench, None)
+    for kind, extra in (("duplicate", {"rate": 0.5}), ("delay", {"delay_ticks": 40})):
+        rows, _ = _lvds_run(cfg, bench, [{"link": "lvds.up", "kind": kind, **extra, **win}])
+        assert rows[:20] == clean[:20]
+        assert rows[21:32] != clean[21:32]
+        assert all(not r["status"] & (LINK_ERROR | BOARD_FAULT) for r in rows)
 
 
 def test_lvds_up_bitflips_are_counted(cfg, bench):

@@ -101,3 +101,68 @@ def test_register_access_checks_ranges(cfg):
         m.write("iq_ref", 40000)
     with pytest.raises(KeyError, match="no downstream register"):
         m.write("nonsense", 1)
+
+
+# --- word-level faults of the value-level link: drop, duplicate, delay -----------------------
+def _booted(cfg):
+    from hil.fpga_stack import FpgaStack
+
+    s = FpgaStack(cfg)
+    s.boot()
+    return s
+
+
+def test_dropped_words_are_lost_without_a_crc_count(cfg):
+    """Every 3rd upstream word lost: a third of the words never arrive, none is counted as
+    a CRC failure, and the MCU side still sees fresh values (the sweep goes on)."""
+    s = _booted(cfg)
+    words0, crc0 = s.link[LK.LK_UP_WORDS], s.link[LK.LK_MASTER_CRC]
+    s.link_fault("up", drop_every=3)
+    s.advance(400)
+    sent = s.link[LK.LK_UP_WORDS] - words0
+    assert s.link[LK.LK_UP_DROPPED] == sent // 3
+    assert s.link[LK.LK_MASTER_CRC] == crc0
+    assert s.mcu.read("tick") > 400  # the tick register still arrives
+
+
+def test_duplicated_words_slow_the_sweep(cfg):
+    """Every 2nd word sent twice: it takes the next word's slot, so over the same ticks the
+    sweep pointer moves on by only half of the words sent."""
+    clean, dup = _booted(cfg), _booted(cfg)
+    dup.link_fault("up", dup_every=2)
+    start = [(int(x.link[LK.LK_UP_PTR]), int(x.link[LK.LK_UP_WORDS])) for x in (clean, dup)]
+    clean.advance(100)
+    dup.advance(100)
+    moved = []
+    for x, (p0, w0) in zip((clean, dup), start, strict=True):
+        words = int(x.link[LK.LK_UP_WORDS]) - w0
+        moved.append(((int(x.link[LK.LK_UP_PTR]) - p0) % B.UP_WORDS, words))
+    (adv_clean, words), (adv_dup, words_dup) = moved
+    assert words == words_dup
+    assert adv_clean == words % B.UP_WORDS
+    assert adv_dup in {(words - words // 2) % B.UP_WORDS, (words - (words + 1) // 2)
+                       % B.UP_WORDS}
+
+
+@pytest.mark.parametrize("delay", [5, 20])
+def test_delay_adds_latency_to_the_tick_register(cfg, delay):
+    """The board's tick counter seen on the MCU side lags by ``delay`` more ticks with an
+    upstream delay: the words carry the board memory of ``delay`` ticks ago."""
+    clean, late = _booted(cfg), _booted(cfg)
+    late.link_fault("up", delay_ticks=delay)
+    clean.advance(300)
+    late.advance(300)
+    assert clean.mcu.read("tick") - late.mcu.read("tick") == delay
+
+
+def test_new_faults_refused_on_the_bit_level_link_and_bad_values(cfg):
+    from hil.fpga_stack import FpgaStack
+
+    s = FpgaStack(cfg, bit_level=True)
+    with pytest.raises(ValueError, match="bit-level"):
+        s.link_fault("up", drop_every=2)
+    v = FpgaStack(cfg)
+    with pytest.raises(ValueError, match="delay_ticks"):
+        v.link_fault("down", delay_ticks=64)
+    with pytest.raises(ValueError, match="drop_every"):
+        v.link_fault("down", drop_every=-1)
