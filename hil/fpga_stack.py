@@ -41,7 +41,8 @@ TRACE_LINK = TRACE_DOWN + B.DOWN_WORDS   # F_SINCE_VALID, F_ERR_LINK_CRC
 TRACE_UP = TRACE_LINK + 2
 TRACE_ON = TRACE_UP + B.UP_WORDS
 TRACE_DUTY = TRACE_ON + 1
-TRACE_WIDTH = TRACE_DUTY + 3
+TRACE_WORDS = TRACE_DUTY + 3           # the link's word logs of the tick: down, then up
+TRACE_WIDTH = TRACE_WORDS + 2 * LK.WORDS_W
 
 
 @njit(cache=True)
@@ -80,6 +81,9 @@ def advance_stack(n_ticks, x, p, u, y, rec, row0, every, tick0, rng, work,
         if tracing:
             _trace_row(trace, j, raw, down, since, crc, up, on, st)
         LK.sweep_up(lk, up, mup)
+        if tracing:
+            for i in range(2 * LK.WORDS_W):
+                trace[j, TRACE_WORDS + i] = lk[LK.LK_DOWN_WORDLOG + i]
         if on != 0:
             u[L.U_MODE] = L.MODE_DUTY
             u[L.U_DA] = st[B.F_DUTY_A] * inv_top

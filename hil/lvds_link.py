@@ -58,7 +58,14 @@ HIST_TICKS = 64
 HIST_W = 32
 LK_DOWN_HIST = N_LINK
 LK_UP_HIST = N_LINK + HIST_TICKS * HIST_W
-N_LINK_STATE = N_LINK + 2 * HIST_TICKS * HIST_W
+#: The words of the latest tick, per direction, for logs: a count, then per word
+#: (address, data, fate) with fate WORD_OK, WORD_CRC_BAD or WORD_DROPPED.
+MAX_WORDS_TICK = 16
+WORDS_W = 1 + 3 * MAX_WORDS_TICK
+LK_DOWN_WORDLOG = N_LINK + 2 * HIST_TICKS * HIST_W
+LK_UP_WORDLOG = LK_DOWN_WORDLOG + WORDS_W
+N_LINK_STATE = LK_UP_WORDLOG + WORDS_W
+WORD_OK, WORD_CRC_BAD, WORD_DROPPED = 0, 1, 2
 WORD_BITS = lvds.WORD_BITS
 _WORD_DEN = WORD_BITS * 1_000_000_000
 
@@ -110,11 +117,23 @@ def _remember(lk, t_index, hist, mem):
     return hist + (back % HIST_TICKS) * HIST_W
 
 
+@njit(cache=True, inline="always")
+def _log_word(lk, base, addr, data, fate):
+    k = lk[base]
+    if k < MAX_WORDS_TICK:
+        p = base + 1 + 3 * k
+        lk[p] = addr
+        lk[p + 1] = data
+        lk[p + 2] = fate
+        lk[base] = k + 1
+
+
 @njit(cache=True)
 def sweep_down(lk, master_down, st, down):
     """Downstream words of one tick: MCU memory -> driver endpoint (value level)."""
     n = _words_this_tick(lk, LK_DOWN_ACC)
     src = _remember(lk, LK_DOWN_T, LK_DOWN_HIST, master_down)
+    lk[LK_DOWN_WORDLOG] = 0
     if lk[LK_DOWN_STOPPED] != 0:
         return
     size = master_down.shape[0]
@@ -123,11 +142,14 @@ def sweep_down(lk, master_down, st, down):
         if not _corrupted(lk, LK_DOWN_DUP, LK_DOWN_DUP_PHASE):
             lk[LK_DOWN_PTR] = (addr + 1) % size
         lk[LK_DOWN_WORDS] += 1
+        data = lk[src + addr]
         if _corrupted(lk, LK_DOWN_DROP, LK_DOWN_DROP_PHASE):
             lk[LK_DOWN_DROPPED] += 1
+            _log_word(lk, LK_DOWN_WORDLOG, addr, data, WORD_DROPPED)
             continue
         bad = _corrupted(lk, LK_DOWN_CORRUPT, LK_DOWN_PHASE)
-        receive_word(st, down, addr, lk[src + addr], not bad)
+        _log_word(lk, LK_DOWN_WORDLOG, addr, data, WORD_CRC_BAD if bad else WORD_OK)
+        receive_word(st, down, addr, data, not bad)
 
 
 @njit(cache=True)
@@ -135,6 +157,7 @@ def sweep_up(lk, up, master_up):
     """Upstream words of one tick: driver memory -> MCU memory (value level)."""
     n = _words_this_tick(lk, LK_UP_ACC)
     src = _remember(lk, LK_UP_T, LK_UP_HIST, up)
+    lk[LK_UP_WORDLOG] = 0
     if lk[LK_UP_STOPPED] != 0:
         return
     size = up.shape[0]
@@ -143,13 +166,17 @@ def sweep_up(lk, up, master_up):
         if not _corrupted(lk, LK_UP_DUP, LK_UP_DUP_PHASE):
             lk[LK_UP_PTR] = (addr + 1) % size
         lk[LK_UP_WORDS] += 1
+        data = lk[src + addr]
         if _corrupted(lk, LK_UP_DROP, LK_UP_DROP_PHASE):
             lk[LK_UP_DROPPED] += 1
+            _log_word(lk, LK_UP_WORDLOG, addr, data, WORD_DROPPED)
             continue
         if _corrupted(lk, LK_UP_CORRUPT, LK_UP_PHASE):
             lk[LK_MASTER_CRC] += 1
+            _log_word(lk, LK_UP_WORDLOG, addr, data, WORD_CRC_BAD)
         else:
-            master_up[addr] = lk[src + addr]
+            master_up[addr] = data
+            _log_word(lk, LK_UP_WORDLOG, addr, data, WORD_OK)
 
 
 def _flip(word: int) -> int:

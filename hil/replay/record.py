@@ -10,7 +10,11 @@ Channels per box ``b`` (blocks of fixed-width frames, times in ns of simulated t
 * ``/fieldbus/frames`` (level "bus" and up): every frame as sent/received, single messages;
 * ``/fpga/b.k/trace`` (level "full"): int64 x TRACE_WIDTH per tick: board k's raw sensor
   words and received downstream memory (its inputs) and its upstream memory, PWM on and
-  compare counts (its outputs), for the FPGA replay (:mod:`hil.replay.fpga_replay`).
+  compare counts (its outputs), for the FPGA replay (:mod:`hil.replay.fpga_replay`);
+* ``/lvds/b.k/down_words``, ``/lvds/b.k/up_words`` (level "full"): every LVDS word that
+  reached the receiver, as its 45-bit line word (``eha-hil/lvds-word``, uint64), stamped
+  with the tick in which its last bit arrived; a word that failed its CRC is logged with
+  the bit error it carried, a dropped word (no start bit) is not on the receiver's wire.
 
 The Metadata record holds the configuration (JSON), the topology, the box model and each
 board's calibrated angle offset, so a replay needs nothing but the file.
@@ -25,14 +29,16 @@ from pathlib import Path
 import numpy as np
 
 from firmware_model.fpga import layout as B
+from hil import lvds_link as LK
 from hil.fieldbus.boxes import StackBox
 from hil.fieldbus.chain import CYCLE_TICKS
 from hil.fieldbus.master import Master
 from hil.fieldbus.system import BusRecord, BusSystem
 from hil.fieldbus.topology import Topology
-from hil.fpga_stack import TRACE_WIDTH
+from hil.fpga_stack import TRACE_WIDTH, TRACE_WORDS
 from hil.framelog import FrameLogWriter
 from plant.config import Config
+from protocols import lvds
 
 UP_WIDTH = B.UP_WORDS + 1
 ENC_MCU_UP = "eha-hil/mcu-up"        # 31 upstream words + CRC-error count, uint32
@@ -74,6 +80,10 @@ class RecordingStackBox(StackBox):
         self.traced = log.level == "full"
         self.ch_trace = [log.add_block_channel(topics(b, k)["trace"], "eha-hil/fpga-trace",
                                                dtype=np.int64, width=TRACE_WIDTH)
+                         for k in range(len(self.stacks))] if self.traced else []
+        self.ch_words = [tuple(log.add_block_channel(f"/lvds/{b}.{k}/{d}_words",
+                                                     "eha-hil/lvds-word", dtype=np.uint64,
+                                                     width=1) for d in ("down", "up"))
                          for k in range(len(self.stacks))] if self.traced else []
         self._reset_buffers()
 
@@ -137,9 +147,29 @@ class RecordingStackBox(StackBox):
             if self.traced and self.buf_trace[k]:
                 t0 = np.array([r[0] for r in self.buf_trace[k]], dtype=np.int64)
                 t = (t0[:, None] + np.arange(self.period)).ravel() * ns
-                self.log.write_block(self.ch_trace[k], t,
-                                     np.concatenate([r[1] for r in self.buf_trace[k]]))
+                tr = np.concatenate([r[1] for r in self.buf_trace[k]])
+                self.log.write_block(self.ch_trace[k], t, tr)
+                for d, ch in enumerate(self.ch_words[k]):
+                    tw, words = _line_words(tr, t, TRACE_WORDS + d * LK.WORDS_W)
+                    if len(tw):
+                        self.log.write_block(ch, tw, words[:, None])
         self._reset_buffers()
+
+
+def _line_words(trace: np.ndarray, t_ns: np.ndarray, col: int) -> tuple[np.ndarray,
+                                                                         np.ndarray]:
+    """(times, 45-bit line words) of the words a trace's word log says reached the
+    receiver; a CRC failure is a word with one data bit flipped (as the link model flips)."""
+    count = trace[:, col]
+    slots = trace[:, col + 1:col + LK.WORDS_W].reshape(len(trace), LK.MAX_WORDS_TICK, 3)
+    mask = np.arange(LK.MAX_WORDS_TICK)[None, :] < count[:, None]
+    w = slots[mask]
+    t = np.repeat(t_ns, count)
+    keep = w[:, 2] != LK.WORD_DROPPED
+    w, t = w[keep], t[keep]
+    line = lvds.encode_words_array(w[:, 0].astype(np.uint64), w[:, 1])
+    line = np.where(w[:, 2] == LK.WORD_CRC_BAD, line ^ np.uint64(1 << 12), line)
+    return t, line.astype(np.uint64)
 
 
 def run_logged(topo: Topology, cfg: Config, cycles: int, pc: Callable[[int, Master], None],
