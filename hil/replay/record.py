@@ -14,7 +14,10 @@ Channels per box ``b`` (blocks of fixed-width frames, times in ns of simulated t
 * ``/lvds/b.k/down_words``, ``/lvds/b.k/up_words`` (level "full"): every LVDS word that
   reached the receiver, as its 45-bit line word (``eha-hil/lvds-word``, uint64), stamped
   with the tick in which its last bit arrived; a word that failed its CRC is logged with
-  the bit error it carried, a dropped word (no start bit) is not on the receiver's wire.
+  the bit error it carried, a dropped word (no start bit) is not on the receiver's wire;
+* ``/sensors/b.k/raw`` (level "full"): the sensor frames of every tick as the board's
+  masters decoded them (``eha-hil/sensor-raw``: the 17 raw words of
+  ``firmware_model.fpga.layout.RAW_NAMES``, uint32).
 
 The Metadata record holds the configuration (JSON), the topology, the box model and each
 board's calibrated angle offset, so a replay needs nothing but the file.
@@ -85,6 +88,9 @@ class RecordingStackBox(StackBox):
                                                      "eha-hil/lvds-word", dtype=np.uint64,
                                                      width=1) for d in ("down", "up"))
                          for k in range(len(self.stacks))] if self.traced else []
+        self.ch_raw = [log.add_block_channel(f"/sensors/{b}.{k}/raw", "eha-hil/sensor-raw",
+                                             dtype=np.uint32, width=B.N_RAW)
+                       for k in range(len(self.stacks))] if self.traced else []
         self._reset_buffers()
 
     def _reset_buffers(self) -> None:
@@ -149,6 +155,7 @@ class RecordingStackBox(StackBox):
                 t = (t0[:, None] + np.arange(self.period)).ravel() * ns
                 tr = np.concatenate([r[1] for r in self.buf_trace[k]])
                 self.log.write_block(self.ch_trace[k], t, tr)
+                self.log.write_block(self.ch_raw[k], t, tr[:, :B.N_RAW])
                 for d, ch in enumerate(self.ch_words[k]):
                     tw, words = _line_words(tr, t, TRACE_WORDS + d * LK.WORDS_W)
                     if len(tw):
