@@ -24,12 +24,25 @@ def _s16(w: int) -> int:
     return w - 0x10000 if w & 0x8000 else w
 
 
+_VOLT_TABLES: dict[float, list] = {}
+
+
+def _volt_table(lsb: float) -> list:
+    """[F32(code) * F32(lsb) for every 16-bit code]: the same float32 products the decode
+    would compute, looked up instead of recomputed 6 times per step (replay speed)."""
+    table = _VOLT_TABLES.get(lsb)
+    if table is None:
+        codes = np.arange(1 << 16, dtype=np.float32) * np.float32(lsb)
+        table = _VOLT_TABLES[lsb] = list(codes)
+    return table
+
+
 class Measurements:
     """One actuator's measurements, float32 SI, refreshed by :meth:`update`."""
 
     __slots__ = ("p_acc", "p_pump_a", "p_pump_b", "p_cyl_a", "p_cyl_b", "f_pres", "tau_q",
                  "f_strain_raw", "omega_m", "v_pump", "x_piston", "iq", "theta_rotor",
-                 "temperature_c", "strain_samples", "status", "_k")
+                 "temperature_c", "strain_samples", "status", "_k", "_volts")
 
     def __init__(self, cfg: Config) -> None:
         adc = padc.DEFAULT
@@ -47,8 +60,9 @@ class Measurements:
             F32(TWO_PI / (1 << s["ssi_bits"])),
             F32(s["temperature_v_at_0c"]), F32(s["temperature_v_per_c"]),
         )
+        self._volts = _volt_table(float(F32(adc.lsb_v)))
         z = F32(0.0)
-        for name in self.__slots__[:-1]:
+        for name in self.__slots__[:-2]:
             setattr(self, name, z)
         self.strain_samples = 0
         self.status = 0
@@ -58,11 +72,12 @@ class Measurements:
         (lsb, v0, pa_per_v, kc, rad_per_count, m_per_rad, n_per_code, mid, zero, m_per_count,
          rad_per_ssi, t_v0, t_vpc) = self._k
         u = up.tolist()  # Python ints: indexing a list is far cheaper than numpy scalars
-        self.p_acc = (F32(u[B.U_P_ACC]) * lsb - v0) * pa_per_v
-        self.p_pump_a = (F32(u[B.U_P_PUMP_A]) * lsb - v0) * pa_per_v
-        self.p_pump_b = (F32(u[B.U_P_PUMP_B]) * lsb - v0) * pa_per_v
-        self.p_cyl_a = (F32(u[B.U_P_CYL_A]) * lsb - v0) * pa_per_v
-        self.p_cyl_b = (F32(u[B.U_P_CYL_B]) * lsb - v0) * pa_per_v
+        volts = self._volts  # F32(code) * lsb for every 16-bit word, computed once
+        self.p_acc = (volts[u[B.U_P_ACC]] - v0) * pa_per_v
+        self.p_pump_a = (volts[u[B.U_P_PUMP_A]] - v0) * pa_per_v
+        self.p_pump_b = (volts[u[B.U_P_PUMP_B]] - v0) * pa_per_v
+        self.p_cyl_a = (volts[u[B.U_P_CYL_A]] - v0) * pa_per_v
+        self.p_cyl_b = (volts[u[B.U_P_CYL_B]] - v0) * pa_per_v
         self.f_pres = kc * (self.p_cyl_a - self.p_cyl_b)
         self.tau_q = kc * (self.p_pump_a - self.p_pump_b)
         hi = u[B.U_STRAIN_HI]
@@ -75,5 +90,5 @@ class Measurements:
         self.x_piston = F32(count - zero) * m_per_count
         self.iq = F32(_s16(u[B.U_IQ])) * F32(1e-3)
         self.theta_rotor = F32(u[B.U_SSI]) * rad_per_ssi
-        self.temperature_c = (F32(u[B.U_TEMPERATURE]) * lsb - t_v0) / t_vpc
+        self.temperature_c = (volts[u[B.U_TEMPERATURE]] - t_v0) / t_vpc
         self.status = u[B.U_STATUS]

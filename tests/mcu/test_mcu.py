@@ -93,7 +93,18 @@ CTRL_FLOATS = ("dt", "kt_eq", "jp", "kp", "kd", "a_d", "ko", "bemf", "kv", "kvi"
                "f_prev", "d_filt", "obs_sum", "obs_p0", "r", "hp_y", "hp_u", "int_force",
                "int_vel", "tau_p", "f_fb", "f_fil")
 MEAS_FLOATS = tuple(n for n in Measurements.__slots__
-                    if n not in ("strain_samples", "status", "_k"))
+                    if n not in ("strain_samples", "status", "_k", "_volts"))
+
+
+def test_volt_table_holds_the_float32_products(cfg):
+    """The ADC decode looks its first product up: every entry is the float32 the
+    Cortex-M4 computes for F32(code) * F32(lsb), and a float32."""
+    m = Measurements(cfg)
+    lsb = m._k[0]
+    codes = np.random.default_rng(0).integers(0, 1 << 16, 2000).tolist() + [0, 4095, 65535]
+    for c in codes:
+        v = m._volts[c]
+        assert type(v) is np.float32 and v == F32(c) * lsb
 
 
 def _watch_outputs(mcu: Mcu) -> list[list[tuple]]:
@@ -176,7 +187,7 @@ def test_every_control_value_is_float32_after_every_step(controller, feedback, m
         assert ctrl.hp_y != 0
 
 
-@pytest.mark.parametrize("where", ["ctrl.kp", "ctrl.bemf", "meas.lsb", "ctrl.k_pos"])
+@pytest.mark.parametrize("where", ["ctrl.kp", "ctrl.bemf", "meas.v0", "ctrl.k_pos"])
 def test_the_float32_check_catches_a_float64_constant(cfg, where):
     """One np.float64 constant anywhere in the chain must show up in the check."""
     mode, value = ("position", 1e-4) if where == "ctrl.k_pos" else ("force", 300.0)
@@ -185,15 +196,15 @@ def test_the_float32_check_catches_a_float64_constant(cfg, where):
     rig.run(0.002)
     assert not float32_leaks(rig.mcu, seen)
     ctrl, meas = rig.mcu.ctrl[0], rig.mcu.meas[0]
-    if where == "meas.lsb":
-        meas._k = (np.float64(meas._k[0]), *meas._k[1:])
+    if where == "meas.v0":  # the ADC's zero-pressure voltage, used in every pressure decode
+        meas._k = (meas._k[0], np.float64(meas._k[1]), *meas._k[2:])
     else:
         attr = where.split(".")[1]
         setattr(ctrl, attr, np.float64(getattr(ctrl, attr)))
     rig.cycle()
     leaks = float32_leaks(rig.mcu, seen)
     expected = {"ctrl.kp": "step[0].i_ref", "ctrl.bemf": "step[0].v_ff",
-                "meas.lsb": "meas[0].p_cyl_a", "ctrl.k_pos": "mcu.tau_ref[0]"}[where]
+                "meas.v0": "meas[0].p_cyl_a", "ctrl.k_pos": "mcu.tau_ref[0]"}[where]
     assert any(s.startswith(expected + ":") for s in leaks), leaks
 
 
