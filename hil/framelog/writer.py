@@ -367,6 +367,13 @@ class FrameLogWriter:
         self.write(channel_id, t_ns, json.dumps(out, separators=(",", ":")).encode())
 
     # -- end -----------------------------------------------------------------------------
+    def add_metadata(self, name: str, values: dict[str, str]) -> None:
+        """A further MCAP Metadata record (e.g. what a replay needs), written at once."""
+        self._check_open()
+        if name == METADATA_NAME:
+            raise ValueError(f"metadata record {name!r} is written by the writer")
+        self._writer.add_metadata(name, {str(k): str(v) for k, v in values.items()})
+
     def flush(self) -> None:
         """Close the chunk in progress and write it: everything so far survives a kill."""
         self._check_open()

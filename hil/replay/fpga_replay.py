@@ -69,13 +69,29 @@ def column_name(col: int) -> str:
     return "duty_" + "abc"[col - TRACE_DUTY]
 
 
-def replay_board(cfg: Config, trace: np.ndarray) -> tuple[int, int]:
-    """Replay one board's trace from boot; (row, column) of the first difference or (-1, -1)."""
+def replay_board_detail(cfg: Config, trace: np.ndarray) -> tuple[int, int, int]:
+    """Replay one board's trace from boot: (row, column, what the model gave) of the first
+    difference, or (-1, -1, 0). The kernel stops at the difference, so the board's state
+    then holds the value it gave."""
     bd = DriverBoard(cfg)
     raw = np.zeros(B.N_RAW, dtype=np.int64)
     row, col = _replay(bd.params, bd.state, bd.down, bd.up, raw,
                        np.ascontiguousarray(trace, dtype=np.int64))
-    return int(row), int(col)
+    if row < 0:
+        return -1, -1, 0
+    if col < TRACE_ON:
+        got = bd.up[col - TRACE_UP]
+    elif col == TRACE_ON:
+        got = int(trace[row, col] == 0)  # the on flag is 0 or 1: a difference flips it
+    else:
+        got = bd.state[(B.F_DUTY_A, B.F_DUTY_B, B.F_DUTY_C)[col - TRACE_DUTY]]
+    return int(row), int(col), int(got)
+
+
+def replay_board(cfg: Config, trace: np.ndarray) -> tuple[int, int]:
+    """(row, column) of the first difference of one board's replay, or (-1, -1)."""
+    row, col, _ = replay_board_detail(cfg, trace)
+    return row, col
 
 
 def warm_up(cfg: Config) -> None:

@@ -206,7 +206,7 @@ def run_logged(topo: Topology, cfg: Config, cycles: int, pc: Callable[[int, Mast
                 bs._install_faults(faults)  # after the recording boxes replaced the plain ones
             offsets = {f"{b.box.id}.{k}": int(s.board.calibrated_offset)
                        for b in boxes for k, s in enumerate(b.stacks)}
-            log._writer.add_metadata("eha-hil.replay", {
+            log.add_metadata("eha-hil.replay", {
                 "config": json.dumps(cfg.data), "topology": topo.source,
                 "model": "stack", "offsets": json.dumps(offsets),
                 "cycles": str(cycles)})

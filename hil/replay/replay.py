@@ -22,7 +22,7 @@ from firmware_model.mcu.mcu import Mcu
 from hil.fieldbus.boxes import StackBox
 from hil.fieldbus.topology import load_topology
 from hil.framelog import FrameLogError, FrameLogReader
-from hil.replay.fpga_replay import column_name, replay_board
+from hil.replay.fpga_replay import column_name, replay_board_detail
 from hil.replay.record import topics
 from plant.config import Config
 
@@ -201,43 +201,14 @@ def replay_mcu(path: str | Path, config_override: Config | None = None) -> Repla
                 traces.append((box.id, k, blk[topic]))
     fpga_ticks = 0
     for box_id, k, tr in traces:
-        row, col = replay_board(cfg, tr.frames)
+        row, col, got = replay_board_detail(cfg, tr.frames)
         fpga_ticks += len(tr.t_ns) if row < 0 else row
         if row >= 0:
             div = Divergence(int(tr.t_ns[row]) * 1e-9, f"/fpga/{box_id}.{k}/trace",
-                             column_name(col), int(tr.frames[row, col]),
-                             _board_output(cfg, tr.frames, row, col))
+                             column_name(col), int(tr.frames[row, col]), got)
             if first is None or div.t_s < first.t_s:
                 first = div
     return ReplayResult(len(topo.boxes), steps, cycles, first, t_end * 1e-9, fpga_ticks)
-
-
-def _board_output(cfg: Config, frames: np.ndarray, row: int, col: int) -> int:
-    """What the current board model gives at (row, col): replay up to that row in Python."""
-    from firmware_model.fpga.driver_board import DriverBoard
-    from hil.fpga_stack import (
-        TRACE_DOWN,
-        TRACE_DUTY,
-        TRACE_LINK,
-        TRACE_ON,
-        TRACE_RAW,
-        TRACE_UP,
-    )
-
-    bd = DriverBoard(cfg)
-    raw = np.zeros(B.N_RAW, dtype=np.int64)
-    on = 0
-    for j in range(row + 1):
-        raw[:] = frames[j, TRACE_RAW:TRACE_DOWN]
-        bd.down[:] = frames[j, TRACE_DOWN:TRACE_LINK]
-        bd.state[B.F_SINCE_VALID] = frames[j, TRACE_LINK]
-        bd.state[B.F_ERR_LINK_CRC] = frames[j, TRACE_LINK + 1]
-        on = bd.tick(raw)
-    if col < TRACE_ON:
-        return int(bd.up[col - TRACE_UP])
-    if col == TRACE_ON:
-        return int(on)
-    return int(bd.state[(B.F_DUTY_A, B.F_DUTY_B, B.F_DUTY_C)[col - TRACE_DUTY]])
 
 
 __all__ = ["Divergence", "ReplayError", "ReplayResult", "replay_mcu"]

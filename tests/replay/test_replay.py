@@ -82,7 +82,7 @@ def test_tampered_log_diverges_on_the_inputs_record(tmp_path, logged):
     info = reader.info()
     out = tmp_path / "tampered.mcap"
     with FrameLogWriter(out, level="mcu") as w:
-        w._writer.add_metadata("eha-hil.replay", info.metadata["eha-hil.replay"])
+        w.add_metadata("eha-hil.replay", info.metadata["eha-hil.replay"])
         for ch in info.channels:
             if ch.framing != "block":
                 continue
