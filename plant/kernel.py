@@ -88,6 +88,7 @@ from plant.layout import (
     P_PULS_ORDER,
     P_PULS_PHASE,
     P_PULS_TORQUE,
+    P_PULS_TORQUE_REL,
     P_Q_MOTOR,
     P_Q_PISTON,
     P_Q_PRESSURE,
@@ -292,9 +293,12 @@ def derivatives(x, p, u, dx):
     if p[P_PULS_ON] > 0.5:
         ripple = math.sin(p[P_PULS_ORDER] * theta_rotor + p[P_PULS_PHASE])
         g = 1.0 + p[P_PULS_AMP] * ripple
-        # Meshing torque ripple: a load torque that depends on where the teeth mesh. It
-        # stays in f_cp, so its work is booked with the pump losses (zero on average).
-        f_cp += p[P_PULS_TORQUE] * ripple
+        # Meshing torque ripple: a load torque that depends on where the teeth mesh, a
+        # constant part and one proportional to the pressure force the pump works against
+        # (chamber pressures at the port edges, trapped volumes, tooth contact forces all
+        # scale with the pressure). It stays in f_cp, so its work is booked with the pump
+        # losses (zero on average).
+        f_cp += (p[P_PULS_TORQUE] + p[P_PULS_TORQUE_REL] * tq) * ripple
     dx[S_THP] = vp
     dx[S_VP] = (tau_p - dp * vp - f_cp - g * tq) / p[P_JP]
 

@@ -128,6 +128,7 @@ def build_params(cfg: Config, substeps: int | None = None) -> np.ndarray:
     p[L.P_PULS_AMP] = e["amplitude"]
     p[L.P_PULS_PHASE] = e["phase_rad"]
     p[L.P_PULS_TORQUE] = e["torque_n"]
+    p[L.P_PULS_TORQUE_REL] = e["torque_amplitude"]
     e = eff["pump_coulomb"]
     p[L.P_PC_ON] = _flag(e)
     p[L.P_PC_FORCE] = e["force_n"]

@@ -7,10 +7,11 @@ Force feedback ``f_fb`` (N, piston force) is, by ``mcu.force_feedback``:
   observer adds the force the seal takes, F^_seal = LP(f_pres - f_strain), to the pressure
   force reference: tau_ref' = tau_ref + F^_seal (first-order LP, cutoff
   ``seal_observer_hz``). Closing the PD directly on f_strain instead only divides the seal
-  friction by 1 + K_p (F7: 5.9 N against 4.4 N this way). Integral action on the strain
-  error (tau_ref - f_strain), which would also remove the pressure loop's own tracking
-  error, destabilises the low-gain position loop of F7 even at 0.5 Hz: the rod force
-  there is set by the hand and the cart, not by the actuator. ``f_strain`` =
+  friction by 1 + K_p (F7, against the observer at 10 Hz: 5.9 N against 4.4 N). Integral
+  action on the strain error (tau_ref - f_strain), which would also remove the pressure
+  loop's own tracking error, destabilises the low-gain position loop of F7 even at
+  0.5 Hz: low-passed, it feeds the pump's inertial force back as negative damping on the
+  ~2.5 Hz mode the 10 N/mm loop makes with the reflected pump inertia. ``f_strain`` =
   cos(alpha) * strain-gauge force (Eq. 6.5);
 * "complementary": f_fil = f_pres + HP(f_strain - f_pres) (Eq. 4.4), a first-order
   high-pass with cutoff ``complementary_cutoff_hz``.

@@ -102,6 +102,8 @@ def synth_config(load: str, effects: dict[str, dict[str, float]], preset: str = 
                        "effects.pulsation.order": int(mag["order"]),
                        "effects.pulsation.amplitude": float(mag["amplitude"]),
                        "effects.pulsation.torque_n": float(mag["torque_n"]),
+                       # The identifier models a load-independent torque ripple only.
+                       "effects.pulsation.torque_amplitude": 0.0,
                        "effects.pulsation.phase_rad": float(mag.get("phase_rad", 0.0))})
         elif name == "pump_coulomb_friction":
             ov.update({"effects.pump_coulomb.enabled": True,

@@ -198,22 +198,25 @@ def f7(cfg: Config, progress: Progress = None) -> ScenarioResult:
             f"rod-seal friction (Coulomb {cfg.get('effects.seal_friction.coulomb_n'):g} N, "
             "calibrated in the hydra_thesis "
             "preset; another preset's meshing ripple or loop gains shift it)")
-    if not ok_s:
-        notes.append(
-            f"strain-feedback error {es:.1f} N misses <= {F7_STRAIN_MAX_N:g} N by "
-            f"{es - F7_STRAIN_MAX_N:.1f} N ({es / F7_THESIS['strain']:.1f}x the thesis's "
-            f"1.3 N); {runs['strain']['rms_low']:.1f} N of it below 5 Hz, "
-            f"{runs['strain']['rms_high']:.1f} N above. The strain feedback removes the seal "
-            f"friction (observer at {cfg.get('mcu.seal_observer_hz'):g} Hz); below 5 Hz what is "
-            "left is the pressure loop's own tracking error while the hand backdrives the pump: "
-            "the pump-side inertia J_p a (118 kg seen from the piston) and the momentum observer's "
-            f"lag on d_p v, divided by 1 + kp_force = {1 + kp:g}; Fig. 5.2 has no inertia "
-            "feed-forward, and integral action on the strain error destabilises this "
-            "low-gain position loop (docs/mcu.md). Above 5 Hz it is the "
-            f"meshing torque ripple (effects.pulsation.torque_n = "
-            f"{cfg.get('effects.pulsation.torque_n'):g} N) at 4x the rotor speed, up to "
-            f"{ripple_hz:.0f} Hz while backdriven, which neither the "
-            f"{cfg.get('mcu.friction_observer_hz'):g} Hz observer nor the loop removes")
+    # What the strain feedback leaves, said whether or not it meets the requirement: the
+    # thesis's 1.3 N is below it, and a reader comparing the two needs the split.
+    verdict = (f"misses <= {F7_STRAIN_MAX_N:g} N by {es - F7_STRAIN_MAX_N:.1f} N" if not ok_s
+               else f"meets <= {F7_STRAIN_MAX_N:g} N")
+    ripple = cfg.get("effects.pulsation.torque_n") + cfg.get(
+        "effects.pulsation.torque_amplitude") * HAND_AMPLITUDE_N
+    notes.append(
+        f"strain-feedback error {es:.1f} N {verdict} ({es / F7_THESIS['strain']:.1f}x the "
+        f"thesis's 1.3 N); {runs['strain']['rms_low']:.1f} N of it below 5 Hz, "
+        f"{runs['strain']['rms_high']:.1f} N above. The strain feedback removes the seal "
+        f"friction (observer at {cfg.get('mcu.seal_observer_hz'):g} Hz, which lags the seal's "
+        "flip at each reversal); below 5 Hz what is left is mostly the pressure loop's own "
+        "tracking error while the hand backdrives the pump: the pump-side inertia J_p a "
+        f"({cfg.get('hydraulics.jp_kg'):g} kg seen from the piston) and the momentum "
+        f"observer's lag on d_p v, divided by 1 + kp_force = {1 + kp:g}; Fig. 5.2 has no "
+        "inertia feed-forward, and integral action on the strain error destabilises this "
+        "low-gain position loop (docs/mcu.md). Above 5 Hz it is the meshing torque ripple "
+        f"(up to {ripple:.0f} N at the hand's peak force) at 4x the rotor speed, up to "
+        f"{ripple_hz:.0f} Hz while backdriven")
     return ScenarioResult(
         "f7", "low-gain position control (10 N/mm), cart moved by hand, seal friction on",
         metrics, series=runs, plot=_plot_f7, notes=notes)

@@ -137,8 +137,9 @@ def f4(cfg: Config, progress: Progress = None) -> ScenarioResult:
     if not metrics[0].ok:
         notes.append(
             f"velocity-based p-p is {pp_v / 1e6 / 0.63:.2f}x the thesis's: it is set by the "
-            "meshing torque ripple (effects.pulsation.torque_n, calibrated to 150 N in the "
-            "hydra_thesis preset; this run has "
+            "meshing torque ripple (effects.pulsation.torque_amplitude, calibrated to 0.26 of "
+            "the pressure force in the hydra_thesis preset; this run has "
+            f"{cfg.get('effects.pulsation.torque_amplitude'):g} and a constant "
             f"{cfg.get('effects.pulsation.torque_n'):g} N)")
     return ScenarioResult("f4", "pressure tracking error vs rotor angle, pulsation on",
                           metrics, series={"th_v": th_v, "e_v": e_v, "th_c": th_c,

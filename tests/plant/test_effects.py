@@ -87,6 +87,29 @@ def test_meshing_torque_ripple_drives_the_pump_speed_at_order_4(default_cfg, tor
         assert a4 < 1e-9
 
 
+def test_meshing_torque_ripple_proportional_to_the_load(default_cfg):
+    """``torque_amplitude`` is a ripple relative to the pump's pressure force: at a steady
+    load it drives the same pump-speed ripple as a constant ``torque_n`` of that fraction of
+    the load, and it scales with the load."""
+    def ripple(current: float, **over) -> tuple[float, float]:
+        cfg = _with(default_cfg, "pulsation", True, **{"effects.pulsation.amplitude": 0.0,
+                                                      "effects.pulsation.torque_n": 0.0,
+                                                      **over})
+        rec = _run(cfg, 20000, lambda p: p.set_current(current))[8000:]
+        v = rec[:, Y_VP] - rec[:, Y_VP].mean()
+        a4 = 2 * np.abs(np.mean(v * np.exp(-4j * rec[:, Y_THETA_M])))
+        return float(a4), float(rec[:, Y_TAU_Q].mean())
+
+    rel = 0.26
+    a_rel, load = ripple(10.0, **{"effects.pulsation.torque_amplitude": rel})
+    a_const, _ = ripple(10.0, **{"effects.pulsation.torque_n": rel * load})
+    a_half, load_half = ripple(5.0, **{"effects.pulsation.torque_amplitude": rel})
+    assert a_rel > 1e-5
+    assert abs(a_rel / a_const - 1.0) < 0.1, (a_rel, a_const)
+    # Half the current, about half the load: the ripple follows the load, not the current.
+    assert abs((a_half / a_rel) / (load_half / load) - 1.0) < 0.25, (a_half, a_rel, load_half)
+
+
 @pytest.mark.parametrize("on", [True, False])
 def test_pump_coulomb_friction_offsets_the_force_speed_line(default_cfg, on):
     """Piston fixed: pump force vs pump speed is a line whose intercept is the Coulomb force."""

@@ -39,10 +39,6 @@ def test_f7_pressure_feedback_error(f7):
     assert abs(e - 12.1) <= 4.0, e
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "known miss (issue 5): the seal observer removes the seal friction, but the pressure "
-    "loop's tracking error while backdriven (pump inertia J_p a / (1 + kp)) and the "
-    "meshing ripple calibrated on F4 leave ~4.4 N; docs/mcu.md explains"))
 def test_f7_strain_feedback_error(f7):
     """Thesis 1.3 N RMS with strain feedback; the issue requires <= 2.5 N."""
     e = f7.metric("RMS error, strain feedback").value
