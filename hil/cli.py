@@ -319,7 +319,9 @@ def cmd_run_thesis(args: argparse.Namespace) -> int:
     from hil import scenarios
 
     names = [n for n in scenarios.THESIS if n in scenarios.names()]
-    out_dir = Path(args.plot_dir)
+    if args.plot:
+        raise UsageError("--plot: 'thesis' writes one plot per scenario; use --plot-dir DIR")
+    out_dir = Path(args.plot_dir or "thesis-plots")
     if not out_dir.parent.is_dir():
         raise UsageError(f"--plot-dir {out_dir}: parent directory does not exist")
     out_dir.mkdir(exist_ok=True)
@@ -368,6 +370,14 @@ def cmd_run(args: argparse.Namespace) -> int:
         scenario = scenarios.get(args.scenario)
     except KeyError as exc:
         raise UsageError(str(exc.args[0])) from None
+    if args.plot_dir is not None:
+        if args.plot:
+            raise UsageError("--plot and --plot-dir: give one of them")
+        out_dir = Path(args.plot_dir)
+        if not out_dir.parent.is_dir():
+            raise UsageError(f"--plot-dir {out_dir}: parent directory does not exist")
+        out_dir.mkdir(exist_ok=True)
+        args.plot = str(out_dir / f"{scenario.name}.png")
     _check_plot_path(args.plot)
     cfg = _config(args)
     res = scenario.run(cfg, _progress(scenario.name, not args.json))
@@ -581,9 +591,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("scenario", metavar="SCENARIO",
                    help="scenario name, or 'thesis' for all thesis experiments (F3-F8); "
                    "these default to -c hydra_thesis")
-    p.add_argument("--plot-dir", default="thesis-plots",
-                   help="with 'thesis': directory for one plot per scenario "
-                   "(default thesis-plots)")
+    p.add_argument("--plot-dir", default=None,
+                   help="directory for one plot per scenario, NAME.png (with 'thesis' "
+                   "default thesis-plots)")
     p.set_defaults(func=cmd_run)
 
     cfgp = sub.add_parser("config", help="inspect configurations")

@@ -89,6 +89,9 @@ def test_config_show_and_presets(capsys):
         (["run", "no-such-scenario"], "no-such-scenario"),
         (["run", "current-step", "--set", "fpga.speed_window_ticks=24"], "speed_window"),
         (["run", "current-step", "--set", "sensors.biss_bits=20"], "biss_bits"),
+        (["run", "thesis", "--plot", "x.png"], "--plot-dir"),
+        (["run", "current-step", "--plot", "x.png", "--plot-dir", "d"], "--plot-dir"),
+        (["run", "current-step", "--plot-dir", "/no/such/dir/d"], "--plot-dir"),
     ],
 )
 def test_user_mistakes_give_one_line_and_exit_2(capsys, argv, fragment):
@@ -120,6 +123,8 @@ def test_run_current_step_table_json_and_plot(capsys, tmp_path):
     code, out, _ = run(capsys, "run", "current-step", "--plot", str(png))
     assert code == 0 and "rise time 10-90 %" in out and "overshoot" in out
     assert png.stat().st_size > 10_000
+    code, out, _ = run(capsys, "run", "current-step", "--plot-dir", str(tmp_path / "plots"))
+    assert code == 0 and (tmp_path / "plots" / "current-step.png").stat().st_size > 10_000
     code, out, _ = run(capsys, "run", "current-step", "--json")
     data = json.loads(out)
     names = {m["name"] for m in data["metrics"]}
