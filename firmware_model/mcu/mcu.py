@@ -38,6 +38,9 @@ STATUS_BITS = (
     (6, "LINK_ERROR", "the driver board lost the link, or upstream words failed CRC"),
     (7, "BOARD_ENABLED", "the driver board reports ENABLED"),
 )
+#: The board's 16-bit error counters saturate here (they do not wrap).
+CRC_COUNT_MAX = 0xFFFF
+
 (CMD_TIMEOUT, SAFE_OFF, FORCE_LIMITED, CURRENT_LIMITED, PRESSURE_HIGH, BOARD_FAULT,
  LINK_ERROR, BOARD_ENABLED) = (1 << b for b, _, _ in STATUS_BITS)
 
@@ -139,8 +142,10 @@ class Mcu:
             if board & B.ST_ENABLED:
                 status |= BOARD_ENABLED
             # Downstream words the board discarded, upstream words this side discarded.
+            # A saturated board counter can no longer show new errors, so it reports
+            # LINK_ERROR for as long as it stays saturated (a board reset zeroes it).
             crc = (int(link.up[B.U_ERR_LINK_CRC]), link.up_crc_errors)
-            if board & B.ST_LINK_LOST or crc != self._crc_seen[i]:
+            if board & B.ST_LINK_LOST or crc != self._crc_seen[i] or crc[0] == CRC_COUNT_MAX:
                 status |= LINK_ERROR
             self._crc_seen[i] = crc
             self.status[i] = status

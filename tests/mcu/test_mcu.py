@@ -341,6 +341,21 @@ def test_corrupted_downstream_words_raise_link_error(cfg):
     assert not rig.mcu.status[0] & LINK_ERROR
 
 
+def test_saturated_downstream_crc_counter_keeps_link_error(cfg):
+    """The board's err_link_crc saturates at 0xFFFF instead of wrapping; from then on new
+    errors no longer change it, so the MCU must keep LINK_ERROR up rather than read the
+    unchanged count as a clean link."""
+    rig = Rig(cfg, [("force", 300.0)])
+    rig.run(0.01)
+    board = rig.stacks[0].board
+    board.state[B.F_ERR_LINK_CRC] = 0xFFFF - 2
+    rig.stacks[0].link_fault("down", corrupt_every=3)
+    flags: list[int] = []
+    rig.run(0.02, lambda r: flags.append(r.mcu.status[0]))
+    assert rig.links[0].read("err_link_crc") == 0xFFFF
+    assert all(s & LINK_ERROR for s in flags[-50:])
+
+
 def test_corrupted_upstream_words_raise_link_error(cfg):
     rig = Rig(cfg, [("force", 300.0)])
     rig.run(0.01)
