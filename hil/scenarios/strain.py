@@ -13,8 +13,8 @@
 Both run on the configuration they are given (``eha-hil run`` uses ``hydra_thesis``) with
 the load and the feedback set here, and the configuration's rod-seal friction switched on
 (its magnitude is calibrated in the hydra_thesis preset, whose comment says how). The PC
-keeps the MCU's command "off" for :data:`STARTUP_OFF_S` after enable, so that the
-controllers start on valid sensor samples (see :data:`STARTUP_OFF_S`).
+keeps the MCU's command "off" for :data:`STARTUP_OFF_S` after enable, then starts the
+experiment.
 """
 
 from __future__ import annotations
@@ -31,10 +31,10 @@ from plant import layout as L
 from plant.config import Config
 
 #: The PC sends "off" for this long after enable (the MCU then holds its controller in
-#: reset), then the experiment's command. Reason: ``ActuatorController.feedback_force``
-#: starts the Eq. 4.4 high-pass on the very first sample, which arrives before the AD7195
-#: has converted (code 0 -> -3000 N); the 3000 N step then leaks out of the high-pass with
-#: its 8 s time constant. Starting on a valid sample avoids it (reported as an MCU issue).
+#: reset), then the experiment's command, as an operator enables the actuator and then
+#: starts. The MCU's Eq. 4.4 high-pass waits for the AD7195's first conversion (before it
+#: the register reads code 0, i.e. -3000 N), so this is procedure, not a workaround:
+#: with 0 s the F7/F8 figures move by less than 0.15 N.
 STARTUP_OFF_S = 0.1
 
 # --- F7: the hand ---------------------------------------------------------------------------
