@@ -584,3 +584,19 @@ def test_pressure_feedback_has_no_seal_term(cfg):
     for _ in range(500):
         ctrl.step(m, F32(100.0))
     assert float(ctrl.seal) == 0.0
+
+
+def test_complementary_filter_starts_on_the_first_strain_conversion(cfg):
+    """Before the AD7195's first conversion its register reads code 0 (-3000 N); the Eq. 4.4
+    high-pass must not start on that, or the 3000 N step leaks out for seconds."""
+    ctrl = ActuatorController(cfg.with_overrides({"mcu.force_feedback": "complementary"}))
+    m = _meas(cfg, f_pres=100.0, f_strain=-3000.0)
+    m.strain_samples = 0
+    for _ in range(20):
+        assert ctrl.step(m, F32(100.0)) is not None and ctrl.f_fil == F32(100.0)
+    m.f_strain_raw, m.strain_samples = F32(95.0), 1
+    ctrl.step(m, F32(100.0))
+    assert ctrl.f_fil == F32(100.0)  # starts at rest on the valid sample
+    for _ in range(1000):
+        ctrl.step(m, F32(100.0))
+    assert abs(float(ctrl.f_fil) - 100.0) < 0.1  # the constant gap decays, no -3000 N leak
