@@ -371,6 +371,10 @@ def control_tick(c, st, down, up, raw):
         else:
             _count(st, F_ERR_STRAIN)
             extra |= ST_STRAIN_ERROR
+    else:
+        # No conversion this tick (4.8 kHz against 20 kHz): the bit keeps saying how the
+        # latest read went, rather than flicker off between conversions.
+        extra |= st[F_STATUS_EXTRA] & ST_STRAIN_ERROR
     st[F_STATUS_EXTRA] = extra
 
     # --- upstream memory ------------------------------------------------------------------

@@ -80,7 +80,7 @@ STATUS_BITS = (
     (3, "LINK_LOST", "latched: no valid downstream word for watchdog_s"),
     (4, "ENABLE_REFUSED", "ENABLE requested while a fault is present"),
     (5, "ENCODER_ERROR", "the latest SSI or BiSS read failed"),
-    (6, "STRAIN_ERROR", "the latest AD7195 read failed"),
+    (6, "STRAIN_ERROR", "the latest AD7195 read failed (held until the next read)"),
     (7, "LINK_OK", "a valid downstream word arrived within the watchdog time"),
 )
 ST_ENABLED, ST_FAULT, ST_OVER_CURRENT, ST_LINK_LOST, ST_ENABLE_REFUSED, ST_ENCODER_ERROR, \

@@ -37,12 +37,14 @@ STATUS_BITS = (
     (5, "BOARD_FAULT", "the driver board reports FAULT"),
     (6, "LINK_ERROR", "the driver board lost the link, or upstream words failed CRC"),
     (7, "BOARD_ENABLED", "the driver board reports ENABLED"),
+    (8, "ENCODER_ERROR", "the driver board's latest SSI or BiSS read failed (value held)"),
+    (9, "STRAIN_ERROR", "the driver board's latest AD7195 read failed (value held)"),
 )
 #: The board's 16-bit error counters saturate here (they do not wrap).
 CRC_COUNT_MAX = 0xFFFF
 
 (CMD_TIMEOUT, SAFE_OFF, FORCE_LIMITED, CURRENT_LIMITED, PRESSURE_HIGH, BOARD_FAULT,
- LINK_ERROR, BOARD_ENABLED) = (1 << b for b, _, _ in STATUS_BITS)
+ LINK_ERROR, BOARD_ENABLED, ENCODER_ERROR, STRAIN_ERROR) = (1 << b for b, _, _ in STATUS_BITS)
 
 MODE_OFF, MODE_FORCE, MODE_POSITION = "off", "force", "position"
 
@@ -141,6 +143,10 @@ class Mcu:
                 status |= BOARD_FAULT
             if board & B.ST_ENABLED:
                 status |= BOARD_ENABLED
+            if board & B.ST_ENCODER_ERROR:
+                status |= ENCODER_ERROR
+            if board & B.ST_STRAIN_ERROR:
+                status |= STRAIN_ERROR
             # Downstream words the board discarded, upstream words this side discarded.
             # A saturated board counter can no longer show new errors, so it reports
             # LINK_ERROR for as long as it stays saturated (a board reset zeroes it).

@@ -14,9 +14,11 @@ from firmware_model.mcu.mcu import (
     BOARD_ENABLED,
     BOARD_FAULT,
     CMD_TIMEOUT,
+    ENCODER_ERROR,
     FORCE_LIMITED,
     LINK_ERROR,
     SAFE_OFF,
+    STRAIN_ERROR,
 )
 from hil.fieldbus import wire
 from hil.fieldbus.faults import FaultError, load_faults, parse_faults
@@ -420,6 +422,10 @@ def test_sensor_dead_strain_rejected(cfg, bench):
     rows, _ = _bench_run(cfg, bench, _sensor("dead", "f_strain"))
     # the AD7195 reports every conversion clamped (ERR): the board keeps its last code
     assert len({r["f_strain"] for r in rows[33:61]}) <= 2
+    # ... and says so; the MCU passes it to the PC in its status word, for the window only
+    assert all(r["status"] & STRAIN_ERROR for r in rows[33:59])
+    assert not any(r["status"] & STRAIN_ERROR for r in rows[:29] + rows[63:])
+    assert not any(r["status"] & ENCODER_ERROR for r in rows)
 
 
 @pytest.mark.parametrize("signal,counter", [("theta_m", "err_ssi"), ("x_piston", "err_biss")])
@@ -431,3 +437,5 @@ def test_sensor_dead_encoder_gives_no_valid_frame(cfg, bench, signal, counter):
     assert rows[:30] == clean[:30]
     assert stacks[0].board.up_value(counter) == 30 * CYCLE
     assert _bench_run(cfg, bench, None)[1][0].board.up_value(counter) == 0
+    assert all(r["status"] & ENCODER_ERROR for r in rows[33:59])
+    assert not any(r["status"] & (ENCODER_ERROR | STRAIN_ERROR) for r in rows[:29] + rows[63:])

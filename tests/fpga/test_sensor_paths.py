@@ -277,7 +277,13 @@ def test_ad7195_failed_read_rejected_and_counted(cfg, mask):
             assert (raw[B.R_STRAIN_NEW], raw[B.R_STRAIN_OK], raw[B.R_STRAIN]) == (1, 0, good)
             assert board.up[B.U_STATUS] & B.ST_STRAIN_ERROR
             assert board.up[B.U_STRAIN_LO] == good & 0xFFFF
+        elif t_bad < t < t_after:
+            # between conversions the bit still says how the latest read went
+            assert board.up[B.U_STATUS] & B.ST_STRAIN_ERROR
         elif t == t_after:
             assert (raw[B.R_STRAIN_NEW], raw[B.R_STRAIN_OK]) == (1, 1)
             assert raw[B.R_STRAIN] == strain_code(200.0, k)
+            assert not board.up[B.U_STATUS] & B.ST_STRAIN_ERROR
+        elif t_good <= t < t_bad:
+            assert not board.up[B.U_STATUS] & B.ST_STRAIN_ERROR
     assert board.up[B.U_ERR_STRAIN] == 1 == masters.strain_errors
