@@ -61,6 +61,15 @@ def _check_plot_path(path: str | None) -> None:
         raise UsageError(f"--plot {path}: directory {parent} does not exist")
 
 
+def _plot_dir(path: str) -> Path:
+    """The --plot-dir directory, created if its parent exists."""
+    out_dir = Path(path)
+    if not out_dir.parent.is_dir():
+        raise UsageError(f"--plot-dir {out_dir}: parent directory does not exist")
+    out_dir.mkdir(exist_ok=True)
+    return out_dir
+
+
 def _emit(args: argparse.Namespace, text: str, data: dict) -> None:
     if args.json:
         print(json.dumps(data, indent=2, default=_json_default))
@@ -321,10 +330,7 @@ def cmd_run_thesis(args: argparse.Namespace) -> int:
     names = [n for n in scenarios.THESIS if n in scenarios.names()]
     if args.plot:
         raise UsageError("--plot: 'thesis' writes one plot per scenario; use --plot-dir DIR")
-    out_dir = Path(args.plot_dir or "thesis-plots")
-    if not out_dir.parent.is_dir():
-        raise UsageError(f"--plot-dir {out_dir}: parent directory does not exist")
-    out_dir.mkdir(exist_ok=True)
+    out_dir = _plot_dir(args.plot_dir or "thesis-plots")
     cfg = _config(args)
     rows = []
     results = []
@@ -373,11 +379,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     if args.plot_dir is not None:
         if args.plot:
             raise UsageError("--plot and --plot-dir: give one of them")
-        out_dir = Path(args.plot_dir)
-        if not out_dir.parent.is_dir():
-            raise UsageError(f"--plot-dir {out_dir}: parent directory does not exist")
-        out_dir.mkdir(exist_ok=True)
-        args.plot = str(out_dir / f"{scenario.name}.png")
+        args.plot = str(_plot_dir(args.plot_dir) / f"{scenario.name}.png")
     _check_plot_path(args.plot)
     cfg = _config(args)
     res = scenario.run(cfg, _progress(scenario.name, not args.json))
