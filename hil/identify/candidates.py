@@ -73,6 +73,10 @@ def _needs_strain(exp: Experiment) -> str | None:
     return None if "f_strain" in exp.channels else "no f_strain column"
 
 
+def _needs_strain_and_temperature(exp: Experiment) -> str | None:
+    return _needs_strain(exp) or _needs_temperature(exp)
+
+
 def _needs_moving_piston(exp: Experiment) -> str | None:
     return "piston fixed: the seal never slides" if exp.load == "fixed" else None
 
@@ -104,11 +108,13 @@ def library(exp: Experiment) -> list[EffectDef]:
                   (0.02,), "d_s, d_p, d_c scale with mu(T) = exp(-c (T - T_ref))",
                   _needs_temperature),
         EffectDef("strain_thermal_drift", "strain_thermal_drift",
-                  ("drift_lin_n", "drift_quad_n"), (2.0, 2.0),
-                  "slow drift of the strain reading (linear + quadratic in time)",
-                  _needs_strain),
+                  ("drift_n_per_c",), (2.5,),
+                  "drift of the strain reading with the logged temperature, "
+                  "c (T - T_ref) N/degC (thesis 4.4: 2.5 N/degC after compensation)",
+                  _needs_strain_and_temperature),
         EffectDef("input_delay", "input_delay", ("delay_s",), (100e-6,),
-                  "delay between the logged and the applied current"),
+                  "causal delay between the logged and the applied current (beyond the "
+                  "baseline's sub-sample timing skew, which it replaces when added)"),
     ]
     sat = [c for c in SAT_CHANNELS if c in exp.plateaus and c in exp.channels]
     if not sat:
@@ -195,6 +201,15 @@ def test_candidates(
     jac = np.column_stack(j_est) if j_est else np.zeros((r_est.size, 0))
     jac_v = np.column_stack(j_val) if j_val else np.zeros((r_val.size, 0))
     jac_pinv = np.linalg.pinv(jac)
+    # A causal delay is tested against the residual with the sub-sample skew left in: the
+    # skew already took what half a sample of timing can explain, the delay is what is left.
+    if "skew_s" in jac_names:
+        keep_cols = [i for i, p in enumerate(jac_names) if p != "skew_s"]
+        jac_ns, jac_v_ns = jac[:, keep_cols], jac_v[:, keep_cols]
+        names_ns = [jac_names[i] for i in keep_cols]
+        pinv_ns = np.linalg.pinv(jac_ns)
+    else:
+        jac_ns, jac_v_ns, names_ns, pinv_ns = jac, jac_v, jac_names, jac_pinv
     results: list[CandidateTest] = []
     for d in defs:
         t = CandidateTest(d.label, d.name, list(d.params), "tested")
@@ -212,17 +227,22 @@ def test_candidates(
         x = np.column_stack(cols_est)
         xv = np.column_stack(cols_val)
         norms = np.linalg.norm(x, axis=0)
-        proj = jac_pinv @ x
-        xp = x - jac @ proj
-        xvp = xv - jac_v @ proj
+        if d.name == "input_delay":
+            jac_d, jac_vd, names_d, pinv_d = jac_ns, jac_v_ns, names_ns, pinv_ns
+        else:
+            jac_d, jac_vd, names_d, pinv_d = jac, jac_v, jac_names, jac_pinv
+        proj = pinv_d @ x
+        xp = x - jac_d @ proj
+        xvp = xv - jac_vd @ proj
         kept_norm = np.linalg.norm(xp, axis=0)
         keep = []
         for j, p in enumerate(d.params):
             if norms[j] == 0.0:
                 continue
             if kept_norm[j] ** 2 < MIN_RETAINED * norms[j] ** 2:
-                corr = np.abs(jac.T @ x[:, j]) / (np.linalg.norm(jac, axis=0) * norms[j] + 1e-300)
-                who = jac_names[int(np.argmax(corr))] if jac_names else "the model"
+                corr = (np.abs(jac_d.T @ x[:, j])
+                        / (np.linalg.norm(jac_d, axis=0) * norms[j] + 1e-300))
+                who = names_d[int(np.argmax(corr))] if names_d else "the model"
                 t.reason = f"{p} collinear with declared {who} (|corr| {corr.max():.3f})"
                 continue
             keep.append(j)

@@ -77,6 +77,9 @@ class Experiment:
     val: np.ndarray  # boolean mask, validation samples
     plateaus: dict[str, float] = field(default_factory=dict)  # channel -> clip level
     notes: list[str] = field(default_factory=list)
+    #: the input between samples: zoh | foh | bl (:mod:`hil.identify.intersample`)
+    intersample: str = "zoh"
+    intersample_reason: str = ""
 
     @property
     def n(self) -> int:
@@ -109,13 +112,30 @@ def _smooth(y: np.ndarray, n: int) -> np.ndarray:
 
 
 def quantum(y: np.ndarray) -> float:
-    """The smallest step between distinct values (a converter's LSB), or 0 if continuous."""
-    u = np.unique(y)
-    if u.size < 3:
+    """The converter's step (LSB) if every sample of ``y`` lies on one grid, else 0.
+
+    The grid is found from the sample-to-sample changes, not from the sorted distinct values
+    (a long stroke at 5 nm visits far more codes than the record has samples): the smallest
+    change is the LSB or a small multiple of it when the signal never moves by one count
+    between samples, so ``q = d_min / m`` for the first ``m`` in 1..8 that puts all samples
+    (relative to the first) on integer multiples of ``q``.
+    """
+    y = np.asarray(y, dtype=float)
+    d = np.abs(np.diff(y))
+    scale = float(np.max(np.abs(y))) if y.size else 0.0
+    d = d[d > 1e-12 * max(scale, 1e-300)]
+    if d.size < 3:
         return 0.0
-    d = np.diff(u)
-    step = float(np.median(d[: min(d.size, 2000)]))
-    return step if np.count_nonzero(d < 0.5 * step) < 0.05 * d.size else 0.0
+    d_min = float(np.min(d))
+    rel = y - y[0]
+    for m in range(1, 9):
+        q = d_min / m
+        r = rel / q
+        # a float grid k*q carries rounding of about eps*|y|/q counts
+        tol = 1e-3 + 1e-12 * scale / q
+        if np.mean(np.abs(r - np.round(r)) < tol) >= 0.999:
+            return q
+    return 0.0
 
 
 def _plateau(y: np.ndarray) -> float | None:
@@ -131,8 +151,9 @@ def _plateau(y: np.ndarray) -> float | None:
     return None
 
 
-def prepare(data: MeasuredData, cfg: Config) -> Experiment:
-    """Build the :class:`Experiment` for ``data`` with constants and start values of ``cfg``."""
+def prepare(data: MeasuredData, cfg: Config, intersample: str = "zoh") -> Experiment:
+    """Build the :class:`Experiment` for ``data`` with constants and start values of ``cfg``;
+    the input is taken to behave between samples as ``intersample`` says."""
     h = cfg.section("hydraulics")
     eff = cfg.section("effects")
     load = LOAD_CASES[data.load]
@@ -147,7 +168,7 @@ def prepare(data: MeasuredData, cfg: Config) -> Experiment:
     gain = motor_torque_constant(cfg) * const.kc / const.kp  # N/A, piston-equivalent
     start = {
         "gain_n_per_a": gain, "ds": h["ds_ns_per_m"], "dp": h["dp_ns_per_m"],
-        "dc": h["dc_ns_per_m"], "ks": h["ks_n_per_m"],
+        "dc": h["dc_ns_per_m"], "ks": h["ks_n_per_m"], "jp": h["jp_kg"], "jc": h["jc_kg"],
         "k_rod": cfg.get("load.conrod_stiffness_n_per_m"),
         "c_rod": cfg.get("load.conrod_damping_ns_per_m"), "strain_offset_n": 0.0,
     }
@@ -216,7 +237,8 @@ def prepare(data: MeasuredData, cfg: Config) -> Experiment:
         temperature = _smooth(cols["temp_c"], max(1, int(0.2 * fs)))
         t_ref = float(np.mean(temperature[est]))
     return Experiment(data, load, const, start, channels, measured, sigma0, precharge,
-                      angle, position, temperature, t_ref, w, est, val, plateaus, notes)
+                      angle, position, temperature, t_ref, w, est, val, plateaus, notes,
+                      intersample)
 
 
 class _WindowDiff:

@@ -38,10 +38,34 @@ BASELINE_FREE: dict[str, tuple[str, ...]] = {
     "free": ("gain_n_per_a", "ds", "dp", "dc", "ks"),
     "conrod": ("gain_n_per_a", "ds", "dp", "dc", "ks", "k_rod", "c_rod"),
 }
-LOG_PARAMS = frozenset({"gain_n_per_a", "ds", "dp", "dc", "ks", "k_rod", "c_rod"})
+LOG_PARAMS = frozenset({"gain_n_per_a", "ds", "dp", "dc", "ks", "jp", "jc", "k_rod", "c_rod"})
+#: Parameters with a physical sign and size whose confidence interval must not swallow
+#: their value (the pulsation's sine/cosine parts, offsets and the skew may sit near zero).
+CREDIBLE = LOG_PARAMS | {"pc_force_n", "sf_coulomb_n", "sf_static_n", "visc_coeff_per_c",
+                         "drift_n_per_c", "delay_s"}
+#: Log-parameters may move by at most this factor from their start: beyond it a fit has run
+#: away (a diverging k_s), and the parameter counts as at its bound.
+LOG_RANGE = 1e3
 #: Relative standard error above which a baseline parameter is held at the preset value.
 MAX_REL_SE = 0.5
 Z95 = 1.959963984540054
+
+
+#: The timing skew is a sub-sample alignment: |skew| <= SKEW_LIMIT x the sample period.
+SKEW_LIMIT = 0.5
+
+
+def bounds_of(name: str, dt: float, skew_limit: float = SKEW_LIMIT) -> tuple[float, float]:
+    """Bounds of a parameter in its own units (the log-parameters' are relative to the start):
+    the skew is a sub-sample alignment (|skew| <= T/2), a delay is causal, a clip fraction
+    lies in 0..1."""
+    if name == "skew_s":
+        return -skew_limit * dt, skew_limit * dt
+    if name == "delay_s":
+        return 0.0, np.inf
+    if name.startswith("sat_"):
+        return 0.0, 1.0
+    return -np.inf, np.inf
 
 
 @dataclass
@@ -77,6 +101,7 @@ class OutputErrorFit:
         self.exp: Experiment = model.exp
         self.scales = scales or {}
         self.n_sims = 0
+        self.skew_limit = SKEW_LIMIT
 
     # --- parameter transforms ------------------------------------------------------------
     def _to_theta(self, x: np.ndarray, free: list[str], base: np.ndarray) -> np.ndarray:
@@ -146,6 +171,36 @@ class OutputErrorFit:
             mask &= np.isfinite(self.exp.measured[c])
         return mask
 
+    def _x_bounds(self, free: list[str]) -> tuple[np.ndarray, np.ndarray]:
+        lo, hi = [], []
+        for name in free:
+            if name in LOG_PARAMS:
+                lo.append(-np.log(LOG_RANGE))
+                hi.append(np.log(LOG_RANGE))
+            else:
+                b_lo, b_hi = bounds_of(name, self.exp.dt, self.skew_limit)
+                sc = self.scales.get(name, 1.0)
+                lo.append(b_lo / sc)
+                hi.append(b_hi / sc)
+        return np.array(lo), np.array(hi)
+
+    def at_bound(self, result: FitResult, name: str) -> bool:
+        """True when ``name`` ended on (or within 0.1 % of the range near) its bound."""
+        i = result.free.index(name)
+        lo, hi = self._x_bounds(result.free)
+        x = self._to_x(result.theta, result.free)[i]
+        width = hi[i] - lo[i] if np.isfinite(hi[i] - lo[i]) else max(abs(x), 1.0)
+        tol = 1e-3 * width
+        # a causal delay or a clip fraction resting at 0 is "absent", not "at a bound"
+        rest_at_zero = name == "delay_s" or name.startswith("sat_")
+        return bool(x - lo[i] < tol and not (rest_at_zero and lo[i] == 0.0)) or bool(
+            hi[i] - x < tol)
+
+    def cost(self, theta: np.ndarray, sigma: dict[str, float]) -> float:
+        """Weighted sum of squares on the estimation samples."""
+        r = self._stack(theta, sigma, self.fit_mask())
+        return float(r @ r)
+
     def fit(self, theta0: np.ndarray, free: list[str], sigma: dict[str, float] | None = None,
             passes: int = 2, max_nfev: int = 40) -> FitResult:
         """Fit the parameters ``free`` starting from ``theta0``; others stay as given."""
@@ -154,13 +209,17 @@ class OutputErrorFit:
         sigma = dict(sigma or self.exp.sigma0)
         theta = theta0.copy()
         x = self._to_x(theta, free)
+        lo, hi = self._x_bounds(free)
+        # least_squares wants a strictly feasible start
+        margin = 1e-6 * np.where(np.isfinite(hi - lo), hi - lo, 1.0)
+        x = np.clip(x, lo + margin, hi - margin)
         used = sigma
         for k in range(passes):
             if k > 0 and all(abs(sigma[c] / used[c] - 1.0) < 0.2 for c in sigma):
                 break  # weights settled: a second pass would not move the optimum
             fun, jac = self._problem(free, theta0, sigma, mask)
             sol = least_squares(fun, x, jac=jac, method="trf", x_scale=1.0, ftol=1e-8,
-                                xtol=1e-8, gtol=1e-8, max_nfev=max_nfev)
+                                xtol=1e-8, gtol=1e-8, max_nfev=max_nfev, bounds=(lo, hi))
             x = sol.x
             used = sigma
             theta = self._to_theta(x, free, theta0)
@@ -175,6 +234,28 @@ class OutputErrorFit:
         se, cov = self.hac_se(jac, e, mask.sum(), theta, free)
         return FitResult(theta, list(free), se, sigma, out, states, n_sims=self.n_sims, cov=cov,
                          jac=jac, weights=dict(used))
+
+    def offenders(self, result: FitResult, names: list[str] | None = None
+                  ) -> list[tuple[str, str, float]]:
+        """Parameters of ``result`` that are not credible, worst first: (name, why, badness).
+
+        A parameter is not credible when it ran to a bound, or (for parameters with a
+        physical size, :data:`CREDIBLE`) when its 95 % confidence interval is wider than its
+        value, i.e. the data cannot tell it from a value twice as large or from zero.
+        """
+        out = []
+        for n in names if names is not None else result.free:
+            if n not in result.free:
+                continue
+            v = result.value(n)
+            if self.at_bound(result, n):
+                out.append((n, f"ran to its bound ({v:.4g})", np.inf))
+                continue
+            width = 2.0 * Z95 * result.se.get(n, 0.0)
+            if n in CREDIBLE and not width <= abs(v):
+                out.append((n, f"95 % confidence interval {width:.3g} wider than the value "
+                               f"{v:.4g}", width / max(abs(v), 1e-300)))
+        return sorted(out, key=lambda o: -o[2])
 
     def hac_se(self, jac: np.ndarray, e: np.ndarray, n_t: int, theta: np.ndarray,
                free: list[str]) -> tuple[dict[str, float], np.ndarray]:
@@ -199,39 +280,67 @@ class OutputErrorFit:
         return se, cov
 
 
+def guarded_fit(fitter: OutputErrorFit, theta0: np.ndarray, free: list[str],
+                credible: np.ndarray, sigma: dict[str, float] | None = None,
+                passes: int = 2, guard: list[str] | None = None,
+                ) -> tuple[FitResult, dict[str, str]]:
+    """Fit, then hold every non-credible parameter (of ``guard``, default all free) at its
+    last credible value (from ``credible``), worst first, refitting after each hold.
+
+    Returns the fit and ``{parameter: why it was held}``.
+    """
+    free = list(free)
+    result = fitter.fit(theta0, free, sigma=sigma, passes=passes)
+    held: dict[str, str] = {}
+    for _ in range(len(free)):
+        bad = fitter.offenders(result, guard)
+        if not bad:
+            break
+        name, why, _ = bad[0]
+        held[name] = f"{why}; held at {credible[IDX[name]]:.4g}"
+        free.remove(name)
+        theta = result.theta.copy()
+        theta[IDX[name]] = credible[IDX[name]]
+        if not free:
+            break
+        result = fitter.fit(theta, free, sigma=result.sigma, passes=1)
+    return result, held
+
+
+def baseline_free(exp: Experiment) -> list[str]:
+    """The baseline's fitted parameters for this record: the linear model of the load kind,
+    J_p where the motor encoder pins the rotor's inertia, J_c where the piston encoder pins
+    the piston's, the strain offset, and the input/output timing skew (a nuisance)."""
+    free = list(BASELINE_FREE[exp.load])
+    if "omega_m" in exp.channels:
+        free.append("jp")
+    if exp.load != "fixed" and "v_piston" in exp.channels:
+        free.append("jc")
+    if "f_strain" in exp.channels:
+        free.append("strain_offset_n")
+    free.append("skew_s")
+    return free
+
+
 def fit_baseline(model: FastModel, theta0: np.ndarray | None = None,
                  extra_free: tuple[str, ...] = (), scales: dict[str, float] | None = None
                  ) -> FitResult:
     """Fit the linear model of thesis ch. 2 (plus ``extra_free`` effect parameters).
 
-    Baseline parameters that come out with a relative standard error above
-    :data:`MAX_REL_SE` are held at their preset values and the fit is repeated.
+    Parameters that are not credible (a bound reached, or a confidence interval wider than
+    the value) are held at the preset's values, one at a time, and the fit is repeated.
     """
     exp = model.exp
     theta = model.start_vector() if theta0 is None else theta0.copy()
-    free = list(BASELINE_FREE[exp.load])
-    if "f_strain" in exp.channels:
-        free.append("strain_offset_n")
+    free = baseline_free(exp)
     free += [p for p in extra_free if p not in free]
-    scales = {"strain_offset_n": 1.0, **(scales or {})}
+    scales = {"strain_offset_n": 1.0, "skew_s": exp.dt, **(scales or {})}
     fitter = OutputErrorFit(model, scales)
-    held: dict[str, str] = {}
-    result = fitter.fit(theta, free)
-    for _ in range(2):
-        weak = [n for n in free if n in LOG_PARAMS
-                and result.se[n] > MAX_REL_SE * abs(result.value(n))]
-        if not weak:
-            break
-        start = model.start_vector()
-        for n in weak:
-            held[n] = (f"not identifiable from this record (relative standard error "
-                       f"{result.se[n] / abs(result.value(n)):.0%}); held at the preset value")
-            free.remove(n)
-            result.theta[IDX[n]] = start[IDX[n]]
-        result = fitter.fit(result.theta, free, sigma=result.sigma, passes=1)
-    result.held = held
+    result, held = guarded_fit(fitter, theta, free, model.start_vector())
+    result.held = {n: f"not identifiable from this record: {why}" for n, why in held.items()}
     result.n_sims = fitter.n_sims
     return result
 
 
-__all__ = ["BASELINE_FREE", "FitResult", "OutputErrorFit", "fit_baseline"]
+__all__ = ["BASELINE_FREE", "CREDIBLE", "FitResult", "OutputErrorFit", "baseline_free",
+           "bounds_of", "fit_baseline", "guarded_fit"]

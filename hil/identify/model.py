@@ -34,9 +34,11 @@ from numba import njit
 from scipy.linalg import expm
 
 from hil.identify.experiment import Experiment
+from hil.identify.intersample import substep_average
 
 N_ORDERS = 8
-BASE_NAMES = ("gain_n_per_a", "ds", "dp", "dc", "ks", "k_rod", "c_rod", "strain_offset_n")
+BASE_NAMES = ("gain_n_per_a", "ds", "dp", "dc", "ks", "jp", "jc", "k_rod", "c_rod",
+              "strain_offset_n", "skew_s")
 _PULS = tuple(
     f"puls{n}_{part}" for n in range(1, N_ORDERS + 1)
     for part in ("flow_s", "flow_c", "torque_s", "torque_c")
@@ -44,7 +46,7 @@ _PULS = tuple(
 SAT_CHANNELS = ("p_pump_a", "p_pump_b", "p_cyl_a", "p_cyl_b", "f_strain")
 EFFECT_NAMES = _PULS + (
     "pc_force_n", "sf_coulomb_n", "sf_static_n", "ks_k1", "ks_k2", "visc_coeff_per_c",
-    "drift_lin_n", "drift_quad_n", "delay_s",
+    "drift_n_per_c", "delay_s",
 ) + tuple(f"sat_{c}" for c in SAT_CHANNELS)
 PARAM_NAMES = BASE_NAMES + EFFECT_NAMES
 IDX = {name: i for i, name in enumerate(PARAM_NAMES)}
@@ -94,15 +96,14 @@ def discretise(a: np.ndarray, b: np.ndarray, h: float) -> tuple[np.ndarray, np.n
 
 def continuous(theta: np.ndarray, exp: Experiment) -> tuple[np.ndarray, np.ndarray]:
     """Continuous-time (A, B) of the linear model for the parameter vector ``theta``."""
-    c = exp.const
-    ds, dp, dc, ks = (theta[IDX[k]] for k in ("ds", "dp", "dc", "ks"))
+    ds, dp, dc, ks, jp, jc = (theta[IDX[k]] for k in ("ds", "dp", "dc", "ks", "jp", "jc"))
     a = np.zeros((5, 5))
     b = np.zeros((5, 4))
     a[0, 1] = 1.0
-    a[1, 1] = -dp / c.jp
-    a[1, 2] = -1.0 / c.jp
-    b[1, 0] = 1.0 / c.jp
-    b[1, 1] = 1.0 / c.jp
+    a[1, 1] = -dp / jp
+    a[1, 2] = -1.0 / jp
+    b[1, 0] = 1.0 / jp
+    b[1, 1] = 1.0 / jp
     a[2, 1] = ks
     a[2, 2] = -ks / ds
     b[2, 2] = 1.0
@@ -111,10 +112,10 @@ def continuous(theta: np.ndarray, exp: Experiment) -> tuple[np.ndarray, np.ndarr
         c_rod = theta[IDX["c_rod"]] if exp.load == "conrod" else 0.0
         a[2, 4] = -ks
         a[3, 4] = 1.0
-        a[4, 2] = 1.0 / c.jc
-        a[4, 3] = -k_rod / c.jc
-        a[4, 4] = -(dc + c_rod) / c.jc
-        b[4, 3] = 1.0 / c.jc
+        a[4, 2] = 1.0 / jc
+        a[4, 3] = -k_rod / jc
+        a[4, 4] = -(dc + c_rod) / jc
+        b[4, 3] = 1.0 / jc
     return a, b
 
 
@@ -274,12 +275,8 @@ class FastModel:
         if n_sub is None:
             n_sub = max(1, int(math.ceil(exp.dt / 50e-6 - 1e-9)))
         self.n_sub = n_sub
-        iq = exp.iq
-        self._iq_cum = np.concatenate([[0.0], np.cumsum(iq)]) * exp.dt  # A s at sample edges
-        self._t_edges = np.arange(iq.size + 1) * exp.dt
-        frac = (np.arange(n_sub) + 0.5) / n_sub
-        self._t_sub = (np.arange(iq.size)[:, None] + frac[None, :]).ravel() * exp.dt
-        self._iq_sub0 = np.repeat(iq, n_sub)
+        self._iq_sub0 = np.repeat(exp.iq, n_sub)
+        self._input_cache: dict[tuple[str, float], np.ndarray] = {}
         self._empty = np.zeros(1)
 
     def start_vector(self) -> np.ndarray:
@@ -290,19 +287,20 @@ class FastModel:
         return theta
 
     def applied_current(self, delay_s: float) -> np.ndarray:
-        """The logged current delayed by ``delay_s``, averaged over each sub-step, A."""
-        if delay_s == 0.0:
+        """The logged current as applied ``delay_s`` later (negative: a timing skew the other
+        way), averaged over each sub-step, interpolated between samples as the experiment's
+        intersample behaviour says (:mod:`hil.identify.intersample`), A."""
+        mode = self.exp.intersample
+        if delay_s == 0.0 and mode == "zoh":
             return self._iq_sub0
-        h = self.exp.dt / self.n_sub
-        a = self._t_sub - 0.5 * h - delay_s
-        b = a + h
-        ia = np.interp(a, self._t_edges, self._iq_cum, left=0.0)
-        ib = np.interp(b, self._t_edges, self._iq_cum, left=0.0)
-        # before t = 0 the first logged value is assumed to have been applied
-        iq0 = self.exp.iq[0]
-        ia = np.where(a < 0, a * iq0, ia)
-        ib = np.where(b < 0, b * iq0, ib)
-        return (ib - ia) / h
+        key = (mode, float(delay_s))
+        hit = self._input_cache.get(key)
+        if hit is None:
+            if len(self._input_cache) > 64:  # a fit visits many delays; keep memory bounded
+                self._input_cache.clear()
+            hit = substep_average(self.exp.iq, self.exp.dt, self.n_sub, delay_s, mode)
+            self._input_cache[key] = hit
+        return hit
 
     def states(self, theta: np.ndarray) -> np.ndarray:
         """State trajectory (n x 5) for the parameter vector ``theta``."""
@@ -311,7 +309,7 @@ class FastModel:
         h = exp.dt / self.n_sub
         ad, bd = discretise(a, b, h)
         gain = theta[IDX["gain_n_per_a"]]
-        tau_p = gain * self.applied_current(theta[IDX["delay_s"]])
+        tau_p = gain * self.applied_current(theta[IDX["delay_s"]] + theta[IDX["skew_s"]])
         u0 = np.array([tau_p[0], 0.0, 0.0, 0.0])
         z0 = _initial_state(a, b, u0, exp.load)
         eff = np.zeros(_N_EFF)
@@ -369,9 +367,12 @@ class FastModel:
             elif ch == "p_cyl_b":
                 y = pre + np.maximum(-f_cyl, 0.0) / c.kc
             elif ch == "f_strain":
-                tn = (exp.data.t - exp.data.t[0]) / (exp.data.t[-1] - exp.data.t[0]) * 2 - 1
-                y = (f_rod + theta[IDX["strain_offset_n"]] + theta[IDX["drift_lin_n"]] * tn
-                     + theta[IDX["drift_quad_n"]] * (tn * tn - 1.0 / 3.0))
+                y = f_rod + theta[IDX["strain_offset_n"]]
+                drift = theta[IDX["drift_n_per_c"]]
+                if drift != 0.0 and exp.temperature is not None:
+                    # the gauge drifts with temperature: against the logged covariate,
+                    # whatever its shape over time
+                    y = y + drift * (exp.temperature - exp.t_ref)
             elif ch == "omega_m":
                 y = exp.window_diff(z[:, 0] * c.rotor_per_m)
             elif ch == "v_piston":

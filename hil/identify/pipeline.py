@@ -14,11 +14,13 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.optimize import minimize_scalar
 
 from hil.identify.candidates import (
     MIN_SHARE,
@@ -28,10 +30,25 @@ from hil.identify.candidates import (
     rank,
     test_candidates,
 )
+from hil.identify.checks import check_fit, check_record
 from hil.identify.csvdata import MeasuredData
-from hil.identify.experiment import Experiment, prepare
-from hil.identify.fit import Z95, FitResult, OutputErrorFit, fit_baseline
+from hil.identify.experiment import Experiment, prepare, quantum
+from hil.identify.fit import (
+    Z95,
+    FitResult,
+    OutputErrorFit,
+    baseline_free,
+    fit_baseline,
+    guarded_fit,
+)
+from hil.identify.intersample import MODES
 from hil.identify.model import IDX, FastModel
+from hil.identify.noise import (
+    InputNoise,
+    estimate_input_noise,
+    noisy_experiment,
+    predicted_residual,
+)
 from hil.identify.residuals import ResidualAnalysis, analyse
 from plant.config import Config
 
@@ -42,9 +59,13 @@ BASELINE_LABELS = {
     "dp": ("d_p", "N/(m/s)", "pump viscous friction"),
     "dc": ("d_c", "N/(m/s)", "piston-side viscous friction"),
     "ks": ("k_s", "N/m", "series elasticity"),
+    "jp": ("J_p", "kg", "rotor + pump inertia seen from the piston"),
+    "jc": ("J_c", "kg", "piston + load mass"),
     "k_rod": ("k_rod", "N/m", "connecting-rod stiffness"),
     "c_rod": ("c_rod", "N/(m/s)", "connecting-rod damping"),
     "strain_offset_n": ("f_0", "N", "strain-gauge offset"),
+    "skew_s": ("skew", "s", "timing skew of the logged input against the outputs (nuisance; "
+               "applied current i(t - skew))"),
 }
 
 
@@ -121,6 +142,9 @@ class IdentifyReport:
     experiment: Experiment | None = None
     outputs_before: dict[str, np.ndarray] = field(default_factory=dict)
     outputs_after: dict[str, np.ndarray] = field(default_factory=dict)
+    intersample: str = "zoh"
+    intersample_reason: str = ""
+    input_noise: InputNoise | None = None
 
     def candidate_table(self) -> list[dict]:
         """One row per candidate: the round it was selected in, else the last round."""
@@ -251,13 +275,11 @@ def describe_effect(d: EffectDef, fit: FitResult, exp: Experiment) -> dict[str, 
                                    ps, "1/degC"),
                 "t_ref_c": ParamEstimate("t_ref_c", exp.t_ref, exp.t_ref, exp.t_ref, "degC")}
     if d.name == "strain_thermal_drift":
-        out = {"drift_n": _pe("drift_n", fit, lambda t: 2.0 * t[g["drift_lin_n"]], ps, "N"),
-               "curvature_n": _pe("curvature_n", fit, lambda t: t[g["drift_quad_n"]], ps, "N")}
+        out = {"n_per_c": _pe("n_per_c", fit, lambda t: t[g["drift_n_per_c"]], ps, "N/degC")}
         if exp.temperature is not None:
             d_t = float(exp.temperature[-1] - exp.temperature[0])
-            if abs(d_t) > 0.5:
-                out["n_per_c_oil"] = _pe("n_per_c_oil", fit,
-                                         lambda t: 2.0 * t[g["drift_lin_n"]] / d_t, ps, "N/degC")
+            out["drift_n"] = _pe("drift_n", fit, lambda t: t[g["drift_n_per_c"]] * d_t, ps,
+                                 "N")
         return out
     if d.name == "input_delay":
         return {"delay_s": _pe("delay_s", fit, lambda t: t[g["delay_s"]], ps, "s")}
@@ -269,27 +291,108 @@ def describe_effect(d: EffectDef, fit: FitResult, exp: Experiment) -> dict[str, 
     return {p: _pe(p, fit, lambda t, p=p: t[g[p]], [p], "") for p in ps}
 
 
+#: Relative cost difference under which two intersample modes fit equally well.
+INTERSAMPLE_TIE = 2e-3
+
+
+def choose_intersample(data: MeasuredData, cfg: Config, given: str | None,
+                       say: Callable[[str], None]) -> tuple[Experiment, np.ndarray | None]:
+    """The experiment with the input's intersample behaviour: as given, else estimated.
+
+    Estimated: a short output-error fit of the baseline with the input band-limited and the
+    timing skew free over a whole sample, then, at that fit, the skew that suits each of
+    ``zoh``, ``foh``, ``bl`` best and the cost it leaves; the lowest cost wins. A current
+    that was applied as a staircase fits ``zoh`` with no skew; a sampled continuous current
+    fits ``zoh`` only with a skew near -T/2 and one of the others better.
+    Returns the experiment and the provisional parameter vector (None when given).
+    """
+    if given is not None:
+        exp = prepare(data, cfg, given)
+        src = data.header.get("intersample")
+        exp.intersample_reason = ("from the '# intersample:' header line" if src == given
+                                  else "as given (--intersample)")
+        return exp, None
+    exp = prepare(data, cfg, "bl")
+    model = FastModel(exp)
+    fitter = OutputErrorFit(model, {"strain_offset_n": 1.0, "skew_s": exp.dt})
+    fitter.skew_limit = 1.0
+    say("intersample: provisional fit (input band-limited, skew free over one sample)")
+    prov = fitter.fit(model.start_vector(), baseline_free(exp), passes=1, max_nfev=12)
+    results: dict[str, tuple[float, float]] = {}
+    for mode in MODES:
+        e_mode = dataclasses.replace(exp, intersample=mode)
+        f_mode = OutputErrorFit(FastModel(e_mode))
+
+        def cost(skew: float, f_mode: OutputErrorFit = f_mode) -> float:
+            th = prov.theta.copy()
+            th[IDX["skew_s"]] = skew
+            return f_mode.cost(th, prov.sigma)
+
+        sol = minimize_scalar(cost, bounds=(-exp.dt, exp.dt), method="bounded",
+                              options={"xatol": exp.dt / 400, "maxiter": 25})
+        results[mode] = (float(sol.fun), float(sol.x))
+    # Below ~300 Hz a staircase is a band-limited signal half a sample late: costs can tie.
+    # Among the modes within a hair of the best cost the one that needs the least skew is
+    # the right one (the skew is a nuisance that a right intersample model leaves near 0).
+    ref = min(c for c, _ in results.values())
+    near = [m for m in MODES if results[m][0] <= (1.0 + INTERSAMPLE_TIE) * ref]
+    best = min(near, key=lambda m: abs(results[m][1]))
+    detail = ", ".join(f"{m} {results[m][0] / ref:.4f} (skew {results[m][1] * 1e6:+.0f} us)"
+                       for m in MODES)
+    why = {"zoh": "the current was held between samples (a staircase applied exactly)",
+           "foh": "the current moved between samples; linear between them fits with the "
+                  "least skew",
+           "bl": "the current moved between samples; band-limited fits with the least "
+                 "skew"}[best]
+    exp = prepare(data, cfg, best)
+    exp.intersample_reason = (f"estimated: {why}; cost relative to the best with the best "
+                              f"skew each: {detail}")
+    theta = prov.theta.copy()
+    theta[IDX["skew_s"]] = float(np.clip(results[best][1], -0.5 * exp.dt, 0.5 * exp.dt))
+    return exp, theta
+
+
 def identify(
     data: MeasuredData,
     cfg: Config,
     max_effects: int = 6,
     progress: Callable[[str], None] | None = None,
+    intersample: str | None = None,
 ) -> IdentifyReport:
-    """Run the whole loop on one record (see the module docstring)."""
+    """Run the whole loop on one record (see the module docstring).
+
+    ``intersample`` (``zoh``, ``foh``, ``bl``) says how the logged current behaved between
+    samples; None takes the ``# intersample:`` header line, else estimates it. Raises
+    :class:`~hil.identify.checks.RefusedData` for a record that cannot be identified.
+    """
     import time
 
     t_start = time.perf_counter()
     say = progress or (lambda msg: None)
-    exp = prepare(data, cfg)
+    check_record(data)
+    if intersample is None:
+        intersample = data.header.get("intersample")
+    exp, theta_prov = choose_intersample(data, cfg, intersample, say)
+    say(f"intersample {exp.intersample}: {exp.intersample_reason}")
     model = FastModel(exp)
+    noise = estimate_input_noise(exp.iq, exp.data.sample_rate_hz, quantum(exp.iq))
+    noisy_model = FastModel(noisy_experiment(exp, noise.rms_a)) if noise.rms_a > 0 else None
+
+    def noise_part(theta: np.ndarray) -> dict[str, np.ndarray] | None:
+        if noisy_model is None:
+            return None
+        return predicted_residual(model.outputs(theta), noisy_model.outputs(theta))
+
     say(f"baseline fit ({exp.load}, {exp.n} samples, channels {', '.join(exp.channels)})")
-    base = fit_baseline(model)
+    base = fit_baseline(model, theta0=theta_prov)
+    check_fit(exp, base)
     names = [n for n in BASELINE_LABELS if n in base.free or n in base.held]
     baseline_est = _estimates(base, names)
     residual0 = {c: exp.measured[c] - base.outputs[c] for c in exp.channels}
-    analysis0 = analyse(exp, residual0, exp.val)
+    analysis0 = analyse(exp, residual0, exp.val, noise_part(base.theta))
     sigma_ref = dict(base.sigma)
     current = base
+    held = dict(base.held)
     defs_all = {d.label: d for d in library(exp)}
     added: list[EffectAdded] = []
     added_labels: set[str] = set()
@@ -310,40 +413,49 @@ def identify(
         if not ranked or len(added) >= max_effects:
             break
         best = ranked[0]
-        group = [best]
+        d = defs_all[best.label]
         theta0 = current.theta.copy()
         new_free = list(current.free)
         scales = {}
-        for t in group:
-            d = defs_all[t.label]
-            for p in t.params:
-                theta0[IDX[p]] += t.beta.get(p, 0.0)
-                new_free.append(p)
-            for p, nom in zip(d.params, d.nominal, strict=True):
-                scales[p] = nom
-        say(f"round {rnd}: adding {', '.join(t.label for t in group)}; refit")
-        fitter = OutputErrorFit(model, {"strain_offset_n": 1.0, **_all_scales(defs_all),
-                                        **scales})
-        new = fitter.fit(theta0, new_free, sigma=current.sigma, passes=2)
+        for p in best.params:
+            theta0[IDX[p]] += best.beta.get(p, 0.0)
+            new_free.append(p)
+        for p, nom in zip(d.params, d.nominal, strict=True):
+            scales[p] = nom
+        credible = current.theta.copy()
+        if d.name == "input_delay" and "skew_s" in new_free:
+            # the causal delay takes over the sub-sample skew: one timing parameter
+            theta0[IDX["delay_s"]] = max(theta0[IDX["delay_s"]] + theta0[IDX["skew_s"]], 0.0)
+            theta0[IDX["skew_s"]] = 0.0
+            new_free.remove("skew_s")
+        say(f"round {rnd}: adding {best.label}; refit")
+        fitter = OutputErrorFit(model, {"strain_offset_n": 1.0, "skew_s": exp.dt,
+                                        **_all_scales(defs_all), **scales})
+        new, held_now = guarded_fit(fitter, theta0, new_free, credible, sigma=current.sigma)
+        own = [p for p in held_now if p in d.params]
         before = _val_cost(exp, current.outputs, sigma_ref)
         after = _val_cost(exp, new.outputs, sigma_ref)
-        if not after < (1.0 - MIN_SHARE) * before:
-            for t in group:
-                excluded.add(t.label)
-                rejected.append(f"{t.label}: refit lowered the validation cost by less than "
-                                f"{MIN_SHARE:.1%} ({after:.6g} vs {before:.6g})")
+        if own:
+            excluded.add(best.label)
+            rejected.append(f"{best.label}: not credible after the refit "
+                            f"({own[0]}: {held_now[own[0]]})")
             continue
-        new.held = current.held
+        if not after < (1.0 - MIN_SHARE) * before:
+            excluded.add(best.label)
+            rejected.append(f"{best.label}: refit lowered the validation cost by less than "
+                            f"{MIN_SHARE:.1%} ({after:.6g} vs {before:.6g})")
+            continue
+        for p, why in held_now.items():
+            held[p] = f"after adding {best.label}: {why}"
         current = new
-        for t in group:
-            t.selected = True
-            added_labels.add(t.label)
-            added.append(EffectAdded(t.name, t.label, {}, rnd, t.p_holm, t.share_val))
+        best.selected = True
+        added_labels.add(best.label)
+        added.append(EffectAdded(best.name, best.label, {}, rnd, best.p_holm, best.share_val))
     # describe the added effects with the final fit's covariance
     for e in added:
         e.params = describe_effect(defs_all[e.label], current, exp)
     residual1 = {c: exp.measured[c] - current.outputs[c] for c in exp.channels}
-    analysis1 = analyse(exp, residual1, exp.val)
+    analysis1 = analyse(exp, residual1, exp.val, noise_part(current.theta))
     channels = [ChannelError(c, nrmse(exp.measured[c][exp.val], base.outputs[c][exp.val]),
                              nrmse(exp.measured[c][exp.val], current.outputs[c][exp.val]))
                 for c in exp.channels]
@@ -351,10 +463,12 @@ def identify(
     final_est = _estimates(current, names)
     return IdentifyReport(
         data.path, data.load, exp.n, data.sample_rate_hz, baseline_est, final_est,
-        base.held, added, rounds, channels, analysis0, analysis1, unexplained, detail,
+        held, added, rounds, channels, analysis0, analysis1, unexplained, detail,
         notes=list(exp.notes) + [f"ignored column {c}" for c in data.ignored],
         rejected=rejected, wall_s=time.perf_counter() - t_start, experiment=exp,
         outputs_before=base.outputs, outputs_after=current.outputs,
+        intersample=exp.intersample, intersample_reason=exp.intersample_reason,
+        input_noise=noise,
     )
 
 

@@ -38,6 +38,7 @@ from hil.identify.experiment import Experiment, quantum
 MAX_LAG = 50
 Z99 = 2.5758293035489
 JUDGED = ("p_pump_a", "p_pump_b", "p_cyl_a", "p_cyl_b", "f_strain")
+PAIRS = (("p_pump_a", "p_pump_b"), ("p_cyl_a", "p_cyl_b"))
 SPEEDS = {"omega_m": "theta_m", "v_piston": "x_piston"}
 #: Residual rms of an encoder speed above this multiple of its quantisation floor is structure.
 MAX_FLOOR_RATIO = 1.5
@@ -131,19 +132,51 @@ def order_spectrum(r: np.ndarray, angle: np.ndarray, orders: np.ndarray = ORDERS
     return out
 
 
-def spectrum_peak(r: np.ndarray, fs: float) -> tuple[float, float]:
-    """(frequency Hz, peak / median) of the residual's Welch spectrum above 1 Hz."""
+def _nperseg(n: int, fs: float) -> int:
+    return int(min(n, 2 ** int(np.log2(fs))))  # about 1 s segments
+
+
+def spectrum_peak(r: np.ndarray, fs: float, half_width_hz: float = 15.0) -> tuple[float, float]:
+    """(frequency Hz, ratio) of the residual's most prominent narrow peak above 1 Hz: each
+    bin of the Welch spectrum is judged against the median of its neighbourhood
+    (+-``half_width_hz``, the bin and its direct neighbours left out), so the highest random
+    bin of a broad hump does not read as a line."""
+    from scipy.ndimage import median_filter
     from scipy.signal import welch
 
-    nper = int(min(r.size, 2 ** int(np.log2(fs))))  # about 1 s segments
-    f, p = welch(r - r.mean(), fs=fs, nperseg=nper)
-    sel = f >= 1.0
-    if not sel.any():
+    f, p = welch(r - r.mean(), fs=fs, nperseg=_nperseg(r.size, fs))
+    if f.size < 8:
         return 0.0, 0.0
-    f, p = f[sel], p[sel]
-    k = int(np.argmax(p))
-    med = float(np.median(p))
-    return float(f[k]), float(p[k] / med) if med > 0 else 0.0
+    df = float(f[1] - f[0])
+    half = max(3, int(round(half_width_hz / df)))
+    fp = np.ones(2 * half + 1, dtype=bool)
+    fp[half - 1: half + 2] = False
+    local = median_filter(p, footprint=fp, mode="reflect")
+    sel = f >= 1.0
+    ratio = np.where(local > 0, p / np.where(local > 0, local, 1.0), 0.0)
+    ratio[~sel] = 0.0
+    k = int(np.argmax(ratio))
+    return float(f[k]), float(ratio[k])
+
+
+def whiten(r: np.ndarray, noise_part: np.ndarray | None, fs: float) -> np.ndarray:
+    """``r`` divided, bin by bin, by the spectrum a right model leaves: a white sensor floor
+    plus what input noise through the model makes (``noise_part``, see
+    :mod:`hil.identify.noise`). Returns ``r`` unchanged when there is no noise part."""
+    from scipy.signal import welch
+
+    if noise_part is None or not np.any(noise_part):
+        return r
+    nper = _nperseg(r.size, fs)
+    f, pr = welch(r - r.mean(), fs=fs, nperseg=nper)
+    _, pd = welch(noise_part - noise_part.mean(), fs=fs, nperseg=nper)
+    # the sensor's own floor: what the residual holds beyond the predicted input-noise part
+    floor = max(float(np.median(pr - pd)), 0.05 * float(np.median(pr)), 1e-300)
+    target = floor + pd
+    n = r.size
+    fr = np.fft.rfftfreq(n, 1.0 / fs)
+    w = 1.0 / np.sqrt(np.interp(fr, f, target))
+    return np.fft.irfft(np.fft.rfft(r - r.mean()) * w, n)
 
 
 def predictable_share(r: np.ndarray, order: int = 20) -> float:
@@ -160,35 +193,60 @@ def predictable_share(r: np.ndarray, order: int = 20) -> float:
     return float(1.0 - (e @ e) / v) if v > 0 else 0.0
 
 
-def analyse(exp: Experiment, residual: dict[str, np.ndarray], mask: np.ndarray
-            ) -> ResidualAnalysis:
-    """Diagnostics of ``residual`` (measured - model, per channel) on the samples ``mask``."""
+def analyse(exp: Experiment, residual: dict[str, np.ndarray], mask: np.ndarray,
+            noise_part: dict[str, np.ndarray] | None = None) -> ResidualAnalysis:
+    """Diagnostics of ``residual`` (measured - model, per channel) on the samples ``mask``.
+
+    ``noise_part`` (per channel, full length) is what the logged current's own noise makes
+    through the model (:mod:`hil.identify.noise`): whiteness and predictability are judged
+    on the residual whitened by it, encoder speeds against their floor plus it."""
     iq = exp.iq[mask]
     n = int(mask.sum())
     bound = Z99 / np.sqrt(n)
-    judged = [c for c in exp.channels if c in JUDGED]
+    residual = dict(residual)
+    noise_part = dict(noise_part) if noise_part is not None else None
+    channels = list(exp.channels)
+    # A pressure pair is judged by its difference: each side sees the load only while its
+    # side is the high one, so the input noise it carries switches on and off with the sign
+    # of the load; the difference k_c (p_a - p_b) is the whole load, a stationary signal.
+    paired = set()
+    for a_, b_ in PAIRS:
+        if a_ in residual and b_ in residual:
+            name = f"{a_}-{b_}"
+            residual[name] = residual[a_] - residual[b_]
+            if noise_part is not None and a_ in noise_part and b_ in noise_part:
+                noise_part[name] = noise_part[a_] - noise_part[b_]
+            channels.append(name)
+            paired |= {a_, b_}
+    judged = [c for c in channels if (c in JUDGED and c not in paired) or "-" in c]
     out: dict[str, ChannelResidual] = {}
     speed = (exp.measured["omega_m"][mask] / exp.const.rotor_per_m
              if "omega_m" in exp.measured else None)
     all_white = True
-    for c in exp.channels:
+    for c in channels:
         r = residual[c][mask]
         ok = np.isfinite(r)
         r = np.where(ok, r, 0.0)
-        a = stats.acf(r, MAX_LAG)
-        q, p = stats.ljung_box(r, MAX_LAG)
-        x = stats.ccf(r, iq, MAX_LAG)
+        d = None
+        if noise_part is not None and c in noise_part:
+            d = np.nan_to_num(noise_part[c][mask])
+        fs = exp.data.sample_rate_hz
+        rw = whiten(r, d, fs) if c not in SPEEDS else r
+        a = stats.acf(rw, MAX_LAG)
+        q, p = stats.ljung_box(rw, MAX_LAG)
+        x = stats.ccf(rw, iq, MAX_LAG)
         is_judged = c in judged
         res = ChannelResidual(c, float(np.sqrt(np.mean(r * r))), a,
                               int(np.sum(np.abs(a) > bound)), q, p, x,
                               int(np.sum(np.abs(x) > bound)), is_judged)
         res.white = p > 0.01 / max(len(judged), 1)
-        res.predictable_share = predictable_share(r)
+        res.predictable_share = predictable_share(rw)
         if c in SPEEDS and SPEEDS[c] in exp.data.columns:
             q_enc = quantum(exp.data.col(SPEEDS[c]))
             if q_enc > 0:
                 floor = q_enc / np.sqrt(6.0) / (exp.speed_window * exp.dt)
-                res.floor_ratio = res.rms / floor
+                expected = floor * floor + (float(np.mean(d * d)) if d is not None else 0.0)
+                res.floor_ratio = res.rms / np.sqrt(expected)
                 res.judged = is_judged = True
                 res.white = res.floor_ratio < MAX_FLOOR_RATIO
         if is_judged and not res.white:
@@ -209,7 +267,7 @@ def analyse(exp: Experiment, residual: dict[str, np.ndarray], mask: np.ndarray
             res.peak_order = float(ORDERS[k])
             med = float(np.median(amp))
             res.peak_order_ratio = float(amp[k] / med) if med > 0 else 0.0
-        res.peak_hz, res.peak_hz_ratio = spectrum_peak(r, exp.data.sample_rate_hz)
+        res.peak_hz, res.peak_hz_ratio = spectrum_peak(rw, fs)
         out[c] = res
     return ResidualAnalysis(out, all_white and bool(judged), n, float(bound))
 
