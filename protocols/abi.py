@@ -21,7 +21,7 @@ from typing import NamedTuple
 import numpy as np
 
 from protocols.bits import as_index
-from protocols.errors import FrameError, RangeError
+from protocols.errors import FrameError, RangeError, as_int, finite_number
 
 COUNTS_PER_REV = 2048
 #: (A, B) per quadrature phase 0..3 (count mod 4).
@@ -35,18 +35,23 @@ _DELTA_NP = np.asarray((0, 1, 0, -1), dtype=np.int64)
 
 def ab_from_count(count: int) -> tuple[int, int]:
     """(A, B) levels at a quadrature count (any integer, negative allowed)."""
+    if count.__class__ is not int:
+        count = as_int(count, "quadrature count")
     return STATES[count & 3]
 
 
 def abi_from_count(count: int, counts_per_rev: int = COUNTS_PER_REV) -> tuple[int, int, int]:
     """(A, B, I) levels at a quadrature count."""
+    count = as_int(count, "quadrature count")
+    counts_per_rev = as_int(counts_per_rev, "counts_per_rev", 1)
     a, b = STATES[count & 3]
     return a, b, int(count % counts_per_rev == 0)
 
 
 def count_from_angle(theta_mech_rad: float, counts_per_rev: int = COUNTS_PER_REV) -> int:
     """Quadrature count (floor) of an unwrapped mechanical angle in radians."""
-    x = theta_mech_rad * counts_per_rev / (2.0 * math.pi)
+    x = (finite_number(theta_mech_rad, "mechanical angle")
+         * as_int(counts_per_rev, "counts_per_rev", 1) / (2.0 * math.pi))
     if not math.isfinite(x):
         raise RangeError(f"angle {theta_mech_rad!r} is not finite")
     return math.floor(x)
@@ -74,7 +79,7 @@ class QuadratureCounter:
     def __init__(self, a: int = 0, b: int = 0, count: int = 0) -> None:
         self._phase = _PHASE[_level(a, "A") << 1 | _level(b, "B")]
         self._index = 0
-        self.count = count
+        self.count = as_int(count, "quadrature count")
         self.illegal = 0
         self.index_count: int | None = None
 
@@ -118,6 +123,8 @@ def count_array(a: np.ndarray, b: np.ndarray, a0: int = 0, b0: int = 0,
         if arr.dtype.kind not in "biu" or (arr.size and (arr.min() < 0 or arr.max() > 1)):
             raise FrameError(f"{name} samples must be integers 0 or 1")
     start = _PHASE[_level(a0, "A") << 1 | _level(b0, "B")]
+    # The counts are int64: a start beyond it would overflow inside numpy.
+    count0 = as_int(count0, "count0", -(1 << 62), 1 << 62)
     if av.size == 0:
         return QuadratureBatch(np.zeros(0, dtype=np.int64), np.zeros(0, dtype=bool))
     phase = _PHASE_NP[(av.astype(np.int64) << 1) | bv.astype(np.int64)]

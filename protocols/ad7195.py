@@ -35,7 +35,15 @@ from typing import Any, ClassVar, NamedTuple, TypeVar
 
 import numpy as np
 
-from protocols.errors import CrcError, FrameError, RangeError, finite_number
+from protocols.errors import (
+    CrcError,
+    FrameError,
+    RangeError,
+    as_bit,
+    as_bytes,
+    as_int,
+    finite_number,
+)
 
 # --------------------------------------------------------------------------------------
 # Declarative bit registers
@@ -87,10 +95,9 @@ class BitRegister:
         """Pack the fields into the register word. Raises :class:`RangeError` on overflow."""
         word = 0
         for name, msb, lsb in self.layout():
-            value = int(getattr(self, name))
             width = msb - lsb + 1
-            if not 0 <= value < (1 << width):
-                raise RangeError(f"{type(self).__name__}.{name}={value} does not fit {width} bit")
+            value = as_int(getattr(self, name), f"{type(self).__name__}.{name}", 0,
+                           (1 << width) - 1)
             word |= value << lsb
         return word
 
@@ -228,7 +235,8 @@ DEFAULT_FULL_SCALE_N = 3000.0
 
 def comms_byte(address: int, read: bool, cread: bool = False) -> int:
     """Return the communications byte that starts an access to ``address``."""
-    return Comms(read=int(read), address=address, cread=int(cread)).encode()
+    return Comms(read=as_bit(read, "read", RangeError), address=address,
+                 cread=as_bit(cread, "cread", RangeError)).encode()
 
 
 # --------------------------------------------------------------------------------------
@@ -249,6 +257,7 @@ def voltage_to_code(
     """
     ain = finite_number(ain_v, "ain_v")
     vref = finite_number(vref_v, "vref_v")
+    gain = as_int(gain, "gain")
     if vref <= 0 or gain not in GAIN_OF_CODE.values():
         raise RangeError(f"vref {vref} V / gain {gain} invalid")
     ratio = ain * gain / vref
@@ -263,9 +272,21 @@ def voltage_to_code(
 def code_to_voltage(code: int, vref_v: float, gain: int = 1, bipolar: bool = True) -> float:
     """Input voltage (V) represented by a 24-bit code (inverse of :func:`voltage_to_code`)."""
     code = _check_code(code)
+    vref_v = _positive(vref_v, "vref_v")
+    gain = as_int(gain, "gain")
+    if gain not in GAIN_OF_CODE.values():
+        raise RangeError(f"gain {gain} invalid")
     if bipolar:
         return (code / MIDSCALE - 1.0) * vref_v / gain
     return code / (1 << CODE_BITS) * vref_v / gain
+
+
+def _positive(x: object, what: str) -> float:
+    """A finite number > 0 (a reference voltage, a full scale), else RangeError."""
+    v = finite_number(x, what)
+    if v <= 0:
+        raise RangeError(f"{what}: {v} must be > 0")
+    return v
 
 
 def _check_code(code: int) -> int:
@@ -281,6 +302,7 @@ def _check_code(code: int) -> int:
 def code_to_force(code: int, full_scale_n: float = DEFAULT_FULL_SCALE_N) -> float:
     """Bridge force (N) of a bipolar code: ``(code - 2**23) * full_scale_n / 2**23``."""
     code = _check_code(code)
+    full_scale_n = _positive(full_scale_n, "full_scale_n")
     return (code - MIDSCALE) * (full_scale_n / MIDSCALE)
 
 
@@ -291,6 +313,7 @@ def force_to_code(force_n: float, full_scale_n: float = DEFAULT_FULL_SCALE_N) ->
     (about -3000 N .. +3000 N minus one LSB at the default scale).
     """
     f = finite_number(force_n, "force_n")
+    full_scale_n = _positive(full_scale_n, "full_scale_n")
     x = f * (MIDSCALE / full_scale_n) + MIDSCALE
     if not -0.5 <= x < CODE_MAX + 0.5:
         raise RangeError(f"{f} N is outside +/-{full_scale_n} N")
@@ -302,6 +325,7 @@ def clamp_force_to_code(
 ) -> tuple[int, bool]:
     """Like :func:`force_to_code` but saturating as the ADC does; returns ``(code, clamped)``."""
     f = finite_number(force_n, "force_n")
+    full_scale_n = _positive(full_scale_n, "full_scale_n")
     x = f * (MIDSCALE / full_scale_n) + MIDSCALE
     if x < -0.5:
         return 0, True
@@ -312,7 +336,7 @@ def clamp_force_to_code(
 
 def parity_of(code: int) -> int:
     """1 if ``code`` has an odd number of 1 bits (the status PARITY bit with ENPAR)."""
-    return code.bit_count() & 1
+    return as_int(code, "code", 0).bit_count() & 1
 
 
 # --------------------------------------------------------------------------------------
@@ -394,6 +418,7 @@ def decode_data_words(words: np.ndarray, full_scale_n: float = DEFAULT_FULL_SCAL
 
     Raises :class:`RangeError` if ``words`` is not an integer array of values in 0..2**32-1.
     """
+    full_scale_n = _positive(full_scale_n, "full_scale_n")
     w = np.asarray(words)
     if w.dtype.kind not in "ui":
         raise RangeError(f"words must be an integer array, got dtype {w.dtype}")
@@ -492,6 +517,7 @@ class AD7195Device:
 
     def read_register_value(self, address: int) -> int:
         """Value a read of ``address`` would return (data: without status)."""
+        address = as_int(address, "register address", 0, 7)
         return {
             REG_STATUS: self.status,
             REG_MODE: self.mode,
@@ -513,9 +539,7 @@ class AD7195Device:
     ) -> None:
         """A conversion finished with result ``code`` (24 bit): data register, /RDY = 0."""
         code = _check_code(code)
-        ch = self._default_channel() if channel is None else channel
-        if not 0 <= ch <= 7:
-            raise RangeError(f"channel {ch} not in 0..7")
+        ch = self._default_channel() if channel is None else as_int(channel, "channel", 0, 7)
         par = parity_of(code) if self.mode & (1 << 13) else 0
         self.data = code
         self.status = (int(err) << 6) | (int(noref) << 5) | (par << 4) | ch
@@ -603,8 +627,10 @@ class AD7195Device:
         return (self.status >> 7) & 1
 
     def clock(self, din: int) -> int:
-        """One SCLK period (mode 3): return the DOUT bit, then sample ``din``."""
-        din = 1 if din else 0
+        """One SCLK period (mode 3): return the DOUT bit, then sample ``din`` (0 or 1;
+        anything else is a :class:`FrameError`)."""
+        if din.__class__ is not int or not (din == 0 or din == 1):
+            din = as_bit(din, "DIN")
         # DOUT is shifted on the falling edge, before DIN is sampled on the rising edge.
         if self._phase == _READ:
             dout = (self._out >> (self._left - 1)) & 1
@@ -692,7 +718,7 @@ class AD7195Device:
     def transfer(self, data: bytes) -> bytes:
         """Full-duplex transfer of whole bytes (MSB first); returns the bytes on DOUT."""
         cb = self._clock_byte
-        return bytes([cb(b) for b in data])
+        return bytes([cb(b) for b in as_bytes(data, "SPI transfer data")])
 
 
 # --------------------------------------------------------------------------------------
@@ -732,6 +758,7 @@ class AD7195Master:
         Raises :class:`FrameError` (wrong length, stale, wrong channel), :class:`RangeError`
         (ERR) or :class:`CrcError` (parity).
         """
+        response = as_bytes(response, "data read response")
         if len(response) != len(self._request):
             raise FrameError(f"data read needs {len(self._request)} bytes, got {len(response)}")
         if self.status_appended:
@@ -754,8 +781,7 @@ class AD7195Master:
 
     def read_register(self, transfer: Transfer, address: int) -> int:
         """Read register ``address`` (data: 24 bits, or 32 with status if appended)."""
-        if not 0 <= address <= 7:
-            raise RangeError(f"register address {address} not in 0..7")
+        address = as_int(address, "register address", 0, 7)
         width = REG_WIDTH[address]
         if address == REG_DATA and self.status_appended:
             width = 32
@@ -769,10 +795,9 @@ class AD7195Master:
     def write_register(transfer: Transfer, address: int, value: int) -> None:
         """Write ``value`` to a writable register (mode, config, GPOCON, offset, full-scale)."""
         if address not in (REG_MODE, REG_CONFIG, REG_GPOCON, REG_OFFSET, REG_FULLSCALE):
-            raise RangeError(f"register {address} is not writable")
+            raise RangeError(f"register {address!r} is not writable")
         n = REG_WIDTH[address] // 8
-        if not 0 <= value < (1 << (8 * n)):
-            raise RangeError(f"{value:#x} does not fit register {address}")
+        value = as_int(value, f"register {address} value", 0, (1 << (8 * n)) - 1)
         transfer(bytes([comms_byte(address, read=False)]) + value.to_bytes(n, "big"))
 
     def start(

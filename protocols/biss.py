@@ -24,12 +24,23 @@ import numpy as np
 
 from protocols.bits import Layout, as_index, check, const, value
 from protocols.crc import CRC6_BISS
-from protocols.errors import FrameError, RangeError
+from protocols.errors import (
+    FrameError,
+    RangeError,
+    as_bit,
+    as_int,
+    as_int_array,
+    as_sequence,
+    finite_number,
+)
 
 #: Position word lengths this codec accepts (RESOLUTE part numbers: 18, 26, 32, 36 bit).
 POSITION_BITS = (18, 26, 32, 36)
 #: Linear RESOLUTE scale pitch per count, metres (5 nm).
 LINEAR_COUNT_M = 5e-9
+#: Most ready, Ack or timeout bits :meth:`BissCodec.encode_line` builds (a real line has a
+#: few; the cap turns a wrong count into an error instead of a huge tuple).
+MAX_LINE_BITS = 1 << 16
 
 
 class BissReading(NamedTuple):
@@ -78,7 +89,11 @@ class BissCodec:
 
     # -- value level ----------------------------------------------------------------------
     def encode(self, position: int, error: bool = False, warning: bool = False) -> int:
-        """Frame word (Start..CRC) for a position in counts and the two status flags."""
+        """Frame word (Start..CRC) for a position in counts and the two status flags
+        (bool or 0/1; anything else is a :class:`RangeError`, not a truth value)."""
+        if error.__class__ is not bool or warning.__class__ is not bool:
+            error = as_bit(error, "BiSS error flag", RangeError)
+            warning = as_bit(warning, "BiSS warning flag", RangeError)
         return self.layout.pack(position, not error, not warning)
 
     def decode(self, word: object) -> BissReading:
@@ -98,8 +113,9 @@ class BissCodec:
         ``ready_bits`` ones (SLO idle high), ``ack_bits`` zeros (Ack: the encoder needs
         time to latch), the frame, then ``timeout_bits`` zeros (SLO held low until ready).
         """
-        if ready_bits < 0 or ack_bits < 1 or timeout_bits < 0:
-            raise RangeError("need ready_bits >= 0, ack_bits >= 1, timeout_bits >= 0")
+        ready_bits = as_int(ready_bits, "ready_bits", 0, MAX_LINE_BITS)
+        ack_bits = as_int(ack_bits, "ack_bits", 1, MAX_LINE_BITS)
+        timeout_bits = as_int(timeout_bits, "timeout_bits", 0, MAX_LINE_BITS)
         word = self.encode(position, error, warning)
         n = self.frame_bits
         frame = tuple((word >> i) & 1 for i in range(n - 1, -1, -1))
@@ -108,12 +124,10 @@ class BissCodec:
     def decode_line(self, samples: Sequence[object]) -> BissReading:
         """Find the frame in sampled SLO levels (ready ones, Ack zeros, Start...) and decode.
 
-        Raises :class:`FrameError` if there is no Ack, no Start or too few bits.
+        Raises :class:`FrameError` if there is no Ack, no Start or too few bits, or
+        ``samples`` is not a sequence.
         """
-        try:
-            n_samples = len(samples)
-        except TypeError:
-            raise FrameError("samples must be a sequence of 0/1") from None
+        n_samples = len(as_sequence(samples, "BiSS SLO samples"))
         i = 0
         # Skip the ready (high) level, then at least one Ack zero, then expect Start.
         while i < n_samples and _bit(samples[i]) == 1:
@@ -137,9 +151,15 @@ class BissCodec:
     def encode_array(self, position: np.ndarray, error: np.ndarray | bool = False,
                      warning: np.ndarray | bool = False) -> np.ndarray:
         """Vectorised :meth:`encode`: uint64 frame words."""
-        pos = np.asarray(position)
-        ne = np.logical_not(np.broadcast_to(error, pos.shape)).astype(np.uint64)
-        nw = np.logical_not(np.broadcast_to(warning, pos.shape)).astype(np.uint64)
+        pos = as_int_array(position, "BiSS positions", 0, (1 << self.position_bits) - 1)
+        flags = [as_int_array(f, f"BiSS {what} flags", 0, 1)
+                 for f, what in ((error, "error"), (warning, "warning"))]
+        try:
+            ne, nw = (np.logical_not(np.broadcast_to(f, pos.shape)).astype(np.uint64)
+                      for f in flags)
+        except ValueError:
+            raise RangeError(f"BiSS flags of shape {flags[0].shape}/{flags[1].shape} do not "
+                             f"match positions of shape {pos.shape}") from None
         return self.layout.pack_array(pos, ne, nw)
 
     def decode_array(self, words: np.ndarray) -> BissBatch:
@@ -172,12 +192,13 @@ def _bit(sample: object) -> int:
 
 def linear_position_m(counts: int) -> float:
     """Linear RESOLUTE position in metres from counts (5 nm per count)."""
-    return counts * LINEAR_COUNT_M
+    return as_int(counts, "counts") * LINEAR_COUNT_M
 
 
 def counts_from_linear_m(x_m: float, position_bits: int) -> int:
     """Counts for a linear position in metres, rounded to nearest; RangeError off scale."""
-    c = round(x_m / LINEAR_COUNT_M)
+    position_bits = as_int(position_bits, "position_bits", 1, 64)
+    c = round(finite_number(x_m, "x_m") / LINEAR_COUNT_M)
     if not 0 <= c < (1 << position_bits):
         raise RangeError(f"{x_m} m outside the {position_bits}-bit scale")
     return c

@@ -28,8 +28,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from protocols.crc import MAX_ARRAY_BITS, Crc
-from protocols.errors import CodecError, CrcError, FrameError, RangeError
+from protocols.crc import MAX_ARRAY_BITS, MAX_MESSAGE_BITS, Crc
+from protocols.errors import CodecError, CrcError, FrameError, RangeError, as_int, as_int_array
 
 
 def as_index(value: object, what: str = "value") -> int:
@@ -45,8 +45,10 @@ def as_index(value: object, what: str = "value") -> int:
 def as_word(word: object, nbits: int) -> int:
     """Validate a received frame word of ``nbits`` bits and return it as an int.
 
-    Raises :class:`FrameError` if it is not an integer or does not fit in ``nbits``.
+    Raises :class:`FrameError` if it is not an integer or does not fit in ``nbits``
+    (0..MAX_MESSAGE_BITS).
     """
+    nbits = as_int(nbits, "frame length nbits", 0, MAX_MESSAGE_BITS, FrameError)
     w = as_index(word, "frame word")
     if w < 0 or w >> nbits:
         raise FrameError(f"frame word {w:#x} does not fit in {nbits} bits")
@@ -80,13 +82,23 @@ def from_bits(bits: Iterable[object]) -> int:
 
 def bits_from_words(words: np.ndarray, nbits: int) -> np.ndarray:
     """Serialise an array of ``nbits``-bit words into one uint8 bit array, wire order."""
-    w = np.asarray(words, dtype=np.uint64).reshape(-1, 1)
+    nbits = as_int(nbits, "word length nbits", 0, MAX_ARRAY_BITS)
+    w = as_int_array(words, "words", 0, None if nbits == 64 else (1 << nbits) - 1)
+    w = w.astype(np.uint64).reshape(-1, 1)
     shifts = np.arange(nbits - 1, -1, -1, dtype=np.uint64)
     return ((w >> shifts) & np.uint64(1)).astype(np.uint8).ravel()
 
 
 def gray_encode(value):  # int -> int, or uint64 array -> array
-    """Binary-reflected Gray code of ``value`` (an int or a numpy unsigned array)."""
+    """Binary-reflected Gray code of ``value`` (an int or a numpy unsigned array).
+
+    :class:`RangeError` for anything else, or a negative value.
+    """
+    if isinstance(value, np.ndarray):
+        if value.dtype.kind != "u":
+            raise RangeError(f"gray_encode: array of dtype {value.dtype} is not unsigned")
+    elif value.__class__ is not int or value < 0:
+        value = as_int(value, "gray_encode value", 0)
     return value ^ (value >> 1)
 
 
@@ -94,9 +106,18 @@ def gray_decode(gray, nbits: int):
     """Inverse of :func:`gray_encode` for codes of up to ``nbits`` bits (int or array).
 
     Prefix XOR by doubling shifts: ceil(log2(nbits)) steps instead of one per bit.
+    :class:`RangeError` for a code that is not a non-negative int or an unsigned array,
+    or ``nbits`` not in 0..MAX_MESSAGE_BITS.
     """
-    shift = 1
+    if nbits.__class__ is not int or not 0 <= nbits <= MAX_MESSAGE_BITS:
+        nbits = as_int(nbits, "gray_decode nbits", 0, MAX_MESSAGE_BITS)
     is_array = isinstance(gray, np.ndarray)
+    if is_array:
+        if gray.dtype.kind != "u":
+            raise RangeError(f"gray_decode: array of dtype {gray.dtype} is not unsigned")
+    elif gray.__class__ is not int or gray < 0:
+        gray = as_int(gray, "gray_decode code", 0)
+    shift = 1
     while shift < nbits:
         gray = gray ^ (gray >> (np.uint64(shift) if is_array else shift))
         shift <<= 1
@@ -190,6 +211,7 @@ class Layout:
                 vals.append((f.name, shift, mask))
         self.value_names: tuple[str, ...] = tuple(n for n, _s, _m in vals)
         self._vals = tuple((s, m) for _n, s, m in vals)
+        self._named_vals = tuple(vals)
         self._const_mask = const_mask
         self._const_word = const_word
         self._checks = tuple(checks)
@@ -249,12 +271,11 @@ class Layout:
         self._require_array_width()
         if len(values) != len(self._vals):
             raise RangeError(f"{self.name}: expected {len(self._vals)} arrays")
-        arrays = [np.asarray(v) for v in values]
+        arrays = [as_int_array(v, f"{self.name}: field {name}", 0, mask)
+                  for (name, _s, mask), v in zip(self._named_vals, values, strict=True)]
         shape = np.broadcast_shapes(*(a.shape for a in arrays)) if arrays else ()
         word = np.full(shape, self._const_word, dtype=np.uint64)
-        for (shift, mask), a in zip(self._vals, arrays, strict=True):
-            if a.size and (a.min() < 0 or a.max() > mask):
-                raise RangeError(f"{self.name}: a value does not fit in {mask.bit_length()} bits")
+        for (shift, _mask), a in zip(self._vals, arrays, strict=True):
             word |= a.astype(np.uint64) << np.uint64(shift)
         for c in self._checks:
             word |= c.crc.compute_array(self._covered_array(word, c), c.nbits) << np.uint64(
@@ -277,11 +298,13 @@ class Layout:
         good where both masks are true; values elsewhere are meaningless.
         """
         self._require_array_width()
-        try:
-            w = np.asarray(words, dtype=np.uint64)
-        except (OverflowError, ValueError, TypeError):
-            raise FrameError(f"{self.name}: frame words must be non-negative 64-bit integers"
-                             ) from None
+        if isinstance(words, np.ndarray) and words.dtype.kind in "iu":
+            # A signed array is reinterpreted as uint64 (a log's uint64 column read back
+            # as int64): words too wide then come out invalid, not as an exception.
+            w = words.astype(np.uint64, copy=False)
+        else:
+            w = as_int_array(words, f"{self.name}: frame words", 0, error=FrameError
+                             ).astype(np.uint64, copy=False)
         frame_ok = (w & np.uint64(self._const_mask)) == np.uint64(self._const_word)
         if self.width < 64:
             frame_ok &= (w >> np.uint64(self.width)) == 0

@@ -21,13 +21,27 @@ from __future__ import annotations
 
 from functools import cache
 from itertools import combinations
+from math import comb
 
 import numpy as np
 
-from protocols.errors import CodecError, RangeError
+from protocols.errors import RangeError, as_bytes, as_int, as_int_array
 
 #: Largest message a numpy batch path accepts: the message must fit a uint64.
 MAX_ARRAY_BITS = 64
+#: Largest message the scalar paths accept, in bits (16 KiB: above a 9000-byte jumbo
+#: frame). The limit is there so that a wrong length fails at once instead of building a
+#: chunk plan of that many steps.
+MAX_MESSAGE_BITS = 1 << 17
+
+
+def _message(value: object, nbits: object) -> tuple[int, int]:
+    """``(value, nbits)`` checked: 0 <= nbits <= MAX_MESSAGE_BITS, value fits nbits bits."""
+    n = as_int(nbits, "CRC message length nbits", 0, MAX_MESSAGE_BITS)
+    v = as_int(value, "CRC message", 0)
+    if v >> n:
+        raise RangeError(f"CRC message: {v:#x} does not fit in {n} bits")
+    return v, n
 
 
 def crc_bitwise(value: int, nbits: int, width: int, poly: int, init: int = 0,
@@ -38,6 +52,10 @@ def crc_bitwise(value: int, nbits: int, width: int, poly: int, init: int = 0,
     each message bit is XORed into the register's top bit, which selects whether the
     polynomial is subtracted (XORed) after the shift.
     """
+    value, nbits = _message(value, nbits)
+    width = as_int(width, "CRC width", 1, 64)
+    poly = as_int(poly, "CRC polynomial", 0, (1 << width) - 1)
+    init, xorout = as_int(init, "CRC init"), as_int(xorout, "CRC xorout")
     top = 1 << (width - 1)
     mask = (1 << width) - 1
     reg = init & mask
@@ -70,10 +88,11 @@ class Crc:
 
     def __init__(self, width: int, poly: int, init: int = 0, xorout: int = 0,
                  name: str = "") -> None:
-        if not 1 <= width <= 64:
-            raise RangeError(f"CRC width {width} outside 1..64")
+        width = as_int(width, "CRC width", 1, 64)
         self.width = width
         self.mask = (1 << width) - 1
+        poly = as_int(poly, "CRC polynomial")
+        init, xorout = as_int(init, "CRC init"), as_int(xorout, "CRC xorout")
         if not 0 <= poly <= self.mask or poly & 1 == 0:
             # A generator without the x^0 term is x * Q(x): it wastes a check bit.
             raise RangeError(f"polynomial {poly:#x} is not a valid {width}-bit generator")
@@ -110,7 +129,15 @@ class Crc:
         return plan
 
     def compute(self, value: int, nbits: int) -> int:
-        """CRC of the ``nbits``-bit message ``value`` (first bit = bit ``nbits - 1``)."""
+        """CRC of the ``nbits``-bit message ``value`` (first bit = bit ``nbits - 1``).
+
+        :class:`RangeError` if ``nbits`` is not an int in 0..MAX_MESSAGE_BITS or ``value``
+        is not a non-negative int that fits in ``nbits`` bits.
+        """
+        # Per-frame path of every link codec: plain ints in range pass one cheap test.
+        if (value.__class__ is not int or nbits.__class__ is not int or value < 0
+                or not 0 <= nbits <= MAX_MESSAGE_BITS or value >> nbits):
+            value, nbits = _message(value, nbits)
         w = self.width
         mask = self.mask
         reg = self.init
@@ -126,6 +153,7 @@ class Crc:
 
     def compute_bytes(self, data: bytes) -> int:
         """CRC of a byte string, first byte first, each byte MSB first."""
+        data = as_bytes(data, "CRC message", RangeError)
         return self.compute(int.from_bytes(data, "big"), 8 * len(data))
 
     # -- numpy ----------------------------------------------------------------------------
@@ -134,9 +162,10 @@ class Crc:
 
         Returns a uint64 array of the same shape. ``nbits`` must be at most 64.
         """
-        if not 0 <= nbits <= MAX_ARRAY_BITS:
-            raise RangeError(f"array messages hold at most {MAX_ARRAY_BITS} bits, not {nbits}")
-        v = np.asarray(values, dtype=np.uint64)
+        nbits = as_int(nbits, "CRC message length nbits (array messages)", 0, MAX_ARRAY_BITS)
+        v = as_int_array(values, "CRC messages", 0, None if nbits == 64 else (1 << nbits) - 1)
+        if v.dtype != np.uint64:
+            v = v.astype(np.uint64)
         w = self.width
         mask = np.uint64(self.mask)
         reg = np.full(v.shape, self.init, dtype=np.uint64)
@@ -150,7 +179,6 @@ class Crc:
         return reg ^ np.uint64(self.xorout)
 
 
-@cache
 def hamming_distance(crc_width: int, poly: int, data_bits: int, max_weight: int = 6) -> int:
     """Minimum Hamming distance of the code (data_bits message + CRC) of a plain CRC.
 
@@ -161,8 +189,24 @@ def hamming_distance(crc_width: int, poly: int, data_bits: int, max_weight: int 
     when no codeword of weight <= ``max_weight`` exists. ``init``/``xorout`` do not change
     the distance.
     """
-    if data_bits < 1:
-        raise CodecError("data_bits must be positive")
+    crc_width = as_int(crc_width, "crc_width", 1, 64)
+    poly = as_int(poly, "poly", 0, (1 << crc_width) - 1)
+    data_bits = as_int(data_bits, "data_bits", 1, MAX_MESSAGE_BITS)
+    max_weight = as_int(max_weight, "max_weight", 1)
+    # The search walks every combination of half the weight: refuse one that would run
+    # for hours rather than start it.
+    work = comb(data_bits + crc_width, (max_weight + 1) // 2)
+    if work > _MAX_SEARCH:
+        raise RangeError(f"hamming_distance: {work} error patterns per side to search "
+                         f"(limit {_MAX_SEARCH}); lower data_bits or max_weight")
+    return _hamming_distance(crc_width, poly, data_bits, max_weight)
+
+
+_MAX_SEARCH = 5_000_000
+
+
+@cache
+def _hamming_distance(crc_width: int, poly: int, data_bits: int, max_weight: int) -> int:
     n = data_bits + crc_width
     # Syndrome of a single error at codeword bit i (counted from the last bit sent):
     # x^i mod P. An error pattern is undetected iff its syndromes XOR to 0.

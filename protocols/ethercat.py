@@ -26,7 +26,15 @@ import struct
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
-from protocols.errors import CrcError, FrameError, RangeError
+from protocols.errors import (
+    CrcError,
+    FrameError,
+    RangeError,
+    as_bytes,
+    as_int,
+    as_iterable,
+    as_sequence,
+)
 
 ETHERTYPE_ETHERCAT = 0x88A4
 ETHERTYPE_IPV4 = 0x0800
@@ -97,9 +105,7 @@ class _BitWord:
     def pack(self, **values: int) -> int:
         word = 0
         for name, msb, lsb in self.fields:
-            v = int(values[name])
-            if not 0 <= v < (1 << (msb - lsb + 1)):
-                raise RangeError(f"{name}={v} does not fit bits {msb}..{lsb}")
+            v = as_int(values[name], name, 0, (1 << (msb - lsb + 1)) - 1)
             word |= v << lsb
         return word
 
@@ -173,9 +179,9 @@ class Datagram:
         cls, cmd: int, lad: int, data: bytes, idx: int = 0, wkc: int = 0, irq: int = 0
     ) -> Datagram:
         """A logical-addressed datagram (LRD/LWR/LRW) at 32-bit address ``lad``."""
-        if not 0 <= lad <= 0xFFFFFFFF:
-            raise RangeError(f"logical address {lad:#x} is not 32 bit")
-        return cls(cmd, idx, lad & 0xFFFF, lad >> 16, bytes(data), wkc, irq)
+        lad = as_int(lad, "logical address", 0, 0xFFFFFFFF)
+        return cls(as_int(cmd, "command"), idx, lad & 0xFFFF, lad >> 16,
+                   as_bytes(data, "datagram data", RangeError), wkc, irq)
 
     @property
     def lad(self) -> int:
@@ -190,19 +196,24 @@ class Datagram:
 
 def encode_datagrams(datagrams: Sequence[Datagram]) -> bytes:
     """The datagram area of a frame; M bits are set on all but the last datagram."""
+    datagrams = as_sequence(datagrams, "datagrams", RangeError)
     out = bytearray()
     last = len(datagrams) - 1
     for i, d in enumerate(datagrams):
-        if d.cmd not in Command._value2member_map_:
+        if not isinstance(d, Datagram):
+            raise RangeError(f"datagrams[{i}]: {type(d).__name__} is not a Datagram")
+        cmd = as_int(d.cmd, f"datagrams[{i}].cmd")
+        if cmd not in Command._value2member_map_:
             raise RangeError(f"unknown command {d.cmd!r}")
-        n = len(d.data)
+        data = as_bytes(d.data, f"datagrams[{i}].data", RangeError)
+        n = len(data)
         len_word = DATAGRAM_LEN_WORD.pack(
             length=n, reserved=0, circulating=int(d.circulating), more=int(i < last)
         )
         out += DATAGRAM_HEADER.pack(
-            cmd=d.cmd, idx=d.idx, adp=d.adp, ado=d.ado, len_word=len_word, irq=d.irq
+            cmd=cmd, idx=d.idx, adp=d.adp, ado=d.ado, len_word=len_word, irq=d.irq
         )
-        out += d.data
+        out += data
         out += DATAGRAM_TRAILER.pack(wkc=d.wkc)
     return bytes(out)
 
@@ -213,7 +224,7 @@ def encode_pdu(datagrams: Sequence[Datagram]) -> bytes:
     Raises :class:`RangeError` for no datagrams, a field out of range or more than 2047
     bytes of datagrams.
     """
-    if not datagrams:
+    if not as_sequence(datagrams, "datagrams", RangeError):
         raise RangeError("an EtherCAT frame carries at least one datagram")
     body = encode_datagrams(datagrams)
     if len(body) > MAX_PDU_LENGTH:
@@ -228,9 +239,10 @@ def decode_pdu(buf: bytes, allow_trailing: bool = True) -> list[Datagram]:
     ``allow_trailing``: bytes after the header's length are accepted (Ethernet padding).
     Raises :class:`FrameError` if the type is not 1, a reserved bit is set, the length is
     zero or longer than the buffer, a datagram overruns the length, an M bit is set on the
-    datagram that ends the frame, or the M chain ends before the frame's length.
+    datagram that ends the frame, or the M chain ends before the frame's length, and for
+    a ``buf`` that is not bytes-like.
     """
-    buf = bytes(buf)
+    buf = as_bytes(buf, "EtherCAT PDU")
     hdr = ECAT_HEADER_WORD.unpack(int(ECAT_HEADER.unpack_from(buf)["word"]))
     if hdr["type"] != ECAT_TYPE_COMMANDS:
         raise FrameError(f"EtherCAT type {hdr['type']} is not 1 (commands)")
@@ -295,7 +307,7 @@ def mac(value: str | bytes) -> bytes:
         except ValueError as exc:
             raise RangeError(f"bad MAC {value!r}") from exc
     else:
-        raw = bytes(value)
+        raw = as_bytes(value, "MAC address", RangeError)
     if len(raw) != 6:
         raise RangeError(f"a MAC address has 6 bytes, got {len(raw)}")
     return raw
@@ -313,9 +325,10 @@ class EthernetFrame:
 
 def encode_ethernet(payload: bytes, dst: str | bytes, src: str | bytes, ethertype: int) -> bytes:
     """Ethernet II frame, zero-padded to the 60-byte minimum (FCS not included)."""
+    payload = as_bytes(payload, "Ethernet payload", RangeError)
     if len(payload) > ETH_MAX_PAYLOAD:
         raise RangeError(f"payload of {len(payload)} bytes exceeds the 1500-byte MTU")
-    frame = ETHERNET_HEADER.pack(dst=mac(dst), src=mac(src), ethertype=ethertype) + bytes(payload)
+    frame = ETHERNET_HEADER.pack(dst=mac(dst), src=mac(src), ethertype=ethertype) + payload
     if len(frame) < ETH_MIN_FRAME:
         frame += bytes(ETH_MIN_FRAME - len(frame))
     return frame
@@ -323,7 +336,7 @@ def encode_ethernet(payload: bytes, dst: str | bytes, src: str | bytes, ethertyp
 
 def decode_ethernet(frame: bytes) -> EthernetFrame:
     """Split an Ethernet II frame; :class:`FrameError` if shorter than the 14-byte header."""
-    frame = bytes(frame)
+    frame = as_bytes(frame, "Ethernet frame")
     h = ETHERNET_HEADER.unpack_from(frame)
     ethertype = int(h["ethertype"])
     if ethertype < 0x0600:
@@ -355,8 +368,9 @@ def decode_frame(frame: bytes) -> list[Datagram]:
 
 def ones_complement_sum(data: bytes) -> int:
     """16-bit one's-complement sum of ``data`` (odd length padded with a zero byte)."""
+    data = as_bytes(data, "checksum data", RangeError)
     if len(data) % 2:
-        data = bytes(data) + b"\x00"
+        data = data + b"\x00"
     total = sum(struct.unpack(f">{len(data) // 2}H", data))
     while total >> 16:
         total = (total & 0xFFFF) + (total >> 16)
@@ -375,7 +389,7 @@ def ip4(value: str | bytes) -> bytes:
             return ipaddress.IPv4Address(value).packed
         except ValueError as exc:
             raise RangeError(f"bad IPv4 address {value!r}") from exc
-    raw = bytes(value)
+    raw = as_bytes(value, "IPv4 address", RangeError)
     if len(raw) != 4:
         raise RangeError(f"an IPv4 address has 4 bytes, got {len(raw)}")
     return raw
@@ -411,12 +425,13 @@ def encode_ipv4_udp(
 ) -> bytes:
     """IPv4 (20-byte header, DF set, correct header checksum) + UDP (with checksum)."""
     src, dst = ip4(src_ip), ip4(dst_ip)
+    payload = as_bytes(payload, "UDP payload", RangeError)
     udp_len = UDP_HEADER.size + len(payload)
     total = IPV4_HEADER.size + udp_len
     if total > 0xFFFF:
         raise RangeError("IPv4 packet longer than 65535 bytes")
     udp0 = UDP_HEADER.pack(src_port=src_port, dst_port=dst_port, length=udp_len, checksum=0)
-    udp = udp0 + bytes(payload)
+    udp = udp0 + payload
     csum = _udp_checksum(src, dst, udp)
     udp = UDP_HEADER.pack(src_port=src_port, dst_port=dst_port, length=udp_len, checksum=csum)
     ip_fields = dict(
@@ -432,7 +447,7 @@ def encode_ipv4_udp(
     )
     hdr0 = IPV4_HEADER.pack(checksum=0, **ip_fields)
     hdr = IPV4_HEADER.pack(checksum=internet_checksum(hdr0), **ip_fields)
-    return hdr + udp + bytes(payload)
+    return hdr + udp + payload
 
 
 def decode_ipv4_udp(packet: bytes, allow_trailing: bool = True) -> UdpDatagram:
@@ -443,7 +458,7 @@ def decode_ipv4_udp(packet: bytes, allow_trailing: bool = True) -> UdpDatagram:
     lengths inconsistent with the buffer). ``allow_trailing`` accepts Ethernet padding
     after the IP total length.
     """
-    packet = bytes(packet)
+    packet = as_bytes(packet, "IPv4 packet")
     h = IPV4_HEADER.unpack_from(packet)
     ver_ihl = int(h["ver_ihl"])
     ihl = (ver_ihl & 0x0F) * 4
@@ -522,6 +537,8 @@ def expected_wkc(cmd: int, slaves_addressed: int) -> int:
     Reads and writes add 1 per slave; read-write commands 3 (1 for the read, 2 for the
     write). NOP: 0. ARMW/FRMW mix rules per slave and raise :class:`RangeError` here.
     """
+    cmd = as_int(cmd, "command")
+    slaves_addressed = as_int(slaves_addressed, "slaves_addressed", 0)
     if cmd not in Command._value2member_map_ or cmd in (Command.ARMW, Command.FRMW):
         raise RangeError(f"no simple working-counter rule for command {cmd!r}")
     if cmd == Command.NOP:
@@ -532,6 +549,6 @@ def expected_wkc(cmd: int, slaves_addressed: int) -> int:
 
 def iter_datagrams(frames: Iterable[bytes]) -> Iterable[tuple[int, Datagram]]:
     """``(frame index, datagram)`` for every datagram of every frame (EtherCAT or UDP)."""
-    for i, f in enumerate(frames):
+    for i, f in enumerate(as_iterable(frames, "frames")):
         for d in decode_any(f):
             yield i, d

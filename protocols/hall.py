@@ -19,7 +19,7 @@ import math
 import numpy as np
 
 from protocols.bits import as_index
-from protocols.errors import FrameError, RangeError
+from protocols.errors import FrameError, RangeError, as_int_array, finite_number
 
 #: Hall code per sector, sector 0 first (increasing electrical angle).
 SEQUENCE: tuple[int, ...] = (0b101, 0b100, 0b110, 0b010, 0b011, 0b001)
@@ -34,6 +34,9 @@ _CODE_NP = np.asarray(SEQUENCE, dtype=np.uint8)
 
 def sector_from_angle(theta_e_rad: float, offset_rad: float = 0.0) -> int:
     """Sector 0..5 of an electrical angle in radians (any real value, wraps)."""
+    if theta_e_rad.__class__ is not float or offset_rad.__class__ is not float:
+        theta_e_rad = finite_number(theta_e_rad, "electrical angle")
+        offset_rad = finite_number(offset_rad, "offset_rad")
     x = (theta_e_rad - offset_rad) / SECTOR_RAD
     if not math.isfinite(x):
         raise RangeError(f"electrical angle {theta_e_rad!r} is not finite")
@@ -95,23 +98,34 @@ def sector_step(previous_code: object, code: object) -> int:
 
 def sectors_from_angle_array(theta_e_rad: np.ndarray, offset_rad: float = 0.0) -> np.ndarray:
     """Vectorised :func:`sector_from_angle` (int64); RangeError for non-finite angles."""
-    x = (np.asarray(theta_e_rad, dtype=np.float64) - offset_rad) / SECTOR_RAD
+    try:
+        theta = np.asarray(theta_e_rad, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise RangeError(f"electrical angles: {type(theta_e_rad).__name__} is not an array "
+                         "of numbers") from None
+    x = (theta - finite_number(offset_rad, "offset_rad")) / SECTOR_RAD
     if not np.all(np.isfinite(x)):
         raise RangeError("an electrical angle is not finite")
-    return np.floor(x).astype(np.int64) % 6
+    # The modulo before the cast: a huge angle would overflow int64 (its sector is
+    # meaningless at that size, but must not come out of a wrapped integer).
+    return (np.floor(x) % 6).astype(np.int64)
 
 
 def encode_array(sectors: np.ndarray) -> np.ndarray:
     """Vectorised :func:`encode` -> uint8 codes."""
-    s = np.asarray(sectors)
-    if s.size and (s.min() < 0 or s.max() > 5):
-        raise RangeError("a sector is outside 0..5")
-    return _CODE_NP[s]
+    return _CODE_NP[as_int_array(sectors, "sectors", 0, 5)]
 
 
 def decode_array(codes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Vectorised :func:`decode`: (sector int8, valid bool); sector is -1 where invalid."""
-    c = np.asarray(codes).astype(np.int64)
+    """Vectorised :func:`decode`: (sector int8, valid bool); sector is -1 where invalid.
+
+    :class:`FrameError` if ``codes`` is not an array of integers (a code outside 0..7 is
+    merely invalid).
+    """
+    c = as_int_array(codes, "hall codes", error=FrameError)
+    if c.dtype.kind == "u" and c.dtype.itemsize == 8:
+        c = np.minimum(c, 8)  # above int64: invalid anyway, and would wrap negative
+    c = c.astype(np.int64)
     in_range = (c >= 0) & (c <= 7)
     sector = np.where(in_range, _SECTOR_NP[np.clip(c, 0, 7)], -1).astype(np.int8)
     return sector, sector >= 0

@@ -34,7 +34,7 @@ import numpy as np
 
 from protocols.bits import Layout, as_index, bits_from_words, check, const, value
 from protocols.crc import CRC8_AUTOSAR
-from protocols.errors import CodecError, CrcError, FrameError, RangeError
+from protocols.errors import CodecError, CrcError, FrameError, RangeError, as_int_array, as_iterable
 
 ADDR_BITS = 8
 DATA_BITS = 16
@@ -95,8 +95,17 @@ def word_bits(addr: int, data: int) -> tuple[int, ...]:
 
 def encode_stream(words: Iterable[tuple[int, int]]) -> np.ndarray:
     """The uint8 bit stream (wire order) of a sequence of (addr, data) words."""
-    return bits_from_words(np.array([encode_word(a, d) for a, d in words], dtype=np.uint64),
-                           WORD_BITS)
+    return bits_from_words(np.array([encode_word(*_pair(w)) for w in as_iterable(
+        words, "LVDS words", RangeError)], dtype=np.uint64), WORD_BITS)
+
+
+def _pair(word: object) -> tuple[int, int]:
+    """An ``(addr, data)`` pair from one element of :func:`encode_stream`'s input."""
+    try:
+        addr, data = word  # type: ignore[misc]
+    except (TypeError, ValueError):
+        raise RangeError(f"LVDS word {word!r} is not an (addr, data) pair") from None
+    return addr, data
 
 
 # -- batch ----------------------------------------------------------------------------------
@@ -111,10 +120,7 @@ class LvdsBatch(NamedTuple):
 
 def encode_words_array(addr: np.ndarray, data: np.ndarray) -> np.ndarray:
     """Vectorised :func:`encode_word` -> uint64 line words."""
-    d = np.asarray(data)
-    if d.size and (d.min() < 0 or d.max() >> DATA_BITS):
-        raise RangeError("data outside 0..65535")
-    d = d.astype(np.uint64)
+    d = as_int_array(data, "LVDS data", 0, (1 << DATA_BITS) - 1).astype(np.uint64)
     return LAYOUT.pack_array(addr, d >> np.uint64(8), d & np.uint64(0xFF))
 
 

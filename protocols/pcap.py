@@ -19,7 +19,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import BinaryIO
 
-from protocols.errors import FrameError, RangeError
+from protocols.errors import FrameError, RangeError, as_bytes, as_int, as_iterable
 
 MAGIC_USEC = 0xA1B2C3D4
 MAGIC_NSEC = 0xA1B23C4D
@@ -82,6 +82,8 @@ def build_pcap(
     ``snaplen`` or an ``orig_len`` smaller than the data.
     """
     g, r = _structs("<")
+    records = as_iterable(records, "pcap records", RangeError)
+    snaplen = as_int(snaplen, "snaplen", 0, 0xFFFFFFFF)
     magic = MAGIC_NSEC if nanosecond else MAGIC_USEC
     try:
         out = bytearray(g.pack(magic, *VERSION, 0, 0, snaplen, linktype))
@@ -89,16 +91,19 @@ def build_pcap(
         raise RangeError(f"global header field out of range: {exc}") from exc
     per_sec = 1_000_000_000 if nanosecond else 1_000_000
     div = 1 if nanosecond else 1000
-    for rec in records:
-        data = bytes(rec.data)
+    for i, rec in enumerate(records):
+        if not isinstance(rec, PcapRecord):
+            raise RangeError(f"pcap records[{i}]: {type(rec).__name__} is not a PcapRecord")
+        data = as_bytes(rec.data, f"pcap records[{i}].data", RangeError)
         if len(data) > snaplen:
             raise RangeError(f"record of {len(data)} bytes exceeds snaplen {snaplen}")
-        orig = len(data) if rec.orig_len is None else rec.orig_len
+        orig = len(data) if rec.orig_len is None else as_int(rec.orig_len, "orig_len")
         if orig < len(data):
             raise RangeError("orig_len smaller than the captured data")
-        if rec.ts_ns < 0:
+        ts_ns = as_int(rec.ts_ns, f"pcap records[{i}].ts_ns")
+        if ts_ns < 0:
             raise RangeError("negative timestamp")
-        sec, frac = divmod(rec.ts_ns // div, per_sec)
+        sec, frac = divmod(ts_ns // div, per_sec)
         try:
             out += r.pack(sec, frac, len(data), orig)
         except struct.error as exc:
@@ -112,9 +117,9 @@ def parse_pcap(buf: bytes) -> PcapFile:
 
     Raises :class:`FrameError` for an unknown magic, an unsupported version, a truncated
     header or record, a sub-second field out of range, ``incl_len`` above the snaplen, or
-    ``orig_len`` below ``incl_len``.
+    ``orig_len`` below ``incl_len``, and for a ``buf`` that is not bytes-like.
     """
-    buf = bytes(buf)
+    buf = as_bytes(buf, "pcap data")
     if len(buf) < GLOBAL_HEADER_LEN:
         raise FrameError(f"pcap global header needs 24 bytes, have {len(buf)}")
     for order in ("<", ">"):
@@ -172,8 +177,13 @@ def write_pcap(
 
 
 def read_pcap(source: str | os.PathLike[str] | BinaryIO) -> PcapFile:
-    """Read and parse a capture from a path or binary file object."""
+    """Read and parse a capture from a path or binary file object (OSError from the file
+    system, :class:`FrameError` for anything else that is not a capture)."""
     if isinstance(source, str | os.PathLike):
         with open(source, "rb") as fh:
             return parse_pcap(fh.read())
-    return parse_pcap(source.read())
+    read = getattr(source, "read", None)
+    if not callable(read):
+        raise FrameError(f"pcap source: {type(source).__name__} is neither a path nor a "
+                         "binary file")
+    return parse_pcap(read())

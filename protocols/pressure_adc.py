@@ -27,7 +27,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from protocols.errors import FrameError, RangeError, finite_number
+from protocols.errors import (
+    FrameError,
+    RangeError,
+    as_bytes,
+    as_int_array,
+    as_sequence,
+    finite_number,
+)
 
 
 class PressureFlag(enum.IntFlag):
@@ -160,6 +167,7 @@ def code_to_pressure(code: int, cfg: PressureAdcConfig = DEFAULT) -> PressureRea
 
 def encode_scan(pressures_pa: Sequence[float], cfg: PressureAdcConfig = DEFAULT) -> list[int]:
     """Codes of one scan of all channels (``cfg.channels`` pressures in Pa)."""
+    pressures_pa = as_sequence(pressures_pa, "pressures_pa", RangeError)
     if len(pressures_pa) != cfg.channels:
         raise RangeError(f"a scan has {cfg.channels} channels, got {len(pressures_pa)}")
     return [pressure_to_code(p, cfg) for p in pressures_pa]
@@ -167,6 +175,7 @@ def encode_scan(pressures_pa: Sequence[float], cfg: PressureAdcConfig = DEFAULT)
 
 def decode_scan(codes: Sequence[int], cfg: PressureAdcConfig = DEFAULT) -> list[PressureReading]:
     """Readings of one scan of all channels."""
+    codes = as_sequence(codes, "pressure scan codes")
     if len(codes) != cfg.channels:
         raise FrameError(f"a scan has {cfg.channels} channels, got {len(codes)}")
     return [code_to_pressure(c, cfg) for c in codes]
@@ -174,6 +183,7 @@ def decode_scan(codes: Sequence[int], cfg: PressureAdcConfig = DEFAULT) -> list[
 
 def pack_scan(codes: Sequence[int], cfg: PressureAdcConfig = DEFAULT) -> bytes:
     """Log format of one scan: one little-endian uint16 per channel, unused high bits 0."""
+    codes = as_sequence(codes, "pressure scan codes", RangeError)
     if len(codes) != cfg.channels:
         raise RangeError(f"a scan has {cfg.channels} channels, got {len(codes)}")
     return struct.pack(f"<{cfg.channels}H", *(_check_code(c, cfg) for c in codes))
@@ -181,6 +191,7 @@ def pack_scan(codes: Sequence[int], cfg: PressureAdcConfig = DEFAULT) -> bytes:
 
 def unpack_scan(data: bytes, cfg: PressureAdcConfig = DEFAULT) -> list[int]:
     """Inverse of :func:`pack_scan`; :class:`FrameError` on wrong length or high bits set."""
+    data = as_bytes(data, "pressure scan")
     if len(data) != 2 * cfg.channels:
         raise FrameError(f"scan needs {2 * cfg.channels} bytes, got {len(data)}")
     codes = list(struct.unpack(f"<{cfg.channels}H", data))
@@ -197,11 +208,9 @@ def decode_codes(
     Same arithmetic and thresholds as :func:`code_to_pressure`. Raises :class:`RangeError`
     for a non-integer array or a code outside the ADC range.
     """
-    c = np.asarray(codes)
-    if c.dtype.kind not in "ui":
-        raise RangeError(f"codes must be an integer array, got dtype {c.dtype}")
-    if c.size and (int(c.min()) < 0 or int(c.max()) > cfg.code_max):
-        raise RangeError(f"codes must lie in 0..{cfg.code_max}")
+    c = as_int_array(codes, "pressure codes", 0, cfg.code_max)
+    if c.dtype.kind == "b":
+        raise RangeError("pressure codes: a bool array is not ADC codes")
     v = c * cfg.lsb_v
     pressure = (v - cfg.v_at_zero) * cfg.pa_per_v
     flags = (

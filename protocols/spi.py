@@ -25,7 +25,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from typing import NamedTuple, Protocol
 
-from protocols.errors import FrameError, RangeError
+from protocols.errors import FrameError, RangeError, as_bytes, as_iterable, as_sequence
 
 __all__ = [
     "SpiMode",
@@ -105,13 +105,13 @@ def _level(value: object, what: str) -> int:
 
 
 def _check_bits(bits: Sequence[int], what: str) -> list[int]:
-    return [_level(b, what) for b in bits]
+    return [_level(b, what) for b in as_iterable(bits, what)]
 
 
 def bytes_to_bits(data: bytes, msb_first: bool = True) -> list[int]:
     """Return the bits of ``data`` in transmission order (8 per byte)."""
     order = range(7, -1, -1) if msb_first else range(8)
-    return [(byte >> i) & 1 for byte in bytes(data) for i in order]
+    return [(byte >> i) & 1 for byte in as_bytes(data, "SPI data") for i in order]
 
 
 def bits_to_bytes(bits: Sequence[int], msb_first: bool = True) -> bytes:
@@ -119,7 +119,7 @@ def bits_to_bytes(bits: Sequence[int], msb_first: bool = True) -> bytes:
 
     Raises :class:`FrameError` if the count is not a multiple of 8 or a bit is not 0/1.
     """
-    if len(bits) % 8:
+    if len(as_sequence(bits, "bits_to_bytes")) % 8:
         raise FrameError(f"{len(bits)} bits is not a whole number of bytes")
     bits = _check_bits(bits, "bits_to_bytes")
     out = bytearray()
@@ -143,6 +143,8 @@ def encode_waveform(
     mode's shift edge and stable across its sampling edge. Lines not yet driven sit at 1
     (pulled up). Both sequences must have the same length.
     """
+    mosi_bits = as_sequence(mosi_bits, "mosi", RangeError)
+    miso_bits = as_sequence(miso_bits, "miso", RangeError)
     if len(mosi_bits) != len(miso_bits):
         raise RangeError("mosi and miso must carry the same number of bits")
     mosi_bits = _check_bits(mosi_bits, "mosi")
@@ -188,7 +190,7 @@ def decode_waveform(
     miso: list[int] = []
     prev_cs: int | None = None
     prev_clk: int | None = None
-    for s in samples:
+    for s in as_iterable(samples, "SPI samples"):
         try:
             cs_n, sclk, d_mosi, d_miso = s
         except (TypeError, ValueError) as exc:
@@ -210,7 +212,7 @@ def decode_waveform(
 
 def exchange_bits(slave: SpiSlave, mosi_bits: Iterable[int]) -> list[int]:
     """Clock ``slave`` once per MOSI bit; return the bits it drove on MISO."""
-    return [slave.clock(b) for b in mosi_bits]
+    return [slave.clock(b) for b in _check_bits(mosi_bits, "mosi")]
 
 
 def exchange_bytes(slave: SpiSlave, data: bytes, msb_first: bool = True) -> bytes:

@@ -27,7 +27,7 @@ import numpy as np
 
 from protocols.bits import Layout, check, const, gray_decode, gray_encode, value
 from protocols.crc import PARITY_EVEN, PARITY_ODD
-from protocols.errors import FrameError, RangeError
+from protocols.errors import FrameError, RangeError, as_bit, as_int, as_int_array
 
 #: RMB30SI resolution used on the Hydra motor (counts per revolution).
 COUNTS_PER_REV = 2048
@@ -50,10 +50,10 @@ class SsiFormat:
     parity: str = "none"
 
     def __post_init__(self) -> None:
-        if not 1 <= self.position_bits <= 32:
-            raise RangeError("position_bits must be 1..32")
-        if self.lead_zeros < 0 or self.status_bits < 0:
-            raise RangeError("lead_zeros and status_bits must be >= 0")
+        as_int(self.position_bits, "position_bits", 1, 32)
+        as_int(self.lead_zeros, "lead_zeros", 0, 64)
+        as_int(self.status_bits, "status_bits", 0, 64)
+        as_bit(self.gray, "gray", RangeError)
         if self.parity not in ("none", "even", "odd"):
             raise RangeError("parity must be 'none', 'even' or 'odd'")
         if self.frame_bits > 64:
@@ -130,6 +130,8 @@ class SsiCodec:
             if position < 0 or position >> self._pbits:
                 raise RangeError(f"position {position} does not fit in {self._pbits} bits")
             position ^= position >> 1
+        if status.__class__ is not int:
+            status = as_int(status, "SSI status")
         if self._has_status:
             return self.layout.pack(position, status)
         if status:
@@ -144,9 +146,7 @@ class SsiCodec:
 
     def encode_array(self, position: np.ndarray, status: np.ndarray | int = 0) -> np.ndarray:
         """Vectorised :meth:`encode` -> uint64 frame words."""
-        pos = np.asarray(position)
-        if pos.size and (pos.min() < 0 or pos.max() >> self._pbits):
-            raise RangeError(f"a position does not fit in {self._pbits} bits")
+        pos = as_int_array(position, "SSI positions", 0, (1 << self._pbits) - 1)
         pos = pos.astype(np.uint64)
         if self._gray:
             pos = gray_encode(pos)
@@ -179,6 +179,9 @@ class SsiTiming:
     max_clock_hz: int = 1_500_000
 
     def __post_init__(self) -> None:
+        as_int(self.max_clock_hz, "max_clock_hz", 1)
+        as_int(self.clock_hz, "clock_hz", 1, self.max_clock_hz)
+        as_int(self.monoflop_ns, "monoflop_ns", 1)
         if not 0 < self.clock_hz <= self.max_clock_hz:
             raise RangeError(f"clock {self.clock_hz} Hz outside 0..{self.max_clock_hz} Hz")
         if self.monoflop_ns <= 2 * self.half_period_ns:
@@ -201,8 +204,8 @@ class SsiSlave:
     """
 
     def __init__(self, frame_bits: int, monoflop_ns: int = 20_000) -> None:
-        if not 1 <= frame_bits <= 64 or monoflop_ns <= 0:
-            raise RangeError("frame_bits must be 1..64 and monoflop_ns positive")
+        frame_bits = as_int(frame_bits, "frame_bits", 1, 64)
+        monoflop_ns = as_int(monoflop_ns, "monoflop_ns", 1)
         self.frame_bits = frame_bits
         self.monoflop_ns = monoflop_ns
         self.clock = 1  # idles high
@@ -217,6 +220,8 @@ class SsiSlave:
 
     def present(self, word: int) -> None:
         """Set the frame the encoder would latch on its next first falling edge."""
+        if word.__class__ is not int:
+            word = as_int(word, "SSI frame word")
         if word < 0 or word >> self.frame_bits:
             raise RangeError("word does not fit the frame")
         self._present = word
@@ -230,6 +235,8 @@ class SsiSlave:
 
     def data_at(self, t_ns: int) -> int:
         """Data line level at time ``t_ns`` (no clock edge at that instant)."""
+        if t_ns.__class__ is not int:
+            t_ns = as_int(t_ns, "time t_ns")
         if t_ns < self._t_ns:
             raise RangeError("time went backwards")
         self._expire(t_ns)
@@ -238,8 +245,8 @@ class SsiSlave:
 
     def step(self, t_ns: int, clock: int) -> int:
         """Apply clock level ``clock`` at ``t_ns``; return the data level just after."""
-        if clock not in (0, 1):
-            raise FrameError("clock level must be 0 or 1")
+        if clock.__class__ is not int or not (clock == 0 or clock == 1):
+            clock = as_bit(clock, "SSI clock level")
         self.data_at(t_ns)
         if clock == self.clock:
             return self.data
@@ -265,7 +272,7 @@ class SsiMaster:
     """Master side: generates the clock train for one frame and samples the data line."""
 
     def __init__(self, frame_bits: int, timing: SsiTiming | None = None) -> None:
-        self.frame_bits = frame_bits
+        self.frame_bits = as_int(frame_bits, "frame_bits", 1, 64)
         self.timing = timing or SsiTiming()
 
     def clock_train(self, t0_ns: int) -> list[tuple[int, int]]:
@@ -274,6 +281,7 @@ class SsiMaster:
         ``frame_bits + 1`` periods: falling edge 1 latches, rising edge k puts out bit k,
         falling edge k + 1 samples it, the last rising edge makes the line go low.
         """
+        t0_ns = as_int(t0_ns, "start time t0_ns")
         h = self.timing.half_period_ns
         events = []
         for k in range(self.frame_bits + 1):
