@@ -1,24 +1,29 @@
 # Two commands do all set-up on a fresh machine with only python3:
 #   make run   - create .venv, install eha-hil, run the main job on the default actuator
 #   make test  - create .venv, install eha-hil with its test extra, run the whole suite
+#   make test-fast - the same without the tests marked slow (about a minute)
 PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 TSTAMP := $(VENV)/.installed-test
 
-.PHONY: run test bench lint clean
+.PHONY: run test test-fast bench lint clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 
+# After each install the numba kernels are compiled into their cache once (hil/warmup.py),
+# so that the first run does not spend half a minute compiling.
 $(STAMP): $(BIN)/python pyproject.toml
 	$(BIN)/python -m pip install --quiet -e .
+	$(BIN)/python -m hil.warmup
 	touch $@
 
 $(TSTAMP): $(BIN)/python pyproject.toml
 	$(BIN)/python -m pip install --quiet -e '.[test]'
+	$(BIN)/python -m hil.warmup
 	touch $@ $(STAMP)
 
 run: $(STAMP)
@@ -27,6 +32,9 @@ run: $(STAMP)
 
 test: $(TSTAMP)
 	$(BIN)/python -m pytest -q
+
+test-fast: $(TSTAMP)
+	$(BIN)/python -m pytest -q -m "not slow"
 
 bench: $(STAMP)
 	$(BIN)/eha-hil bench plant
