@@ -4,7 +4,8 @@
 * ``eha-hil bench identify [--seconds 16] [--effect NAME]`` — wall time of a whole run on a
   synthetic 5 kHz record against the 60 s budget;
 * ``eha-hil identify-synth OUT.csv --load fixed_piston --effect pump_coulomb_friction`` — an
-  example dataset from the project's plant, to try the tool on.
+  example dataset from the project's plant, to try the tool on; ``--realism rig`` takes it
+  from the independent rig simulator (:mod:`hil.identify.rig`) instead.
 
 A user mistake (malformed CSV, unknown preset, unusable report directory) prints one line
 starting ``eha-hil identify: `` (or ``identify-synth``) on stderr and returns 2.
@@ -83,31 +84,66 @@ def run_identify(args: argparse.Namespace) -> int:
 
 def configure_synth(parser: argparse.ArgumentParser) -> None:
     """Arguments of ``eha-hil identify-synth``."""
+    from hil.identify.rig import INTERSAMPLE, RIG_EFFECTS, TEMPERATURE_SHAPES
     from hil.identify.synth import ALL_SYNTH_EFFECTS, PROFILES
 
     parser.add_argument("out", metavar="OUT.csv", help="CSV file to write")
     parser.add_argument("--load", default="fixed_piston",
                         choices=("fixed_piston", "free_piston", "conrod_fixed"))
-    parser.add_argument("--effect", action="append", default=[], choices=ALL_SYNTH_EFFECTS,
-                        help="effect to switch on (repeatable); none gives the null dataset")
+    parser.add_argument("--realism", default="plant", choices=("plant", "rig"),
+                        help="plant: the project's plant (default); rig: the independent "
+                        "rig simulator (drawn parameters, continuous current, sensor chains)")
+    # validated in run_synth: the two generators know different effects
+    parser.add_argument("--effect", action="append", default=[], metavar="NAME",
+                        help="effect to switch on (repeatable); none gives the null dataset. "
+                        f"plant: {', '.join(ALL_SYNTH_EFFECTS)}; rig: {', '.join(RIG_EFFECTS)}")
     parser.add_argument("--magnitude", action="append", default=[], metavar="EFFECT.KEY=V",
                         help="override a magnitude, e.g. pump_coulomb_friction.force_n=60")
     parser.add_argument("--seconds", type=float, default=8.0)
     parser.add_argument("--seed", type=int, default=1)
-    parser.add_argument("--preset", default="hydra_linear", help="plant preset (base)")
+    parser.add_argument("--preset", default=None,
+                        help="preset (base): hydra_linear for the plant, hydra_default for "
+                        "the rig's nominal parameters")
     parser.add_argument("--profile", default="multisine", choices=PROFILES,
                         help="excitation: multisine (default); resonance (piston free: "
                         "strong 0.7-2 kHz band over a 0.5 Hz position sweep, makes k_s(x) "
                         "identifiable); slide (piston free: triangle sweep at constant "
                         "speed, quick reversals, avoids the seal's stick-slip)")
+    parser.add_argument("--temperature", default=None, choices=tuple(TEMPERATURE_SHAPES),
+                        help="rig: oil temperature shape (default constant, or ramp_level "
+                        "when an effect needs a moving temperature)")
+    parser.add_argument("--current-noise-lsb", type=float, default=None, metavar="X",
+                        help="rig: noise of the logged current, LSB of the 12-bit +-40 A "
+                        "converter (default 1)")
+    parser.add_argument("--intersample", default=None, choices=INTERSAMPLE,
+                        help="rig: continuous current (default) or the logged value held")
+    parser.add_argument("--header-intersample", action="store_true",
+                        help="rig: write '# intersample: ...' into the CSV header")
+    parser.add_argument("--spread", type=float, default=None,
+                        help="rig: relative spread of the drawn parameters (default 0.15)")
 
 
 def run_synth(args: argparse.Namespace) -> int:
     """Write an example dataset; prints what was put into it."""
     from hil.identify.csvdata import write_measured
-    from hil.identify.synth import DEFAULT_MAGNITUDES, generate
+    from hil.identify.synth import ALL_SYNTH_EFFECTS, DEFAULT_MAGNITUDES, generate
     from plant.config import ConfigError
 
+    if args.realism == "rig":
+        return _run_rig_synth(args)
+    rig_only = [f"--{k.replace('_', '-')}" for k in ("temperature", "current_noise_lsb",
+                                                      "intersample", "spread")
+                if getattr(args, k, None) is not None]
+    if getattr(args, "header_intersample", False):
+        rig_only.append("--header-intersample")
+    if rig_only:
+        return _err("identify-synth", f"{rig_only[0]}: only with --realism rig")
+    for e in args.effect:
+        if e not in ALL_SYNTH_EFFECTS:
+            return _err("identify-synth", f"--effect {e}: unknown effect for --realism plant "
+                        f"(known: {', '.join(ALL_SYNTH_EFFECTS)})")
+    if args.preset is None:
+        args.preset = "hydra_linear"
     effects: dict[str, dict[str, float]] = {e: {} for e in args.effect}
     for item in args.magnitude:
         try:
@@ -136,6 +172,59 @@ def run_synth(args: argparse.Namespace) -> int:
     write_measured(out, res.data, {"effects": truth})
     print(f"wrote {out}: {args.load}, {res.data.n} samples at {res.data.sample_rate_hz:g} Hz, "
           f"effects: {truth}")
+    return EXIT_OK
+
+
+def _run_rig_synth(args: argparse.Namespace) -> int:
+    """``identify-synth --realism rig``: a record from the independent rig simulator."""
+    from hil.identify.csvdata import write_measured
+    from hil.identify.rig import RIG_DEFAULT_MAGNITUDES, RIG_EFFECTS, generate_rig
+    from plant.config import ConfigError
+
+    for e in args.effect:
+        if e not in RIG_EFFECTS:
+            return _err("identify-synth", f"--effect {e}: unknown effect for --realism rig "
+                        f"(known: {', '.join(RIG_EFFECTS)})")
+    effects: dict[str, dict[str, float]] = {e: {} for e in args.effect}
+    for item in args.magnitude:
+        try:
+            key, value = item.split("=", 1)
+            name, field = key.split(".", 1)
+            val = float(value)
+        except ValueError:
+            return _err("identify-synth", f"--magnitude {item}: expected EFFECT.KEY=NUMBER")
+        if name not in effects:
+            return _err("identify-synth", f"--magnitude {item}: effect {name} not switched on")
+        extra_order = name == "pump_pulsation" and field.rsplit("_", 1)[-1].isdigit()
+        if field not in RIG_DEFAULT_MAGNITUDES[name] and not extra_order:
+            known = ", ".join(RIG_DEFAULT_MAGNITUDES[name]) or "none"
+            return _err("identify-synth", f"--magnitude {item}: unknown key (known: {known})")
+        effects[name][field] = val
+    if args.seconds <= 1.0:
+        return _err("identify-synth", f"--seconds {args.seconds}: need more than 1 s")
+    out = Path(args.out)
+    if not out.parent.exists() and str(out.parent):
+        return _err("identify-synth", f"{args.out}: directory {out.parent} does not exist")
+    try:
+        res = generate_rig(
+            args.load, effects, seconds=args.seconds, seed=args.seed, profile=args.profile,
+            temperature=args.temperature,
+            current_noise_lsb=1.0 if args.current_noise_lsb is None else args.current_noise_lsb,
+            intersample=args.intersample or "continuous",
+            spread=0.15 if args.spread is None else args.spread,
+            preset=args.preset or "hydra_default",
+            header_intersample=args.header_intersample)
+    except (ConfigError, ValueError) as exc:
+        return _err("identify-synth", str(exc))
+    # the truth is printed, not written: the file holds only what a rig's log would
+    write_measured(out, res.data, dict(res.data.header))
+    par = res.truth["parameters"]
+    print(f"wrote {out}: rig, {args.load}, {res.data.n} samples at "
+          f"{res.data.sample_rate_hz:g} Hz, intersample {res.config['intersample']}, "
+          f"temperature {res.config['temperature']}")
+    print("  true parameters: " + ", ".join(f"{k} {v:.6g}" for k, v in par.items()))
+    for name, vals in res.truth["effects"].items():
+        print(f"  {name}: " + ", ".join(f"{k} {v:.6g}" for k, v in vals.items()))
     return EXIT_OK
 
 
