@@ -1,6 +1,12 @@
 """``eha-hil serve`` in its own process on a pseudo-terminal, paced to the wall clock, with
 a 1 kHz master in this process: the loop closes (the commanded force shows in f_pressure
-of the stack model) and no frame is lost or damaged on either side."""
+of the stack model) and no frame is lost or damaged on either side.
+
+Both processes share the machine with whatever else runs, so nothing asserted here may
+depend on how promptly they are scheduled: replies get a deadline far beyond any stall, the
+MCU's command watchdog (10 ms by default: a stalled master would zero the force) is set
+beyond any stall too (it has its own tests), and the server's pacing is checked by relations
+that hold under load (never ahead of the clock; behind it only by counted, slipped cycles)."""
 
 from __future__ import annotations
 
@@ -18,11 +24,16 @@ import pytest
 from firmware_model.mcu.mcu import BOARD_ENABLED, SAFE_OFF
 from hil.fieldbus.master import Master
 from hil.fieldbus.topology import load_topology
+from hil.serve import PERIOD_S
 
 SECONDS = 3.0
 STEP_AT = 1000          # cycle of the force step 0 -> FORCE_N
 FORCE_N = 300.0
-REPLY_TIMEOUT_S = 0.4   # generous: the machine may be loaded; no timing is asserted
+#: A reply later than this is lost (the test fails, and the master stops at once rather than
+#: wait this long for each of the remaining cycles). Far beyond any scheduling stall.
+REPLY_TIMEOUT_S = 5.0
+#: The MCU's command watchdog for this test [s]: a stalled master must not zero the force.
+COMMAND_TIMEOUT_S = 2.0
 
 
 @pytest.fixture
@@ -46,7 +57,8 @@ def _reader(stream, lines: queue.Queue) -> None:
 
 
 def _wait_ready(proc: subprocess.Popen, lines: queue.Queue, stderr: list[str]) -> None:
-    deadline = time.monotonic() + 60.0
+    # On a cold numba cache the server compiles first, maybe on a busy machine.
+    deadline = time.monotonic() + 180.0
     while time.monotonic() < deadline:
         try:
             line = lines.get(timeout=0.5)
@@ -63,8 +75,8 @@ def _wait_ready(proc: subprocess.Popen, lines: queue.Queue, stderr: list[str]) -
 
 def _master_loop(end, topo) -> tuple[Master, list[tuple[int, float, int]], int]:
     """1 kHz, paced to the wall clock; per cycle (cycle, f_pressure, status) of fresh
-    inputs. A board switched off by the command watchdog (this process stalled for > 60 ms)
-    is re-enabled, as a PC would do."""
+    inputs. A board switched off by the command watchdog (this process stalled for longer
+    than the watchdog) is re-enabled, as a PC would do. Stops at the first lost reply."""
     m = Master(topo)
     seen: list[tuple[int, float, int]] = []
     reenables = 0
@@ -76,13 +88,17 @@ def _master_loop(end, topo) -> tuple[Master, list[tuple[int, float, int]], int]:
         for f in m.frames():
             end.send(f)
         deadline = time.perf_counter() + REPLY_TIMEOUT_S
+        lost = False
         while not all(m._answered):
             reply = end.recv(timeout=max(0.0, deadline - time.perf_counter()))
             if reply is None:
+                lost = True
                 break
             m.receive(reply)
         inp = m.actuator_inputs(0)
         m.end_cycle()
+        if lost:
+            break
         if inp["fresh"]:
             seen.append((k, inp["f_pressure"], inp["status"]))
         if not enable:
@@ -100,7 +116,8 @@ def test_serve_closes_the_loop_over_a_pty(pty):
 
     topo = load_topology("bench_one_box")
     cmd = [sys.executable, "-m", "hil.cli", "serve", "--transport", "serial", "--port",
-           pty.slave_path, "--topology", "bench_one_box", "--model", "stack", "--json"]
+           pty.slave_path, "--topology", "bench_one_box", "--model", "stack", "--json",
+           "--set", f"mcu.command_timeout_s={COMMAND_TIMEOUT_S}"]
     t_start = time.perf_counter()
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     lines: queue.Queue = queue.Queue()
@@ -136,7 +153,9 @@ def test_serve_closes_the_loop_over_a_pty(pty):
         assert summary[key] == 0, (key, summary)
     ts = summary["transport_stats"]
     assert (ts["crc_errors"], ts["framing_errors"], ts["oversize"]) == (0, 0, 0)
-    assert summary["sessions"] == 1
+    # A pause of more than hil.serve.SESSION_GAP_S between two frames (a stalled process)
+    # starts a new session; the counts above show that no frame was lost across it.
+    assert summary["sessions"] >= 1
 
     # The loop closed: the board came up and f_pressure followed the commanded force.
     assert len(seen) == n
@@ -147,10 +166,13 @@ def test_serve_closes_the_loop_over_a_pty(pty):
     tracking = sum(abs(f - FORCE_N) < 0.1 * FORCE_N for f in after)
     assert tracking > 0.5 * len(after), (tracking, after[-20:], reenables)
 
-    # The server paced itself and says how well: overruns counted, exit code consistent.
-    assert summary["cycles"] >= 0.8 * SECONDS * 1000
+    # The server paced itself and says how well: never ahead of the wall clock, behind it only
+    # by the cycles it counted as slipped (and the lag it had when stopped, well under the
+    # 20% margin: the master ran SECONDS of wall time), overruns counted, exit code consistent.
+    assert summary["cycles"] <= summary["wall_s"] / PERIOD_S + 1
+    assert summary["cycles"] + summary["slipped_cycles"] >= 0.8 * SECONDS / PERIOD_S
     assert isinstance(summary["overruns"], int) and summary["overruns"] >= 0
-    assert summary["worst_late_ms"] >= 0.0 and summary["real_time_factor"] > 0.5
+    assert summary["worst_late_ms"] >= 0.0
     assert summary["ok"] == (not summary["overrun_limit_exceeded"]), summary["failures"]
     assert proc.returncode == (1 if summary["overrun_limit_exceeded"] else 0), err
     assert "ready on serial" in err and "serve:" in err  # ready line + status lines
