@@ -8,8 +8,8 @@ channel by the rms of its own residual, and the fit is repeated (maximum likelih
 unknown per-channel variances, in two passes).
 
 Positive physical parameters (d_s, d_p, d_c, k_s, K, k_rod, c_rod) are fitted as logarithms;
-effect parameters linearly, scaled by their nominal size. ``scipy.optimize.least_squares``
-(trust-region reflective, two-point Jacobian) does the work.
+effect parameters linearly, scaled by their nominal size. A Levenberg-Marquardt on the normal
+equations (box bounds, forward-difference Jacobian, columns simulated in parallel) does the work.
 
 Confidence intervals come from the Jacobian ``J`` at the optimum: ``cov = H^-1 S H^-1`` with
 ``H = J'J`` and ``S`` the Newey-West long-run covariance of the per-sample scores (the sum
@@ -23,14 +23,14 @@ and named in :attr:`FitResult.held`.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.optimize import least_squares
 
 from hil.identify import stats
 from hil.identify.experiment import Experiment
-from hil.identify.model import IDX, FastModel, map_threads
+from hil.identify.model import IDX, NUISANCE, PRESSURE_CHANNELS, FastModel, map_threads
 
 #: Baseline parameters that can be fitted per load kind (others have no effect there).
 BASELINE_FREE: dict[str, tuple[str, ...]] = {
@@ -51,8 +51,15 @@ MAX_REL_SE = 0.5
 Z95 = 1.959963984540054
 
 
+#: Longest first-order sensor lag the baseline may fit (a 160 Hz sensor).
+MAX_SENSOR_LAG_S = 1e-3
 #: The timing skew is a sub-sample alignment: |skew| <= SKEW_LIMIT x the sample period.
 SKEW_LIMIT = 0.5
+
+
+def NUISANCE_SCALES(dt: float) -> dict[str, float]:  # noqa: N802 - a table, by sample period
+    """Fit scales of the offset and the timing nuisances (about their typical size)."""
+    return {"strain_offset_n": 1.0, "skew_s": dt, "lag_pressure_s": dt, "lag_strain_s": dt}
 
 
 def bounds_of(name: str, dt: float, skew_limit: float = SKEW_LIMIT) -> tuple[float, float]:
@@ -61,6 +68,8 @@ def bounds_of(name: str, dt: float, skew_limit: float = SKEW_LIMIT) -> tuple[flo
     lies in 0..1."""
     if name == "skew_s":
         return -skew_limit * dt, skew_limit * dt
+    if name.startswith("lag_"):
+        return 0.0, MAX_SENSOR_LAG_S
     if name == "delay_s":
         return 0.0, np.inf
     if name.startswith("sat_"):
@@ -133,7 +142,8 @@ class OutputErrorFit:
 
     def _stack(self, theta: np.ndarray, sigma: dict[str, float], mask: np.ndarray) -> np.ndarray:
         self.n_sims += 1
-        out = self.model.outputs(theta)
+        # the model is causal: samples after the last one compared need no simulation
+        out = self.model.outputs(theta, n_stop=int(np.flatnonzero(mask)[-1]) + 1)
         parts = []
         for c in self.exp.channels:
             e = (self.exp.measured[c] - out[c])[mask] / sigma[c]
@@ -186,15 +196,19 @@ class OutputErrorFit:
 
     def at_bound(self, result: FitResult, name: str) -> bool:
         """True when ``name`` ended on (or within 0.1 % of the range near) its bound."""
-        i = result.free.index(name)
-        lo, hi = self._x_bounds(result.free)
-        x = self._to_x(result.theta, result.free)[i]
-        width = hi[i] - lo[i] if np.isfinite(hi[i] - lo[i]) else max(abs(x), 1.0)
+        lo, hi = (a[0] for a in self._x_bounds([name]))
+        if name in LOG_PARAMS:
+            ref = getattr(self, "_ref", {}).get(name)
+            if ref is None:
+                return False
+            x = float(np.log(result.value(name) / ref))
+        else:
+            x = result.value(name) / self.scales.get(name, 1.0)
+        width = hi - lo if np.isfinite(hi - lo) else max(abs(x), 1.0)
         tol = 1e-3 * width
         # a causal delay or a clip fraction resting at 0 is "absent", not "at a bound"
-        rest_at_zero = name == "delay_s" or name.startswith("sat_")
-        return bool(x - lo[i] < tol and not (rest_at_zero and lo[i] == 0.0)) or bool(
-            hi[i] - x < tol)
+        rest_at_zero = name == "delay_s" or name.startswith(("sat_", "lag_"))
+        return bool(x - lo < tol and not (rest_at_zero and lo == 0.0)) or bool(hi - x < tol)
 
     def cost(self, theta: np.ndarray, sigma: dict[str, float]) -> float:
         """Weighted sum of squares on the estimation samples."""
@@ -203,37 +217,48 @@ class OutputErrorFit:
 
     def fit(self, theta0: np.ndarray, free: list[str], sigma: dict[str, float] | None = None,
             passes: int = 2, max_nfev: int = 40) -> FitResult:
-        """Fit the parameters ``free`` starting from ``theta0``; others stay as given."""
+        """Fit the parameters ``free`` starting from ``theta0``; others stay as given.
+
+        ``max_nfev`` bounds the Jacobians (each one simulation per free parameter) per pass.
+        """
         self._ref = {n: max(abs(theta0[IDX[n]]), 1e-12) for n in free if n in LOG_PARAMS}
         mask = self.fit_mask()
-        sigma = dict(sigma or self.exp.sigma0)
-        theta = theta0.copy()
-        x = self._to_x(theta, free)
+        if sigma is None:
+            # weights from the start's own residual: near the final ones, so one pass usually
+            # settles them (signal scales would weight a 2 kPa-noise pressure like a speed)
+            res0 = self.residual_channels(self.model.outputs(theta0))
+            sigma = {c: float(np.sqrt(np.nanmean(res0[c][mask] ** 2))) or self.exp.sigma0[c]
+                     for c in self.exp.channels}
+        sigma = dict(sigma)
+        x = self._to_x(theta0.copy(), free)
         lo, hi = self._x_bounds(free)
-        # least_squares wants a strictly feasible start
-        margin = 1e-6 * np.where(np.isfinite(hi - lo), hi - lo, 1.0)
-        x = np.clip(x, lo + margin, hi - margin)
+        x = np.clip(x, lo, hi)
         used = sigma
+        r = j = None
         for k in range(passes):
-            if k > 0 and all(abs(sigma[c] / used[c] - 1.0) < 0.2 for c in sigma):
-                break  # weights settled: a second pass would not move the optimum
+            if k > 0:
+                if all(abs(sigma[c] / used[c] - 1.0) < 0.2 for c in sigma):
+                    break  # weights settled: a second pass would not move the optimum
+                # re-weight the last residual and Jacobian instead of simulating them again
+                n_t = int(mask.sum())
+                scale = np.repeat([used[c] / sigma[c] for c in self.exp.channels], n_t)
+                r = r * scale
+                j = j * scale[:, None]
             fun, jac = self._problem(free, theta0, sigma, mask)
-            sol = least_squares(fun, x, jac=jac, method="trf", x_scale=1.0, ftol=1e-8,
-                                xtol=1e-8, gtol=1e-8, max_nfev=max_nfev, bounds=(lo, hi))
-            x = sol.x
+            x, r, j = levenberg_marquardt(fun, jac, x, lo, hi, max_jac=max(3, max_nfev // 3),
+                                          r0=r, j0=j)
             used = sigma
             theta = self._to_theta(x, free, theta0)
             out = self.model.outputs(theta)
             res = self.residual_channels(out)
             sigma = {c: float(np.sqrt(np.nanmean(res[c][mask] ** 2))) or 1.0
                      for c in self.exp.channels}
-        jac = sol.jac
+        theta = self._to_theta(x, free, theta0)
         states = self.model.states(theta)
         out = self.model.outputs(theta, states)
-        e = self._stack(theta, used, mask)
-        se, cov = self.hac_se(jac, e, mask.sum(), theta, free)
+        se, cov = self.hac_se(j, r, mask.sum(), theta, free)
         return FitResult(theta, list(free), se, sigma, out, states, n_sims=self.n_sims, cov=cov,
-                         jac=jac, weights=dict(used))
+                         jac=j, weights=dict(used))
 
     def offenders(self, result: FitResult, names: list[str] | None = None
                   ) -> list[tuple[str, str, float]]:
@@ -245,7 +270,8 @@ class OutputErrorFit:
         """
         out = []
         for n in names if names is not None else result.free:
-            if n not in result.free:
+            if n not in result.free or n in NUISANCE:
+                # timing nuisances: at a bound they are reported, not held
                 continue
             v = result.value(n)
             if self.at_bound(result, n):
@@ -278,6 +304,64 @@ class OutputErrorFit:
         cov = cov_x * np.outer(d, d)
         se = {n: float(np.sqrt(max(cov[i, i], 0.0))) for i, n in enumerate(free)}
         return se, cov
+
+
+def levenberg_marquardt(
+    fun: Callable[[np.ndarray], np.ndarray],
+    jac: Callable[[np.ndarray], np.ndarray],
+    x0: np.ndarray,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    max_jac: int = 12,
+    r0: np.ndarray | None = None,
+    j0: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Minimise ``|fun(x)|^2`` within the box ``lo <= x <= hi``; returns ``(x, r, J)``.
+
+    Levenberg-Marquardt on the normal equations: the residual has hundreds of thousands of
+    rows and the parameters a dozen, so each step costs one product ``J'J`` (a library solver
+    takes an SVD of ``J`` per step, and most of the fit's time with it). Steps leaving the box
+    are clipped to it. Stops when a step lowers the cost by less than 1e-9 of it, the step
+    is below 1e-8, or after ``max_jac`` Jacobians.
+    """
+    x = np.clip(np.asarray(x0, dtype=float), lo, hi)
+    r = fun(x) if r0 is None else r0
+    j = jac(x) if j0 is None else j0
+    cost = float(r @ r)
+    lam = 1e-3
+    n_jac = 1
+    while True:
+        a = j.T @ j
+        g = j.T @ r
+        d = np.sqrt(np.maximum(np.diag(a), 1e-300))
+        an = a / np.outer(d, d)
+        gn = g / d
+        improved = False
+        for _ in range(12):
+            try:
+                step = -np.linalg.solve(an + lam * np.eye(an.shape[0]), gn) / d
+            except np.linalg.LinAlgError:
+                lam *= 10.0
+                continue
+            x_new = np.clip(x + step, lo, hi)
+            r_new = fun(x_new)
+            cost_new = float(r_new @ r_new)
+            if np.isfinite(cost_new) and cost_new < cost:
+                gain = cost - cost_new
+                x, r, cost = x_new, r_new, cost_new
+                lam = max(lam / 5.0, 1e-9)
+                improved = True
+                break
+            lam *= 8.0
+        # a cost change below a tenth of one residual variance moves no parameter by more than
+        # a small fraction of its standard error
+        if not improved or gain <= 0.1 * cost / r.size or np.max(np.abs(step)) < 1e-8 \
+                or n_jac >= max_jac:
+            if improved:
+                j = jac(x)  # the Jacobian at the returned point, for the covariance
+            return x, r, j
+        j = jac(x)
+        n_jac += 1
 
 
 def guarded_fit(fitter: OutputErrorFit, theta0: np.ndarray, free: list[str],
@@ -319,6 +403,11 @@ def baseline_free(exp: Experiment) -> list[str]:
     if "f_strain" in exp.channels:
         free.append("strain_offset_n")
     free.append("skew_s")
+    # the sensors' own lags: told apart from the input's skew by the encoder, which has none
+    if any(c in exp.channels for c in PRESSURE_CHANNELS):
+        free.append("lag_pressure_s")
+    if "f_strain" in exp.channels:
+        free.append("lag_strain_s")
     return free
 
 
@@ -334,7 +423,7 @@ def fit_baseline(model: FastModel, theta0: np.ndarray | None = None,
     theta = model.start_vector() if theta0 is None else theta0.copy()
     free = baseline_free(exp)
     free += [p for p in extra_free if p not in free]
-    scales = {"strain_offset_n": 1.0, "skew_s": exp.dt, **(scales or {})}
+    scales = {**NUISANCE_SCALES(exp.dt), **(scales or {})}
     fitter = OutputErrorFit(model, scales)
     result, held = guarded_fit(fitter, theta, free, model.start_vector())
     result.held = {n: f"not identifiable from this record: {why}" for n, why in held.items()}

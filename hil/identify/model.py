@@ -38,7 +38,10 @@ from hil.identify.intersample import substep_average
 
 N_ORDERS = 8
 BASE_NAMES = ("gain_n_per_a", "ds", "dp", "dc", "ks", "jp", "jc", "k_rod", "c_rod",
-              "strain_offset_n", "skew_s")
+              "strain_offset_n", "skew_s", "lag_pressure_s", "lag_strain_s")
+#: Nuisance parameters of the baseline: the input's timing skew and the sensors' first-order
+#: lags. They are fitted, reported, bounded, and never held for a wide interval.
+NUISANCE = ("skew_s", "lag_pressure_s", "lag_strain_s")
 _PULS = tuple(
     f"puls{n}_{part}" for n in range(1, N_ORDERS + 1)
     for part in ("flow_s", "flow_c", "torque_s", "torque_c")
@@ -51,6 +54,8 @@ EFFECT_NAMES = _PULS + (
 PARAM_NAMES = BASE_NAMES + EFFECT_NAMES
 IDX = {name: i for i, name in enumerate(PARAM_NAMES)}
 N_PARAMS = len(PARAM_NAMES)
+#: The parameters the continuous (A, B) depend on.
+_LINEAR_IDX = tuple(IDX[k] for k in ("ds", "dp", "dc", "ks", "jp", "jc", "k_rod", "c_rod"))
 
 # Indices into the flat effect array the kernel reads.
 _E_PULS = 0  # 8 orders x (flow_s, flow_c, torque_s, torque_c)
@@ -173,20 +178,24 @@ def _solve_friction(v_free, b, level_c, level_s, vs, eps):
 @njit(cache=True, nogil=True)
 def _simulate(ad, bd, z0, tau_p, ks, ds, dp, dc, eff, angle, has_angle, xs, has_x, temp,
               has_temp, t_ref, n_sub, fixed, out):
-    """Run the model over the record; ``out[k]`` gets the state at sample ``k``.
+    """Run the model over ``out.shape[0]`` samples; ``out[k]`` gets the state at sample ``k``.
 
     ``tau_p`` holds one value per sub-step; ``angle``, ``xs``, ``temp`` one per sample. The
     pulsation terms use the simulated rotor angle plus an offset that tracks the measured
-    angle with the first-order gain ``alpha`` per sample.
+    angle with the first-order gain ``alpha`` per sample. With the piston fixed only the
+    first three states move, and only they are propagated. The harmonics n = 1..8 of the
+    rotor angle come from one sine and cosine by the angle-addition recurrence.
     """
     n = out.shape[0]
+    ns = 3 if fixed else 5
     z = z0.copy()
     zn = np.zeros(5)
     u = np.zeros(4)
-    puls_on = False
-    for i in range(32):
-        if eff[_E_PULS + i] != 0.0:
-            puls_on = True
+    n_ord = 0
+    for m in range(8):
+        for i in range(4):
+            if eff[_E_PULS + 4 * m + i] != 0.0:
+                n_ord = m + 1
     pc = eff[_E_PC]
     sf_c = eff[_E_SF_C]
     sf_s = eff[_E_SF_S]
@@ -205,6 +214,9 @@ def _simulate(ad, bd, z0, tau_p, ks, ds, dp, dc, eff, angle, has_angle, xs, has_
             out[k, i] = z[i]
         if k == n - 1:
             break
+        r = 1.0
+        if visc != 0.0 and has_temp:
+            r = math.exp(-visc * (temp[k] - t_ref))
         for j in range(n_sub):
             vp = z[1]
             tq = z[2]
@@ -212,59 +224,78 @@ def _simulate(ad, bd, z0, tau_p, ks, ds, dp, dc, eff, angle, has_angle, xs, has_
             f_pump = 0.0
             f_pist = 0.0
             g = 1.0
-            if puls_on:
+            if n_ord > 0:
                 # rotor angle at the sub-step's midpoint: simulated, plus the slowly
                 # tracked offset to the measured angle (complementary filter)
                 th = (z[0] + 0.5 * h_sub * vp) * kc_kp + offset
+                s1 = math.sin(th)
+                c1 = math.cos(th)
+                s = s1
+                c = c1
                 ripple = 0.0
                 torque = 0.0
-                for m in range(8):
-                    o = m + 1.0
-                    s = math.sin(o * th)
-                    c = math.cos(o * th)
+                for m in range(n_ord):
                     base = _E_PULS + 4 * m
                     ripple += eff[base] * s + eff[base + 1] * c
                     torque += eff[base + 2] * s + eff[base + 3] * c
+                    s, c = s * c1 + c * s1, c * c1 - s * s1
                 g = 1.0 + ripple
                 f_pump -= ripple * tq + torque
-            r = 1.0
-            if visc != 0.0 and has_temp:
-                r = math.exp(-visc * (temp[k] - t_ref))
+            if r != 1.0:
                 f_pump -= dp * (r - 1.0) * vp
                 f_pist -= dc * (r - 1.0) * vc
-            ks_eff = ks
-            if ksx_on:
-                # Eq. 2.25-2.27: the series compliance is exactly quadratic in x
-                xpos = xs[k] if has_x else z[3]
-                xn = xpos / half
-                ks_eff = ks / max(1.0 + k1 * xn + k2 * xn * xn, 0.05)
-            q_rate = ks_eff * (g * vp - tq / (ds * r) - vc) - ks * (vp - tq / ds - vc)
+            if ksx_on or g != 1.0 or r != 1.0:
+                ks_eff = ks
+                if ksx_on:
+                    # Eq. 2.25-2.27: the series compliance is exactly quadratic in x
+                    xpos = xs[k] if has_x else z[3]
+                    xn = xpos / half
+                    ks_eff = ks / max(1.0 + k1 * xn + k2 * xn * xn, 0.05)
+                q_rate = ks_eff * (g * vp - tq / (ds * r) - vc) - ks * (vp - tq / ds - vc)
+            else:
+                q_rate = 0.0
             u[0] = tau_p[k * n_sub + j]
             u[1] = f_pump
             u[2] = q_rate
             u[3] = f_pist
-            for i in range(5):
+            for i in range(ns):
                 acc = 0.0
-                for m in range(5):
+                for m in range(ns):
                     acc += ad[i, m] * z[m]
                 for m in range(4):
                     acc += bd[i, m] * u[m]
                 zn[i] = acc
-            fp = 0.0
-            fs = 0.0
             if pc != 0.0:
                 vnew, fp = _solve_friction(zn[1], bd[1, 1], pc, pc, 0.0, eff[_E_PC_EPS])
-                for i in range(5):
+                for i in range(ns):
                     zn[i] -= bd[i, 1] * fp
             if sf_on:
                 vnew, fs = _solve_friction(zn[4], bd[4, 3], sf_c, sf_s, eff[_E_SF_VS],
                                            eff[_E_SF_EPS])
-                for i in range(5):
+                for i in range(ns):
                     zn[i] -= bd[i, 3] * fs
-            for i in range(5):
+            for i in range(ns):
                 z[i] = zn[i]
         if has_angle:
             offset += alpha * (angle[k + 1] - z[0] * kc_kp - offset)
+
+
+PRESSURE_CHANNELS = ("p_pump_a", "p_pump_b", "p_cyl_a", "p_cyl_b")
+
+
+def sensor_lag(y: np.ndarray, tau: float, dt: float) -> np.ndarray:
+    """``y`` (samples ``dt`` apart) through a first-order sensor lag ``tau`` s, exact for an
+    input linear between samples: ``tau y' = x - y`` gives
+    ``y[k+1] = a y[k] + b0 x[k+1] + b1 x[k]`` with ``a = exp(-dt/tau)``,
+    ``b0 = 1 - (tau/dt)(1 - a)``, ``b1 = (tau/dt)(1 - a) - a``; it starts settled."""
+    from scipy.signal import lfilter
+
+    a = math.exp(-dt / tau)
+    r = tau / dt * (1.0 - a)
+    b0, b1 = 1.0 - r, r - a
+    zi = np.array([y[0] * (1.0 - b0)])  # steady state for y[0]: the filter state a*y - b1*x
+    out, _ = lfilter([b0, b1], [1.0, -a], y, zi=zi)
+    return out
 
 
 class FastModel:
@@ -277,6 +308,7 @@ class FastModel:
         self.n_sub = n_sub
         self._iq_sub0 = np.repeat(exp.iq, n_sub)
         self._input_cache: dict[tuple[str, float], np.ndarray] = {}
+        self._disc_cache: dict[tuple[float, ...], tuple[np.ndarray, np.ndarray]] = {}
         self._empty = np.zeros(1)
 
     def start_vector(self) -> np.ndarray:
@@ -302,12 +334,20 @@ class FastModel:
             self._input_cache[key] = hit
         return hit
 
-    def states(self, theta: np.ndarray) -> np.ndarray:
-        """State trajectory (n x 5) for the parameter vector ``theta``."""
+    def states(self, theta: np.ndarray, n_stop: int | None = None) -> np.ndarray:
+        """State trajectory (n x 5) for the parameter vector ``theta``; with ``n_stop`` only
+        the first ``n_stop`` samples are simulated (the rest stays zero)."""
         exp = self.exp
         a, b = continuous(theta, exp)
         h = exp.dt / self.n_sub
-        ad, bd = discretise(a, b, h)
+        # Jacobian columns of effect parameters share the linear part: discretise it once
+        key = tuple(float(theta[i]) for i in _LINEAR_IDX)
+        hit = self._disc_cache.get(key)
+        if hit is None:
+            if len(self._disc_cache) > 64:
+                self._disc_cache.clear()
+            hit = self._disc_cache[key] = discretise(a, b, h)
+        ad, bd = hit
         gain = theta[IDX["gain_n_per_a"]]
         tau_p = gain * self.applied_current(theta[IDX["delay_s"]] + theta[IDX["skew_s"]])
         u0 = np.array([tau_p[0], 0.0, 0.0, 0.0])
@@ -329,19 +369,22 @@ class FastModel:
         eff[_E_ALPHA] = 1.0 - math.exp(-2.0 * math.pi * ANGLE_CROSSOVER_HZ * exp.dt)
         out = np.zeros((exp.n, 5))
         e = self._empty
+        sim = out if n_stop is None else out[: max(2, min(n_stop, exp.n))]
         _simulate(ad, bd, z0, tau_p, theta[IDX["ks"]], theta[IDX["ds"]], theta[IDX["dp"]],
                   theta[IDX["dc"]], eff,
                   exp.angle if exp.angle is not None else e, exp.angle is not None,
                   exp.position if exp.position is not None else e, exp.position is not None,
                   exp.temperature if exp.temperature is not None else e,
-                  exp.temperature is not None, exp.t_ref, self.n_sub, exp.load == "fixed", out)
+                  exp.temperature is not None, exp.t_ref, self.n_sub, exp.load == "fixed", sim)
         return out
 
-    def outputs(self, theta: np.ndarray, z: np.ndarray | None = None) -> dict[str, np.ndarray]:
-        """Model channels (same names and units as :attr:`Experiment.measured`)."""
+    def outputs(self, theta: np.ndarray, z: np.ndarray | None = None,
+                n_stop: int | None = None) -> dict[str, np.ndarray]:
+        """Model channels (same names and units as :attr:`Experiment.measured`); with
+        ``n_stop``, valid for the first ``n_stop`` samples only."""
         exp = self.exp
         if z is None:
-            z = self.states(theta)
+            z = self.states(theta, n_stop)
         c = exp.const
         tq = z[:, 2]
         vc = z[:, 4]
@@ -379,6 +422,10 @@ class FastModel:
                 y = exp.window_diff(z[:, 3])
             else:  # pragma: no cover - channels come from prepare()
                 raise KeyError(ch)
+            lag = (theta[IDX["lag_strain_s"]] if ch == "f_strain"
+                   else theta[IDX["lag_pressure_s"]] if ch in PRESSURE_CHANNELS else 0.0)
+            if lag > 0.0:
+                y = sensor_lag(y, lag, exp.dt)
             if ch in SAT_CHANNELS:
                 beta = theta[IDX[f"sat_{ch}"]]
                 level = exp.plateaus.get(ch)

@@ -34,6 +34,7 @@ from hil.identify.checks import check_fit, check_record
 from hil.identify.csvdata import MeasuredData
 from hil.identify.experiment import Experiment, prepare, quantum
 from hil.identify.fit import (
+    NUISANCE_SCALES,
     Z95,
     FitResult,
     OutputErrorFit,
@@ -41,7 +42,6 @@ from hil.identify.fit import (
     fit_baseline,
     guarded_fit,
 )
-from hil.identify.intersample import MODES
 from hil.identify.model import IDX, FastModel
 from hil.identify.noise import (
     InputNoise,
@@ -66,6 +66,8 @@ BASELINE_LABELS = {
     "strain_offset_n": ("f_0", "N", "strain-gauge offset"),
     "skew_s": ("skew", "s", "timing skew of the logged input against the outputs (nuisance; "
                "applied current i(t - skew))"),
+    "lag_pressure_s": ("tau_p_sensor", "s", "first-order lag of the pressure sensors (nuisance)"),
+    "lag_strain_s": ("tau_strain", "s", "first-order lag of the strain measurement (nuisance)"),
 }
 
 
@@ -293,18 +295,22 @@ def describe_effect(d: EffectDef, fit: FitResult, exp: Experiment) -> dict[str, 
 
 #: Relative cost difference under which two intersample modes fit equally well.
 INTERSAMPLE_TIE = 2e-3
+#: Under ``zoh`` a sampled continuous current needs a skew of about -T/2; beyond this share
+#: of T the current is taken as continuous.
+CONTINUOUS_SKEW = 0.25
 
 
 def choose_intersample(data: MeasuredData, cfg: Config, given: str | None,
                        say: Callable[[str], None]) -> tuple[Experiment, np.ndarray | None]:
     """The experiment with the input's intersample behaviour: as given, else estimated.
 
-    Estimated: a short output-error fit of the baseline with the input band-limited and the
-    timing skew free over a whole sample, then, at that fit, the skew that suits each of
-    ``zoh``, ``foh``, ``bl`` best and the cost it leaves; the lowest cost wins. A current
-    that was applied as a staircase fits ``zoh`` with no skew; a sampled continuous current
-    fits ``zoh`` only with a skew near -T/2 and one of the others better.
-    Returns the experiment and the provisional parameter vector (None when given).
+    Estimated: the baseline is fitted with the current held between samples (``zoh``) and
+    the timing skew free over a whole sample. A current that was applied as a staircase fits
+    that with a skew near 0. A sampled continuous current fits it only about half a sample
+    early (a held sample is, on average, half a sample late), so a skew below -T/4 says
+    "continuous"; then ``foh`` and ``bl`` are compared at that fit, each with the skew that
+    suits it best, and the lower cost wins (a tie goes to the one needing the smaller skew).
+    Returns the experiment and the parameter vector to start the baseline from.
     """
     if given is not None:
         exp = prepare(data, cfg, given)
@@ -312,41 +318,43 @@ def choose_intersample(data: MeasuredData, cfg: Config, given: str | None,
         exp.intersample_reason = ("from the '# intersample:' header line" if src == given
                                   else "as given (--intersample)")
         return exp, None
-    exp = prepare(data, cfg, "bl")
+    exp = prepare(data, cfg, "zoh")
     model = FastModel(exp)
-    fitter = OutputErrorFit(model, {"strain_offset_n": 1.0, "skew_s": exp.dt})
+    fitter = OutputErrorFit(model, NUISANCE_SCALES(exp.dt))
     fitter.skew_limit = 1.0
-    say("intersample: provisional fit (input band-limited, skew free over one sample)")
-    prov = fitter.fit(model.start_vector(), baseline_free(exp), passes=1, max_nfev=12)
+    say("intersample: fit with the current held between samples, skew free over one sample")
+    prov = fitter.fit(model.start_vector(), baseline_free(exp), passes=1, max_nfev=20)
+    skew = prov.value("skew_s")
+    us = skew * 1e6
+    if skew > -CONTINUOUS_SKEW * exp.dt:
+        exp.intersample_reason = (f"estimated: held between samples fits with a skew of "
+                                  f"{us:+.0f} us, near 0: a staircase applied exactly")
+        theta = prov.theta.copy()
+        theta[IDX["skew_s"]] = float(np.clip(skew, -0.5 * exp.dt, 0.5 * exp.dt))
+        return exp, theta
     results: dict[str, tuple[float, float]] = {}
-    for mode in MODES:
-        e_mode = dataclasses.replace(exp, intersample=mode)
-        f_mode = OutputErrorFit(FastModel(e_mode))
+    for mode in ("bl", "foh"):
+        f_mode = OutputErrorFit(FastModel(dataclasses.replace(exp, intersample=mode)))
 
-        def cost(skew: float, f_mode: OutputErrorFit = f_mode) -> float:
+        def cost(sk: float, f_mode: OutputErrorFit = f_mode) -> float:
             th = prov.theta.copy()
-            th[IDX["skew_s"]] = skew
+            th[IDX["skew_s"]] = sk
             return f_mode.cost(th, prov.sigma)
 
-        sol = minimize_scalar(cost, bounds=(-exp.dt, exp.dt), method="bounded",
-                              options={"xatol": exp.dt / 400, "maxiter": 25})
+        centre = skew + 0.5 * exp.dt
+        sol = minimize_scalar(cost, bounds=(centre - 0.5 * exp.dt, centre + 0.5 * exp.dt),
+                              method="bounded", options={"xatol": exp.dt / 200, "maxiter": 20})
         results[mode] = (float(sol.fun), float(sol.x))
-    # Below ~300 Hz a staircase is a band-limited signal half a sample late: costs can tie.
-    # Among the modes within a hair of the best cost the one that needs the least skew is
-    # the right one (the skew is a nuisance that a right intersample model leaves near 0).
     ref = min(c for c, _ in results.values())
-    near = [m for m in MODES if results[m][0] <= (1.0 + INTERSAMPLE_TIE) * ref]
+    near = [m for m in results if results[m][0] <= (1.0 + INTERSAMPLE_TIE) * ref]
     best = min(near, key=lambda m: abs(results[m][1]))
-    detail = ", ".join(f"{m} {results[m][0] / ref:.4f} (skew {results[m][1] * 1e6:+.0f} us)"
-                       for m in MODES)
-    why = {"zoh": "the current was held between samples (a staircase applied exactly)",
-           "foh": "the current moved between samples; linear between them fits with the "
-                  "least skew",
-           "bl": "the current moved between samples; band-limited fits with the least "
-                 "skew"}[best]
+    detail = ", ".join(f"{m} {results[m][0] / ref:.5f} (skew {results[m][1] * 1e6:+.0f} us)"
+                       for m in results)
+    shape = {"bl": "band-limited", "foh": "linear between samples"}[best]
     exp = prepare(data, cfg, best)
-    exp.intersample_reason = (f"estimated: {why}; cost relative to the best with the best "
-                              f"skew each: {detail}")
+    exp.intersample_reason = (f"estimated: held between samples fits only {us:+.0f} us early "
+                              f"(a sampled continuous current); {shape} fits best (relative "
+                              f"cost with its best skew: {detail})")
     theta = prov.theta.copy()
     theta[IDX["skew_s"]] = float(np.clip(results[best][1], -0.5 * exp.dt, 0.5 * exp.dt))
     return exp, theta
@@ -386,6 +394,11 @@ def identify(
     say(f"baseline fit ({exp.load}, {exp.n} samples, channels {', '.join(exp.channels)})")
     base = fit_baseline(model, theta0=theta_prov)
     check_fit(exp, base)
+    skew_fitter = OutputErrorFit(model, NUISANCE_SCALES(exp.dt))
+    if "skew_s" in base.free and skew_fitter.at_bound(base, "skew_s"):
+        exp.notes.append(f"the timing skew sits at its bound ({base.value('skew_s') * 1e6:+.0f} "
+                         "us, half a sample): the outputs and the logged input are further "
+                         "apart in time than a sampling alignment")
     names = [n for n in BASELINE_LABELS if n in base.free or n in base.held]
     baseline_est = _estimates(base, names)
     residual0 = {c: exp.measured[c] - base.outputs[c] for c in exp.channels}
@@ -429,8 +442,8 @@ def identify(
             theta0[IDX["skew_s"]] = 0.0
             new_free.remove("skew_s")
         say(f"round {rnd}: adding {best.label}; refit")
-        fitter = OutputErrorFit(model, {"strain_offset_n": 1.0, "skew_s": exp.dt,
-                                        **_all_scales(defs_all), **scales})
+        fitter = OutputErrorFit(model, {**NUISANCE_SCALES(exp.dt), **_all_scales(defs_all),
+                                        **scales})
         new, held_now = guarded_fit(fitter, theta0, new_free, credible, sigma=current.sigma)
         own = [p for p in held_now if p in d.params]
         before = _val_cost(exp, current.outputs, sigma_ref)

@@ -63,17 +63,25 @@ def nw_lags(n: int, corr_len: int = 0) -> int:
 
 def newey_west(scores: np.ndarray, lags: int) -> np.ndarray:
     """Long-run covariance ``sum_l w_l Gamma_l`` of the rows of ``scores`` (n x p), with
-    Bartlett weights ``w_l = 1 - l/(lags+1)``. Scores are used as given (their mean is zero
-    at a least-squares optimum)."""
+    Bartlett weights ``w_l = 1 - |l|/(lags+1)``. Scores are used as given (their mean is zero
+    at a least-squares optimum).
+
+    Computed as the batch-mean form of the same kernel: with ``S_t`` the sum of the ``L + 1``
+    scores from row ``t``, ``E[S_t S_t'] = (L+1) sum_l w_l gamma_l``, so
+    ``n/((n-L)(L+1)) sum_t S_t S_t'`` estimates ``n sum_l w_l gamma_l`` in O(n p^2) whatever
+    the bandwidth (the lag-by-lag sum costs O(n p^2 L), seconds at the bandwidths that
+    correlated residuals need).
+    """
     s = np.asarray(scores, dtype=float)
     if s.ndim == 1:
         s = s[:, None]
-    out = s.T @ s
     n = s.shape[0]
-    for lag in range(1, min(lags, n - 1) + 1):
-        g = s[lag:].T @ s[:-lag]
-        out += (1.0 - lag / (lags + 1.0)) * (g + g.T)
-    return out
+    big_l = int(min(max(lags, 0), n - 1))
+    if big_l == 0:
+        return s.T @ s
+    csum = np.concatenate([np.zeros((1, s.shape[1])), np.cumsum(s, axis=0)])
+    win = csum[big_l + 1:] - csum[: n - big_l]
+    return (win.T @ win) * (n / ((n - big_l) * (big_l + 1.0)))
 
 
 def wald(beta: np.ndarray, cov: np.ndarray) -> tuple[float, float, int]:
