@@ -61,6 +61,9 @@ class EffectDef:
     description: str
     applicable: Callable[[Experiment], str | None] = field(default=lambda exp: None,
                                                            compare=False)
+    #: shape parameters freed only in the refit once the effect is in (their signature is
+    #: zero while the effect is off): (parameter, start value from the experiment)
+    refit_extra: tuple[tuple[str, Callable[[Experiment], float]], ...] = ()
 
 
 def _needs_temperature(exp: Experiment) -> str | None:
@@ -75,6 +78,13 @@ def _needs_strain(exp: Experiment) -> str | None:
 
 def _needs_strain_and_temperature(exp: Experiment) -> str | None:
     return _needs_strain(exp) or _needs_temperature(exp)
+
+
+def _needs_skew_at_bound(exp: Experiment) -> str | None:
+    if exp.skew_at_bound:
+        return None
+    return ("the baseline's timing skew lies within half a sample: a sampling alignment, "
+            "no delay beyond it")
 
 
 def _needs_moving_piston(exp: Experiment) -> str | None:
@@ -95,11 +105,13 @@ def library(exp: Experiment) -> list[EffectDef]:
         ))
     out += [
         EffectDef("pump_coulomb_friction", "pump_coulomb_friction", ("pc_force_n",), (40.0,),
-                  "Coulomb friction of the pump shaft seal, F_c tanh(v_p/eps)"),
+                  "Coulomb friction of the pump shaft seal, F_c tanh(v_p/eps), eps fitted",
+                  refit_extra=(("pc_eps_m_per_s", lambda exp: exp.const.eps_pump),)),
         EffectDef("seal_friction", "seal_friction", ("sf_coulomb_n", "sf_static_n"),
                   (15.0, 15.0),
-                  "rod-seal Coulomb + Stribeck friction on the piston",
-                  _needs_moving_piston),
+                  "rod-seal Coulomb + Stribeck friction on the piston, v_s fitted",
+                  _needs_moving_piston,
+                  refit_extra=(("sf_vs_m_per_s", lambda exp: exp.const.vs_seal),)),
         EffectDef("stiffness_vs_position", "stiffness_vs_position", ("ks_k1", "ks_k2"),
                   (0.1, 0.1),
                   "k_s(x) = k_s / (1 + c1 x/h + c2 (x/h)^2), h the half stroke: Eq. "
@@ -114,7 +126,8 @@ def library(exp: Experiment) -> list[EffectDef]:
                   _needs_strain_and_temperature),
         EffectDef("input_delay", "input_delay", ("delay_s",), (100e-6,),
                   "causal delay between the logged and the applied current (beyond the "
-                  "baseline's sub-sample timing skew, which it replaces when added)"),
+                  "baseline's sub-sample timing skew, which it replaces when added)",
+                  _needs_skew_at_bound),
     ]
     sat = [c for c in SAT_CHANNELS if c in exp.plateaus and c in exp.channels]
     if not sat:
@@ -214,10 +227,12 @@ def test_candidates(
     jac = np.column_stack(j_est) if j_est else np.zeros((r_est.size, 0))
     jac_v = np.column_stack(j_val) if j_val else np.zeros((r_val.size, 0))
     jac_pinv = _pinv(jac)
-    # A causal delay is tested against the residual with the sub-sample skew left in: the
-    # skew already took what half a sample of timing can explain, the delay is what is left.
-    if "skew_s" in jac_names:
-        keep_cols = [i for i, p in enumerate(jac_names) if p != "skew_s"]
+    # A causal delay is tested against the residual with the timing nuisances left in: the
+    # skew took what half a sample of timing can explain and the sensor lags part of the rest;
+    # the delay (seen by the encoder too, which has no lag) is what is left.
+    timing = ("skew_s", "lag_pressure_s", "lag_strain_s")
+    if any(p in jac_names for p in timing):
+        keep_cols = [i for i, p in enumerate(jac_names) if p not in timing]
         jac_ns, jac_v_ns = jac[:, keep_cols], jac_v[:, keep_cols]
         names_ns = [jac_names[i] for i in keep_cols]
         pinv_ns = _pinv(jac_ns)

@@ -244,7 +244,10 @@ def write_measured(path: str | Path, data: MeasuredData, extra_header: dict | No
     with open(path, "w", encoding="utf-8", newline="") as fh:
         fh.write(f"# load: {data.load}\n")
         fh.write(f"# sample_rate_hz: {data.sample_rate_hz:g}\n")
-        for k, v in (extra_header or {}).items():
+        header = dict(extra_header or {})
+        if "intersample" in data.header:
+            header.setdefault("intersample", data.header["intersample"])
+        for k, v in header.items():
             fh.write(f"# {k}: {v}\n")
         fh.write(",".join(names) + "\n")
         mat = np.column_stack([data.t] + [data.columns[c] for c in names[1:]])

@@ -80,6 +80,8 @@ class Experiment:
     #: the input between samples: zoh | foh | bl (:mod:`hil.identify.intersample`)
     intersample: str = "zoh"
     intersample_reason: str = ""
+    #: the baseline's skew ended at its upper bound (the outputs lag by more than T/2)
+    skew_at_bound: bool = False
 
     @property
     def n(self) -> int:

@@ -49,7 +49,7 @@ _PULS = tuple(
 SAT_CHANNELS = ("p_pump_a", "p_pump_b", "p_cyl_a", "p_cyl_b", "f_strain")
 EFFECT_NAMES = _PULS + (
     "pc_force_n", "sf_coulomb_n", "sf_static_n", "ks_k1", "ks_k2", "visc_coeff_per_c",
-    "drift_n_per_c", "delay_s",
+    "drift_n_per_c", "delay_s", "pc_eps_m_per_s", "sf_vs_m_per_s",
 ) + tuple(f"sat_{c}" for c in SAT_CHANNELS)
 PARAM_NAMES = BASE_NAMES + EFFECT_NAMES
 IDX = {name: i for i, name in enumerate(PARAM_NAMES)}
@@ -355,10 +355,11 @@ class FastModel:
         eff = np.zeros(_N_EFF)
         eff[:32] = theta[IDX["puls1_flow_s"]: IDX["puls1_flow_s"] + 32]
         eff[_E_PC] = theta[IDX["pc_force_n"]]
-        eff[_E_PC_EPS] = exp.const.eps_pump
+        # the friction laws' shape velocities: fitted once the friction is in, else the preset's
+        eff[_E_PC_EPS] = theta[IDX["pc_eps_m_per_s"]] or exp.const.eps_pump
         eff[_E_SF_C] = theta[IDX["sf_coulomb_n"]]
         eff[_E_SF_S] = theta[IDX["sf_static_n"]]
-        eff[_E_SF_VS] = exp.const.vs_seal
+        eff[_E_SF_VS] = theta[IDX["sf_vs_m_per_s"]] or exp.const.vs_seal
         eff[_E_SF_EPS] = exp.const.eps_seal
         eff[_E_K1] = theta[IDX["ks_k1"]]
         eff[_E_K2] = theta[IDX["ks_k2"]]

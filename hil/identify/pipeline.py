@@ -241,10 +241,19 @@ def describe_effect(d: EffectDef, fit: FitResult, exp: Experiment) -> dict[str, 
                                     "rad"),
         }
     if d.name == "pump_coulomb_friction":
-        return {"force_n": _pe("force_n", fit, lambda t: t[g["pc_force_n"]], ps, "N")}
+        out = {"force_n": _pe("force_n", fit, lambda t: t[g["pc_force_n"]], ps, "N")}
+        if "pc_eps_m_per_s" in fit.free:
+            out["eps_m_per_s"] = _pe("eps_m_per_s", fit, lambda t: t[g["pc_eps_m_per_s"]],
+                                     ["pc_eps_m_per_s"], "m/s")
+        return out
     if d.name == "seal_friction":
-        return {"coulomb_n": _pe("coulomb_n", fit, lambda t: t[g["sf_coulomb_n"]], ps, "N"),
-                "static_n": _pe("static_n", fit, lambda t: t[g["sf_static_n"]], ps, "N")}
+        out = {"coulomb_n": _pe("coulomb_n", fit, lambda t: t[g["sf_coulomb_n"]], ps, "N"),
+               "static_n": _pe("static_n", fit, lambda t: t[g["sf_static_n"]], ps, "N")}
+        if "sf_vs_m_per_s" in fit.free:
+            out["stribeck_velocity_m_per_s"] = _pe(
+                "stribeck_velocity_m_per_s", fit, lambda t: t[g["sf_vs_m_per_s"]],
+                ["sf_vs_m_per_s"], "m/s")
+        return out
     if d.name == "stiffness_vs_position":
         # k_s(x) = k_s / (1 + c1 x/h + c2 (x/h)^2): Eq. 2.25-2.27 make the compliance exactly
         # quadratic, 1/k_s(x) = 1/k_s(0) - x^2 / (2 A kappa) with A = V_side + k_c h, so
@@ -295,9 +304,6 @@ def describe_effect(d: EffectDef, fit: FitResult, exp: Experiment) -> dict[str, 
 
 #: Relative cost difference under which two intersample modes fit equally well.
 INTERSAMPLE_TIE = 2e-3
-#: Under ``zoh`` a sampled continuous current needs a skew of about -T/2; beyond this share
-#: of T the current is taken as continuous.
-CONTINUOUS_SKEW = 0.25
 
 
 def choose_intersample(data: MeasuredData, cfg: Config, given: str | None,
@@ -318,22 +324,14 @@ def choose_intersample(data: MeasuredData, cfg: Config, given: str | None,
         exp.intersample_reason = ("from the '# intersample:' header line" if src == given
                                   else "as given (--intersample)")
         return exp, None
-    exp = prepare(data, cfg, "zoh")
+    exp = prepare(data, cfg, "bl")
     model = FastModel(exp)
     fitter = OutputErrorFit(model, NUISANCE_SCALES(exp.dt))
     fitter.skew_limit = 1.0
-    say("intersample: fit with the current held between samples, skew free over one sample")
+    say("intersample: provisional fit, skew free over one sample")
     prov = fitter.fit(model.start_vector(), baseline_free(exp), passes=1, max_nfev=20)
-    skew = prov.value("skew_s")
-    us = skew * 1e6
-    if skew > -CONTINUOUS_SKEW * exp.dt:
-        exp.intersample_reason = (f"estimated: held between samples fits with a skew of "
-                                  f"{us:+.0f} us, near 0: a staircase applied exactly")
-        theta = prov.theta.copy()
-        theta[IDX["skew_s"]] = float(np.clip(skew, -0.5 * exp.dt, 0.5 * exp.dt))
-        return exp, theta
     results: dict[str, tuple[float, float]] = {}
-    for mode in ("bl", "foh"):
+    for mode in ("bl", "foh", "zoh"):
         f_mode = OutputErrorFit(FastModel(dataclasses.replace(exp, intersample=mode)))
 
         def cost(sk: float, f_mode: OutputErrorFit = f_mode) -> float:
@@ -341,20 +339,27 @@ def choose_intersample(data: MeasuredData, cfg: Config, given: str | None,
             th[IDX["skew_s"]] = sk
             return f_mode.cost(th, prov.sigma)
 
-        centre = skew + 0.5 * exp.dt
-        sol = minimize_scalar(cost, bounds=(centre - 0.5 * exp.dt, centre + 0.5 * exp.dt),
+        centre = prov.value("skew_s") + (0.5 * exp.dt if mode == "zoh" else 0.0)
+        sol = minimize_scalar(cost, bounds=(centre - 0.75 * exp.dt, centre + 0.75 * exp.dt),
                               method="bounded", options={"xatol": exp.dt / 200, "maxiter": 20})
         results[mode] = (float(sol.fun), float(sol.x))
     ref = min(c for c, _ in results.values())
-    near = [m for m in results if results[m][0] <= (1.0 + INTERSAMPLE_TIE) * ref]
-    best = min(near, key=lambda m: abs(results[m][1]))
+    # Below a few hundred hertz a staircase is a band-limited signal half a sample late, and
+    # the costs tie: then the data cannot tell, and a logged current is taken for what a log
+    # of a measured current is, a sampled continuous signal (bl before foh before zoh).
+    best = next(m for m in ("bl", "foh", "zoh")
+                if results[m][0] <= (1.0 + INTERSAMPLE_TIE) * ref)
+    tie = [m for m in results if results[m][0] <= (1.0 + INTERSAMPLE_TIE) * ref]
     detail = ", ".join(f"{m} {results[m][0] / ref:.5f} (skew {results[m][1] * 1e6:+.0f} us)"
                        for m in results)
-    shape = {"bl": "band-limited", "foh": "linear between samples"}[best]
+    if len(tie) > 1:
+        why = (f"{' and '.join(tie)} fit equally well (a staircase and a continuous current "
+               f"half a sample apart look alike below a few hundred hertz); taken as "
+               f"{best}, a sampled continuous current")
+    else:
+        why = f"{best} fits best"
     exp = prepare(data, cfg, best)
-    exp.intersample_reason = (f"estimated: held between samples fits only {us:+.0f} us early "
-                              f"(a sampled continuous current); {shape} fits best (relative "
-                              f"cost with its best skew: {detail})")
+    exp.intersample_reason = f"estimated: {why} (relative cost with its best skew: {detail})"
     theta = prov.theta.copy()
     theta[IDX["skew_s"]] = float(np.clip(results[best][1], -0.5 * exp.dt, 0.5 * exp.dt))
     return exp, theta
@@ -396,6 +401,7 @@ def identify(
     check_fit(exp, base)
     skew_fitter = OutputErrorFit(model, NUISANCE_SCALES(exp.dt))
     if "skew_s" in base.free and skew_fitter.at_bound(base, "skew_s"):
+        exp.skew_at_bound = base.value("skew_s") > 0
         exp.notes.append(f"the timing skew sits at its bound ({base.value('skew_s') * 1e6:+.0f} "
                          "us, half a sample): the outputs and the logged input are further "
                          "apart in time than a sampling alignment")
@@ -435,7 +441,12 @@ def identify(
             new_free.append(p)
         for p, nom in zip(d.params, d.nominal, strict=True):
             scales[p] = nom
+        for p, start in d.refit_extra:
+            theta0[IDX[p]] = start(exp)
+            new_free.append(p)
         credible = current.theta.copy()
+        for p, start in d.refit_extra:
+            credible[IDX[p]] = start(exp)
         if d.name == "input_delay" and "skew_s" in new_free:
             # the causal delay takes over the sub-sample skew: one timing parameter
             theta0[IDX["delay_s"]] = max(theta0[IDX["delay_s"]] + theta0[IDX["skew_s"]], 0.0)
@@ -446,6 +457,9 @@ def identify(
                                         **scales})
         new, held_now = guarded_fit(fitter, theta0, new_free, credible, sigma=current.sigma)
         own = [p for p in held_now if p in d.params]
+        for p, _ in d.refit_extra:
+            if p in held_now:  # a shape the data cannot pin: the preset's, and say so
+                held[p] = f"after adding {best.label}: {held_now.pop(p)}"
         before = _val_cost(exp, current.outputs, sigma_ref)
         after = _val_cost(exp, new.outputs, sigma_ref)
         if own:

@@ -275,7 +275,9 @@ def generate(
         cols["theta_m"] = np.floor(_backlash(true_angle, mags["backlash"]["width_rad"]) / q) * q
     data = MeasuredData(path=f"<synth {load} {'+'.join(mags) or 'null'} seed {seed}>",
                         load=load, sample_rate_hz=fs, t=t, columns=cols,
-                        header={"source": "eha-hil identify synth"})
+                        header={"source": "eha-hil identify synth",
+                                # the plant is driven by the logged value, held per sample
+                                "intersample": "zoh"})
     states = {"v_p": rec[:, L.Y_VP].copy(), "tau_q": rec[:, L.Y_TAU_Q].copy(),
               "t_oil": rec[:, L.Y_T_OIL].copy(), "v_piston": rec[:, L.Y_V_PISTON].copy()}
     return SynthResult(data, truth, cfg, iq_app, states)
