@@ -478,6 +478,19 @@ def identify(
         best.selected = True
         added_labels.add(best.label)
         added.append(EffectAdded(best.name, best.label, {}, rnd, best.p_holm, best.share_val))
+    # A baseline parameter held because an unmodelled effect blurred it may be credible now
+    # that the effect is in: free the held ones once more (the guard holds them again if not).
+    retry = [p for p in held if p in BASELINE_LABELS and p not in current.free]
+    if added and retry:
+        say(f"refit with {', '.join(retry)} free again")
+        fitter = OutputErrorFit(model, {**NUISANCE_SCALES(exp.dt), **_all_scales(defs_all)})
+        again, held_again = guarded_fit(fitter, current.theta, current.free + retry,
+                                        current.theta, sigma=current.sigma, passes=1)
+        if not any(p in held_again for p in current.free):
+            for p in retry:
+                if p not in held_again:
+                    held.pop(p)
+            current = again
     # describe the added effects with the final fit's covariance
     for e in added:
         e.params = describe_effect(defs_all[e.label], current, exp)

@@ -49,6 +49,9 @@ def summary(rep: IdentifyReport) -> dict:
         "residual_after": rep.residual_after.summary(),
         "unexplained": rep.unexplained,
         "unexplained_detail": rep.unexplained_detail,
+        "intersample": {"mode": rep.intersample, "reason": rep.intersample_reason},
+        "input_noise": rep.input_noise.as_dict() if rep.input_noise is not None else None,
+        "refused": None,
         "rejected": rep.rejected,
         "notes": rep.notes,
         "wall_s": rep.wall_s,
@@ -109,6 +112,10 @@ def text(rep: IdentifyReport) -> str:
     out.append(table(["channel", "NRMSE before", "NRMSE after", "fit % before", "fit % after",
                       "residual before", "after"], rows,
                      title="\nvalidation part (held out)"))
+    out.append(f"\ninput between samples: {rep.intersample} ({rep.intersample_reason})")
+    if rep.input_noise is not None:
+        out.append(f"noise on the logged current: {rep.input_noise.rms_a:.4g} A rms "
+                   "(accounted for in the residual tests)")
     out.append(f"\nresidual white: before {rep.residual_before.white}, "
                f"after {rep.residual_after.white}")
     if rep.unexplained:
@@ -217,7 +224,8 @@ def _plots(rep: IdentifyReport, d: Path) -> list[Path]:
     for j, (tag, ana) in enumerate((("before", rep.residual_before),
                                     ("after", rep.residual_after))):
         for c, cr in ana.channels.items():
-            if cr.order_amp is not None:
+            # the judged pressure differences exist only in the analysis, not as channels
+            if cr.order_amp is not None and c in exp.measured:
                 sd = np.std((exp.measured[c] - (rep.outputs_before if j == 0
                                                 else rep.outputs_after)[c])[val])
                 axes[0, j].semilogy(ORDERS, cr.order_amp / max(sd, 1e-300), label=c)
