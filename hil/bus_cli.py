@@ -5,10 +5,11 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import sys
 import time
 from pathlib import Path
 
+from hil import cli_progress
+from hil.cli_args import float_range, input_file, int_range, output_file
 from hil.fieldbus.master import Master
 from hil.tables import table
 
@@ -40,16 +41,11 @@ def demo_pc(amplitude_n: float = 300.0, frequency_hz: float = 2.0):
     return pc
 
 
-def cmd_bus_run(args: argparse.Namespace, cfg) -> int:
+def _run_bus(args: argparse.Namespace, cfg, topo, cycles: int, model: str, pc):
+    """(record, wall seconds) of the run, logged to ``args.log`` if given."""
     from hil.fieldbus.system import BusSystem
     from hil.transports import TransportError
 
-    topo = _topology(args.topology)
-    if args.seconds <= 0:
-        raise BusUsageError(f"--seconds {args.seconds}: must be > 0")
-    cycles = int(round(args.seconds * 1000))
-    model = args.model or ("stack" if topo.n_actuators <= 5 else "echo")
-    pc = demo_pc(args.amplitude, args.frequency)
     t0 = time.perf_counter()
     if args.log:
         if args.transport != "inproc":
@@ -58,6 +54,7 @@ def cmd_bus_run(args: argparse.Namespace, cfg) -> int:
             raise BusUsageError("--log records the MCU model: use --model stack")
         from hil.replay.record import run_logged
 
+        cli_progress.output("log", args.log, cli_progress.readable_log)
         rec = run_logged(topo, cfg, cycles, pc, args.log, level=args.level,
                          progress=_progress("bus run", not args.json))
     else:
@@ -66,7 +63,24 @@ def cmd_bus_run(args: argparse.Namespace, cfg) -> int:
                 rec = bs.run(cycles, pc)
         except TransportError as exc:
             raise BusUsageError(str(exc)) from None
-    wall = time.perf_counter() - t0
+    return rec, time.perf_counter() - t0
+
+
+def cmd_bus_run(args: argparse.Namespace, cfg) -> int:
+    topo = _topology(args.topology)
+    cycles = int(round(args.seconds * 1000))
+    model = args.model or ("stack" if topo.n_actuators <= 5 else "echo")
+    sine = demo_pc(args.amplitude, args.frequency)
+    with cli_progress.interrupt_between_steps() as check:
+
+        def pc(cycle: int, m: Master) -> None:
+            # Every cycle passes here: Ctrl-C stops between two cycles (never inside a
+            # log write), and the simulated time is what the interrupt line reports.
+            check()
+            cli_progress.at(f"at t={cycle * 1e-3:.3f} s")
+            sine(cycle, m)
+
+        rec, wall = _run_bus(args, cfg, topo, cycles, model, pc)
     data = {"topology": topo.name, "boxes": len(topo.boxes), "actuators": topo.n_actuators,
             "transport": args.transport, "model": model, "cycles": cycles,
             "wall_s": wall, "real_time_factor": args.seconds / wall,
@@ -86,22 +100,17 @@ def cmd_bus_run(args: argparse.Namespace, cfg) -> int:
 
 
 def _progress(label: str, enabled: bool):
-    if not enabled:
-        return None
-
-    def report(i: int, n: int) -> None:
-        print(f"\r{label}: {i}/{n} cycles", end="\n" if i >= n else "", file=sys.stderr,
-              flush=True)
-
-    return report
+    # The position is noted by the PC loop (simulated time), not by these counts.
+    return cli_progress.reporter(label, enabled, "cycles", note=False)
 
 
 def cmd_replay(args: argparse.Namespace, cfg) -> int:
-    from hil.replay.replay import ReplayError, replay_mcu
-
-    if not Path(args.log).is_file():
-        raise BusUsageError(f"{args.log}: no such file")
+    """Exit 0: the whole log matches; 1: a divergence, or a truncated log replayed up to
+    its readable end (one line on stderr says where it ends); 2: nothing could be replayed
+    (foreign or damaged file, bad metadata, no MCU data), one line ``eha-hil replay: FILE:
+    what`` on stderr."""
     from hil.replay.fpga_replay import warm_up
+    from hil.replay.replay import ReplayError, replay_mcu
     from plant.config import load_config
 
     warm_up(cfg or load_config(None))  # load the compiled kernel outside the timing
@@ -109,22 +118,37 @@ def cmd_replay(args: argparse.Namespace, cfg) -> int:
     try:
         res = replay_mcu(args.log, cfg)
     except ReplayError as exc:
-        raise BusUsageError(str(exc)) from None
+        _replay_note(str(exc))
+        return EXIT_USAGE
     wall = time.perf_counter() - t0
     rtf = res.simulated_s / wall if wall > 0 else float("inf")
     data = {"ok": res.ok, "boxes": res.boxes, "cycles": res.cycles, "mcu_steps": res.mcu_steps,
             "fpga_ticks": res.fpga_ticks,
             "simulated_s": res.simulated_s, "wall_s": wall, "real_time_factor": rtf,
-            "divergence": None if res.ok else res.divergence.__dict__}
+            "divergence": None if res.ok else res.divergence.__dict__,
+            "truncated": res.truncated, "stop_reason": res.stop_reason}
+    cut = (f"TRUNCATED log ({res.stop_reason}), replayed up to t = {res.simulated_s:.3f} s: "
+           if res.truncated else "")
     if args.json:
         print(json.dumps(data, indent=2))
     elif res.ok:
         board = (f" and {res.fpga_ticks} driver-board ticks" if res.fpga_ticks else "")
-        print(f"replay {args.log}: {res.mcu_steps} MCU steps{board} over "
+        print(f"replay {args.log}: {cut}{res.mcu_steps} MCU steps{board} over "
               f"{res.simulated_s:.3f} s match bit for bit ({wall:.2f} s, {rtf:.0f}x real time)")
     else:
-        print(f"replay {args.log}: first divergence at {res.divergence}")
-    return 0 if res.ok else 1
+        print(f"replay {args.log}: {cut}first divergence at {res.divergence}")
+    if res.truncated:
+        # A cut log that matches is not a whole run that matches: say where it ends, exit 1.
+        _replay_note(f"{args.log}: truncated: {res.stop_reason}; replayed up to "
+                     f"t = {res.simulated_s:.6f} s")
+    return 0 if res.ok and not res.truncated else 1
+
+
+def _replay_note(message: str) -> None:
+    """The one stderr line of ``eha-hil replay``: ``eha-hil replay: FILE: what``."""
+    import sys
+
+    print(f"eha-hil replay: {message}", file=sys.stderr)
 
 
 def cmd_bench_bus(args: argparse.Namespace, cfg) -> int:
@@ -162,31 +186,38 @@ def add_parsers(sub, bsub, common, config_fn, wrap) -> None:
                         epilog="Topologies: hydra_full (Table 6.4, 16 boxes), bench_one_box, "
                         "or a TOML file (docs/fieldbus.md).")
     p.add_argument("--topology", default="bench_one_box",
-                   help="shipped topology name or TOML file (default bench_one_box)")
+                   help="shipped topology name or TOML file")
     p.add_argument("--transport", default="inproc", choices=list(BACKENDS),
-                   help="frame transport (default inproc)")
+                   help="frame transport")
     p.add_argument("--model", choices=("stack", "echo"),
                    help="box model: stack (plant + FPGA + MCU) or echo (behavioural); "
                    "default stack for <= 5 actuators, echo otherwise")
-    p.add_argument("--seconds", type=float, default=1.0, help="simulated seconds (default 1)")
-    p.add_argument("--amplitude", type=float, default=300.0, help="force sine amplitude, N")
-    p.add_argument("--frequency", type=float, default=2.0, help="force sine frequency, Hz")
-    p.add_argument("--log", metavar="FILE.mcap", help="log MCU inputs/outputs for replay")
+    # At least one 1 ms cycle; an hour of a 16-box robot is already a long run.
+    p.add_argument("--seconds", type=float_range(1e-3, 3600, unit="s"), default=1.0,
+                   help="simulated seconds, in [0.001, 3600]")
+    p.add_argument("--amplitude", type=float_range(0.0, 1e5, unit="N"), default=300.0,
+                   help="force sine amplitude, N, in [0, 1e5]")
+    p.add_argument("--frequency", type=float_range(0.0, 500.0, unit="Hz"), default=2.0,
+                   help="force sine frequency, Hz, in [0, 500] (the 1 kHz cycle's Nyquist)")
+    p.add_argument("--log", metavar="FILE.mcap", type=output_file((".mcap",)),
+                   help="log MCU inputs/outputs for replay")
     p.add_argument("--level", default="mcu", choices=("bus", "mcu", "full"),
-                   help="log detail (default mcu)")
+                   help="log detail")
     p.set_defaults(func=wrap(cmd_bus_run, config_fn))
 
     p = sub.add_parser("replay", parents=[common(plot=False)],
                        help="feed a log's MCU inputs to the current MCU model; compare outputs "
                        "bit for bit")
-    p.add_argument("log", metavar="LOG.mcap")
+    p.add_argument("log", metavar="LOG.mcap", type=input_file("frame log (.mcap)"),
+                   help="frame log written by eha-hil bus run --log")
     p.set_defaults(func=wrap(cmd_replay, config_fn, use_log_config=True))
 
     p = bsub.add_parser("bus", parents=[common(plot=False)],
                         help="full-robot process-image cycles per second per transport")
     p.add_argument("--backends", nargs="+", default=["inproc", "udp", "serial", "can"],
-                   choices=list(BACKENDS))
-    p.add_argument("--cycles", type=int, default=500, help="cycles per backend (default 500)")
+                   choices=list(BACKENDS), help="transports to measure")
+    p.add_argument("--cycles", type=int_range(1, 1_000_000), default=500,
+                   help="cycles per backend, 1..1000000")
     p.add_argument("--no-replay", dest="replay", action="store_false",
                    help="skip the replay real-time factor")
     p.set_defaults(func=wrap(cmd_bench_bus, config_fn))

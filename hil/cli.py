@@ -2,7 +2,10 @@
 
 Every verb prints a readable table, takes ``--json`` for machines and (where a picture
 helps) ``--plot FILE.png``; long runs report progress on stderr. A user mistake (bad
-configuration, bad argument, unwritable plot file) prints one line and exits with code 2.
+configuration, bad argument, unwritable plot file) prints one line and exits with code 2;
+numbers and paths are checked by the argument types of :mod:`hil.cli_args`, configuration
+values by :mod:`plant.config`. A missed requirement exits with code 1. Ctrl-C prints one
+line saying what was interrupted and what was written (:mod:`hil.cli_progress`), exit 130.
 """
 
 from __future__ import annotations
@@ -15,10 +18,21 @@ from pathlib import Path
 
 import numpy as np
 
+from hil import cli_progress
+from hil.cli_args import (
+    Parser,
+    add_config_options,
+    float_range,
+    int_range,
+    output_dir,
+    output_file,
+    positive_float,
+)
 from hil.tables import table
 from plant.config import ConfigError, linearised, load_config, preset_names
 
 EXIT_USAGE = 2
+EXIT_MISSED = 1  # a requirement missed (F2 band, scenario requirement, bus errors)
 
 # Thesis figures the main job compares against (targets, never outputs).
 THESIS_F1 = {"model_peak_hz": 60.0, "measured_peak_hz": 25.0}
@@ -39,33 +53,18 @@ class UsageError(Exception):
     """A mistake in the command line that argparse cannot see (e.g. a bad --plot path)."""
 
 
-def _progress(label: str, enabled: bool) -> Callable[[int, int], None] | None:
-    if not enabled:
-        return None
-
-    def report(i: int, n: int) -> None:
-        end = "\n" if i >= n else ""
-        print(f"\r{label}: {i}/{n}", end=end, file=sys.stderr, flush=True)
-
-    return report
+def _progress(label: str, enabled: bool) -> Callable[[int, int], None]:
+    # Always a callback: the position it notes is what Ctrl-C reports, also with --json.
+    return cli_progress.reporter(label, enabled)
 
 
-def _check_plot_path(path: str | None) -> None:
-    if path is None:
-        return
-    p = Path(path)
-    if p.suffix.lower() not in (".png", ".svg", ".pdf"):
-        raise UsageError(f"--plot {path}: use a .png, .svg or .pdf file name")
-    parent = p.parent if str(p.parent) else Path(".")
-    if not parent.is_dir():
-        raise UsageError(f"--plot {path}: directory {parent} does not exist")
+#: --plot: a figure file whose directory exists.
+PLOT_FILE = output_file((".png", ".svg", ".pdf"))
 
 
 def _plot_dir(path: str) -> Path:
-    """The --plot-dir directory, created if its parent exists."""
+    """The --plot-dir directory (checked by its argument type), created if missing."""
     out_dir = Path(path)
-    if not out_dir.parent.is_dir():
-        raise UsageError(f"--plot-dir {out_dir}: parent directory does not exist")
     out_dir.mkdir(exist_ok=True)
     return out_dir
 
@@ -98,9 +97,8 @@ def _bode_results(cfg, loads: Sequence[str], f_min: float, f_max: float, points:
 
 
 def cmd_plant_bode(args: argparse.Namespace) -> int:
-    if not 0 < args.fmin < args.fmax <= 2000:
-        raise UsageError("--fmin/--fmax: need 0 < fmin < fmax <= 2000 Hz")
-    _check_plot_path(args.plot)
+    if not args.fmin < args.fmax:  # each alone is checked by its type; here the pair
+        raise UsageError("--fmin/--fmax: need fmin < fmax")
     if args.linear and args.config is not None:
         raise UsageError("--linear and --config: give one (--linear means -c hydra_linear)")
     cfg = load_config("hydra_linear" if args.linear else args.config, args.set or ())
@@ -138,9 +136,6 @@ def cmd_plant_bode(args: argparse.Namespace) -> int:
 def cmd_plant_tn(args: argparse.Namespace) -> int:
     from hil.analysis.tn_curve import simulate_tn_curve
 
-    if args.points < 3 or args.points > 200:
-        raise UsageError("--points: need 3..200")
-    _check_plot_path(args.plot)
     cfg = _config(args)
     curve = simulate_tn_curve(cfg, args.current, args.points,
                               progress=_progress("tn-curve", not args.json))
@@ -194,6 +189,7 @@ def cmd_main(args: argparse.Namespace) -> int:
     freqs = np.unique(np.concatenate([np.arange(10.0, 121.0), np.geomspace(1, 300, 25).round()]))
     if show:
         print("F1: exciting the plant (piston fixed) ...", file=sys.stderr)
+    cli_progress.at("in F1 (open-loop response)")
     f1 = simulate_bode(cfg, "fixed", freqs)
     f1_lin = simulate_bode(linearised(cfg), "fixed", freqs)
     ge = float(np.abs(f1.gain_error_db()).max())
@@ -201,6 +197,7 @@ def cmd_main(args: argparse.Namespace) -> int:
     ge_lin = float(np.abs(f1_lin.gain_error_db()).max())
     pe_lin = float(np.abs(f1_lin.phase_error_deg()).max())
     f2 = simulate_tn_curve(cfg, 18.0, 17, progress=_progress("F2: T-N sweep", show))
+    cli_progress.at("after F1, F2 done")
     pk = f2.peak()
     sim_f2 = {
         "stall_force_n": f2.stall_force_n,
@@ -255,15 +252,14 @@ def cmd_main(args: argparse.Namespace) -> int:
         ),
     ]
     _emit(args, "\n".join(lines), data)
-    return 0
+    # An F2 figure outside its band is a missed requirement, as MISSED is for `run`.
+    return 0 if all(data["F2"]["within_band"].values()) else EXIT_MISSED
 
 
 # --- bench -----------------------------------------------------------------------------------
 def cmd_bench_plant(args: argparse.Namespace) -> int:
     from hil.bench import bench_plant
 
-    if not 0 < args.seconds <= 600:
-        raise UsageError("--seconds: need 0 < seconds <= 600")
     cfg = _config(args)
     results = [bench_plant(cfg, args.seconds, mode) for mode in ("scheduled", "kernel")]
     rows = [(r.mode, r.simulated_s, r.wall_s, r.real_time_factor, r.ticks_per_s, r.substeps)
@@ -282,10 +278,6 @@ def cmd_bench_plant(args: argparse.Namespace) -> int:
 def cmd_bench_fpga(args: argparse.Namespace) -> int:
     from hil.bench import bench_fpga
 
-    if not 0 < args.seconds <= 600:
-        raise UsageError("--seconds: need 0 < seconds <= 600")
-    if not 0 < args.bit_seconds <= 60:
-        raise UsageError("--bit-seconds: need 0 < seconds <= 60")
     cfg = _config(args)
     results = [bench_fpga(cfg, args.seconds, bit_level=False)]
     if not args.json:
@@ -308,9 +300,9 @@ def cmd_bench_fpga(args: argparse.Namespace) -> int:
 def cmd_bench_stack(args: argparse.Namespace) -> int:
     from hil.bench import bench_stack
 
-    if not 0 < args.seconds <= 600:
-        raise UsageError("--seconds: need 0 < seconds <= 600")
     cfg = _config(args)
+    if not args.json:
+        print(f"bench stack: simulating {args.seconds:g} s ...", file=sys.stderr, flush=True)
     r = bench_stack(cfg, args.seconds)
     text = table(["path", "simulated [s]", "wall [s]", "real-time factor", "ticks/s"],
                  [(r.mode, r.simulated_s, r.wall_s, r.real_time_factor, r.ticks_per_s)],
@@ -339,11 +331,14 @@ def cmd_run_thesis(args: argparse.Namespace) -> int:
         t0 = time.perf_counter()
         if not args.json:
             print(f"{name} ...", file=sys.stderr, flush=True)
+        done = ", ".join(r.name for r, _ in results)
+        cli_progress.at(f"in {name}" + (f" ({done} done)" if done else ""))
         res = scenarios.get(name).run(cfg, None)
         wall = time.perf_counter() - t0
         results.append((res, wall))
         if res.plot:
             res.plot(res, out_dir / f"{name}.png")
+            cli_progress.output("plot", out_dir / f"{name}.png", done=True)
         for m in res.metrics:
             diff = "" if m.thesis is None else f"{(m.value - m.thesis) / m.thesis * 100:+.0f} %"
             mark = "" if m.ok is None else ("ok" if m.ok else "MISSED")
@@ -380,7 +375,6 @@ def cmd_run(args: argparse.Namespace) -> int:
         if args.plot:
             raise UsageError("--plot and --plot-dir: give one of them")
         args.plot = str(_plot_dir(args.plot_dir) / f"{scenario.name}.png")
-    _check_plot_path(args.plot)
     cfg = _config(args)
     res = scenario.run(cfg, _progress(scenario.name, not args.json))
     rows = [(m.name, m.value, m.unit, m.requirement,
@@ -405,8 +399,6 @@ def cmd_bench_codecs(args: argparse.Namespace) -> int:
 
     from hil.codec_bench import all_cases
 
-    if not 0 < args.seconds <= 60:
-        raise UsageError("--seconds: need 0 < seconds <= 60")
     rows = []
     data = []
     for case in all_cases():
@@ -509,70 +501,94 @@ def _add_external(sub, bsub) -> None:
 
 
 # --- parser ----------------------------------------------------------------------------------
-def _common(json_plot: bool = True, plot: bool = True) -> argparse.ArgumentParser:
-    parent = argparse.ArgumentParser(add_help=False)
-    parent.add_argument("-c", "--config", metavar="PRESET|FILE",
-                        help="actuator preset name or TOML file (default: hydra_default)")
-    parent.add_argument("--set", action="append", metavar="SECTION.KEY=VALUE",
-                        help="override one configuration value (repeatable)")
+def _common(json_plot: bool = True, plot: bool = True,
+            config: bool = True) -> argparse.ArgumentParser:
+    """The options verbs share: ``-c``/``--set`` (``config``), ``--json`` and ``--plot``."""
+    parent = Parser(add_help=False)
+    if config:
+        add_config_options(parent)
     if json_plot:
         parent.add_argument("--json", action="store_true", help="print JSON instead of tables")
     if plot:
-        parent.add_argument("--plot", metavar="FILE.png", help="also write a figure")
+        parent.add_argument("--plot", metavar="FILE.png", type=PLOT_FILE,
+                            help="also write a figure (.png, .svg or .pdf)")
     return parent
 
 
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("eha-hil")
+    except PackageNotFoundError:  # running from a source tree that was never installed
+        return "unknown (not installed)"
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = Parser(
         prog="eha-hil",
         description="Emulator and HIL test harness for the Hydra electro-hydrostatic actuator.",
         epilog="Presets: " + ", ".join(preset_names()) + ". Example: eha-hil plant bode "
-        "--set effects.pulsation.enabled=false --plot bode.png",
+        "--set effects.pulsation.enabled=false --plot bode.png. Exit codes: 0 ok, 1 a "
+        "requirement missed, 2 a mistake on the command line or in a configuration, "
+        "130 interrupted (Ctrl-C).",
     )
+    parser.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
 
     p = sub.add_parser("main", parents=[_common(plot=False)],
-                       help="the main job: plant summary and F1/F2 against the thesis")
+                       help="the main job: plant summary and F1/F2 against the thesis "
+                       "(exit 1 if an F2 figure is outside its band)")
     p.set_defaults(func=cmd_main)
 
     plant = sub.add_parser("plant", help="plant-only studies")
     psub = plant.add_subparsers(dest="plant_command", metavar="STUDY", required=True)
     p = psub.add_parser("bode", parents=[_common()],
                         help="open-loop Bode by simulation next to d_s k_s/G1 and d_s k_s/G3")
-    p.add_argument("--load", choices=["fixed", "free", "both"], default="both")
-    p.add_argument("--fmin", type=float, default=1.0, help="lowest frequency, Hz (default 1)")
-    p.add_argument("--fmax", type=float, default=300.0, help="highest frequency, Hz (default 300)")
-    p.add_argument("--points", type=int, default=30, help="log-spaced points (default 30)")
+    p.add_argument("--load", choices=["fixed", "free", "both"], default="both",
+                   help="piston fixed, free, or both")
+    p.add_argument("--fmin", type=positive_float(2000, "Hz"), default=1.0,
+                   help="lowest frequency, Hz, in (0, 2000]")
+    p.add_argument("--fmax", type=positive_float(2000, "Hz"), default=300.0,
+                   help="highest frequency, Hz, in (0, 2000], above --fmin")
+    p.add_argument("--points", type=int_range(2, 200), default=30,
+                   help="log-spaced points, 2..200")
     p.add_argument("--linear", action="store_true",
                    help="use the hydra_linear preset (all effects off) unless -c is given")
     p.set_defaults(func=cmd_plant_bode)
     p = psub.add_parser("tn-curve", parents=[_common()],
                         help="T-N curve and efficiencies at constant current (thesis F2)")
-    p.add_argument("--current", type=float, default=18.0, help="q-axis current, A (default 18)")
-    p.add_argument("--points", type=int, default=17, help="operating points (default 17)")
+    # Beyond the driver board's +/- 40 A current range the piston reaches its end stop
+    # before the sweep settles and the integration breaks down.
+    p.add_argument("--current", type=float_range(-40.0, 40.0, unit="A"), default=18.0,
+                   help="q-axis current, A, in [-40, 40]")
+    p.add_argument("--points", type=int_range(3, 200), default=17,
+                   help="operating points, 3..200")
     p.set_defaults(func=cmd_plant_tn)
 
     bench = sub.add_parser("bench", help="benchmarks (real-time factor, throughput)")
     bsub = bench.add_subparsers(dest="bench_command", metavar="TARGET", required=True)
     p = bsub.add_parser("plant", parents=[_common(plot=False)],
                         help="real-time factor of the plant alone, default effects on")
-    p.add_argument("--seconds", type=float, default=5.0, help="simulated seconds (default 5)")
+    p.add_argument("--seconds", type=positive_float(600, "s"), default=5.0,
+                   help="simulated seconds, in (0, 600]")
     p.set_defaults(func=cmd_bench_plant)
     p = bsub.add_parser("fpga", parents=[_common(plot=False)],
                         help="real-time factor of plant + driver board + LVDS link")
-    p.add_argument("--seconds", type=float, default=2.0,
-                   help="simulated seconds, value-level path (default 2)")
-    p.add_argument("--bit-seconds", type=float, default=0.05,
-                   help="simulated seconds, bit-level path (default 0.05)")
+    p.add_argument("--seconds", type=positive_float(600, "s"), default=2.0,
+                   help="simulated seconds, value-level path, in (0, 600]")
+    p.add_argument("--bit-seconds", type=positive_float(60, "s"), default=0.05,
+                   help="simulated seconds, bit-level path, in (0, 60]")
     p.set_defaults(func=cmd_bench_fpga)
     p = bsub.add_parser("stack", parents=[_common(plot=False)],
                         help="real-time factor of the full actuator stack (plant to MCU)")
-    p.add_argument("--seconds", type=float, default=2.0, help="simulated seconds (default 2)")
+    p.add_argument("--seconds", type=positive_float(600, "s"), default=2.0,
+                   help="simulated seconds, in (0, 600]")
     p.set_defaults(func=cmd_bench_stack)
-    p = bsub.add_parser("codecs", parents=[_common(plot=False)],
+    p = bsub.add_parser("codecs", parents=[_common(plot=False, config=False)],
                         help="encode+decode throughput of every protocol codec")
-    p.add_argument("--seconds", type=float, default=0.5,
-                   help="wall seconds per codec (default 0.5)")
+    p.add_argument("--seconds", type=positive_float(60, "s"), default=0.5,
+                   help="wall seconds per codec, in (0, 60]")
     p.set_defaults(func=cmd_bench_codecs)
 
     from hil import bus_cli
@@ -587,13 +603,14 @@ def build_parser() -> argparse.ArgumentParser:
 
     scen = names()
     p = sub.add_parser("run", parents=[_common()],
-                       help="run a scenario on the simulated stack (" + ", ".join(scen) + ")",
-                       epilog="Scenarios: " + "; ".join(
+                       help="run a scenario on the simulated stack (thesis, "
+                       + ", ".join(scen) + "; exit 1 if a requirement is missed)",
+                       epilog="Scenarios: thesis: all thesis experiments (F3-F8); " + "; ".join(
                            f"{n}: {SCENARIOS[n].summary}" for n in scen))
     p.add_argument("scenario", metavar="SCENARIO",
                    help="scenario name, or 'thesis' for all thesis experiments (F3-F8); "
                    "these default to -c hydra_thesis")
-    p.add_argument("--plot-dir", default=None,
+    p.add_argument("--plot-dir", default=None, type=output_dir,
                    help="directory for one plot per scenario, NAME.png (with 'thesis' "
                    "default thesis-plots)")
     p.set_defaults(func=cmd_run)
@@ -603,21 +620,39 @@ def build_parser() -> argparse.ArgumentParser:
     p = csub.add_parser("show", parents=[_common(plot=False)],
                         help="print the resolved configuration")
     p.set_defaults(func=cmd_config_show)
-    p = csub.add_parser("presets", parents=[_common(plot=False)], help="list shipped presets")
+    p = csub.add_parser("presets", parents=[_common(plot=False, config=False)],
+                        help="list shipped presets")
     p.set_defaults(func=cmd_config_presets)
     return parser
 
 
+def _verb(args: argparse.Namespace) -> str:
+    """``eha-hil bus run``, ``eha-hil run thesis``: the command as the user typed it."""
+    words = ["eha-hil", args.command]
+    action = getattr(args, f"{args.command}_command", None)
+    if action:
+        words.append(action)
+    if args.command == "run":
+        words.append(args.scenario)
+    return " ".join(words)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
     try:
+        parser = build_parser()
+        args = parser.parse_args(argv)
+        cli_progress.start(_verb(args))
         return int(args.func(args))
     except (ConfigError, UsageError) as exc:
         print(f"eha-hil: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
     except BrokenPipeError:
         return 0
+    except KeyboardInterrupt:
+        # The one place Ctrl-C ends up. By now every `with` on the way out has run, so a
+        # log being written is closed; the line says whether it reads back.
+        print(cli_progress.interrupted_line(), file=sys.stderr, flush=True)
+        return cli_progress.EXIT_INTERRUPTED
 
 
 if __name__ == "__main__":

@@ -30,6 +30,7 @@ import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
 
+from hil.cli_args import float_range, int_range
 from hil.fieldbus import wire
 from hil.fieldbus.chain import Chain
 from hil.transports import TransportError
@@ -283,12 +284,6 @@ def cmd_serve(args: argparse.Namespace, cfg) -> int:
         topo = load_topology(args.topology)
     except TopologyError as exc:
         raise _usage(str(exc)) from None
-    if args.seconds is not None and args.seconds <= 0:
-        raise _usage(f"--seconds {args.seconds}: must be > 0")
-    if args.baudrate <= 0:
-        raise _usage(f"--baudrate {args.baudrate}: must be > 0")
-    if args.max_overrun_percent < 0:
-        raise _usage(f"--max-overrun-percent {args.max_overrun_percent}: must be >= 0")
     model = args.model or ("stack" if topo.n_actuators <= 5 else "echo")
     chain = Chain(topo, cfg, model, paced=True)
     if args.realtime:
@@ -394,23 +389,25 @@ def add_parser(sub, common, config_fn, wrap) -> None:
         epilog="Example: eha-hil serve --transport serial --port pty --seconds 10 "
         "(docs/fieldbus.md, 'Serving the simulated robot to real hardware').")
     p.add_argument("--transport", default="serial", choices=("serial", "udp"),
-                   help="serial (COBS + CRC-32 frames) or udp (default serial)")
+                   help="serial (COBS + CRC-32 frames) or udp")
     p.add_argument("--port", required=True,
                    help="serial: device path or pyserial URL, or 'pty' for a new "
                    "pseudo-terminal whose path is printed; udp: local port number (0: any)")
     p.add_argument("--host", default="127.0.0.1",
-                   help="udp: local address to bind (default 127.0.0.1; 0.0.0.0 for all)")
-    p.add_argument("--baudrate", type=int, default=3_000_000,
-                   help="serial line speed (default 3000000; ignored by ptys)")
+                   help="udp: local address to bind (0.0.0.0 for all)")
+    p.add_argument("--baudrate", type=int_range(50, 100_000_000), default=3_000_000,
+                   help="serial line speed, 50..100000000 (ignored by ptys)")
     p.add_argument("--topology", default="bench_one_box",
-                   help="shipped topology name or TOML file (default bench_one_box)")
+                   help="shipped topology name or TOML file")
     p.add_argument("--model", choices=("stack", "echo"),
                    help="box model; default stack for <= 5 actuators, echo otherwise")
-    p.add_argument("--seconds", type=float,
-                   help="wall seconds to serve (default: until Ctrl-C / SIGTERM)")
-    p.add_argument("--max-overrun-percent", type=float, default=DEFAULT_MAX_OVERRUN_PERCENT,
-                   metavar="P", help="exit 1 if more than P%% of the cycles overran their "
-                   f"deadline (default {DEFAULT_MAX_OVERRUN_PERCENT:g})")
+    p.add_argument("--seconds", type=float_range(1e-3, 1e7, unit="s"),
+                   help="wall seconds to serve, in [0.001, 1e7] (default: until Ctrl-C / "
+                   "SIGTERM)")
+    p.add_argument("--max-overrun-percent", type=float_range(0.0, 100.0, unit="%"),
+                   default=DEFAULT_MAX_OVERRUN_PERCENT, metavar="P",
+                   help="exit 1 if more than P%% of the cycles overran their deadline, "
+                   "P in [0, 100]")
     p.add_argument("--realtime", action="store_true",
                    help="run with SCHED_FIFO priority 50 (like chrt -f 50; needs root or "
                    "CAP_SYS_NICE): far fewer overruns on a busy machine")

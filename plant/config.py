@@ -20,19 +20,6 @@ from typing import Any
 
 DEFAULT_PRESET = "hydra_default"
 
-#: Keys whose numbers may be negative (positions about mid-stroke, phases, temperatures).
-SIGNED_KEYS = frozenset(
-    {
-        "load.x0_m",
-        "effects.pulsation.phase_rad",
-        "effects.oil_temperature.reference_c",
-        "effects.oil_temperature.initial_c",
-        "effects.oil_temperature.ambient_c",
-        "sensors.ssi_mount_rad",
-        "sensors.hall_offset_rad",
-    }
-)
-
 #: Keys that take one of a fixed set of strings.
 CHOICES: dict[str, tuple[str, ...]] = {
     "load.kind": ("fixed", "free", "conrod", "cart"),
@@ -40,52 +27,145 @@ CHOICES: dict[str, tuple[str, ...]] = {
     "mcu.force_feedback": ("pressure", "strain", "complementary"),
 }
 
-#: Keys that must be strictly positive (a zero would divide or stall the clock).
-POSITIVE_KEYS = frozenset(
-    {
-        "hydraulics.kp_m3_per_rad",
-        "hydraulics.kq_m2",
-        "hydraulics.kc_m2",
-        "hydraulics.jp_kg",
-        "hydraulics.jc_kg",
-        "hydraulics.ds_ns_per_m",
-        "hydraulics.ks_n_per_m",
-        "hydraulics.ks_pipe_n_per_m",
-        "hydraulics.bulk_modulus_pa",
-        "hydraulics.stroke_m",
-        "motor.pole_pairs",
-        "motor.iq_rated_a",
-        "motor.force_at_rated_n",
-        "motor.inductance_h",
-        "inverter.pwm_hz",
-        "load.cart_mass_kg",
-        "sim.tick_ns",
-        "effects.pulsation.order",
-        "effects.pump_coulomb.velocity_eps_m_per_s",
-        "effects.seal_friction.velocity_eps_m_per_s",
-        "effects.seal_friction.stribeck_velocity_m_per_s",
-        "effects.oil_temperature.heat_capacity_j_per_k",
-        "effects.strain_drift.rod_time_constant_s",
-        "effects.quantisation.motor_counts_per_rev",
-        "fpga.clock_hz",
-        "fpga.current_full_scale_a",
-        "fpga.watchdog_s",
-        "fpga.speed_window_ticks",
-        "fpga.lvds_bit_rate_hz",
-        "sensors.ssi_bits",
-        "sensors.abi_counts_per_rev",
-        "sensors.biss_bits",
-        "sensors.strain_full_scale_n",
-        "sensors.strain_odr_hz",
-        "sensors.temperature_v_per_c",
-        "mcu.period_ticks",
-        "mcu.derivative_filter_hz",
-        "mcu.complementary_cutoff_hz",
-        "mcu.seal_observer_hz",
-        "mcu.command_timeout_s",
-    }
-)
 
+@dataclass(frozen=True)
+class Range:
+    """The values a numeric key may take: ``lo <= v <= hi`` (``lo < v`` when ``open_lo``).
+
+    Bounds are physical plausibility, not design limits: wide enough for any actuator of
+    this kind, narrow enough that the models' arithmetic (divisions, fixed-point scaling,
+    array sizes) stays meaningful.
+    """
+
+    lo: float
+    hi: float
+    open_lo: bool = False
+
+
+def _pos(hi: float) -> Range:
+    """Greater than zero (a zero would divide or stall the clock), at most ``hi``."""
+    return Range(0.0, hi, open_lo=True)
+
+
+def _span(lo: float, hi: float) -> Range:
+    return Range(lo, hi)
+
+
+#: Range of every numeric key of the schema (a test checks that none is missing).
+#: Negative values are allowed only where the key says a position, phase or temperature.
+RANGES: dict[str, Range] = {
+    # hydraulics
+    "hydraulics.kp_m3_per_rad": _pos(1e-5),
+    "hydraulics.kq_m2": _pos(1e-2),
+    "hydraulics.kc_m2": _pos(1e-2),
+    "hydraulics.jp_kg": _pos(1e5),
+    "hydraulics.jc_kg": _pos(1e4),
+    "hydraulics.dp_ns_per_m": _span(0.0, 1e8),
+    "hydraulics.dc_ns_per_m": _span(0.0, 1e8),
+    "hydraulics.ds_ns_per_m": _pos(1e10),
+    "hydraulics.ks_n_per_m": _pos(1e11),
+    "hydraulics.ks_pipe_n_per_m": _pos(1e12),
+    "hydraulics.bulk_modulus_pa": _pos(1e11),
+    "hydraulics.dead_volume_m3": _span(0.0, 1e-2),
+    "hydraulics.pipe_volume_m3": _span(0.0, 1e-2),
+    "hydraulics.stroke_m": _pos(2.0),
+    "hydraulics.precharge_pa": _span(0.0, 1e8),
+    "hydraulics.force_limit_n": _pos(1e6),
+    # motor
+    "motor.pole_pairs": _span(1, 64),
+    "motor.iq_rated_a": _pos(1e3),
+    "motor.force_at_rated_n": _pos(1e5),
+    "motor.resistance_ohm": _span(0.0, 100.0),
+    "motor.inductance_h": _pos(1.0),
+    # inverter
+    "inverter.dc_bus_v": _span(1.0, 1000.0),
+    "inverter.pwm_hz": _span(1e3, 2e5),
+    "inverter.dead_time_s": _span(0.0, 1e-3),
+    "inverter.duty_min": _span(0.0, 1.0),
+    "inverter.duty_max": _span(0.0, 1.0),
+    "inverter.dead_time_current_a": _span(0.0, 1e3),
+    # load
+    "load.conrod_stiffness_n_per_m": _pos(1e11),
+    "load.conrod_damping_ns_per_m": _span(0.0, 1e8),
+    "load.beam_axial_stiffness_n_per_m": _pos(1e11),
+    "load.beam_reinforcement_ratio": _pos(1e3),
+    "load.cart_mass_kg": _pos(1e5),
+    "load.cart_damping_ns_per_m": _span(0.0, 1e8),
+    "load.x0_m": _span(-1.0, 1.0),
+    # sim
+    "sim.tick_ns": _span(1_000, 1_000_000),
+    "sim.substeps": _span(0, 1000),
+    "sim.seed": _span(0, 2**32 - 1),
+    # effects
+    "effects.pulsation.order": _span(1, 64),
+    "effects.pulsation.amplitude": _span(0.0, 1.0),
+    "effects.pulsation.phase_rad": _span(-2 * math.pi, 2 * math.pi),
+    "effects.pulsation.torque_n": _span(0.0, 1e5),
+    "effects.pulsation.torque_amplitude": _span(0.0, 1.0),
+    "effects.pump_coulomb.force_n": _span(0.0, 1e5),
+    "effects.pump_coulomb.velocity_eps_m_per_s": _pos(10.0),
+    "effects.seal_friction.coulomb_n": _span(0.0, 1e5),
+    "effects.seal_friction.static_n": _span(0.0, 1e5),
+    "effects.seal_friction.stribeck_velocity_m_per_s": _pos(10.0),
+    "effects.seal_friction.velocity_eps_m_per_s": _pos(10.0),
+    "effects.oil_temperature.reference_c": _span(-40.0, 150.0),
+    "effects.oil_temperature.initial_c": _span(-40.0, 150.0),
+    "effects.oil_temperature.viscosity_coeff_per_c": _span(0.0, 0.1),
+    "effects.oil_temperature.heat_capacity_j_per_k": _pos(1e8),
+    "effects.oil_temperature.cooling_w_per_k": _span(0.0, 1e6),
+    "effects.oil_temperature.ambient_c": _span(-40.0, 150.0),
+    "effects.strain_drift.n_per_c": _span(0.0, 1e4),
+    "effects.strain_drift.rod_time_constant_s": _pos(1e6),
+    "effects.sensor_noise.pressure_pa": _span(0.0, 1e7),
+    "effects.sensor_noise.strain_n": _span(0.0, 1e5),
+    "effects.sensor_noise.temperature_c": _span(0.0, 100.0),
+    "effects.quantisation.motor_counts_per_rev": _span(1, 1 << 24),
+    "effects.quantisation.piston_lsb_m": _span(0.0, 1e-3),
+    "effects.quantisation.pressure_lsb_pa": _span(0.0, 1e6),
+    "effects.quantisation.strain_lsb_n": _span(0.0, 1e3),
+    "effects.quantisation.temperature_lsb_c": _span(0.0, 10.0),
+    # fpga
+    "fpga.clock_hz": _span(1_000_000, 1_000_000_000),
+    "fpga.current_full_scale_a": _pos(1e4),
+    "fpga.current_kp_v_per_a": _span(0.0, 1e3),
+    "fpga.current_ki_v_per_a_s": _span(0.0, 1e7),
+    "fpga.current_limit_a": _span(0.0, 1e4),
+    "fpga.trip_current_a": _pos(1e4),
+    "fpga.watchdog_s": _pos(10.0),
+    "fpga.speed_window_ticks": _span(1, 256),
+    "fpga.lvds_bit_rate_hz": _span(100_000, 1_000_000_000),
+    # sensors
+    "sensors.ssi_bits": _span(1, 16),
+    "sensors.ssi_mount_rad": _span(-2 * math.pi, 2 * math.pi),
+    "sensors.abi_counts_per_rev": _span(4, 1 << 24),
+    "sensors.biss_bits": _span(18, 36),
+    "sensors.biss_zero_count": _span(0, (1 << 36) - 1),
+    "sensors.strain_full_scale_n": _pos(1e6),
+    "sensors.strain_odr_hz": _span(1, 4800),
+    "sensors.temperature_v_at_0c": _span(0.0, 10.0),
+    "sensors.temperature_v_per_c": _pos(1.0),
+    "sensors.hall_offset_rad": _span(-2 * math.pi, 2 * math.pi),
+    # mcu
+    "mcu.period_ticks": _span(1, 20),
+    "mcu.kp_force": _span(0.0, 1e3),
+    "mcu.kd_force_s": _span(0.0, 10.0),
+    "mcu.derivative_filter_hz": _pos(1e5),
+    "mcu.friction_observer_hz": _span(0.0, 1e4),
+    "mcu.vel_kp_n_per_m_s": _span(0.0, 1e9),
+    "mcu.vel_ki_n_per_m": _span(0.0, 1e12),
+    "mcu.vel_force_kp_m_s_per_n": _span(0.0, 1.0),
+    "mcu.vel_force_ki_m_per_n": _span(0.0, 1e3),
+    "mcu.complementary_cutoff_hz": _pos(1e3),
+    "mcu.seal_observer_hz": _pos(1e4),
+    "mcu.position_kp_n_per_m": _span(0.0, 1e9),
+    "mcu.conrod_length_m": _span(0.0, 10.0),
+    "mcu.conrod_offset_m": _span(0.0, 10.0),
+    "mcu.force_limit_n": _span(0.0, 1e6),
+    "mcu.pressure_limit_pa": _span(0.0, 1e9),
+    "mcu.current_limit_a": _span(0.0, 1e4),
+    "mcu.command_timeout_s": _pos(100.0),
+    "mcu.safe_off_delay_s": _span(0.0, 100.0),
+}
 
 class ConfigError(Exception):
     """A configuration mistake; ``str(err)`` is one line naming the key and the file."""
@@ -186,11 +266,21 @@ def _check_value(key: str, value: Any, template: Any, where: str) -> Any:
         value = float(value)
         if not math.isfinite(value):
             raise ConfigError(f"{where}: {key}: must be finite, got {value!r}")
-    if key not in SIGNED_KEYS and value < 0:
-        raise ConfigError(f"{where}: {key}: must not be negative, got {value!r}")
-    if key in POSITIVE_KEYS and value == 0:
-        raise ConfigError(f"{where}: {key}: must be greater than zero")
+    _check_range(key, value, where)
     return value
+
+
+def _check_range(key: str, value: float, where: str) -> None:
+    # A key missing from RANGES (a test prevents that) is at least kept non-negative.
+    rng = RANGES.get(key, Range(0.0, math.inf))
+    if rng.lo == 0 and value < 0:
+        raise ConfigError(f"{where}: {key}: must not be negative, got {value!r}")
+    if rng.open_lo and value <= rng.lo:
+        raise ConfigError(f"{where}: {key}: must be greater than {rng.lo:g}, got {value!r}")
+    if value < rng.lo:
+        raise ConfigError(f"{where}: {key}: must be at least {rng.lo:g}, got {value!r}")
+    if value > rng.hi:
+        raise ConfigError(f"{where}: {key}: must be at most {rng.hi:g}, got {value!r}")
 
 
 def _set_checked(data: dict[str, Any], key: str, value: Any, where: str) -> None:
@@ -267,12 +357,20 @@ def load_config(
         else:
             path = Path(text_source)
             where = str(path)
+            if path.is_dir():
+                raise ConfigError(f"{where}: is a directory, not a TOML file")
             if not path.is_file():
                 raise ConfigError(f"{where}: no such file (and not a preset name)")
+            if path.suffix.lower() != ".toml":
+                # A data file given by mistake can parse as (empty) TOML and mean nothing.
+                raise ConfigError(f"{where}: not a configuration file (expected NAME.toml)")
             try:
                 text = path.read_text(encoding="utf-8")
             except (OSError, UnicodeDecodeError) as exc:
                 raise ConfigError(f"{where}: cannot read: {exc}") from None
+            if not text.strip():
+                raise ConfigError(f"{where}: is empty (a configuration file holds the keys "
+                                  "that differ from hydra_default)")
             tree = _read_toml_text(text, where)
         _overlay(data, tree, where)
         _check_consistency(data, where)

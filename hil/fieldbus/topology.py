@@ -79,6 +79,8 @@ def load_topology(src: str | Path) -> Topology:
         where = f"topology {src}"
     else:
         path = Path(src)
+        if path.is_dir():
+            raise TopologyError(f"topology {src}: is a directory, not a TOML file")
         if not path.is_file():
             raise TopologyError(f"topology {src}: no such file and not a shipped topology "
                                 f"({', '.join(topology_names())})")

@@ -19,6 +19,15 @@ import tempfile
 import time
 from pathlib import Path
 
+from hil.cli_args import (
+    add_config_options,
+    float_range,
+    input_file,
+    int_range,
+    output_dir,
+    output_file,
+)
+
 EXIT_OK = 0
 EXIT_USAGE = 2
 BUDGET_S = 60.0
@@ -31,13 +40,16 @@ def _err(verb: str, msg: str) -> int:
 
 def configure_identify(parser: argparse.ArgumentParser) -> None:
     """Arguments of ``eha-hil identify``."""
-    parser.add_argument("data", metavar="DATA.csv", help="measured-data CSV (docs/identify.md)")
-    parser.add_argument("--preset", default="hydra_default",
-                        help="actuator preset or TOML file for the constants and start values")
-    parser.add_argument("--report", metavar="DIR", help="write tables and plots into DIR")
+    parser.add_argument("data", metavar="DATA.csv", type=input_file("measured-data CSV"),
+                        help="measured-data CSV (docs/identify.md)")
+    # -c/--set: the constants and start values, as on every other verb
+    add_config_options(parser)
+    parser.add_argument("--preset", dest="config", help=argparse.SUPPRESS)  # old name of -c
+    parser.add_argument("--report", metavar="DIR", type=output_dir,
+                        help="write tables and plots into DIR")
     parser.add_argument("--json", action="store_true", help="print the JSON summary")
-    parser.add_argument("--max-effects", type=int, default=6,
-                        help="stop after adding this many effects (default 6)")
+    parser.add_argument("--max-effects", type=int_range(0, 20), default=6,
+                        help="stop after adding this many effects, 0..20")
     parser.add_argument("--quiet", action="store_true", help="no progress on stderr")
 
 
@@ -46,18 +58,10 @@ def run_identify(args: argparse.Namespace) -> int:
     from hil.identify.csvdata import CsvError, read_measured
     from plant.config import ConfigError, load_config
 
-    if args.max_effects < 0:
-        return _err("identify", f"--max-effects {args.max_effects}: must be >= 0")
-    if args.report:
-        rdir = Path(args.report)
-        if rdir.exists() and not rdir.is_dir():
-            return _err("identify", f"--report {args.report}: exists and is not a directory")
-        if not rdir.parent.exists() and str(rdir.parent):
-            return _err("identify", f"--report {args.report}: parent directory does not exist")
     try:
-        cfg = load_config(args.preset)
+        cfg = load_config(args.config, getattr(args, "set", None) or ())
     except ConfigError as exc:
-        return _err("identify", f"--preset {args.preset}: {exc}")
+        return _err("identify", str(exc))  # names the preset or file and the key
     try:
         data = read_measured(args.data)
     except CsvError as exc:
@@ -87,9 +91,11 @@ def configure_synth(parser: argparse.ArgumentParser) -> None:
     from hil.identify.rig import INTERSAMPLE, RIG_EFFECTS, TEMPERATURE_SHAPES
     from hil.identify.synth import ALL_SYNTH_EFFECTS, PROFILES
 
-    parser.add_argument("out", metavar="OUT.csv", help="CSV file to write")
+    parser.add_argument("out", metavar="OUT.csv", type=output_file((".csv",), text=True),
+                        help="CSV file to write (an existing file only if it is text)")
     parser.add_argument("--load", default="fixed_piston",
-                        choices=("fixed_piston", "free_piston", "conrod_fixed"))
+                        choices=("fixed_piston", "free_piston", "conrod_fixed"),
+                        help="load case of the record")
     parser.add_argument("--realism", default="plant", choices=("plant", "rig"),
                         help="plant: the project's plant (default); rig: the independent "
                         "rig simulator (drawn parameters, continuous current, sensor chains)")
@@ -99,8 +105,10 @@ def configure_synth(parser: argparse.ArgumentParser) -> None:
                         f"plant: {', '.join(ALL_SYNTH_EFFECTS)}; rig: {', '.join(RIG_EFFECTS)}")
     parser.add_argument("--magnitude", action="append", default=[], metavar="EFFECT.KEY=V",
                         help="override a magnitude, e.g. pump_coulomb_friction.force_n=60")
-    parser.add_argument("--seconds", type=float, default=8.0)
-    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--seconds", type=float_range(1.0, 600.0, open_lo=True, unit="s"),
+                        default=8.0, help="record length, s, in (1, 600]")
+    parser.add_argument("--seed", type=int_range(0, 2**32 - 1), default=1,
+                        help="noise seed: the same seed gives the same record")
     parser.add_argument("--preset", default=None,
                         help="preset (base): hydra_linear for the plant, hydra_default for "
                         "the rig's nominal parameters")
@@ -158,11 +166,7 @@ def run_synth(args: argparse.Namespace) -> int:
             known = ", ".join(DEFAULT_MAGNITUDES[name]) or "none"
             return _err("identify-synth", f"--magnitude {item}: unknown key (known: {known})")
         effects[name][field] = val
-    if args.seconds <= 1.0:
-        return _err("identify-synth", f"--seconds {args.seconds}: need more than 1 s")
     out = Path(args.out)
-    if not out.parent.exists() and str(out.parent):
-        return _err("identify-synth", f"{args.out}: directory {out.parent} does not exist")
     try:
         res = generate(args.load, effects, seconds=args.seconds, seed=args.seed,
                        preset=args.preset, profile=args.profile)
@@ -230,13 +234,16 @@ def _run_rig_synth(args: argparse.Namespace) -> int:
 
 def configure_bench(parser: argparse.ArgumentParser) -> None:
     """Arguments of ``eha-hil bench identify``."""
-    parser.add_argument("--seconds", type=float, default=16.0, help="record length (s)")
+    parser.add_argument("--seconds", type=float_range(1.0, 600.0, open_lo=True, unit="s"),
+                        default=16.0, help="record length, s, in (1, 600]")
     parser.add_argument("--load", default="fixed_piston",
-                        choices=("fixed_piston", "free_piston", "conrod_fixed"))
+                        choices=("fixed_piston", "free_piston", "conrod_fixed"),
+                        help="load case of the synthetic record")
+    add_config_options(parser)  # the fitted model's configuration, as for identify
     parser.add_argument("--effect", action="append", default=None,
                         help="effects in the record (default: pump_pulsation and "
                              "pump_coulomb_friction)")
-    parser.add_argument("--json", action="store_true")
+    parser.add_argument("--json", action="store_true", help="print JSON")
 
 
 def run_bench(args: argparse.Namespace) -> int:
@@ -249,7 +256,7 @@ def run_bench(args: argparse.Namespace) -> int:
     from plant.config import load_config
 
     effects = args.effect or ["pump_pulsation", "pump_coulomb_friction"]
-    cfg = load_config("hydra_default")
+    cfg = load_config(args.config, args.set or ())
     warm = generate(args.load, effects, seconds=2.0, seed=7)
     identify(warm.data, cfg, max_effects=1)  # compile the kernels outside the timing
     res = generate(args.load, effects, seconds=args.seconds, seed=3)

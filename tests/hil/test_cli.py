@@ -13,7 +13,12 @@ from hil.cli import main
 
 
 def run(capsys, *argv: str) -> tuple[int, str, str]:
-    code = main(list(argv))
+    """``eha-hil ARGV`` in this process: the exit code, stdout, stderr. A value refused by
+    its argument type ends in argparse's SystemExit, as in the console script."""
+    try:
+        code = main(list(argv))
+    except SystemExit as exc:
+        code = exc.code
     out, err = capsys.readouterr()
     return code, out, err
 

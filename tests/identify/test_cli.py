@@ -26,8 +26,11 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def run(capsys, *argv: str) -> tuple[int, str, str]:
-    args = _parser().parse_args(list(argv))
-    code = args.func(args)
+    try:  # a bad number or path is refused by its argument type, before the verb runs
+        args = _parser().parse_args(list(argv))
+        code = args.func(args)
+    except SystemExit as exc:
+        code = exc.code
     out, err = capsys.readouterr()
     return code, out, err
 
@@ -82,8 +85,9 @@ def test_malformed_csv_exit_2(capsys, tmp_path):
 
 
 def test_unknown_preset_and_bad_report(capsys, coulomb_csv, tmp_path):
-    code, _, err = run(capsys, "identify", str(coulomb_csv), "--preset", "nope")
-    assert code == 2 and err.startswith("eha-hil identify: --preset nope")
+    for flag in ("-c", "--preset"):  # --preset: the old name of -c, still accepted
+        code, _, err = run(capsys, "identify", str(coulomb_csv), flag, "nope")
+        assert code == 2 and err.startswith("eha-hil identify: nope: no such file")
     f = tmp_path / "file"
     f.write_text("x")
     code, _, err = run(capsys, "identify", str(coulomb_csv), "--report", str(f))

@@ -1,0 +1,210 @@
+"""Argument types of the ``eha-hil`` command line: every number and path check in one place.
+
+Each factory returns an argparse ``type=`` function. A bad value raises
+:class:`argparse.ArgumentTypeError`, which the parser (:class:`Parser`) turns into one line
+``eha-hil VERB: error: argument --opt: why`` and exit code 2, before any work starts. A
+verb never re-checks a value it got through one of these types.
+
+Numbers are checked for being finite first (``nan`` and ``inf`` parse as floats), then
+against the range the option's meaning allows; the range is part of the option's help.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import NoReturn
+
+EXIT_USAGE = 2
+
+
+class Parser(argparse.ArgumentParser):
+    """An ArgumentParser whose errors are one line (no usage block) and whose help shows
+    each option's default. Sub-parsers inherit the class, hence both behaviours."""
+
+    def __init__(self, *args, **kwargs) -> None:  # noqa: ANN002, ANN003 - argparse's own
+        kwargs.setdefault("formatter_class", HelpFormatter)
+        super().__init__(*args, **kwargs)
+
+    def error(self, message: str) -> NoReturn:
+        # argparse prints the whole usage block first; one line says the same and keeps
+        # stderr readable for scripts (``--help`` has the usage).
+        self.exit(EXIT_USAGE, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+class HelpFormatter(argparse.HelpFormatter):
+    """Appends ``(default: X)`` to an option's help when it has a default worth showing."""
+
+    def _get_help_string(self, action: argparse.Action) -> str | None:
+        text = action.help or ""
+        default = action.default
+        # A flag's True/False default says nothing the help does not; None: no default.
+        if (text and "default" not in text and action.option_strings
+                and default is not None and default is not argparse.SUPPRESS
+                and not isinstance(default, bool) and default != []):
+            shown = " ".join(map(str, default)) if isinstance(default, list) else default
+            text += f" (default: {shown})".replace("%", "%%")
+        return text
+
+
+def _interval(lo: float | None, hi: float | None, open_lo: bool, unit: str) -> str:
+    left = "(" if open_lo else "["
+    lo_s = "-inf" if lo is None else f"{lo:g}"
+    hi_s = "inf" if hi is None else f"{hi:g}"
+    return f"{left}{lo_s}, {hi_s}]" + (f" {unit}" if unit else "")
+
+
+def _parse_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"{text!r}: need a finite number")
+    return value
+
+
+def float_range(lo: float | None = None, hi: float | None = None, *, open_lo: bool = False,
+                unit: str = "") -> Callable[[str], float]:
+    """A finite float with ``lo <= x <= hi`` (``lo < x`` when ``open_lo``); None: unbounded."""
+    span = _interval(lo, hi, open_lo, unit)
+
+    def parse(text: str) -> float:
+        value = _parse_float(text)
+        if lo is not None and (value < lo or (open_lo and value == lo)):
+            raise argparse.ArgumentTypeError(f"{text}: need a number in {span}")
+        if hi is not None and value > hi:
+            raise argparse.ArgumentTypeError(f"{text}: need a number in {span}")
+        return value
+
+    parse.__name__ = "number"  # argparse names the type in some messages
+    parse.kind = "number"  # type: ignore[attr-defined]  # what the CLI tests feed it
+    return parse
+
+
+def positive_float(hi: float, unit: str = "") -> Callable[[str], float]:
+    """A finite float with ``0 < x <= hi``."""
+    return float_range(0.0, hi, open_lo=True, unit=unit)
+
+
+def int_range(lo: int, hi: int, unit: str = "") -> Callable[[str], int]:
+    """An integer with ``lo <= n <= hi``."""
+    span = f"{lo}..{hi}" + (f" {unit}" if unit else "")
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text, 10)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+        if not lo <= value <= hi:
+            raise argparse.ArgumentTypeError(f"{text}: need an integer in {span}")
+        return value
+
+    parse.__name__ = "integer"
+    parse.kind = "number"  # type: ignore[attr-defined]
+    return parse
+
+
+def input_file(what: str = "file") -> Callable[[str], str]:
+    """An existing, readable, non-empty regular file (its content is the reader's to judge)."""
+
+    def parse(text: str) -> str:
+        p = Path(text)
+        if p.is_dir():
+            raise argparse.ArgumentTypeError(f"{text}: is a directory; give a {what}")
+        if not p.exists():
+            raise argparse.ArgumentTypeError(f"{text}: no such file")
+        if not p.is_file():
+            raise argparse.ArgumentTypeError(f"{text}: not a regular file")
+        try:
+            with p.open("rb") as f:
+                first = f.read(1)
+        except OSError as exc:
+            raise argparse.ArgumentTypeError(f"{text}: cannot read: {exc.strerror}") from None
+        if not first:
+            raise argparse.ArgumentTypeError(f"{text}: is empty; give a {what}")
+        return text
+
+    parse.__name__ = "file"
+    parse.kind = "input"  # type: ignore[attr-defined]
+    return parse
+
+
+def _looks_like_text(p: Path) -> bool:
+    with p.open("rb") as f:
+        head = f.read(4096)
+    if b"\0" in head:
+        return False
+    try:
+        head.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        return exc.start >= len(head) - 3  # a multi-byte character cut by the 4 KiB read
+    return True
+
+
+def output_file(suffixes: Sequence[str], text: bool = False,
+                stdout: bool = False) -> Callable[[str], str]:
+    """A file to write: one of ``suffixes`` (case-insensitive), its directory exists, not a
+    directory. ``text``: an existing file is overwritten only if it holds text, so a
+    mistyped name never replaces an image or a log. ``stdout``: ``-`` means stdout."""
+    names = ", ".join(suffixes)
+
+    def parse(value: str) -> str:
+        if stdout and value == "-":
+            return value
+        p = Path(value)
+        if p.is_dir():
+            raise argparse.ArgumentTypeError(f"{value}: is a directory; give a file name "
+                                             f"({names})")
+        if p.suffix.lower() not in suffixes:
+            raise argparse.ArgumentTypeError(f"{value}: use a file name ending {names}")
+        parent = p.parent if str(p.parent) else Path(".")
+        if not parent.is_dir():
+            raise argparse.ArgumentTypeError(f"{value}: directory {parent} does not exist")
+        if p.exists():
+            if not p.is_file():
+                raise argparse.ArgumentTypeError(f"{value}: exists and is not a regular file")
+            if text and not _looks_like_text(p):
+                raise argparse.ArgumentTypeError(f"{value}: exists and is not a text file; "
+                                                 "not overwriting it")
+        return value
+
+    parse.__name__ = "file name"
+    parse.kind = "output"  # type: ignore[attr-defined]
+    parse.suffixes = tuple(suffixes)  # type: ignore[attr-defined]
+    return parse
+
+
+def output_dir(value: str) -> str:
+    """A directory to write into: an existing directory, or a new one whose parent exists."""
+    p = Path(value)
+    if p.exists() and not p.is_dir():
+        raise argparse.ArgumentTypeError(f"{value}: exists and is not a directory")
+    parent = p.parent if str(p.parent) else Path(".")
+    if not p.exists() and not parent.is_dir():
+        raise argparse.ArgumentTypeError(f"{value}: parent directory {parent} does not exist")
+    return value
+
+
+output_dir.kind = "dir"  # type: ignore[attr-defined]
+
+
+def add_config_options(parser: argparse.ArgumentParser) -> None:
+    """``-c/--config`` and ``--set``, the same on every verb that simulates the actuator (the
+    values are checked by :func:`plant.config.load_config`, against the schema's ranges)."""
+    parser.add_argument("-c", "--config", metavar="PRESET|FILE",
+                        help="actuator preset name or TOML file (default: hydra_default)")
+    parser.add_argument("--set", action="append", metavar="SECTION.KEY=VALUE",
+                        help="override one configuration value (repeatable)")
+
+
+def walk(parser: argparse.ArgumentParser) -> list[argparse.ArgumentParser]:
+    """This parser and every sub-parser below it (for checks over the whole command line)."""
+    out = [parser]
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for sub in dict.fromkeys(action.choices.values()):
+                out += walk(sub)
+    return out
