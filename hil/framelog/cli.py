@@ -1,8 +1,10 @@
 """``eha-hil log info|export``: the frame-log verbs, to be hung under the main parser.
 
 ``configure_log(parser)`` adds the subcommands to a (sub)parser; ``run_log(args)`` runs the
-chosen one and returns the exit code: 0, or 2 after one line ``eha-hil log: ...`` on stderr
-for a bad file or option (never a traceback).
+chosen one and returns the exit code: 0 for a complete log; 1 for a truncated one (the
+summary, or the CSV of what is readable, is still written) after one line on stderr saying
+where it ends; 2 after one line ``eha-hil log: ...`` on stderr for a missing, foreign or
+damaged file or a bad option. Never a traceback.
 """
 
 from __future__ import annotations
@@ -13,8 +15,9 @@ import sys
 from pathlib import Path
 
 from hil.framelog.export import export_csv, summary_text
-from hil.framelog.reader import FrameLogError, FrameLogReader
+from hil.framelog.reader import FrameLogError, FrameLogReader, LogInfo
 
+EXIT_TRUNCATED = 1
 EXIT_USAGE = 2
 
 
@@ -34,13 +37,27 @@ def configure_log(parser: argparse.ArgumentParser) -> None:
                    help="export only this decoded field (repeatable; default all)")
 
 
+def _truncated(info: LogInfo) -> int:
+    """0 for a complete log; for a truncated one, the one stderr line and EXIT_TRUNCATED.
+
+    A cut log is what a killed run leaves: it is read up to its last complete record, but a
+    script must not take it for a whole one, hence the exit code."""
+    if info.complete:
+        return 0
+    upto = "nothing" if info.readable_until_ns is None else \
+        f"t = {info.readable_until_ns / 1e9:.6f} s"
+    print(f"eha-hil log: {info.path}: truncated: {info.stop_reason}; readable up to {upto}",
+          file=sys.stderr)
+    return EXIT_TRUNCATED
+
+
 def _info(args: argparse.Namespace) -> int:
     info = FrameLogReader(args.log).info()
     if args.json:
         print(json.dumps(info.to_dict(), indent=2))
     else:
         print(summary_text(info))
-    return 0
+    return _truncated(info)
 
 
 def _export(args: argparse.Namespace) -> int:
@@ -51,14 +68,16 @@ def _export(args: argparse.Namespace) -> int:
             raise FrameLogError(f"{args.out}: directory {parent} does not exist")
         if out.is_dir():
             raise FrameLogError(f"{args.out}: is a directory; give a .csv file name")
-    n = export_csv(args.log, args.out, topics=args.topic, fields=args.field)
+    info = FrameLogReader(args.log).info()
+    n = export_csv(args.log, args.out, topics=args.topic, fields=args.field, info=info)
     if args.out != "-":
         print(f"wrote {n} rows to {args.out}")
-    return 0
+    return _truncated(info)
 
 
 def run_log(args: argparse.Namespace) -> int:
-    """Run ``args.log_command``; 0 on success, 2 with one line on stderr on a user error."""
+    """Run ``args.log_command``; 0 on success, 1 for a truncated log, 2 for a file that
+    cannot be read or a bad option; each non-zero code with one line on stderr."""
     try:
         if args.log_command == "info":
             return _info(args)

@@ -83,7 +83,7 @@ def _cell(v: object) -> object:
 
 def export_csv(log_path: str | os.PathLike[str], out_path: str | os.PathLike[str],
                topics: Sequence[str] | None = None,
-               fields: Sequence[str] | None = None) -> int:
+               fields: Sequence[str] | None = None, info: LogInfo | None = None) -> int:
     """Write the decoded frames of ``log_path`` to the CSV ``out_path`` ("-": stdout).
 
     ``topics``: only these (default all); FrameLogError for a topic not in the log.
@@ -91,9 +91,12 @@ def export_csv(log_path: str | os.PathLike[str], out_path: str | os.PathLike[str
     have at least one of them (so frames that fail to decode are left out too);
     FrameLogError if a field occurs in no selected frame.
     Returns the number of data rows written. A truncated log exports what is readable.
+    ``info``: the log's :meth:`FrameLogReader.info` if the caller has it already (saves a
+    pass over the file).
     """
     reader = FrameLogReader(log_path)
-    info = reader.info()
+    if info is None:
+        info = reader.info()
     encodings = {c.topic: c.encoding for c in info.channels}
     if topics:
         for t in topics:

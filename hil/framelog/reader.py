@@ -46,6 +46,13 @@ _MSG = struct.Struct("<HIQQ")  # channel id, sequence, log time, publish time
 _CHUNK = struct.Struct("<QQQI")  # start, end, uncompressed size, uncompressed crc
 OP_HEADER, OP_FOOTER, OP_SCHEMA, OP_CHANNEL, OP_MESSAGE, OP_CHUNK = 1, 2, 3, 4, 5, 6
 OP_METADATA, OP_DATA_END = 0x0C, 0x0F
+#: A record claiming more than this many bytes is taken as a damaged length field, not as a
+#: record cut short: no writer of these logs writes a record of a terabyte.
+MAX_RECORD_BYTES = 1 << 40
+#: What a closed MCAP file ends with: a Footer record (opcode, length 20, 20 bytes), then
+#: the magic again.
+_FOOTER_TAIL = 1 + 8 + 20 + len(MAGIC)
+_INT64_MAX = (1 << 63) - 1
 _OP_NAMES = {1: "Header", 2: "Footer", 3: "Schema", 4: "Channel", 5: "Message", 6: "Chunk",
              7: "MessageIndex", 8: "ChunkIndex", 9: "Attachment", 10: "AttachmentIndex",
              11: "Statistics", 12: "Metadata", 13: "MetadataIndex", 14: "SummaryOffset",
@@ -271,6 +278,19 @@ class FrameLogReader:
             raise FrameLogError(f"{self.path}: not an MCAP file (no MCAP magic at the start)")
 
     # -- the record walk -----------------------------------------------------------------
+    def _ends_with_footer(self, f: object, size: int) -> bool:
+        """Whether the file ends with a Footer record and the closing magic, i.e. it was
+        closed by its writer: a walk that runs off its end is then reading a damaged
+        length field, not a file cut short."""
+        if size < len(MAGIC) + _FOOTER_TAIL:
+            return False
+        here = f.tell()  # type: ignore[attr-defined]
+        f.seek(size - _FOOTER_TAIL)  # type: ignore[attr-defined]
+        tail = f.read(_FOOTER_TAIL)  # type: ignore[attr-defined]
+        f.seek(here)  # type: ignore[attr-defined]
+        return (tail[0] == OP_FOOTER and int.from_bytes(tail[1:9], "little") == 20
+                and tail[-len(MAGIC):] == MAGIC)
+
     def _error(self, offset: int, what: str, scan: _Scan) -> FrameLogError:
         upto = "nothing" if scan.last_ns is None else f"t = {scan.last_ns} ns"
         return FrameLogError(f"{self.path}: damaged at byte {offset}: {what} "
@@ -289,10 +309,16 @@ class FrameLogReader:
             while True:
                 head = f.read(_REC.size)
                 if not head:
+                    if self._ends_with_footer(f, size):
+                        raise self._error(pos, "the records end without reaching the Footer "
+                                          "the file ends with (a damaged length field)", scan)
                     scan.stop_reason = (f"file ends at byte {pos}, after the last complete "
                                         "record")
                     return
                 if len(head) < _REC.size:
+                    if self._ends_with_footer(f, size):
+                        raise self._error(pos, "a record header runs into the end of a closed "
+                                          "file (a damaged length field before it)", scan)
                     scan.stop_reason = f"file ends inside a record header at byte {pos}"
                     return
                 op, length = _REC.unpack(head)
@@ -300,8 +326,13 @@ class FrameLogReader:
                 if op == 0:
                     raise self._error(pos, "invalid record opcode 0x00", scan)
                 if pos + _REC.size + length > size:
+                    present = size - pos - _REC.size
+                    if length > MAX_RECORD_BYTES or self._ends_with_footer(f, size):
+                        # A closed file cannot end inside a record: its length is wrong.
+                        raise self._error(pos, f"{name} record claims {length} bytes, only "
+                                          f"{present} follow (a damaged length field)", scan)
                     scan.stop_reason = (f"file ends inside a {name} record at byte {pos} "
-                                        f"({size - pos - _REC.size} of {length} bytes present)")
+                                        f"({present} of {length} bytes present)")
                     return
                 body = memoryview(f.read(length))
                 if first and op != OP_HEADER:
@@ -462,7 +493,8 @@ class FrameLogReader:
         if order not in ("time", "file"):
             raise ValueError(f"order must be 'time' or 'file', got {order!r}")
         msgs = self._walk(_Scan(), self._selector(topics))
-        return self._file_ordered(msgs) if order == "file" else self._time_ordered(msgs)
+        return self._file_ordered(msgs) if order == "file" else self._time_ordered(msgs,
+                                                                                    self.path)
 
     @staticmethod
     def _file_ordered(msgs: Iterator[_Msg]) -> Iterator[tuple[str, int, bytes]]:
@@ -476,7 +508,7 @@ class FrameLogReader:
                 yield m.chan.topic, m.log_ns, bytes(m.data)
 
     @staticmethod
-    def _time_ordered(msgs: Iterator[_Msg]) -> Iterator[tuple[str, int, bytes]]:
+    def _time_ordered(msgs: Iterator[_Msg], path: Path) -> Iterator[tuple[str, int, bytes]]:
         # Singles go to plain lists; blocks stay numpy views. One lexsort over
         # (time, message number, row) then gives time order with ties in file order.
         s_t: list[int] = []
@@ -496,7 +528,7 @@ class FrameLogReader:
                 s_seq.append(k)
                 s_ref.append((m.chan.topic, bytes(m.data)))
         sizes = [t.shape[0] for t in b_t]
-        times = np.concatenate([np.asarray(s_t, dtype=np.int64), *b_t]) if (s_t or b_t) \
+        times = np.concatenate([_times(s_t, b_t, path), *b_t]) if (s_t or b_t) \
             else np.zeros(0, np.int64)
         seq = np.concatenate([np.asarray(s_seq, dtype=np.int64),
                               np.repeat(np.asarray(b_seq, dtype=np.int64), sizes)])
@@ -565,7 +597,22 @@ class FrameLogReader:
                                         f"({min(lengths)}..{max(lengths)} bytes) do not stack")
                 width = lengths.pop() if lengths else 0
                 frames = np.frombuffer(b"".join(data), np.uint8).reshape(len(data), width)
-                times = np.asarray(singles_t.get(ch.id, []), dtype=np.int64)
+                times = _times(singles_t.get(ch.id, []), [], self.path)
             out[topic] = Blocks(times, frames)
         return out
 
+
+
+def _times(singles: list[int], blocks: list[np.ndarray], path: Path) -> np.ndarray:
+    """Log times of single messages as an array: int64 as our logs write them, or uint64
+    when a foreign MCAP file (log time is u64 there) holds times of 2^63 ns and beyond.
+    ``blocks`` (int64 block times to be sorted with them) are converted in place to match;
+    a negative block time cannot share an order with such times: FrameLogError."""
+    if not singles or max(singles) <= _INT64_MAX:
+        return np.asarray(singles, dtype=np.int64)
+    for i, t in enumerate(blocks):
+        if t.size and int(t.min()) < 0:
+            raise FrameLogError(f"{path}: log times up to {max(singles)} ns (beyond 2^63) "
+                                "next to negative block times cannot be ordered")
+        blocks[i] = t.astype(np.uint64)
+    return np.asarray(singles, dtype=np.uint64)

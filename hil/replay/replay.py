@@ -6,6 +6,11 @@ fieldbus outputs exactly as the box did, each 5 kHz step it loads the logged ups
 memory and CRC-error count, steps the MCU and compares the downstream registers with the
 logged ones; at the end of each cycle it compares the fieldbus input record. The first
 difference is reported with its time, link, field, expected and got values.
+
+A log that cannot be replayed (missing, foreign, damaged, without replay metadata, with
+metadata that does not parse, with nothing to replay) is a :class:`ReplayError` of one line
+naming the file. A truncated log (a killed run) is replayed up to the last MCU step all of
+its channels cover, and the result says so (``truncated``, ``stop_reason``).
 """
 
 from __future__ import annotations
@@ -20,11 +25,14 @@ from firmware_model.fpga import layout as B
 from firmware_model.fpga.driver_board import LinkMemory
 from firmware_model.mcu.mcu import Mcu
 from hil.fieldbus.boxes import StackBox
-from hil.fieldbus.topology import load_topology
+from hil.fieldbus.chain import CYCLE_TICKS
+from hil.fieldbus.topology import Topology, TopologyError, load_topology
+from hil.fpga_stack import TRACE_WIDTH
 from hil.framelog import FrameLogError, FrameLogReader
+from hil.framelog.reader import LogInfo
 from hil.replay.fpga_replay import column_name, replay_board_detail
-from hil.replay.record import topics
-from plant.config import Config
+from hil.replay.record import UP_WIDTH, topics
+from plant.config import Config, ConfigError, schema
 
 DOWN_NAMES = [name for _addr, name, *_ in B.DOWN_REGISTERS]
 
@@ -54,6 +62,8 @@ class ReplayResult:
     divergence: Divergence | None
     simulated_s: float
     fpga_ticks: int = 0  # driver-board ticks replayed (logs of level "full")
+    truncated: bool = False  # the log was cut short: replayed up to where it is readable
+    stop_reason: str = ""  # where a truncated log ends (FrameLogReader's words)
 
     @property
     def ok(self) -> bool:
@@ -103,22 +113,86 @@ def _record_value(dtype: np.dtype, raw: np.ndarray, field: str) -> int | float:
     return np.frombuffer(raw.tobytes(), dtype=dtype)[0][slot][name].item()
 
 
+def _flat(tree: dict, prefix: str = "") -> dict[str, object]:
+    out: dict[str, object] = {}
+    for k, v in tree.items():
+        if isinstance(v, dict):
+            out.update(_flat(v, f"{prefix}{k}."))
+        else:
+            out[f"{prefix}{k}"] = v
+    return out
+
+
+def _metadata(path: str | Path, info: LogInfo) -> tuple[Config, Topology, dict[str, int]]:
+    """The logged configuration (checked against the schema), topology and board offsets.
+
+    In a log whose end is cut off nothing checks the metadata's bytes (the data-section CRC
+    is at the end), so every field is parsed defensively: ReplayError, one line, otherwise.
+    """
+    meta = info.metadata.get("eha-hil.replay")
+    if not meta:
+        if info.truncated:
+            raise ReplayError(f"{path}: truncated before its replay metadata "
+                              f"({info.stop_reason}): nothing to replay")
+        raise ReplayError(f"{path}: no replay metadata (not a log of `eha-hil bus run --log`)")
+    where = f"{path}: replay metadata"
+    try:
+        data = json.loads(meta["config"])
+        if not isinstance(data, dict):
+            raise ValueError("not a JSON object")
+        logged = _flat(data)
+        missing = sorted(set(_flat(schema())) - set(logged))
+        if missing:
+            raise ValueError(f"no key {missing[0]}")
+        cfg = Config(schema(), [f"log {path}"]).with_overrides(logged, f"log {path}")
+    except KeyError:
+        raise ReplayError(f"{where}: no 'config'") from None
+    except (ValueError, ConfigError) as exc:  # JSONDecodeError is a ValueError
+        raise ReplayError(f"{where}: config: {exc}") from None
+    try:
+        name = meta["topology"]
+        topo = load_topology(name.split()[-1] if name.startswith("topology ") else name)
+    except KeyError:
+        raise ReplayError(f"{where}: no 'topology'") from None
+    except TopologyError as exc:
+        raise ReplayError(f"{where}: {exc}") from None
+    try:
+        offsets = json.loads(meta["offsets"])
+        want = [f"{b.id}.{k}" for b in topo.boxes for k in range(len(b.actuators))]
+        for key in want:
+            if not isinstance(offsets.get(key), int):
+                raise ValueError(f"no integer offset for board {key}")
+    except KeyError:
+        raise ReplayError(f"{where}: no 'offsets'") from None
+    except (ValueError, AttributeError) as exc:
+        raise ReplayError(f"{where}: offsets: {exc}") from None
+    return cfg, topo, offsets
+
+
+def _check_width(path: str | Path, topic: str, frames: np.ndarray, width: int) -> None:
+    if frames.ndim != 2 or frames.shape[1] != width:
+        raise ReplayError(f"{path}: {topic}: frames of {frames.shape[-1]} values, the replay "
+                          f"needs {width} (a log of another version?)")
+
+
 def replay_mcu(path: str | Path, config_override: Config | None = None) -> ReplayResult:
-    """Replay every box of a log; the first divergence, or none."""
+    """Replay every box of a log; the first divergence, or none.
+
+    ReplayError (one line) for a log that cannot be replayed or holds no MCU step to
+    replay; a truncated log is replayed up to its readable end (``truncated`` is set).
+    """
     try:
         reader = FrameLogReader(path)
         info = reader.info()
     except FrameLogError as exc:
         raise ReplayError(str(exc)) from None
-    meta = info.metadata.get("eha-hil.replay")
-    if not meta:
-        raise ReplayError(f"{path}: no replay metadata (not a log of `eha-hil bus run --log`)")
-    cfg = config_override or Config(json.loads(meta["config"]), [f"log {path}"])
-    topo = load_topology(meta["topology"].split()[-1] if meta["topology"].startswith(
-        "topology ") else meta["topology"])
-    offsets = json.loads(meta["offsets"])
+    logged_cfg, topo, offsets = _metadata(path, info)
+    cfg = config_override or logged_cfg
     tick_ns = cfg.get("sim.tick_ns")
-    steps = cycles = 0
+    # MCU steps per fieldbus cycle as the run logged them (not inferred from the counts,
+    # which a truncated log no longer has in that ratio).
+    per = CYCLE_TICKS // logged_cfg.get("mcu.period_ticks")
+    steps = cycles = planned = 0
     first: Divergence | None = None
     traces: list = []  # (box, board, logged trace) for the FPGA replay
     t_end = 0
@@ -134,14 +208,40 @@ def replay_mcu(path: str | Path, config_override: Config | None = None) -> Repla
         try:
             blk = reader.blocks_many(want)
         except FrameLogError as exc:
+            if info.truncated and "no topic" in str(exc):
+                raise ReplayError(f"{path}: truncated before the MCU channels of box "
+                                  f"{box.id} ({info.stop_reason}): nothing to replay") from None
             raise ReplayError(str(exc)) from None
         ins = blk[tp["inputs"]]
         outs = blk.get(tp["outputs"])
         ups = [blk[topics(box.id, k)["up"]] for k in range(n_act)]
         downs = [blk[topics(box.id, k)["down"]] for k in range(n_act)]
+        _check_width(path, tp["inputs"], ins.frames, rbox.in_dtype.itemsize)
+        if outs is not None:
+            _check_width(path, tp["outputs"], outs.frames, rbox.out_dtype.itemsize)
+        for k in range(n_act):
+            _check_width(path, topics(box.id, k)["up"], ups[k].frames, UP_WIDTH)
+            _check_width(path, topics(box.id, k)["down"], downs[k].frames, B.DOWN_WORDS)
+            if topics(box.id, k)["trace"] in blk:
+                _check_width(path, topics(box.id, k)["trace"],
+                             blk[topics(box.id, k)["trace"]].frames, TRACE_WIDTH)
         n_cycles = len(ins.t_ns)
-        n_steps = len(ups[0].t_ns) if n_act else 0
-        per = n_steps // max(n_cycles, 1) if n_act else 0
+        covered = min([len(x.t_ns) for x in ups + downs]) // per if n_act else n_cycles
+        if info.truncated:
+            # The channels of one box end at different points of a cut log: replay the
+            # cycles that every one of them covers, outputs included (a cycle's outputs are
+            # logged at its start).
+            n_cycles = min(n_cycles, covered)
+            last_out = int(outs.t_ns[-1]) if outs is not None and len(outs.t_ns) else -1
+            cycle_ns = CYCLE_TICKS * tick_ns
+            while outs is not None and n_cycles and \
+                    int(ins.t_ns[n_cycles - 1]) - cycle_ns > last_out:
+                n_cycles -= 1
+        elif any(len(x.t_ns) != per * n_cycles for x in ups + downs):
+            raise ReplayError(f"{path}: box {box.id}: {n_cycles} cycles but "
+                              f"{[len(x.t_ns) for x in ups + downs]} MCU steps logged per "
+                              f"link (expected {per} per cycle): the log is inconsistent")
+        planned += n_cycles
         div = None
         s = 0
         # Per-step data as plain Python objects / row views: the loop runs 5000x per s.
@@ -192,7 +292,7 @@ def replay_mcu(path: str | Path, config_override: Config | None = None) -> Repla
                 break
             cycles += 1
         steps += s
-        t_end = max(t_end, int(ins.t_ns[-1]) if n_cycles else 0)
+        t_end = max(t_end, int(ins.t_ns[n_cycles - 1]) if n_cycles else 0)
         if div and (first is None or div.t_s < first.t_s):
             first = div
         for k in range(n_act):
@@ -208,7 +308,12 @@ def replay_mcu(path: str | Path, config_override: Config | None = None) -> Repla
                              column_name(col), int(tr.frames[row, col]), got)
             if first is None or div.t_s < first.t_s:
                 first = div
-    return ReplayResult(len(topo.boxes), steps, cycles, first, t_end * 1e-9, fpga_ticks)
+    if planned == 0:
+        why = f"truncated ({info.stop_reason}) before the first MCU cycle" if info.truncated \
+            else "no MCU cycle logged"
+        raise ReplayError(f"{path}: {why}: nothing to replay")
+    return ReplayResult(len(topo.boxes), steps, cycles, first, t_end * 1e-9, fpga_ticks,
+                        info.truncated, "" if info.complete else info.stop_reason)
 
 
 __all__ = ["Divergence", "ReplayError", "ReplayResult", "replay_mcu"]

@@ -223,3 +223,57 @@ def test_killed_writer_lost_only_its_open_chunk(tmp_path: Path) -> None:
     _run_and_kill(path, "quiet")
     messages, _ = _check_gap_free(path)
     assert messages == sum(per_chunk[:-1])
+
+
+# --- damage that looks like a cut ---------------------------------------------------------------
+def test_flipped_length_byte_in_a_closed_log_is_damage_not_truncation(tmp_path: Path) -> None:
+    # A Header one byte longer makes the walk read garbage and run off the end. The file
+    # ends with its Footer and closing magic, so it was not cut short: its length is bad.
+    path = tmp_path / "len.mcap"
+    _counter_log(path, 60)
+    data = bytearray(path.read_bytes())
+    data[len(MAGIC) + 1] ^= 0x01
+    path.write_bytes(bytes(data))
+    with pytest.raises(FrameLogError, match=r"damaged at byte \d+: .*a damaged length field"):
+        FrameLogReader(path).info()
+    # Without the footer the same file is indistinguishable from one cut short, unless the
+    # length it claims is beyond any record a writer makes.
+    cut = tmp_path / "len_cut.mcap"
+    cut.write_bytes(bytes(data[:-100]))
+    with pytest.raises(FrameLogError, match="a damaged length field"):
+        FrameLogReader(cut).info()
+
+
+def test_implausible_record_length_is_damage(tmp_path: Path) -> None:
+    path = tmp_path / "huge.mcap"
+    _counter_log(path, 10)
+    data = bytearray(path.read_bytes())
+    chunk = _chunk_offsets(bytes(data))[0]
+    data[chunk + 1:chunk + 9] = (1 << 50).to_bytes(8, "little")
+    path.write_bytes(bytes(data[:chunk + 500]))  # cut, so no footer vouches for the file
+    with pytest.raises(FrameLogError, match=rf"damaged at byte {chunk}: Chunk record claims"):
+        FrameLogReader(path).info()
+
+
+def test_log_times_beyond_int64_read_and_export(tmp_path: Path) -> None:
+    """MCAP log times are u64: a legal file from another tool may hold 2^63 and beyond."""
+    from mcap.writer import Writer
+
+    from hil.framelog.export import export_csv
+
+    path = tmp_path / "late.mcap"
+    times = [5, 2**63, 2**64 - 1]
+    with open(path, "wb") as f:
+        w = Writer(f)
+        w.start(profile="", library="test")
+        cid = w.register_channel("/late", "raw", 0)
+        for t in times:
+            w.add_message(cid, log_time=t, data=b"x", publish_time=t)
+        w.finish()
+    reader = FrameLogReader(path)
+    assert [t for _, t, _ in reader.frames()] == times
+    assert reader.blocks("/late").t_ns.tolist() == times
+    out = tmp_path / "late.csv"
+    assert export_csv(path, out) == 3
+    last = 2**64 - 1
+    assert out.read_text().splitlines()[-1] == f"{last // 10**9}.{last % 10**9:09d},/late,1"

@@ -106,10 +106,18 @@ def test_cli_info(log: Path, capsys: pytest.CaptureFixture[str]) -> None:
 
 def test_cli_info_truncated(log: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
                             ) -> None:
+    # A cut log is summarised, but exits 1 with one line on stderr: it is not a whole log.
     cut = tmp_path / "cut.mcap"
     cut.write_bytes(log.read_bytes()[:-40])
-    assert run_log(_parse(["info", str(cut)])) == 0
-    assert "state: TRUNCATED" in capsys.readouterr().out
+    assert run_log(_parse(["info", str(cut)])) == 1
+    out, err = capsys.readouterr()
+    assert "state: TRUNCATED" in out
+    assert err.startswith(f"eha-hil log: {cut}: truncated: file ends inside")
+    assert err.count("\n") == 1
+    csv_out = tmp_path / "cut.csv"
+    assert run_log(_parse(["export", str(cut), str(csv_out)])) == 1
+    out, err = capsys.readouterr()
+    assert "wrote 7 rows" in out and "truncated" in err and err.count("\n") == 1
 
 
 def test_cli_export(log: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

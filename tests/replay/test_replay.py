@@ -106,13 +106,21 @@ def test_replay_cli(logged, capsys):
     assert "iq_ref" in capsys.readouterr().out
 
 
+def _exit_code(argv: list[str]) -> int:
+    try:
+        return main(argv)
+    except SystemExit as exc:  # argument checking may refuse a missing file before the command
+        return int(exc.code)
+
+
 def test_replay_bad_files(tmp_path, capsys):
-    assert main(["replay", str(tmp_path / "missing.mcap")]) == 2
+    assert _exit_code(["replay", str(tmp_path / "missing.mcap")]) == 2
     junk = tmp_path / "junk.mcap"
     junk.write_bytes(b"not an mcap file at all")
     assert main(["replay", str(junk)]) == 2
     err = capsys.readouterr().err
-    assert err.count("\n") == 2 and "junk.mcap" in err
+    assert err.count("\n") == 2 and "missing.mcap" in err
+    assert err.splitlines()[-1].startswith(f"eha-hil replay: {junk}: not an MCAP file")
 
 
 def test_replay_error_without_metadata(tmp_path):

@@ -1,0 +1,175 @@
+"""Damaged logs through the console script: `eha-hil replay`, `log info` and `log export`
+exit 1 (a result: the log is truncated, what is readable was used and the output says
+where it ends) or 2 (nothing could be done: empty, foreign, damaged, unreadable metadata,
+nothing to replay), each with exactly one line on stderr and never a traceback.
+
+The logs are real ones (`run_logged`, what `eha-hil bus run --log` writes), damaged the
+ways a user meets: cut at several points, a flipped byte, the end dropped, an empty file,
+a text file, a directory.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import pytest
+
+from hil.bus_cli import demo_pc
+from hil.fieldbus.topology import load_topology
+from hil.framelog.reader import MAGIC
+from hil.replay.record import run_logged
+from plant.config import load_config
+
+EXE = shutil.which("eha-hil") or f"{sys.prefix}/bin/eha-hil"
+COMMANDS = {"replay": ["replay", "{log}"], "info": ["log", "info", "{log}"],
+            "export": ["log", "export", "{log}", "{out}"]}
+
+
+def _records(data: bytes) -> list[tuple[int, int, int]]:
+    """(offset, opcode, length) of the top-level records up to the Footer."""
+    out, pos = [], len(MAGIC)
+    while pos + 9 <= len(data):
+        op, length = data[pos], int.from_bytes(data[pos + 1:pos + 9], "little")
+        out.append((pos, op, length))
+        if op == 2:
+            break
+        pos += 9 + length
+    return out
+
+
+def _flip(data: bytes, at: int, mask: int = 0xFF) -> bytes:
+    b = bytearray(data)
+    b[at] ^= mask
+    return bytes(b)
+
+
+@pytest.fixture(scope="module")
+def logs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    """Name -> damaged file (or directory), all made from two real logs."""
+    d = tmp_path_factory.mktemp("damaged")
+    cfg = load_config("hydra_default")
+    full = d / "full.mcap"
+    run_logged(load_topology("bench_one_box"), cfg, 300, demo_pc(), full)
+    data = full.read_bytes()
+    recs = _records(data)
+    chunks = [pos for pos, op, _ in recs if op == 6]
+    data_end = next(pos for pos, op, _ in recs if op == 15)
+    assert len(chunks) >= 2, recs
+    meta = data.find(b'{"', data.find(b"eha-hil.replay"))  # the logged configuration
+    assert meta > 0
+    colon = data.index(b":", meta)
+    short = d / "short.mcap"  # a complete log of one cycle: no MCU step was logged
+    run_logged(load_topology("bench_one_box"), cfg, 1, demo_pc(), short)
+    made = {
+        "empty": b"",
+        "text": b"this is not a log\n" * 20,
+        "cut_in_header": data[:20],
+        "cut_in_metadata": data[:recs[2][0] + 40],
+        "cut_in_first_chunk": data[:chunks[0] + 50],
+        "cut_in_last_chunk": data[:chunks[-1] + 50],
+        "end_dropped": data[:-40],
+        "flipped_chunk_byte": _flip(data, chunks[-1] + 200),
+        "flipped_length_byte": _flip(data, len(MAGIC) + 1, 0x01),  # the Header's length
+        # Cut before the data-section CRC, which would otherwise catch the flip.
+        "flipped_metadata_then_cut": (data[:colon] + b";" + data[colon + 1:])[:data_end],
+    }
+    out = {}
+    for name, blob in made.items():
+        (d / f"{name}.mcap").write_bytes(blob)
+        out[name] = d / f"{name}.mcap"
+    (d / "a_directory").mkdir()
+    out["a_directory"] = d / "a_directory"
+    out["no_mcu_data"] = short
+    return out
+
+
+# name -> expected exit code of (replay, info, export); None: not run (not damaged).
+EXPECTED = {
+    "empty": (2, 2, 2),
+    "text": (2, 2, 2),
+    "a_directory": (2, 2, 2),
+    "cut_in_header": (2, 1, 1),
+    "cut_in_metadata": (2, 1, 1),
+    "cut_in_first_chunk": (2, 1, 1),
+    "cut_in_last_chunk": (1, 1, 1),
+    "end_dropped": (1, 1, 1),
+    "flipped_chunk_byte": (2, 2, 2),
+    "flipped_length_byte": (2, 2, 2),
+    "flipped_metadata_then_cut": (2, 1, 1),
+    "no_mcu_data": (2, None, None),
+}
+
+
+def _run(cmd: str, log: Path, out: Path) -> subprocess.CompletedProcess[str]:
+    argv = [a.format(log=log, out=out) for a in COMMANDS[cmd]]
+    env = {**os.environ, "COLUMNS": "200"}
+    return subprocess.run([str(EXE), *argv], capture_output=True, text=True, timeout=300,
+                          env=env)
+
+
+@pytest.fixture(scope="module")
+def results(logs: dict[str, Path], tmp_path_factory: pytest.TempPathFactory
+            ) -> dict[tuple[str, str], subprocess.CompletedProcess[str]]:
+    """Every (case, command) run once through the console script, two at a time."""
+    out_dir = tmp_path_factory.mktemp("csv")
+    jobs = [(name, cmd) for name, codes in EXPECTED.items()
+            for cmd, code in zip(COMMANDS, codes, strict=True) if code is not None]
+    with ThreadPoolExecutor(max_workers=2) as pool:
+        done = pool.map(lambda job: _run(job[1], logs[job[0]], out_dir / f"{job[0]}.csv"),
+                        jobs)
+        return dict(zip(jobs, done, strict=True))
+
+
+@pytest.mark.parametrize("name", list(EXPECTED))
+def test_exit_code_and_one_line_on_stderr(name: str, logs: dict[str, Path],
+                                          results: dict) -> None:
+    for cmd, want in zip(COMMANDS, EXPECTED[name], strict=True):
+        if want is None:
+            continue
+        p = results[(name, cmd)]
+        where = f"{cmd} {name}: rc {p.returncode}, stderr {p.stderr!r}"
+        assert "Traceback" not in p.stderr, where
+        assert p.returncode == want, where
+        lines = p.stderr.splitlines()
+        assert len(lines) == 1, where
+        prefix = "eha-hil replay: " if cmd == "replay" else "eha-hil log: "
+        assert lines[0].startswith(prefix) and logs[name].name in lines[0], where
+
+
+def test_truncated_replay_says_so_and_where(results: dict) -> None:
+    """A cut log is replayed up to its readable end, and both streams say it is cut."""
+    p = results[("cut_in_last_chunk", "replay")]
+    assert "TRUNCATED log (file ends inside a Chunk record at byte" in p.stdout
+    assert "MCU steps" in p.stdout and "match bit for bit" in p.stdout
+    steps = int(p.stdout.split("MCU steps")[0].split()[-1])
+    assert 0 < steps < 5 * 299  # a prefix: more than nothing, less than the whole run
+    assert "truncated: file ends inside a Chunk record at byte" in p.stderr
+    assert "replayed up to t = " in p.stderr
+
+
+def test_truncated_replay_json_says_truncated(logs: dict[str, Path]) -> None:
+    p = subprocess.run([str(EXE), "replay", str(logs["end_dropped"]), "--json"],
+                       capture_output=True, text=True, timeout=300)
+    assert p.returncode == 1
+    data = json.loads(p.stdout)
+    assert data["ok"] and data["truncated"] and data["stop_reason"].startswith("file ends")
+    assert data["mcu_steps"] == 5 * 299  # only the summary is lost: every step replayed
+
+
+@pytest.mark.parametrize(("name", "cmd", "words"), [
+    ("no_mcu_data", "replay", "no MCU cycle logged: nothing to replay"),
+    ("cut_in_first_chunk", "replay", "truncated before the MCU channels of box 0"),
+    ("cut_in_metadata", "replay", "truncated before its replay metadata"),
+    ("flipped_metadata_then_cut", "replay", "replay metadata: config:"),
+    ("flipped_length_byte", "info", "(a damaged length field)"),
+    ("flipped_chunk_byte", "export", "damaged at byte"),
+    ("cut_in_last_chunk", "info", "truncated: file ends inside a Chunk record at byte"),
+])
+def test_the_line_says_what_is_wrong(name: str, cmd: str, words: str, results: dict) -> None:
+    assert words in results[(name, cmd)].stderr
