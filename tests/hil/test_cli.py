@@ -97,6 +97,29 @@ def test_config_show_and_presets(capsys):
         (["run", "thesis", "--plot", "x.png"], "--plot-dir"),
         (["run", "current-step", "--plot", "x.png", "--plot-dir", "d"], "--plot-dir"),
         (["run", "current-step", "--plot-dir", "/no/such/dir/d"], "--plot-dir"),
+        # Values the configuration check accepted and a model divided by.
+        (["run", "current-step", "--set", "inverter.dc_bus_v=0"], "inverter.dc_bus_v"),
+        (["run", "f5", "--set", "mcu.period_ticks=100000"], "mcu.period_ticks"),
+        # Numbers: refused by their argument type before anything runs.
+        (["plant", "bode", "--points", "0"], "--points"),
+        (["plant", "bode", "--points", "-3"], "--points"),
+        (["plant", "tn-curve", "--current", "1e6"], "--current"),
+        (["plant", "tn-curve", "--current", "nan"], "--current"),
+        (["bus", "run", "--seconds", "nan"], "--seconds"),
+        (["bus", "run", "--seconds", "inf"], "--seconds"),
+        (["bus", "run", "--amplitude", "nan"], "--amplitude"),
+        (["serve", "--port", "pty", "--seconds", "nan"], "--seconds"),
+        (["bench", "identify", "--seconds", "0"], "--seconds"),
+        (["bench", "identify", "--seconds", "-3"], "--seconds"),
+        (["bench", "identify", "--seconds", "1e9"], "--seconds"),
+        (["identify-synth", "x.csv", "--seconds", "nan"], "--seconds"),
+        (["bench", "bus", "--cycles", "0"], "--cycles"),
+        # Paths.
+        (["bus", "run", "--log", "/nonexistent/x.mcap"], "/nonexistent does not exist"),
+        (["main", "-c", "/tmp"], "/tmp: is a directory"),
+        # Options a verb does not use are not offered.
+        (["config", "presets", "-c", "hydra_linear"], "unrecognized arguments: -c"),
+        (["bench", "codecs", "--set", "sim.seed=2"], "unrecognized arguments: --set"),
     ],
 )
 def test_user_mistakes_give_one_line_and_exit_2(capsys, argv, fragment):
@@ -149,3 +172,75 @@ def test_bench_fpga_reports_both_paths(capsys):
     assert code == 0
     assert [r["path"] for r in data["results"]] == ["value-level", "bit-level"]
     assert all(r["real_time_factor"] > 0 for r in data["results"])
+
+
+def test_config_file_of_the_wrong_kind(capsys, tmp_path):
+    (tmp_path / "empty.csv").write_text("")
+    (tmp_path / "empty.toml").write_text("\n")
+    for name, fragment in (("empty.csv", "expected NAME.toml"), ("empty.toml", "is empty")):
+        code, _, err = run(capsys, "config", "show", "-c", str(tmp_path / name))
+        assert code == 2 and fragment in err and err.count("\n") == 1, err
+
+
+def test_identify_synth_never_overwrites_a_non_csv_file(capsys, tmp_path):
+    png = tmp_path / "img.png"
+    png.write_bytes(b"\x89PNG\r\n\x1a\n" + bytes(100))
+    disguised = tmp_path / "img.csv"  # a picture under a CSV name
+    disguised.write_bytes(png.read_bytes())
+    for path, fragment in ((png, "ending .csv"), (disguised, "not a text file")):
+        code, _, err = run(capsys, "identify-synth", str(path), "--seconds", "1.5")
+        assert code == 2 and fragment in err and err.count("\n") == 1, err
+        assert path.read_bytes() == png.read_bytes()
+
+
+def test_main_exits_1_when_an_f2_figure_is_out_of_band(capsys):
+    # A stronger motor constant puts the stall force far above the 1600..1800 N band.
+    code, out, _ = run(capsys, "main", "--json", "--set", "motor.force_at_rated_n=3000")
+    data = json.loads(out)
+    assert not data["F2"]["within_band"]["stall_force_n"]
+    assert code == 1
+
+
+def test_version(capsys):
+    from importlib.metadata import version
+
+    code, out, _ = run(capsys, "--version")
+    assert code == 0 and out.strip() == f"eha-hil {version('eha-hil')}"
+
+
+def test_help_lists_run_thesis_and_exit_codes(capsys):
+    code, out, _ = run(capsys, "--help")
+    assert code == 0
+    run_line = next(line for line in out.splitlines() if line.strip().startswith("run "))
+    assert "thesis" in run_line
+    assert "130" in out  # the exit codes are in the epilog
+
+
+def test_every_option_has_help_and_shows_its_default(capsys):
+    import argparse
+
+    from hil.cli import build_parser
+    from hil.cli_args import walk
+
+    missing = [f"{p.prog} {a.option_strings or a.dest}" for p in walk(build_parser())
+               for a in p._actions
+               if not a.help and not isinstance(a, argparse._SubParsersAction)]
+    assert not missing
+    code, out, _ = run(capsys, "bench", "plant", "--help")
+    assert code == 0 and "(default: 5.0)" in out and "(0, 600]" in out
+
+
+def test_identify_takes_c_and_set_and_still_the_old_preset(tmp_path):
+    from hil.cli import build_parser
+
+    data = tmp_path / "d.csv"
+    data.write_text("t\n0\n")
+    parser = build_parser()
+    args = parser.parse_args(["identify", str(data), "-c", "hydra_linear", "--set", "sim.seed=2"])
+    assert args.config == "hydra_linear" and args.set == ["sim.seed=2"]
+    assert parser.parse_args(["identify", str(data), "--preset", "x"]).config == "x"
+    args = parser.parse_args(["bench", "identify", "-c", "hydra_linear"])
+    assert args.config == "hydra_linear"
+    sub = next(a for a in parser._actions if a.dest == "command").choices
+    assert "--preset" not in sub["identify"].format_help()  # a deprecated alias, not shown
+    assert "--config" in sub["identify"].format_help()

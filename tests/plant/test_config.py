@@ -96,3 +96,65 @@ def test_bad_overrides(bad):
 def test_parse_override_bare_word():
     assert parse_override("load.kind = cart") == ("load.kind", "cart")
     assert parse_override("sim.seed=3") == ("sim.seed", 3)
+
+
+def test_every_numeric_key_has_a_range():
+    from plant.config import RANGES, schema
+
+    def numeric(tree, prefix=""):
+        for k, v in tree.items():
+            if isinstance(v, dict):
+                yield from numeric(v, f"{prefix}{k}.")
+            elif not isinstance(v, bool | str):
+                yield f"{prefix}{k}"
+
+    assert set(numeric(schema())) == set(RANGES)
+
+
+def test_every_range_holds_its_default_and_accepts_its_bounds():
+    from plant.config import RANGES
+
+    cfg = load_config()
+    for key, r in RANGES.items():
+        default = cfg.get(key)
+        assert r.lo <= default <= r.hi and not (r.open_lo and default == r.lo), key
+        kind = type(default)
+        bounds = [r.hi] if r.open_lo else [r.lo, r.hi]
+        for v in bounds:
+            assert cfg.with_overrides({key: kind(v)}).get(key) == kind(v), (key, v)
+
+
+@pytest.mark.parametrize(
+    "override, fragment",
+    [
+        ("inverter.dc_bus_v=0", "must be at least 1"),
+        ("mcu.period_ticks=100000", "must be at most 20"),
+        ("mcu.period_ticks=0", "must be at least 1"),
+        ("sim.tick_ns=0", "must be at least 1000"),
+        ("effects.pulsation.amplitude=2.0", "must be at most 1"),
+        ("effects.oil_temperature.initial_c=300.0", "must be at most 150"),
+        ("effects.seal_friction.stribeck_velocity_m_per_s=0.0", "must be greater than 0"),
+        ("load.x0_m=-5.0", "must be at least -1"),
+        ("hydraulics.jp_kg=-3", "must not be negative"),
+    ],
+)
+def test_out_of_range_values_are_refused(override, fragment):
+    key = override.split("=")[0]
+    with pytest.raises(ConfigError) as err:
+        load_config(None, [override])
+    assert key in str(err.value) and fragment in str(err.value)
+
+
+@pytest.mark.parametrize("name, text, fragment", [
+    ("dir", None, "is a directory"),
+    ("data.csv", "t,iq\n0,1\n", "expected NAME.toml"),
+    ("empty.toml", "  \n", "is empty"),
+])
+def test_config_file_that_is_not_one(tmp_path, name, text, fragment):
+    path = tmp_path / name
+    if text is None:
+        path.mkdir()
+    else:
+        path.write_text(text)
+    with pytest.raises(ConfigError, match=fragment):
+        load_config(path)
