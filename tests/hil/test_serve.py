@@ -189,4 +189,6 @@ def test_serve_usage_errors_are_one_line(capsys):
     assert err.count("\n") == 1 and "/dev/no-such-tty-here" in err
     assert main(["serve", "--transport", "udp", "--port", "x"]) == 2
     assert "udp needs a port number" in capsys.readouterr().err
-    assert main(["serve", "--port", "pty", "--seconds", "0"]) == 2
+    with pytest.raises(SystemExit) as exc:  # refused by the type of --seconds, as argparse does
+        main(["serve", "--port", "pty", "--seconds", "0"])
+    assert exc.value.code == 2 and "--seconds" in capsys.readouterr().err
