@@ -1,6 +1,7 @@
 """Command-line verbs of the identification tool (wired into ``hil.cli`` by the project).
 
-* ``eha-hil identify DATA.csv [--preset NAME] [--report DIR] [--json] [--max-effects N]``
+* ``eha-hil identify DATA.csv [-c PRESET|FILE] [--set K=V] [--report DIR] [--json]
+  [--max-effects N]``
 * ``eha-hil bench identify [--seconds 16] [--effect NAME]`` — wall time of a whole run on a
   synthetic 5 kHz record against the 60 s budget;
 * ``eha-hil identify-synth OUT.csv --load fixed_piston --effect pump_coulomb_friction`` — an
