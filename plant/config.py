@@ -320,6 +320,10 @@ def _check_consistency(data: dict[str, Any], where: str) -> None:
     if sens["biss_zero_count"] >= 1 << sens["biss_bits"]:
         raise ConfigError(f"{where}: sensors.biss_zero_count: beyond the {sens['biss_bits']}"
                           "-bit scale")
+    mcu = data["mcu"]
+    if mcu["conrod_length_m"] > 0 and mcu["conrod_offset_m"] >= mcu["conrod_length_m"]:
+        # cos(alpha) = sqrt(1 - (d/l)^2) of Eq. 6.5 needs a rod longer than its offset.
+        raise ConfigError(f"{where}: mcu.conrod_offset_m: need less than mcu.conrod_length_m")
     half = data["hydraulics"]["stroke_m"] / 2
     if abs(data["load"]["x0_m"]) > half:
         raise ConfigError(f"{where}: load.x0_m: outside the stroke (+/- {half} m)")
