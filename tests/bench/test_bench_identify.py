@@ -7,10 +7,13 @@ The suite runs with ``--benchmark-disable`` (each case once, as a smoke test); t
 
 from __future__ import annotations
 
+import pytest
+
 from hil.identify.pipeline import identify
 from hil.identify.synth import generate
 
 
+@pytest.mark.slow
 def test_identify_pulsation_record(benchmark, default_cfg):
     data = generate("fixed_piston", ["pump_pulsation"], seconds=4.0, seed=5).data
     identify(data, default_cfg, max_effects=1)  # compile outside the measurement

@@ -61,6 +61,7 @@ def bench_reference(cfg):
     return _run(load_topology("bench_one_box"), cfg, BACKENDS[0], "stack", 300, force_profile)
 
 
+@pytest.mark.slow  # the fast lane has every backend in test_full_robot_image
 @pytest.mark.parametrize("backend", BACKENDS[1:], ids=IDS[1:])
 def test_same_scenario_same_bytes(cfg, bench, backend, bench_reference):
     ref, ref_inputs = bench_reference

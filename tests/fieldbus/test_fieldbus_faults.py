@@ -90,6 +90,7 @@ def test_box_faults_checked_against_topology(cfg, bench, full):
                                               "box": 5, "slot": 0}])
 
 
+@pytest.mark.slow
 def test_box_faults_reach_a_chain_in_another_process(cfg, bench):
     """LVDS and sensor faults are handed to a remote chain: the same declaration gives the
     same bytes on inproc and on udp (chain in another process)."""
@@ -135,6 +136,7 @@ def _check_counters(rec):
         assert rec.chain["bad_frames"] == f["down_flipped"]
 
 
+@pytest.mark.slow
 def test_mixed_faults_deterministic_across_transports(cfg, bench):
     recs = {}
     for transport in ("inproc", "udp", "serial"):

@@ -111,6 +111,7 @@ def _master_loop(end, topo) -> tuple[Master, list[tuple[int, float, int]], int]:
     return m, seen, reenables
 
 
+@pytest.mark.slow  # SECONDS of wall time by design, more on a busy machine
 def test_serve_closes_the_loop_over_a_pty(pty):
     from hil.transports import open_transport
 

@@ -40,12 +40,14 @@ def test_f4_needs_the_meshing_torque_ripple(cfg):
     assert res.metric("p-p error, velocity based").value < 0.1
 
 
+@pytest.mark.slow
 def test_f5_pressure_bandwidth(cfg):
     res = scenario("f5").run(cfg, None)
     bw = res.metric("-3 dB bandwidth").value
     assert 75.0 <= bw <= 125.0, bw
 
 
+@pytest.mark.slow
 def test_f6_force_bandwidths(cfg):
     res = scenario("f6").run(cfg, None)
     weak = res.metric("-3 dB bandwidth, weak beam").value

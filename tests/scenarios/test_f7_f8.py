@@ -32,6 +32,7 @@ def test_registered():
     assert {"f7", "f8"} <= set(SCENARIOS)
 
 
+@pytest.mark.slow
 def test_f7_pressure_feedback_error(f7):
     """Thesis 12.1 N RMS without strain feedback (the seal's Coulomb force is calibrated
     on this figure, so it checks the calibration still holds)."""
@@ -39,17 +40,20 @@ def test_f7_pressure_feedback_error(f7):
     assert abs(e - 12.1) <= 4.0, e
 
 
+@pytest.mark.slow
 def test_f7_strain_feedback_error(f7):
     """Thesis 1.3 N RMS with strain feedback; the issue requires <= 2.5 N."""
     e = f7.metric("RMS error, strain feedback").value
     assert e <= 2.5, f"{e:.2f} N; {' '.join(f7.notes)}"
 
 
+@pytest.mark.slow
 def test_f7_strain_feedback_reduces_the_error(f7):
     m = f7.metric
     assert m("RMS error, strain feedback").value < m("RMS error, pressure feedback").value
 
 
+@pytest.mark.slow
 def test_f7_the_seal_friction_makes_the_pressure_figure(cfg):
     """Without the rod-seal friction the pressure-feedback error is far below 12.1 N: the
     calibrated effect is what produces the figure, not the loop's other errors."""
@@ -57,6 +61,7 @@ def test_f7_the_seal_friction_makes_the_pressure_figure(cfg):
     assert run["rms"] < 0.5 * 12.1, run["rms"]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name,thesis", [("strain", 15.1), ("pressure", 6.58),
                                          ("complementary", 4.18)])
 def test_f8_errors_within_40_percent(f8, name, thesis):
@@ -64,16 +69,19 @@ def test_f8_errors_within_40_percent(f8, name, thesis):
     assert abs(e - thesis) <= 0.4 * thesis, (e, f8.notes)
 
 
+@pytest.mark.slow
 def test_f8_order(f8):
     rms = f8.series["rms"]
     assert rms["strain"] > rms["pressure"] > rms["complementary"], rms
 
 
+@pytest.mark.slow
 def test_f8_strain_drift_gradient(f8):
     """Fig. 4.10: the strain reading drifts 2.5 N/degC with the rod temperature."""
     assert abs(f8.metric("strain drift vs rod temperature").value - 2.5) < 0.1
 
 
+@pytest.mark.slow
 def test_f8_offline_filter_matches_the_mcu(f8, cfg):
     """The cutoff sweep recomputes Eq. 4.4 from the recording; at the preset's cutoff it
     must give the MCU's own float32 figure."""
@@ -98,6 +106,7 @@ def test_complementary_filter_is_complementary():
         10.0 * math.exp(-1.0), rel=0.01)
 
 
+@pytest.mark.slow
 def test_plots(f7, f8, tmp_path):
     for res in (f7, f8):
         path = tmp_path / f"{res.name}.png"
