@@ -259,6 +259,7 @@ def _state(d: ad.AD7195Device) -> tuple:
     return (d.mode, d.config, d.status, d.data, d.gpocon, d.offset, d.fullscale, d.cread)
 
 
+@pytest.mark.slow
 @settings(max_examples=200)
 @given(ops)
 def test_byte_path_equals_bit_path(sequence: list) -> None:

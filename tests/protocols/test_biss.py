@@ -46,6 +46,7 @@ def test_error_and_warning_are_active_low() -> None:
     assert c.decode(c.encode(5, error=False, warning=True)) == BissReading(5, False, True)
 
 
+@pytest.mark.slow
 @settings(max_examples=300, deadline=None)
 @given(widths.flatmap(lambda n: st.tuples(st.just(n), frames(n))))
 def test_round_trip_whole_range(case: tuple[int, tuple[int, bool, bool]]) -> None:
@@ -123,6 +124,7 @@ def test_arbitrary_words_never_yield_corrupt_values(n: int, word: int) -> None:
     assert c.encode(*r) == word
 
 
+@pytest.mark.slow
 @settings(max_examples=300, deadline=None)
 @given(widths, st.lists(st.one_of(st.integers(-3, 3), st.booleans(), st.none(),
                                   st.text(max_size=1), st.floats()), max_size=60))

@@ -75,6 +75,7 @@ def test_crc8_autosar_equals_crcmod(data: bytes) -> None:
     assert CRC8_AUTOSAR.compute_bytes(data) == fun(data)
 
 
+@pytest.mark.slow
 @settings(max_examples=300, deadline=None)
 @given(st.integers(1, 64).flatmap(lambda n: st.tuples(st.just(n), st.integers(0, 2**n - 1))))
 def test_crc6_biss_table_equals_independent_references(msg: tuple[int, int]) -> None:

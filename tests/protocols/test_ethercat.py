@@ -111,6 +111,7 @@ def test_expected_wkc() -> None:
 # ---- round trips --------------------------------------------------------------------
 
 
+@pytest.mark.slow
 @settings(max_examples=150)
 @given(frames_st)
 def test_ethernet_round_trip(dgs: list[Datagram]) -> None:
@@ -156,6 +157,7 @@ def test_arbitrary_bytes_only_codec_errors(buf: bytes) -> None:
             pass
 
 
+@pytest.mark.slow
 @settings(max_examples=200)
 @given(frames_st, st.integers(0, 0x7FF))
 def test_length_field_inconsistent_is_frame_error(dgs: list[Datagram], new_len: int) -> None:
@@ -168,6 +170,7 @@ def test_length_field_inconsistent_is_frame_error(dgs: list[Datagram], new_len: 
         ec.decode_pdu(bytes(pdu))
 
 
+@pytest.mark.slow
 @settings(max_examples=200)
 @given(st.lists(datagrams_st, min_size=2, max_size=5), st.data())
 def test_broken_m_chain_is_frame_error(dgs: list[Datagram], data: st.DataObject) -> None:
@@ -188,6 +191,7 @@ def test_truncated_frame_is_frame_error(dgs: list[Datagram], data: st.DataObject
         ec.decode_pdu(pdu[:cut])
 
 
+@pytest.mark.slow
 @settings(max_examples=200)
 @given(frames_st, st.data())
 def test_udp_single_bit_flip_never_yields_a_wrong_value(

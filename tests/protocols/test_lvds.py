@@ -117,6 +117,7 @@ def test_every_error_below_hd_detected_batch(w: tuple[int, int]) -> None:
     assert not batch.valid.any()
 
 
+@pytest.mark.slow
 @settings(max_examples=500, deadline=None)
 @given(st.integers(-2**50, 2**50))
 def test_arbitrary_words_never_yield_corrupt_values(word: int) -> None:
@@ -184,6 +185,7 @@ def check_recovery(ws, received: np.ndarray, d0: int, d1: int, out: list[LinkWor
     assert len(out) >= len(before) + len(after)
 
 
+@pytest.mark.slow
 @settings(max_examples=300, deadline=None)
 @given(st.lists(words_st, min_size=4, max_size=10), st.data())
 def test_stream_recovers_after_slip(ws, data) -> None:
@@ -204,6 +206,7 @@ def test_stream_recovers_after_slip(ws, data) -> None:
     check_recovery(ws, received, d0, d1, out)
 
 
+@pytest.mark.slow
 @settings(max_examples=300, deadline=None)
 @given(st.lists(words_st, min_size=4, max_size=10), st.data())
 def test_stream_recovers_after_burst(ws, data) -> None:
@@ -223,6 +226,7 @@ def test_stream_recovers_after_burst(ws, data) -> None:
     check_recovery(ws, received, d0, d1, out)
 
 
+@pytest.mark.slow
 @settings(max_examples=300, deadline=None)
 @given(st.lists(words_st, min_size=3, max_size=8), st.data())
 def test_locked_decoder_drops_exactly_a_corrupted_word(ws, data) -> None:
@@ -240,6 +244,7 @@ def test_locked_decoder_drops_exactly_a_corrupted_word(ws, data) -> None:
     assert dec.resyncs == 0
 
 
+@pytest.mark.slow
 @settings(max_examples=300, deadline=None)
 @given(st.lists(st.integers(0, 1), max_size=400), st.lists(st.integers(0, 400), max_size=4))
 def test_arbitrary_bits_only_yield_words_present_in_the_input(raw, cuts) -> None:

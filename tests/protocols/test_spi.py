@@ -9,6 +9,7 @@ and from the AD7195 data sheet's statement that it uses mode 3, MSB first. The c
 
 from __future__ import annotations
 
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -69,6 +70,7 @@ def test_bytes_bits_round_trip(data: bytes, msb_first: bool) -> None:
     assert bits_to_bytes(bytes_to_bits(data, msb_first), msb_first) == data
 
 
+@pytest.mark.slow
 @settings(max_examples=200)
 @given(
     st.sampled_from(MODES),

@@ -50,6 +50,7 @@ def test_gray_table() -> None:
     assert c.encode(2047) == 0b10000000000  # Gray code of 2^n - 1 is the MSB alone
 
 
+@pytest.mark.slow
 @settings(max_examples=300, deadline=None)
 @given(formats.flatmap(lambda f: st.tuples(st.just(f), readings(f))))
 def test_round_trip_whole_range(case) -> None:
@@ -87,6 +88,7 @@ def test_parity_detects_every_single_bit_error(case) -> None:
             c.decode(word ^ (1 << i))
 
 
+@pytest.mark.slow
 @settings(max_examples=300, deadline=None)
 @given(formats, st.integers(-2**40, 2**40))
 def test_arbitrary_words_never_yield_corrupt_values(fmt: SsiFormat, word: int) -> None:
