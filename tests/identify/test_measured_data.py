@@ -38,6 +38,7 @@ def rig_identified():
     return run
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("lsb", [0.5, 1.0, 2.0])
 def test_null_with_current_noise_is_explained_with_nothing_added(rig_identified, lsb):
     rig, rep = rig_identified("fixed_piston", current_noise_lsb=lsb)
@@ -52,6 +53,7 @@ def test_null_with_current_noise_is_explained_with_nothing_added(rig_identified,
     assert abs(rep.final["skew"].value) < 0.25 * rep.experiment.dt
 
 
+@pytest.mark.slow
 def test_null_recovers_the_drawn_parameters(rig_identified):
     rig, rep = rig_identified("fixed_piston", seed=2)
     truth = rig.truth["parameters"]
@@ -61,6 +63,7 @@ def test_null_recovers_the_drawn_parameters(rig_identified):
         assert got == pytest.approx(truth[key], rel=tol), (sym, got, truth[key])
 
 
+@pytest.mark.slow
 def test_input_delay_is_causal_and_found(rig_identified):
     rig, rep = rig_identified("fixed_piston", ("input_delay",))
     names = [e.name for e in rep.effects_added]

@@ -5,6 +5,9 @@ from __future__ import annotations
 
 import pytest
 
+# whole identifications of several-second records: the full lane only
+pytestmark = pytest.mark.slow
+
 
 @pytest.mark.parametrize("load", ["fixed_piston", "free_piston", "conrod_fixed"])
 def test_null_dataset_adds_nothing_and_is_white(identified, load):
