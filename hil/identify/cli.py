@@ -52,10 +52,17 @@ def configure_identify(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--max-effects", type=int_range(0, 20), default=6,
                         help="stop after adding this many effects, 0..20")
     parser.add_argument("--quiet", action="store_true", help="no progress on stderr")
+    parser.add_argument("--intersample", choices=("zoh", "foh", "bl"), default=None,
+                        help="how the logged current behaved between samples: zoh (held), "
+                        "foh (linear), bl (band-limited); default: the '# intersample:' "
+                        "header line, else estimated from the data (the report says why)")
 
 
 def run_identify(args: argparse.Namespace) -> int:
     """Run ``eha-hil identify``; 0 on success, 2 on a user error (one line on stderr)."""
+    import json
+
+    from hil.identify.checks import RefusedData
     from hil.identify.csvdata import CsvError, read_measured
     from plant.config import ConfigError, load_config
 
@@ -75,7 +82,13 @@ def run_identify(args: argparse.Namespace) -> int:
             print(f"identify: {msg}", file=sys.stderr, flush=True)
 
     try:
-        rep = identify(data, cfg, max_effects=args.max_effects, progress=progress)
+        rep = identify(data, cfg, max_effects=args.max_effects, progress=progress,
+                       intersample=args.intersample)
+    except RefusedData as exc:
+        # a record that cannot be identified: say why, never a verdict
+        if args.json:
+            print(json.dumps({"file": str(args.data), "refused": str(exc)}))
+        return _err("identify", f"{args.data}: refused: {exc}")
     except ValueError as exc:
         return _err("identify", f"{args.data}: {exc}")
     if args.report:

@@ -158,3 +158,23 @@ def test_refused_record_never_gets_a_verdict():
     with pytest.raises(RefusedData):
         identify(MeasuredData(d.path, d.load, d.sample_rate_hz, d.t, cols, {}),
                  load_config("hydra_default"))
+
+
+def test_cli_refuses_with_one_line_and_exit_2(tmp_path, capsys):
+    from hil.cli import main
+    from hil.identify.csvdata import write_measured
+
+    rig = generate_rig("fixed_piston", seconds=1.0, seed=5)
+    d = rig.data
+    cols = dict(d.columns)
+    cols["iq"] = np.zeros(d.n)
+    path = tmp_path / "flat.csv"
+    write_measured(path, MeasuredData(d.path, d.load, d.sample_rate_hz, d.t, cols, {}))
+    try:
+        code = main(["identify", str(path), "--json", "--quiet"])
+    except SystemExit as exc:
+        code = exc.code
+    out = capsys.readouterr()
+    assert code == 2
+    assert out.err.strip().count("\n") == 0 and "refused" in out.err and "iq" in out.err
+    assert '"refused"' in out.out
