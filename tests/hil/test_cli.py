@@ -23,6 +23,7 @@ def run(capsys, *argv: str) -> tuple[int, str, str]:
     return code, out, err
 
 
+@pytest.mark.slow
 def test_main_job_prints_f1_f2(capsys):
     code, out, err = run(capsys, "main")
     assert code == 0
@@ -38,6 +39,7 @@ def test_main_job_json(capsys):
     assert data["F1"]["linear_max_gain_error_db"] < 0.5
 
 
+@pytest.mark.slow
 def test_bode_table_json_and_plot(capsys, tmp_path):
     png = tmp_path / "bode.png"
     code, out, _ = run(capsys, "plant", "bode", "--linear", "--points", "6", "--plot", str(png))

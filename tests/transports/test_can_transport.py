@@ -172,6 +172,7 @@ def apply_ops(stream: list, ops: list[tuple[str, int, int]]) -> list:
     return stream
 
 
+@pytest.mark.slow
 @given(
     frames=st.lists(st.binary(min_size=1, max_size=200), min_size=1, max_size=12),
     fd=st.booleans(),

@@ -102,6 +102,7 @@ garbage_st = st.one_of(
 )
 
 
+@pytest.mark.slow
 @given(
     frames=st.lists(st.binary(min_size=1, max_size=64), min_size=1, max_size=12),
     insertions=st.lists(st.tuples(st.integers(0, 10**6), garbage_st), max_size=6),
