@@ -1,9 +1,10 @@
 """Actuator configuration: TOML presets shipped in the package, user files, CLI overrides.
 
 ``hydra_default.toml`` is the schema: every key a configuration may hold appears in it, with
-a value whose type is the key's type. Other presets and user files are overlays on it. A
-mistake (unknown key, wrong type, negative or non-finite number, bad choice, missing or
-unparsable file) raises :class:`ConfigError` whose one-line message names the key and the
+a value whose type is the key's type; :data:`RANGES` holds each number's range. Other
+presets and user files are overlays on it. A mistake (unknown key, wrong type, non-finite
+number or one outside its range, bad choice, missing, empty or unparsable file, a file that
+is not ``.toml``) raises :class:`ConfigError` whose one-line message names the key and the
 file, so the CLI can print it and exit with code 2.
 """
 
@@ -321,6 +322,12 @@ def _check_consistency(data: dict[str, Any], where: str) -> None:
         raise ConfigError(f"{where}: sensors.biss_zero_count: beyond the {sens['biss_bits']}"
                           "-bit scale")
     mcu = data["mcu"]
+    mcu_dt = mcu["period_ticks"] * data["sim"]["tick_ns"] * 1e-9
+    f_max = 1.0 / (math.pi * mcu_dt)
+    if mcu["friction_observer_hz"] >= f_max:
+        # The discrete momentum observer r += k_o dt (...) diverges once k_o dt >= 2.
+        raise ConfigError(f"{where}: mcu.friction_observer_hz: need less than {f_max:.0f} Hz "
+                          "at this MCU period (the discrete observer diverges)")
     if mcu["conrod_length_m"] > 0 and mcu["conrod_offset_m"] >= mcu["conrod_length_m"]:
         # cos(alpha) = sqrt(1 - (d/l)^2) of Eq. 6.5 needs a rod longer than its offset.
         raise ConfigError(f"{where}: mcu.conrod_offset_m: need less than mcu.conrod_length_m")

@@ -64,6 +64,7 @@ def test_linearised_switches_every_effect_off(default_cfg):
         ("[load]\nx0_m = 0.3\n", "load.x0_m"),
         ("[inverter]\nduty_min = 0.9\nduty_max = 0.1\n", "duty_min"),
         ("[mcu]\nconrod_length_m = 0.1\nconrod_offset_m = 0.2\n", "conrod_offset_m"),
+        ("[mcu]\nfriction_observer_hz = 2000.0\n", "friction_observer_hz"),
         ("[hydraulics\n", "not valid TOML"),
     ],
 )
