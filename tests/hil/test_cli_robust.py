@@ -170,6 +170,7 @@ def test_every_option_is_classified():
     assert not unknown, f"classify these in tests/hil/test_cli_robust.py: {unknown}"
 
 
+@pytest.mark.slow  # ~300 cases in this process: 5-15 s
 def test_mistake_matrix_gives_at_most_one_line(files, monkeypatch):
     monkeypatch.chdir(files["root"])
     cases = _cases(files)
@@ -185,6 +186,7 @@ def test_mistake_matrix_gives_at_most_one_line(files, monkeypatch):
 
 
 # The console script is main() plus sys.exit: the same exit code and the same stderr.
+@pytest.mark.slow  # a process start each
 @pytest.mark.parametrize("argv", [
     ["bus", "run", "--seconds", "nan"],
     ["plant", "tn-curve", "--current", "1e6"],
@@ -254,6 +256,7 @@ def _one_interrupt_line(code: int, lines: list[str], verb: str, progress: str) -
     return last
 
 
+@pytest.mark.slow
 def test_ctrl_c_bus_run_closes_the_log(tmp_path):
     from mcap.reader import make_reader
 
@@ -274,6 +277,7 @@ def test_ctrl_c_bus_run_closes_the_log(tmp_path):
         assert sum(1 for _ in reader.iter_messages()) == info.message_count
 
 
+@pytest.mark.slow
 def test_ctrl_c_run_thesis_names_the_scenario_and_the_plots(tmp_path):
     run = _Running(["run", "thesis", "--plot-dir", str(tmp_path / "plots")], tmp_path)
     run.wait_for(r"f4 \.\.\.")  # f3 is done and its plot written
@@ -284,6 +288,7 @@ def test_ctrl_c_run_thesis_names_the_scenario_and_the_plots(tmp_path):
     assert (tmp_path / "plots" / "f3.png").stat().st_size > 10_000
 
 
+@pytest.mark.slow
 def test_ctrl_c_bench_stack(tmp_path):
     run = _Running(["bench", "stack", "--seconds", "600"], tmp_path)
     run.wait_for(r"bench stack: simulating")
@@ -293,6 +298,7 @@ def test_ctrl_c_bench_stack(tmp_path):
     assert last.endswith("nothing written"), last
 
 
+@pytest.mark.slow
 def test_ctrl_c_identify(tmp_path):
     data = tmp_path / "d.csv"
     exe = shutil.which("eha-hil") or f"{sys.prefix}/bin/eha-hil"
