@@ -1,7 +1,7 @@
 # Two commands do all set-up on a fresh machine with only python3:
 #   make run   - create .venv, install eha-hil, run the main job on the default actuator
 #   make test  - create .venv, install eha-hil with its test extra, run the whole suite
-#   make test-fast - the same without the tests marked slow (about a minute)
+#   make test-fast - the same without the tests marked slow (under a minute)
 PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
