@@ -26,6 +26,9 @@ from hil.framelog.reader import MAGIC
 from hil.replay.record import run_logged
 from plant.config import load_config
 
+#: One console-script process per damaged log and command: ~20 s, so not in make test-fast.
+pytestmark = pytest.mark.slow
+
 EXE = shutil.which("eha-hil") or f"{sys.prefix}/bin/eha-hil"
 COMMANDS = {"replay": ["replay", "{log}"], "info": ["log", "info", "{log}"],
             "export": ["log", "export", "{log}", "{out}"]}
