@@ -73,12 +73,24 @@ def _fixed_point(cfg) -> None:
     fixed.isqrt(0)
 
 
+def _identify_model(cfg) -> None:
+    """The identification model's simulation (``eha-hil identify``), on a short synthetic
+    record."""
+    from hil.identify.experiment import prepare
+    from hil.identify.model import FastModel
+    from hil.identify.synth import generate
+
+    model = FastModel(prepare(generate(seconds=0.2, noise=False).data, cfg))
+    model.outputs(model.start_vector())
+
+
 STEPS: list[tuple[str, Callable]] = [
     ("plant", _plant),
     ("driver board + link", _fpga_value_level),
     ("bit-level sensors and link", _fpga_bit_level),
     ("board replay", _replay),
     ("fixed-point blocks", _fixed_point),
+    ("identification model", _identify_model),
 ]
 
 
@@ -93,7 +105,7 @@ def warm(out=sys.stderr) -> int:
     except Exception as exc:  # nothing to warm without a configuration
         print(f"eha-hil warmup: skipped ({type(exc).__name__}: {exc})", file=out)
         return len(STEPS)
-    print("eha-hil warmup: compiling the numba kernels once (half a minute on a fresh "
+    print("eha-hil warmup: compiling the numba kernels once (15-30 s on a fresh "
           "install, a second when they are cached) ...", file=out, flush=True)
     for name, step in STEPS:
         try:

@@ -51,6 +51,7 @@ def test_bode_table_json_and_plot(capsys, tmp_path):
     assert len(data["responses"][0]["points"]) == 5
 
 
+@pytest.mark.slow
 def test_tn_curve_plot(capsys, tmp_path):
     png = tmp_path / "tn.png"
     code, out, err = run(capsys, "plant", "tn-curve", "--points", "5", "--plot", str(png))
