@@ -57,41 +57,28 @@ def check_record(data: MeasuredData) -> None:
         if bad.any():
             raise RefusedData(f"{_where(data, name, bad)}: not a finite number")
     iq = cols["iq"]
-    bad = np.abs(iq) > IQ_LIMIT_A
-    if bad.any():
-        k = int(np.flatnonzero(bad)[0])
-        raise RefusedData(f"{_where(data, 'iq', bad)}: {iq[k]:.6g} A is beyond the drive's "
-                          f"+-{IQ_LIMIT_A:g} A (wrong units? the CSV is SI: amperes)")
-    for name in PRESSURES:
+    pressure_why = ("Pa is outside {lo:g}..{hi:g} MPa gauge (wrong units? declare them with "
+                    "'# units: p=bar')")
+    ranges = [("iq", -IQ_LIMIT_A, IQ_LIMIT_A, 1.0,
+               "A is beyond the drive's +-{hi:g} A (wrong units? the CSV is SI: amperes)")]
+    ranges += [(c, *PRESSURE_RANGE_PA, 1e6, pressure_why) for c in PRESSURES]
+    ranges += [("temp_c", *TEMPERATURE_RANGE_C, 1.0,
+                "degC is outside {lo:g}..{hi:g} degC (kelvin? fahrenheit?)"),
+               ("x_piston", -POSITION_LIMIT_M, POSITION_LIMIT_M, 1.0,
+                "m is beyond the stroke (+-{hi:g} m; millimetres?)")]
+    for name, lo, hi, unit, why in ranges:
         if name not in cols:
             continue
         y = cols[name]
-        lo, hi = PRESSURE_RANGE_PA
         bad = (y < lo) | (y > hi)
         if bad.any():
             k = int(np.flatnonzero(bad)[0])
-            raise RefusedData(f"{_where(data, name, bad)}: {y[k]:.6g} Pa is outside "
-                              f"{lo / 1e6:g}..{hi / 1e6:g} MPa gauge (wrong units? declare "
-                              "them with '# units: p=bar')")
+            raise RefusedData(f"{_where(data, name, bad)}: {y[k]:.6g} "
+                              + why.format(lo=lo / unit, hi=hi / unit))
     pres = [cols[c] for c in PRESSURES if c in cols]
     if pres and max(float(np.max(np.abs(y))) for y in pres) < PRESSURE_MIN_SPAN_PA:
         raise RefusedData("every pressure column stays below 2 kPa: logged in bar or MPa, "
                           "not Pa? (declare them with '# units: p=bar')")
-    if "temp_c" in cols:
-        y = cols["temp_c"]
-        lo, hi = TEMPERATURE_RANGE_C
-        bad = (y < lo) | (y > hi)
-        if bad.any():
-            k = int(np.flatnonzero(bad)[0])
-            raise RefusedData(f"{_where(data, 'temp_c', bad)}: {y[k]:.6g} degC is outside "
-                              f"{lo:g}..{hi:g} degC (kelvin? fahrenheit?)")
-    if "x_piston" in cols:
-        y = cols["x_piston"]
-        bad = np.abs(y) > POSITION_LIMIT_M
-        if bad.any():
-            k = int(np.flatnonzero(bad)[0])
-            raise RefusedData(f"{_where(data, 'x_piston', bad)}: {y[k]:.6g} m is beyond the "
-                              f"stroke (+-{POSITION_LIMIT_M:g} m; millimetres?)")
     if data.n < MIN_SAMPLES:
         raise RefusedData(f"only {data.n} samples: the model and the residual tests need at "
                           f"least {MIN_SAMPLES} (0.5 s at 5 kHz)")
