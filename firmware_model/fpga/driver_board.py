@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from firmware_model.calibration import FirmwareCalibration, calibration
 from firmware_model.fpga import layout as B
 from firmware_model.fpga.board import (
     board_params,
@@ -17,7 +18,6 @@ from firmware_model.fpga.board import (
     control_tick,
     down_defaults,
 )
-from plant.config import Config
 
 _DOWN_TYPE = {name: typ for _, name, typ, *_ in B.DOWN_REGISTERS}
 _UP_TYPE = {name: typ for _, name, typ, *_ in B.UP_REGISTERS}
@@ -41,14 +41,15 @@ def from_word(word: int, typ: str) -> int:
 class DriverBoard:
     """One motor driver board (FPGA state, downstream and upstream memories)."""
 
-    def __init__(self, cfg: Config) -> None:
-        self.config = cfg
-        self.params = board_params(cfg)
+    def __init__(self, cal: FirmwareCalibration) -> None:
+        cal = calibration(cal)
+        self.calibration = cal
+        self.params = board_params(cal)
         self.state = np.zeros(B.N_STATE, dtype=np.int64)
-        self.down = down_defaults(cfg)
+        self.down = down_defaults(cal)
         self.up = np.zeros(B.UP_WORDS, dtype=np.int64)
         self.pwm_top = int(self.params[B.C_PWM_TOP])
-        self.calibrated_offset = calibrated_offset(cfg)
+        self.calibrated_offset = calibrated_offset(cal)
 
     def tick(self, raw: np.ndarray) -> int:
         """One 50 us tick with the raw sensor words ``raw``; returns 1 while PWM is on."""
@@ -83,8 +84,8 @@ class LinkMemory:
     receives (up), with typed access by register name (what the MCU program reads as plain
     variables through the dual-port RAM, thesis 6.3.1)."""
 
-    def __init__(self, cfg: Config) -> None:
-        self.down = down_defaults(cfg)
+    def __init__(self, cal: FirmwareCalibration) -> None:
+        self.down = down_defaults(cal)
         self.up = np.zeros(B.UP_WORDS, dtype=np.int64)
         #: Upstream words this side discarded for CRC (the MCU board FPGA's counter).
         self.up_crc_errors = 0

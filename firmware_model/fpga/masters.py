@@ -39,8 +39,8 @@ from typing import Protocol
 
 import numpy as np
 
+from firmware_model.calibration import FirmwareCalibration, calibration
 from firmware_model.fpga import layout as B
-from plant.config import Config
 from protocols.abi import QuadratureCounter
 from protocols.ad7195 import ID_PART_AD7195, REG_ID, REG_MODE, AD7195Master, Mode
 from protocols.biss import BissCodec
@@ -92,22 +92,22 @@ class SensorWires(Protocol):
         ...
 
 
-def strain_master(cfg: Config) -> AD7195Master:
+def strain_master(cal: FirmwareCalibration) -> AD7195Master:
     """The board's AD7195 reader: status appended and checked, parity checked."""
-    return AD7195Master(full_scale_n=cfg.get("sensors.strain_full_scale_n"),
+    return AD7195Master(full_scale_n=calibration(cal).strain_full_scale_n,
                         status_appended=True, channel=STRAIN_CHANNEL, check_parity=True)
 
 
-def boot_strain(cfg: Config, transfer: Callable[[bytes], bytes]) -> int:
+def boot_strain(cal: FirmwareCalibration, transfer: Callable[[bytes], bytes]) -> int:
     """The board's AD7195 power-on sequence over ``transfer``: reset, ID check (FrameError
     if not an AD7195), configuration (channel CH0) and mode (:data:`STRAIN_MODE`).
     Returns the ID byte. A pending conversion result is discarded by the mode write."""
-    return strain_master(cfg).start(transfer, mode=STRAIN_MODE)
+    return strain_master(cal).start(transfer, mode=STRAIN_MODE)
 
 
-def ssi_format(cfg: Config) -> SsiFormat:
+def ssi_format(cal: FirmwareCalibration) -> SsiFormat:
     """SSI frame format of the configured encoder (natural binary, no status, no parity)."""
-    return SsiFormat(position_bits=cfg.get("sensors.ssi_bits"))
+    return SsiFormat(position_bits=calibration(cal).ssi_bits)
 
 
 class BitLevelMasters:
@@ -119,11 +119,12 @@ class BitLevelMasters:
     its own from the ok flags.
     """
 
-    def __init__(self, cfg: Config, ssi_fmt: SsiFormat | None = None,
+    def __init__(self, cal: FirmwareCalibration, ssi_fmt: SsiFormat | None = None,
                  ssi_timing: SsiTiming | None = None) -> None:
-        self.config = cfg
-        self.tick_ns: int = cfg.get("sim.tick_ns")
-        self._ssi_codec = SsiCodec(ssi_fmt or ssi_format(cfg))
+        cal = calibration(cal)
+        self.calibration = cal
+        self.tick_ns: int = cal.tick_ns
+        self._ssi_codec = SsiCodec(ssi_fmt or ssi_format(cal))
         self._ssi_master = SsiMaster(self._ssi_codec.frame_bits, ssi_timing)
         timing = self._ssi_master.timing
         # One frame (frame_bits + 1 clock periods) plus the monoflop must fit in a tick, or
@@ -132,8 +133,8 @@ class BitLevelMasters:
         if frame_ns + timing.monoflop_ns > self.tick_ns:
             raise ValueError(f"SSI frame {frame_ns} ns + monoflop {timing.monoflop_ns} ns "
                              f"exceed the {self.tick_ns} ns tick")
-        self._biss = BissCodec(cfg.get("sensors.biss_bits"))
-        self._strain = strain_master(cfg)
+        self._biss = BissCodec(cal.biss_bits)
+        self._strain = strain_master(cal)
         self._strain_wires: object | None = None
         self._abi = QuadratureCounter(0, 0, 0)
         self._abi_mask = (1 << ABI_BITS) - 1
@@ -164,7 +165,7 @@ class BitLevelMasters:
         m = self._strain
         if (m.read_register(transfer, REG_ID) & 0x0F) != ID_PART_AD7195 or (
                 m.read_register(transfer, REG_MODE) != STRAIN_MODE.encode()):
-            boot_strain(self.config, transfer)
+            boot_strain(self.calibration, transfer)
         self._strain_wires = wires
 
     def read(self, wires: SensorWires, tick: int, raw: np.ndarray) -> None:

@@ -42,8 +42,8 @@ import math
 
 import numpy as np
 
+from firmware_model.calibration import FirmwareCalibration, calibration
 from firmware_model.mcu.measure import Measurements
-from plant.config import Config
 
 F32 = np.float32
 ZERO = F32(0.0)
@@ -66,17 +66,17 @@ def _clamp(x: np.float32, lim: np.float32) -> np.float32:
 class ActuatorController:
     """One actuator's force/pressure controller (float32 state)."""
 
-    def __init__(self, cfg: Config) -> None:
-        m = cfg.section("mcu")
-        kc = cfg.get("hydraulics.kc_m2")
-        kp_pump = cfg.get("hydraulics.kp_m3_per_rad")
-        dt = m["period_ticks"] * cfg.get("sim.tick_ns") * 1e-9
-        kt = cfg.get("motor.force_at_rated_n") * (kp_pump / kc) / cfg.get("motor.iq_rated_a")
+    def __init__(self, cal: FirmwareCalibration) -> None:
+        cal = calibration(cal)
+        m = cal.mcu
+        kc = cal.kc_m2
+        dt = m["period_ticks"] * cal.tick_ns * 1e-9
+        kt = cal.kt_nm_per_a
         self.dt = F32(dt)
         self.velocity_based = m["controller"] == "velocity"
         self.feedback = m["force_feedback"]
-        self.kt_eq = F32(cfg.get("motor.force_at_rated_n") / cfg.get("motor.iq_rated_a"))
-        self.jp = F32(cfg.get("hydraulics.jp_kg"))
+        self.kt_eq = F32(cal.kt_eq_n_per_a)
+        self.jp = F32(cal.jp_kg)
         self.kp = F32(m["kp_force"])
         self.kd = F32(m["kd_force_s"])
         self.a_d = F32(1.0 - math.exp(-2.0 * math.pi * m["derivative_filter_hz"] * dt))

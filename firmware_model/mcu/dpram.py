@@ -37,10 +37,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from firmware_model.calibration import FirmwareCalibration
 from firmware_model.fpga import layout as B
 from firmware_model.fpga.board import down_defaults
 from firmware_model.fpga.driver_board import LinkMemory, from_word
-from plant.config import Config
 
 MAX_BOARDS = 5
 BOARD_STRIDE = 0x40        # words per board block
@@ -136,9 +136,9 @@ class DualPortRam:
     :meth:`sync` does not send zeros for those registers.
     """
 
-    def __init__(self, cfg: Config) -> None:
+    def __init__(self, cal: FirmwareCalibration) -> None:
         self.words = np.zeros(DPRAM_WORDS, dtype=np.int64)
-        defaults = down_defaults(cfg)
+        defaults = down_defaults(cal)
         for k in range(MAX_BOARDS):
             d = down_base(k)
             self.words[d:d + B.DOWN_WORDS] = defaults

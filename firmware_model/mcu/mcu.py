@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from firmware_model.calibration import FirmwareCalibration, calibration
 from firmware_model.fpga import layout as B
 from firmware_model.fpga.driver_board import LinkMemory
 from firmware_model.mcu.controller import (
@@ -23,7 +24,6 @@ from firmware_model.mcu.controller import (
     ActuatorController,
 )
 from firmware_model.mcu.measure import Measurements
-from plant.config import Config
 
 F32 = np.float32
 MAX_BOARDS = 5
@@ -52,16 +52,17 @@ MODE_OFF, MODE_FORCE, MODE_POSITION = "off", "force", "position"
 class Mcu:
     """The STM32F4 program for ``len(links)`` actuators (1..5)."""
 
-    def __init__(self, cfg: Config, links: list[LinkMemory]) -> None:
+    def __init__(self, cal: FirmwareCalibration, links: list[LinkMemory]) -> None:
         if not 1 <= len(links) <= MAX_BOARDS:
             raise ValueError(f"an MCU board serves 1..{MAX_BOARDS} driver boards, "
                              f"got {len(links)}")
-        m = cfg.section("mcu")
-        tick_s = cfg.get("sim.tick_ns") * 1e-9
+        cal = calibration(cal)
+        m = cal.mcu
+        tick_s = cal.tick_ns * 1e-9
         self.links = links
         self.period = m["period_ticks"]
-        self.meas = [Measurements(cfg) for _ in links]
-        self.ctrl = [ActuatorController(cfg) for _ in links]
+        self.meas = [Measurements(cal) for _ in links]
+        self.ctrl = [ActuatorController(cal) for _ in links]
         n = len(links)
         self.mode = [MODE_OFF] * n
         self.value = [F32(0.0)] * n

@@ -11,8 +11,8 @@ import math
 
 import numpy as np
 
+from firmware_model.calibration import FirmwareCalibration, calibration
 from firmware_model.fpga import layout as B
-from plant.config import Config
 from protocols import pressure_adc as padc
 from protocols.ad7195 import MIDSCALE
 
@@ -44,21 +44,21 @@ class Measurements:
                  "f_strain_raw", "omega_m", "v_pump", "x_piston", "iq", "theta_rotor",
                  "temperature_c", "strain_samples", "status", "_k", "_volts")
 
-    def __init__(self, cfg: Config) -> None:
+    def __init__(self, cal: FirmwareCalibration) -> None:
+        cal = calibration(cal)
         adc = padc.DEFAULT
-        s = cfg.section("sensors")
-        kc = cfg.get("hydraulics.kc_m2")
-        kp = cfg.get("hydraulics.kp_m3_per_rad")
-        window = cfg.get("fpga.speed_window_ticks")
-        tick_s = cfg.get("sim.tick_ns") * 1e-9
+        kc = cal.kc_m2
+        kp = cal.kp_m3_per_rad
+        window = cal.fpga["speed_window_ticks"]
+        tick_s = cal.tick_ns * 1e-9
         self._k = (
             F32(adc.lsb_v), F32(adc.v_at_zero), F32(adc.pa_per_v), F32(kc),
-            F32(TWO_PI / (s["abi_counts_per_rev"] * window * tick_s)),   # rad/s per count
+            F32(TWO_PI / (cal.abi_counts_per_rev * window * tick_s)),   # rad/s per count
             F32(kp / kc),                                                 # m per rad
-            F32(s["strain_full_scale_n"] / MIDSCALE), MIDSCALE,
-            s["biss_zero_count"], F32(5e-9),
-            F32(TWO_PI / (1 << s["ssi_bits"])),
-            F32(s["temperature_v_at_0c"]), F32(s["temperature_v_per_c"]),
+            F32(cal.strain_full_scale_n / MIDSCALE), MIDSCALE,
+            cal.biss_zero_count, F32(5e-9),
+            F32(TWO_PI / (1 << cal.ssi_bits)),
+            F32(cal.temperature_v_at_0c), F32(cal.temperature_v_per_c),
         )
         self._volts = _volt_table(float(F32(adc.lsb_v)))
         z = F32(0.0)

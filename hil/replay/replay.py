@@ -32,7 +32,7 @@ from hil.framelog import FrameLogError, FrameLogReader
 from hil.framelog.reader import LogInfo
 from hil.replay.fpga_replay import column_name, replay_board_detail
 from hil.replay.record import UP_WIDTH, topics
-from plant.config import Config, ConfigError, schema
+from plant.config import Config, ConfigError, schema, with_nominal_firmware
 
 DOWN_NAMES = [name for _addr, name, *_ in B.DOWN_REGISTERS]
 
@@ -140,7 +140,7 @@ def _metadata(path: str | Path, info: LogInfo) -> tuple[Config, Topology, dict[s
         data = json.loads(meta["config"])
         if not isinstance(data, dict):
             raise ValueError("not a JSON object")
-        logged = _flat(data)
+        logged = with_nominal_firmware(_flat(data))  # logs from before [firmware]
         missing = sorted(set(_flat(schema())) - set(logged))
         if missing:
             raise ValueError(f"no key {missing[0]}")
