@@ -123,9 +123,14 @@ def configure_synth(parser: argparse.ArgumentParser) -> None:
                         default=8.0, help="record length, s, in (1, 600]")
     parser.add_argument("--seed", type=int_range(0, 2**32 - 1), default=1,
                         help="noise seed: the same seed gives the same record")
-    parser.add_argument("--preset", default=None,
-                        help="preset (base): hydra_linear for the plant, hydra_default for "
-                        "the rig's nominal parameters")
+    parser.add_argument("--preset", dest="config", help=argparse.SUPPRESS)  # old name of -c
+    parser.add_argument("-c", "--config", dest="config", default=None,
+                        metavar="PRESET|FILE",
+                        help="actuator preset or TOML file the record is made from (default: "
+                        "hydra_linear for the plant, hydra_default for the rig's nominal "
+                        "parameters)")
+    parser.add_argument("--set", action="append", metavar="SECTION.KEY=VALUE",
+                        help="override one configuration value (repeatable)")
     parser.add_argument("--profile", default="multisine", choices=PROFILES,
                         help="excitation: multisine (default); resonance (piston free: "
                         "strong 0.7-2 kHz band over a 0.5 Hz position sweep, makes k_s(x) "
@@ -134,22 +139,24 @@ def configure_synth(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--temperature", default=None, choices=tuple(TEMPERATURE_SHAPES),
                         help="rig: oil temperature shape (default constant, or ramp_level "
                         "when an effect needs a moving temperature)")
-    parser.add_argument("--current-noise-lsb", type=float, default=None, metavar="X",
+    parser.add_argument("--current-noise-lsb", type=float_range(0.0, 100.0, unit="LSB"),
+                        default=None, metavar="X",
                         help="rig: noise of the logged current, LSB of the 12-bit +-40 A "
                         "converter (default 1)")
     parser.add_argument("--intersample", default=None, choices=INTERSAMPLE,
                         help="rig: continuous current (default) or the logged value held")
     parser.add_argument("--header-intersample", action="store_true",
                         help="rig: write '# intersample: ...' into the CSV header")
-    parser.add_argument("--spread", type=float, default=None,
-                        help="rig: relative spread of the drawn parameters (default 0.15)")
+    parser.add_argument("--spread", type=float_range(0.0, 0.5), default=None,
+                        help="rig: relative spread of the drawn parameters, 0..0.5 "
+                        "(default 0.15)")
 
 
 def run_synth(args: argparse.Namespace) -> int:
     """Write an example dataset; prints what was put into it."""
     from hil.identify.csvdata import write_measured
     from hil.identify.synth import ALL_SYNTH_EFFECTS, DEFAULT_MAGNITUDES, generate
-    from plant.config import ConfigError
+    from plant.config import ConfigError, load_config
 
     if args.realism == "rig":
         return _run_rig_synth(args)
@@ -164,8 +171,6 @@ def run_synth(args: argparse.Namespace) -> int:
         if e not in ALL_SYNTH_EFFECTS:
             return _err("identify-synth", f"--effect {e}: unknown effect for --realism plant "
                         f"(known: {', '.join(ALL_SYNTH_EFFECTS)})")
-    if args.preset is None:
-        args.preset = "hydra_linear"
     effects: dict[str, dict[str, float]] = {e: {} for e in args.effect}
     for item in args.magnitude:
         try:
@@ -182,8 +187,9 @@ def run_synth(args: argparse.Namespace) -> int:
         effects[name][field] = val
     out = Path(args.out)
     try:
+        cfg = load_config(args.config or "hydra_linear", args.set or ())
         res = generate(args.load, effects, seconds=args.seconds, seed=args.seed,
-                       preset=args.preset, profile=args.profile)
+                       preset=cfg, profile=args.profile)
     except (ConfigError, ValueError) as exc:
         return _err("identify-synth", str(exc))
     truth = "; ".join(f"{k} {v}" for k, v in res.truth.items()) or "none"
@@ -197,7 +203,7 @@ def _run_rig_synth(args: argparse.Namespace) -> int:
     """``identify-synth --realism rig``: a record from the independent rig simulator."""
     from hil.identify.csvdata import write_measured
     from hil.identify.rig import RIG_DEFAULT_MAGNITUDES, RIG_EFFECTS, generate_rig
-    from plant.config import ConfigError
+    from plant.config import ConfigError, load_config
 
     for e in args.effect:
         if e not in RIG_EFFECTS:
@@ -230,7 +236,7 @@ def _run_rig_synth(args: argparse.Namespace) -> int:
             current_noise_lsb=1.0 if args.current_noise_lsb is None else args.current_noise_lsb,
             intersample=args.intersample or "continuous",
             spread=0.15 if args.spread is None else args.spread,
-            preset=args.preset or "hydra_default",
+            preset=load_config(args.config or "hydra_default", args.set or ()),
             header_intersample=args.header_intersample)
     except (ConfigError, ValueError) as exc:
         return _err("identify-synth", str(exc))

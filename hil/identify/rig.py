@@ -55,7 +55,7 @@ import numpy as np
 from numba import njit
 
 from hil.identify.csvdata import LOAD_CASES, MeasuredData
-from plant.config import load_config
+from plant.config import Config, load_config
 
 # --------------------------------------------------------------------------------------
 # Defaults
@@ -521,7 +521,13 @@ def _pulsation_orders(mag: Mapping[str, float]) -> list[tuple[float, float, floa
     return rows
 
 
-def draw_parameters(preset: str = "hydra_default", seed: int = 1,
+def _preset_config(preset: str | Config) -> Config:
+    """The configuration the rig's nominal numbers come from: a preset name, a TOML path or
+    a ready :class:`~plant.config.Config`."""
+    return preset if isinstance(preset, Config) else load_config(preset)
+
+
+def draw_parameters(preset: str | Config = "hydra_default", seed: int = 1,
                     spread: float = 0.15) -> dict[str, float]:
     """True baseline parameters: each uniform within ``+-spread`` of the preset (``J_p``,
     ``J_c``: ``+-2/3 spread``); the precharge ``0.5 MPa +- 0.2 MPa x spread/0.15``. The draw
@@ -530,7 +536,7 @@ def draw_parameters(preset: str = "hydra_default", seed: int = 1,
     Also returns the bulk modulus and pipe stiffness (``+-spread``) that ``k_s(x)`` uses."""
     if not 0.0 <= spread < 1.0:
         raise ValueError(f"spread {spread}: must be in [0, 1)")
-    cfg = load_config(preset)
+    cfg = _preset_config(preset)
     rng = np.random.default_rng(np.random.SeedSequence([int(seed), 101]))
     g = cfg.get
 
@@ -607,7 +613,7 @@ def generate_rig(
     current_noise_lsb: float = 1.0,
     intersample: str = "continuous",
     spread: float = 0.15,
-    preset: str = "hydra_default",
+    preset: str | Config = "hydra_default",
     header_intersample: bool = False,
     excitation_lines: tuple[Sequence[float], Sequence[float], Sequence[float]] | None = None,
     position_loop_a_per_m: float | None = None,
@@ -658,8 +664,8 @@ def generate_rig(
         raise ValueError(f"effect {needs_temp[0]} needs a moving temperature "
                          f"(not 'constant'; e.g. ramp_level)")
 
-    cfg = load_config(preset)
-    truep = draw_parameters(preset, seed, spread)
+    cfg = _preset_config(preset)
+    truep = draw_parameters(cfg, seed, spread)
     kc = float(cfg.get("hydraulics.kc_m2"))
     kp = float(cfg.get("hydraulics.kp_m3_per_rad"))
     half = 0.5 * float(cfg.get("hydraulics.stroke_m"))
@@ -928,7 +934,7 @@ def generate_rig(
     noise_rms = math.sqrt((current_noise_lsb * i_lsb) ** 2 + i_lsb ** 2 / 12.0)
     config = {
         "load": load, "profile": profile, "seconds": seconds, "seed": seed,
-        "sample_rate_hz": fs, "preset": preset, "spread": spread,
+        "sample_rate_hz": fs, "preset": preset if isinstance(preset, str) else " + ".join(cfg.sources), "spread": spread,
         "integrator": f"classical RK4, step <= {step_s:g} s, split at the input's kinks",
         "intersample": intersample,
         "current_noise_lsb": current_noise_lsb, "current_lsb_a": i_lsb,

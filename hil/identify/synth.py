@@ -86,10 +86,12 @@ def multisine(n: int, fs: float, rms: float, f_lo: float, f_hi: float, n_lines: 
     return u * (rms / np.sqrt(np.mean(u * u)))
 
 
-def synth_config(load: str, effects: dict[str, dict[str, float]], preset: str = "hydra_linear",
+def synth_config(load: str, effects: dict[str, dict[str, float]],
+                 preset: str | Config = "hydra_linear",
                  seed: int = 1, noise: bool = True) -> Config:
-    """Plant configuration for a dataset: the preset, the load, the plant-side effects."""
-    cfg = load_config(preset)
+    """Plant configuration for a dataset: the preset (a name, a TOML path or a ready
+    :class:`~plant.config.Config`), the load, the plant-side effects."""
+    cfg = preset if isinstance(preset, Config) else load_config(preset)
     ov: dict[str, Any] = {
         "load.kind": LOAD_CASES[load],
         "sim.seed": int(seed),
@@ -131,7 +133,7 @@ def generate(
     effects: dict[str, dict[str, float]] | list[str] | tuple[str, ...] = (),
     seconds: float = 8.0,
     seed: int = 1,
-    preset: str = "hydra_linear",
+    preset: str | Config = "hydra_linear",
     sample_rate_hz: float = 5000.0,
     rms_a: float | None = None,
     noise: bool = True,

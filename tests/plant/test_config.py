@@ -65,6 +65,11 @@ def test_linearised_switches_every_effect_off(default_cfg):
         ("[inverter]\nduty_min = 0.9\nduty_max = 0.1\n", "duty_min"),
         ("[mcu]\nconrod_length_m = 0.1\nconrod_offset_m = 0.2\n", "conrod_offset_m"),
         ("[mcu]\nfriction_observer_hz = 2000.0\n", "friction_observer_hz"),
+        # each temperature in range, together 300x thinner oil than the table's
+        ("[effects.oil_temperature]\nenabled = true\nreference_c = -40.0\ninitial_c = 150.0\n",
+         "oil_temperature.initial_c"),
+        ("[effects.oil_temperature]\nenabled = true\nviscosity_coeff_per_c = 0.1\n"
+         "ambient_c = 100.0\n", "oil_temperature.ambient_c"),
         ("[hydraulics\n", "not valid TOML"),
     ],
 )
