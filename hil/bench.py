@@ -80,7 +80,7 @@ def bench_fpga(cfg: Config, seconds: float = 2.0, bit_level: bool = False) -> Pl
     stack.boot()
     sched = Scheduler(stack, record_every=1)
     tick_s = stack.tick_s
-    mem = stack.mcu
+    mem = stack.mcu_link
 
     def mcu_task(tick: int) -> None:
         mem.write("iq_ref", int(8000.0 * math.sin(2.0 * math.pi * 20.0 * tick * tick_s)))

@@ -3,7 +3,7 @@
 :class:`FpgaStack` looks like a :class:`plant.model.Plant` to the scheduler (``advance``,
 ``y``, ``tick``, ``tick_ns``), so tasks at lower rates (an MCU model, a scenario's
 reference generator) run between its compiled stretches and talk to the board only through
-``stack.mcu`` (the MCU-side memories), as the real MCU does.
+``stack.mcu_link`` (the MCU-side memories), as the real MCU does.
 
 Per tick t (plant integrated to t): sensor chips digitise the plant outputs -> downstream
 link words of the tick reach the board -> the board's control tick -> upstream words ->
@@ -22,8 +22,8 @@ import numpy as np
 from numba import njit
 
 from firmware_model.fpga import layout as B
-from firmware_model.fpga.board import control_tick
 from firmware_model.fpga.driver_board import DriverBoard, LinkMemory
+from firmware_model.fpga.tick import control_tick
 from hil import lvds_link as LK
 from hil.sensor_chips import chip_params, digitise
 from plant import kernel
@@ -85,13 +85,13 @@ def advance_stack(n_ticks, x, p, u, y, rec, row0, every, tick0, rng, work,
             for i in range(2 * LK.WORDS_W):
                 trace[j, TRACE_WORDS + i] = lk[LK.LK_DOWN_WORDLOG + i]
         if on != 0:
-            u[L.U_MODE] = L.MODE_DUTY
-            u[L.U_DA] = st[B.F_DUTY_A] * inv_top
-            u[L.U_DB] = st[B.F_DUTY_B] * inv_top
-            u[L.U_DC] = st[B.F_DUTY_C] * inv_top
+            u[L.IN_MODE] = L.DriveMode.DUTY.value
+            u[L.IN_DA] = st[B.F_DUTY_A] * inv_top
+            u[L.IN_DB] = st[B.F_DUTY_B] * inv_top
+            u[L.IN_DC] = st[B.F_DUTY_C] * inv_top
         else:
-            if u[L.U_MODE] != L.MODE_OFF:
-                u[L.U_MODE] = L.MODE_OFF
+            if int(u[L.IN_MODE]) != L.DriveMode.OFF:
+                u[L.IN_MODE] = L.DriveMode.OFF.value
                 kernel.gates_off(x)
         kernel.rk4_tick(x, p, u, work)
         kernel.outputs(x, p, u, rng, y)
@@ -111,7 +111,7 @@ class FpgaStack:
         self.plant = Plant(cfg, substeps)
         self.plant.set_gates_off()
         self.board = DriverBoard(cfg)
-        self.mcu = LinkMemory(cfg)
+        self.mcu_link = LinkMemory(cfg)
         self.link = LK.link_state(cfg)
         self.chips = chip_params(cfg)
         self.raw = np.zeros(B.N_RAW, dtype=np.int64)
@@ -154,13 +154,13 @@ class FpgaStack:
         if self._bits is None:
             row = advance_stack(n_ticks, pl.x, pl.params, pl.u, pl.y, rows, row0, every,
                                 pl.tick, pl.rng, pl._work, self.chips, self.raw,
-                                bd.params, bd.state, bd.down, bd.up, self.mcu.down,
-                                self.mcu.up, self.link,
+                                bd.params, bd.state, bd.down, bd.up, self.mcu_link.down,
+                                self.mcu_link.up, self.link,
                                 self._no_trace if trace is None else trace)
             pl.tick += n_ticks
         else:
             row = self._advance_bits(n_ticks, rows, row0, every)
-        self.mcu.up_crc_errors = int(self.link[LK.LK_MASTER_CRC])
+        self.mcu_link.up_crc_errors = int(self.link[LK.LK_MASTER_CRC])
         return row
 
     def _advance_bits(self, n_ticks: int, rows: np.ndarray, row0: int, every: int) -> int:
@@ -173,9 +173,9 @@ class FpgaStack:
             t = pl.tick
             lines.update(pl.y, t)
             masters.read(lines, t, self.raw)
-            link.sweep_down(self.link, self.mcu.down, bd.state, bd.down)
+            link.sweep_down(self.link, self.mcu_link.down, bd.state, bd.down)
             on = bd.tick(self.raw)
-            link.sweep_up(self.link, bd.up, self.mcu.up)
+            link.sweep_up(self.link, bd.up, self.mcu_link.up)
             if on:
                 a, b, c = bd.duty_counts()
                 pl.set_duty(a * inv_top, b * inv_top, c * inv_top)
@@ -214,15 +214,15 @@ class FpgaStack:
             self.link[index] = value
 
     # --- the boot sequence the PC and MCU perform ---------------------------------------------
-    def boot(self, mode: int = B.MODE_CURRENT, settle_ticks: int = 40) -> None:
+    def boot(self, mode: int = B.BoardMode.CURRENT, settle_ticks: int = 40) -> None:
         """Send the calibrated angle offset, select ``mode``, enable, and run until the board
         reports ENABLED; RuntimeError (with the status bits) if it refuses."""
-        self.mcu.write("angle_offset", self.board.calibrated_offset)
-        self.mcu.write("mode", mode)
-        self.mcu.write("control", B.CTRL_ENABLE)
+        self.mcu_link.write("angle_offset", self.board.calibrated_offset)
+        self.mcu_link.write("mode", mode)
+        self.mcu_link.write("control", B.CTRL_ENABLE)
         self.advance(settle_ticks)
-        if "ENABLED" not in self.mcu.status():
-            raise RuntimeError(f"driver board did not enable: {sorted(self.mcu.status())}")
+        if "ENABLED" not in self.mcu_link.status():
+            raise RuntimeError(f"driver board did not enable: {sorted(self.mcu_link.status())}")
 
 
 __all__ = ["FpgaStack", "advance_stack"]

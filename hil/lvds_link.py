@@ -31,7 +31,7 @@ import numpy as np
 from numba import njit
 
 from firmware_model.fpga import layout as B
-from firmware_model.fpga.board import receive_word
+from firmware_model.fpga.tick import receive_word
 from plant.config import Config
 from protocols import lvds
 

@@ -27,7 +27,7 @@ class ActuatorStack:
     def __init__(self, cfg: Config, command: CommandFn, record_every: int = 4) -> None:
         self.config = cfg
         self.fpga = FpgaStack(cfg)
-        self.mcu = Mcu(cfg, [self.fpga.mcu])
+        self.mcu = Mcu(cfg, [self.fpga.mcu_link])
         self.command = command
         self.tick_s = self.fpga.tick_s
         self.sched = Scheduler(self.fpga, record_every=record_every)

@@ -19,8 +19,8 @@ The motor is a surface-magnet machine in the dq frame (amplitude-invariant trans
     torque    = 1.5 p psi i_q                       (motor Nm; times k_c/k_p -> piston N)
 
 fed by an average-value inverter: leg voltage (d - 1/2) V_dc less the dead-time error
-sign(i) t_dead f_pwm V_dc. In ``MODE_CURRENT`` the currents follow their references exactly;
-in ``MODE_FORCE`` tau_p is given directly; in ``MODE_OFF`` the gates are open and the
+sign(i) t_dead f_pwm V_dc. In ``DriveMode.CURRENT`` the currents follow their references exactly;
+in ``DriveMode.FORCE`` tau_p is given directly; in ``DriveMode.OFF`` the gates are open and the
 currents are zero.
 
 Integration: classic RK4 over ``n_sub`` equal sub-steps per tick, inputs held (the PWM
@@ -39,6 +39,15 @@ import numpy as np
 from numba import njit
 
 from plant.layout import (
+    IN_DA,
+    IN_DB,
+    IN_DC,
+    IN_F_EXT,
+    IN_ID_REF,
+    IN_IQ_REF,
+    IN_MODE,
+    IN_T_AMB,
+    IN_TAU_REF,
     LOAD_CART,
     LOAD_CONROD,
     LOAD_FIXED,
@@ -122,15 +131,6 @@ from plant.layout import (
     S_VL,
     S_VP,
     S_XL,
-    U_DA,
-    U_DB,
-    U_DC,
-    U_F_EXT,
-    U_ID_REF,
-    U_IQ_REF,
-    U_MODE,
-    U_T_AMB,
-    U_TAU_REF,
     Y_E_DISS,
     Y_E_EXT,
     Y_E_IN,
@@ -157,6 +157,7 @@ from plant.layout import (
     Y_VP,
     Y_X_CART,
     Y_X_PISTON,
+    DriveMode,
 )
 
 TWO_PI_3 = 2.0 * math.pi / 3.0
@@ -239,10 +240,10 @@ def derivatives(x, p, u, dx):
     theta_rotor = x[S_THP] * kc_kp
 
     # --- motor and inverter ---
-    mode = u[U_MODE]
+    mode = int(u[IN_MODE])
     p_elec = 0.0
     p_copper = 0.0
-    if mode == 0.0:
+    if mode == DriveMode.DUTY:
         i_d = x[S_ID]
         i_q = x[S_IQ]
         th = pole_pairs * theta_rotor
@@ -254,9 +255,9 @@ def derivatives(x, p, u, dx):
         i_b = i_d * c2 - i_q * s2
         i_c = -i_a - i_b
         vdc = p[P_VDC]
-        v_a = (_clamp_duty(p, u[U_DA]) - 0.5) * vdc + _dead_time_error(p, i_a)
-        v_b = (_clamp_duty(p, u[U_DB]) - 0.5) * vdc + _dead_time_error(p, i_b)
-        v_c = (_clamp_duty(p, u[U_DC]) - 0.5) * vdc + _dead_time_error(p, i_c)
+        v_a = (_clamp_duty(p, u[IN_DA]) - 0.5) * vdc + _dead_time_error(p, i_a)
+        v_b = (_clamp_duty(p, u[IN_DB]) - 0.5) * vdc + _dead_time_error(p, i_b)
+        v_c = (_clamp_duty(p, u[IN_DC]) - 0.5) * vdc + _dead_time_error(p, i_c)
         # Clarke (amplitude invariant); the common-mode voltage of a star winding drops out.
         v_alpha = (2.0 * v_a - v_b - v_c) / 3.0
         v_beta = (v_b - v_c) / SQRT3
@@ -270,20 +271,20 @@ def derivatives(x, p, u, dx):
         p_elec = 1.5 * (v_d * i_d + v_q * i_q)
         p_copper = 1.5 * res * (i_d * i_d + i_q * i_q)
         tau_p = p[P_KT_EQ] * i_q
-    elif mode == 1.0:
+    elif mode == DriveMode.CURRENT:
         dx[S_ID] = 0.0
         dx[S_IQ] = 0.0
-        tau_p = p[P_KT_EQ] * u[U_IQ_REF]
-    elif mode == 3.0:
+        tau_p = p[P_KT_EQ] * u[IN_IQ_REF]
+    elif mode == DriveMode.OFF:
         # Gates off: the winding current has already decayed through the diodes (see
-        # MODE_OFF in plant.layout), so there is no torque.
+        # DriveMode.OFF in plant.layout), so there is no torque.
         dx[S_ID] = 0.0
         dx[S_IQ] = 0.0
         tau_p = 0.0
     else:
         dx[S_ID] = 0.0
         dx[S_IQ] = 0.0
-        tau_p = u[U_TAU_REF]
+        tau_p = u[IN_TAU_REF]
 
     # --- pump ---
     g = 1.0
@@ -309,7 +310,7 @@ def derivatives(x, p, u, dx):
     # --- piston and load ---
     kind = p[P_LOAD_KIND]
     f_seal = seal_friction(p, vc)
-    f_ext = u[U_F_EXT]
+    f_ext = u[IN_F_EXT]
     loss_load = 0.0
     p_ext = 0.0
     if kind == LOAD_FIXED:
@@ -340,13 +341,13 @@ def derivatives(x, p, u, dx):
 
     # --- energy and heat ---
     heat_oil = dp * vp * vp + f_cp * vp + tq * tq / ds + dc * vc * vc + f_seal * vc
-    if mode == 0.0:
+    if mode == DriveMode.DUTY:
         dx[S_EIN] = p_elec
     else:
         dx[S_EIN] = tau_p * vp
     dx[S_EDISS] = heat_oil + loss_load + p_copper
     dx[S_EEXT] = p_ext
-    t_amb = u[U_T_AMB]
+    t_amb = u[IN_T_AMB]
     if p[P_TEMP_ON] > 0.5:
         dx[S_TOIL] = (heat_oil - p[P_COOL_G] * (x[S_TOIL] - t_amb)) / p[P_HEAT_CAP]
     else:
@@ -432,7 +433,7 @@ def stored_energy(x, p, u):
         e += 0.5 * p[P_K_ROD] * (x[S_THC] - p[P_X_ANCHOR]) ** 2
     elif kind == LOAD_CART:
         e += 0.5 * p[P_K_ROD] * (x[S_THC] - x[S_XL]) ** 2 + 0.5 * p[P_M_CART] * x[S_VL] ** 2
-    if u[U_MODE] == 0.0:
+    if int(u[IN_MODE]) == DriveMode.DUTY:
         e += 0.75 * p[P_L] * (x[S_ID] ** 2 + x[S_IQ] ** 2)
     return e
 
@@ -443,13 +444,13 @@ def outputs(x, p, u, rng, y):
     kc = p[P_KC]
     kc_kp = p[P_KC_OVER_KP]
     r = viscosity_ratio(p, x[S_TOIL])
-    mode = u[U_MODE]
-    if mode == 1.0:
-        i_q = u[U_IQ_REF]
-        i_d = u[U_ID_REF]
+    mode = int(u[IN_MODE])
+    if mode == DriveMode.CURRENT:
+        i_q = u[IN_IQ_REF]
+        i_d = u[IN_ID_REF]
         tau_p = p[P_KT_EQ] * i_q
-    elif mode == 2.0:
-        tau_p = u[U_TAU_REF]
+    elif mode == DriveMode.FORCE:
+        tau_p = u[IN_TAU_REF]
         i_q = tau_p / p[P_KT_EQ]
         i_d = 0.0
     else:
@@ -537,7 +538,7 @@ def outputs(x, p, u, rng, y):
 
 @njit(cache=True, inline="always")
 def gates_off(x):
-    """Enter MODE_OFF: the phase currents are zero from here on."""
+    """Enter DriveMode.OFF: the phase currents are zero from here on."""
     x[S_ID] = 0.0
     x[S_IQ] = 0.0
 
@@ -550,10 +551,10 @@ def advance(x, p, u, n_ticks, y, rec, row0, every, tick0, rng, work):
     index (``tick0`` + k + 1, the tick just reached) is a multiple of ``every`` are copied
     into ``rec[row]`` for row = ``row0``, ``row0 + 1``, ...
     """
-    if u[U_MODE] == 1.0:
-        x[S_IQ] = u[U_IQ_REF]
-        x[S_ID] = u[U_ID_REF]
-    elif u[U_MODE] == 3.0:
+    if int(u[IN_MODE]) == DriveMode.CURRENT:
+        x[S_IQ] = u[IN_IQ_REF]
+        x[S_ID] = u[IN_ID_REF]
+    elif int(u[IN_MODE]) == DriveMode.OFF:
         gates_off(x)
     row = row0
     n_rows = rec.shape[0]

@@ -7,6 +7,8 @@ compile time). The name tuples give the same layout to people, logs and plots.
 
 from __future__ import annotations
 
+from enum import IntEnum
+
 # --- parameters (P_*), filled once by plant.model.build_params --------------------------
 PARAM_NAMES = (
     "jp", "jc", "dp", "dc", "ds", "ks_avg", "ks_fluid_gain", "side_volume0", "kc",
@@ -65,25 +67,37 @@ STATE_NAMES = (
  S_EIN, S_EDISS, S_EEXT) = range(len(STATE_NAMES))
 N_STATES = len(STATE_NAMES)
 
-# --- inputs (U_*), held over a tick -------------------------------------------------------
+# --- inputs (IN_*), held over a tick ------------------------------------------------------
+# (IN_, not U_: U_* are the driver board's upstream registers in firmware_model.fpga.layout.)
+
+
+class DriveMode(IntEnum):
+    """How the plant's motor is driven this tick (input ``IN_MODE``); numba compiles the
+    members to constants."""
+
+    DUTY = 0      # phase duty cycles from the driver board, average-value inverter
+    CURRENT = 1   # ideal current source: i_q, i_d follow their references exactly
+    FORCE = 2     # ideal pump force tau_p, no motor
+    #: All six gates open (driver board tripped or disabled). The winding current then
+    #: flows back to the bus through the free-wheeling diodes against about V_dc, so it
+    #: dies within L i / V_dc (40 uH * 18 A / 48 V = 15 us), inside one 50 us tick: the
+    #: model sets it to zero at once. Not modelled: the diode-rectifier regime, where a
+    #: back-EMF above V_dc (line-line) drives current into the bus; at 48 V that needs
+    #: > 0.35 m/s of piston speed.
+    OFF = 3
+
+
 INPUT_NAMES = (
-    "mode",           # MODE_DUTY, MODE_CURRENT, MODE_FORCE or MODE_OFF
-    "duty_a", "duty_b", "duty_c",  # phase duty cycles 0..1 (MODE_DUTY)
-    "iq_ref_a", "id_ref_a",        # ideal currents (MODE_CURRENT)
-    "tau_p_ref_n",    # ideal pump force, piston-equivalent N (MODE_FORCE)
+    "mode",           # a DriveMode, stored as float
+    "duty_a", "duty_b", "duty_c",  # phase duty cycles 0..1 (DriveMode.DUTY)
+    "iq_ref_a", "id_ref_a",        # ideal currents (DriveMode.CURRENT)
+    "tau_p_ref_n",    # ideal pump force, piston-equivalent N (DriveMode.FORCE)
     "f_ext_n",        # external force on the load body (free piston or cart), +x, N
     "t_amb_c",        # ambient / coolant temperature, degC
 )
-(U_MODE, U_DA, U_DB, U_DC, U_IQ_REF, U_ID_REF, U_TAU_REF, U_F_EXT, U_T_AMB) = range(
+(IN_MODE, IN_DA, IN_DB, IN_DC, IN_IQ_REF, IN_ID_REF, IN_TAU_REF, IN_F_EXT, IN_T_AMB) = range(
     len(INPUT_NAMES))
 N_INPUTS = len(INPUT_NAMES)
-MODE_DUTY, MODE_CURRENT, MODE_FORCE = 0.0, 1.0, 2.0
-#: All six gates open (driver board tripped or disabled). The winding current then flows
-#: back to the bus through the free-wheeling diodes against about V_dc, so it dies within
-#: L i / V_dc (40 uH * 18 A / 48 V = 15 us), inside one 50 us tick: the model sets it to
-#: zero at once. Not modelled: the diode-rectifier regime, where a back-EMF above V_dc
-#: (line-line) drives current into the bus; at 48 V that needs > 0.35 m/s of piston speed.
-MODE_OFF = 3.0
 
 # --- outputs (Y_*), one row per tick --------------------------------------------------------
 OUTPUT_NAMES = (

@@ -200,8 +200,8 @@ class Plant:
         ambient = cfg.get("effects.oil_temperature.ambient_c")
         self.x[L.S_TROD] = ambient
         self.u = np.zeros(L.N_INPUTS)
-        self.u[L.U_MODE] = L.MODE_CURRENT
-        self.u[L.U_T_AMB] = ambient
+        self.u[L.IN_MODE] = L.DriveMode.CURRENT
+        self.u[L.IN_T_AMB] = ambient
         self.y = np.zeros(L.N_OUTPUTS)
         self.rng = np.array([_splitmix64(cfg.get("sim.seed"))], dtype=np.uint64)
         self._work = np.zeros((5, L.N_STATES))
@@ -223,34 +223,34 @@ class Plant:
     def set_duty(self, duty_a: float, duty_b: float, duty_c: float) -> None:
         """Drive the inverter with phase duty cycles 0..1 (average over a PWM period)."""
         u = self.u
-        u[L.U_MODE] = L.MODE_DUTY
-        u[L.U_DA] = duty_a
-        u[L.U_DB] = duty_b
-        u[L.U_DC] = duty_c
+        u[L.IN_MODE] = L.DriveMode.DUTY
+        u[L.IN_DA] = duty_a
+        u[L.IN_DB] = duty_b
+        u[L.IN_DC] = duty_c
 
     def set_current(self, iq_a: float, id_a: float = 0.0) -> None:
         """Ideal current source: the dq currents follow these values exactly, A."""
         u = self.u
-        u[L.U_MODE] = L.MODE_CURRENT
-        u[L.U_IQ_REF] = iq_a
-        u[L.U_ID_REF] = id_a
+        u[L.IN_MODE] = L.DriveMode.CURRENT
+        u[L.IN_IQ_REF] = iq_a
+        u[L.IN_ID_REF] = id_a
 
     def set_gates_off(self) -> None:
-        """Open all inverter gates: no current, no motor torque (``MODE_OFF``)."""
-        self.u[L.U_MODE] = L.MODE_OFF
+        """Open all inverter gates: no current, no motor torque (``DriveMode.OFF``)."""
+        self.u[L.IN_MODE] = L.DriveMode.OFF
 
     def set_force(self, tau_p_n: float) -> None:
         """Ideal pump force input tau_p (piston-equivalent), N."""
-        self.u[L.U_MODE] = L.MODE_FORCE
-        self.u[L.U_TAU_REF] = tau_p_n
+        self.u[L.IN_MODE] = L.DriveMode.FORCE
+        self.u[L.IN_TAU_REF] = tau_p_n
 
     def set_external_force(self, f_n: float) -> None:
         """External force on the load body (free piston or cart), +x, N."""
-        self.u[L.U_F_EXT] = f_n
+        self.u[L.IN_F_EXT] = f_n
 
     def set_ambient(self, t_c: float) -> None:
         """Ambient / coolant temperature, degC."""
-        self.u[L.U_T_AMB] = t_c
+        self.u[L.IN_T_AMB] = t_c
 
     # --- stepping -----------------------------------------------------------------------
     def advance(

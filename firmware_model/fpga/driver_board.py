@@ -1,6 +1,6 @@
 """The driver board as an object: its integer arrays, register access by name, one tick.
 
-The per-tick work is :func:`firmware_model.fpga.board.control_tick` (compiled); this class
+The per-tick work is :func:`firmware_model.fpga.tick.control_tick` (compiled); this class
 owns the arrays and gives people and tests names and units. It never touches the plant or
 a link: the harness (:mod:`hil.fpga_stack`) wires raw sensor words in, duty counts out,
 and the LVDS words in both directions.
@@ -12,12 +12,8 @@ import numpy as np
 
 from firmware_model.calibration import FirmwareCalibration, calibration
 from firmware_model.fpga import layout as B
-from firmware_model.fpga.board import (
-    board_params,
-    calibrated_offset,
-    control_tick,
-    down_defaults,
-)
+from firmware_model.fpga.params import board_params, calibrated_offset, down_defaults
+from firmware_model.fpga.tick import control_tick
 
 _DOWN_TYPE = {name: typ for _, name, typ, *_ in B.DOWN_REGISTERS}
 _UP_TYPE = {name: typ for _, name, typ, *_ in B.UP_REGISTERS}

@@ -8,6 +8,8 @@ them as tables.
 
 from __future__ import annotations
 
+from enum import IntEnum
+
 # --- downstream memory (MCU -> driver), 16-bit words ------------------------------------
 DOWN_REGISTERS = (
     (0x00, "control", "u16", "bits", "bit0 ENABLE (level), bit1 CLEAR_FAULT (rising edge)"),
@@ -30,7 +32,17 @@ DOWN_WORDS = 16
 
 CTRL_ENABLE = 1
 CTRL_CLEAR_FAULT = 2
-MODE_OFF, MODE_CURRENT, MODE_VOLTAGE = 0, 1, 2
+
+
+class BoardMode(IntEnum):
+    """The driver board's ``mode`` register (downstream 0x01); numba compiles the members to
+    constants. Not the plant's :class:`plant.layout.DriveMode`, which says how the plant's
+    motor is driven."""
+
+    OFF = 0
+    CURRENT = 1   # PI current loop on iq_ref / id_ref
+    VOLTAGE = 2   # vd_ref / vq_ref straight to the modulator
+
 
 # --- upstream memory (driver -> MCU), 16-bit words ----------------------------------------
 UP_REGISTERS = (

@@ -39,8 +39,8 @@ import numpy as np
 
 from firmware_model.calibration import FirmwareCalibration
 from firmware_model.fpga import layout as B
-from firmware_model.fpga.board import down_defaults
 from firmware_model.fpga.driver_board import LinkMemory, from_word
+from firmware_model.fpga.params import down_defaults
 
 MAX_BOARDS = 5
 BOARD_STRIDE = 0x40        # words per board block

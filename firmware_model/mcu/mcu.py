@@ -92,7 +92,7 @@ class Mcu:
         """Boot actuator ``i``'s board: calibrated offset, current mode, enable."""
         link = self.links[i]
         link.write("angle_offset", angle_offset)
-        link.write("mode", B.MODE_CURRENT)
+        link.write("mode", B.BoardMode.CURRENT)
         link.write("control", B.CTRL_ENABLE)
         self.ctrl[i].reset()
 

@@ -15,7 +15,7 @@ Eliminating theta_p, theta_q from the same equations gives
 
 which is what :func:`g3` returns; docs/plant.md shows the derivation.
 
-The simulation excites the plant with an ideal pump force (``MODE_FORCE``): a multisine
+The simulation excites the plant with an ideal pump force (``DriveMode.FORCE``): a multisine
 whose components sit on the DFT grid of one period, so each frequency is read exactly by
 one DFT bin after the transient has died out. The input is a zero-order-hold staircase (one
 value per tick); its fundamental is computed from the samples with the exact ZOH factor

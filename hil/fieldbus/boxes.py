@@ -101,7 +101,7 @@ class StackBox(_BoxBase):
         from hil.fpga_stack import FpgaStack
 
         self.stacks = [FpgaStack(cfg) for _ in self.act]
-        self.mcu = Mcu(cfg, [s.mcu for s in self.stacks]) if self.stacks else None
+        self.mcu = Mcu(cfg, [s.mcu_link for s in self.stacks]) if self.stacks else None
         self.period = cfg.get("mcu.period_ticks")
         self._flags = [0] * len(self.act)
         self._x_prev = [0.0] * len(self.act)
@@ -115,11 +115,11 @@ class StackBox(_BoxBase):
         for i, (mode, value, flags, kpos, kpf) in enumerate(self.decode(data)):
             rising = flags & ~self._flags[i]
             if rising & pdo.FLAG_CLEAR_FAULT:
-                self.stacks[i].mcu.write("control", B.CTRL_CLEAR_FAULT)
+                self.stacks[i].mcu_link.write("control", B.CTRL_CLEAR_FAULT)
             if rising & pdo.FLAG_ENABLE:
                 self.mcu.enable(i, self.stacks[i].board.calibrated_offset)
             elif self._flags[i] & pdo.FLAG_ENABLE and not flags & pdo.FLAG_ENABLE:
-                self.stacks[i].mcu.write("control", 0)
+                self.stacks[i].mcu_link.write("control", 0)
             self._flags[i] = flags
             ctrl = self.mcu.ctrl[i]
             ctrl.k_pos = F32(kpos) if kpos > 0 else self._defaults[i][0]

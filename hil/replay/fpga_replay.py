@@ -16,8 +16,8 @@ import numpy as np
 from numba import njit
 
 from firmware_model.fpga import layout as B
-from firmware_model.fpga.board import control_tick
 from firmware_model.fpga.driver_board import DriverBoard
+from firmware_model.fpga.tick import control_tick
 from hil.fpga_stack import (
     TRACE_DOWN,
     TRACE_DUTY,

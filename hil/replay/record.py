@@ -110,12 +110,12 @@ class RecordingStackBox(StackBox):
             if self.mcu is not None:
                 for k, s in enumerate(self.stacks):
                     up = np.empty(UP_WIDTH, dtype=np.uint32)
-                    up[:-1] = s.mcu.up
-                    up[-1] = s.mcu.up_crc_errors
+                    up[:-1] = s.mcu_link.up
+                    up[-1] = s.mcu_link.up_crc_errors
                     self.buf_up[k].append((self.tick, up))
                 self.mcu.step(self.tick)
                 for k, s in enumerate(self.stacks):
-                    self.buf_down[k].append((self.tick, s.mcu.down.astype(np.uint16)))
+                    self.buf_down[k].append((self.tick, s.mcu_link.down.astype(np.uint16)))
             for k, s in enumerate(self.stacks):
                 if self.traced:
                     tr = np.zeros((self.period, TRACE_WIDTH), dtype=np.int64)

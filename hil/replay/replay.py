@@ -93,7 +93,7 @@ class _Offset:
 
     def __init__(self, offset: int, link: LinkMemory) -> None:
         self.board = type("Board", (), {"calibrated_offset": offset})()
-        self.mcu = link
+        self.mcu_link = link
 
 
 def _field_of_record(dtype: np.dtype, byte: int) -> str:

@@ -62,7 +62,7 @@ def current_step(cfg: Config, progress: Progress = None) -> ScenarioResult:
     rec = np.zeros((pre + total, L.N_OUTPUTS))
     row = stack.advance(pre, rec)
     t_step = stack.tick
-    stack.mcu.write("iq_ref", round(STEP_A * 1000))
+    stack.mcu_link.write("iq_ref", round(STEP_A * 1000))
     latency_ticks = 0
     while stack.board.down_value("iq_ref") != round(STEP_A * 1000):
         row = stack.advance(1, rec, row)
@@ -84,7 +84,7 @@ def current_step(cfg: Config, progress: Progress = None) -> ScenarioResult:
         Metric("steady-state error rel.", ss / STEP_A * 100.0, "%"),
         Metric("link latency", latency_ticks * tick_ms, "ms",
                "write -> board's memory (<= one downstream sweep + a tick)"),
-        Metric("measured iq (board)", stack.mcu.read("iq") / 1000.0, "A", "upstream register"),
+        Metric("measured iq (board)", stack.mcu_link.read("iq") / 1000.0, "A", "upstream register"),
     ]
     return ScenarioResult(
         "current-step", "q-current step 0 -> 10 A, piston fixed", metrics,
@@ -133,7 +133,7 @@ def closed_loop_response(cfg: Config, freqs_hz: np.ndarray, bias_a: float = BIAS
     iq_addr = B.D_IQ_REF
     amp_ma = amplitude_a * 1000.0
     bias_ma = bias_a * 1000.0
-    stack.mcu.write("iq_ref", round(bias_ma))
+    stack.mcu_link.write("iq_ref", round(bias_ma))
     stack.advance(400)  # let the pressure built by the bias settle
     for j, f in enumerate(freqs_hz):
         w = 2.0 * math.pi * f / fs
@@ -142,7 +142,7 @@ def closed_loop_response(cfg: Config, freqs_hz: np.ndarray, bias_a: float = BIAS
         ref = np.empty(n)
         iq = np.empty(n)
         for k in range(settle + n):
-            stack.mcu.down[iq_addr] = round(bias_ma + amp_ma * math.sin(w * k)) & 0xFFFF
+            stack.mcu_link.down[iq_addr] = round(bias_ma + amp_ma * math.sin(w * k)) & 0xFFFF
             if k >= settle:
                 # The reference the board uses at this tick, and the current it samples.
                 ref[k - settle] = stack.board.down_value("iq_ref") / 1000.0

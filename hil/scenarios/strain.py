@@ -299,7 +299,7 @@ def f8(cfg: Config, progress: Progress = None) -> ScenarioResult:
 
     stack.sched.every(200, heat, "heat gun")
     stack.sched.probe("t_rod", lambda: float(plant.x[L.S_TROD]), 200)
-    stack.sched.probe("t_amb", lambda: float(plant.u[L.U_T_AMB]), 200)
+    stack.sched.probe("t_amb", lambda: float(plant.u[L.IN_T_AMB]), 200)
     rec = stack.run(F8_RUN_S)
     if progress:
         progress(1, 1)

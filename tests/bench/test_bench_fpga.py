@@ -9,8 +9,8 @@ from __future__ import annotations
 import numpy as np
 
 from firmware_model.fpga import layout as B
-from firmware_model.fpga.board import control_tick
 from firmware_model.fpga.driver_board import DriverBoard
+from firmware_model.fpga.tick import control_tick
 from hil.fpga_stack import FpgaStack
 
 
@@ -18,7 +18,7 @@ def test_fpga_stack_one_second(benchmark, default_cfg):
     """Plant + board + link for 20,000 ticks in one compiled call."""
     stack = FpgaStack(default_cfg)
     stack.boot()
-    stack.mcu.write("iq_ref", 5000)
+    stack.mcu_link.write("iq_ref", 5000)
     benchmark(stack.advance, 20000)
     assert stack.board.fsm_state == "enabled"
 

@@ -356,7 +356,7 @@ def test_commands_never_beyond_limits(cfg, bench):
 
     with BusSystem(bench, cfg, "inproc", faults=faults) as bs:
         mcu = bs.chain.boxes[0].mcu
-        link = bs.chain.boxes[0].stacks[0].mcu
+        link = bs.chain.boxes[0].stacks[0].mcu_link
         step = mcu.step
 
         def logged(tick):

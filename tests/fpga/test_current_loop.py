@@ -49,8 +49,8 @@ def test_wrong_angle_offset_costs_torque(cfg):
     for shift in (0, 65536 // 6):
         stack = FpgaStack(fixed)
         stack.boot()
-        stack.mcu.write("angle_offset", (stack.board.calibrated_offset + shift) & 0xFFFF)
-        stack.mcu.write("iq_ref", 8000)
+        stack.mcu_link.write("angle_offset", (stack.board.calibrated_offset + shift) & 0xFFFF)
+        stack.mcu_link.write("iq_ref", 8000)
         stack.advance(2000)
         forces.append(stack.y[L.Y_TAU_P])
     assert forces[1] / forces[0] == pytest.approx(0.5, abs=0.05)
@@ -61,7 +61,7 @@ def test_same_config_same_bits(cfg):
     for _ in range(2):
         stack = FpgaStack(cfg)
         stack.boot()
-        stack.mcu.write("iq_ref", 7000)
+        stack.mcu_link.write("iq_ref", 7000)
         rec = np.zeros((300, L.N_OUTPUTS))
         stack.advance(300, rec)
         runs.append((rec, stack.board.up.copy()))

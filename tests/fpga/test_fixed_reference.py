@@ -21,7 +21,6 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from firmware_model.fpga.board import gain_registers
 from firmware_model.fpga.fixed import (
     clamp,
     isqrt,
@@ -46,6 +45,7 @@ from firmware_model.fpga.foc import (
     sin_cos,
     svpwm,
 )
+from firmware_model.fpga.params import gain_registers
 
 Q15 = float(1 << 15)
 S16_MIN, S16_MAX = -(1 << 15), (1 << 15) - 1

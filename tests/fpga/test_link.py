@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from firmware_model.fpga import layout as B
-from firmware_model.fpga.board import control_tick
 from firmware_model.fpga.driver_board import DriverBoard, LinkMemory
+from firmware_model.fpga.tick import control_tick
 from hil import lvds_link as LK
 from hil.fpga_stack import FpgaStack
 from hil.sensor_chips import chip_params, digitise
@@ -36,9 +36,9 @@ def test_round_trip_latency_is_bounded_by_the_two_sweeps(cfg, rate):
     tick_s = stack.tick_s
     worst = 0
     for seq in range(1, 30):
-        stack.mcu.write("sequence", seq)
+        stack.mcu_link.write("sequence", seq)
         k = 0
-        while stack.mcu.read("sequence_echo") != seq:
+        while stack.mcu_link.read("sequence_echo") != seq:
             stack.advance(1)
             k += 1
             assert k < 1000
@@ -60,7 +60,7 @@ def test_bit_level_link_gives_the_same_memories_and_counts(cfg):
     links = [LK.link_state(cfg), LK.link_state(cfg)]
     bit = LK.BitLevelLink()
     for m in mems:
-        m.write("mode", B.MODE_VOLTAGE)
+        m.write("mode", B.BoardMode.VOLTAGE)
         m.write("control", B.CTRL_ENABLE)
         m.write("vq_ref", 1500)
     for t in range(300):
@@ -122,7 +122,7 @@ def test_dropped_words_are_lost_without_a_crc_count(cfg):
     sent = s.link[LK.LK_UP_WORDS] - words0
     assert s.link[LK.LK_UP_DROPPED] == sent // 3
     assert s.link[LK.LK_MASTER_CRC] == crc0
-    assert s.mcu.read("tick") > 400  # the tick register still arrives
+    assert s.mcu_link.read("tick") > 400  # the tick register still arrives
 
 
 def test_duplicated_words_slow_the_sweep(cfg):
@@ -152,7 +152,7 @@ def test_delay_adds_latency_to_the_tick_register(cfg, delay):
     late.link_fault("up", delay_ticks=delay)
     clean.advance(300)
     late.advance(300)
-    assert clean.mcu.read("tick") - late.mcu.read("tick") == delay
+    assert clean.mcu_link.read("tick") - late.mcu_link.read("tick") == delay
 
 
 def test_new_faults_refused_on_the_bit_level_link_and_bad_values(cfg):

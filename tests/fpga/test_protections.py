@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from firmware_model.fpga import layout as B
-from firmware_model.fpga.board import board_params, control_tick, down_defaults
+from firmware_model.fpga.params import board_params, down_defaults
+from firmware_model.fpga.tick import control_tick
 from hil.fpga_stack import FpgaStack
 from plant import layout as L
 from plant.config import load_config
@@ -21,7 +22,7 @@ def cfg():
 def _running(cfg, iq_ma: int = 10000) -> FpgaStack:
     stack = FpgaStack(cfg)
     stack.boot()
-    stack.mcu.write("iq_ref", iq_ma)
+    stack.mcu_link.write("iq_ref", iq_ma)
     stack.advance(200)
     assert stack.board.fsm_state == "enabled"
     assert abs(stack.y[L.Y_IQ] - iq_ma / 1000) < 0.5
@@ -49,9 +50,9 @@ def test_watchdog_trips_within_its_time_and_current_decays(cfg, fault):
     assert stack.board.fsm_state == "fault"
     stack.advance(2)
     assert stack.y[L.Y_IQ] == 0.0 and stack.y[L.Y_IA] == 0.0
-    status = stack.mcu.status()  # the upstream direction still works
+    status = stack.mcu_link.status()  # the upstream direction still works
     assert {"LINK_LOST", "FAULT"} <= status and "ENABLED" not in status
-    assert stack.mcu.read("wd_trips") == 1
+    assert stack.mcu_link.read("wd_trips") == 1
     if "corrupt_every" in fault:
         assert stack.board.up_value("err_link_crc") - crc_before >= 10 * (k - 1)
     # The pressure force decays with no motor torque.
@@ -74,16 +75,16 @@ def test_occasional_corrupt_words_are_discarded_and_counted_without_a_trip(cfg):
 
 def test_over_current_trips_and_latches(cfg):
     stack = _running(cfg, iq_ma=4000)
-    stack.mcu.write("trip_current", 8000)
+    stack.mcu_link.write("trip_current", 8000)
     stack.advance(5)
-    stack.mcu.write("iq_ref", 12000)
+    stack.mcu_link.write("iq_ref", 12000)
     k = _ticks_until_trip(stack, 40)
     assert k <= 10
     stack.advance(2)
     assert stack.y[L.Y_IQ] == 0.0
-    st = stack.mcu.status()
+    st = stack.mcu_link.status()
     assert {"OVER_CURRENT", "FAULT"} <= st
-    assert stack.mcu.read("oc_trips") == 1
+    assert stack.mcu_link.read("oc_trips") == 1
     # Enable still held: the board stays in fault, it does not re-arm itself.
     stack.advance(100)
     assert stack.board.fsm_state == "fault" and stack.y[L.Y_IQ] == 0.0
@@ -91,20 +92,20 @@ def test_over_current_trips_and_latches(cfg):
 
 def test_fault_is_cleared_only_with_enable_low_then_enable_works(cfg):
     stack = _running(cfg, iq_ma=4000)
-    stack.mcu.write("trip_current", 3000)
+    stack.mcu_link.write("trip_current", 3000)
     _ticks_until_trip(stack, 20)
-    stack.mcu.write("trip_current", 30000)
+    stack.mcu_link.write("trip_current", 30000)
     # CLEAR_FAULT while ENABLE is still set: refused.
-    stack.mcu.write("control", B.CTRL_ENABLE | B.CTRL_CLEAR_FAULT)
+    stack.mcu_link.write("control", B.CTRL_ENABLE | B.CTRL_CLEAR_FAULT)
     stack.advance(10)
     assert stack.board.fsm_state == "fault"
-    stack.mcu.write("control", 0)
+    stack.mcu_link.write("control", 0)
     stack.advance(10)
-    stack.mcu.write("control", B.CTRL_CLEAR_FAULT)
+    stack.mcu_link.write("control", B.CTRL_CLEAR_FAULT)
     stack.advance(10)
     assert stack.board.fsm_state == "disabled"
-    assert "FAULT" not in stack.mcu.status()
-    stack.mcu.write("control", B.CTRL_ENABLE)
+    assert "FAULT" not in stack.mcu_link.status()
+    stack.mcu_link.write("control", B.CTRL_ENABLE)
     stack.advance(200)
     assert stack.board.fsm_state == "enabled"
     assert abs(stack.y[L.Y_IQ] - 4.0) < 0.3
@@ -118,7 +119,7 @@ def _board(cfg):
     raw = np.zeros(B.N_RAW, dtype=np.int64)
     raw[[B.R_SSI_OK, B.R_BISS_OK]] = 1
     raw[[B.R_IA, B.R_IB]] = 2048
-    down[B.D_MODE] = B.MODE_CURRENT
+    down[B.D_MODE] = B.BoardMode.CURRENT
     down[B.D_CONTROL] = B.CTRL_ENABLE
     return c, st, down, up, raw
 
@@ -145,7 +146,7 @@ def test_mode_off_disables_and_pwm_stops(cfg):
     c, st, down, up, raw = _board(cfg)
     st[B.F_SINCE_VALID] = 0
     assert control_tick(c, st, down, up, raw) == 1
-    down[B.D_MODE] = B.MODE_OFF
+    down[B.D_MODE] = B.BoardMode.OFF
     st[B.F_SINCE_VALID] = 0
     assert control_tick(c, st, down, up, raw) == 0
     assert st[B.F_STATE] == B.STATE_DISABLED

@@ -14,8 +14,9 @@ import numpy as np
 import pytest
 
 from firmware_model.fpga import layout as B
-from firmware_model.fpga.board import board_params, calibrated_offset, control_tick, down_defaults
 from firmware_model.fpga.masters import BitLevelMasters
+from firmware_model.fpga.params import board_params, calibrated_offset, down_defaults
+from firmware_model.fpga.tick import control_tick
 from hil.sensor_chips import (
     abi_count,
     biss_count,
@@ -51,7 +52,7 @@ class Board:
         self.up = np.zeros(B.UP_WORDS, dtype=np.int64)
         self.down = down_defaults(cfg)
         self.down[B.D_CONTROL] = B.CTRL_ENABLE
-        self.down[B.D_MODE] = B.MODE_CURRENT
+        self.down[B.D_MODE] = B.BoardMode.CURRENT
         self.down[B.D_IQ_REF] = 5000  # mA
         self.down[B.D_ANGLE_OFFSET] = calibrated_offset(cfg)
 

@@ -47,7 +47,7 @@ class Rig:
     def __init__(self, cfg: Config, commands: list[tuple[str, float]],
                  dpram: bool = False) -> None:
         self.stacks = [FpgaStack(cfg) for _ in commands]
-        self.links = [s.mcu for s in self.stacks]
+        self.links = [s.mcu_link for s in self.stacks]
         self.ram = D.DualPortRam(cfg) if dpram else None
         mems = ([self.ram.board(k) for k in range(len(commands))] if self.ram is not None
                 else self.links)
@@ -518,7 +518,7 @@ def test_mcu_through_the_dpram_is_bit_identical_to_direct_link_access(cfg):
         direct.cycle()
         via.cycle()
         for a, b in zip(direct.stacks, via.stacks, strict=True):
-            assert np.array_equal(a.mcu.down, b.mcu.down)
+            assert np.array_equal(a.mcu_link.down, b.mcu_link.down)
             assert np.array_equal(a.y, b.y)
     assert via.ram is not None and via.ram.board(1).read("iq_ref") < 0
 
@@ -531,9 +531,9 @@ def test_one_sync_per_cycle_before_the_step_delays_the_downstream_by_one_period(
     mcu.enable(0, stack.board.calibrated_offset)
     for _ in range(20):
         stack.advance(mcu.period)
-        ram.sync([stack.mcu])
+        ram.sync([stack.mcu_link])
         mcu.step(stack.tick)
-        assert stack.mcu.down[B.D_SEQUENCE] == mcu._seq - 1  # the previous step's words
+        assert stack.mcu_link.down[B.D_SEQUENCE] == mcu._seq - 1  # the previous step's words
         assert ram.board(0).read("sequence") == mcu._seq
     assert stack.board.fsm_state == "enabled"
 

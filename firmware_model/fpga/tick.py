@@ -1,5 +1,8 @@
-"""The driver board's per-tick logic, compiled: sensors in, protections, enable state
-machine, FOC current loop, PWM compare counts and the upstream memory out.
+"""The driver board's per-tick logic, compiled: sensors in, protections
+(:mod:`~firmware_model.fpga.protections`), enable state machine
+(:mod:`~firmware_model.fpga.enable`), FOC current loop (:mod:`~firmware_model.fpga.foc`), PWM
+compare counts and the upstream memory out. Constants and boot values:
+:mod:`firmware_model.fpga.params`.
 
 One tick of :func:`control_tick` is one 50 us PWM period. Inputs are the raw words the
 sensor masters delivered (``raw``, see :data:`layout.RAW_NAMES`) and the downstream memory
@@ -10,16 +13,12 @@ declared widths; :class:`DriverBoard` wraps them for Python callers.
 
 from __future__ import annotations
 
-import math
-
-import numpy as np
 from numba import njit
 
-from firmware_model.calibration import FirmwareCalibration, calibration
 from firmware_model.fpga import layout as B
+from firmware_model.fpga.enable import enable_state_machine
 from firmware_model.fpga.fixed import clamp, mul_shift, sat_s, sat_u, wrap_s, wrap_u
 from firmware_model.fpga.foc import (
-    V_LIMIT_Q15,
     clarke,
     inv_park,
     park,
@@ -42,19 +41,13 @@ from firmware_model.fpga.layout import (
     C_SSI_SHIFT,
     C_V_LIMIT,
     C_V_TO_MV,
-    C_WD_TICKS,
-    CTRL_CLEAR_FAULT,
-    CTRL_ENABLE,
     D_ANGLE_OFFSET,
-    D_CONTROL,
     D_CURRENT_LIMIT,
     D_ID_REF,
     D_IQ_REF,
     D_KI,
     D_KP,
-    D_MODE,
     D_SEQUENCE,
-    D_TRIP_CURRENT,
     D_VD_REF,
     D_VQ_FF,
     D_VQ_REF,
@@ -72,7 +65,6 @@ from firmware_model.fpga.layout import (
     F_IQ,
     F_LATCHED,
     F_OC_TRIPS,
-    F_PREV_CONTROL,
     F_PWM_ON,
     F_RING_POS,
     F_SINCE_VALID,
@@ -84,8 +76,6 @@ from firmware_model.fpga.layout import (
     F_VD,
     F_VQ,
     F_WD_TRIPS,
-    MODE_CURRENT,
-    MODE_VOLTAGE,
     R_ABI,
     R_BISS,
     R_BISS_OK,
@@ -100,15 +90,10 @@ from firmware_model.fpga.layout import (
     R_STRAIN_OK,
     R_TEMP,
     RING_BASE,
-    ST_ENABLE_REFUSED,
     ST_ENABLED,
     ST_ENCODER_ERROR,
     ST_FAULT,
-    ST_LINK_LOST,
-    ST_LINK_OK,
-    ST_OVER_CURRENT,
     ST_STRAIN_ERROR,
-    STATE_DISABLED,
     STATE_ENABLED,
     STATE_FAULT,
     U_ABI,
@@ -137,87 +122,9 @@ from firmware_model.fpga.layout import (
     U_VD_OUT,
     U_VQ_OUT,
     U_WD_TRIPS,
+    BoardMode,
 )
-
-#: Fixed shifts of the PI gain multipliers (the registers hold the multipliers).
-KP_SHIFT = 12
-KI_SHIFT = 16
-#: Bits of the current ADC.
-CURRENT_ADC_BITS = 12
-
-
-def _k15(x: float) -> int:
-    """A constant factor as a multiplier for ``mul_shift(.., k, 15)``."""
-    return round(x * (1 << 15))
-
-
-def board_params(cal: FirmwareCalibration) -> np.ndarray:
-    """The constant parameter array of the board (``layout.C_*``) from its calibration."""
-    cal = calibration(cal)
-    f = cal.fpga
-    c = np.zeros(B.N_PARAMS, dtype=np.int64)
-    c[C_POLE_PAIRS] = cal.pole_pairs
-    c[C_SSI_SHIFT] = 16 - cal.ssi_bits
-    c[C_ADC_MID] = 1 << (CURRENT_ADC_BITS - 1)
-    c[C_ADC_SHIFT] = 16 - CURRENT_ADC_BITS
-    c[C_PWM_TOP] = pwm_top(cal)
-    c[C_V_LIMIT] = V_LIMIT_Q15
-    c[C_KP_SHIFT] = KP_SHIFT
-    c[C_KI_SHIFT] = KI_SHIFT
-    i_lsb_ma = 1000.0 * f["current_full_scale_a"] / 32768.0      # mA per s16 current LSB
-    v_lsb_mv = 1000.0 * cal.dc_bus_v / 32768.0    # mV per s16 voltage LSB
-    c[C_MA_TO_I] = _k15(1.0 / i_lsb_ma)
-    c[C_I_TO_MA] = _k15(i_lsb_ma)
-    c[C_MV_TO_V] = _k15(1.0 / v_lsb_mv)
-    c[C_V_TO_MV] = _k15(v_lsb_mv)
-    c[C_WD_TICKS] = max(1, round(f["watchdog_s"] / (cal.tick_ns * 1e-9)))
-    c[C_SPEED_WINDOW] = f["speed_window_ticks"]
-    return c
-
-
-def pwm_top(cal: FirmwareCalibration) -> int:
-    """Compare counts of half a carrier period: f_clk / (2 f_pwm) (centre-aligned)."""
-    cal = calibration(cal)
-    top = cal.fpga["clock_hz"] / (2.0 * cal.pwm_hz)
-    return int(round(top))
-
-
-def gain_registers(cal: FirmwareCalibration) -> tuple[int, int]:
-    """(kp, ki) register values for the configured PI gains in V/A and V/(A s).
-
-    In the s16 units the PI sees (current LSB I_FS/2^15, voltage LSB V_dc/2^15):
-    kp_reg = Kp (I_FS/V_dc) 2^12, ki_reg = Ki T_s (I_FS/V_dc) 2^16, each saturated to u16.
-    """
-    cal = calibration(cal)
-    f = cal.fpga
-    ratio = f["current_full_scale_a"] / cal.dc_bus_v
-    ts = cal.tick_ns * 1e-9
-    kp = round(f["current_kp_v_per_a"] * ratio * (1 << KP_SHIFT))
-    ki = round(f["current_ki_v_per_a_s"] * ts * ratio * (1 << KI_SHIFT))
-    return min(kp, 0xFFFF), min(ki, 0xFFFF)
-
-
-def calibrated_offset(cal: FirmwareCalibration) -> int:
-    """The angle_offset register value that aligns the SSI with the rotor's d axis.
-
-    What the PC's calibration table holds: -p * (SSI zero's mounting angle), 2^16 per
-    electrical turn, rounded. The encoder reads count = (theta_m + mount) N / 2 pi.
-    """
-    cal = calibration(cal)
-    pp = cal.pole_pairs
-    mount = cal.ssi_mount_rad
-    return round(-pp * mount * 65536.0 / (2.0 * math.pi)) & 0xFFFF
-
-
-def down_defaults(cal: FirmwareCalibration) -> np.ndarray:
-    """Reset contents of the downstream memory: limits and gains from the configuration,
-    everything else zero (disabled, mode off, offset not yet calibrated)."""
-    cal = calibration(cal)
-    d = np.zeros(B.DOWN_WORDS, dtype=np.int64)
-    d[D_CURRENT_LIMIT] = min(0xFFFF, round(cal.fpga["current_limit_a"] * 1000.0))
-    d[D_TRIP_CURRENT] = min(0xFFFF, round(cal.fpga["trip_current_a"] * 1000.0))
-    d[D_KP], d[D_KI] = gain_registers(cal)
-    return d
+from firmware_model.fpga.protections import count, protections
 
 
 @njit(cache=True)
@@ -233,11 +140,6 @@ def receive_word(st, down, addr, data, crc_ok):
     if 0 <= addr < DOWN_WORDS:
         down[addr] = data & 0xFFFF
     st[F_SINCE_VALID] = 0
-
-
-@njit(cache=True, inline="always")
-def _count(st, k):
-    st[k] = sat_u(st[k] + 1, 16)
 
 
 @njit(cache=True, inline="always")
@@ -258,10 +160,10 @@ def control_tick(c, st, down, up, raw):
         st[F_THETA_E] = theta_e
     else:
         theta_e = st[F_THETA_E]  # hold the last good angle
-        _count(st, F_ERR_SSI)
+        count(st, F_ERR_SSI)
         extra |= ST_ENCODER_ERROR
     if raw[R_BISS_OK] == 0:
-        _count(st, F_ERR_BISS)
+        count(st, F_ERR_BISS)
         extra |= ST_ENCODER_ERROR
 
     # --- speed: ABI count difference over a window of ticks (M method) -------------------
@@ -285,54 +187,17 @@ def control_tick(c, st, down, up, raw):
     st[F_ID] = i_d
     st[F_IQ] = i_q
 
-    # --- protections ----------------------------------------------------------------------
-    trip = mul_shift(down[D_TRIP_CURRENT], c[C_MA_TO_I], 15)
-    over_current = abs(i_a) >= trip or abs(i_b) >= trip or abs(i_c) >= trip
-    link_ok = st[F_SINCE_VALID] < c[C_WD_TICKS]
-    state = st[F_STATE]
-    latched = st[F_LATCHED]
-    if over_current and (latched & ST_OVER_CURRENT) == 0:
-        latched |= ST_OVER_CURRENT
-        _count(st, F_OC_TRIPS)
-    if state == STATE_ENABLED and not link_ok and (latched & ST_LINK_LOST) == 0:
-        latched |= ST_LINK_LOST
-        _count(st, F_WD_TRIPS)
-    if link_ok:
-        extra |= ST_LINK_OK
-
-    # --- enable state machine -------------------------------------------------------------
-    control = down[D_CONTROL]
-    mode = down[D_MODE]
-    enable = (control & CTRL_ENABLE) != 0 and (mode == MODE_CURRENT or mode == MODE_VOLTAGE)
-    clear = (control & CTRL_CLEAR_FAULT) != 0 and (st[F_PREV_CONTROL] & CTRL_CLEAR_FAULT) == 0
-    st[F_PREV_CONTROL] = control
-    if state == STATE_ENABLED:
-        if latched != 0:
-            state = STATE_FAULT
-        elif not enable:
-            state = STATE_DISABLED
-    elif state == STATE_FAULT:
-        if clear and not enable and not over_current and link_ok:
-            latched = 0
-            state = STATE_DISABLED
-    else:
-        if clear and not over_current:
-            latched = 0
-        if enable:
-            if latched != 0 or over_current or not link_ok or (extra & ST_ENCODER_ERROR) != 0:
-                extra |= ST_ENABLE_REFUSED
-            else:
-                state = STATE_ENABLED
-                st[F_INTEG_D] = 0
-                st[F_INTEG_Q] = 0
-    st[F_STATE] = state
-    st[F_LATCHED] = latched
+    # --- protections and the enable state machine ---------------------------------------
+    latched, extra, over_current, link_ok = protections(
+        c, st, down, i_a, i_b, i_c, st[F_STATE], st[F_LATCHED], extra)
+    state, latched, extra, mode = enable_state_machine(st, down, st[F_STATE], latched, extra,
+                                                       over_current, link_ok)
 
     # --- current loop and modulation ------------------------------------------------------
     top = c[C_PWM_TOP]
     v_lim = c[C_V_LIMIT]
     if state == STATE_ENABLED:
-        if mode == MODE_CURRENT:
+        if mode == BoardMode.CURRENT:
             i_lim = min(mul_shift(down[D_CURRENT_LIMIT], c[C_MA_TO_I], 15), 32767)
             iq_ref = clamp(mul_shift(wrap_s(down[D_IQ_REF], 16), c[C_MA_TO_I], 15), -i_lim, i_lim)
             id_ref = clamp(mul_shift(wrap_s(down[D_ID_REF], 16), c[C_MA_TO_I], 15), -i_lim, i_lim)
@@ -375,7 +240,7 @@ def control_tick(c, st, down, up, raw):
             up[B.U_STRAIN_LO] = code & 0xFFFF
             up[U_STRAIN_HI] = ((code >> 16) & 0xFF) | (n << 8)
         else:
-            _count(st, F_ERR_STRAIN)
+            count(st, F_ERR_STRAIN)
             extra |= ST_STRAIN_ERROR
     else:
         # No conversion this tick (4.8 kHz against 20 kHz): the bit keeps saying how the
