@@ -1,7 +1,7 @@
 """Command-line verbs of the identification tool (wired into ``hil.cli`` by the project).
 
 * ``eha-hil identify DATA.csv [-c PRESET|FILE] [--set K=V] [--report DIR] [--json]
-  [--max-effects N]``
+  [--max-effects N] [--load CASE] [--sample-rate HZ]``
 * ``eha-hil bench identify [--seconds 16] [--effect NAME]`` — wall time of a whole run on a
   synthetic 5 kHz record against the 60 s budget;
 * ``eha-hil identify-synth OUT.csv --load fixed_piston --effect pump_coulomb_friction`` — an
@@ -52,6 +52,14 @@ def configure_identify(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--max-effects", type=int_range(0, 20), default=6,
                         help="stop after adding this many effects, 0..20")
     parser.add_argument("--quiet", action="store_true", help="no progress on stderr")
+    parser.add_argument("--load", choices=("fixed_piston", "free_piston", "conrod_fixed"),
+                        default=None, help="load case, for a file without a '# load:' line "
+                        "(a header line that says otherwise is an error)")
+    parser.add_argument("--sample-rate", type=float_range(0.0, 1e9, open_lo=True, unit="Hz"),
+                        default=None, metavar="HZ",
+                        help="sample rate, Hz, for a file without a '# sample_rate_hz:' line "
+                        "(a header line that says otherwise is an error); without either it "
+                        "is inferred from the median time step")
     parser.add_argument("--intersample", choices=("zoh", "foh", "bl"), default=None,
                         help="how the logged current behaved between samples: zoh (held), "
                         "foh (linear), bl (band-limited); default: the '# intersample:' "
@@ -71,7 +79,8 @@ def run_identify(args: argparse.Namespace) -> int:
     except ConfigError as exc:
         return _err("identify", str(exc))  # names the preset or file and the key
     try:
-        data = read_measured(args.data)
+        data = read_measured(args.data, load=getattr(args, "load", None),
+                             sample_rate_hz=getattr(args, "sample_rate", None))
     except CsvError as exc:
         return _err("identify", str(exc))
     from hil.identify import report
@@ -80,6 +89,9 @@ def run_identify(args: argparse.Namespace) -> int:
     def progress(msg: str) -> None:
         if not args.quiet:
             print(f"identify: {msg}", file=sys.stderr, flush=True)
+
+    for note in data.notes:  # what reading did to the file (also in the report's notes)
+        progress(f"{args.data}: {note}")
 
     try:
         rep = identify(data, cfg, max_effects=args.max_effects, progress=progress,
@@ -91,6 +103,7 @@ def run_identify(args: argparse.Namespace) -> int:
         return _err("identify", f"{args.data}: refused: {exc}")
     except ValueError as exc:
         return _err("identify", f"{args.data}: {exc}")
+    rep.notes[:0] = [n for n in data.notes if n not in rep.notes]
     if args.report:
         try:
             report.write_report(rep, args.report)

@@ -12,6 +12,24 @@ unwrapped), pressures Pa gauge, ``x_piston`` m, ``f_strain`` N, ``temp_c`` degC.
 ``iq`` and the outputs the load case needs are required; every column present is used.
 Unknown columns are kept out of the fit and listed in :attr:`MeasuredData.ignored`.
 
+Files as people have them are read too (``docs/identify.md``, section Input):
+
+* a UTF-8 byte-order mark; leading index columns as ``pandas.DataFrame.to_csv`` writes
+  them (unnamed, ``Unnamed: 0``, ``index``, ``level_0``): dropped, with a note;
+* ``time`` and ``t_s`` as names of the time column (exactly one time column);
+* units other than SI: a header line ``# units: p=bar, iq=mA, t=ms`` (``p``: every pressure
+  column) or in the header row, ``p_pump_a[bar]`` / ``p_pump_a (bar)``; converted on read
+  (:data:`UNITS`);
+* ``load`` and ``sample_rate_hz`` from the caller (``--load``, ``--sample-rate``) when the
+  file has no such header line; a header line that says otherwise is an error. Without
+  either the sample rate is the inverse of the median time step (a note says so);
+* gaps: a row with an empty or NaN cell in a used column, or a time step of more than 1.5
+  sample periods, splits the record; the longest stretch without a gap is used if it has
+  at least :data:`MIN_ROWS` samples (a note names the gaps and the lines used), otherwise
+  the file is refused. A column that is empty in every row is left out (a note).
+
+What was done to the file is in :attr:`MeasuredData.notes` (the report shows it).
+
 Every mistake raises :class:`CsvError`, whose ``str`` is one line naming the file, the line
 and the column, so the command line can print it and exit with code 2.
 """
@@ -20,6 +38,7 @@ from __future__ import annotations
 
 import csv
 import math
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -38,12 +57,54 @@ KNOWN_COLUMNS: tuple[str, ...] = (
     "x_piston", "f_strain", "temp_c",
 )
 
+#: Names of the time column (exactly one of them per file); read as ``t``.
+TIME_ALIASES: tuple[str, ...] = ("t", "time", "t_s")
+
+#: The pressure columns (``p`` in a ``# units:`` line means all of them).
+PRESSURE_COLUMNS: tuple[str, ...] = ("p_pump_a", "p_pump_b", "p_cyl_a", "p_cyl_b", "p_acc")
+
 #: Output groups that are enough for each load case (any one group suffices).
 REQUIRED_OUTPUTS: dict[str, tuple[tuple[str, ...], ...]] = {
     "fixed_piston": (("p_pump_a", "p_pump_b"), ("p_cyl_a", "p_cyl_b"), ("f_strain",)),
     "free_piston": (("x_piston",), ("theta_m",)),
     "conrod_fixed": (("p_pump_a", "p_pump_b"), ("p_cyl_a", "p_cyl_b"), ("f_strain",)),
 }
+
+#: Quantity of each known column.
+QUANTITY: dict[str, str] = {
+    "t": "time", "iq": "current", "theta_m": "angle", "x_piston": "length",
+    "f_strain": "force", "temp_c": "temperature", **dict.fromkeys(PRESSURE_COLUMNS, "pressure"),
+}
+
+_PSI_PA = 6894.757293168361
+#: Units accepted per quantity: name -> (scale, offset), SI value = scale * value + offset.
+#: The first unit of each quantity is the SI one the columns are stored in.
+UNITS: dict[str, dict[str, tuple[float, float]]] = {
+    "time": {"s": (1.0, 0.0), "ms": (1e-3, 0.0), "us": (1e-6, 0.0), "\u00b5s": (1e-6, 0.0),
+             "\u03bcs": (1e-6, 0.0)},
+    "current": {"A": (1.0, 0.0), "mA": (1e-3, 0.0)},
+    "angle": {"rad": (1.0, 0.0), "deg": (math.pi / 180.0, 0.0), "rev": (2.0 * math.pi, 0.0)},
+    "pressure": {"Pa": (1.0, 0.0), "kPa": (1e3, 0.0), "bar": (1e5, 0.0), "mbar": (1e2, 0.0),
+                 "MPa": (1e6, 0.0), "psi": (_PSI_PA, 0.0)},
+    "length": {"m": (1.0, 0.0), "cm": (1e-2, 0.0), "mm": (1e-3, 0.0), "um": (1e-6, 0.0),
+               "\u00b5m": (1e-6, 0.0), "\u03bcm": (1e-6, 0.0)},
+    "force": {"N": (1.0, 0.0), "kN": (1e3, 0.0)},
+    "temperature": {"degC": (1.0, 0.0), "\u00b0C": (1.0, 0.0), "K": (1.0, -273.15),
+                    "degF": (5.0 / 9.0, -160.0 / 9.0), "\u00b0F": (5.0 / 9.0, -160.0 / 9.0)},
+}
+
+#: Fewest samples of a record (or of the stretch used when the record has gaps).
+MIN_ROWS = 10
+#: A time step of more than this many sample periods is a gap (the record is split there).
+GAP_PERIODS = 1.5
+#: Cells read as missing (besides an empty cell and anything ``float`` reads as NaN).
+NA_TOKENS = frozenset({"na", "n/a", "#n/a", "null", "none", "nan", "-nan", "+nan"})
+#: Leading header cells taken for pandas index columns: empty, ``Unnamed: N``, ``index``,
+#: ``level_0`` (what ``to_csv`` writes for an unnamed index, or for one read back and
+#: written again).
+_INDEX_NAME = re.compile(r"^(|unnamed: ?\d+|index|level_\d+)$", re.IGNORECASE)
+_UNIT_IN_NAME = re.compile(r"^(?P<name>.*?)\s*(?:\[(?P<u1>[^\]]*)\]|\((?P<u2>[^)]*)\))$")
+_MAX_GAPS_SHOWN = 5
 
 
 class CsvError(Exception):
@@ -64,7 +125,10 @@ class CsvError(Exception):
 
 @dataclass
 class MeasuredData:
-    """One identification record: header values, time base and the data columns (SI)."""
+    """One identification record: header values, time base and the data columns (SI).
+
+    ``notes``: what reading did to the file (index column dropped, units converted, sample
+    rate inferred, split at gaps), one sentence each, for the report."""
 
     path: str
     load: str
@@ -73,6 +137,7 @@ class MeasuredData:
     columns: dict[str, np.ndarray]
     header: dict[str, str] = field(default_factory=dict)
     ignored: list[str] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
 
     @property
     def n(self) -> int:
@@ -96,7 +161,7 @@ class MeasuredData:
         """The samples ``start:stop`` as a new record (same header)."""
         cols = {k: v[start:stop] for k, v in self.columns.items()}
         return MeasuredData(self.path, self.load, self.sample_rate_hz, self.t[start:stop],
-                            cols, dict(self.header), list(self.ignored))
+                            cols, dict(self.header), list(self.ignored), list(self.notes))
 
 
 def _header_value(path: Path, lineno: int, key: str, raw: str) -> str:
@@ -106,23 +171,96 @@ def _header_value(path: Path, lineno: int, key: str, raw: str) -> str:
     return value
 
 
-def read_measured(path: str | Path) -> MeasuredData:
+def _split(line: str) -> list[str]:
+    """The cells of one CSV line (quotes as the csv module reads them)."""
+    if '"' not in line:
+        return line.split(",")
+    return next(csv.reader([line]))
+
+
+def _cell(path: Path, line: int, column: str, text: str) -> float:
+    """One cell that ``float`` refused: NaN for an empty or NA cell, else CsvError."""
+    cell = text.strip()
+    if not cell or cell.lower() in NA_TOKENS:
+        return math.nan
+    try:
+        return float(cell)
+    except ValueError:
+        raise CsvError(path, line, column, f"'{cell}' is not a number") from None
+
+
+def _unit(path: Path, line: int, column: str, unit: str) -> tuple[float, float]:
+    """(scale, offset) of ``unit`` for ``column``; CsvError naming both if it does not fit."""
+    qty = QUANTITY[column]
+    table = UNITS[qty]
+    if unit in table:
+        return table[unit]
+    other = next((q for q, u in UNITS.items() if unit in u), None)
+    why = f"is a {other} unit" if other else "is not a known unit"
+    raise CsvError(path, line, column, f"unit '{unit}' {why}; {qty} units: "
+                   f"{', '.join(u for u in table if u.isascii())}")
+
+
+def _units_line(path: Path, line: int, text: str, present: set[str]) -> dict[str, str]:
+    """Column -> unit of a ``# units:`` line (``p`` for every pressure column; a column's
+    own entry beats ``p``). CsvError for a malformed item, an unknown column or unit."""
+    group: str | None = None
+    own: dict[str, str] = {}
+    for item in text.split(","):
+        item = item.strip()
+        if not item:
+            continue
+        if "=" not in item:
+            raise CsvError(path, line, None, f"units: '{item}' is not COLUMN=UNIT "
+                           "(e.g. '# units: p=bar, iq=mA')")
+        key, unit = (s.strip() for s in item.split("=", 1))
+        if key in TIME_ALIASES:
+            key = "t"
+        if key != "p" and key not in QUANTITY:
+            raise CsvError(path, line, key, "units: unknown column (known: p, "
+                           f"{', '.join(KNOWN_COLUMNS)}, time, t_s)")
+        if not unit:
+            raise CsvError(path, line, key, "units: no unit given")
+        if (key == "p" and group is not None) or key in own:
+            raise CsvError(path, line, key, "units: given twice")
+        _unit(path, line, PRESSURE_COLUMNS[0] if key == "p" else key, unit)
+        if key == "p":
+            group = unit
+        else:
+            own[key] = unit
+    out = {c: group for c in PRESSURE_COLUMNS if group is not None and c in present}
+    out.update({c: u for c, u in own.items() if c in present})
+    return out
+
+
+def _lines_text(a: int, b: int) -> str:
+    return f"line {a}" if a == b else f"lines {a}-{b}"
+
+
+def read_measured(path: str | Path, load: str | None = None,
+                  sample_rate_hz: float | None = None) -> MeasuredData:
     """Read and validate a measured-data CSV (see the module docstring).
 
-    Raises :class:`CsvError` for a missing file, a missing or unknown ``load``, a missing or
-    non-positive ``sample_rate_hz``, a missing required column, a row of the wrong length, a
-    non-numeric or non-finite cell, a time column that does not increase, or a time step
-    that disagrees with the declared sample rate by more than 1 %.
+    ``load`` and ``sample_rate_hz`` (the command line's ``--load``, ``--sample-rate``) stand
+    in for the header lines; given both ways they must agree.
+
+    Raises :class:`CsvError` for a missing file, a missing or unknown ``load``, a
+    non-positive sample rate, a missing required column, two time columns, an unknown unit
+    or column in the units, a row of the wrong length, a non-numeric or infinite cell, a
+    time column that does not increase, a time step that disagrees with the sample rate by
+    more than 1 % (median) or is under half a period (jitter), or a record whose longest
+    stretch without a gap is shorter than :data:`MIN_ROWS`.
     """
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
+        text = path.read_text(encoding="utf-8-sig")  # a byte-order mark is dropped
     except FileNotFoundError:
         raise CsvError(path, None, None, "no such file") from None
     except (OSError, UnicodeDecodeError) as exc:
         raise CsvError(path, None, None, f"cannot read: {exc}") from None
     lines = text.splitlines()
     header: dict[str, str] = {}
+    header_at: dict[str, int] = {}
     lineno = 0
     names: list[str] | None = None
     header_line = 0
@@ -134,42 +272,109 @@ def read_measured(path: str | Path) -> MeasuredData:
             body = stripped[1:]
             if ":" in body:
                 key, raw = body.split(":", 1)
-                header[key.strip().lower()] = _header_value(path, lineno, key.strip(), raw)
+                k = key.strip().lower()
+                value = _header_value(path, lineno, key.strip(), raw)
+                if k in ("load", "sample_rate_hz", "units") and k in header \
+                        and header[k] != value:
+                    raise CsvError(path, lineno, None, f"header '{k}' given twice, differently "
+                                   f"(line {header_at[k]}: '{header[k]}')")
+                header.setdefault(k, value)
+                header_at.setdefault(k, lineno)
             continue
-        names = [c.strip() for c in next(csv.reader([stripped]))]
+        names = [c.strip() for c in _split(stripped)]
         header_line = lineno
         break
     if names is None:
         raise CsvError(path, lineno or None, None, "no header row (expected t,iq,...)")
-    if "load" not in header:
-        raise CsvError(path, 1, None, "missing header line '# load: ...' "
-                       f"(one of {', '.join(LOAD_CASES)})")
-    load = header["load"]
-    if load not in LOAD_CASES:
-        line_of = _find_header_line(lines, "load")
-        raise CsvError(path, line_of, None,
-                       f"unknown load '{load}' (expected one of {', '.join(LOAD_CASES)})")
-    if "sample_rate_hz" not in header:
-        raise CsvError(path, 1, None, "missing header line '# sample_rate_hz: ...'")
-    line_of = _find_header_line(lines, "sample_rate_hz")
-    try:
-        fs = float(header["sample_rate_hz"])
-    except ValueError:
-        raise CsvError(path, line_of, None,
-                       f"sample_rate_hz '{header['sample_rate_hz']}' is not a number") from None
-    if not math.isfinite(fs) or fs <= 0:
-        raise CsvError(path, line_of, None, f"sample_rate_hz must be > 0, got {fs}")
+    notes: list[str] = []
 
-    seen: set[str] = set()
-    for name in names:
+    # --- load case: header line or the caller's --load ------------------------------------
+    if "load" in header:
+        if header["load"] not in LOAD_CASES:
+            raise CsvError(path, header_at["load"], None, f"unknown load '{header['load']}' "
+                           f"(expected one of {', '.join(LOAD_CASES)})")
+        if load is not None and load != header["load"]:
+            raise CsvError(path, header_at["load"], None, f"'# load: {header['load']}' "
+                           f"disagrees with --load {load}")
+        load = header["load"]
+    elif load is None:
+        raise CsvError(path, 1, None, "missing header line '# load: ...' "
+                       f"(one of {', '.join(LOAD_CASES)}), or pass --load")
+    elif load not in LOAD_CASES:
+        raise CsvError(path, None, None, f"--load {load}: unknown load (expected one of "
+                       f"{', '.join(LOAD_CASES)})")
+
+    # --- sample rate: header line, the caller's --sample-rate, else inferred below --------
+    fs: float | None = None
+    fs_source = "sample_rate_hz"
+    if "sample_rate_hz" in header:
+        line_of = header_at["sample_rate_hz"]
+        try:
+            fs = float(header["sample_rate_hz"])
+        except ValueError:
+            raise CsvError(path, line_of, None, f"sample_rate_hz '{header['sample_rate_hz']}' "
+                           "is not a number") from None
+        if not math.isfinite(fs) or fs <= 0:
+            raise CsvError(path, line_of, None, f"sample_rate_hz must be > 0, got {fs}")
+        if sample_rate_hz is not None and abs(sample_rate_hz - fs) > 1e-9 * fs:
+            raise CsvError(path, line_of, None, f"'# sample_rate_hz: {header['sample_rate_hz']}'"
+                           f" disagrees with --sample-rate {sample_rate_hz:g}")
+    elif sample_rate_hz is not None:
+        if not math.isfinite(sample_rate_hz) or sample_rate_hz <= 0:
+            raise CsvError(path, None, None, f"--sample-rate must be > 0, got {sample_rate_hz}")
+        fs, fs_source = float(sample_rate_hz), "--sample-rate"
+
+    # --- header row: index column, time aliases, units in the names -------------------------
+    canon: list[str | None] = []   # known column each position is read as, None: not read
+    unit_in_name: dict[str, str] = {}
+    seen: dict[str, str] = {}      # read-as name -> name as written
+    ignored: list[str] = []
+    raw_seen: set[str] = set()
+    time_alias = "t"
+    leading = True
+    for j, name in enumerate(names):
+        if leading and _INDEX_NAME.match(name) and j < len(names) - 1:
+            canon.append(None)
+            shown = f"'{name}'" if name else "with an empty name"
+            notes.append(f"column {j + 1} {shown} taken for an index column (as pandas "
+                         "writes it) and dropped")
+            continue
+        leading = False
         if not name:
             raise CsvError(path, header_line, None, "empty column name in the header row")
-        if name in seen:
+        if name in raw_seen:
             raise CsvError(path, header_line, name, "column appears twice")
-        seen.add(name)
+        raw_seen.add(name)
+        base, unit = name, None
+        m = _UNIT_IN_NAME.match(name)
+        if m:
+            cand = m.group("name").strip()
+            if cand in QUANTITY or cand in TIME_ALIASES:
+                base, unit = cand, (m.group("u1") if m.group("u1") is not None
+                                    else m.group("u2")).strip()
+        key = "t" if base in TIME_ALIASES else base
+        if key not in QUANTITY:
+            canon.append(None)
+            ignored.append(name)
+            continue
+        if key in seen:
+            if key == "t":
+                raise CsvError(path, header_line, name, f"a second time column (besides "
+                               f"'{seen[key]}'; use one of {', '.join(TIME_ALIASES)})")
+            raise CsvError(path, header_line, name, f"column appears twice (also '{seen[key]}')")
+        seen[key] = name
+        if key == "t":
+            time_alias = base
+        canon.append(key)
+        if unit is not None:
+            if not unit:
+                raise CsvError(path, header_line, name, "empty unit in the column name")
+            _unit(path, header_line, key, unit)
+            unit_in_name[key] = unit
     for req in ("t", "iq"):
         if req not in seen:
-            raise CsvError(path, header_line, req, "required column missing")
+            raise CsvError(path, header_line, req, "required column missing" + (
+                f" (one of {', '.join(TIME_ALIASES)})" if req == "t" else ""))
     groups = REQUIRED_OUTPUTS[load]
     if not any(all(c in seen for c in g) for g in groups):
         need = " or ".join("+".join(g) for g in groups)
@@ -177,6 +382,33 @@ def read_measured(path: str | Path) -> MeasuredData:
         raise CsvError(path, header_line, first_missing,
                        f"required column missing: load {load} needs {need}")
 
+    # --- units: '# units:' line and units in the names ----------------------------------
+    units = dict(unit_in_name)
+    if "units" in header:
+        line_of = header_at["units"]
+        for col, unit in _units_line(path, line_of, header["units"], set(seen)).items():
+            if col in unit_in_name and unit_in_name[col] != unit:
+                raise CsvError(path, line_of, seen[col], f"unit '{unit}' disagrees with "
+                               f"'{unit_in_name[col]}' in the header row")
+            units[col] = unit
+    if time_alias == "t_s" and units.get("t", "s") != "s":
+        raise CsvError(path, header_line, seen["t"], f"is in seconds by its name, not "
+                       f"'{units['t']}' (call the column t or time)")
+    convert: dict[str, tuple[float, float]] = {}
+    for col, unit in units.items():
+        scale_offset = UNITS[QUANTITY[col]][unit]
+        if scale_offset != (1.0, 0.0):
+            convert[col] = scale_offset
+    if convert:
+        notes.append("converted to SI: " + ", ".join(
+            f"{seen[c]} from {units[c]}" for c in KNOWN_COLUMNS if c in convert))
+    if seen["t"] != "t":
+        notes.append(f"time column '{seen['t']}' read as t")
+
+    # --- data rows ----------------------------------------------------------------------
+    used = [(j, c) for j, c in enumerate(canon) if c is not None]
+    used_names = [c for _, c in used]
+    idx = [j for j, _ in used]
     n_cols = len(names)
     rows: list[list[float]] = []
     row_lines: list[int] = []
@@ -184,58 +416,123 @@ def read_measured(path: str | Path) -> MeasuredData:
         line = lines[lineno - 1].strip()
         if not line or line.startswith("#"):
             continue
-        cells = line.split(",")
+        cells = _split(line)
         if len(cells) != n_cols:
             raise CsvError(path, lineno, None,
                            f"expected {n_cols} cells, found {len(cells)}")
-        values = []
-        for j, cell in enumerate(cells):
-            try:
-                v = float(cell)
-            except ValueError:
-                raise CsvError(path, lineno, names[j],
-                               f"'{cell.strip()}' is not a number") from None
-            if not math.isfinite(v):
-                raise CsvError(path, lineno, names[j], f"'{cell.strip()}' is not finite")
-            values.append(v)
+        try:
+            values = [float(cells[j]) for j in idx]
+        except ValueError:  # an empty or NA cell, or a mistake: cell by cell
+            values = [_cell(path, lineno, names[j], cells[j]) for j in idx]
         rows.append(values)
         row_lines.append(lineno)
-    if len(rows) < 10:
-        raise CsvError(path, header_line, None, f"only {len(rows)} data rows (need >= 10)")
+    if len(rows) < MIN_ROWS:
+        raise CsvError(path, header_line, None,
+                       f"only {len(rows)} data rows (need >= {MIN_ROWS})")
     arr = np.asarray(rows, dtype=float)
-    t = arr[:, names.index("t")]
-    dt = np.diff(t)
-    bad = np.flatnonzero(dt <= 0)
-    if bad.size:
-        k = int(bad[0]) + 1
-        raise CsvError(path, row_lines[k], "t",
-                       f"time does not increase ({t[k]!r} after {t[k - 1]!r})")
-    step = float(np.median(dt))
-    if abs(step * fs - 1.0) > 0.01:
-        raise CsvError(path, row_lines[1], "t",
-                       f"time step {step:.6g} s disagrees with sample_rate_hz {fs:g}")
-    off = np.flatnonzero(np.abs(dt * fs - 1.0) > 0.5)
-    if off.size:
-        k = int(off[0]) + 1
-        raise CsvError(path, row_lines[k], "t",
-                       f"gap or jitter in time: step {dt[k - 1]:.6g} s, expected {1 / fs:.6g} s")
-    columns = {}
-    ignored = []
-    for j, name in enumerate(names):
-        if name in KNOWN_COLUMNS:
-            if name != "t":
-                columns[name] = arr[:, j].copy()
-        else:
-            ignored.append(name)
-    return MeasuredData(str(path), load, fs, t.copy(), columns, header, ignored)
+    inf = np.argwhere(np.isinf(arr))
+    if inf.size:
+        r, k = (int(x) for x in inf[0])
+        cell = _split(lines[row_lines[r] - 1].strip())[idx[k]].strip()
+        raise CsvError(path, row_lines[r], names[idx[k]], f"'{cell}' is not finite")
+    for col, (scale, offset) in convert.items():
+        k = used_names.index(col)
+        arr[:, k] = arr[:, k] * scale + offset
 
+    # --- columns empty in every row are left out ------------------------------------------
+    missing = np.isnan(arr)
+    empty = [c for k, c in enumerate(used_names) if missing[:, k].all()]
+    if "t" in empty:
+        raise CsvError(path, header_line, seen["t"], "no value in any row")
+    if empty:
+        if "iq" in empty:
+            raise CsvError(path, header_line, seen["iq"], "no value in any row")
+        left = [c for c in used_names if c not in empty]
+        if not any(all(c in left for c in g) for g in groups):
+            first = next(c for g in groups for c in g if c in empty)
+            raise CsvError(path, header_line, seen[first], f"no value in any row (load {load} "
+                           f"needs {' or '.join('+'.join(g) for g in groups)})")
+        notes.append("left out, empty in every row: " + ", ".join(seen[c] for c in empty))
+        keep = [k for k, c in enumerate(used_names) if c not in empty]
+        arr, missing = arr[:, keep], missing[:, keep]
+        used_names = left
+    ti = used_names.index("t")
+    tcol = seen["t"]
 
-def _find_header_line(lines: list[str], key: str) -> int:
-    for i, line in enumerate(lines, start=1):
-        s = line.strip()
-        if s.startswith("#") and ":" in s and s[1:].split(":", 1)[0].strip().lower() == key:
-            return i
-    return 1
+    # --- time base, gaps ----------------------------------------------------------------
+    hole = missing.any(axis=1)
+    good = np.flatnonzero(~hole)
+    t_all = arr[:, ti]
+    if good.size >= 2:
+        dtg = np.diff(t_all[good])
+        bad = np.flatnonzero(dtg <= 0)
+        if bad.size:
+            a, b = good[bad[0]], good[bad[0] + 1]
+            raise CsvError(path, row_lines[b], tcol,
+                           f"time does not increase ({t_all[b]!r} after {t_all[a]!r})")
+        adjacent = np.diff(good) == 1
+        steps = dtg[adjacent] if adjacent.any() else dtg
+        step = float(np.median(steps))
+        if fs is None:
+            fs = float(f"{1.0 / step:.6g}")
+            notes.append(f"sample rate {fs:g} Hz inferred from the median time step "
+                         f"{step:.6g} s (no '# sample_rate_hz:' line, no --sample-rate)")
+        elif abs(step * fs - 1.0) > 0.01:
+            raise CsvError(path, row_lines[good[1]], tcol, f"time step {step:.6g} s disagrees "
+                           f"with {fs_source} {fs:g}")
+        ratio = dtg * fs
+        short = np.flatnonzero(ratio < 0.5)
+        if short.size:
+            k = int(short[0])
+            raise CsvError(path, row_lines[good[k + 1]], tcol,
+                           f"jitter in time: step {dtg[k]:.6g} s, expected {1 / fs:.6g} s")
+        jump = ratio > GAP_PERIODS
+    else:
+        dtg = ratio = np.zeros(0)
+        jump = np.zeros(0, dtype=bool)
+        adjacent = np.zeros(0, dtype=bool)
+        if fs is None:
+            fs = 1.0  # no segment will be long enough: refused below
+    gaps: list[tuple[int, str]] = []  # (first line, description)
+    hk = np.flatnonzero(hole)
+    if hk.size:
+        starts = hk[np.r_[True, np.diff(hk) > 1]]
+        ends = hk[np.r_[np.diff(hk) > 1, True]]
+        for a, b in zip(starts, ends, strict=True):
+            first = used_names[int(np.flatnonzero(missing[a])[0])]
+            gaps.append((row_lines[a], f"{_lines_text(row_lines[a], row_lines[b])} "
+                         f"(empty or NaN cell, column '{seen[first]}')"))
+    for k in np.flatnonzero(jump & adjacent):
+        b = int(good[k + 1])
+        gaps.append((row_lines[b], f"line {row_lines[b]} ({tcol} jumps {dtg[k]:.6g} s = "
+                     f"{ratio[k]:.3g} sample periods)"))
+    gaps.sort()
+    if gaps:
+        # stretches of good rows without a hole or a jump inside
+        cut = np.r_[False, jump | ~adjacent] if good.size else np.zeros(0, dtype=bool)
+        seg_id = np.cumsum(cut)
+        counts = np.bincount(seg_id) if good.size else np.zeros(1, dtype=int)
+        best = int(np.argmax(counts))
+        sel = good[seg_id == best] if good.size else good
+        shown = "; ".join(g for _, g in gaps[:_MAX_GAPS_SHOWN])
+        if len(gaps) > _MAX_GAPS_SHOWN:
+            shown += f"; and {len(gaps) - _MAX_GAPS_SHOWN} more"
+        if sel.size < MIN_ROWS:
+            worst = int(np.argmax(missing.sum(axis=0)))
+            hint = (f"; column '{seen[used_names[worst]]}' is empty or NaN in "
+                    f"{int(missing[:, worst].sum())} of {len(rows)} rows"
+                    if missing[:, worst].any() else "")
+            where = (f"longest is {_lines_text(row_lines[sel[0]], row_lines[sel[-1]])}, "
+                     f"{sel.size} samples" if sel.size else "no complete row")
+            raise CsvError(path, gaps[0][0], None, f"no stretch without gaps has {MIN_ROWS} "
+                           f"samples ({where}); gaps at {shown}{hint}")
+        notes.append(f"gaps in the data at {shown}: using the longest stretch without gaps, "
+                     f"{_lines_text(row_lines[sel[0]], row_lines[sel[-1]])} ({sel.size} of "
+                     f"{len(rows)} samples)")
+        arr = arr[sel]
+    columns = {c: arr[:, k].copy() for k, c in enumerate(used_names) if c != "t"}
+    return MeasuredData(str(path), load, fs, arr[:, ti].copy(), columns, header, ignored,
+                        notes)
 
 
 def write_measured(path: str | Path, data: MeasuredData, extra_header: dict | None = None) -> None:
@@ -254,5 +551,5 @@ def write_measured(path: str | Path, data: MeasuredData, extra_header: dict | No
         np.savetxt(fh, mat, delimiter=",", fmt="%.12g")
 
 
-__all__ = ["CsvError", "KNOWN_COLUMNS", "LOAD_CASES", "MeasuredData", "read_measured",
+__all__ = ["CsvError", "KNOWN_COLUMNS", "LOAD_CASES", "MeasuredData", "UNITS", "read_measured",
            "write_measured"]

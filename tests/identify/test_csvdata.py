@@ -56,7 +56,7 @@ def test_non_numeric_cell(tmp_path):
 
 def test_non_finite_cell(tmp_path):
     rows = _rows()
-    rows[2] = "0.000400,nan,500005,500000\n"
+    rows[2] = "0.000400,inf,500005,500000\n"  # (a NaN is a gap: tests/identify/test_inputs.py)
     e = _error(tmp_path, HEADER + COLS + "".join(rows))
     assert e.line == 6 and e.column == "iq"
 
@@ -75,9 +75,10 @@ def test_unknown_load(tmp_path):
 
 def test_missing_load_and_rate(tmp_path):
     assert "load" in str(_error(tmp_path, "# sample_rate_hz: 5000\n" + COLS + "".join(_rows())))
-    assert "sample_rate_hz" in str(_error(tmp_path, "# load: free_piston\n"
-                                          "t,iq,x_piston\n" + "".join(
-                                              f"{k},0,0\n" for k in range(20))))
+    # without a rate the median time step gives it, and a note says so
+    d = read_measured(_write(tmp_path, "# load: free_piston\nt,iq,x_piston\n" + "".join(
+        f"{k},0,0\n" for k in range(20))))
+    assert d.sample_rate_hz == 1.0 and any("inferred" in n for n in d.notes)
 
 
 def test_wrong_cell_count_and_rate_mismatch(tmp_path):
