@@ -22,19 +22,29 @@ EXIT_USAGE = 2
 
 
 def configure_log(parser: argparse.ArgumentParser) -> None:
-    """Add ``info LOG [--json]`` and ``export LOG OUT [--topic T ...] [--field F ...]``."""
+    """Add ``info LOG [--json]`` and ``export LOG OUT [--format frames|identify]
+    [--topic T ...] [--field F ...] [--board B]``."""
     sub = parser.add_subparsers(dest="log_command", metavar="ACTION", required=True)
     p = sub.add_parser("info", help="summarise a frame log (channels, counts, time range, "
                        "whether it is complete)")
     p.add_argument("log", metavar="LOG", help="MCAP frame log")
     p.add_argument("--json", action="store_true", help="print JSON instead of text")
-    p = sub.add_parser("export", help="decode frames to CSV (t_s, topic, decoded fields)")
+    p = sub.add_parser("export", help="decode frames to CSV (t_s, topic, decoded fields), "
+                       "or one board's measurements as an identification CSV")
     p.add_argument("log", metavar="LOG", help="MCAP frame log")
     p.add_argument("out", metavar="OUT", help="CSV file to write ('-': stdout)")
+    p.add_argument("--format", choices=("frames", "identify"), default="frames",
+                   help="frames (default): one row per frame with its decoded fields; "
+                   "identify: what the MCU read from one board, in SI units, as the input of "
+                   "eha-hil identify (docs/framelog.md)")
     p.add_argument("--topic", action="append", metavar="T",
-                   help="export only this topic (repeatable; default all)")
+                   help="export only this topic (repeatable; default all; --format frames)")
     p.add_argument("--field", action="append", metavar="F",
-                   help="export only this decoded field (repeatable; default all)")
+                   help="export only this decoded field (repeatable; default all; "
+                   "--format frames)")
+    p.add_argument("--board", metavar="B",
+                   help="--format identify: the board, e.g. 0.0 (needed when the log has "
+                   "several)")
 
 
 def _truncated(info: LogInfo) -> int:
@@ -68,7 +78,24 @@ def _export(args: argparse.Namespace) -> int:
             raise FrameLogError(f"{args.out}: directory {parent} does not exist")
         if out.is_dir():
             raise FrameLogError(f"{args.out}: is a directory; give a .csv file name")
+    fmt = getattr(args, "format", "frames")
+    if fmt == "identify":
+        for opt in ("topic", "field"):
+            if getattr(args, opt, None):
+                raise FrameLogError(f"--{opt}: only with --format frames (--format identify "
+                                    "writes its own columns; choose the board with --board)")
+    elif getattr(args, "board", None):
+        raise FrameLogError("--board: only with --format identify")
     info = FrameLogReader(args.log).info()
+    if fmt == "identify":
+        from hil.framelog.identify_export import export_identify
+
+        res = export_identify(args.log, args.out, board=args.board, info=info)
+        if args.out != "-":
+            print(f"wrote {res.rows} samples of board {res.board} ({res.load}, "
+                  f"{res.sample_rate_hz:g} Hz; {res.skipped} leading frame(s) from before the "
+                  f"first upstream sweep left out) to {args.out}")
+        return _truncated(info)
     n = export_csv(args.log, args.out, topics=args.topic, fields=args.field, info=info)
     if args.out != "-":
         print(f"wrote {n} rows to {args.out}")
