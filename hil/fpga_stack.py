@@ -13,7 +13,7 @@ average current, which is what the average model gives.
 
 ``bit_level=True`` runs the same per tick in Python with the sensor links and the LVDS
 words as real bits (:mod:`hil.sensor_lines`, :mod:`firmware_model.fpga.masters`,
-:class:`hil.lvds_link.BitLevelLink`); it is ~100x slower and gives identical words.
+:class:`firmware_model.lvds.link.BitLevelLink`); it is ~100x slower and gives identical words.
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ from numba import njit
 from firmware_model.fpga import layout as B
 from firmware_model.fpga.driver_board import DriverBoard, LinkMemory
 from firmware_model.fpga.tick import control_tick
-from hil import lvds_link as LK
+from firmware_model.lvds import link as LK
 from hil.sensor_chips import chip_params, digitise
 from plant import kernel
 from plant import layout as L

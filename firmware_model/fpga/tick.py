@@ -17,7 +17,7 @@ from numba import njit
 
 from firmware_model.fpga import layout as B
 from firmware_model.fpga.enable import enable_state_machine
-from firmware_model.fpga.fixed import clamp, mul_shift, sat_s, sat_u, wrap_s, wrap_u
+from firmware_model.fpga.fixed import clamp, mul_shift, sat_s, wrap_s, wrap_u
 from firmware_model.fpga.foc import (
     clarke,
     inv_park,
@@ -51,7 +51,6 @@ from firmware_model.fpga.layout import (
     D_VD_REF,
     D_VQ_FF,
     D_VQ_REF,
-    DOWN_WORDS,
     F_DUTY_A,
     F_DUTY_B,
     F_DUTY_C,
@@ -125,21 +124,6 @@ from firmware_model.fpga.layout import (
     BoardMode,
 )
 from firmware_model.fpga.protections import count, protections
-
-
-@njit(cache=True)
-def receive_word(st, down, addr, data, crc_ok):
-    """LVDS endpoint, downstream side: store one received word or discard it.
-
-    A word that failed its CRC is counted and dropped; a good word is stored at its
-    address (addresses beyond the memory are ignored) and restarts the link watchdog.
-    """
-    if not crc_ok:
-        st[F_ERR_LINK_CRC] = sat_u(st[F_ERR_LINK_CRC] + 1, 16)
-        return
-    if 0 <= addr < DOWN_WORDS:
-        down[addr] = data & 0xFFFF
-    st[F_SINCE_VALID] = 0
 
 
 @njit(cache=True, inline="always")

@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from firmware_model.fpga import layout as B
-from hil import lvds_link as LK
+from firmware_model.lvds import link as LK
 from hil.fieldbus.boxes import StackBox
 from hil.fieldbus.chain import CYCLE_TICKS
 from hil.fieldbus.master import Master

@@ -303,7 +303,7 @@ def test_lvds_word_drop_duplicate_delay(cfg, bench):
     """Value-level word faults in a window: every word dropped on the down link trips the
     board's watchdog like a dead cable, with no CRC count; duplicated and delayed upstream
     words change what the MCU measures but never count as link errors."""
-    from hil import lvds_link as LK
+    from firmware_model.lvds import link as LK
 
     win = {"box": 0, "slot": 0, "start_s": 0.02, "end_s": 0.03}
     rows, link = _lvds_run(cfg, bench, [{"link": "lvds.down", "kind": "drop", "rate": 1.0,

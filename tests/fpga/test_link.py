@@ -8,7 +8,7 @@ import pytest
 from firmware_model.fpga import layout as B
 from firmware_model.fpga.driver_board import DriverBoard, LinkMemory
 from firmware_model.fpga.tick import control_tick
-from hil import lvds_link as LK
+from firmware_model.lvds import link as LK
 from hil.fpga_stack import FpgaStack
 from hil.sensor_chips import chip_params, digitise
 from plant.config import load_config

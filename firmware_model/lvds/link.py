@@ -7,7 +7,7 @@ takes 4.5 us: 11.1 words per 50 us tick, so a sweep of the 16-word downstream me
 72 us and of the 32-word upstream memory 144 us. Bits are accounted exactly with an integer
 accumulator; a word counts as received in the tick in which its last bit arrives.
 
-Order inside a tick (``hil.fpga_stack``): downstream words of the tick reach the driver's
+Order inside a tick (``hil.actuator``): downstream words of the tick reach the driver's
 memory, the driver computes, then the upstream words of the tick carry its fresh values.
 
 Value level: words travel as (address, data) with a CRC verdict decided by the fault
@@ -30,9 +30,9 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from firmware_model.calibration import FirmwareCalibration, calibration
 from firmware_model.fpga import layout as B
-from firmware_model.fpga.tick import receive_word
-from plant.config import Config
+from firmware_model.fpga.fixed import sat_u
 from protocols import lvds
 
 LINK_NAMES = (
@@ -70,16 +70,32 @@ WORD_BITS = lvds.WORD_BITS
 _WORD_DEN = WORD_BITS * 1_000_000_000
 
 
-def link_state(cfg: Config) -> np.ndarray:
+@njit(cache=True)
+def receive_word(st, down, addr, data, crc_ok):
+    """LVDS endpoint, downstream side: store one received word or discard it.
+
+    A word that failed its CRC is counted and dropped; a good word is stored at its
+    address (addresses beyond the memory are ignored) and restarts the link watchdog.
+    """
+    if not crc_ok:
+        st[B.F_ERR_LINK_CRC] = sat_u(st[B.F_ERR_LINK_CRC] + 1, 16)
+        return
+    if 0 <= addr < B.DOWN_WORDS:
+        down[addr] = data & 0xFFFF
+    st[B.F_SINCE_VALID] = 0
+
+
+def link_state(cal: FirmwareCalibration) -> np.ndarray:
     """A fresh link state: both sweeps at address 0, no faults."""
+    cal = calibration(cal)
     lk = np.zeros(N_LINK_STATE, dtype=np.int64)
-    lk[LK_BITS_NUM] = int(cfg.get("fpga.lvds_bit_rate_hz")) * int(cfg.get("sim.tick_ns"))
+    lk[LK_BITS_NUM] = int(cal.fpga["lvds_bit_rate_hz"]) * int(cal.tick_ns)
     return lk
 
 
-def sweep_time_s(cfg: Config, words: int) -> float:
+def sweep_time_s(cal: FirmwareCalibration, words: int) -> float:
     """Time to send ``words`` words back to back, s."""
-    return words * WORD_BITS / cfg.get("fpga.lvds_bit_rate_hz")
+    return words * WORD_BITS / calibration(cal).fpga["lvds_bit_rate_hz"]
 
 
 @njit(cache=True, inline="always")
