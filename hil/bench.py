@@ -74,7 +74,7 @@ def bench_fpga(cfg: Config, seconds: float = 2.0, bit_level: bool = False) -> Pl
     memory; plant outputs are recorded every tick. ``bit_level`` runs the sensor links and
     LVDS words as real bits (Python per tick) instead of the compiled value-level path.
     """
-    from hil.fpga_stack import FpgaStack
+    from hil.actuator import FpgaStack
 
     stack = FpgaStack(cfg, bit_level=bit_level)
     stack.boot()
@@ -98,7 +98,7 @@ def bench_stack(cfg: Config, seconds: float = 2.0) -> PlantBench:
     """Time the full single-actuator stack: plant + driver board + LVDS link (value level)
     + MCU at 5 kHz (float32) + a 1 kHz PC task sending a sinusoidal force command; plant
     outputs recorded every 4th tick and the MCU's signals probed at 5 kHz."""
-    from hil.stack import ActuatorStack
+    from hil.actuator import ActuatorStack
 
     stack = ActuatorStack(
         cfg, lambda t: ("force", 300.0 * math.sin(2.0 * math.pi * 5.0 * t)), record_every=4)

@@ -33,7 +33,7 @@ def _plant(cfg) -> None:
 def _fpga_value_level(cfg) -> None:
     """Plant + sensor chips + driver board + LVDS link in one compiled call, with and
     without the board trace (the replay logs)."""
-    from hil.fpga_stack import TRACE_WIDTH, FpgaStack
+    from hil.actuator import TRACE_WIDTH, FpgaStack
 
     stack = FpgaStack(cfg)
     stack.boot()
@@ -43,7 +43,7 @@ def _fpga_value_level(cfg) -> None:
 
 def _fpga_bit_level(cfg) -> None:
     """The bit-level path calls the board's tick and the sensor kernels from Python."""
-    from hil.fpga_stack import FpgaStack
+    from hil.actuator import FpgaStack
 
     FpgaStack(cfg, bit_level=True).advance(2)
 

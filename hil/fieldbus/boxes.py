@@ -98,7 +98,7 @@ class StackBox(_BoxBase):
 
     def __init__(self, box: Box, cfg: Config) -> None:
         super().__init__(box, cfg)
-        from hil.fpga_stack import FpgaStack
+        from hil.actuator import FpgaStack
 
         self.stacks = [FpgaStack(cfg) for _ in self.act]
         self.mcu = Mcu(cfg, [s.mcu_link for s in self.stacks]) if self.stacks else None

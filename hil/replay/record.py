@@ -33,12 +33,12 @@ import numpy as np
 
 from firmware_model.fpga import layout as B
 from firmware_model.lvds import link as LK
+from hil.actuator import TRACE_WIDTH, TRACE_WORDS
 from hil.fieldbus.boxes import StackBox
 from hil.fieldbus.chain import CYCLE_TICKS
 from hil.fieldbus.master import Master
 from hil.fieldbus.system import BusRecord, BusSystem
 from hil.fieldbus.topology import Topology
-from hil.fpga_stack import TRACE_WIDTH, TRACE_WORDS
 from hil.framelog import FrameLogWriter
 from plant.config import Config
 from protocols import lvds

@@ -24,10 +24,10 @@ import numpy as np
 from firmware_model.fpga import layout as B
 from firmware_model.fpga.driver_board import LinkMemory
 from firmware_model.mcu.mcu import Mcu
+from hil.actuator import TRACE_WIDTH
 from hil.fieldbus.boxes import StackBox
 from hil.fieldbus.chain import CYCLE_TICKS
 from hil.fieldbus.topology import Topology, TopologyError, load_topology
-from hil.fpga_stack import TRACE_WIDTH
 from hil.framelog import FrameLogError, FrameLogReader
 from hil.framelog.reader import LogInfo
 from hil.replay.fpga_replay import column_name, replay_board_detail

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from firmware_model.fpga import layout as B
-from hil.fpga_stack import FpgaStack
+from hil.actuator import FpgaStack
 from hil.scenarios import Metric, Progress, ScenarioResult, register
 from plant import layout as L
 from plant.config import Config

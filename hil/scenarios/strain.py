@@ -24,9 +24,9 @@ from pathlib import Path
 
 import numpy as np
 
+from hil.actuator import PC_PERIOD_TICKS, ActuatorStack
 from hil.scenarios import Metric, Progress, ScenarioResult, register
 from hil.scheduler import Record
-from hil.stack import PC_PERIOD_TICKS, ActuatorStack
 from plant import layout as L
 from plant.config import Config
 

@@ -20,9 +20,9 @@ from pathlib import Path
 
 import numpy as np
 
+from hil.actuator import ActuatorStack
 from hil.scenarios import Metric, Progress, ScenarioResult, register
 from hil.scenarios.current import bandwidth_3db, step_metrics
-from hil.stack import ActuatorStack
 from plant.config import Config
 
 STEP_N = 550.0

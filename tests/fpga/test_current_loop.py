@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hil.fpga_stack import FpgaStack
+from hil.actuator import FpgaStack
 from hil.scenarios import current
 from hil.scenarios import get as scenario
 from plant import layout as L

@@ -9,7 +9,7 @@ from firmware_model.fpga import layout as B
 from firmware_model.fpga.driver_board import DriverBoard, LinkMemory
 from firmware_model.fpga.tick import control_tick
 from firmware_model.lvds import link as LK
-from hil.fpga_stack import FpgaStack
+from hil.actuator import FpgaStack
 from hil.sensor_chips import chip_params, digitise
 from plant.config import load_config
 from plant.model import Plant
@@ -105,7 +105,7 @@ def test_register_access_checks_ranges(cfg):
 
 # --- word-level faults of the value-level link: drop, duplicate, delay -----------------------
 def _booted(cfg):
-    from hil.fpga_stack import FpgaStack
+    from hil.actuator import FpgaStack
 
     s = FpgaStack(cfg)
     s.boot()
@@ -156,7 +156,7 @@ def test_delay_adds_latency_to_the_tick_register(cfg, delay):
 
 
 def test_new_faults_refused_on_the_bit_level_link_and_bad_values(cfg):
-    from hil.fpga_stack import FpgaStack
+    from hil.actuator import FpgaStack
 
     s = FpgaStack(cfg, bit_level=True)
     with pytest.raises(ValueError, match="bit-level"):

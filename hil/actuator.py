@@ -1,4 +1,11 @@
-"""Plant + driver board + LVDS link + the MCU side's link memory, stepped together.
+"""One actuator wired: plant -> sensor chips -> driver board -> LVDS link [-> MCU].
+
+The one wiring the harness reuses: :class:`FpgaStack` is everything below the MCU (plant,
+sensor chips, driver board, LVDS link and the MCU side's link memory ``mcu_link``);
+:class:`ActuatorStack` adds the MCU and a 1 kHz PC command on the scheduler; the fieldbus
+boxes (:mod:`hil.fieldbus.boxes`) and the replay build on the same pieces.
+
+Plant + driver board + LVDS link + the MCU side's link memory, stepped together.
 
 :class:`FpgaStack` looks like a :class:`plant.model.Plant` to the scheduler (``advance``,
 ``y``, ``tick``, ``tick_ns``), so tasks at lower rates (an MCU model, a scenario's
@@ -18,6 +25,8 @@ words as real bits (:mod:`hil.sensor_lines`, :mod:`firmware_model.fpga.masters`,
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 from numba import njit
 
@@ -25,6 +34,8 @@ from firmware_model.fpga import layout as B
 from firmware_model.fpga.driver_board import DriverBoard, LinkMemory
 from firmware_model.fpga.tick import control_tick
 from firmware_model.lvds import link as LK
+from firmware_model.mcu.mcu import Mcu
+from hil.scheduler import Record, Scheduler
 from hil.sensor_chips import chip_params, digitise
 from plant import kernel
 from plant import layout as L
@@ -225,4 +236,47 @@ class FpgaStack:
             raise RuntimeError(f"driver board did not enable: {sorted(self.mcu_link.status())}")
 
 
-__all__ = ["FpgaStack", "advance_stack"]
+PC_PERIOD_TICKS = 20  # 1 kHz
+
+#: command(t_s) -> (mode, value): "force" N, "position" m, or "off".
+CommandFn = Callable[[float], tuple[str, float]]
+
+
+class ActuatorStack:
+    """Plant, driver board, link and MCU for one actuator."""
+
+    def __init__(self, cfg: Config, command: CommandFn, record_every: int = 4) -> None:
+        self.config = cfg
+        self.fpga = FpgaStack(cfg)
+        self.mcu = Mcu(cfg, [self.fpga.mcu_link])
+        self.command = command
+        self.tick_s = self.fpga.tick_s
+        self.sched = Scheduler(self.fpga, record_every=record_every)
+        period = self.mcu.period
+        self.sched.every(PC_PERIOD_TICKS, self._pc, "pc")
+        self.sched.every(period, self.mcu.step, "mcu")
+        ctrl = self.mcu.ctrl[0]
+        self.sched.probe("tau_ref", lambda: float(self.mcu.tau_ref[0]), period)
+        self.sched.probe("f_pres", lambda: float(self.mcu.meas[0].f_pres), period)
+        self.sched.probe("f_strain", lambda: float(ctrl.cos_alpha * self.mcu.meas[0]
+                                                   .f_strain_raw), period)
+        self.sched.probe("f_fil", lambda: float(ctrl.f_fil), period)
+        self.sched.probe("iq_ref", lambda: float(self.mcu.iq_ref[0]), period)
+        self.sched.probe("x_meas", lambda: float(self.mcu.meas[0].x_piston), period)
+        self.mcu.command(0, *command(0.0), tick=0)
+        self.mcu.enable(0, self.fpga.board.calibrated_offset)
+
+    def _pc(self, tick: int) -> None:
+        self.mcu.command(0, *self.command(tick * self.tick_s), tick=tick)
+
+    def run(self, seconds: float, progress: bool = False, label: str = "stack") -> Record:
+        """Run for ``seconds`` of simulated time; the record holds plant outputs and probes."""
+        return self.sched.run(self.sched.ticks(seconds), progress, label)
+
+
+def probe_times(rec: Record, name: str) -> tuple[np.ndarray, np.ndarray]:
+    """(t in s, values) of a probe."""
+    return rec.probe(name)
+
+
+__all__ = ["ActuatorStack", "FpgaStack", "advance_stack", "probe_times"]
