@@ -19,7 +19,7 @@ plant's average model: duty = count / top; sampling at the carrier's centre sees
 average current, which is what the average model gives.
 
 ``bit_level=True`` runs the same per tick in Python with the sensor links and the LVDS
-words as real bits (:mod:`hil.sensor_lines`, :mod:`firmware_model.fpga.masters`,
+words as real bits (:mod:`plant.sensors.harness`, :mod:`firmware_model.fpga.masters`,
 :class:`firmware_model.lvds.link.BitLevelLink`); it is ~100x slower and gives identical words.
 """
 
@@ -36,11 +36,12 @@ from firmware_model.fpga.tick import control_tick
 from firmware_model.lvds import link as LK
 from firmware_model.mcu.mcu import Mcu
 from hil.scheduler import Record, Scheduler
-from hil.sensor_chips import chip_params, digitise
 from plant import kernel
 from plant import layout as L
 from plant.config import Config
 from plant.model import Plant
+from plant.sensors.chips import chip_params
+from plant.sensors.harness import digitise
 
 #: Columns of a driver-board trace row (:func:`advance_stack` ``trace``): what the board
 #: took in (raw sensor words; its downstream memory, link-watchdog count and CRC-error
@@ -134,7 +135,7 @@ class FpgaStack:
         self._bits = None
         if bit_level:
             from firmware_model.fpga.masters import BitLevelMasters
-            from hil.sensor_lines import SensorLines
+            from plant.sensors.harness import SensorLines
 
             self._bits = (SensorLines(cfg), BitLevelMasters(cfg), LK.BitLevelLink())
 

@@ -35,7 +35,6 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
 from numba import njit
 
 from plant.layout import (
@@ -83,10 +82,6 @@ from plant.layout import (
     P_LOAD_KIND,
     P_M_CART,
     P_N_SUB,
-    P_NOISE_F,
-    P_NOISE_ON,
-    P_NOISE_P,
-    P_NOISE_T,
     P_PC_EPS,
     P_PC_FORCE,
     P_PC_ON,
@@ -98,12 +93,6 @@ from plant.layout import (
     P_PULS_PHASE,
     P_PULS_TORQUE,
     P_PULS_TORQUE_REL,
-    P_Q_MOTOR,
-    P_Q_PISTON,
-    P_Q_PRESSURE,
-    P_Q_STRAIN,
-    P_Q_TEMP,
-    P_QUANT_ON,
     P_R,
     P_ROD_TAU,
     P_SF_COULOMB,
@@ -159,6 +148,7 @@ from plant.layout import (
     Y_X_PISTON,
     DriveMode,
 )
+from plant.sensors.readings import sense
 
 TWO_PI_3 = 2.0 * math.pi / 3.0
 SQRT3 = math.sqrt(3.0)
@@ -398,31 +388,6 @@ def rk4_tick(x, p, u, work):
             _end_stops(p, x)
 
 
-@njit(cache=True, inline="always")
-def _next_uniform(rng):
-    """xorshift64* -> float in (0, 1]. ``rng`` is a uint64 array of length 1."""
-    s = rng[0]
-    s ^= s >> np.uint64(12)
-    s ^= s << np.uint64(25)
-    s ^= s >> np.uint64(27)
-    rng[0] = s
-    r = s * np.uint64(0x2545F4914F6CDD1D)
-    return (float(r >> np.uint64(11)) + 1.0) * (1.0 / 9007199254740992.0)
-
-
-@njit(cache=True, inline="always")
-def _gauss(rng):
-    """Standard normal sample (Box-Muller, one of the pair)."""
-    u1 = _next_uniform(rng)
-    u2 = _next_uniform(rng)
-    return math.sqrt(-2.0 * math.log(u1)) * math.cos(2.0 * math.pi * u2)
-
-
-@njit(cache=True, inline="always")
-def _quantise(v, lsb):
-    return math.floor(v / lsb + 0.5) * lsb
-
-
 @njit(cache=True)
 def stored_energy(x, p, u):
     """Kinetic + elastic + magnetic energy held by the plant, J."""
@@ -440,7 +405,16 @@ def stored_energy(x, p, u):
 
 @njit(cache=True)
 def outputs(x, p, u, rng, y):
-    """Fill the output row ``y`` from the states: sensors, then truth."""
+    """Fill the output row ``y``: the physical values, then what the sensors read of them
+    (:func:`plant.sensors.readings.sense`: noise and converter resolution, when those
+    effects are on)."""
+    physical_outputs(x, p, u, y)
+    sense(p, rng, y)
+
+
+@njit(cache=True, inline="always")
+def physical_outputs(x, p, u, y):
+    """The output row's physical values (truth; no noise, no quantisation)."""
     kc = p[P_KC]
     kc_kp = p[P_KC_OVER_KP]
     r = viscosity_ratio(p, x[S_TOIL])
@@ -475,49 +449,19 @@ def outputs(x, p, u, rng, y):
     dp_pump = tq / kc
     dp_cyl = f_cyl / kc
     # Check valves keep the low side at the accumulator precharge.
-    p_pa = pre + (dp_pump if dp_pump > 0.0 else 0.0)
-    p_pb = pre + (-dp_pump if dp_pump < 0.0 else 0.0)
-    p_ca = pre + (dp_cyl if dp_cyl > 0.0 else 0.0)
-    p_cb = pre + (-dp_cyl if dp_cyl < 0.0 else 0.0)
-    p_acc = pre
+    y[Y_P_ACC] = pre
+    y[Y_P_PUMP_A] = pre + (dp_pump if dp_pump > 0.0 else 0.0)
+    y[Y_P_PUMP_B] = pre + (-dp_pump if dp_pump < 0.0 else 0.0)
+    y[Y_P_CYL_A] = pre + (dp_cyl if dp_cyl > 0.0 else 0.0)
+    y[Y_P_CYL_B] = pre + (-dp_cyl if dp_cyl < 0.0 else 0.0)
     f_strain = f_rod
     if p[P_DRIFT_ON] > 0.5:
         f_strain += p[P_DRIFT_K] * (x[S_TROD] - p[P_T_REF])
-    temp = x[S_TOIL]
-    if p[P_NOISE_ON] > 0.5:
-        sp = p[P_NOISE_P]
-        p_acc += sp * _gauss(rng)
-        p_pa += sp * _gauss(rng)
-        p_pb += sp * _gauss(rng)
-        p_ca += sp * _gauss(rng)
-        p_cb += sp * _gauss(rng)
-        f_strain += p[P_NOISE_F] * _gauss(rng)
-        temp += p[P_NOISE_T] * _gauss(rng)
-    theta_m = theta_rotor
-    x_pis = x[S_THC]
-    if p[P_QUANT_ON] > 0.5:
-        # Encoders floor to their count; converters round to their nearest code.
-        theta_m = math.floor(theta_m / p[P_Q_MOTOR]) * p[P_Q_MOTOR]
-        x_pis = math.floor(x_pis / p[P_Q_PISTON]) * p[P_Q_PISTON]
-        lsb = p[P_Q_PRESSURE]
-        p_acc = _quantise(p_acc, lsb)
-        p_pa = _quantise(p_pa, lsb)
-        p_pb = _quantise(p_pb, lsb)
-        p_ca = _quantise(p_ca, lsb)
-        p_cb = _quantise(p_cb, lsb)
-        f_strain = _quantise(f_strain, p[P_Q_STRAIN])
-        temp = _quantise(temp, p[P_Q_TEMP])
-
-    y[Y_THETA_M] = theta_m
-    y[Y_OMEGA_M] = x[S_VP] * kc_kp
-    y[Y_X_PISTON] = x_pis
-    y[Y_P_ACC] = p_acc
-    y[Y_P_PUMP_A] = p_pa
-    y[Y_P_PUMP_B] = p_pb
-    y[Y_P_CYL_A] = p_ca
-    y[Y_P_CYL_B] = p_cb
     y[Y_F_STRAIN] = f_strain
-    y[Y_TEMP] = temp
+    y[Y_TEMP] = x[S_TOIL]
+    y[Y_THETA_M] = theta_rotor
+    y[Y_OMEGA_M] = x[S_VP] * kc_kp
+    y[Y_X_PISTON] = x[S_THC]
     y[Y_V_PISTON] = vc
     y[Y_TAU_P] = tau_p
     y[Y_TAU_Q] = tq

@@ -1,9 +1,9 @@
 """The driver board's sensor masters at bit level: wires in, raw sensor words out.
 
 Each tick :meth:`BitLevelMasters.read` talks to the sensor chips only through what their
-links carry (the :class:`SensorWires` protocol, implemented by :class:`hil.sensor_lines.
-SensorLines`) and fills the raw word array (``layout.R_*``) the compiled board tick takes,
-in the same layout as the value-level :func:`hil.sensor_chips.digitise`:
+links carry (the :class:`SensorWires` protocol, implemented by :class:`plant.sensors.
+harness.SensorLines`) and fills the raw word array (``layout.R_*``) the compiled board tick takes,
+in the same layout as the value-level :func:`plant.sensors.harness.digitise`:
 
 * SSI (RMB30SI): one clocked frame per tick, starting at ``tick * tick_ns`` (integer ns),
   through :class:`protocols.ssi.SsiMaster`; a rejected frame (line low before the clock,

@@ -35,7 +35,7 @@ Where each link is hit:
   noise of standard deviation ``sigma`` (SI units) every tick, ``dead`` pins the chip's
   output code at 0 (lines low): the ADC channels read code 0, the AD7195 strain gauge
   reports a clamped conversion that the board rejects (ERR); a dead encoder (``theta_m``,
-  ``x_piston``) delivers no valid frame (the chip's dead flag, ``hil.sensor_chips``): the
+  ``x_piston``) delivers no valid frame (the chip's dead flag, ``plant.sensors.chips``): the
   board's master sees OK = 0 and the counts hold.
 
 Deterministic: every random entry draws from its own ``numpy.random.Generator`` seeded with
@@ -436,19 +436,16 @@ class FaultyTransport(Transport):
 
 def _dead_value(signal: str, k: np.ndarray) -> float:
     """Physical value whose chip code is 0 (for the ADC channels and the strain gauge)."""
-    from hil import sensor_chips as sc
-    from protocols.ad7195 import MIDSCALE
+    from plant.sensors.current_sense import zero_code_current
+    from plant.sensors.pressure_sensors import zero_code_pressure, zero_code_temperature
+    from plant.sensors.strain_gauge import zero_code_force
 
     chip = SENSOR_SIGNALS[signal][1]
-    if chip == "pressure":
-        return (-k[sc.K_P_V0] - k[sc.K_ADC_LSB]) * k[sc.K_P_PA_PER_V]
-    if chip == "temperature":
-        return (-k[sc.K_T_V0] - k[sc.K_ADC_LSB]) / k[sc.K_T_V_PER_C]
-    if chip == "current":
-        return -(k[sc.K_I_MID] + 1.0) * k[sc.K_I_LSB]
-    if chip == "strain":
-        return -(MIDSCALE + 1.0) / k[sc.K_STRAIN_SCALE]
-    raise AssertionError(signal)
+    zero = {"pressure": zero_code_pressure, "temperature": zero_code_temperature,
+            "current": zero_code_current, "strain": zero_code_force}
+    if chip not in zero:
+        raise AssertionError(signal)
+    return zero[chip](k)
 
 
 class FaultyStack:
@@ -471,7 +468,7 @@ class FaultyStack:
                       if f.kind == "dead" and SENSOR_SIGNALS[f.signal][1] != "encoder" else 0.0
                       for f in self.sensors]
         # Dead encoders are a chip flag (no valid frame), not a plant value.
-        from hil import sensor_chips as sc
+        from plant.sensors import chips as sc
 
         self._enc_flag = [(sc.K_MOTOR_DEAD if f.signal == "theta_m" else sc.K_PISTON_DEAD)
                           if f.kind == "dead" and SENSOR_SIGNALS[f.signal][1] == "encoder"

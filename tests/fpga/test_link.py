@@ -10,9 +10,10 @@ from firmware_model.fpga.driver_board import DriverBoard, LinkMemory
 from firmware_model.fpga.tick import control_tick
 from firmware_model.lvds import link as LK
 from hil.actuator import FpgaStack
-from hil.sensor_chips import chip_params, digitise
 from plant.config import load_config
 from plant.model import Plant
+from plant.sensors.chips import chip_params
+from plant.sensors.harness import digitise
 
 
 @pytest.fixture(scope="module")

@@ -1,7 +1,7 @@
 """The two sensor paths into the driver board give identical raw words and board outputs.
 
-Value level: :func:`hil.sensor_chips.digitise` (compiled). Bit level: the chips' wires
-(:class:`hil.sensor_lines.SensorLines`) read by the FPGA's masters
+Value level: :func:`plant.sensors.harness.digitise` (compiled). Bit level: the chips' wires
+(:class:`plant.sensors.harness.SensorLines`) read by the FPGA's masters
 (:class:`firmware_model.fpga.masters.BitLevelMasters`). Faults injected on the wires must
 show up as rejected reads that the board counts.
 """
@@ -17,20 +17,14 @@ from firmware_model.fpga import layout as B
 from firmware_model.fpga.masters import BitLevelMasters
 from firmware_model.fpga.params import board_params, calibrated_offset, down_defaults
 from firmware_model.fpga.tick import control_tick
-from hil.sensor_chips import (
-    abi_count,
-    biss_count,
-    chip_params,
-    digitise,
-    ssi_count,
-    strain_clamped,
-    strain_code,
-    strain_conversions,
-)
-from hil.sensor_lines import SensorLines
 from plant import layout as L
 from plant.config import load_config
 from plant.model import Plant
+from plant.sensors.chips import chip_params
+from plant.sensors.harness import SensorLines, digitise
+from plant.sensors.motor_encoder import abi_count, ssi_count
+from plant.sensors.piston_encoder import biss_count
+from plant.sensors.strain_gauge import strain_clamped, strain_code, strain_conversions
 from protocols.ad7195 import AD7195Device
 from protocols.ssi import SsiFormat
 

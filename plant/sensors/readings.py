@@ -1,0 +1,95 @@
+"""What the plant's sensor outputs read: noise and converter resolution, kept out of the
+physics (:func:`plant.kernel.physical_outputs` gives the true values).
+
+``effects.sensor_noise`` adds Gaussian noise to the five pressures, the strain force and the
+oil temperature (in that order, from the plant's own xorshift64* stream, so the same seed
+gives the same noise); ``effects.quantisation`` floors the encoders' angle and position to
+their counts and rounds the converters' values to their LSB.
+
+These are the plant's sensor outputs as the identification and the plant-only analyses see
+them. In the full stack the sensor chips (:mod:`plant.sensors.harness`) then turn these
+readings into codes; with ``effects.quantisation`` on that is a second rounding, which the
+chips' epsilon before each floor keeps harmless for the encoders. It is kept so that runs
+stay bit-identical to the logs and figures recorded before the sensors had a module of their
+own; ``--set effects.quantisation.enabled=false`` gives the chips the unrounded values.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from plant.layout import (
+    P_NOISE_F,
+    P_NOISE_ON,
+    P_NOISE_P,
+    P_NOISE_T,
+    P_Q_MOTOR,
+    P_Q_PISTON,
+    P_Q_PRESSURE,
+    P_Q_STRAIN,
+    P_Q_TEMP,
+    P_QUANT_ON,
+    Y_F_STRAIN,
+    Y_P_ACC,
+    Y_P_CYL_A,
+    Y_P_CYL_B,
+    Y_P_PUMP_A,
+    Y_P_PUMP_B,
+    Y_TEMP,
+    Y_THETA_M,
+    Y_X_PISTON,
+)
+
+
+@njit(cache=True, inline="always")
+def _next_uniform(rng):
+    """xorshift64* -> float in (0, 1]. ``rng`` is a uint64 array of length 1."""
+    s = rng[0]
+    s ^= s >> np.uint64(12)
+    s ^= s << np.uint64(25)
+    s ^= s >> np.uint64(27)
+    rng[0] = s
+    r = s * np.uint64(0x2545F4914F6CDD1D)
+    return (float(r >> np.uint64(11)) + 1.0) * (1.0 / 9007199254740992.0)
+
+
+@njit(cache=True, inline="always")
+def _gauss(rng):
+    """Standard normal sample (Box-Muller, one of the pair)."""
+    u1 = _next_uniform(rng)
+    u2 = _next_uniform(rng)
+    return math.sqrt(-2.0 * math.log(u1)) * math.cos(2.0 * math.pi * u2)
+
+
+@njit(cache=True, inline="always")
+def _quantise(v, lsb):
+    return math.floor(v / lsb + 0.5) * lsb
+
+
+@njit(cache=True, inline="always")
+def sense(p, rng, y):
+    """Turn the physical values in the output row ``y`` into what the sensors read."""
+    if p[P_NOISE_ON] > 0.5:
+        sp = p[P_NOISE_P]
+        y[Y_P_ACC] += sp * _gauss(rng)
+        y[Y_P_PUMP_A] += sp * _gauss(rng)
+        y[Y_P_PUMP_B] += sp * _gauss(rng)
+        y[Y_P_CYL_A] += sp * _gauss(rng)
+        y[Y_P_CYL_B] += sp * _gauss(rng)
+        y[Y_F_STRAIN] += p[P_NOISE_F] * _gauss(rng)
+        y[Y_TEMP] += p[P_NOISE_T] * _gauss(rng)
+    if p[P_QUANT_ON] > 0.5:
+        # Encoders floor to their count; converters round to their nearest code.
+        y[Y_THETA_M] = math.floor(y[Y_THETA_M] / p[P_Q_MOTOR]) * p[P_Q_MOTOR]
+        y[Y_X_PISTON] = math.floor(y[Y_X_PISTON] / p[P_Q_PISTON]) * p[P_Q_PISTON]
+        lsb = p[P_Q_PRESSURE]
+        y[Y_P_ACC] = _quantise(y[Y_P_ACC], lsb)
+        y[Y_P_PUMP_A] = _quantise(y[Y_P_PUMP_A], lsb)
+        y[Y_P_PUMP_B] = _quantise(y[Y_P_PUMP_B], lsb)
+        y[Y_P_CYL_A] = _quantise(y[Y_P_CYL_A], lsb)
+        y[Y_P_CYL_B] = _quantise(y[Y_P_CYL_B], lsb)
+        y[Y_F_STRAIN] = _quantise(y[Y_F_STRAIN], p[P_Q_STRAIN])
+        y[Y_TEMP] = _quantise(y[Y_TEMP], p[P_Q_TEMP])
