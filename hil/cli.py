@@ -495,6 +495,12 @@ def _add_external(sub, bsub) -> None:
                        "plant, with an effect the fitted model does not declare")
     ident.configure_synth(p)
     p.set_defaults(func=ident.run_synth)
+    from hil.identify import check_cli
+
+    p = sub.add_parser("identify-check", help="judge the identification on the independent "
+                       "rig: every effect, load and seed, as a table")
+    check_cli.configure_check(p)
+    p.set_defaults(func=check_cli.run_check)
     p = bsub.add_parser("identify", help="time to identify a 16 s, 5 kHz dataset (<= 60 s)")
     ident.configure_bench(p)
     p.set_defaults(func=ident.run_bench)

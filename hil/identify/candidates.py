@@ -48,6 +48,9 @@ MAX_SELF_COND = 1e3
 MIN_SHARE = 0.005
 #: ... and least size relative to the realistic (nominal) one, for at least one parameter.
 MIN_MAGNITUDE = 0.2
+#: Where the friction laws' shape starts its refit: between tanh (0) and atan (1), so the
+#: data, not the start, picks the law.
+FRICTION_SHAPE_START = 0.5
 
 
 @dataclass(frozen=True)
@@ -105,13 +108,17 @@ def library(exp: Experiment) -> list[EffectDef]:
         ))
     out += [
         EffectDef("pump_coulomb_friction", "pump_coulomb_friction", ("pc_force_n",), (40.0,),
-                  "Coulomb friction of the pump shaft seal, F_c tanh(v_p/eps), eps fitted",
-                  refit_extra=(("pc_eps_m_per_s", lambda exp: exp.const.eps_pump),)),
+                  "Coulomb friction of the pump shaft seal, F_c s(v_p/eps); eps and the sign "
+                  "law's shape (tanh .. atan) fitted",
+                  refit_extra=(("pc_eps_m_per_s", lambda exp: exp.const.eps_pump),
+                               ("pc_shape", lambda exp: FRICTION_SHAPE_START))),
         EffectDef("seal_friction", "seal_friction", ("sf_coulomb_n", "sf_static_n"),
                   (15.0, 15.0),
-                  "rod-seal Coulomb + Stribeck friction on the piston, v_s fitted",
+                  "rod-seal Coulomb + Stribeck friction on the piston; v_s and the sign "
+                  "law's shape (tanh .. atan) fitted",
                   _needs_moving_piston,
-                  refit_extra=(("sf_vs_m_per_s", lambda exp: exp.const.vs_seal),)),
+                  refit_extra=(("sf_vs_m_per_s", lambda exp: exp.const.vs_seal),
+                               ("sf_shape", lambda exp: FRICTION_SHAPE_START))),
         EffectDef("stiffness_vs_position", "stiffness_vs_position", ("ks_k1", "ks_k2"),
                   (0.1, 0.1),
                   "k_s(x) = k_s / (1 + c1 x/h + c2 (x/h)^2), h the half stroke: Eq. "

@@ -73,7 +73,7 @@ def bounds_of(name: str, dt: float, skew_limit: float = SKEW_LIMIT) -> tuple[flo
         return 0.0, MAX_SENSOR_LAG_S
     if name == "delay_s":
         return 0.0, np.inf
-    if name.startswith("sat_"):
+    if name.startswith("sat_") or name.endswith("_shape"):
         return 0.0, 1.0
     return -np.inf, np.inf
 
@@ -196,7 +196,11 @@ class OutputErrorFit:
         return np.array(lo), np.array(hi)
 
     def at_bound(self, result: FitResult, name: str) -> bool:
-        """True when ``name`` ended on (or within 0.1 % of the range near) its bound."""
+        """True when ``name`` ended on (or within 0.1 % of the range near) its bound.
+
+        A friction law's shape (0 tanh .. 1 atan) at either end is that law, not a runaway."""
+        if name.endswith("_shape"):
+            return False
         lo, hi = (a[0] for a in self._x_bounds([name]))
         if name in LOG_PARAMS:
             ref = getattr(self, "_ref", {}).get(name)

@@ -49,7 +49,7 @@ _PULS = tuple(
 SAT_CHANNELS = ("p_pump_a", "p_pump_b", "p_cyl_a", "p_cyl_b", "f_strain")
 EFFECT_NAMES = _PULS + (
     "pc_force_n", "sf_coulomb_n", "sf_static_n", "ks_k1", "ks_k2", "visc_coeff_per_c",
-    "drift_n_per_c", "delay_s", "pc_eps_m_per_s", "sf_vs_m_per_s",
+    "drift_n_per_c", "delay_s", "pc_eps_m_per_s", "sf_vs_m_per_s", "pc_shape", "sf_shape",
 ) + tuple(f"sat_{c}" for c in SAT_CHANNELS)
 PARAM_NAMES = BASE_NAMES + EFFECT_NAMES
 IDX = {name: i for i, name in enumerate(PARAM_NAMES)}
@@ -66,7 +66,8 @@ _E_VISC = 41
 _E_KC_KP = 42
 _E_H_SUB = 43
 _E_ALPHA = 44  # per-sample gain of the angle complementary filter
-_N_EFF = 45
+_E_PC_SHAPE, _E_SF_SHAPE = 45, 46
+_N_EFF = 47
 #: Crossover of the complementary filter that ties the simulated rotor angle to the
 #: measured one: below it the encoder (no drift), above it the simulation (no quantisation).
 ANGLE_CROSSOVER_HZ = 10.0
@@ -136,8 +137,25 @@ def _initial_state(a: np.ndarray, b: np.ndarray, u0: np.ndarray, load: str) -> n
 
 
 @njit(cache=True, nogil=True)
-def _solve_friction(v_free, b, level_c, level_s, vs, eps):
-    """Root v of v = v_free - b * F(v), F(v) = (Fc + (Fs - Fc) exp(-(v/vs)^2)) tanh(v/eps).
+def _friction_sign(u, w):
+    """The friction's sign law and its slope: ``(1 - w) tanh(u) + w (2/pi) atan(pi u/2)``.
+
+    Both laws have slope 1 at zero (so ``eps`` keeps its meaning) and reach +-1; tanh does so
+    exponentially, atan algebraically (1 - 2/(pi u)): ``w`` in 0..1 is the shape."""
+    th = math.tanh(u)
+    s = (1.0 - w) * th
+    ds = (1.0 - w) * (1.0 - th * th)
+    if w != 0.0:
+        q = 0.5 * math.pi * u
+        s += w * (2.0 / math.pi) * math.atan(q)
+        ds += w / (1.0 + q * q)
+    return s, ds
+
+
+@njit(cache=True, nogil=True)
+def _solve_friction(v_free, b, level_c, level_s, vs, eps, w):
+    """Root v of v = v_free - b * F(v), F(v) = (Fc + (Fs - Fc) exp(-(v/vs)^2)) s(v/eps, w)
+    with the sign law ``s`` of :func:`_friction_sign`.
 
     Bisection on the bracket [v_free - b Fmax, v_free + b Fmax] refined by Newton steps;
     returns (v, F(v)).
@@ -152,7 +170,7 @@ def _solve_friction(v_free, b, level_c, level_s, vs, eps):
             lev = level_c + (level_s - level_c) * math.exp(-q * q)
         else:
             lev = level_c
-        th = math.tanh(v / eps)
+        th, dth = _friction_sign(v / eps, w)
         g = v - v_free + b * lev * th
         if abs(g) < 1e-13 + 1e-10 * abs(v_free):
             break
@@ -160,7 +178,7 @@ def _solve_friction(v_free, b, level_c, level_s, vs, eps):
             hi = v
         else:
             lo = v
-        dg = 1.0 + b * lev * (1.0 - th * th) / eps
+        dg = 1.0 + b * lev * dth / eps
         if vs > 0.0:
             dg += b * th * (level_s - level_c) * math.exp(-q * q) * (-2.0 * q / vs)
         vn = v - g / dg if dg > 0.0 else 0.5 * (lo + hi)
@@ -172,7 +190,7 @@ def _solve_friction(v_free, b, level_c, level_s, vs, eps):
         lev = level_c + (level_s - level_c) * math.exp(-q * q)
     else:
         lev = level_c
-    return v, lev * math.tanh(v / eps)
+    return v, lev * _friction_sign(v / eps, w)[0]
 
 
 @njit(cache=True, nogil=True)
@@ -266,12 +284,13 @@ def _simulate(ad, bd, z0, tau_p, ks, ds, dp, dc, eff, angle, has_angle, xs, has_
                     acc += bd[i, m] * u[m]
                 zn[i] = acc
             if pc != 0.0:
-                vnew, fp = _solve_friction(zn[1], bd[1, 1], pc, pc, 0.0, eff[_E_PC_EPS])
+                vnew, fp = _solve_friction(zn[1], bd[1, 1], pc, pc, 0.0, eff[_E_PC_EPS],
+                                           eff[_E_PC_SHAPE])
                 for i in range(ns):
                     zn[i] -= bd[i, 1] * fp
             if sf_on:
                 vnew, fs = _solve_friction(zn[4], bd[4, 3], sf_c, sf_s, eff[_E_SF_VS],
-                                           eff[_E_SF_EPS])
+                                           eff[_E_SF_EPS], eff[_E_SF_SHAPE])
                 for i in range(ns):
                     zn[i] -= bd[i, 3] * fs
             for i in range(ns):
@@ -361,6 +380,8 @@ class FastModel:
         eff[_E_SF_S] = theta[IDX["sf_static_n"]]
         eff[_E_SF_VS] = theta[IDX["sf_vs_m_per_s"]] or exp.const.vs_seal
         eff[_E_SF_EPS] = exp.const.eps_seal
+        eff[_E_PC_SHAPE] = theta[IDX["pc_shape"]]
+        eff[_E_SF_SHAPE] = theta[IDX["sf_shape"]]
         eff[_E_K1] = theta[IDX["ks_k1"]]
         eff[_E_K2] = theta[IDX["ks_k2"]]
         eff[_E_HALF] = exp.const.half_stroke

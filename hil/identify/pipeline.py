@@ -245,6 +245,9 @@ def describe_effect(d: EffectDef, fit: FitResult, exp: Experiment) -> dict[str, 
         if "pc_eps_m_per_s" in fit.free:
             out["eps_m_per_s"] = _pe("eps_m_per_s", fit, lambda t: t[g["pc_eps_m_per_s"]],
                                      ["pc_eps_m_per_s"], "m/s")
+        if "pc_shape" in fit.free:
+            out["shape"] = _pe("shape", fit, lambda t: t[g["pc_shape"]], ["pc_shape"],
+                               "0 tanh .. 1 atan")
         return out
     if d.name == "seal_friction":
         out = {"coulomb_n": _pe("coulomb_n", fit, lambda t: t[g["sf_coulomb_n"]], ps, "N"),
@@ -253,6 +256,9 @@ def describe_effect(d: EffectDef, fit: FitResult, exp: Experiment) -> dict[str, 
             out["stribeck_velocity_m_per_s"] = _pe(
                 "stribeck_velocity_m_per_s", fit, lambda t: t[g["sf_vs_m_per_s"]],
                 ["sf_vs_m_per_s"], "m/s")
+        if "sf_shape" in fit.free:
+            out["shape"] = _pe("shape", fit, lambda t: t[g["sf_shape"]], ["sf_shape"],
+                               "0 tanh .. 1 atan")
         return out
     if d.name == "stiffness_vs_position":
         # k_s(x) = k_s / (1 + c1 x/h + c2 (x/h)^2): Eq. 2.25-2.27 make the compliance exactly
@@ -504,7 +510,8 @@ def identify(
     return IdentifyReport(
         data.path, data.load, exp.n, data.sample_rate_hz, baseline_est, final_est,
         held, added, rounds, channels, analysis0, analysis1, unexplained, detail,
-        notes=list(exp.notes) + [f"ignored column {c}" for c in data.ignored],
+        notes=list(data.notes) + list(exp.notes)
+        + [f"ignored column {c}" for c in data.ignored],
         rejected=rejected, wall_s=time.perf_counter() - t_start, experiment=exp,
         outputs_before=base.outputs, outputs_after=current.outputs,
         intersample=exp.intersample, intersample_reason=exp.intersample_reason,

@@ -34,7 +34,7 @@ PNG = b"\x89PNG\r\n\x1a\n" + bytes(range(256)) * 4
 UNTYPED_PATHS = {"config": "config", "preset": "config", "topology": "input",
                  "port": "device", "log": "input", "out": "output"}
 #: Options that take a value which is neither a number nor a path.
-TEXT = {"set", "effect", "magnitude", "host", "scenario", "topic", "field", "board"}
+TEXT = {"set", "effect", "magnitude", "host", "scenario", "topic", "field", "board", "case"}
 
 #: Extra arguments that keep a verb cheap when the value under test is valid (tiny
 #: durations, --json for no progress lines), and placeholders for required positionals.
@@ -50,6 +50,7 @@ BASE = {
     "eha-hil bus run": ["--seconds", "0.01"],
     "eha-hil serve": ["--port", "pty", "--seconds", "0.01", "-q"],
     "eha-hil identify-synth": ["--seconds", "1.01"],
+    "eha-hil identify-check": ["--case", "no such case"],  # exits 2 before any run
 }
 
 
