@@ -36,7 +36,7 @@ import numpy as np
 
 from hil.identify import stats
 from hil.identify.experiment import Experiment
-from hil.identify.model import N_ORDERS, SAT_CHANNELS, map_threads
+from hil.identify.model import N_ORDERS, PRESSURE_CHANNELS, SAT_CHANNELS, SAT_PRESSURE, map_threads
 
 ALPHA = 0.01
 #: Retained norm share below which a signature column is collinear with declared terms.
@@ -141,6 +141,12 @@ def library(exp: Experiment) -> list[EffectDef]:
         out.append(EffectDef("sensor_saturation", "sensor_saturation", (), (),
                              "a channel clipped at a level",
                              lambda exp: "no channel sits on a plateau at its maximum"))
+    press = [c for c in sat if c in PRESSURE_CHANNELS]
+    if len(press) > 1:  # the pressure sensors clip as one effect
+        levels = ", ".join(f"{c} {exp.plateaus[c]:.6g}" for c in press)
+        out.append(EffectDef("sensor_saturation", "sensor_saturation[pressure]",
+                             (SAT_PRESSURE,), (1.0,), f"pressure sensors clipped at {levels}"))
+        sat = [c for c in sat if c not in press]
     for c in sat:
         out.append(EffectDef("sensor_saturation", f"sensor_saturation[{c}]", (f"sat_{c}",),
                              (1.0,), f"{c} clipped at {exp.plateaus[c]:.6g}"))

@@ -29,8 +29,15 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from hil.identify import stats
-from hil.identify.experiment import Experiment
-from hil.identify.model import IDX, NUISANCE, PRESSURE_CHANNELS, FastModel, map_threads
+from hil.identify.experiment import Experiment, quantum
+from hil.identify.model import (
+    IDX,
+    NUISANCE,
+    PRESSURE_CHANNELS,
+    SAT_PRESSURE,
+    FastModel,
+    map_threads,
+)
 
 #: Baseline parameters that can be fitted per load kind (others have no effect there).
 BASELINE_FREE: dict[str, tuple[str, ...]] = {
@@ -112,6 +119,12 @@ class OutputErrorFit:
         self.scales = scales or {}
         self.n_sims = 0
         self.skew_limit = SKEW_LIMIT
+        # Samples on a channel's clip plateau say only "at least the level": until the
+        # saturation effect models the clip, they count only where the model is below it
+        # (a censored residual), so the clip does not bias the linear fit.
+        self._clipped = {
+            c: self.exp.measured[c] >= level - 0.5 * quantum(self.exp.measured[c])
+            for c, level in self.exp.plateaus.items() if c in self.exp.channels}
 
     # --- parameter transforms ------------------------------------------------------------
     def _to_theta(self, x: np.ndarray, free: list[str], base: np.ndarray) -> np.ndarray:
@@ -147,8 +160,12 @@ class OutputErrorFit:
         out = self.model.outputs(theta, n_stop=int(np.flatnonzero(mask)[-1]) + 1)
         parts = []
         for c in self.exp.channels:
-            e = (self.exp.measured[c] - out[c])[mask] / sigma[c]
-            parts.append(np.nan_to_num(e))
+            e = self.exp.measured[c] - out[c]
+            clipped = self._clipped.get(c)
+            if clipped is not None and theta[IDX[f"sat_{c}"]] == 0.0 and (
+                    c not in PRESSURE_CHANNELS or theta[IDX[SAT_PRESSURE]] == 0.0):
+                e = np.where(clipped, np.maximum(e, 0.0), e)
+            parts.append(np.nan_to_num(e[mask] / sigma[c]))
         return np.concatenate(parts)
 
     def _problem(self, free: list[str], theta0: np.ndarray, sigma: dict[str, float],
@@ -198,8 +215,9 @@ class OutputErrorFit:
     def at_bound(self, result: FitResult, name: str) -> bool:
         """True when ``name`` ended on (or within 0.1 % of the range near) its bound.
 
-        A friction law's shape (0 tanh .. 1 atan) at either end is that law, not a runaway."""
-        if name.endswith("_shape"):
+        A friction law's shape (0 tanh .. 1 atan) at either end is that law, and a clip
+        fraction of 1 is a sensor that clips outright: neither is a runaway."""
+        if name.endswith("_shape") or name.startswith("sat_"):
             return False
         lo, hi = (a[0] for a in self._x_bounds([name]))
         if name in LOG_PARAMS:
@@ -212,7 +230,7 @@ class OutputErrorFit:
         width = hi - lo if np.isfinite(hi - lo) else max(abs(x), 1.0)
         tol = 1e-3 * width
         # a causal delay or a clip fraction resting at 0 is "absent", not "at a bound"
-        rest_at_zero = name == "delay_s" or name.startswith(("sat_", "lag_"))
+        rest_at_zero = name == "delay_s" or name.startswith("lag_")
         return bool(x - lo < tol and not (rest_at_zero and lo == 0.0)) or bool(hi - x < tol)
 
     def cost(self, theta: np.ndarray, sigma: dict[str, float]) -> float:

@@ -47,10 +47,14 @@ _PULS = tuple(
     for part in ("flow_s", "flow_c", "torque_s", "torque_c")
 )
 SAT_CHANNELS = ("p_pump_a", "p_pump_b", "p_cyl_a", "p_cyl_b", "f_strain")
+#: Pressure channels clipping together: one clip fraction for every pressure channel with a
+#: plateau (the sensors share a range; a clip seen on one channel only in the estimation part
+#: and on another only in the validation part is still one effect).
+SAT_PRESSURE = "sat_pressure"
 EFFECT_NAMES = _PULS + (
     "pc_force_n", "sf_coulomb_n", "sf_static_n", "ks_k1", "ks_k2", "visc_coeff_per_c",
     "drift_n_per_c", "delay_s", "pc_eps_m_per_s", "sf_vs_m_per_s", "pc_shape", "sf_shape",
-) + tuple(f"sat_{c}" for c in SAT_CHANNELS)
+) + tuple(f"sat_{c}" for c in SAT_CHANNELS) + (SAT_PRESSURE,)
 PARAM_NAMES = BASE_NAMES + EFFECT_NAMES
 IDX = {name: i for i, name in enumerate(PARAM_NAMES)}
 N_PARAMS = len(PARAM_NAMES)
@@ -450,6 +454,8 @@ class FastModel:
                 y = sensor_lag(y, lag, exp.dt)
             if ch in SAT_CHANNELS:
                 beta = theta[IDX[f"sat_{ch}"]]
+                if ch in PRESSURE_CHANNELS:
+                    beta += theta[IDX[SAT_PRESSURE]]
                 level = exp.plateaus.get(ch)
                 if beta != 0.0 and level is not None:
                     y = y + beta * (np.minimum(y, level) - y)

@@ -42,7 +42,7 @@ from hil.identify.fit import (
     fit_baseline,
     guarded_fit,
 )
-from hil.identify.model import IDX, FastModel
+from hil.identify.model import IDX, PRESSURE_CHANNELS, FastModel
 from hil.identify.noise import (
     InputNoise,
     estimate_input_noise,
@@ -302,7 +302,9 @@ def describe_effect(d: EffectDef, fit: FitResult, exp: Experiment) -> dict[str, 
         return {"delay_s": _pe("delay_s", fit, lambda t: t[g["delay_s"]], ps, "s")}
     if d.name == "sensor_saturation":
         ch = d.label.split("[")[1].rstrip("]")
-        lvl = exp.plateaus[ch]
+        # the pressure group: the highest plateau (the sensors' common range)
+        lvl = (max(exp.plateaus[c] for c in PRESSURE_CHANNELS if c in exp.plateaus)
+               if ch == "pressure" else exp.plateaus[ch])
         return {"level": ParamEstimate("level", lvl, lvl, lvl, "Pa" if ch != "f_strain" else "N"),
                 "clip_fraction": _pe("clip_fraction", fit, lambda t: t[g[ps[0]]], ps, "1")}
     return {p: _pe(p, fit, lambda t, p=p: t[g[p]], [p], "") for p in ps}
@@ -506,6 +508,14 @@ def identify(
                              nrmse(exp.measured[c][exp.val], current.outputs[c][exp.val]))
                 for c in exp.channels]
     unexplained, detail = _verdict(analysis1)
+    far = implausible_parameters(current, exp)
+    if far:
+        # a white residual bought with a core parameter far from its datasheet value: the
+        # linear model absorbed a structure it does not have
+        unexplained = True
+        detail = "; ".join(filter(None, [detail, "baseline parameters far from the configured "
+                                         "values, the model absorbs structure it lacks: "
+                                         + ", ".join(far)]))
     final_est = _estimates(current, names)
     return IdentifyReport(
         data.path, data.load, exp.n, data.sample_rate_hz, baseline_est, final_est,
@@ -530,6 +540,25 @@ def _all_scales(defs: dict[str, EffectDef]) -> dict[str, float]:
 #: Share of a judged channel's residual variance predictable from its own past above which
 #: non-white structure counts as material (see :mod:`hil.identify.residuals`).
 MATERIAL_SHARE = 0.01
+#: Core parameters of the linear model, well determined in every load case that has them,
+#: and the factor by which a fit may leave their configured (datasheet) values before the
+#: model is taken to be absorbing structure it lacks.
+CORE_PARAMS = ("gain_n_per_a", "ds", "dp", "ks", "jp", "k_rod")
+PLAUSIBLE_FACTOR = 1.5
+
+
+def implausible_parameters(fit: FitResult, exp: Experiment) -> list[str]:
+    """Core parameters the fit left free and moved beyond :data:`PLAUSIBLE_FACTOR` of their
+    configured values (text for the report)."""
+    out = []
+    for name in CORE_PARAMS:
+        start = exp.start.get(name)
+        if name not in fit.free or not start:
+            continue
+        ratio = fit.value(name) / start
+        if not 1.0 / PLAUSIBLE_FACTOR <= ratio <= PLAUSIBLE_FACTOR:
+            out.append(f"{BASELINE_LABELS[name][0]} {ratio:.2f}x")
+    return out
 
 
 def _verdict(a: ResidualAnalysis) -> tuple[bool, str]:

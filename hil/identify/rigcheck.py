@@ -93,6 +93,8 @@ class CaseResult:
     magnitudes: list[tuple[str, float, float | None]] = field(default_factory=list)
     wall_s: float = 0.0
     cpu_s: float = 0.0
+    #: fitted baseline parameter / its true value - 1, for those the fit did not hold
+    param_error: dict[str, float] = field(default_factory=dict)
 
     def as_dict(self) -> dict[str, Any]:
         return {"case": self.case.label, "load": self.case.load,
@@ -102,6 +104,7 @@ class CaseResult:
                 "refused": self.refused,
                 "magnitudes": [{"what": w, "truth": t, "found": f}
                                for w, t, f in self.magnitudes],
+                "param_error": self.param_error,
                 "wall_s": self.wall_s, "cpu_s": self.cpu_s}
 
 
@@ -143,7 +146,7 @@ def judge(case: Case, truth: dict[str, dict[str, float]], found: dict[str, dict[
 def run_case(case: Case, seed: int) -> CaseResult:
     """Generate the record, identify it, judge it (runs in a worker process)."""
     from hil.identify.checks import RefusedData
-    from hil.identify.pipeline import identify
+    from hil.identify.pipeline import BASELINE_LABELS, identify
     from hil.identify.rig import generate_rig
     from plant.config import load_config
 
@@ -166,9 +169,13 @@ def run_case(case: Case, seed: int) -> CaseResult:
             continue
         found[e.name] = params
     right, why, mags = judge(case, truth, found, rep.unexplained)
+    true_p = rig.truth["parameters"]
+    param_error = {sym: rep.final[sym].value / true_p[name] - 1.0
+                   for name, (sym, _, _) in BASELINE_LABELS.items()
+                   if sym in rep.final and name in true_p and name not in rep.held}
     return CaseResult(case, seed, right, why, list(case.effects), labels, rep.unexplained,
                       magnitudes=mags, wall_s=time.perf_counter() - t0,
-                      cpu_s=time.process_time() - c0)
+                      cpu_s=time.process_time() - c0, param_error=param_error)
 
 
 def _run_packed(args: tuple[Case, int]) -> CaseResult:
@@ -208,7 +215,7 @@ def _warm() -> None:
     from hil.identify.rig import generate_rig
     from plant.config import load_config
 
-    rig = generate_rig("fixed_piston", ["pump_coulomb_friction"], seconds=0.05)
+    rig = generate_rig("fixed_piston", ["pump_coulomb_friction"], seconds=0.2)
     model = FastModel(prepare(rig.data, load_config("hydra_default")))
     model.outputs(model.start_vector())
 
