@@ -48,7 +48,9 @@ def _run_bus(args: argparse.Namespace, cfg, topo, cycles: int, model: str, pc):
 
     t0 = time.perf_counter()
     if args.log:
-        if args.transport != "inproc":
+        from hil.transports import backend
+
+        if not backend(args.transport).in_memory:
             raise BusUsageError("--log records the in-process run; use --transport inproc")
         if model != "stack":
             raise BusUsageError("--log records the MCU model: use --model stack")
@@ -214,7 +216,7 @@ def add_parsers(sub, bsub, common, config_fn, wrap) -> None:
 
     p = bsub.add_parser("bus", parents=[common(plot=False)],
                         help="full-robot process-image cycles per second per transport")
-    p.add_argument("--backends", nargs="+", default=["inproc", "udp", "serial", "can"],
+    p.add_argument("--backends", nargs="+", default=list(BACKENDS),
                    choices=list(BACKENDS), help="transports to measure")
     p.add_argument("--cycles", type=int_range(1, 1_000_000), default=500,
                    help="cycles per backend, 1..1000000")

@@ -227,37 +227,29 @@ def _usage(msg: str) -> Exception:
     return BusUsageError(msg)
 
 
-def _open_end(args: argparse.Namespace):
-    """(transport end, where it listens, pty to close or None)."""
-    from hil.transports import open_transport, pty_pair
+def serve_backends() -> list[str]:
+    """The transports ``eha-hil serve`` offers (each backend says whether it can)."""
+    from hil.transports import BACKENDS, backend
 
-    pty = None
+    return [b for b in BACKENDS if backend(b).serves_remote_masters]
+
+
+def _open_end(args: argparse.Namespace):
+    """(transport end, where it listens, release callable or None). The backend's listen
+    takes the options of ours it declares (``host``, ``baudrate``)."""
+    import inspect
+
+    from hil.transports import backend
+
+    kind = backend(args.transport)
+    declared = inspect.signature(kind.listen).parameters
+    opts = {k: v for k, v in (("host", args.host), ("baudrate", args.baudrate))
+            if k in declared}
     try:
-        if args.transport == "udp":
-            try:
-                port = int(args.port)
-            except ValueError:
-                raise _usage(f"--port {args.port!r}: udp needs a port number "
-                             "(0: any free port)") from None
-            if not 0 <= port <= 65535:
-                raise _usage(f"--port {port}: must be 0..65535")
-            end = open_transport("udp", "slave", host=args.host, port=port)
-            return end, f"udp {end.address[0]}:{end.address[1]}", None
-        if args.port == "pty":
-            pty = pty_pair()
-            end = open_transport("serial", "slave", fd=pty.master_fd)
-            return end, f"serial {pty.slave_path} (new pseudo-terminal: open this path from "\
-                "the master program)", pty
-        end = open_transport("serial", "slave", url=args.port, baudrate=args.baudrate)
-        return end, f"serial {args.port} at {args.baudrate} baud", None
+        listening = kind.listen(args.port, **opts)
     except TransportError as exc:
-        if pty is not None:
-            pty.close()
         raise _usage(str(exc)) from None
-    except OSError as exc:
-        if pty is not None:
-            pty.close()
-        raise _usage(f"cannot open a pseudo-terminal: {exc}") from None
+    return listening.end, listening.where, listening.close
 
 
 def _realtime_priority(priority: int = 50) -> None:
@@ -288,7 +280,7 @@ def cmd_serve(args: argparse.Namespace, cfg) -> int:
     chain = Chain(topo, cfg, model, paced=True)
     if args.realtime:
         _realtime_priority()
-    end, where, pty = _open_end(args)
+    end, where, release = _open_end(args)
     server = PacedServer(chain, end)
     frames = [{"lad": lad, "length": n, "wkc": wkc} for lad, n, wkc in chain.plan.frames]
     plan = ", ".join(f"LRW lad {f['lad']} len {f['length']} WKC {f['wkc']}" for f in frames)
@@ -317,8 +309,8 @@ def cmd_serve(args: argparse.Namespace, cfg) -> int:
         transport = end.stats.as_dict()
         terrors = server.transport_errors()
         end.close()
-        if pty is not None:
-            pty.close()
+        if release is not None:
+            release()
     if tty and not args.quiet:
         print(file=sys.stderr)
 
@@ -388,7 +380,7 @@ def add_parser(sub, common, config_fn, wrap) -> None:
         "the wall clock, for a real master to close the loop",
         epilog="Example: eha-hil serve --transport serial --port pty --seconds 10 "
         "(docs/fieldbus.md, 'Serving the simulated robot to real hardware').")
-    p.add_argument("--transport", default="serial", choices=("serial", "udp"),
+    p.add_argument("--transport", default="serial", choices=serve_backends(),
                    help="serial (COBS + CRC-32 frames) or udp")
     p.add_argument("--port", required=True,
                    help="serial: device path or pyserial URL, or 'pty' for a new "

@@ -15,6 +15,7 @@ from collections.abc import Sequence
 
 from hil.fieldbus.system import BusSystem
 from hil.fieldbus.topology import load_topology
+from hil.transports import BACKENDS
 from plant.config import load_config
 
 CYCLE_S = 1e-3
@@ -39,7 +40,7 @@ def _rate(topo, cfg, transport: str, model: str, cycles: int, pc) -> tuple[float
     return cycles / wall, rec.master
 
 
-def bench_bus(backends: Sequence[str] = ("inproc", "udp", "serial", "can"),
+def bench_bus(backends: Sequence[str] = BACKENDS,
               cycles: int = 500, stack_cycles: int = 1000,
               preset: str = "hydra_default") -> dict[str, float]:
     """Cycles per second of hydra_full (echo model) per backend (key = backend name), plus
@@ -74,7 +75,7 @@ def format_table(results: dict[str, float]) -> str:
 
 def main(argv: Sequence[str] | None = None) -> dict[str, float]:
     ap = argparse.ArgumentParser(prog="eha-hil bench bus", description=__doc__.split("\n")[0])
-    ap.add_argument("--backends", default="inproc,udp,serial,can",
+    ap.add_argument("--backends", default=",".join(BACKENDS),
                     help="comma-separated transports (default: all four)")
     ap.add_argument("--cycles", type=int, default=500, help="timed full-robot cycles")
     ap.add_argument("--stack-cycles", type=int, default=1000,

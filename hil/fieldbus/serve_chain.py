@@ -13,14 +13,17 @@ import sys
 
 from hil.fieldbus.chain import Chain
 from hil.fieldbus.topology import load_topology
-from hil.transports import TransportError, open_transport
+from hil.transports import BACKENDS, TransportError, backend
 from plant.config import Config
 
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m hil.fieldbus.serve_chain")
-    ap.add_argument("--transport", required=True, choices=("udp", "serial", "can"))
-    ap.add_argument("--port", required=True, help="UDP port (0: any free) or serial device")
+    ap.add_argument("--transport", required=True,
+                    choices=[b for b in BACKENDS if backend(b).can_listen()])
+    ap.add_argument("--port", required=True,
+                    help="the backend's address: UDP port (0: any free), serial device, CAN "
+                    "channel")
     ap.add_argument("--topology", default="hydra_full")
     ap.add_argument("--model", default="stack", choices=("stack", "echo"))
     ap.add_argument("--config-json", required=True)
@@ -34,16 +37,9 @@ def main(argv: list[str] | None = None) -> int:
         plan = parse_faults(json.loads(args.faults_json), "faults (from the master)")
         if plan.box_faults:
             install_box_faults(chain, plan)
-    if args.transport == "udp":
-        end = open_transport("udp", "slave", port=int(args.port))
-        where = str(end.address[1])
-    elif args.transport == "serial":
-        end = open_transport("serial", "slave", url=args.port)
-        where = args.port
-    else:
-        end = open_transport("can", "slave", channel=args.port)
-        where = args.port
-    print(f"READY {where}", flush=True)
+    listening = backend(args.transport).listen(args.port)
+    end = listening.end
+    print(f"READY {listening.address}", flush=True)
     try:
         while True:
             frame = end.recv(timeout=1.0)
@@ -56,6 +52,8 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     finally:
         end.close()
+        if listening.close is not None:
+            listening.close()
 
 
 if __name__ == "__main__":

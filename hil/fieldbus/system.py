@@ -48,7 +48,7 @@ class BusSystem:
                  model: str = "stack", reply_timeout_s: float = 2.0,
                  remote: bool | None = None, tap: TapFn | None = None,
                  transport_options: dict | None = None, faults: object = None) -> None:
-        from hil.transports import open_transport, transport_pair
+        from hil.transports import TransportError, backend, transport_pair
 
         self.topology = topo
         self.master = Master(topo)
@@ -58,11 +58,13 @@ class BusSystem:
         self.reply_timeout_s = reply_timeout_s
         self.tap = tap
         self.proc: subprocess.Popen | None = None
-        self._pty = None
+        self._release = None  # what the remote peer's set-up made (e.g. a pty)
+        kind = backend(transport)
+        self._in_memory = kind.in_memory
         self.chain: Chain | None = None
         opts = dict(transport_options or {})
         if remote is None:
-            remote = transport == "udp"
+            remote = kind.remote_by_default
         # A remote chain gets the LVDS/sensor faults as the raw declaration (JSON).
         self._remote_faults = None
         if remote and faults is not None:
@@ -79,24 +81,17 @@ class BusSystem:
         if not remote:
             self.chain = Chain(topo, cfg, model)
             self.m_end, self.s_end = transport_pair(transport, **opts)
-        elif transport == "udp":
-            self.proc = _spawn_chain(["--transport", "udp", "--port", "0"], topo, cfg, model,
-                                     self._remote_faults)
-            port = int(_ready_line(self.proc))
-            self.m_end = open_transport("udp", "master", remote_port=port, **opts)
-            self.s_end = None
-        elif transport == "serial":
-            from hil.transports import pty_pair
-
-            pty = pty_pair()
-            self._pty = pty
-            self.proc = _spawn_chain(["--transport", "serial", "--port", pty.slave_path], topo,
-                                     cfg, model, self._remote_faults)
-            _ready_line(self.proc)
-            self.m_end = open_transport("serial", "master", fd=pty.master_fd, **opts)
-            self.s_end = None
         else:
-            raise ValueError(f"transport {transport!r} cannot run the chain in another process")
+            try:
+                peer = kind.remote_master(**opts)
+            except TransportError:
+                raise ValueError(f"transport {transport!r} cannot run the chain in another "
+                                 "process") from None
+            self._release = peer.close
+            self.proc = _spawn_chain(["--transport", transport, "--port", peer.child_address],
+                                     topo, cfg, model, self._remote_faults)
+            self.m_end = peer.connect(_ready_line(self.proc))
+            self.s_end = None
         self.faults = None
         if faults is not None:
             self._install_faults(faults)
@@ -140,7 +135,7 @@ class BusSystem:
             if self.proc:
                 timeout = self.reply_timeout_s
             else:
-                timeout = 0.0 if self.transport == "inproc" else 0.05
+                timeout = 0.0 if self._in_memory else 0.05
             # Until every frame of the cycle is answered: stale replies (duplicated or
             # delayed ones) are read and counted, they do not stand for this cycle's.
             while not all(m._answered):
@@ -163,7 +158,7 @@ class BusSystem:
         or a CAN bus takes a moment, so wait (briefly) for as many frames as were sent.
         On an echoing port (serial ``loop://``: one end for both sides) the chain would read
         its own replies back, so it takes exactly the frames that were sent."""
-        wait = 0.0 if self.transport == "inproc" else self.inline_wait_s
+        wait = 0.0 if self._in_memory else self.inline_wait_s
         shared = self.s_end is getattr(self.m_end, "inner", self.m_end)
         got = 0
         while not (shared and got >= expected):
@@ -186,9 +181,9 @@ class BusSystem:
             except subprocess.TimeoutExpired:
                 self.proc.kill()
             self.proc = None
-        if self._pty is not None:
-            self._pty.close()
-            self._pty = None
+        if self._release is not None:
+            self._release()
+            self._release = None
 
     def __enter__(self) -> BusSystem:
         return self

@@ -109,6 +109,14 @@ class Transport(abc.ABC):
 
     #: backend name, as given to :func:`open_transport`
     name: ClassVar[str] = "?"
+    #: A sent frame is at the other end when ``send`` returns (memory in this process): the
+    #: bus need not wait for it, and a run over it is deterministic enough to log.
+    in_memory: ClassVar[bool] = False
+    #: The bus system puts the chain of boxes in another process by default on this backend.
+    remote_by_default: ClassVar[bool] = False
+    #: ``eha-hil serve`` offers it: a master in another process or on another machine can
+    #: reach an end that :meth:`listen` opened.
+    serves_remote_masters: ClassVar[bool] = False
 
     def __init__(self, role: str, max_frame: int = DEFAULT_MAX_FRAME) -> None:
         if role not in ROLES:
@@ -220,6 +228,54 @@ class Transport(abc.ABC):
     def _pair(cls, **options: Any) -> tuple[Transport, Transport]:
         """Two connected ends (master, slave); backends override when they can."""
         raise TransportError(f"{cls.name}: transport_pair is not supported by this backend")
+
+    # -- peers in another process: each backend knows how its ends find each other --------
+
+    @classmethod
+    def can_listen(cls) -> bool:
+        """Whether the backend implements :meth:`listen`."""
+        return cls.listen.__func__ is not Transport.listen.__func__
+
+    @classmethod
+    def listen(cls, address: str, **options: Any) -> Listening:
+        """A slave end for a master in another process or on another machine. ``address``
+        is the backend's own address text (a UDP port, a serial device or ``pty``, a CAN
+        channel); TransportError (one line) if it is not one."""
+        raise TransportError(f"{cls.name}: cannot serve a peer in another process")
+
+    @classmethod
+    def remote_master(cls, **options: Any) -> RemotePeer:
+        """How a master reaches a slave this process starts: the address the child listens
+        on, and how to connect once the child has said where it listens."""
+        raise TransportError(f"{cls.name}: cannot reach a chain in another process")
+
+
+@dataclasses.dataclass
+class Listening:
+    """A listening slave end: ``address`` is what a peer needs to reach it (a port, a
+    path), ``where`` the same for people; ``close`` releases what the end does not own."""
+
+    end: Transport
+    address: str
+    where: str
+    close: Callable[[], None] | None = None
+
+
+@dataclasses.dataclass
+class RemotePeer:
+    """A slave in a child process: it listens on ``child_address``; ``connect(address)``,
+    given the address the child reports, opens the master end; ``close`` releases the
+    resources made for the pair (e.g. a pseudo-terminal)."""
+
+    child_address: str
+    connect: Callable[[str], Transport]
+    close: Callable[[], None] | None = None
+
+
+def backend(name: str) -> type[Transport]:
+    """The backend class registered under ``name`` (its capabilities: ``in_memory``,
+    ``remote_by_default``, ``listen``, ``remote_master``); TransportError if none."""
+    return _backend(name)
 
 
 def _backend(name: str) -> type[Transport]:

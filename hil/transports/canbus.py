@@ -31,6 +31,7 @@ import can
 
 from hil.transports.base import (
     DEFAULT_MAX_FRAME,
+    Listening,
     Transport,
     TransportError,
     TransportStats,
@@ -320,6 +321,12 @@ class CanTransport(Transport):
     def _close(self) -> None:
         if self._owns_bus:
             self.bus.shutdown()
+
+    @classmethod
+    def listen(cls, address: str, **options: Any) -> Listening:
+        """A slave on CAN channel ``address``."""
+        end = cls("slave", channel=address, **options)
+        return Listening(end, address, f"can {address}")
 
     @classmethod
     def _pair(cls, interface: str = "virtual", channel: str | int | None = None,

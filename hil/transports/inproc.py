@@ -97,6 +97,7 @@ class InprocTransport(Transport):
     """
 
     name = "inproc"
+    in_memory = True
 
     def __init__(self, role: str, channel: str = "default",
                  max_frame: int = DEFAULT_MAX_FRAME) -> None:

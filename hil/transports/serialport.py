@@ -32,6 +32,8 @@ import serial
 
 from hil.transports.base import (
     DEFAULT_MAX_FRAME,
+    Listening,
+    RemotePeer,
     Transport,
     TransportError,
     deadline_of,
@@ -182,6 +184,7 @@ class SerialTransport(Transport):
     """
 
     name = "serial"
+    serves_remote_masters = True
 
     def __init__(
         self,
@@ -263,6 +266,35 @@ class SerialTransport(Transport):
         finally:
             for callback in self._on_close:
                 callback()
+
+    @classmethod
+    def listen(cls, address: str, baudrate: int = DEFAULT_BAUDRATE,
+               **options: Any) -> Listening:
+        """A slave on the device or pyserial URL ``address``, or on a new pseudo-terminal
+        for ``"pty"`` (its path is what the peer opens)."""
+        if address != "pty":
+            end = cls("slave", url=address, baudrate=baudrate, **options)
+            return Listening(end, address, f"serial {address} at {baudrate} baud")
+        try:
+            pty_ = pty_pair()
+        except OSError as exc:
+            raise TransportError(f"cannot open a pseudo-terminal: {exc}") from None
+        try:
+            end = cls("slave", fd=pty_.master_fd, **options)
+        except BaseException:
+            pty_.close()
+            raise
+        return Listening(end, pty_.slave_path, f"serial {pty_.slave_path} (new "
+                         "pseudo-terminal: open this path from the master program)", pty_.close)
+
+    @classmethod
+    def remote_master(cls, **options: Any) -> RemotePeer:
+        """A new pseudo-terminal: the child opens its device path, the master its
+        controlling side."""
+        pty_ = pty_pair()
+        return RemotePeer(pty_.slave_path,
+                          lambda _address: cls("master", fd=pty_.master_fd, **options),
+                          pty_.close)
 
     @classmethod
     def _pair(cls, url: str | None = None, baudrate: int = DEFAULT_BAUDRATE,

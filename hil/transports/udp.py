@@ -22,6 +22,8 @@ from typing import Any
 
 from hil.transports.base import (
     DEFAULT_MAX_FRAME,
+    Listening,
+    RemotePeer,
     Transport,
     TransportError,
     deadline_of,
@@ -60,6 +62,8 @@ class UdpTransport(Transport):
     """
 
     name = "udp"
+    remote_by_default = True
+    serves_remote_masters = True
 
     def __init__(
         self,
@@ -184,6 +188,26 @@ class UdpTransport(Transport):
 
     def _close(self) -> None:
         self._sock.close()
+
+    @classmethod
+    def listen(cls, address: str, host: str = "127.0.0.1", **options: Any) -> Listening:
+        """A slave on port ``address`` (``"0"``: any free port) of ``host``."""
+        try:
+            port = int(address)
+        except (TypeError, ValueError):
+            raise TransportError(f"port {address!r}: udp needs a port number "
+                                 "(0: any free port)") from None
+        if not 0 <= port <= 65535:
+            raise TransportError(f"port {port}: must be 0..65535")
+        end = cls("slave", host=host, port=port, **options)
+        h, p = end.address[0], end.address[1]
+        return Listening(end, str(p), f"udp {h}:{p}")
+
+    @classmethod
+    def remote_master(cls, **options: Any) -> RemotePeer:
+        """The child listens on any free port and reports it; the master sends there."""
+        return RemotePeer("0", lambda address: cls("master", remote_port=int(address),
+                                                   **options))
 
     @classmethod
     def _pair(cls, host: str = "127.0.0.1",
