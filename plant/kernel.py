@@ -12,16 +12,10 @@ constant k_s this is exactly the thesis's model. ``g = 1 + a sin(N theta_rotor +
 the trochoid's displacement ripple; it scales flow and reaction torque alike, so the pump
 still converts power losslessly. ``d_p, d_s, d_c`` scale with oil viscosity mu(T).
 
-The motor is a surface-magnet machine in the dq frame (amplitude-invariant transform):
-
-    L di_d/dt = v_d - R i_d + w_e L i_q
-    L di_q/dt = v_q - R i_q - w_e L i_d - w_e psi
-    torque    = 1.5 p psi i_q                       (motor Nm; times k_c/k_p -> piston N)
-
-fed by an average-value inverter: leg voltage (d - 1/2) V_dc less the dead-time error
-sign(i) t_dead f_pwm V_dc. In ``DriveMode.CURRENT`` the currents follow their references exactly;
-in ``DriveMode.FORCE`` tau_p is given directly; in ``DriveMode.OFF`` the gates are open and the
-currents are zero.
+The blocks that make up the right-hand side (motor, inverter, pump, hydraulics, load,
+thermal) are in :mod:`plant.blocks`, each with its equations; :func:`derivatives` sums them.
+:mod:`plant.reference` writes the linear model out readably, and a test holds the two equal.
+The sensors' noise and resolution are not physics: :mod:`plant.sensors.readings`.
 
 Integration: classic RK4 over ``n_sub`` equal sub-steps per tick, inputs held (the PWM
 average is constant over a carrier period). ``plant.model`` picks ``n_sub`` from the
@@ -37,74 +31,39 @@ import math
 
 from numba import njit
 
+from plant.blocks.hydraulics import pressure_force, series_stiffness
+from plant.blocks.load import end_stops, piston_and_load, rod_force
+from plant.blocks.motor_dq import TWO_PI_3, drive
+from plant.blocks.pump import pump, ripple_and_friction
+from plant.blocks.thermal import energy_and_heat, viscosity_ratio
 from plant.layout import (
-    IN_DA,
-    IN_DB,
-    IN_DC,
-    IN_F_EXT,
     IN_ID_REF,
     IN_IQ_REF,
     IN_MODE,
-    IN_T_AMB,
     IN_TAU_REF,
     LOAD_CART,
     LOAD_CONROD,
     LOAD_FIXED,
-    LOAD_FREE,
     N_STATES,
-    P_C_CART,
-    P_C_ROD,
-    P_COOL_G,
     P_DC,
-    P_DEAD_CURRENT,
-    P_DEAD_FRAC,
     P_DP,
     P_DRIFT_K,
     P_DRIFT_ON,
     P_DS,
-    P_DUTY_MAX,
-    P_DUTY_MIN,
-    P_FLUX,
     P_H_SUB,
-    P_HALF_STROKE,
-    P_HEAT_CAP,
     P_JC,
     P_JP,
     P_K_ROD,
     P_KC,
     P_KC_OVER_KP,
-    P_KS_AVG,
-    P_KS_FLUID_GAIN,
-    P_KS_PIPE,
-    P_KSX_ON,
     P_KT_EQ,
     P_L,
     P_LOAD_KIND,
     P_M_CART,
     P_N_SUB,
-    P_PC_EPS,
-    P_PC_FORCE,
-    P_PC_ON,
     P_POLE_PAIRS,
     P_PRECHARGE,
-    P_PULS_AMP,
-    P_PULS_ON,
-    P_PULS_ORDER,
-    P_PULS_PHASE,
-    P_PULS_TORQUE,
-    P_PULS_TORQUE_REL,
-    P_R,
-    P_ROD_TAU,
-    P_SF_COULOMB,
-    P_SF_EPS,
-    P_SF_ON,
-    P_SF_STATIC,
-    P_SF_VS,
-    P_SIDE_V0,
     P_T_REF,
-    P_TEMP_ON,
-    P_VDC,
-    P_VISC_COEFF,
     P_X_ANCHOR,
     S_EDISS,
     S_EEXT,
@@ -150,74 +109,12 @@ from plant.layout import (
 )
 from plant.sensors.readings import sense
 
-TWO_PI_3 = 2.0 * math.pi / 3.0
-SQRT3 = math.sqrt(3.0)
-
-
-@njit(cache=True, inline="always")
-def viscosity_ratio(p, t_oil):
-    """mu(T)/mu(T_ref): 1 when the oil-temperature effect is off."""
-    if p[P_TEMP_ON] > 0.5:
-        return math.exp(-p[P_VISC_COEFF] * (t_oil - p[P_T_REF]))
-    return 1.0
-
-
-@njit(cache=True, inline="always")
-def series_stiffness(p, x_c):
-    """k_s in N/m: Eq. 2.25-2.27 at piston position x_c when ks_position is on."""
-    if p[P_KSX_ON] > 0.5:
-        kc = p[P_KC]
-        v1 = p[P_SIDE_V0] + kc * (p[P_HALF_STROKE] + x_c)
-        v2 = p[P_SIDE_V0] + kc * (p[P_HALF_STROKE] - x_c)
-        k_fluid = p[P_KS_FLUID_GAIN] * (1.0 / v1 + 1.0 / v2)
-        return k_fluid * p[P_KS_PIPE] / (k_fluid + p[P_KS_PIPE])
-    return p[P_KS_AVG]
-
-
-@njit(cache=True, inline="always")
-def seal_friction(p, v):
-    """Rod-seal friction force in N opposing v: Coulomb + Stribeck, tanh-regularised."""
-    if p[P_SF_ON] > 0.5:
-        vs = v / p[P_SF_VS]
-        level = p[P_SF_COULOMB] + (p[P_SF_STATIC] - p[P_SF_COULOMB]) * math.exp(-vs * vs)
-        return level * math.tanh(v / p[P_SF_EPS])
-    return 0.0
-
-
-@njit(cache=True, inline="always")
-def _rod_force(p, x):
-    """Force the rod (or the fixing) takes from the piston, N; compression positive."""
-    kind = p[P_LOAD_KIND]
-    if kind == LOAD_CONROD:
-        return p[P_K_ROD] * (x[S_THC] - p[P_X_ANCHOR]) + p[P_C_ROD] * x[S_VC]
-    if kind == LOAD_CART:
-        return p[P_K_ROD] * (x[S_THC] - x[S_XL]) + p[P_C_ROD] * (x[S_VC] - x[S_VL])
-    return 0.0
-
-
-@njit(cache=True, inline="always")
-def _dead_time_error(p, i):
-    """Leg-voltage error in V from dead time: -sign(i) t_d f_pwm V_dc, faded near i = 0."""
-    s = i / p[P_DEAD_CURRENT]
-    if s > 1.0:
-        s = 1.0
-    elif s < -1.0:
-        s = -1.0
-    return -s * p[P_DEAD_FRAC] * p[P_VDC]
-
-
-@njit(cache=True, inline="always")
-def _clamp_duty(p, d):
-    if d < p[P_DUTY_MIN]:
-        return p[P_DUTY_MIN]
-    if d > p[P_DUTY_MAX]:
-        return p[P_DUTY_MAX]
-    return d
-
 
 @njit(cache=True)
 def derivatives(x, p, u, dx):
-    """Write dx/dt of every integrated state into ``dx`` (see :mod:`plant.layout`)."""
+    """Write dx/dt of every integrated state into ``dx`` (see :mod:`plant.layout`): the
+    blocks of :mod:`plant.blocks`, motor and inverter, pump, hydraulics, piston and load,
+    heat and energy."""
     r = viscosity_ratio(p, x[S_TOIL])
     dp = p[P_DP] * r
     ds = p[P_DS] * r
@@ -226,138 +123,16 @@ def derivatives(x, p, u, dx):
     vc = x[S_VC]
     tq = x[S_TQ]
     kc_kp = p[P_KC_OVER_KP]
-    pole_pairs = p[P_POLE_PAIRS]
     theta_rotor = x[S_THP] * kc_kp
-
-    # --- motor and inverter ---
     mode = int(u[IN_MODE])
-    p_elec = 0.0
-    p_copper = 0.0
-    if mode == DriveMode.DUTY:
-        i_d = x[S_ID]
-        i_q = x[S_IQ]
-        th = pole_pairs * theta_rotor
-        c = math.cos(th)
-        s = math.sin(th)
-        c2 = math.cos(th - TWO_PI_3)
-        s2 = math.sin(th - TWO_PI_3)
-        i_a = i_d * c - i_q * s
-        i_b = i_d * c2 - i_q * s2
-        i_c = -i_a - i_b
-        vdc = p[P_VDC]
-        v_a = (_clamp_duty(p, u[IN_DA]) - 0.5) * vdc + _dead_time_error(p, i_a)
-        v_b = (_clamp_duty(p, u[IN_DB]) - 0.5) * vdc + _dead_time_error(p, i_b)
-        v_c = (_clamp_duty(p, u[IN_DC]) - 0.5) * vdc + _dead_time_error(p, i_c)
-        # Clarke (amplitude invariant); the common-mode voltage of a star winding drops out.
-        v_alpha = (2.0 * v_a - v_b - v_c) / 3.0
-        v_beta = (v_b - v_c) / SQRT3
-        v_d = v_alpha * c + v_beta * s
-        v_q = -v_alpha * s + v_beta * c
-        w_e = pole_pairs * vp * kc_kp
-        res = p[P_R]
-        ind = p[P_L]
-        dx[S_ID] = (v_d - res * i_d + w_e * ind * i_q) / ind
-        dx[S_IQ] = (v_q - res * i_q - w_e * ind * i_d - w_e * p[P_FLUX]) / ind
-        p_elec = 1.5 * (v_d * i_d + v_q * i_q)
-        p_copper = 1.5 * res * (i_d * i_d + i_q * i_q)
-        tau_p = p[P_KT_EQ] * i_q
-    elif mode == DriveMode.CURRENT:
-        dx[S_ID] = 0.0
-        dx[S_IQ] = 0.0
-        tau_p = p[P_KT_EQ] * u[IN_IQ_REF]
-    elif mode == DriveMode.OFF:
-        # Gates off: the winding current has already decayed through the diodes (see
-        # DriveMode.OFF in plant.layout), so there is no torque.
-        dx[S_ID] = 0.0
-        dx[S_IQ] = 0.0
-        tau_p = 0.0
-    else:
-        dx[S_ID] = 0.0
-        dx[S_IQ] = 0.0
-        tau_p = u[IN_TAU_REF]
-
-    # --- pump ---
-    g = 1.0
-    f_cp = 0.0
-    if p[P_PC_ON] > 0.5:
-        f_cp = p[P_PC_FORCE] * math.tanh(vp / p[P_PC_EPS])
-    if p[P_PULS_ON] > 0.5:
-        ripple = math.sin(p[P_PULS_ORDER] * theta_rotor + p[P_PULS_PHASE])
-        g = 1.0 + p[P_PULS_AMP] * ripple
-        # Meshing torque ripple: a load torque that depends on where the teeth mesh, a
-        # constant part and one proportional to the pressure force the pump works against
-        # (chamber pressures at the port edges, trapped volumes, tooth contact forces all
-        # scale with the pressure). It stays in f_cp, so its work is booked with the pump
-        # losses (zero on average).
-        f_cp += (p[P_PULS_TORQUE] + p[P_PULS_TORQUE_REL] * tq) * ripple
-    dx[S_THP] = vp
-    dx[S_VP] = (tau_p - dp * vp - f_cp - g * tq) / p[P_JP]
-
-    # --- leakage damper and series elasticity ---
-    ks = series_stiffness(p, x[S_THC])
-    dx[S_TQ] = ks * (g * vp - tq / ds - vc)
-
-    # --- piston and load ---
-    kind = p[P_LOAD_KIND]
-    f_seal = seal_friction(p, vc)
-    f_ext = u[IN_F_EXT]
-    loss_load = 0.0
-    p_ext = 0.0
-    if kind == LOAD_FIXED:
-        dx[S_THC] = 0.0
-        dx[S_VC] = 0.0
-        dx[S_XL] = 0.0
-        dx[S_VL] = 0.0
-    else:
-        f_rod = _rod_force(p, x)
-        dx[S_THC] = vc
-        dx[S_VC] = (tq - dc * vc - f_seal - f_rod + (f_ext if kind == LOAD_FREE else 0.0)) / p[
-            P_JC
-        ]
-        if kind == LOAD_CART:
-            vl = x[S_VL]
-            dx[S_XL] = vl
-            dx[S_VL] = (f_rod + f_ext - p[P_C_CART] * vl) / p[P_M_CART]
-            rel = vc - vl
-            loss_load = p[P_C_ROD] * rel * rel + p[P_C_CART] * vl * vl
-            p_ext = f_ext * vl
-        else:
-            dx[S_XL] = 0.0
-            dx[S_VL] = 0.0
-            if kind == LOAD_CONROD:
-                loss_load = p[P_C_ROD] * vc * vc
-            elif kind == LOAD_FREE:
-                p_ext = f_ext * vc
-
-    # --- energy and heat ---
+    tau_p, p_elec, p_copper = drive(x, p, u, dx, mode, theta_rotor, vp, kc_kp)
+    g, f_cp = ripple_and_friction(p, vp, theta_rotor, tq)
+    pump(p, dx, tau_p, vp, dp, f_cp, g, tq)
+    pressure_force(x, p, dx, g, vp, ds, vc, tq)
+    f_seal, loss_load, p_ext = piston_and_load(x, p, u, dx, tq, vc, dc)
     heat_oil = dp * vp * vp + f_cp * vp + tq * tq / ds + dc * vc * vc + f_seal * vc
-    if mode == DriveMode.DUTY:
-        dx[S_EIN] = p_elec
-    else:
-        dx[S_EIN] = tau_p * vp
-    dx[S_EDISS] = heat_oil + loss_load + p_copper
-    dx[S_EEXT] = p_ext
-    t_amb = u[IN_T_AMB]
-    if p[P_TEMP_ON] > 0.5:
-        dx[S_TOIL] = (heat_oil - p[P_COOL_G] * (x[S_TOIL] - t_amb)) / p[P_HEAT_CAP]
-    else:
-        dx[S_TOIL] = 0.0
-    dx[S_TROD] = (t_amb - x[S_TROD]) / p[P_ROD_TAU]
-
-
-@njit(cache=True)
-def _end_stops(p, x):
-    """Inelastic end stops at +/- stroke/2: hold the piston, drop its outward velocity."""
-    half = p[P_HALF_STROKE]
-    v = x[S_VC]
-    if (x[S_THC] > half and v > 0.0) or (x[S_THC] < -half and v < 0.0):
-        # The impact's kinetic energy is lost; book it so the energy balance still closes.
-        x[S_EDISS] += 0.5 * p[P_JC] * v * v
-        x[S_VC] = 0.0
-    if x[S_THC] > half:
-        x[S_THC] = half
-    elif x[S_THC] < -half:
-        x[S_THC] = -half
+    energy_and_heat(x, p, u, dx, mode, heat_oil, tau_p, vp, p_elec, p_copper, loss_load,
+                    p_ext)
 
 
 @njit(cache=True)
@@ -385,7 +160,7 @@ def rk4_tick(x, p, u, work):
         for i in range(N_STATES):
             x[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
         if not fixed:
-            _end_stops(p, x)
+            end_stops(p, x)
 
 
 @njit(cache=True)
@@ -443,7 +218,7 @@ def physical_outputs(x, p, u, y):
     if kind == LOAD_FIXED:
         f_rod = f_cyl
     else:
-        f_rod = _rod_force(p, x)
+        f_rod = rod_force(p, x)
 
     pre = p[P_PRECHARGE]
     dp_pump = tq / kc
