@@ -43,6 +43,13 @@ import math
 import numpy as np
 
 from firmware_model.calibration import FirmwareCalibration, calibration
+from firmware_model.mcu.filters import (
+    DerivativeFilter,
+    HighPassFilter,
+    LowPassFilter,
+    MomentumObserver,
+    PIController,
+)
 from firmware_model.mcu.measure import Measurements
 
 F32 = np.float32
@@ -76,19 +83,16 @@ class ActuatorController:
         self.velocity_based = m["controller"] == "velocity"
         self.feedback = m["force_feedback"]
         self.kt_eq = F32(cal.kt_eq_n_per_a)
-        self.jp = F32(cal.jp_kg)
         self.kp = F32(m["kp_force"])
         self.kd = F32(m["kd_force_s"])
-        self.a_d = F32(1.0 - math.exp(-2.0 * math.pi * m["derivative_filter_hz"] * dt))
-        self.ko = F32(2.0 * math.pi * m["friction_observer_hz"])
+        self.derivative = DerivativeFilter(m["derivative_filter_hz"], dt)
+        self.observer = MomentumObserver(cal.jp_kg, m["friction_observer_hz"], dt)
         self.bemf = F32(kt / 1.5) if m["backemf_ff"] else ZERO
-        self.kv = F32(m["vel_kp_n_per_m_s"])
-        self.kvi = F32(m["vel_ki_n_per_m"])
-        self.kf = F32(m["vel_force_kp_m_s_per_n"])
-        self.kfi = F32(m["vel_force_ki_m_per_n"])
-        # Eq. 4.4 high-pass as a first-order discrete filter: y = a (y + u - u_prev).
-        self.a_hp = F32(1.0 / (1.0 + 2.0 * math.pi * m["complementary_cutoff_hz"] * dt))
-        self.a_seal = F32(1.0 - math.exp(-2.0 * math.pi * m["seal_observer_hz"] * dt))
+        self.velocity_pi = PIController(m["vel_kp_n_per_m_s"], m["vel_ki_n_per_m"], dt)
+        self.force_pi = PIController(m["vel_force_kp_m_s_per_n"], m["vel_force_ki_m_per_n"],
+                                     dt)
+        self.highpass = HighPassFilter(m["complementary_cutoff_hz"], dt)  # Eq. 4.4
+        self.seal_observer = LowPassFilter(m["seal_observer_hz"], dt)
         self.k_pos = F32(m["position_kp_n_per_m"])
         length, offset = m["conrod_length_m"], m["conrod_offset_m"]
         self.cos_alpha = F32(math.sqrt(1.0 - (offset / length) ** 2) if length > 0 else 1.0)
@@ -99,18 +103,11 @@ class ActuatorController:
 
     def reset(self) -> None:
         """Zero every state (at enable)."""
-        self.f_prev = ZERO
-        self.d_filt = ZERO
-        self.obs_sum = ZERO
-        self.obs_p0 = F32(math.nan)
-        self.r = ZERO
-        self.hp_y = ZERO
-        self.hp_u = F32(math.nan)
-        self.int_force = ZERO
-        self.seal = ZERO
+        for block in (self.derivative, self.observer, self.velocity_pi, self.force_pi,
+                      self.highpass, self.seal_observer):
+            block.reset()
         self.f_strain = ZERO
         self.i_limited = False
-        self.int_vel = ZERO
         self.tau_p = ZERO
         self.tau_used = ZERO
         self.f_fb = ZERO
@@ -124,12 +121,7 @@ class ActuatorController:
             self.f_fil = m.f_pres
             return m.f_pres
         f_strain = self.cos_alpha * m.f_strain_raw
-        u = f_strain - m.f_pres
-        if self.hp_u != self.hp_u:  # first sample: start the high-pass at rest
-            self.hp_u = u
-        self.hp_y = self.a_hp * (self.hp_y + u - self.hp_u)
-        self.hp_u = u
-        self.f_fil = m.f_pres + self.hp_y
+        self.f_fil = m.f_pres + self.highpass(f_strain - m.f_pres)
         if self.feedback == "pressure":
             return m.f_pres
         self.f_strain = f_strain
@@ -148,20 +140,18 @@ class ActuatorController:
             self.limits |= LIMIT_PRESSURE
         f = self.feedback_force(m)
         self.f_fb = f
-        dt = self.dt
         if self.feedback == "strain" and m.strain_samples:
             # Piston-side friction observer (F^_seal, see the module docstring), held while
             # the current is limited (its estimate is then not what the loop applied).
             if not self.i_limited:
-                self.seal += self.a_seal * (m.f_pres - self.f_strain - self.seal)
-        e = tau_ref + self.seal - f
+                self.seal_observer(m.f_pres - self.f_strain)
+        seal = self.seal_observer.y
+        e = tau_ref + seal - f
         if self.velocity_based:
-            v_ref = self.kf * e + self.int_force
-            tau_p = self.kv * (v_ref - m.v_pump) + self.int_vel
+            tau_p = self.velocity_pi(self.force_pi(e) - m.v_pump)
         else:
-            self.d_filt += self.a_d * ((f - self.f_prev) / dt - self.d_filt)
-            self.f_prev = f
-            tau_p = tau_ref + self.seal + self.kp * e - self.kd * self.d_filt - self.r
+            d = self.derivative(f)
+            tau_p = tau_ref + seal + self.kp * e - self.kd * d - self.observer.r
         i_ref = tau_p / self.kt_eq
         saturated = i_ref > self.i_lim or i_ref < -self.i_lim
         self.i_limited = saturated
@@ -171,18 +161,10 @@ class ActuatorController:
         if self.velocity_based:
             # Integrate only while the current is not limited (no wind-up).
             if not saturated:
-                self.int_force += self.kfi * e * dt
-                self.int_vel += self.kvi * (self.kf * e + self.int_force - m.v_pump) * dt
+                self.force_pi.integrate(e)
+                self.velocity_pi.integrate(self.force_pi(e) - m.v_pump)
         else:
-            self._observe(m)
+            self.observer(m.v_pump, self.kt_eq * m.iq, m.tau_q)
         self.tau_p = i_ref * self.kt_eq
         # The board's register holds +/-32.767 V; clamp rather than let the word wrap.
         return i_ref, _clamp(self.bemf * m.omega_m, V_FF_MAX)
-
-    def _observe(self, m: Measurements) -> None:
-        """Momentum observer of the pump side's disturbance (friction, ripple), N."""
-        momentum = self.jp * m.v_pump
-        if self.obs_p0 != self.obs_p0:
-            self.obs_p0 = momentum
-        self.obs_sum += (self.kt_eq * m.iq - m.tau_q + self.r) * self.dt
-        self.r = self.ko * (momentum - self.obs_p0 - self.obs_sum)

@@ -88,10 +88,11 @@ class Rig:
 
 
 # --- (a) float32 ------------------------------------------------------------------------------
-CTRL_FLOATS = ("dt", "kt_eq", "jp", "kp", "kd", "a_d", "ko", "bemf", "kv", "kvi", "kf", "kfi",
-               "a_hp", "k_pos", "cos_alpha", "f_lim", "p_lim", "i_lim",
-               "f_prev", "d_filt", "obs_sum", "obs_p0", "r", "hp_y", "hp_u", "int_force",
-               "int_vel", "tau_p", "f_fb", "f_fil")
+CTRL_FLOATS = ("dt", "kt_eq", "kp", "kd", "bemf", "k_pos", "cos_alpha", "f_lim", "p_lim",
+               "i_lim", "tau_p", "f_fb", "f_fil")
+#: The controller's filters and loop blocks (firmware_model.mcu.filters): every slot a float.
+CTRL_BLOCKS = ("derivative", "observer", "velocity_pi", "force_pi", "highpass",
+               "seal_observer")
 MEAS_FLOATS = tuple(n for n in Measurements.__slots__
                     if n not in ("strain_samples", "status", "_k", "_volts"))
 
@@ -135,6 +136,10 @@ def float32_leaks(mcu: Mcu, outputs: list[list[tuple]] | None = None) -> list[st
             check(f"mcu.{lst}[{i}]", getattr(mcu, lst)[i])
         for n in CTRL_FLOATS:
             check(f"ctrl[{i}].{n}", getattr(ctrl, n))
+        for b in CTRL_BLOCKS:
+            block = getattr(ctrl, b)
+            for n in type(block).__slots__:
+                check(f"ctrl[{i}].{b}.{n}", getattr(block, n))
         for n in MEAS_FLOATS:
             check(f"meas[{i}].{n}", getattr(mcu.meas[i], n))
         if outputs is not None:
@@ -180,11 +185,11 @@ def test_every_control_value_is_float32_after_every_step(controller, feedback, m
     assert len(seen[0]) == 300 and len(set(words)) > 20, "the loop did not move"
     assert ctrl.cos_alpha < F32(1.0)
     if controller == "velocity":
-        assert ctrl.int_force != 0 and ctrl.int_vel != 0
+        assert ctrl.force_pi.integral != 0 and ctrl.velocity_pi.integral != 0
     else:
-        assert ctrl.r != 0 and ctrl.d_filt != 0
+        assert ctrl.observer.r != 0 and ctrl.derivative.y != 0
     if feedback == "complementary":
-        assert ctrl.hp_y != 0
+        assert ctrl.highpass.y != 0
 
 
 @pytest.mark.parametrize("where", ["ctrl.kp", "ctrl.bemf", "meas.v0", "ctrl.k_pos"])
@@ -567,15 +572,15 @@ def test_seal_observer_learns_the_seal_force_and_adds_it_to_the_reference(cfg):
     n_tau = int(round(1.0 / (2 * np.pi * fc) / float(ctrl.dt)))
     for _ in range(n_tau):
         ctrl.step(m, F32(100.0))
-    assert 0.55 < float(ctrl.seal) / 12.0 < 0.7  # one time constant: 1 - 1/e
+    assert 0.55 < float(ctrl.seal_observer.y) / 12.0 < 0.7  # one time constant: 1 - 1/e
     for _ in range(20 * n_tau):
         i_ref, _ = ctrl.step(m, F32(100.0))
-    assert abs(float(ctrl.seal) - 12.0) < 0.01
+    assert abs(float(ctrl.seal_observer.y) - 12.0) < 0.01
     # The loop now asks for 112 N of pressure force: PD error (112 - 100) times kp on top.
     kp = c_cfg.get("mcu.kp_force")
-    expect = (112.0 + kp * 12.0 - float(ctrl.r)) / float(ctrl.kt_eq)
+    expect = (112.0 + kp * 12.0 - float(ctrl.observer.r)) / float(ctrl.kt_eq)
     assert float(i_ref) == pytest.approx(expect, rel=1e-4)
-    assert type(ctrl.seal) is np.float32
+    assert type(ctrl.seal_observer.y) is np.float32
 
 
 def test_pressure_feedback_has_no_seal_term(cfg):
@@ -583,7 +588,7 @@ def test_pressure_feedback_has_no_seal_term(cfg):
     m = _meas(cfg, f_pres=100.0, f_strain=88.0)
     for _ in range(500):
         ctrl.step(m, F32(100.0))
-    assert float(ctrl.seal) == 0.0
+    assert float(ctrl.seal_observer.y) == 0.0
 
 
 def test_complementary_filter_starts_on_the_first_strain_conversion(cfg):
