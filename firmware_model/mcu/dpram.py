@@ -144,6 +144,13 @@ class DualPortRam:
             self.words[d:d + B.DOWN_WORDS] = defaults
         self._boards = [DpramBoard(self, k) for k in range(MAX_BOARDS)]
         self.cycles = 0
+        self._links: list[LinkMemory] | None = None
+
+    def attach(self, links: list[LinkMemory]) -> None:
+        """The LVDS memories of boards 0, 1, ... for the argument-less sync calls (checked
+        once here, not every cycle)."""
+        self._check_links(links)
+        self._links = list(links)
 
     # --- the STM32's bus side ----------------------------------------------------------------
     def read(self, addr: int) -> int:
@@ -180,25 +187,36 @@ class DualPortRam:
             if np.shares_memory(link.down, self.words) or np.shares_memory(link.up, self.words):
                 raise ValueError(f"link {k} is a view of this DPRAM, not an LVDS memory")
 
-    def sync_down(self, links: list[LinkMemory]) -> None:
-        """Copy board k's downstream block into ``links[k].down``, k = 0, 1, ..."""
-        self._check_links(links)
+    def sync_down(self, links: list[LinkMemory] | None = None) -> None:
+        """Copy board k's downstream block into ``links[k].down``, k = 0, 1, ... (default:
+        the attached links)."""
+        links = self._attached(links)
         for k, link in enumerate(links):
             d = down_base(k)
             link.down[:] = self.words[d:d + B.DOWN_WORDS]
 
-    def sync_up(self, links: list[LinkMemory]) -> None:
-        """Copy ``links[k].up`` into board k's upstream block, k = 0, 1, ..."""
-        self._check_links(links)
+    def sync_up(self, links: list[LinkMemory] | None = None) -> None:
+        """Copy ``links[k].up`` into board k's upstream block, k = 0, 1, ... (default: the
+        attached links)."""
+        links = self._attached(links)
         for k, link in enumerate(links):
             u = up_base(k)
             self.words[u:u + B.UP_WORDS] = np.asarray(link.up, dtype=np.int64) & 0xFFFF
             self._boards[k].up_crc_errors = link.up_crc_errors
 
-    def sync(self, links: list[LinkMemory]) -> None:
+    def _attached(self, links: list[LinkMemory] | None) -> list[LinkMemory]:
+        if links is None:
+            if self._links is None:
+                raise ValueError("no links attached to this DPRAM (DualPortRam.attach)")
+            return self._links
+        self._check_links(links)
+        return links
+
+    def sync(self, links: list[LinkMemory] | None = None) -> None:
         """One pass of the copy state machine (once per 5 kHz cycle): every downstream
         block out to its link memory, then every link's upstream memory in. ``links[k]``
         is board k's LVDS memory; blocks of boards ``>= len(links)`` are not touched."""
+        links = self._attached(links)
         self.sync_down(links)
         self.sync_up(links)
         self.cycles += 1

@@ -1,7 +1,8 @@
 """Box models: what sits behind one EtherCAT slave (an MCU board and its driver boards).
 
-* :class:`StackBox`: the real thing in simulation: the MCU model over one value-level stack
-  (plant + driver board + LVDS link) per actuator slot, at their real rates.
+* :class:`StackBox`: the real thing in simulation: the MCU board model over one value-level
+  stack (plant + driver board + LVDS link) per actuator slot, at their real rates on the
+  scheduler.
 * :class:`EchoBox`: a cheap behavioural stand-in for bus-level work on the full robot
   (47 actuators): each actuator follows its command through a first-order lag and keeps the
   MCU's command watchdog, so timeouts and status words behave as the firmware's.
@@ -17,13 +18,12 @@ import struct
 
 import numpy as np
 
-from firmware_model.fpga import layout as B
-from firmware_model.mcu.mcu import BOARD_ENABLED, CMD_TIMEOUT, SAFE_OFF, Mcu
+from firmware_model.mcu.board import McuBoard
+from firmware_model.mcu.mcu import BOARD_ENABLED, CMD_TIMEOUT, SAFE_OFF
 from hil.fieldbus import pdo
 from hil.fieldbus.topology import Box
+from hil.scheduler import Scheduler
 from plant.config import Config
-
-F32 = np.float32
 
 
 def _out_dtype(box: Box) -> np.dtype:
@@ -93,63 +93,81 @@ assert _OUT.size == pdo.ACTUATOR_OUT_DTYPE.itemsize and _IN.size == pdo.ACTUATOR
 assert [f.name for f in pdo.ACTUATOR_IN][:3] == ["x_piston", "v_piston", "f_pressure"]
 
 
-class StackBox(_BoxBase):
-    """MCU model + one value-level FPGA stack per actuator slot."""
+class _Stacks:
+    """The box's value-level stacks as one plant-like block for the scheduler (every stack
+    advanced over the same ticks; ``box.stacks`` may be wrapped in place, e.g. by faults)."""
 
-    def __init__(self, box: Box, cfg: Config) -> None:
+    def __init__(self, box: StackBox, tick_ns: int) -> None:
+        self.box = box
+        self.tick_ns = tick_ns
+        self.tick = 0
+
+    def advance(self, n_ticks: int, rec: np.ndarray | None = None, row0: int = 0,
+                every: int = 1) -> int:
+        self.box._advance_stacks(n_ticks)
+        self.tick += n_ticks
+        return row0
+
+
+class McuBox(_BoxBase):
+    """A box's MCU board (:class:`~firmware_model.mcu.board.McuBoard`) over the given LVDS
+    link memories: the process data in and out. :class:`StackBox` puts driver boards and
+    plants behind the links; the replay (:mod:`hil.replay.replay`) feeds them from a log."""
+
+    def __init__(self, box: Box, cfg: Config, links: list, offsets: list[int]) -> None:
         super().__init__(box, cfg)
-        from hil.actuator import FpgaStack
-
-        self.stacks = [FpgaStack(cfg) for _ in self.act]
-        self.mcu = Mcu(cfg, [s.mcu_link for s in self.stacks]) if self.stacks else None
+        self.board = McuBoard(cfg, links, offsets) if links else None
+        self.mcu = self.board.mcu if self.board else None
         self.period = cfg.get("mcu.period_ticks")
-        self._flags = [0] * len(self.act)
-        self._x_prev = [0.0] * len(self.act)
-        self._defaults = [(c.k_pos, c.kp) for c in self.mcu.ctrl] if self.mcu else []
-        self._fill()
 
     def apply(self, data: bytes) -> None:
         """Outputs of this cycle: commands, enable edges, gains."""
-        if self.mcu is None:
+        if self.board is None:
             return
         for i, (mode, value, flags, kpos, kpf) in enumerate(self.decode(data)):
-            rising = flags & ~self._flags[i]
-            if rising & pdo.FLAG_CLEAR_FAULT:
-                self.stacks[i].mcu_link.write("control", B.CTRL_CLEAR_FAULT)
-            if rising & pdo.FLAG_ENABLE:
-                self.mcu.enable(i, self.stacks[i].board.calibrated_offset)
-            elif self._flags[i] & pdo.FLAG_ENABLE and not flags & pdo.FLAG_ENABLE:
-                self.stacks[i].mcu_link.write("control", 0)
-            self._flags[i] = flags
-            ctrl = self.mcu.ctrl[i]
-            ctrl.k_pos = F32(kpos) if kpos > 0 else self._defaults[i][0]
-            ctrl.kp = F32(kpf) if kpf > 0 else self._defaults[i][1]
-            self.mcu.command(i, mode, value, self.tick)
-
-    def advance(self, ticks: int) -> None:
-        """Run the MCU every period and the stacks between, for ``ticks`` ticks."""
-        end = self.tick + ticks
-        while self.tick < end:
-            if self.mcu is not None:
-                self.mcu.step(self.tick)
-            for s in self.stacks:
-                s.advance(self.period)
-            self.tick += self.period
-        self._fill(ticks)
+            self.board.apply(i, mode, value, bool(flags & pdo.FLAG_ENABLE),
+                             bool(flags & pdo.FLAG_CLEAR_FAULT), kpos, kpf, self.tick)
 
     def _fill(self, ticks: int = 0) -> None:
-        if self.mcu is None:
+        if self.board is None:
             return
         for i, k in enumerate(self.act):
-            m, c = self.mcu.meas[i], self.mcu.ctrl[i]
-            x = float(m.x_piston)
-            v = (x - self._x_prev[i]) / (ticks * self.tick_s) if ticks else 0.0
-            self._x_prev[i] = x
-            # The error counts as the MCU read them at its last step (what it reports).
-            err_down, err_up = self.mcu.link_error_counts(i)
-            self._pack_actuator(k, x, v, float(m.f_pres), float(c.cos_alpha * m.f_strain_raw),
-                                float(c.f_fil), float(m.iq), float(m.temperature_c),
-                                self.mcu.status[i], err_down, err_up)
+            r = self.board.report(i, ticks)
+            self._pack_actuator(k, r.x_piston, r.v_piston, r.f_pressure, r.f_strain,
+                                r.f_filtered, r.iq, r.temperature_c, r.status,
+                                r.link_errors_down, r.link_errors_up)
+
+
+class StackBox(McuBox):
+    """The MCU board over one value-level stack (:class:`~hil.actuator.FpgaStack`) per
+    actuator slot, on the scheduler: the MCU every ``mcu.period_ticks``, the stacks
+    between."""
+
+    def __init__(self, box: Box, cfg: Config) -> None:
+        from hil.actuator import FpgaStack
+
+        self.stacks = [FpgaStack(cfg) for _ in box.actuators]
+        super().__init__(box, cfg, [s.mcu_link for s in self.stacks],
+                         [s.board.calibrated_offset for s in self.stacks])
+        self._group = _Stacks(self, cfg.get("sim.tick_ns"))
+        self.sched = Scheduler(self._group, record_every=0)
+        if self.board is not None:
+            self.sched.every(self.period, self._mcu_step, "mcu")
+        self._fill()
+
+    def advance(self, ticks: int) -> None:
+        """``ticks`` ticks on the scheduler (the MCU at its period, the stacks between)."""
+        self._group.tick = self.tick
+        self.sched.run(ticks)
+        self.tick = self._group.tick
+        self._fill(ticks)
+
+    def _mcu_step(self, tick: int) -> None:
+        self.board.step(tick)
+
+    def _advance_stacks(self, n_ticks: int) -> None:
+        for s in self.stacks:
+            s.advance(n_ticks)
 
 
 class EchoBox(_BoxBase):

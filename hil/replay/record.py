@@ -104,27 +104,27 @@ class RecordingStackBox(StackBox):
         self.buf_out.append((self.tick, bytes(data)))
         super().apply(data)
 
+    def _mcu_step(self, tick: int) -> None:
+        for k, s in enumerate(self.stacks):
+            up = np.empty(UP_WIDTH, dtype=np.uint32)
+            up[:-1] = s.mcu_link.up
+            up[-1] = s.mcu_link.up_crc_errors
+            self.buf_up[k].append((tick, up))
+        super()._mcu_step(tick)
+        for k, s in enumerate(self.stacks):
+            self.buf_down[k].append((tick, s.mcu_link.down.astype(np.uint16)))
+
+    def _advance_stacks(self, n_ticks: int) -> None:
+        if not self.traced:
+            super()._advance_stacks(n_ticks)
+            return
+        for k, s in enumerate(self.stacks):
+            tr = np.zeros((n_ticks, TRACE_WIDTH), dtype=np.int64)
+            s.advance(n_ticks, trace=tr)
+            self.buf_trace[k].append((self._group.tick, tr))
+
     def advance(self, ticks: int) -> None:
-        end = self.tick + ticks
-        while self.tick < end:
-            if self.mcu is not None:
-                for k, s in enumerate(self.stacks):
-                    up = np.empty(UP_WIDTH, dtype=np.uint32)
-                    up[:-1] = s.mcu_link.up
-                    up[-1] = s.mcu_link.up_crc_errors
-                    self.buf_up[k].append((self.tick, up))
-                self.mcu.step(self.tick)
-                for k, s in enumerate(self.stacks):
-                    self.buf_down[k].append((self.tick, s.mcu_link.down.astype(np.uint16)))
-            for k, s in enumerate(self.stacks):
-                if self.traced:
-                    tr = np.zeros((self.period, TRACE_WIDTH), dtype=np.int64)
-                    s.advance(self.period, trace=tr)
-                    self.buf_trace[k].append((self.tick, tr))
-                else:
-                    s.advance(self.period)
-            self.tick += self.period
-        self._fill(ticks)
+        super().advance(ticks)
         self.buf_in.append((self.tick, self.inputs()))
         if len(self.buf_in) >= FLUSH_CYCLES:
             self.flush()
@@ -151,8 +151,8 @@ class RecordingStackBox(StackBox):
             put(self.ch_up[k], self.buf_up[k], False)
             put(self.ch_down[k], self.buf_down[k], False)
             if self.traced and self.buf_trace[k]:
-                t0 = np.array([r[0] for r in self.buf_trace[k]], dtype=np.int64)
-                t = (t0[:, None] + np.arange(self.period)).ravel() * ns
+                t = np.concatenate([t0 + np.arange(len(rows), dtype=np.int64)
+                                    for t0, rows in self.buf_trace[k]]) * ns
                 tr = np.concatenate([r[1] for r in self.buf_trace[k]])
                 self.log.write_block(self.ch_trace[k], t, tr)
                 self.log.write_block(self.ch_raw[k], t, tr[:, :B.N_RAW])

@@ -23,9 +23,8 @@ import numpy as np
 
 from firmware_model.fpga import layout as B
 from firmware_model.fpga.driver_board import LinkMemory
-from firmware_model.mcu.mcu import Mcu
 from hil.actuator import TRACE_WIDTH
-from hil.fieldbus.boxes import StackBox
+from hil.fieldbus.boxes import McuBox
 from hil.fieldbus.chain import CYCLE_TICKS
 from hil.fieldbus.topology import Topology, TopologyError, load_topology
 from hil.framelog import FrameLogError, FrameLogReader
@@ -70,30 +69,14 @@ class ReplayResult:
         return self.divergence is None
 
 
-class _ReplayBox(StackBox):
-    """The MCU side of a StackBox over bare link memories."""
+class _ReplayBox(McuBox):
+    """A box's MCU board over bare link memories, which the replay fills from the log."""
 
     def __init__(self, box, cfg: Config, offsets: list[int]) -> None:  # noqa: ANN001
-        # Deliberately not StackBox.__init__: no FPGA stacks, no plant.
-        from hil.fieldbus.boxes import _BoxBase
-
-        _BoxBase.__init__(self, box, cfg)
-        self.links = [LinkMemory(cfg) for _ in self.act]
-        self.mcu = Mcu(cfg, self.links) if self.links else None
-        self.period = cfg.get("mcu.period_ticks")
-        self._flags = [0] * len(self.act)
-        self._x_prev = [0.0] * len(self.act)
-        self._defaults = [(c.k_pos, c.kp) for c in self.mcu.ctrl] if self.mcu else []
-        self.stacks = [_Offset(o, link) for o, link in zip(offsets, self.links, strict=True)]
+        links = [LinkMemory(cfg) for _ in box.actuators]
+        super().__init__(box, cfg, links, offsets)
+        self.links = links
         self._fill()
-
-
-class _Offset:
-    """Stands in for an FpgaStack where StackBox needs one: calibrated offset and link."""
-
-    def __init__(self, offset: int, link: LinkMemory) -> None:
-        self.board = type("Board", (), {"calibrated_offset": offset})()
-        self.mcu_link = link
 
 
 def _field_of_record(dtype: np.dtype, byte: int) -> str:
@@ -265,7 +248,7 @@ def replay_mcu(path: str | Path, config_override: Config | None = None) -> Repla
                 for k, link in enumerate(links):
                     link.up = up_rows[k][s]
                     link.up_crc_errors = up_crc[k][s]
-                rbox.mcu.step(tick)
+                rbox.board.step(tick)
                 for k, link in enumerate(links):
                     got = link.down.tolist()
                     exp = down_exp[k][s]
