@@ -14,8 +14,9 @@ counts 0..top. The file is JSON::
     {"header": {...field order per function...},
      "sin_cos": [[theta_e, sin, cos], ...], ...}
 
-Regenerate with ``python -m firmware_model.fpga.golden --write [PATH]`` (default
-``tests/fpga/golden_vectors.json``); ``--check [PATH]`` compares instead of writing.
+Regenerate with ``python -m firmware_model.fpga.golden --write PATH`` (the project's copy is
+``tests/fpga/golden_vectors.json``); ``--check PATH`` compares instead of writing. The model
+does not know where a checkout keeps its tests: the path is always given.
 """
 
 from __future__ import annotations
@@ -46,7 +47,6 @@ SEED = 20240611
 #: Format version of the file; bump when the layout (not the numbers) changes.
 VERSION = 1
 #: Repository-relative default location of the vector file.
-DEFAULT_PATH = Path(__file__).resolve().parents[2] / "tests" / "fpga" / "golden_vectors.json"
 #: PWM top of the board: 50 MHz / (2 * 20 kHz) compare counts.
 TOP = 1250
 #: PI gain multipliers of the shipped configuration (``board.gain_registers``): kp, ki.
@@ -305,19 +305,19 @@ def dumps(vectors: dict[str, Any]) -> str:
     return "".join(parts)
 
 
-def load(path: Path | str = DEFAULT_PATH) -> dict[str, Any]:
+def load(path: Path | str) -> dict[str, Any]:
     """Read a vector file."""
     return json.loads(Path(path).read_text())
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """CLI: ``--write [PATH]`` writes the vectors, ``--check [PATH]`` compares with a file."""
+    """CLI: ``--write PATH`` writes the vectors, ``--check PATH`` compares with a file."""
     ap = argparse.ArgumentParser(prog="python -m firmware_model.fpga.golden",
                                  description=__doc__.splitlines()[0])
     g = ap.add_mutually_exclusive_group(required=True)
-    g.add_argument("--write", nargs="?", const=DEFAULT_PATH, type=Path, metavar="PATH",
-                   help=f"write the vectors (default {DEFAULT_PATH})")
-    g.add_argument("--check", nargs="?", const=DEFAULT_PATH, type=Path, metavar="PATH",
+    g.add_argument("--write", type=Path, metavar="PATH",
+                   help="write the vectors (the project's: tests/fpga/golden_vectors.json)")
+    g.add_argument("--check", type=Path, metavar="PATH",
                    help="exit 1 if the file differs from freshly generated vectors")
     a = ap.parse_args(argv)
     vectors = generate()
