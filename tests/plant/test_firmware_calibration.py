@@ -25,9 +25,9 @@ def test_set_changes_the_plant_only(default_cfg):
     cfg = load_config(overrides=["hydraulics.jp_kg=130.0"])
     assert cfg.get("hydraulics.jp_kg") == 130.0
     assert cfg.get("firmware.jp_kg") == default_cfg.get("firmware.jp_kg")
-    assert ActuatorController(cfg).jp == pytest.approx(118.0)
+    assert ActuatorController(cfg).observer.j == pytest.approx(118.0)
     cfg = load_config(overrides=["firmware.jp_kg=130.0"])
-    assert ActuatorController(cfg).jp == pytest.approx(130.0)
+    assert ActuatorController(cfg).observer.j == pytest.approx(130.0)
     assert cfg.get("hydraulics.jp_kg") == default_cfg.get("hydraulics.jp_kg")
 
 
