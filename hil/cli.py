@@ -501,7 +501,8 @@ def _add_external(sub, bsub) -> None:
                        "rig: every effect, load and seed, as a table")
     check_cli.configure_check(p)
     p.set_defaults(func=check_cli.run_check)
-    p = bsub.add_parser("identify", help="time to identify a 16 s, 5 kHz dataset (<= 60 s)")
+    p = bsub.add_parser("identify", help="wall and CPU time to identify a 16 s, 5 kHz "
+                         "dataset (budget 20 s CPU)")
     ident.configure_bench(p)
     p.set_defaults(func=ident.run_bench)
 

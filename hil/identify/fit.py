@@ -188,7 +188,13 @@ class OutputErrorFit:
                 xx[i] += steps[i]
                 return (self._stack(self._to_theta(xx, free, theta0), sigma, mask) - r0) / steps[i]
 
-            return np.column_stack(map_threads(column, range(x.size)))
+            out = np.empty((r0.size, x.size))
+
+            def fill(i: int) -> None:
+                out[:, i] = column(i)
+
+            list(map_threads(fill, range(x.size)))
+            return out
 
         return fun, jac
 
@@ -360,9 +366,21 @@ def levenberg_marquardt(
         an = a / np.outer(d, d)
         gn = g / d
         improved = False
+        # parameters on a bound that the gradient pushes outward stay there for this step:
+        # a step computed with them and then clipped is no descent step, and LM would shrink
+        # its steps around it (zig-zagging through a dozen Jacobians)
+        span = np.where(np.isfinite(hi - lo), hi - lo, 1.0)
+        at_lo = (x - lo <= 1e-9 * span) & (gn > 0)
+        at_hi = (hi - x <= 1e-9 * span) & (gn < 0)
+        move = ~(at_lo | at_hi)
+        if not move.any():
+            return x, r, j
+        an_m = an[np.ix_(move, move)]
         for _ in range(12):
+            step = np.zeros_like(x)
             try:
-                step = -np.linalg.solve(an + lam * np.eye(an.shape[0]), gn) / d
+                step[move] = -np.linalg.solve(an_m + lam * np.eye(an_m.shape[0]),
+                                              gn[move]) / d[move]
             except np.linalg.LinAlgError:
                 lam *= 10.0
                 continue

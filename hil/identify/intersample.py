@@ -68,15 +68,23 @@ def _bandlimited(u: np.ndarray, dt: float, n_sub: int, delay_s: float) -> np.nda
     sub-step average as the box filter ``sinc(f h)`` and the shift as a phase ramp."""
     n = u.size
     h = dt / n_sub
-    ext = np.concatenate([u, u[::-1]])
-    spec = np.fft.rfft(ext)
-    f = np.fft.rfftfreq(ext.size, dt)
-    box = np.sinc(f * h)
+    key = (hash(u.tobytes()), n, dt, n_sub)
+    hit = _BL_CACHE.get("last")  # one tuple, swapped whole: safe from the fit's threads
+    if hit is None or hit[0] != key:  # a fit asks for many delays of the same input
+        ext = np.concatenate([u, u[::-1]])
+        f = np.fft.rfftfreq(ext.size, dt)
+        hit = (key, np.fft.rfft(ext) * np.sinc(f * h), f, ext.size)
+        _BL_CACHE["last"] = hit
+    _, spec, f, size = hit
     out = np.empty((n, n_sub))
     for j in range(n_sub):
         shift = (j + 0.5) * h - delay_s  # value at t_k + shift
-        out[:, j] = np.fft.irfft(spec * box * np.exp(2j * np.pi * f * shift), ext.size)[:n]
+        out[:, j] = np.fft.irfft(spec * np.exp(2j * np.pi * f * shift), size)[:n]
     return out.ravel()
+
+
+#: The last input's even-extension spectrum times the sub-step box filter (one slot).
+_BL_CACHE: dict[str, tuple] = {}
 
 
 __all__ = ["MODES", "substep_average"]

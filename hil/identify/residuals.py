@@ -187,7 +187,9 @@ def predictable_share(r: np.ndarray, order: int = 20) -> float:
         return 0.0
     x = np.column_stack([r[order - k - 1: n - k - 1] for k in range(order)])
     y = r[order:]
-    coef, *_ = np.linalg.lstsq(x, y, rcond=None)
+    # least squares by the (order x order) normal equations: an SVD of the n x order matrix
+    # took most of the residual analysis' time
+    coef, *_ = np.linalg.lstsq(x.T @ x, x.T @ y, rcond=None)
     e = y - x @ coef
     v = float(y @ y)
     return float(1.0 - (e @ e) / v) if v > 0 else 0.0
