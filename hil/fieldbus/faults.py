@@ -51,11 +51,14 @@ from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from hil.transports.base import Transport, deadline_of, remaining
+
+if TYPE_CHECKING:
+    from hil.actuator import FpgaStack
 
 CYCLE_S = 1e-3
 CYCLE_TICKS = 20
@@ -453,12 +456,18 @@ class FaultyStack:
     are switched at cycle boundaries; while a sensor fault is active the stack advances
     tick by tick and the faulted plant outputs are overwritten just before each tick's
     sensor chips read them (the plant recomputes its outputs from its state every tick, so
-    nothing else sees the override)."""
+    nothing else sees the override).
 
-    def __init__(self, stack: Any, faults: tuple[Fault, ...]) -> None:
+    It holds the stack (:attr:`stack`) and offers what a box, the recorder and the
+    scheduler use of one, by name: the scheduler's plant-like interface (``advance``,
+    ``y``, ``tick``, ``tick_ns``, ``tick_s``, ``time_s``) and the parts (``plant``,
+    ``board``, ``mcu_link``, ``link``, ``chips``, ``config``, ``link_fault``). Anything
+    else is reached through :attr:`stack`."""
+
+    def __init__(self, stack: FpgaStack, faults: tuple[Fault, ...]) -> None:
         from plant import layout as L
 
-        self._stack = stack
+        self.stack = stack
         self.lvds = [f for f in faults if f.link.startswith("lvds")]
         self.sensors = [f for f in faults if f.link == "sensor"]
         self._rows = [getattr(L, SENSOR_SIGNALS[f.signal][0]) for f in self.sensors]
@@ -476,8 +485,54 @@ class FaultyStack:
         self._lvds_on = [False] * len(self.lvds)
         self.sensor_ticks = 0  # ticks run with a sensor fault applied
 
-    def __getattr__(self, name: str) -> Any:
-        return getattr(self._stack, name)
+    # --- the wrapped stack's interface, explicitly ---------------------------------------------
+    @property
+    def config(self) -> Any:
+        return self.stack.config
+
+    @property
+    def plant(self) -> Any:
+        return self.stack.plant
+
+    @property
+    def board(self) -> Any:
+        return self.stack.board
+
+    @property
+    def mcu_link(self) -> Any:
+        return self.stack.mcu_link
+
+    @property
+    def link(self) -> np.ndarray:
+        return self.stack.link
+
+    @property
+    def chips(self) -> np.ndarray:
+        return self.stack.chips
+
+    @property
+    def y(self) -> np.ndarray:
+        return self.stack.y
+
+    @property
+    def tick(self) -> int:
+        return self.stack.tick
+
+    @property
+    def tick_ns(self) -> int:
+        return self.stack.tick_ns
+
+    @property
+    def tick_s(self) -> float:
+        return self.stack.tick_s
+
+    @property
+    def time_s(self) -> float:
+        return self.stack.time_s
+
+    def link_fault(self, *args: Any, **kw: Any) -> None:
+        """:meth:`FpgaStack.link_fault` of the wrapped stack."""
+        self.stack.link_fault(*args, **kw)
 
     def _switch_lvds(self, cycle: int) -> None:
         for i, f in enumerate(self.lvds):
@@ -488,18 +543,18 @@ class FaultyStack:
             direction = f.link.split(".")[1]
             every = max(1, round(1.0 / f.rate)) if on else 0
             if f.kind == "dead":
-                self._stack.link_fault(direction, stopped=on)
+                self.stack.link_fault(direction, stopped=on)
             elif f.kind == "bitflip":
-                self._stack.link_fault(direction, corrupt_every=every)
+                self.stack.link_fault(direction, corrupt_every=every)
             elif f.kind == "drop":
-                self._stack.link_fault(direction, drop_every=every)
+                self.stack.link_fault(direction, drop_every=every)
             elif f.kind == "duplicate":
-                self._stack.link_fault(direction, dup_every=every)
+                self.stack.link_fault(direction, dup_every=every)
             else:
-                self._stack.link_fault(direction, delay_ticks=f.delay_ticks if on else 0)
+                self.stack.link_fault(direction, delay_ticks=f.delay_ticks if on else 0)
 
     def advance(self, n_ticks: int, *args: Any, **kw: Any) -> int:
-        st = self._stack
+        st = self.stack
         self._switch_lvds(st.tick // CYCLE_TICKS)
         if not self.sensors:
             return st.advance(n_ticks, *args, **kw)

@@ -399,6 +399,14 @@ def test_sensor_stuck_strain(cfg, bench):
     clean, _ = _bench_run(cfg, bench, None)
     rows, stacks = _bench_run(cfg, bench, _sensor("stuck", "f_strain"))
     assert stacks[0].sensor_ticks == 30 * CYCLE
+    # Explicit composition: the wrapper is not the stack, offers its parts by name and
+    # passes nothing else on implicitly.
+    wrapped = stacks[0]
+    assert not hasattr(type(wrapped), "__getattr__")
+    assert wrapped.board is wrapped.stack.board and wrapped.mcu_link is wrapped.stack.mcu_link
+    assert wrapped.tick == wrapped.stack.tick > 0
+    with pytest.raises(AttributeError):
+        wrapped._bits  # noqa: B018 - a private of the stack is not reachable through it
     inside = [r["f_strain"] for r in rows[33:61]]
     assert len(set(inside)) <= 2  # held (one rounding step at most)
     assert len({r["f_strain"] for r in clean[33:61]}) > 10
