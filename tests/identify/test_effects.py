@@ -38,7 +38,6 @@ _REGRESSED = {
     # logged: against the logged oil temperature it is, by design, not the library's effect
     "strain_thermal_drift": "the plant's gauge follows the unlogged rod temperature",
     "input_delay": "sensor-lag nuisances absorb part of a whole-tick delay on plant data",
-    "sensor_saturation": "clipped pressures with the sensor-lag nuisances leave structure",
 }
 
 

@@ -36,8 +36,6 @@ def test_coulomb_friction_does_not_make_a_25_hz_resonance(finding):
     assert g[f == 25][0] < g[f == fric.peak_hz][0]
 
 
-@pytest.mark.xfail(reason="regressed on the plant's held-current data after the measured-"
-                   "data rework; the rig's tests cover the effect", strict=False)
 def test_tool_names_pump_coulomb_friction(finding):
     rep = finding.report
     assert rep.effects_added and rep.effects_added[0].name == "pump_coulomb_friction"
