@@ -12,6 +12,8 @@ hit and board/link trouble are reported in the status word.
 
 from __future__ import annotations
 
+from enum import StrEnum
+
 import numpy as np
 
 from firmware_model.calibration import FirmwareCalibration, calibration
@@ -46,7 +48,21 @@ CRC_COUNT_MAX = 0xFFFF
 (CMD_TIMEOUT, SAFE_OFF, FORCE_LIMITED, CURRENT_LIMITED, PRESSURE_HIGH, BOARD_FAULT,
  LINK_ERROR, BOARD_ENABLED, ENCODER_ERROR, STRAIN_ERROR) = (1 << b for b, _, _ in STATUS_BITS)
 
-MODE_OFF, MODE_FORCE, MODE_POSITION = "off", "force", "position"
+
+
+class CommandMode(StrEnum):
+    """What the PC asks of one actuator (:meth:`Mcu.command`, the process data's ``mode``):
+    nothing, a piston force (N) or a piston position (m). Neither the driver board's
+    :class:`~firmware_model.fpga.layout.BoardMode` nor the plant's
+    :class:`~plant.layout.DriveMode`. Members equal their names as text, so ``"force"``
+    from a scenario or a command line is the same command."""
+
+    OFF = "off"
+    FORCE = "force"
+    POSITION = "position"
+
+
+_COMMAND_MODES = frozenset(m.value for m in CommandMode)
 
 
 class Mcu:
@@ -64,7 +80,7 @@ class Mcu:
         self.meas = [Measurements(cal) for _ in links]
         self.ctrl = [ActuatorController(cal) for _ in links]
         n = len(links)
-        self.mode = [MODE_OFF] * n
+        self.mode = [CommandMode.OFF] * n
         self.value = [F32(0.0)] * n
         self.last_cmd_tick = [0] * n
         self.status = [0] * n
@@ -82,9 +98,9 @@ class Mcu:
 
     def command(self, i: int, mode: str, value: float, tick: int) -> None:
         """A fresh command for actuator ``i``: mode "force" (N), "position" (m) or "off"."""
-        if mode not in (MODE_OFF, MODE_FORCE, MODE_POSITION):
+        if mode not in _COMMAND_MODES:
             raise ValueError(f"unknown command mode {mode!r}")
-        self.mode[i] = mode
+        self.mode[i] = CommandMode(mode)
         self.value[i] = F32(value)
         self.last_cmd_tick[i] = tick
 
@@ -106,19 +122,19 @@ class Mcu:
             age = tick - self.last_cmd_tick[i]
             status = 0
             mode = self.mode[i]
-            if age > self.timeout_ticks and mode != MODE_OFF:
+            if age > self.timeout_ticks and mode != CommandMode.OFF:
                 status |= CMD_TIMEOUT
                 tau_ref = F32(0.0)
                 if age > self.off_ticks:
                     status |= SAFE_OFF
                     link.down[B.D_CONTROL] = 0
-            elif mode == MODE_FORCE:
+            elif mode == CommandMode.FORCE:
                 tau_ref = self.value[i]
-            elif mode == MODE_POSITION:
+            elif mode == CommandMode.POSITION:
                 tau_ref = ctrl.k_pos * (self.value[i] - m.x_piston)
             else:
                 tau_ref = F32(0.0)
-            if mode == MODE_OFF:
+            if mode == CommandMode.OFF:
                 i_ref, v_ff = F32(0.0), F32(0.0)
                 ctrl.reset()
             else:

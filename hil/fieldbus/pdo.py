@@ -20,6 +20,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from firmware_model.mcu.mcu import CommandMode
+
 
 @dataclass(frozen=True)
 class Field:
@@ -33,7 +35,7 @@ class Field:
 
 
 #: Command modes in the ``mode`` output byte.
-MODE_CODES = {"off": 0, "force": 1, "position": 2}
+MODE_CODES = {CommandMode.OFF: 0, CommandMode.FORCE: 1, CommandMode.POSITION: 2}
 MODE_NAMES = {v: k for k, v in MODE_CODES.items()}
 #: ``flags`` output bits.
 FLAG_ENABLE = 0x01
