@@ -59,8 +59,9 @@ class Case:
 
 
 def default_cases() -> list[Case]:
-    """Null on each load; each library effect alone on each load where it is observable; an
-    effect outside the library; two effects at once."""
+    """Null on each load; each library effect alone on each load where it is observable;
+    effects outside the library (a viscoelastic hose, mains hum on a pressure sensor, backlash
+    at the motor encoder); two effects at once."""
     cases = [Case(load) for load in LOADS]
     each_load = ("pump_pulsation", "pump_coulomb_friction", "viscosity_temperature",
                  "input_delay")
@@ -72,6 +73,7 @@ def default_cases() -> list[Case]:
     cases += [Case(load, ("strain_thermal_drift",)) for load in ("fixed_piston", "conrod_fixed")]
     cases += [Case(load, ("sensor_saturation",)) for load in ("fixed_piston", "conrod_fixed")]
     cases += [Case(load, ("hose_viscoelastic",)) for load in ("fixed_piston", "conrod_fixed")]
+    cases += [Case("conrod_fixed", ("mains_hum",)), Case("free_piston", ("backlash",))]
     cases += [Case("fixed_piston", ("pump_pulsation", "pump_coulomb_friction")),
               Case("conrod_fixed", ("input_delay", "strain_thermal_drift")),
               Case("free_piston", ("pump_coulomb_friction", "viscosity_temperature"))]

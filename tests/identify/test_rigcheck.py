@@ -1,0 +1,68 @@
+"""The judge of ``eha-hil identify-check`` (hil.identify.rigcheck): what counts as right."""
+
+from __future__ import annotations
+
+import pytest
+
+from hil.identify.rigcheck import Case, CaseResult, default_cases, judge, markdown
+
+COULOMB = Case("fixed_piston", ("pump_coulomb_friction",))
+TRUTH = {"pump_coulomb_friction": {"force_n": 80.0, "eps_m_per_s": 3e-4}}
+
+
+@pytest.mark.parametrize("found,unexplained,right,why", [
+    ({"pump_coulomb_friction": {"force_n": 79.0}}, False, True, "ok"),
+    ({"pump_coulomb_friction": {"force_n": 70.0}}, False, False, "-12 %"),  # beyond 10 %
+    ({}, False, False, "missed pump_coulomb_friction"),
+    ({"pump_coulomb_friction": {"force_n": 80.0}, "input_delay": {"delay_s": 1e-4}}, False,
+     False, "added input_delay"),
+    ({"pump_coulomb_friction": {"force_n": 80.0}}, True, False, "verdict unexplained"),
+    ({"pump_coulomb_friction": {"force_n": float("nan")}}, False, False, "nan"),
+])
+def test_library_effect_judged(found, unexplained, right, why):
+    ok, text, mags = judge(COULOMB, TRUTH, found, unexplained)
+    assert ok is right and why in text
+    assert mags[0][:2] == ("pump_coulomb_friction.force_n", 80.0)
+
+
+def test_amplitudes_get_twenty_percent():
+    case = Case("fixed_piston", ("pump_pulsation",))
+    truth = {"pump_pulsation": {"amplitude": 0.02, "torque_n": 150.0}}
+    ok, _, _ = judge(case, truth, {"pump_pulsation": {"amplitude": 0.0235,
+                                                      "torque_n": 125.0}}, False)
+    assert ok  # +17.5 % and -17 %: inside the amplitude tolerance
+    ok, why, _ = judge(case, truth, {"pump_pulsation": {"amplitude": 0.025,
+                                                        "torque_n": 150.0}}, False)
+    assert not ok and "amplitude" in why
+
+
+def test_outside_effect_must_be_unexplained_with_nothing_added():
+    case = Case("fixed_piston", ("hose_viscoelastic",))
+    assert judge(case, {}, {}, True)[0]
+    assert not judge(case, {}, {}, False)[0]
+    assert not judge(case, {}, {"pump_coulomb_friction": {"force_n": 5.0}}, True)[0]
+
+
+def test_matrix_covers_what_must_be_shown():
+    cases = default_cases()
+    from hil.identify.rig import LIBRARY_EFFECTS, OUTSIDE_EFFECTS
+
+    alone = {c.effects[0] for c in cases if len(c.effects) == 1}
+    assert set(LIBRARY_EFFECTS) <= alone  # each library effect alone
+    assert alone & set(OUTSIDE_EFFECTS)  # an effect outside the library
+    assert any(len(c.effects) == 2 for c in cases)  # two at once
+    assert {c.load for c in cases if not c.effects} == {"fixed_piston", "free_piston",
+                                                         "conrod_fixed"}  # null on each load
+
+
+def test_markdown_table_rows_and_tally():
+    rows = [CaseResult(COULOMB, 1, True, "ok", ["pump_coulomb_friction"],
+                       ["pump_coulomb_friction"], False,
+                       magnitudes=[("pump_coulomb_friction.force_n", 80.0, 79.9)]),
+            CaseResult(Case("fixed_piston"), 2, False, "added input_delay", [],
+                       ["input_delay"], False)]
+    text = markdown(rows)
+    lines = text.splitlines()
+    assert lines[2].startswith("| fixed_piston: pump_coulomb_friction | 1 | force_n 80 / 79.9")
+    assert "**no**: added input_delay" in lines[3]
+    assert lines[-1].startswith("1 of 2 right")
