@@ -28,22 +28,12 @@ from hil.cli_args import (
     output_file,
     positive_float,
 )
+from hil.scenarios.plant_figures import F2_BANDS, THESIS_F1, THESIS_F2, within_band
 from hil.tables import table
-from plant.config import ConfigError, linearised, load_config, preset_names
+from plant.config import ConfigError, load_config, preset_names
 
 EXIT_USAGE = 2
 EXIT_MISSED = 1  # a requirement missed (F2 band, scenario requirement, bus errors)
-
-# Thesis figures the main job compares against (targets, never outputs).
-THESIS_F1 = {"model_peak_hz": 60.0, "measured_peak_hz": 25.0}
-THESIS_F2 = {"stall_force_n": 1700.0, "no_load_velocity_mm_s": 150.0, "peak_efficiency": 0.40}
-# Acceptance bands of issue 2 around the thesis's F2 figures.
-F2_BANDS = {
-    "stall_force_n": (1600.0, 1800.0),
-    "no_load_velocity_mm_s": (135.0, 165.0),
-    "peak_efficiency": (0.35, 0.45),
-}
-
 
 #: Preset the thesis scenarios run on unless -c is given (calibrated effect magnitudes).
 THESIS_PRESET = "hydra_thesis"
@@ -162,14 +152,13 @@ def cmd_plant_tn(args: argparse.Namespace) -> int:
 
 # --- main job --------------------------------------------------------------------------------
 def _band_mark(key: str, value: float) -> str:
-    lo, hi = F2_BANDS[key]
-    return "ok" if lo <= value <= hi else "OUT"
+    return "ok" if within_band(key, value) else "OUT"
 
 
 def cmd_main(args: argparse.Namespace) -> int:
-    """Plant summary and the comparison with the thesis's figures F1 and F2."""
-    from hil.analysis.bode import simulate_bode
-    from hil.analysis.tn_curve import simulate_tn_curve
+    """Plant summary and the comparison with the thesis's figures F1 and F2 (the scenarios
+    ``f1`` and ``f2`` of :mod:`hil.scenarios.plant_figures`)."""
+    from hil import scenarios
     from plant.model import Plant, motor_torque_constant, stiffness_range
 
     cfg = _config(args)
@@ -185,25 +174,19 @@ def cmd_main(args: argparse.Namespace) -> int:
     show = not args.json
     if show:
         print("eha-hil main job: the simulated Hydra EHA against the thesis", file=sys.stderr)
-    # F1: dense 1 Hz grid over the resonance region plus a log grid for the error figure.
-    freqs = np.unique(np.concatenate([np.arange(10.0, 121.0), np.geomspace(1, 300, 25).round()]))
-    if show:
         print("F1: exciting the plant (piston fixed) ...", file=sys.stderr)
     cli_progress.at("in F1 (open-loop response)")
-    f1 = simulate_bode(cfg, "fixed", freqs)
-    f1_lin = simulate_bode(linearised(cfg), "fixed", freqs)
-    ge = float(np.abs(f1.gain_error_db()).max())
-    pe = float(np.abs(f1.phase_error_deg()).max())
-    ge_lin = float(np.abs(f1_lin.gain_error_db()).max())
-    pe_lin = float(np.abs(f1_lin.phase_error_deg()).max())
-    f2 = simulate_tn_curve(cfg, 18.0, 17, progress=_progress("F2: T-N sweep", show))
+    r1 = scenarios.get("f1").run(cfg, None)
+    r2 = scenarios.get("f2").run(cfg, _progress("F2: T-N sweep", show))
     cli_progress.at("after F1, F2 done")
-    pk = f2.peak()
-    sim_f2 = {
-        "stall_force_n": f2.stall_force_n,
-        "no_load_velocity_mm_s": f2.no_load_velocity_m_s * 1e3,
-        "peak_efficiency": pk.efficiency,
-    }
+    f1 = r1.series["bode"]
+    f1_lin = r1.series["bode_linear"]
+    ge = r1.metric("max gain error").value
+    pe = r1.metric("max phase error").value
+    ge_lin = r1.metric("linear max gain error").value
+    pe_lin = r1.metric("linear max phase error").value
+    pk = r2.series["curve"].peak()
+    sim_f2 = r2.series["figures"]
     data = {
         **info,
         "F1": {"simulated_peak_hz": f1.peak_hz(), "model_peak_hz": f1.peak_hz("analytic"),

@@ -91,18 +91,20 @@ def names() -> list[str]:
     return sorted(SCENARIOS)
 
 
-#: The thesis experiments ``eha-hil run thesis`` runs, in order.
+#: The thesis experiments ``eha-hil run thesis`` runs, in order, on the full stack.
 THESIS = ("f3", "f4", "f5", "f6", "f7", "f8")
+#: The main job's figures (plant alone), which ``eha-hil main`` runs and prints.
+MAIN = ("f1", "f2")
 
 
 def _load_all() -> None:
     # Importing the modules registers their scenarios.
-    from hil.scenarios import current, thesis  # noqa: F401
+    from hil.scenarios import current, plant_figures, thesis  # noqa: F401
     try:
         from hil.scenarios import strain  # noqa: F401
     except ImportError:  # pragma: no cover - only while F7/F8 are being written
         pass
 
 
-__all__ = ["THESIS", "Metric", "SCENARIOS", "Scenario", "ScenarioResult", "get", "names",
+__all__ = ["MAIN", "THESIS", "Metric", "SCENARIOS", "Scenario", "ScenarioResult", "get", "names",
            "register"]

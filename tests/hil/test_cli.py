@@ -31,10 +31,26 @@ def test_main_job_prints_f1_f2(capsys):
     assert "OUT" not in out  # every F2 figure inside its band
 
 
-def test_main_job_json(capsys):
+def test_main_job_json(capsys, monkeypatch):
+    # The main job's figures are the scenarios f1 and f2, run once each and reported.
+    import dataclasses
+
+    from hil import scenarios
+
+    ran = {}
+    for name in scenarios.MAIN:
+        sc = scenarios.get(name)
+
+        def counted(cfg, progress=None, _run=sc.run, _name=name):
+            ran[_name] = _run(cfg, progress)
+            return ran[_name]
+        monkeypatch.setitem(scenarios.SCENARIOS, name, dataclasses.replace(sc, run=counted))
     code, out, _ = run(capsys, "main", "--json")
     data = json.loads(out)
-    assert all(data["F2"]["within_band"].values())
+    assert set(ran) == {"f1", "f2"}
+    assert data["F1"]["simulated_peak_hz"] == ran["f1"].metric("simulated peak").value
+    assert data["F2"]["simulated"]["stall_force_n"] == ran["f2"].metric("stall force").value
+    assert all(data["F2"]["within_band"].values()) and ran["f2"].ok
     assert 50 <= data["F1"]["model_peak_hz"] <= 65
     assert data["F1"]["linear_max_gain_error_db"] < 0.5
 
