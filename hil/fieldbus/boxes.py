@@ -4,8 +4,9 @@
   stack (plant + driver board + LVDS link) per actuator slot, at their real rates on the
   scheduler.
 * :class:`EchoBox`: a cheap behavioural stand-in for bus-level work on the full robot
-  (47 actuators): each actuator follows its command through a first-order lag and keeps the
-  MCU's command watchdog, so timeouts and status words behave as the firmware's.
+  (47 actuators): :class:`plant.echo_actuator.EchoActuators` (each actuator follows its
+  command through a first-order lag and keeps the MCU's command watchdog, so timeouts and
+  status words behave as the firmware's).
 
 Both take the box's output record bytes once per fieldbus cycle (:meth:`apply`), give the
 input record bytes (:meth:`inputs`) and advance by whole ticks (:meth:`advance`).
@@ -13,17 +14,16 @@ input record bytes (:meth:`inputs`) and advance by whole ticks (:meth:`advance`)
 
 from __future__ import annotations
 
-import math
 import struct
 
 import numpy as np
 
 from firmware_model.mcu.board import McuBoard
-from firmware_model.mcu.mcu import BOARD_ENABLED, CMD_TIMEOUT, SAFE_OFF
 from hil.fieldbus import pdo
 from hil.fieldbus.topology import Box
 from hil.scheduler import Scheduler
 from plant.config import Config
+from plant.echo_actuator import EchoActuators
 
 
 def _out_dtype(box: Box) -> np.dtype:
@@ -171,67 +171,30 @@ class StackBox(McuBox):
 
 
 class EchoBox(_BoxBase):
-    """Behavioural actuators: force follows the command with ``TAU_FORCE_S``, the piston a
-    position command with ``TAU_POSITION_S``; the MCU's command watchdog is kept."""
-
-    TAU_FORCE_S = 0.005
-    TAU_POSITION_S = 0.02
-    N_PER_A = 2150.0 / 18.0
+    """Behavioural actuators (:class:`plant.echo_actuator.EchoActuators`: a first-order lag
+    each, the MCU's command watchdog kept) behind the box's process data."""
 
     def __init__(self, box: Box, cfg: Config) -> None:
         super().__init__(box, cfg)
-        n = len(self.act)
-        self.timeout = round(cfg.get("mcu.command_timeout_s") / self.tick_s)
-        self.off = self.timeout + round(cfg.get("mcu.safe_off_delay_s") / self.tick_s)
+        self.model = EchoActuators(len(self.act), cfg)
         self.temp = cfg.get("effects.oil_temperature.initial_c")
-        self.cmd = [("off", 0.0)] * n
-        self.enabled = [False] * n
-        self.last = [0] * n
-        self.f = [0.0] * n
-        self.x = [0.0] * n
-        self.v = [0.0] * n
-        self.status = [0] * n
         self._fill()
 
     def apply(self, data: bytes) -> None:
         for i, (mode, value, flags, _kpos, _kpf) in enumerate(self.decode(data)):
-            self.cmd[i] = (mode, value)
-            self.enabled[i] = bool(flags & pdo.FLAG_ENABLE)
-            self.last[i] = self.tick
+            self.model.command(i, mode, value, bool(flags & pdo.FLAG_ENABLE))
 
     def advance(self, ticks: int) -> None:
-        dt = ticks * self.tick_s
-        af = 1.0 - math.exp(-dt / self.TAU_FORCE_S)
-        ax = 1.0 - math.exp(-dt / self.TAU_POSITION_S)
-        self.tick += ticks
-        for i in range(len(self.act)):
-            mode, value = self.cmd[i]
-            age = self.tick - self.last[i]
-            status = BOARD_ENABLED if self.enabled[i] else 0
-            if age > self.timeout and mode != "off":
-                status |= CMD_TIMEOUT
-                mode, value = "force", 0.0
-                if age > self.off:
-                    status = (status | SAFE_OFF) & ~BOARD_ENABLED
-            if not status & BOARD_ENABLED:
-                mode = "off"
-            x0 = self.x[i]
-            if mode == "force":
-                self.f[i] += af * (value - self.f[i])
-            elif mode == "position":
-                self.x[i] += ax * (value - self.x[i])
-                self.f[i] += af * (1e4 * (value - self.x[i]) - self.f[i])
-            else:
-                self.f[i] += af * (0.0 - self.f[i])
-            self.v[i] = (self.x[i] - x0) / dt
-            self.status[i] = status
+        self.model.advance(ticks)
+        self.tick = self.model.tick
         self._fill()
 
     def _fill(self) -> None:
+        m = self.model
         for i, k in enumerate(self.act):
-            f = self.f[i]
-            self._pack_actuator(k, self.x[i], self.v[i], f, f, f, f / self.N_PER_A, self.temp,
-                                self.status[i], 0, 0)
+            f = m.f[i]
+            self._pack_actuator(k, m.x[i], m.v[i], f, f, f, m.iq(i), self.temp, m.status[i],
+                                0, 0)
 
 
 BOX_MODELS = {"stack": StackBox, "echo": EchoBox}
