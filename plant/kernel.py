@@ -22,7 +22,8 @@ average is constant over a carrier period). ``plant.model`` picks ``n_sub`` from
 stiffest mode so that h * omega stays below 0.5.
 
 Everything here works on flat float64 arrays addressed by :mod:`plant.layout` constants:
-no allocation per tick, no string lookups, no Python objects.
+no allocation per tick, no string lookups, no Python objects. The per-tick functions are
+compiled with :data:`plant.blocks.TICK` (no reference counting: see there).
 """
 
 from __future__ import annotations
@@ -31,6 +32,7 @@ import math
 
 from numba import njit
 
+from plant.blocks import TICK
 from plant.blocks.hydraulics import pressure_force, series_stiffness
 from plant.blocks.load import end_stops, piston_and_load, rod_force
 from plant.blocks.motor_dq import TWO_PI_3, drive
@@ -110,7 +112,7 @@ from plant.layout import (
 from plant.sensors.readings import sense
 
 
-@njit(cache=True)
+@njit(**TICK)
 def derivatives(x, p, u, dx):
     """Write dx/dt of every integrated state into ``dx`` (see :mod:`plant.layout`): the
     blocks of :mod:`plant.blocks`, motor and inverter, pump, hydraulics, piston and load,
@@ -135,7 +137,7 @@ def derivatives(x, p, u, dx):
                     p_ext)
 
 
-@njit(cache=True)
+@njit(**TICK)
 def rk4_tick(x, p, u, work):
     """Advance the states ``x`` by one tick: ``n_sub`` RK4 sub-steps of ``h_sub`` s."""
     h = p[P_H_SUB]
@@ -163,7 +165,7 @@ def rk4_tick(x, p, u, work):
             end_stops(p, x)
 
 
-@njit(cache=True)
+@njit(**TICK)
 def stored_energy(x, p, u):
     """Kinetic + elastic + magnetic energy held by the plant, J."""
     e = 0.5 * p[P_JP] * x[S_VP] ** 2 + 0.5 * p[P_JC] * x[S_VC] ** 2
@@ -178,7 +180,7 @@ def stored_energy(x, p, u):
     return e
 
 
-@njit(cache=True)
+@njit(**TICK)
 def outputs(x, p, u, rng, y):
     """Fill the output row ``y``: the physical values, then what the sensors read of them
     (:func:`plant.sensors.readings.sense`: noise and converter resolution, when those
@@ -262,7 +264,7 @@ def gates_off(x):
     x[S_IQ] = 0.0
 
 
-@njit(cache=True)
+@njit(**TICK)
 def advance(x, p, u, n_ticks, y, rec, row0, every, tick0, rng, work):
     """Advance ``n_ticks`` ticks with inputs ``u`` held; return the next free record row.
 

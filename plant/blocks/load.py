@@ -14,6 +14,7 @@ import math
 
 from numba import njit
 
+from plant.blocks import TICK
 from plant.layout import (
     IN_F_EXT,
     LOAD_CART,
@@ -99,7 +100,7 @@ def piston_and_load(x, p, u, dx, tq, vc, dc):
     return f_seal, loss_load, p_ext
 
 
-@njit(cache=True)
+@njit(**TICK)
 def end_stops(p, x):
     """Inelastic end stops at +/- stroke/2: hold the piston, drop its outward velocity."""
     half = p[P_HALF_STROKE]
