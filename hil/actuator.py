@@ -259,8 +259,8 @@ class ActuatorStack:
         ctrl = self.mcu.ctrl[0]
         self.sched.probe("tau_ref", lambda: float(self.mcu.tau_ref[0]), period)
         self.sched.probe("f_pres", lambda: float(self.mcu.meas[0].f_pres), period)
-        self.sched.probe("f_strain", lambda: float(ctrl.cos_alpha * self.mcu.meas[0]
-                                                   .f_strain_raw), period)
+        self.sched.probe("f_strain", lambda: float(ctrl.strain_force(self.mcu.meas[0])),
+                         period)
         self.sched.probe("f_fil", lambda: float(ctrl.f_fil), period)
         self.sched.probe("iq_ref", lambda: float(self.mcu.iq_ref[0]), period)
         self.sched.probe("x_meas", lambda: float(self.mcu.meas[0].x_piston), period)

@@ -114,13 +114,18 @@ class ActuatorController:
         self.f_fil = ZERO
         self.limits = 0
 
+    def strain_force(self, m: Measurements) -> np.float32:
+        """The piston-axis force the strain gauge reads: its raw force times cos(alpha) of
+        the rod's angle, N."""
+        return self.cos_alpha * m.f_strain_raw
+
     def feedback_force(self, m: Measurements) -> np.float32:
         """Update the complementary filter; return the force the loop is closed on, N."""
         if m.strain_samples == 0:
             # No AD7195 conversion read yet: its register still says code 0 (-3000 N).
             self.f_fil = m.f_pres
             return m.f_pres
-        f_strain = self.cos_alpha * m.f_strain_raw
+        f_strain = self.strain_force(m)
         self.f_fil = m.f_pres + self.highpass(f_strain - m.f_pres)
         if self.feedback == "pressure":
             return m.f_pres
