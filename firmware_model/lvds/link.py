@@ -195,9 +195,30 @@ def sweep_up(lk, up, master_up):
             _log_word(lk, LK_UP_WORDLOG, addr, data, WORD_OK)
 
 
+#: The bit :func:`_flip` flips in a line word.
+FLIP_BIT = 12
+
+
 def _flip(word: int) -> int:
     """One bit error in a data bit of a line word (the CRC catches every single-bit error)."""
-    return word ^ (1 << 12)
+    return word ^ (1 << FLIP_BIT)
+
+
+def line_words(wordlogs: np.ndarray, t_ns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(times, 45-bit line words) of the words that reached the receiver, from rows of one
+    direction's word log (``wordlogs[:, :WORDS_W]``, one row per tick at ``t_ns``): a word
+    that failed its CRC is the word with the data bit :func:`_flip` flips; dropped words
+    never reached the line."""
+    count = wordlogs[:, 0]
+    slots = wordlogs[:, 1:WORDS_W].reshape(len(wordlogs), MAX_WORDS_TICK, 3)
+    mask = np.arange(MAX_WORDS_TICK)[None, :] < count[:, None]
+    w = slots[mask]
+    t = np.repeat(t_ns, count)
+    keep = w[:, 2] != WORD_DROPPED
+    w, t = w[keep], t[keep]
+    line = lvds.encode_words_array(w[:, 0].astype(np.uint64), w[:, 1])
+    line = np.where(w[:, 2] == WORD_CRC_BAD, line ^ np.uint64(1 << FLIP_BIT), line)
+    return t, line.astype(np.uint64)
 
 
 class BitLevelLink:

@@ -41,7 +41,6 @@ from hil.fieldbus.system import BusRecord, BusSystem
 from hil.fieldbus.topology import Topology
 from hil.framelog import FrameLogWriter
 from plant.config import Config
-from protocols import lvds
 
 UP_WIDTH = B.UP_WORDS + 1
 ENC_MCU_UP = "eha-hil/mcu-up"        # 31 upstream words + CRC-error count, uint32
@@ -157,26 +156,10 @@ class RecordingStackBox(StackBox):
                 self.log.write_block(self.ch_trace[k], t, tr)
                 self.log.write_block(self.ch_raw[k], t, tr[:, :B.N_RAW])
                 for d, ch in enumerate(self.ch_words[k]):
-                    tw, words = _line_words(tr, t, TRACE_WORDS + d * LK.WORDS_W)
+                    tw, words = LK.line_words(tr[:, TRACE_WORDS + d * LK.WORDS_W:], t)
                     if len(tw):
                         self.log.write_block(ch, tw, words[:, None])
         self._reset_buffers()
-
-
-def _line_words(trace: np.ndarray, t_ns: np.ndarray, col: int) -> tuple[np.ndarray,
-                                                                         np.ndarray]:
-    """(times, 45-bit line words) of the words a trace's word log says reached the
-    receiver; a CRC failure is a word with one data bit flipped (as the link model flips)."""
-    count = trace[:, col]
-    slots = trace[:, col + 1:col + LK.WORDS_W].reshape(len(trace), LK.MAX_WORDS_TICK, 3)
-    mask = np.arange(LK.MAX_WORDS_TICK)[None, :] < count[:, None]
-    w = slots[mask]
-    t = np.repeat(t_ns, count)
-    keep = w[:, 2] != LK.WORD_DROPPED
-    w, t = w[keep], t[keep]
-    line = lvds.encode_words_array(w[:, 0].astype(np.uint64), w[:, 1])
-    line = np.where(w[:, 2] == LK.WORD_CRC_BAD, line ^ np.uint64(1 << 12), line)
-    return t, line.astype(np.uint64)
 
 
 def run_logged(topo: Topology, cfg: Config, cycles: int, pc: Callable[[int, Master], None],
