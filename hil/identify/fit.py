@@ -59,6 +59,12 @@ MAX_REL_SE = 0.5
 Z95 = 1.959963984540054
 
 
+#: Relative change of every channel's residual rms under which the weights count as settled
+#: (a weighted least-squares optimum moves little with its weights; a pass costs a fit).
+WEIGHTS_SETTLED = 0.5
+#: Estimation samples a long record's fit iterates on before its last step on all of them.
+ITERATION_SAMPLES = 30_000
+
 #: Longest first-order sensor lag the baseline may fit (a 160 Hz sensor).
 MAX_SENSOR_LAG_S = 1e-3
 #: The timing skew is a sub-sample alignment: |skew| <= SKEW_LIMIT x the sample period.
@@ -264,16 +270,24 @@ class OutputErrorFit:
         x = np.clip(x, lo, hi)
         used = sigma
         r = j = None
+        # A long record iterates on the first ITERATION_SAMPLES estimation samples (every
+        # simulation stops there) and takes one last step on all of them, for the optimum
+        # and the covariance; a record of up to ~8 s at 5 kHz uses all of them throughout.
+        where = np.flatnonzero(mask)
+        iter_mask = mask
+        if where.size > ITERATION_SAMPLES:
+            iter_mask = mask.copy()
+            iter_mask[where[ITERATION_SAMPLES]:] = False
         for k in range(passes):
             if k > 0:
-                if all(abs(sigma[c] / used[c] - 1.0) < 0.2 for c in sigma):
+                if all(abs(sigma[c] / used[c] - 1.0) < WEIGHTS_SETTLED for c in sigma):
                     break  # weights settled: a second pass would not move the optimum
                 # re-weight the last residual and Jacobian instead of simulating them again
-                n_t = int(mask.sum())
+                n_t = int(iter_mask.sum())
                 scale = np.repeat([used[c] / sigma[c] for c in self.exp.channels], n_t)
                 r = r * scale
                 j = j * scale[:, None]
-            fun, jac = self._problem(free, theta0, sigma, mask)
+            fun, jac = self._problem(free, theta0, sigma, iter_mask)
             x, r, j = levenberg_marquardt(fun, jac, x, lo, hi, max_jac=max(3, max_nfev // 3),
                                           r0=r, j0=j)
             used = sigma
@@ -282,6 +296,10 @@ class OutputErrorFit:
             res = self.residual_channels(out)
             sigma = {c: float(np.sqrt(np.nanmean(res[c][mask] ** 2))) or 1.0
                      for c in self.exp.channels}
+        if iter_mask is not mask:
+            fun, jac = self._problem(free, theta0, sigma, mask)
+            x, r, j = levenberg_marquardt(fun, jac, x, lo, hi, max_jac=1, final_jac=False)
+            used = sigma
         theta = self._to_theta(x, free, theta0)
         states = self.model.states(theta)
         out = self.model.outputs(theta, states)
@@ -344,6 +362,7 @@ def levenberg_marquardt(
     max_jac: int = 12,
     r0: np.ndarray | None = None,
     j0: np.ndarray | None = None,
+    final_jac: bool = True,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Minimise ``|fun(x)|^2`` within the box ``lo <= x <= hi``; returns ``(x, r, J)``.
 
@@ -351,7 +370,8 @@ def levenberg_marquardt(
     rows and the parameters a dozen, so each step costs one product ``J'J`` (a library solver
     takes an SVD of ``J`` per step, and most of the fit's time with it). Steps leaving the box
     are clipped to it. Stops when a step lowers the cost by less than 1e-9 of it, the step
-    is below 1e-8, or after ``max_jac`` Jacobians.
+    is below 1e-8, or after ``max_jac`` Jacobians. ``final_jac=False`` returns the last
+    Jacobian computed rather than one at the returned point (for a last small step).
     """
     x = np.clip(np.asarray(x0, dtype=float), lo, hi)
     r = fun(x) if r0 is None else r0
@@ -398,7 +418,7 @@ def levenberg_marquardt(
         # a small fraction of its standard error
         if not improved or gain <= 0.1 * cost / r.size or np.max(np.abs(step)) < 1e-8 \
                 or n_jac >= max_jac:
-            if improved:
+            if improved and final_jac:
                 j = jac(x)  # the Jacobian at the returned point, for the covariance
             return x, r, j
         j = jac(x)
@@ -407,7 +427,7 @@ def levenberg_marquardt(
 
 def guarded_fit(fitter: OutputErrorFit, theta0: np.ndarray, free: list[str],
                 credible: np.ndarray, sigma: dict[str, float] | None = None,
-                passes: int = 2, guard: list[str] | None = None,
+                passes: int = 2, guard: list[str] | None = None, max_nfev: int = 40,
                 ) -> tuple[FitResult, dict[str, str]]:
     """Fit, then hold every non-credible parameter (of ``guard``, default all free) at its
     last credible value (from ``credible``), worst first, refitting after each hold.
@@ -415,7 +435,7 @@ def guarded_fit(fitter: OutputErrorFit, theta0: np.ndarray, free: list[str],
     Returns the fit and ``{parameter: why it was held}``.
     """
     free = list(free)
-    result = fitter.fit(theta0, free, sigma=sigma, passes=passes)
+    result = fitter.fit(theta0, free, sigma=sigma, passes=passes, max_nfev=max_nfev)
     held: dict[str, str] = {}
     for _ in range(len(free)):
         bad = fitter.offenders(result, guard)

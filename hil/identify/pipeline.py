@@ -493,7 +493,8 @@ def identify(
         say(f"refit with {', '.join(retry)} free again")
         fitter = OutputErrorFit(model, {**NUISANCE_SCALES(exp.dt), **_all_scales(defs_all)})
         again, held_again = guarded_fit(fitter, current.theta, current.free + retry,
-                                        current.theta, sigma=current.sigma, passes=1)
+                                        current.theta, sigma=current.sigma, passes=1,
+                                        max_nfev=9)
         if not any(p in held_again for p in current.free):
             for p in retry:
                 if p not in held_again:
