@@ -45,25 +45,23 @@ def coulomb_csv(tmp_path_factory):
     return path
 
 
-def test_synth_then_identify_json(capsys, coulomb_csv):
-    code, out, err = run(capsys, "identify", str(coulomb_csv), "--json", "--quiet")
-    assert code == 0, err
-    data = json.loads(out)
-    for key in ("effects_added", "candidates", "channels", "residual_white_before",
-                "residual_white_after", "unexplained"):
-        assert key in data
-    assert [e["name"] for e in data["effects_added"]] == ["pump_coulomb_friction"]
-    force = data["effects_added"][0]["params"]["force_n"]["value"]
-    assert abs(force - 60.0) < 6.0
-    assert all({"nrmse_before", "nrmse_after"} <= set(c) for c in data["channels"])
-    assert any(c["selected"] and "statistic" in c for c in data["candidates"])
-    assert data["residual_white_after"] and not data["residual_white_before"]
-    assert data["unexplained"] is False
+@pytest.fixture(scope="module")
+def report_run(coulomb_csv, tmp_path_factory):
+    """One identification through the command line with ``--report`` (the whole tool: a
+    few seconds), shared by the tests of its text, its files and its JSON summary."""
+    import contextlib
+    import io
+
+    rdir = tmp_path_factory.mktemp("rep") / "rep"
+    args = _parser().parse_args(["identify", str(coulomb_csv), "--report", str(rdir)])
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        code = args.func(args)
+    return code, out.getvalue(), err.getvalue(), rdir
 
 
-def test_identify_text_and_report_dir(capsys, coulomb_csv, tmp_path):
-    rdir = tmp_path / "rep"
-    code, out, err = run(capsys, "identify", str(coulomb_csv), "--report", str(rdir))
+def test_identify_text_and_report_dir(report_run):
+    code, out, err, rdir = report_run
     assert code == 0
     assert "effects added" in out and "pump_coulomb_friction" in out and "NRMSE" in out
     assert "round 0" in err  # progress on stderr
@@ -71,6 +69,23 @@ def test_identify_text_and_report_dir(capsys, coulomb_csv, tmp_path):
                  "overlay.png", "residual_before.png", "residual_after.png",
                  "order_spectrum_acf.png"):
         assert (rdir / name).stat().st_size > 100, name
+
+
+def test_json_summary(report_run):
+    """``--json`` prints what ``summary.json`` holds (report.to_json of the same report)."""
+    rdir = report_run[3]
+    data = json.loads((rdir / "summary.json").read_text())
+    for key in ("effects_added", "candidates", "channels", "residual_white_before",
+                "residual_white_after", "unexplained", "intersample", "input_noise",
+                "refused"):
+        assert key in data
+    assert [e["name"] for e in data["effects_added"]] == ["pump_coulomb_friction"]
+    force = data["effects_added"][0]["params"]["force_n"]["value"]
+    assert abs(force - 60.0) < 6.0
+    assert all({"nrmse_before", "nrmse_after"} <= set(c) for c in data["channels"])
+    assert any(c["selected"] and "statistic" in c for c in data["candidates"])
+    assert data["residual_white_after"] and not data["residual_white_before"]
+    assert data["unexplained"] is False and data["refused"] is None
 
 
 def test_malformed_csv_exit_2(capsys, tmp_path):
