@@ -443,6 +443,15 @@ def identify(
         credible = current.theta.copy()
         for p, begin in d.refit_extra:
             credible[IDX[p]] = begin(exp)
+        if d.name == "viscosity_temperature" and exp.temperature is not None:
+            # the fitted dampers hold at the record's temperature until the law is in; with
+            # it they hold at the reference temperature (a held one already does: the preset's)
+            t_mean = float(np.mean(exp.temperature[est_mask]))
+            factor = math.exp(theta0[IDX["visc_coeff_per_c"]] * (t_mean - exp.t_ref))
+            for p in ("ds", "dp", "dc"):
+                if p in current.free:
+                    theta0[IDX[p]] *= factor
+                    credible[IDX[p]] *= factor
         if d.name == "input_delay" and "skew_s" in new_free:
             # the causal delay takes over the sub-sample skew: one timing parameter
             theta0[IDX["delay_s"]] = max(theta0[IDX["delay_s"]] + theta0[IDX["skew_s"]], 0.0)
