@@ -16,11 +16,14 @@ The test is a score-type regression of the weighted output-error residual on the
 3. **Test**: least-squares coefficients ``beta`` of the residual on the projected signature,
    their covariance by Newey-West (HAC) on the per-sample scores, Wald chi^2 and its p-value;
    Holm's correction over all candidates tested in a round.
-   A candidate that *takes over a nuisance at its bound* (``input_delay``: the baseline's
-   timing skew pinned at +T/2) is judged at its own fit instead (Wald test of the estimate
-   beyond the nuisance's reach, validation share by the refit): the restricted fit that a
-   score test linearises at has already bent other parameters (sensor lags, gains, k_s and
-   J_c) to imitate it, so its local signature is small or collinear there.
+   A candidate that *takes over a nuisance at its bound* (``input_delay``: the fit's timing
+   skew pinned at +T/2) is judged at its own fit instead (Wald test of the estimate beyond
+   the nuisance's reach, validation share by the refit): the restricted fit that a score
+   test linearises at has already bent other parameters (sensor lags, gains, k_s and J_c) to
+   imitate it, so its local signature is small or collinear there. That fit is the refit it
+   gets if selected, so it is *deferred*: done only in a round where no score-tested
+   candidate is selected (another effect's structure can pin the skew too; once that effect
+   is in, the skew may come off its bound, and the delay is then not applicable).
 4. **Rank**: by the share of the *held-out validation* residual variance the effect removes
    (with ``beta`` from the estimation part), then by the Wald statistic.
 
@@ -107,7 +110,7 @@ def _needs_strain_and_temperature(exp: Experiment) -> str | None:
 def _needs_skew_at_bound(exp: Experiment) -> str | None:
     if exp.skew_at_bound:
         return None
-    return ("the baseline's timing skew lies within half a sample: a sampling alignment, "
+    return ("the fit's timing skew lies within half a sample: a sampling alignment, "
             "no delay beyond it")
 
 
@@ -181,7 +184,7 @@ class CandidateTest:
     label: str
     name: str
     params: list[str]
-    status: str  # "tested" | "collinear" | "not_excited" | "not_applicable"
+    status: str  # "tested" | "collinear" | "not_excited" | "not_applicable" | "deferred"
     reason: str = ""
     beta: dict[str, float] = field(default_factory=dict)
     se: dict[str, float] = field(default_factory=dict)
@@ -235,10 +238,9 @@ def test_candidates(
     ``simulate(theta)`` returns the model channels; ``jac_names`` are the fitted (declared)
     parameters whose sensitivities are projected off each signature, on the estimation
     samples ``est_mask`` and, with the same coefficients, on the validation samples.
-    ``judge_at_fit(d)`` fits a candidate marked :attr:`EffectDef.judged_at_fit` (without
-    it, such a candidate gets the score test like the others).
+    A candidate marked :attr:`EffectDef.judged_at_fit` is judged by ``judge_at_fit(d)``; without
+    it, it is left ``deferred`` for :func:`judge_deferred`.
     """
-    at_fit = judge_at_fit is not None
     base_out = simulate(theta)
     r_est = _weighted(residual, exp, sigma, est_mask)
     r_val = _weighted(residual, exp, sigma, val_mask)
@@ -248,7 +250,7 @@ def test_candidates(
     jobs: list[tuple[str, float]] = [(p, 1e-4 * abs(theta[index[p]]) or 1e-4)
                                      for p in jac_names]
     for d in defs:
-        if not d.applicable(exp) and d.params and not (at_fit and d.judged_at_fit):
+        if not d.applicable(exp) and d.params and not d.judged_at_fit:
             jobs += [(p, 0.25 * nom) for p, nom in zip(d.params, d.nominal, strict=True)]
 
     def sens(job: tuple[str, float]) -> tuple[np.ndarray, np.ndarray]:
@@ -273,8 +275,13 @@ def test_candidates(
             t.status, t.reason = "not_applicable", reason or "no parameters"
             results.append(t)
             continue
-        if at_fit and d.judged_at_fit:
-            results.append(_judged(t, d, judge_at_fit(d)))
+        if d.judged_at_fit:
+            if judge_at_fit is None:
+                t.status, t.reason = "deferred", ("judged at its own fit, in a round where "
+                                                  "no other candidate is selected")
+            else:
+                _judged(t, d, judge_at_fit(d))
+            results.append(t)
             continue
         cols_est, cols_val, steps = [], [], []
         for p, nom in zip(d.params, d.nominal, strict=True):
@@ -348,20 +355,37 @@ def test_candidates(
         rv = float(r_val @ r_val)
         t.share_val = float(1.0 - np.sum((r_val - fv) ** 2) / rv) if rv > 0 else 0.0
         results.append(t)
-    tested = [t for t in results if t.status == "tested"]
-    if tested:
-        for t, p in zip(tested, stats.holm([t.p_value for t in tested]), strict=True):
-            t.p_holm = p
+    _holm(results)
     return results
 
 
-def _judged(t: CandidateTest, d: EffectDef, j: FitJudgement) -> CandidateTest:
+def _holm(tests: list[CandidateTest]) -> None:
+    tested = [t for t in tests if t.status == "tested"]
+    if tested:
+        for t, p in zip(tested, stats.holm([t.p_value for t in tested]), strict=True):
+            t.p_holm = p
+
+
+def judge_deferred(tests: list[CandidateTest], defs: list[EffectDef],
+                   judge_at_fit: Callable[[EffectDef], FitJudgement]) -> bool:
+    """Judge the ``deferred`` candidates of ``tests`` at their own fits (in place) and redo
+    Holm's correction over the round; False when there were none."""
+    by_label = {d.label: d for d in defs}
+    deferred = [t for t in tests if t.status == "deferred"]
+    for t in deferred:
+        t.status, t.reason = "tested", ""
+        _judged(t, by_label[t.label], judge_at_fit(by_label[t.label]))
+    _holm(tests)
+    return bool(deferred)
+
+
+def _judged(t: CandidateTest, d: EffectDef, j: FitJudgement) -> None:
     """The test row of a candidate judged at its own fit: a Wald test of the estimates'
     excess over what the restricted model reaches (one-sided: only an excess counts), the
     shares the fit removed."""
     if j.refused:
         t.status, t.reason = "not_excited", j.refused
-        return t
+        return
     names = list(j.beta)
     t.params = names
     t.beta = dict(j.beta)
@@ -371,7 +395,7 @@ def _judged(t: CandidateTest, d: EffectDef, j: FitJudgement) -> CandidateTest:
     se = np.array([j.se[p] for p in names])
     if not np.all(np.isfinite(se)) or np.any(se <= 0.0):
         t.status, t.reason = "not_excited", "its fit gives no standard error"
-        return t
+        return
     t.wald, t.p_value, t.dof = stats.wald(excess, np.diag(se * se))
     if np.any(excess <= 0.0):
         t.p_value = 1.0
@@ -379,7 +403,6 @@ def _judged(t: CandidateTest, d: EffectDef, j: FitJudgement) -> CandidateTest:
     t.reason = "judged at its own fit: " + ", ".join(
         f"{p} {j.beta[p]:.4g} ({j.excess[p] / j.se[p]:+.1f} standard errors beyond the "
         "restricted model's reach)" for p in names)
-    return t
 
 
 def rank(tests: list[CandidateTest]) -> list[CandidateTest]:
@@ -389,5 +412,5 @@ def rank(tests: list[CandidateTest]) -> list[CandidateTest]:
     return sorted(sig, key=lambda t: (t.share_val, t.wald), reverse=True)
 
 
-__all__ = ["ALPHA", "CandidateTest", "EffectDef", "FitJudgement", "library", "rank",
-           "test_candidates"]
+__all__ = ["ALPHA", "CandidateTest", "EffectDef", "FitJudgement", "judge_deferred", "library",
+           "rank", "test_candidates"]

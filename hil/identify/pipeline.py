@@ -27,6 +27,7 @@ from hil.identify.candidates import (
     CandidateTest,
     EffectDef,
     FitJudgement,
+    judge_deferred,
     library,
     rank,
     test_candidates,
@@ -411,9 +412,10 @@ def identify(
     skew_fitter = OutputErrorFit(model, NUISANCE_SCALES(exp.dt))
     if "skew_s" in base.free and skew_fitter.at_bound(base, "skew_s"):
         exp.skew_at_bound = base.value("skew_s") > 0
-        exp.notes.append(f"the timing skew sits at its bound ({base.value('skew_s') * 1e6:+.0f} "
-                         "us, half a sample): the outputs and the logged input are further "
-                         "apart in time than a sampling alignment")
+        exp.notes.append(f"the baseline's timing skew sits at its bound "
+                         f"({base.value('skew_s') * 1e6:+.0f} us, half a sample): the outputs "
+                         "and the logged input are further apart in time than a sampling "
+                         "alignment")
     names = [n for n in BASELINE_LABELS if n in base.free or n in base.held]
     baseline_est = _estimates(base, names)
     residual0 = {c: exp.measured[c] - base.outputs[c] for c in exp.channels}
@@ -472,7 +474,7 @@ def identify(
     def judge_at_fit(d: EffectDef) -> FitJudgement:
         """A candidate that takes over a nuisance pinned at its bound, judged at its own fit
         (the refit it would get if selected, kept for that)."""
-        say(f"fitting {d.label} to judge it (the baseline's skew sits at its bound)")
+        say(f"fitting {d.label} to judge it (the fit's skew sits at its bound)")
         new, held_now = prefit[d.label] = refit_with(d, {p: 0.0 for p in d.params})
         own = [p for p in held_now if p in d.params]
         if own:
@@ -496,9 +498,12 @@ def identify(
         say(f"round {rnd}: testing {len(defs)} candidates")
         prefit.clear()
         tests = test_candidates(defs, model.outputs, current.theta, IDX, exp, current.weights,
-                                residual, est_mask, exp.val, current.free, judge_at_fit)
+                                residual, est_mask, exp.val, current.free)
         rounds.append(tests)
         ranked = rank(tests)
+        if not ranked and len(added) < max_effects and judge_deferred(tests, defs,
+                                                                      judge_at_fit):
+            ranked = rank(tests)
         if not ranked or len(added) >= max_effects:
             break
         best = ranked[0]
@@ -528,6 +533,11 @@ def identify(
         for p, why in held_now.items():
             held[p] = f"after adding {best.label}: {why}"
         current = new
+        if "skew_s" in current.free:
+            # the skew pinned at +T/2 may have been another effect's doing: the delay is
+            # offered against the current fit's skew
+            exp.skew_at_bound = (skew_fitter.at_bound(current, "skew_s")
+                                 and current.value("skew_s") > 0)
         best.selected = True
         added_labels.add(best.label)
         added.append(EffectAdded(best.name, best.label, {}, rnd, best.p_holm, best.share_val))
