@@ -16,6 +16,14 @@ The test is a score-type regression of the weighted output-error residual on the
 3. **Test**: least-squares coefficients ``beta`` of the residual on the projected signature,
    their covariance by Newey-West (HAC) on the per-sample scores, Wald chi^2 and its p-value;
    Holm's correction over all candidates tested in a round.
+   A candidate that *takes over a nuisance at its bound* (``input_delay``: the fit's timing
+   skew pinned at +T/2) is judged at its own fit instead (Wald test of the estimate beyond
+   the nuisance's reach, validation share by the refit): the restricted fit that a score
+   test linearises at has already bent other parameters (sensor lags, gains, k_s and J_c) to
+   imitate it, so its local signature is small or collinear there. That fit is the refit it
+   gets if selected, so it is *deferred*: done only in a round where no score-tested
+   candidate is selected (another effect's structure can pin the skew too; once that effect
+   is in, the skew may come off its bound, and the delay is then not applicable).
 4. **Rank**: by the share of the *held-out validation* residual variance the effect removes
    (with ``beta`` from the estimation part), then by the Wald statistic.
 
@@ -67,6 +75,22 @@ class EffectDef:
     #: shape parameters freed only in the refit once the effect is in (their signature is
     #: zero while the effect is off): (parameter, start value from the experiment)
     refit_extra: tuple[tuple[str, Callable[[Experiment], float]], ...] = ()
+    #: judged at its own fit (the module docstring, step 3), not by a score test
+    judged_at_fit: bool = False
+
+
+@dataclass(frozen=True)
+class FitJudgement:
+    """A candidate judged at its own fit: the estimates beyond the restricted model's reach
+    (``excess``), their standard errors, and the shares of the estimation and validation
+    residual variance the fit removed; or, in ``refused``, why the fit is not credible."""
+
+    beta: dict[str, float] = field(default_factory=dict)
+    excess: dict[str, float] = field(default_factory=dict)
+    se: dict[str, float] = field(default_factory=dict)
+    share_est: float = 0.0
+    share_val: float = 0.0
+    refused: str = ""
 
 
 def _needs_temperature(exp: Experiment) -> str | None:
@@ -86,7 +110,7 @@ def _needs_strain_and_temperature(exp: Experiment) -> str | None:
 def _needs_skew_at_bound(exp: Experiment) -> str | None:
     if exp.skew_at_bound:
         return None
-    return ("the baseline's timing skew lies within half a sample: a sampling alignment, "
+    return ("the fit's timing skew lies within half a sample: a sampling alignment, "
             "no delay beyond it")
 
 
@@ -134,7 +158,7 @@ def library(exp: Experiment) -> list[EffectDef]:
         EffectDef("input_delay", "input_delay", ("delay_s",), (100e-6,),
                   "causal delay between the logged and the applied current (beyond the "
                   "baseline's sub-sample timing skew, which it replaces when added)",
-                  _needs_skew_at_bound),
+                  _needs_skew_at_bound, judged_at_fit=True),
     ]
     sat = [c for c in SAT_CHANNELS if c in exp.plateaus and c in exp.channels]
     if not sat:
@@ -160,7 +184,7 @@ class CandidateTest:
     label: str
     name: str
     params: list[str]
-    status: str  # "tested" | "collinear" | "not_excited" | "not_applicable"
+    status: str  # "tested" | "collinear" | "not_excited" | "not_applicable" | "deferred"
     reason: str = ""
     beta: dict[str, float] = field(default_factory=dict)
     se: dict[str, float] = field(default_factory=dict)
@@ -207,12 +231,15 @@ def test_candidates(
     est_mask: np.ndarray,
     val_mask: np.ndarray,
     jac_names: list[str],
+    judge_at_fit: Callable[[EffectDef], FitJudgement] | None = None,
 ) -> list[CandidateTest]:
     """Test every candidate in ``defs`` against ``residual`` (measured - model per channel).
 
     ``simulate(theta)`` returns the model channels; ``jac_names`` are the fitted (declared)
     parameters whose sensitivities are projected off each signature, on the estimation
     samples ``est_mask`` and, with the same coefficients, on the validation samples.
+    A candidate marked :attr:`EffectDef.judged_at_fit` is judged by ``judge_at_fit(d)``; without
+    it, it is left ``deferred`` for :func:`judge_deferred`.
     """
     base_out = simulate(theta)
     r_est = _weighted(residual, exp, sigma, est_mask)
@@ -223,7 +250,7 @@ def test_candidates(
     jobs: list[tuple[str, float]] = [(p, 1e-4 * abs(theta[index[p]]) or 1e-4)
                                      for p in jac_names]
     for d in defs:
-        if not d.applicable(exp) and d.params:
+        if not d.applicable(exp) and d.params and not d.judged_at_fit:
             jobs += [(p, 0.25 * nom) for p, nom in zip(d.params, d.nominal, strict=True)]
 
     def sens(job: tuple[str, float]) -> tuple[np.ndarray, np.ndarray]:
@@ -240,23 +267,20 @@ def test_candidates(
     jac = np.column_stack(j_est) if j_est else np.zeros((r_est.size, 0))
     jac_v = np.column_stack(j_val) if j_val else np.zeros((r_val.size, 0))
     jac_pinv = _pinv(jac)
-    # A causal delay is tested against the residual with the timing nuisances left in: the
-    # skew took what half a sample of timing can explain and the sensor lags part of the rest;
-    # the delay (seen by the encoder too, which has no lag) is what is left.
-    timing = ("skew_s", "lag_pressure_s", "lag_strain_s")
-    if any(p in jac_names for p in timing):
-        keep_cols = [i for i, p in enumerate(jac_names) if p not in timing]
-        jac_ns, jac_v_ns = jac[:, keep_cols], jac_v[:, keep_cols]
-        names_ns = [jac_names[i] for i in keep_cols]
-        pinv_ns = _pinv(jac_ns)
-    else:
-        jac_ns, jac_v_ns, names_ns, pinv_ns = jac, jac_v, jac_names, jac_pinv
     results: list[CandidateTest] = []
     for d in defs:
         t = CandidateTest(d.label, d.name, list(d.params), "tested")
         reason = d.applicable(exp)
         if reason or not d.params:
             t.status, t.reason = "not_applicable", reason or "no parameters"
+            results.append(t)
+            continue
+        if d.judged_at_fit:
+            if judge_at_fit is None:
+                t.status, t.reason = "deferred", ("judged at its own fit, in a round where "
+                                                  "no other candidate is selected")
+            else:
+                _judged(t, d, judge_at_fit(d))
             results.append(t)
             continue
         cols_est, cols_val, steps = [], [], []
@@ -268,10 +292,7 @@ def test_candidates(
         x = np.column_stack(cols_est)
         xv = np.column_stack(cols_val)
         norms = np.linalg.norm(x, axis=0)
-        if d.name == "input_delay":
-            jac_d, jac_vd, names_d, pinv_d = jac_ns, jac_v_ns, names_ns, pinv_ns
-        else:
-            jac_d, jac_vd, names_d, pinv_d = jac, jac_v, jac_names, jac_pinv
+        jac_d, jac_vd, names_d, pinv_d = jac, jac_v, jac_names, jac_pinv
         proj = pinv_d @ x
         xp = x - jac_d @ proj
         xvp = xv - jac_vd @ proj
@@ -334,11 +355,54 @@ def test_candidates(
         rv = float(r_val @ r_val)
         t.share_val = float(1.0 - np.sum((r_val - fv) ** 2) / rv) if rv > 0 else 0.0
         results.append(t)
-    tested = [t for t in results if t.status == "tested"]
+    _holm(results)
+    return results
+
+
+def _holm(tests: list[CandidateTest]) -> None:
+    tested = [t for t in tests if t.status == "tested"]
     if tested:
         for t, p in zip(tested, stats.holm([t.p_value for t in tested]), strict=True):
             t.p_holm = p
-    return results
+
+
+def judge_deferred(tests: list[CandidateTest], defs: list[EffectDef],
+                   judge_at_fit: Callable[[EffectDef], FitJudgement]) -> bool:
+    """Judge the ``deferred`` candidates of ``tests`` at their own fits (in place) and redo
+    Holm's correction over the round; False when there were none."""
+    by_label = {d.label: d for d in defs}
+    deferred = [t for t in tests if t.status == "deferred"]
+    for t in deferred:
+        t.status, t.reason = "tested", ""
+        _judged(t, by_label[t.label], judge_at_fit(by_label[t.label]))
+    _holm(tests)
+    return bool(deferred)
+
+
+def _judged(t: CandidateTest, d: EffectDef, j: FitJudgement) -> None:
+    """The test row of a candidate judged at its own fit: a Wald test of the estimates'
+    excess over what the restricted model reaches (one-sided: only an excess counts), the
+    shares the fit removed."""
+    if j.refused:
+        t.status, t.reason = "not_excited", j.refused
+        return
+    names = list(j.beta)
+    t.params = names
+    t.beta = dict(j.beta)
+    t.se = dict(j.se)
+    t.nominal = {p: nom for p, nom in zip(d.params, d.nominal, strict=True) if p in j.beta}
+    excess = np.array([j.excess[p] for p in names])
+    se = np.array([j.se[p] for p in names])
+    if not np.all(np.isfinite(se)) or np.any(se <= 0.0):
+        t.status, t.reason = "not_excited", "its fit gives no standard error"
+        return
+    t.wald, t.p_value, t.dof = stats.wald(excess, np.diag(se * se))
+    if np.any(excess <= 0.0):
+        t.p_value = 1.0
+    t.share_est, t.share_val = j.share_est, j.share_val
+    t.reason = "judged at its own fit: " + ", ".join(
+        f"{p} {j.beta[p]:.4g} ({j.excess[p] / j.se[p]:+.1f} standard errors beyond the "
+        "restricted model's reach)" for p in names)
 
 
 def rank(tests: list[CandidateTest]) -> list[CandidateTest]:
@@ -348,4 +412,5 @@ def rank(tests: list[CandidateTest]) -> list[CandidateTest]:
     return sorted(sig, key=lambda t: (t.share_val, t.wald), reverse=True)
 
 
-__all__ = ["ALPHA", "CandidateTest", "EffectDef", "library", "rank", "test_candidates"]
+__all__ = ["ALPHA", "CandidateTest", "EffectDef", "FitJudgement", "judge_deferred", "library",
+           "rank", "test_candidates"]

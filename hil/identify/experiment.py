@@ -71,7 +71,10 @@ class Experiment:
     angle: np.ndarray | None  # measured rotor angle, rad
     position: np.ndarray | None  # measured piston position, m
     temperature: np.ndarray | None  # smoothed oil temperature, degC
-    t_ref: float  # temperature at which the fitted dampers hold, degC
+    #: temperature at which the dampers hold, degC: the preset's oil reference temperature,
+    #: where its own damper values hold, so a damper held at the preset and the fitted ones
+    #: (once the viscosity law is in) refer to one temperature
+    t_ref: float
     speed_window: int  # samples
     est: np.ndarray  # boolean mask, estimation samples
     val: np.ndarray  # boolean mask, validation samples
@@ -237,7 +240,6 @@ def prepare(data: MeasuredData, cfg: Config, intersample: str = "zoh") -> Experi
     t_ref = float(eff["oil_temperature"]["reference_c"])
     if "temp_c" in cols:
         temperature = _smooth(cols["temp_c"], max(1, int(0.2 * fs)))
-        t_ref = float(np.mean(temperature[est]))
     return Experiment(data, load, const, start, channels, measured, sigma0, precharge,
                       angle, position, temperature, t_ref, w, est, val, plateaus, notes,
                       intersample)

@@ -26,6 +26,8 @@ from hil.identify.candidates import (
     MIN_SHARE,
     CandidateTest,
     EffectDef,
+    FitJudgement,
+    judge_deferred,
     library,
     rank,
     test_candidates,
@@ -410,9 +412,10 @@ def identify(
     skew_fitter = OutputErrorFit(model, NUISANCE_SCALES(exp.dt))
     if "skew_s" in base.free and skew_fitter.at_bound(base, "skew_s"):
         exp.skew_at_bound = base.value("skew_s") > 0
-        exp.notes.append(f"the timing skew sits at its bound ({base.value('skew_s') * 1e6:+.0f} "
-                         "us, half a sample): the outputs and the logged input are further "
-                         "apart in time than a sampling alignment")
+        exp.notes.append(f"the baseline's timing skew sits at its bound "
+                         f"({base.value('skew_s') * 1e6:+.0f} us, half a sample): the outputs "
+                         "and the logged input are further apart in time than a sampling "
+                         "alignment")
     names = [n for n in BASELINE_LABELS if n in base.free or n in base.held]
     baseline_est = _estimates(base, names)
     residual0 = {c: exp.measured[c] - base.outputs[c] for c in exp.channels}
@@ -428,42 +431,89 @@ def identify(
     rounds: list[list[CandidateTest]] = []
     fitter = OutputErrorFit(model)
     est_mask = fitter.fit_mask()
-    for rnd in range(max_effects + 1):
-        defs = [d for lbl, d in defs_all.items()
-                if lbl not in added_labels and lbl not in excluded]
-        residual = {c: exp.measured[c] - current.outputs[c] for c in exp.channels}
-        say(f"round {rnd}: testing {len(defs)} candidates")
-        tests = test_candidates(defs, model.outputs, current.theta, IDX, exp, current.weights,
-                                residual, est_mask, exp.val, current.free)
-        rounds.append(tests)
-        ranked = rank(tests)
-        if not ranked or len(added) >= max_effects:
-            break
-        best = ranked[0]
-        d = defs_all[best.label]
+    def refit_with(d: EffectDef, start: dict[str, float]) -> tuple[FitResult, dict[str, str]]:
+        """``current`` refitted with the effect ``d`` in, its parameters from ``start``."""
         theta0 = current.theta.copy()
         new_free = list(current.free)
-        scales = {}
-        for p in best.params:
-            theta0[IDX[p]] += best.beta.get(p, 0.0)
-            new_free.append(p)
-        for p, nom in zip(d.params, d.nominal, strict=True):
-            scales[p] = nom
-        for p, start in d.refit_extra:
-            theta0[IDX[p]] = start(exp)
+        for p in d.params:
+            if p in start:
+                theta0[IDX[p]] += start[p]
+                new_free.append(p)
+        for p, begin in d.refit_extra:
+            theta0[IDX[p]] = begin(exp)
             new_free.append(p)
         credible = current.theta.copy()
-        for p, start in d.refit_extra:
-            credible[IDX[p]] = start(exp)
+        for p, begin in d.refit_extra:
+            credible[IDX[p]] = begin(exp)
+        if d.name == "viscosity_temperature" and exp.temperature is not None:
+            # the fitted dampers hold at the record's temperature until the law is in; with
+            # it they hold at the reference temperature (a held one already does: the preset's)
+            t_mean = float(np.mean(exp.temperature[est_mask]))
+            factor = math.exp(theta0[IDX["visc_coeff_per_c"]] * (t_mean - exp.t_ref))
+            for p in ("ds", "dp", "dc"):
+                if p in current.free:
+                    theta0[IDX[p]] *= factor
+                    credible[IDX[p]] *= factor
         if d.name == "input_delay" and "skew_s" in new_free:
             # the causal delay takes over the sub-sample skew: one timing parameter
             theta0[IDX["delay_s"]] = max(theta0[IDX["delay_s"]] + theta0[IDX["skew_s"]], 0.0)
             theta0[IDX["skew_s"]] = 0.0
             new_free.remove("skew_s")
-        say(f"round {rnd}: adding {best.label}; refit")
-        fitter = OutputErrorFit(model, {**NUISANCE_SCALES(exp.dt), **_all_scales(defs_all),
-                                        **scales})
-        new, held_now = guarded_fit(fitter, theta0, new_free, credible, sigma=current.sigma)
+        scales = dict(zip(d.params, d.nominal, strict=True))
+        refitter = OutputErrorFit(model, {**NUISANCE_SCALES(exp.dt), **_all_scales(defs_all),
+                                          **scales})
+        return guarded_fit(refitter, theta0, new_free, credible, sigma=current.sigma)
+
+    def weighted_ss(out: dict[str, np.ndarray], mask: np.ndarray) -> float:
+        w = current.weights
+        return sum(float(np.nansum(((exp.measured[c] - out[c])[mask] / w[c]) ** 2))
+                   for c in exp.channels)
+
+    prefit: dict[str, tuple[FitResult, dict[str, str]]] = {}
+
+    def judge_at_fit(d: EffectDef) -> FitJudgement:
+        """A candidate that takes over a nuisance pinned at its bound, judged at its own fit
+        (the refit it would get if selected, kept for that)."""
+        say(f"fitting {d.label} to judge it (the fit's skew sits at its bound)")
+        new, held_now = prefit[d.label] = refit_with(d, {p: 0.0 for p in d.params})
+        own = [p for p in held_now if p in d.params]
+        if own:
+            return FitJudgement(refused=f"not credible at its own fit ({own[0]}: "
+                                        f"{held_now[own[0]]})")
+        # the restricted model reaches a delay of the skew's bound (half a sample)
+        reach = {"delay_s": skew_fitter.skew_limit * exp.dt}
+        beta = {p: new.value(p) for p in d.params}
+        shares = []
+        for mask in (est_mask, exp.val):
+            before = weighted_ss(current.outputs, mask)
+            shares.append(1.0 - weighted_ss(new.outputs, mask) / before if before > 0 else 0.0)
+        return FitJudgement(beta=beta, excess={p: v - reach.get(p, 0.0) for p, v in beta.items()},
+                            se={p: new.se.get(p, float("nan")) for p in d.params},
+                            share_est=shares[0], share_val=shares[1])
+
+    for rnd in range(max_effects + 1):
+        defs = [d for lbl, d in defs_all.items()
+                if lbl not in added_labels and lbl not in excluded]
+        residual = {c: exp.measured[c] - current.outputs[c] for c in exp.channels}
+        say(f"round {rnd}: testing {len(defs)} candidates")
+        prefit.clear()
+        tests = test_candidates(defs, model.outputs, current.theta, IDX, exp, current.weights,
+                                residual, est_mask, exp.val, current.free)
+        rounds.append(tests)
+        ranked = rank(tests)
+        if not ranked and len(added) < max_effects and judge_deferred(tests, defs,
+                                                                      judge_at_fit):
+            ranked = rank(tests)
+        if not ranked or len(added) >= max_effects:
+            break
+        best = ranked[0]
+        d = defs_all[best.label]
+        if best.label in prefit:
+            say(f"round {rnd}: adding {best.label} (its fit from the test)")
+            new, held_now = prefit[best.label]
+        else:
+            say(f"round {rnd}: adding {best.label}; refit")
+            new, held_now = refit_with(d, best.beta)
         own = [p for p in held_now if p in d.params]
         for p, _ in d.refit_extra:
             if p in held_now:  # a shape the data cannot pin: the preset's, and say so
@@ -483,6 +533,11 @@ def identify(
         for p, why in held_now.items():
             held[p] = f"after adding {best.label}: {why}"
         current = new
+        if "skew_s" in current.free:
+            # the skew pinned at +T/2 may have been another effect's doing: the delay is
+            # offered against the current fit's skew
+            exp.skew_at_bound = (skew_fitter.at_bound(current, "skew_s")
+                                 and current.value("skew_s") > 0)
         best.selected = True
         added_labels.add(best.label)
         added.append(EffectAdded(best.name, best.label, {}, rnd, best.p_holm, best.share_val))
