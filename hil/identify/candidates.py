@@ -77,6 +77,11 @@ class EffectDef:
     refit_extra: tuple[tuple[str, Callable[[Experiment], float]], ...] = ()
     #: judged at its own fit (the module docstring, step 3), not by a score test
     judged_at_fit: bool = False
+    #: most of the signature is, by construction, a change of declared parameters (the
+    #: viscosity law referred to the preset's temperature rescales the dampers by the
+    #: record's mean offset from it): identifiability is judged by the detectability of
+    #: what the projection leaves, not by the share of the signature it leaves
+    rescales_declared: bool = False
 
 
 @dataclass(frozen=True)
@@ -149,7 +154,7 @@ def library(exp: Experiment) -> list[EffectDef]:
                   "2.25-2.27 make the series compliance exactly quadratic in x"),
         EffectDef("viscosity_temperature", "viscosity_temperature", ("visc_coeff_per_c",),
                   (0.02,), "d_s, d_p, d_c scale with mu(T) = exp(-c (T - T_ref))",
-                  _needs_temperature),
+                  _needs_temperature, rescales_declared=True),
         EffectDef("strain_thermal_drift", "strain_thermal_drift",
                   ("drift_n_per_c",), (2.5,),
                   "drift of the strain reading with the logged temperature, "
@@ -301,7 +306,7 @@ def test_candidates(
         for j, p in enumerate(d.params):
             if norms[j] == 0.0:
                 continue
-            if kept_norm[j] ** 2 < MIN_RETAINED * norms[j] ** 2:
+            if kept_norm[j] ** 2 < MIN_RETAINED * norms[j] ** 2 and not d.rescales_declared:
                 corr = (np.abs(jac_d.T @ x[:, j])
                         / (np.linalg.norm(jac_d, axis=0) * norms[j] + 1e-300))
                 who = names_d[int(np.argmax(corr))] if names_d else "the model"
