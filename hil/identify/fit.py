@@ -448,7 +448,7 @@ def guarded_fit(fitter: OutputErrorFit, theta0: np.ndarray, free: list[str],
         theta[IDX[name]] = credible[IDX[name]]
         if not free:
             break
-        result = fitter.fit(theta, free, sigma=result.sigma, passes=1)
+        result = fitter.fit(theta, free, sigma=result.sigma, passes=1, max_nfev=9)
     return result, held
 
 
