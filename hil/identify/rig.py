@@ -934,7 +934,8 @@ def generate_rig(
     noise_rms = math.sqrt((current_noise_lsb * i_lsb) ** 2 + i_lsb ** 2 / 12.0)
     config = {
         "load": load, "profile": profile, "seconds": seconds, "seed": seed,
-        "sample_rate_hz": fs, "preset": preset if isinstance(preset, str) else " + ".join(cfg.sources), "spread": spread,
+        "sample_rate_hz": fs, "spread": spread,
+        "preset": preset if isinstance(preset, str) else " + ".join(cfg.sources),
         "integrator": f"classical RK4, step <= {step_s:g} s, split at the input's kinks",
         "intersample": intersample,
         "current_noise_lsb": current_noise_lsb, "current_lsb_a": i_lsb,
