@@ -463,7 +463,8 @@ def identify(
         say(f"round {rnd}: adding {best.label}; refit")
         fitter = OutputErrorFit(model, {**NUISANCE_SCALES(exp.dt), **_all_scales(defs_all),
                                         **scales})
-        new, held_now = guarded_fit(fitter, theta0, new_free, credible, sigma=current.sigma)
+        new, held_now = guarded_fit(fitter, theta0, new_free, credible, sigma=current.sigma,
+                                    configured=model.start_vector())
         own = [p for p in held_now if p in d.params]
         for p, _ in d.refit_extra:
             if p in held_now:  # a shape the data cannot pin: the preset's, and say so
@@ -493,7 +494,8 @@ def identify(
         say(f"refit with {', '.join(retry)} free again")
         fitter = OutputErrorFit(model, {**NUISANCE_SCALES(exp.dt), **_all_scales(defs_all)})
         again, held_again = guarded_fit(fitter, current.theta, current.free + retry,
-                                        current.theta, sigma=current.sigma, passes=1)
+                                        current.theta, sigma=current.sigma, passes=1,
+                                        configured=model.start_vector())
         if not any(p in held_again for p in current.free):
             for p in retry:
                 if p not in held_again:
