@@ -428,9 +428,17 @@ def levenberg_marquardt(
 def guarded_fit(fitter: OutputErrorFit, theta0: np.ndarray, free: list[str],
                 credible: np.ndarray, sigma: dict[str, float] | None = None,
                 passes: int = 2, guard: list[str] | None = None, max_nfev: int = 40,
+                configured: np.ndarray | None = None,
                 ) -> tuple[FitResult, dict[str, str]]:
     """Fit, then hold every non-credible parameter (of ``guard``, default all free) at its
     last credible value (from ``credible``), worst first, refitting after each hold.
+
+    With ``configured`` (the preset's values), a parameter that has one (non-zero, unlike
+    an effect's) may be held there instead: at whichever of the two the rest of the fit
+    has the lower cost. The last credible value can be credible only because an effect the
+    model lacked pushed the parameter there (a damper taking a friction's dissipation);
+    once that effect is in, it contradicts the other parameters, the configured value
+    does not.
 
     Returns the fit and ``{parameter: why it was held}``.
     """
@@ -442,10 +450,22 @@ def guarded_fit(fitter: OutputErrorFit, theta0: np.ndarray, free: list[str],
         if not bad:
             break
         name, why, _ = bad[0]
-        held[name] = f"{why}; held at {credible[IDX[name]]:.4g}"
+        value = credible[IDX[name]]
+        where = ""
+        if configured is not None:
+            alt = configured[IDX[name]]
+            if alt != 0.0 and alt != value:
+                trial = result.theta.copy()
+                trial[IDX[name]] = value
+                cost_last = fitter.cost(trial, result.sigma)
+                trial[IDX[name]] = alt
+                if fitter.cost(trial, result.sigma) < cost_last:
+                    where = f" (the configured value: the last fit's {value:.4g} fits worse)"
+                    value = alt
+        held[name] = f"{why}; held at {value:.4g}{where}"
         free.remove(name)
         theta = result.theta.copy()
-        theta[IDX[name]] = credible[IDX[name]]
+        theta[IDX[name]] = value
         if not free:
             break
         result = fitter.fit(theta, free, sigma=result.sigma, passes=1, max_nfev=9)

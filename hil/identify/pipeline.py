@@ -462,7 +462,8 @@ def identify(
         scales = dict(zip(d.params, d.nominal, strict=True))
         refitter = OutputErrorFit(model, {**NUISANCE_SCALES(exp.dt), **_all_scales(defs_all),
                                           **scales})
-        return guarded_fit(refitter, theta0, new_free, credible, sigma=current.sigma)
+        return guarded_fit(refitter, theta0, new_free, credible, sigma=current.sigma,
+                           configured=model.start_vector())
 
     def weighted_ss(out: dict[str, np.ndarray], mask: np.ndarray) -> float:
         w = current.weights
@@ -549,7 +550,7 @@ def identify(
         fitter = OutputErrorFit(model, {**NUISANCE_SCALES(exp.dt), **_all_scales(defs_all)})
         again, held_again = guarded_fit(fitter, current.theta, current.free + retry,
                                         current.theta, sigma=current.sigma, passes=1,
-                                        max_nfev=9)
+                                        max_nfev=9, configured=model.start_vector())
         if not any(p in held_again for p in current.free):
             for p in retry:
                 if p not in held_again:
