@@ -23,6 +23,7 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 
 from hil.identify.candidates import (
+    MIN_MAGNITUDE,
     MIN_SHARE,
     CandidateTest,
     EffectDef,
@@ -531,6 +532,16 @@ def identify(
             rejected.append(f"{best.label}: refit lowered the validation cost by less than "
                             f"{MIN_SHARE:.1%} ({after:.6g} vs {before:.6g})")
             continue
+        sizes = {p: abs(new.value(p)) / abs(nom) for p, nom in zip(d.params, d.nominal,
+                                                                      strict=True) if nom}
+        if sizes and max(sizes.values()) < MIN_MAGNITUDE:
+            # the same size rule as the test's, on the refitted values: a score test is local,
+            # and the refit can shrink the effect to nothing while other terms take its place
+            p = max(sizes, key=sizes.get)
+            excluded.add(best.label)
+            rejected.append(f"{best.label}: the refit shrank it to {new.value(p):.4g} "
+                            f"({sizes[p]:.1%} of a realistic size)")
+            continue
         for p, why in held_now.items():
             held[p] = f"after adding {best.label}: {why}"
         current = new
@@ -542,6 +553,33 @@ def identify(
         best.selected = True
         added_labels.add(best.label)
         added.append(EffectAdded(best.name, best.label, {}, rnd, best.p_holm, best.share_val))
+    # An effect added early, by a local test, may have shrunk to nothing once a later one was
+    # in (a pump friction standing in for a pulsation): drop it and refit without it.
+    for e in list(added):
+        d = defs_all[e.label]
+        sizes = {p: abs(current.value(p)) / abs(nom)
+                 for p, nom in zip(d.params, d.nominal, strict=True) if nom}
+        if len(added) < 2 or not sizes or max(sizes.values()) >= MIN_MAGNITUDE:
+            continue
+        p_max = max(sizes, key=sizes.get)
+        shrunk = current.value(p_max)
+        say(f"dropping {e.label}: shrank to {shrunk:.4g} once the others were in")
+        theta = current.theta.copy()
+        drop = list(d.params) + [p for p, _ in d.refit_extra]
+        for p in drop:
+            theta[IDX[p]] = 0.0
+            held.pop(p, None)
+        refitter = OutputErrorFit(model, {**NUISANCE_SCALES(exp.dt), **_all_scales(defs_all)})
+        current, held_now = guarded_fit(refitter, theta,
+                                        [p for p in current.free if p not in drop], theta,
+                                        sigma=current.sigma, passes=1, max_nfev=9)
+        for p, why in held_now.items():
+            held[p] = f"after dropping {e.label}: {why}"
+        added.remove(e)
+        added_labels.discard(e.label)
+        rejected.append(f"{e.label}: shrank to {shrunk:.4g} "
+                        f"({sizes[p_max]:.1%} of a realistic size) once the others were in; "
+                        "dropped")
     # A baseline parameter held because an unmodelled effect blurred it may be credible now
     # that the effect is in: free the held ones once more (the guard holds them again if not).
     retry = [p for p in held if p in BASELINE_LABELS and p not in current.free]
