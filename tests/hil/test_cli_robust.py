@@ -211,8 +211,12 @@ class _Running:
 
     def __init__(self, argv: list[str], cwd: Path) -> None:
         exe = shutil.which("eha-hil") or f"{sys.prefix}/bin/eha-hil"
+        # SIGINT back to its default in the child: a test run started in the background
+        # (nohup, a CI job, `&`) ignores it, and the child would inherit the ignoring
         self.proc = subprocess.Popen([exe, *argv], cwd=cwd, stdout=subprocess.DEVNULL,
-                                     stderr=subprocess.PIPE)
+                                     stderr=subprocess.PIPE,
+                                     preexec_fn=lambda: signal.signal(signal.SIGINT,
+                                                                      signal.SIG_DFL))
         self.err = b""
         self._lock = threading.Lock()
         threading.Thread(target=self._read, daemon=True).start()
