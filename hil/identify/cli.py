@@ -18,6 +18,7 @@ import argparse
 import sys
 import tempfile
 import time
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 from hil.cli_args import (
@@ -166,6 +167,34 @@ def configure_synth(parser: argparse.ArgumentParser) -> None:
                         "(default 0.15)")
 
 
+def _synth_effects(args: argparse.Namespace, known: Sequence[str],
+                   magnitudes: Mapping[str, Mapping[str, float]], realism: str
+                   ) -> dict[str, dict[str, float]] | str:
+    """``--effect`` and ``--magnitude`` as {effect: {key: value}}, or the one-line mistake.
+    A pulsation's further orders (``amplitude_2``, ...) are keys of the rig only."""
+    for e in args.effect:
+        if e not in known:
+            return (f"--effect {e}: unknown effect for --realism {realism} "
+                    f"(known: {', '.join(known)})")
+    effects: dict[str, dict[str, float]] = {e: {} for e in args.effect}
+    for item in args.magnitude:
+        try:
+            key, value = item.split("=", 1)
+            name, field = key.split(".", 1)
+            val = float(value)
+        except ValueError:
+            return f"--magnitude {item}: expected EFFECT.KEY=NUMBER"
+        if name not in effects:
+            return f"--magnitude {item}: effect {name} not switched on"
+        extra_order = (realism == "rig" and name == "pump_pulsation"
+                       and field.rsplit("_", 1)[-1].isdigit())
+        if field not in magnitudes[name] and not extra_order:
+            return (f"--magnitude {item}: unknown key "
+                    f"(known: {', '.join(magnitudes[name]) or 'none'})")
+        effects[name][field] = val
+    return effects
+
+
 def run_synth(args: argparse.Namespace) -> int:
     """Write an example dataset; prints what was put into it."""
     from hil.identify.csvdata import write_measured
@@ -181,24 +210,9 @@ def run_synth(args: argparse.Namespace) -> int:
         rig_only.append("--header-intersample")
     if rig_only:
         return _err("identify-synth", f"{rig_only[0]}: only with --realism rig")
-    for e in args.effect:
-        if e not in ALL_SYNTH_EFFECTS:
-            return _err("identify-synth", f"--effect {e}: unknown effect for --realism plant "
-                        f"(known: {', '.join(ALL_SYNTH_EFFECTS)})")
-    effects: dict[str, dict[str, float]] = {e: {} for e in args.effect}
-    for item in args.magnitude:
-        try:
-            key, value = item.split("=", 1)
-            name, field = key.split(".", 1)
-            val = float(value)
-        except ValueError:
-            return _err("identify-synth", f"--magnitude {item}: expected EFFECT.KEY=NUMBER")
-        if name not in effects:
-            return _err("identify-synth", f"--magnitude {item}: effect {name} not switched on")
-        if field not in DEFAULT_MAGNITUDES[name]:
-            known = ", ".join(DEFAULT_MAGNITUDES[name]) or "none"
-            return _err("identify-synth", f"--magnitude {item}: unknown key (known: {known})")
-        effects[name][field] = val
+    effects = _synth_effects(args, ALL_SYNTH_EFFECTS, DEFAULT_MAGNITUDES, "plant")
+    if isinstance(effects, str):
+        return _err("identify-synth", effects)
     out = Path(args.out)
     try:
         cfg = load_config(args.config or "hydra_linear", args.set or ())
@@ -219,25 +233,9 @@ def _run_rig_synth(args: argparse.Namespace) -> int:
     from hil.identify.rig import RIG_DEFAULT_MAGNITUDES, RIG_EFFECTS, generate_rig
     from plant.config import ConfigError, load_config
 
-    for e in args.effect:
-        if e not in RIG_EFFECTS:
-            return _err("identify-synth", f"--effect {e}: unknown effect for --realism rig "
-                        f"(known: {', '.join(RIG_EFFECTS)})")
-    effects: dict[str, dict[str, float]] = {e: {} for e in args.effect}
-    for item in args.magnitude:
-        try:
-            key, value = item.split("=", 1)
-            name, field = key.split(".", 1)
-            val = float(value)
-        except ValueError:
-            return _err("identify-synth", f"--magnitude {item}: expected EFFECT.KEY=NUMBER")
-        if name not in effects:
-            return _err("identify-synth", f"--magnitude {item}: effect {name} not switched on")
-        extra_order = name == "pump_pulsation" and field.rsplit("_", 1)[-1].isdigit()
-        if field not in RIG_DEFAULT_MAGNITUDES[name] and not extra_order:
-            known = ", ".join(RIG_DEFAULT_MAGNITUDES[name]) or "none"
-            return _err("identify-synth", f"--magnitude {item}: unknown key (known: {known})")
-        effects[name][field] = val
+    effects = _synth_effects(args, RIG_EFFECTS, RIG_DEFAULT_MAGNITUDES, "rig")
+    if isinstance(effects, str):
+        return _err("identify-synth", effects)
     if args.seconds <= 1.0:
         return _err("identify-synth", f"--seconds {args.seconds}: need more than 1 s")
     out = Path(args.out)
