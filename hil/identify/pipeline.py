@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.optimize import minimize_scalar
+from threadpoolctl import threadpool_limits
 
 from hil.identify.candidates import (
     MIN_MAGNITUDE,
@@ -388,7 +389,18 @@ def identify(
     ``intersample`` (``zoh``, ``foh``, ``bl``) says how the logged current behaved between
     samples; None takes the ``# intersample:`` header line, else estimates it. Raises
     :class:`~hil.identify.checks.RefusedData` for a record that cannot be identified.
+
+    The linear algebra runs on one BLAS thread: its products are tall and thin, OpenBLAS's
+    extra threads spin between them (half again the CPU time for no shorter wall time), and
+    the simulations already take a thread per core (:func:`~hil.identify.model.map_threads`).
     """
+    with threadpool_limits(limits=1, user_api="blas"):
+        return _identify(data, cfg, max_effects, progress, intersample)
+
+
+def _identify(data: MeasuredData, cfg: Config, max_effects: int,
+              progress: Callable[[str], None] | None, intersample: str | None
+              ) -> IdentifyReport:
     import time
 
     t_start = time.perf_counter()
