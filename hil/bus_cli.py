@@ -55,6 +55,8 @@ def _run_bus(args: argparse.Namespace, cfg, topo, cycles: int, model: str, pc):
     except TransportError as exc:
         raise BusUsageError(str(exc)) from None
     tick_ns = cfg.get("sim.tick_ns")
+    meta = {"topology": args.topology, "model": model, "mode": "lockstep (bus run)",
+            "config": json.dumps(cfg.data)}
     t0 = time.perf_counter()
     if args.log:
         from hil.transports import backend
@@ -70,7 +72,8 @@ def _run_bus(args: argparse.Namespace, cfg, topo, cycles: int, model: str, pc):
 
         cli_progress.output("log", args.log, cli_progress.readable_log)
         try:
-            cap = CaptureWriter(args.capture, crc_trailer=True) if args.capture else None
+            cap = (CaptureWriter(args.capture, crc_trailer=True, metadata=meta)
+                   if args.capture else None)
         except CaptureError as exc:
             raise BusUsageError(str(exc)) from None
         try:
@@ -90,7 +93,8 @@ def _run_bus(args: argparse.Namespace, cfg, topo, cycles: int, model: str, pc):
                 if args.can_log:
                     recorder = end.record_to(args.can_log)
                 if args.capture:
-                    cap = CaptureWriter(args.capture, bs.crc_trailer, end.capture_endpoints)
+                    cap = CaptureWriter(args.capture, bs.crc_trailer, end.capture_endpoints,
+                                        metadata=meta)
                     bs.tap = cap.tap(tick_ns)
                 rec = bs.run(cycles, pc)
             finally:
@@ -149,11 +153,57 @@ def _progress(label: str, enabled: bool):
     return cli_progress.reporter(label, enabled, "cycles", note=False)
 
 
+def cmd_replay_traffic(args: argparse.Namespace, cfg) -> int:
+    """Replay a capture or CAN log of a bus run through a fresh chain (exit 0: every logged
+    reply matches; 1: a divergence; 2: the file cannot be read or holds no exchange)."""
+    from hil.fieldbus.traffic import TrafficError, read_traffic
+    from hil.fieldbus.traffic_replay import replay_traffic
+    from plant.config import Config, load_config
+
+    try:
+        traffic = read_traffic(args.log)
+    except TrafficError as exc:
+        _replay_note(str(exc))
+        return EXIT_USAGE
+    meta = traffic.metadata
+    if cfg is None:
+        cfg = (Config(json.loads(meta["config"]), [f"{args.log} (capture metadata)"])
+               if "config" in meta else load_config(None))
+    topo = _topology(args.topology or meta.get("topology", "bench_one_box"))
+    model = args.model or meta.get("model") or ("stack" if topo.n_actuators <= 5 else "echo")
+    t0 = time.perf_counter()
+    res = replay_traffic(traffic, topo, cfg, model)
+    wall = time.perf_counter() - t0
+    data = {"ok": res.ok, "format": traffic.kind, "topology": topo.name, "model": model,
+            **{k: v for k, v in res.__dict__.items()}, "wall_s": wall}
+    if args.json:
+        print(json.dumps(data, indent=2))
+    elif res.divergence is not None:
+        print(f"replay {args.log}: first divergence at {res.divergence}")
+    elif res.ok:
+        print(f"replay {args.log}: {res.compared} replies of {topo.name} ({model} model) "
+              f"match bit for bit ({res.requests} requests, {res.unanswered} without a logged "
+              f"reply, {res.skipped} frames skipped; {wall:.2f} s)")
+    else:
+        _replay_note(f"{args.log}: no request/reply pair to replay ({len(traffic.frames)} "
+                     f"fieldbus frames: {res.requests} requests, {res.unmatched} unmatched "
+                     f"replies, {res.skipped} skipped)")
+        return EXIT_USAGE
+    return 0 if res.ok else 1
+
+
 def cmd_replay(args: argparse.Namespace, cfg) -> int:
     """Exit 0: the whole log matches; 1: a divergence, or a truncated log replayed up to
     its readable end (one line on stderr says where it ends); 2: nothing could be replayed
     (foreign or damaged file, bad metadata, no MCU data), one line ``eha-hil replay: FILE:
-    what`` on stderr."""
+    what`` on stderr. Captures and CAN logs go to :func:`cmd_replay_traffic`."""
+    from hil.fieldbus.traffic import is_traffic_file
+
+    if is_traffic_file(args.log):
+        return cmd_replay_traffic(args, cfg)
+    if args.topology or args.model:
+        raise BusUsageError("--topology/--model: only for a capture or CAN log (an MCAP log "
+                            "names its own)")
     from hil.replay.fpga_replay import warm_up
     from hil.replay.replay import ReplayError, replay_mcu
     from plant.config import load_config
@@ -279,8 +329,14 @@ def add_parsers(sub, bsub, common, config_fn, wrap) -> None:
     p = sub.add_parser("replay", parents=[common(plot=False)],
                        help="feed a log's MCU inputs to the current MCU model; compare outputs "
                        "bit for bit")
-    p.add_argument("log", metavar="LOG.mcap", type=input_file("frame log (.mcap)"),
-                   help="frame log written by eha-hil bus run --log")
+    p.add_argument("log", metavar="LOG", type=input_file("frame log (.mcap)"),
+                   help="frame log written by eha-hil bus run --log (.mcap), or its traffic: "
+                   "a --capture (.pcapng/.pcap) or --can-log (.blf/.asc/.log)")
+    p.add_argument("--topology", help="capture/CAN log: the run's topology (default: from "
+                   "the pcapng's metadata, else bench_one_box)")
+    p.add_argument("--model", choices=("stack", "echo"),
+                   help="capture/CAN log: the run's box model (default: from the metadata, "
+                   "else as bus run chooses)")
     p.set_defaults(func=wrap(cmd_replay, config_fn, use_log_config=True))
 
     p = bsub.add_parser("bus", parents=[common(plot=False)],

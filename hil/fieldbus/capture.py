@@ -54,6 +54,25 @@ class CaptureError(Exception):
     """A capture file that cannot be written (one line)."""
 
 
+def _section_header(metadata: dict[str, str] | None):
+    """A little-endian pcapng section header naming eha-hil, with the metadata comment."""
+    import json
+    from importlib.metadata import PackageNotFoundError, version
+
+    from dpkt import pcapng
+
+    try:
+        ours = version("eha-hil")
+    except PackageNotFoundError:
+        ours = "source"
+    opts = [pcapng.PcapngOptionLE(code=pcapng.PCAPNG_OPT_SHB_USERAPPL, text=f"eha-hil {ours}")]
+    if metadata is not None:
+        opts.append(pcapng.PcapngOptionLE(code=pcapng.PCAPNG_OPT_COMMENT,
+                                          text=json.dumps({"eha-hil": ours, **metadata})))
+    opts.append(pcapng.PcapngOptionLE(code=pcapng.PCAPNG_OPT_ENDOFOPT))
+    return pcapng.SectionHeaderBlockLE(opts=opts)
+
+
 class CaptureWriter:
     """Fieldbus frames to a pcapng or pcap file, one :meth:`write` per frame.
 
@@ -63,11 +82,15 @@ class CaptureWriter:
     master's and the chain's (address, port) when the frames travel as UDP datagrams (asked
     per frame: a server learns its master's port from the first frame), or None for raw
     Ethernet. Timestamps are integer nanoseconds since the epoch (simulated time for
-    ``bus run``, wall time for ``serve``), stored to the microsecond.
+    ``bus run``, wall time for ``serve``), stored to the microsecond. ``metadata``
+    (pcapng only): written as JSON, with ``"eha-hil"`` = the version, in the section
+    header's comment (Wireshark: Statistics > Capture File Properties), so that ``eha-hil
+    replay`` finds the topology, box model and configuration of the run.
     """
 
     def __init__(self, path: str | os.PathLike[str], crc_trailer: bool,
-                 endpoints: Callable[[], Endpoints] | None = None) -> None:
+                 endpoints: Callable[[], Endpoints] | None = None,
+                 metadata: dict[str, str] | None = None) -> None:
         import dpkt
 
         self.path = Path(path)
@@ -83,7 +106,8 @@ class CaptureWriter:
         except OSError as exc:
             raise CaptureError(f"{path}: cannot write: {exc.strerror or exc}") from None
         if suffix == ".pcapng":
-            self._writer = dpkt.pcapng.Writer(self._fh, snaplen=65535)
+            self._writer = dpkt.pcapng.Writer(self._fh, snaplen=65535,
+                                              shb=_section_header(metadata))
         else:
             self._writer = dpkt.pcap.Writer(self._fh, snaplen=65535)
 
