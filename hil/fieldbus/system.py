@@ -65,6 +65,7 @@ class BusSystem:
         self.reply_timeout_s = reply_timeout_s
         self.tap = tap
         self.proc: subprocess.Popen | None = None
+        self.m_end = self.s_end = None
         self._release = None  # what the remote peer's set-up made (e.g. a pty)
         self._in_memory = kind.in_memory
         self.chain: Chain | None = None
@@ -187,6 +188,7 @@ class BusSystem:
         for end in (self.m_end, self.s_end):
             if end is not None:
                 end.close()
+        self.m_end = self.s_end = None
         if self.proc is not None:
             self.proc.terminate()
             try:
