@@ -122,7 +122,11 @@ def _pcapng_comment(path: str) -> dict[str, str]:
     import dpkt
 
     with open(path, "rb") as fh:
-        head = fh.read(65536)
+        head = fh.read(8)
+        if len(head) < 8 or head[:4] != _PCAPNG_MAGIC:
+            return {}
+        size = int.from_bytes(head[4:8], "little")
+        head += fh.read(max(0, size - 8))
     try:
         shb = dpkt.pcapng.SectionHeaderBlockLE(head)
     except (dpkt.dpkt.Error, ValueError):
