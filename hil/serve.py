@@ -1,8 +1,8 @@
 """``eha-hil serve``: the simulated robot's side of the fieldbus, paced to the wall clock.
 
 The chain of joint driver boxes (:class:`~hil.fieldbus.chain.Chain`, plant + driver boards
-+ MCU per actuator with the ``stack`` model) answers EtherCAT frames (``PDU || FCS``,
-:mod:`hil.fieldbus.wire`) on a serial port (COBS + CRC-32 framing) or a UDP socket, so that
++ MCU per actuator with the ``stack`` model) answers EtherCAT frames (the PDU, with a CRC-32
+trailer on serial and without on udp by default: :mod:`hil.fieldbus.wire`) on a serial port (COBS + CRC-32 framing) or a UDP socket, so that
 a real master (an MCU board, the PC's EtherCAT code, or another program such as
 :class:`hil.fieldbus.master.Master` in another process) closes the loop in real time.
 
@@ -64,7 +64,7 @@ class ServeStats:
     handle_s: float = 0.0       # wall time spent answering frames
     frames_received: int = 0    # frames the transport delivered
     frames_served: int = 0      # frames answered
-    bad_frames: int = 0         # FCS / PDU failed: not answered (chain)
+    bad_frames: int = 0         # CRC trailer / PDU failed: not answered (chain)
     stale_frames: int = 0       # older than the newest frame seen: not answered (chain)
     missed_cycles: int = 0      # master cycle numbers skipped within a session
     incomplete_cycles: int = 0  # master cycles whose frames did not cover every box

@@ -20,8 +20,8 @@ without options). ``eha-hil bus run --capture`` and ``eha-hil serve --capture`` 
         bs.run(20, pc)
     cap.write("bus.pcap")      # tshark -r bus.pcap -T fields -e ecat.cmd -e ecat.cnt
 
-The transports carry ``pdu || FCS`` (:mod:`hil.fieldbus.wire`); the capture holds the PDU
-in an Ethernet II frame without FCS (as a NIC hands frames to libpcap), padded to the
+The transports carry ``pdu`` or ``pdu || CRC-32`` (:mod:`hil.fieldbus.wire`); the tap holds
+the PDU in an Ethernet II frame without FCS (as a NIC hands frames to libpcap), padded to the
 60-byte minimum. Timestamps are simulated time: the cycle's tick times 50 us (the tick of
 the configuration), from ``t0_ns`` (default 0, the epoch). Requests go from the master's
 MAC to broadcast; replies come back with source :data:`CHAIN_MAC`. Frames the tap sees
@@ -36,7 +36,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import BinaryIO
 
-from hil.fieldbus.wire import FCS_BYTES, strip
+from hil.fieldbus.wire import strip
 from protocols import ethercat as ec
 from protocols.pcap import PcapRecord, build_pcap, write_pcap
 
@@ -158,18 +158,20 @@ class Captured:
     cycle: int
     tick: int
     direction: str  # "tx" (master -> chain) or "rx" (chain -> master)
-    frame: bytes    # as on the transport: PDU + FCS
+    frame: bytes    # as on the transport: the PDU (+ the CRC-32 trailer if the link has it)
 
 
 class PcapTap:
     """Use as ``BusSystem(..., tap=PcapTap())``; collects frames, writes a pcap.
 
     ``max_frames`` bounds the memory: frames beyond it are counted in :attr:`dropped`,
-    not kept.
+    not kept. ``crc_trailer``: the frames carry the CRC-32 trailer (cut off in the
+    capture); pass ``BusSystem.crc_trailer`` (False on udp by default).
     """
 
     def __init__(self, tick_ns: int = 50_000, t0_ns: int = 0,
-                 max_frames: int | None = None) -> None:
+                 max_frames: int | None = None, crc_trailer: bool = True) -> None:
+        self.crc_trailer = crc_trailer
         self.tick_ns = tick_ns
         self.t0_ns = t0_ns
         self.max_frames = max_frames
@@ -184,7 +186,7 @@ class PcapTap:
 
     def ethernet(self, c: Captured) -> bytes:
         """The captured frame as an Ethernet II frame (FCS stripped)."""
-        pdu = c.frame[:-FCS_BYTES] if len(c.frame) > FCS_BYTES else c.frame
+        pdu = strip(c.frame, self.crc_trailer)
         if c.direction == "tx":
             return ec.encode_ethernet(pdu, ec.BROADCAST_MAC, ec.DEFAULT_MASTER_MAC,
                                       ec.ETHERTYPE_ETHERCAT)
