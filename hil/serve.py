@@ -2,9 +2,10 @@
 
 The chain of joint driver boxes (:class:`~hil.fieldbus.chain.Chain`, plant + driver boards
 + MCU per actuator with the ``stack`` model) answers EtherCAT frames (the PDU, with a CRC-32
-trailer on serial and without on udp by default: :mod:`hil.fieldbus.wire`) on a serial port (COBS + CRC-32 framing) or a UDP socket, so that
-a real master (an MCU board, the PC's EtherCAT code, or another program such as
-:class:`hil.fieldbus.master.Master` in another process) closes the loop in real time.
+trailer on serial and without on udp by default: :mod:`hil.fieldbus.wire`) on a serial port
+(COBS + CRC-32 framing) or a UDP socket, so that a real master (an MCU board, the PC's
+EtherCAT code, or another program such as :class:`hil.fieldbus.master.Master` in another
+process) closes the loop in real time.
 
 Pacing (:class:`PacedServer`): cycle ``k`` of the boxes (20 ticks, 1 ms of simulated time)
 is released at ``t0 + k * 1 ms`` of ``time.perf_counter`` and must be finished by

@@ -255,6 +255,12 @@ class Transport(abc.ABC):
         on, and how to connect once the child has said where it listens."""
         raise TransportError(f"{cls.name}: cannot reach a chain in another process")
 
+    @classmethod
+    def private_options(cls) -> dict[str, Any]:
+        """Options for a bus run that must not meet another one on this machine (a
+        benchmark, a test): none needed where pairs are private anyway."""
+        return {}
+
     def record_to(self, path: str) -> Any:
         """Start writing the traffic of this end's bus to ``path`` in the bus's own log
         format; returns the recorder (``.close()`` ends it). TransportError if this

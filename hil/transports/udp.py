@@ -212,6 +212,11 @@ class UdpTransport(Transport):
         return self.address, (peer[0], peer[1])
 
     @classmethod
+    def private_options(cls) -> dict[str, Any]:
+        """A free port for the chain instead of 34980, which another run may hold."""
+        return {"port": 0}
+
+    @classmethod
     def remote_master(cls, port: int = ETHERCAT_UDP_PORT, **options: Any) -> RemotePeer:
         """The child listens on ``port`` (default 34980, EtherCAT's, so that a capture
         decodes as EtherCAT without options; 0: any free port) and reports it; the master
