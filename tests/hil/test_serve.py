@@ -190,6 +190,8 @@ def test_serve_usage_errors_are_one_line(capsys):
     assert err.count("\n") == 1 and "/dev/no-such-tty-here" in err
     assert main(["serve", "--transport", "udp", "--port", "x"]) == 2
     assert "udp needs a port number" in capsys.readouterr().err
+    assert main(["serve", "--seconds", "1"]) == 2  # serial has no default port; udp 34980
+    assert "--port: required with --transport serial" in capsys.readouterr().err
     with pytest.raises(SystemExit) as exc:  # refused by the type of --seconds, as argparse does
         main(["serve", "--port", "pty", "--seconds", "0"])
     assert exc.value.code == 2 and "--seconds" in capsys.readouterr().err
