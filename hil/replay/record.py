@@ -165,12 +165,14 @@ class RecordingStackBox(StackBox):
 def run_logged(topo: Topology, cfg: Config, cycles: int, pc: Callable[[int, Master], None],
                log_path: str | Path, level: str = "mcu",
                progress: Callable[[int, int], None] | None = None,
-               faults: object = None) -> BusRecord:
+               faults: object = None,
+               capture: Callable[[int, int, bytes, str], None] | None = None) -> BusRecord:
     """Run ``cycles`` cycles in-process with the stack model and log them to ``log_path``.
 
     ``faults``: a fault declaration (:func:`hil.fieldbus.faults.parse_faults`); the log holds
     what the master sent and received and what each MCU took in and gave out, faults and
-    all, so the replay reproduces a faulty run too."""
+    all, so the replay reproduces a faulty run too. ``capture``: a further tap that sees
+    every fieldbus frame (e.g. :meth:`hil.fieldbus.capture.CaptureWriter.tap`)."""
     with FrameLogWriter(log_path, level=level, flush_every_ns=FLUSH_CYCLES * CYCLE_TICKS
                         * cfg.get("sim.tick_ns")) as log:
         ch_bus = None
@@ -180,9 +182,13 @@ def run_logged(topo: Topology, cfg: Config, cycles: int, pc: Callable[[int, Mast
         tick_ns = cfg.get("sim.tick_ns")
 
         def tap(cycle: int, tick: int, frame: bytes, direction: str) -> None:
-            log.write(ch_bus, tick * tick_ns + (1 if direction == "rx" else 0), frame)
+            if ch_bus is not None:
+                log.write(ch_bus, tick * tick_ns + (1 if direction == "rx" else 0), frame)
+            if capture is not None:
+                capture(cycle, tick, frame, direction)
 
-        with BusSystem(topo, cfg, "inproc", model="stack", tap=tap if ch_bus else None) as bs:
+        use_tap = ch_bus is not None or capture is not None
+        with BusSystem(topo, cfg, "inproc", model="stack", tap=tap if use_tap else None) as bs:
             boxes = [RecordingStackBox(b, cfg, log) for b in topo.boxes]
             bs.chain.boxes = boxes
             if faults is not None:
