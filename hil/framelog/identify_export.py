@@ -52,8 +52,9 @@ LOAD_CASE_OF_KIND: dict[str, str] = {"fixed": "fixed_piston", "free": "free_pist
 COLUMNS: tuple[str, ...] = ("t", "iq", "theta_m", "p_pump_a", "p_pump_b", "p_cyl_a",
                             "p_cyl_b", "p_acc", "x_piston", "f_strain", "temp_c")
 _BOARD_OF_TOPIC = re.compile(r"^/lvds/(?P<board>[^/]+)/up$")
-_PRESSURES = (("p_pump_a", B.U_P_PUMP_A), ("p_pump_b", B.U_P_PUMP_B),
-              ("p_cyl_a", B.U_P_CYL_A), ("p_cyl_b", B.U_P_CYL_B), ("p_acc", B.U_P_ACC))
+#: CSV column -> analog input (``layout.ANALOG_INPUTS``) it is decoded from, column order.
+_ANALOG_COLUMNS = (("p_pump_a", "p_pump_a"), ("p_pump_b", "p_pump_b"), ("p_cyl_a", "p_cyl_a"),
+                   ("p_cyl_b", "p_cyl_b"), ("p_acc", "p_acc"))
 
 
 @dataclass(frozen=True)
@@ -131,33 +132,28 @@ def signals(up: np.ndarray, cfg) -> dict[str, np.ndarray]:  # noqa: ANN001 - Con
     with the sensor scales of the firmware calibration ``cfg`` (a configuration or a
     :class:`~firmware_model.calibration.FirmwareCalibration`): what the MCU decodes with."""
     from firmware_model.calibration import calibration
-    from protocols import pressure_adc as padc
+    from firmware_model.mcu.measure import analog_si
     from protocols.ad7195 import MIDSCALE
     from protocols.biss import LINEAR_COUNT_M
 
     u = np.asarray(up).astype(np.int64) & 0xFFFF
     cal = calibration(cfg)
     s = {k: getattr(cal, k) for k in ("abi_counts_per_rev", "biss_zero_count",
-                                      "strain_full_scale_n", "temperature_v_at_0c",
-                                      "temperature_v_per_c")}
-    adc = padc.DEFAULT
-
-    def volts(col: int) -> np.ndarray:
-        return u[:, col] * adc.lsb_v
+                                      "strain_full_scale_n")}
 
     def s16(col: int) -> np.ndarray:
         return u[:, col] - ((u[:, col] & 0x8000) << 1)
 
     out = {"iq": s16(B.U_IQ) * 1e-3,
            "theta_m": _unwrap16(u[:, B.U_ABI]) * (2.0 * math.pi / s["abi_counts_per_rev"])}
-    for name, col in _PRESSURES:
-        out[name] = (volts(col) - adc.v_at_zero) * adc.pa_per_v
+    inputs = {a.name: a for a in B.ANALOG_INPUTS}
+    for column, name in _ANALOG_COLUMNS:
+        out[column] = analog_si(inputs[name], cal, u[:, inputs[name].register])
     count = (u[:, B.U_PISTON_HI] << 16) | u[:, B.U_PISTON_LO]
     out["x_piston"] = (count - s["biss_zero_count"]) * LINEAR_COUNT_M
     code = ((u[:, B.U_STRAIN_HI] & 0xFF) << 16) | u[:, B.U_STRAIN_LO]
     out["f_strain"] = (code - MIDSCALE) * (s["strain_full_scale_n"] / MIDSCALE)
-    out["temp_c"] = (volts(B.U_TEMPERATURE) - s["temperature_v_at_0c"]) / s[
-        "temperature_v_per_c"]
+    out["temp_c"] = analog_si(inputs["temperature"], cal, u[:, B.U_TEMPERATURE])
     return out
 
 

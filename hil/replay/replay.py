@@ -31,7 +31,7 @@ from hil.framelog import FrameLogError, FrameLogReader
 from hil.framelog.reader import LogInfo
 from hil.replay.fpga_replay import column_name, replay_board_detail
 from hil.replay.record import UP_WIDTH, topics
-from plant.config import Config, ConfigError, schema, with_nominal_firmware
+from plant.config import DECLARED, Config, ConfigError, schema, with_nominal_firmware
 
 DOWN_NAMES = [name for _addr, name, *_ in B.DOWN_REGISTERS]
 
@@ -124,7 +124,8 @@ def _metadata(path: str | Path, info: LogInfo) -> tuple[Config, Topology, dict[s
         if not isinstance(data, dict):
             raise ValueError("not a JSON object")
         logged = with_nominal_firmware(_flat(data))  # logs from before [firmware]
-        missing = sorted(set(_flat(schema())) - set(logged))
+        # A sensor's declared keys missing from an older log keep their defaults.
+        missing = sorted(set(_flat(schema())) - set(logged) - set(DECLARED))
         if missing:
             raise ValueError(f"no key {missing[0]}")
         cfg = Config(schema(), [f"log {path}"]).with_overrides(logged, f"log {path}")
