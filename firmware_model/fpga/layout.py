@@ -197,6 +197,10 @@ RAW_NAMES = (
 #: words of every older layout keep their index (logs are written by index).
 RAW_NAMES += tuple(a.name for a in ANALOG_INPUTS if a.name not in RAW_NAMES)
 N_RAW = len(RAW_NAMES)
+#: Raw words and upstream registers of the first layout. Later layouts only append (a
+#: sensor added since), so a log written with n words holds the first n of today's.
+FIRST_N_RAW = 17
+FIRST_N_UP = 31
 #: Per analog input (in :data:`ANALOG_INPUTS` order): its raw word, upstream register and
 #: ADC channel; constant arrays, which the compiled code takes as constants.
 ANALOG_RAW = np.array([RAW_NAMES.index(a.name) for a in ANALOG_INPUTS], dtype=np.int64)

@@ -60,11 +60,6 @@ def _replay(c, st, down, up, raw, trace):
     return -1, -1
 
 
-#: Raw words of the oldest layout a log may hold; later layouts only append raw words
-#: (``layout.RAW_NAMES``), e.g. an analog sensor added since.
-OLDEST_N_RAW = 17
-
-
 def current_trace(frames: np.ndarray) -> np.ndarray | None:
     """A logged trace in today's columns (:data:`TRACE_WIDTH`), or None if its width fits no
     layout. A log written before raw words were appended gets them as zero columns: the
@@ -74,7 +69,7 @@ def current_trace(frames: np.ndarray) -> np.ndarray | None:
     missing = TRACE_WIDTH - frames.shape[1]
     if missing == 0:
         return frames
-    if not 0 < missing <= B.N_RAW - OLDEST_N_RAW:
+    if not 0 < missing <= B.N_RAW - B.FIRST_N_RAW:
         return None
     at = TRACE_RAW + B.N_RAW - missing
     zeros = np.zeros((frames.shape[0], missing), dtype=frames.dtype)
