@@ -114,6 +114,12 @@ ANALOG_INPUTS = (
     AnalogInput("temperature", 5, 0x13, "degC",
                 "oil temperature, 12-bit code (0.5 V + 10 mV/degC)",
                 "temperature_v_at_0c", "temperature_v_per_c", True, measurement="temperature_c"),
+    AnalogInput("rod_temperature", 6, 0x1F, "degC",
+                "connecting-rod temperature, 12-bit code (MCP9701: 0.4 V + 19.5 mV/degC)",
+                "rod_temperature_v_at_0c", "rod_temperature_v_per_c", True,
+                keys=(("rod_temperature_v_at_0c", 0.4, 0.0, 10.0),
+                      ("rod_temperature_v_per_c", 0.0195, 1e-4, 1.0)),
+                fitted_key="rod_temperature_fitted", measurement="rod_temperature_c"),
 )
 N_ANALOG = len(ANALOG_INPUTS)
 
