@@ -15,6 +15,7 @@ from firmware_model.calibration import FirmwareCalibration, calibration
 from firmware_model.fpga import layout as B
 from protocols import pressure_adc as padc
 from protocols.ad7195 import MIDSCALE
+from protocols.biss import LINEAR_COUNT_M
 
 F32 = np.float32
 TWO_PI = 2.0 * math.pi
@@ -45,12 +46,34 @@ def analog_decoder(a: B.AnalogInput, cal: FirmwareCalibration) -> tuple[F32, F32
     return F32(v0), F32(mul), F32(div)
 
 
-def analog_si(a: B.AnalogInput, cal: FirmwareCalibration, codes: np.ndarray) -> np.ndarray:
-    """SI values of analog input ``a``'s ADC ``codes`` in float64, with the calibration's
-    scales (for offline decoding of logged registers)."""
-    v0, gain = cal.analog[a.name]
-    mul, div = (1.0, gain) if a.volts_per_unit else (gain, 1.0)
-    return (codes * padc.DEFAULT.lsb_v - v0) * mul / div
+def upstream_si(up: np.ndarray, cal: FirmwareCalibration) -> dict[str, np.ndarray]:
+    """SI values of logged upstream memories ``up`` (n rows of at least ``FIRST_N_UP``
+    words) with the calibration's scales, float64 and vectorised, for offline decoding
+    (:meth:`Measurements.update` is the MCU's own, float32, one memory at a time): ``iq``,
+    ``theta_m`` (the ABI counter unwrapped), ``x_piston``, ``f_strain_raw`` and every
+    analog input the rows hold, by its ``si_name``."""
+    u = np.asarray(up).astype(np.int64) & 0xFFFF
+    iq = u[:, B.U_IQ] - ((u[:, B.U_IQ] & 0x8000) << 1)
+    count = (u[:, B.U_PISTON_HI] << 16) | u[:, B.U_PISTON_LO]
+    code = ((u[:, B.U_STRAIN_HI] & 0xFF) << 16) | u[:, B.U_STRAIN_LO]
+    out = {"iq": iq * 1e-3,
+           "theta_m": _unwrap16(u[:, B.U_ABI]) * (TWO_PI / cal.abi_counts_per_rev),
+           "x_piston": (count - cal.biss_zero_count) * LINEAR_COUNT_M,
+           "f_strain_raw": (code - MIDSCALE) * (cal.strain_full_scale_n / MIDSCALE)}
+    for a in B.ANALOG_INPUTS:
+        if a.register < u.shape[1]:
+            v0, gain = cal.analog[a.name]
+            mul, div = (1.0, gain) if a.volts_per_unit else (gain, 1.0)
+            out[a.si_name] = (u[:, a.register] * padc.DEFAULT.lsb_v - v0) * mul / div
+    return out
+
+
+def _unwrap16(words: np.ndarray) -> np.ndarray:
+    """A 16-bit wrapping counter as int64 counts, continuous; the first value signed."""
+    w = words.astype(np.int64) & 0xFFFF
+    first = w[:1] - ((w[:1] & 0x8000) << 1)
+    step = (np.diff(w) + 0x8000) % 0x10000 - 0x8000
+    return np.concatenate([first, first + np.cumsum(step)])
 
 
 class Measurements:
