@@ -38,12 +38,12 @@ def _volt_table(lsb: float) -> list:
     return table
 
 
-def analog_decoder(a: B.AnalogInput, cal: FirmwareCalibration) -> tuple[F32, F32, F32]:
-    """(v0, mul, div), float32, with which the MCU decodes analog input ``a``:
+def analog_decoder(a: B.AnalogInput, cal: FirmwareCalibration) -> tuple[float, float, float]:
+    """(v0, mul, div) with which the MCU decodes analog input ``a``:
     ``SI = (V - v0) * mul / div`` (one of mul, div is 1, so the products are exact)."""
     v0, gain = cal.analog[a.name]
     mul, div = (1.0, gain) if a.volts_per_unit else (gain, 1.0)
-    return F32(v0), F32(mul), F32(div)
+    return v0, mul, div
 
 
 def upstream_si(up: np.ndarray, cal: FirmwareCalibration) -> dict[str, np.ndarray]:
@@ -62,8 +62,7 @@ def upstream_si(up: np.ndarray, cal: FirmwareCalibration) -> dict[str, np.ndarra
            "f_strain_raw": (code - MIDSCALE) * (cal.strain_full_scale_n / MIDSCALE)}
     for a in B.ANALOG_INPUTS:
         if a.register < u.shape[1]:
-            v0, gain = cal.analog[a.name]
-            mul, div = (1.0, gain) if a.volts_per_unit else (gain, 1.0)
+            v0, mul, div = analog_decoder(a, cal)
             out[a.si_name] = (u[:, a.register] * padc.DEFAULT.lsb_v - v0) * mul / div
     return out
 
@@ -98,7 +97,7 @@ class Measurements:
             cal.biss_zero_count, F32(5e-9),
             F32(TWO_PI / (1 << cal.ssi_bits)),
         )
-        self._analog = [(a.si_name, a.register, *analog_decoder(a, cal))
+        self._analog = [(a.si_name, a.register, *map(F32, analog_decoder(a, cal)))
                         for a in B.ANALOG_INPUTS]
         self._volts = _volt_table(float(F32(adc.lsb_v)))
         z = F32(0.0)
