@@ -4,9 +4,10 @@ What identification needs of a run is what the MCU read from one driver board: t
 board's upstream register memory (``UP_REGISTERS`` of ``firmware_model/fpga/layout.py``),
 which every MCU-level log carries once per MCU step:
 
-* ``/lvds/<b>.<k>/up``, encoding ``eha-hil/mcu-up`` (``eha-hil bus run --log``: 31
-  registers + the MCU side's CRC-error count, uint32), or
-* ``/lvds/<board>/up``, encoding ``eha-hil/lvds-up`` (31 x u16, the documented snapshot).
+* ``/lvds/<b>.<k>/up``, encoding ``eha-hil/mcu-up`` (``eha-hil bus run --log``: the link's
+  upstream words + the MCU side's CRC-error count, uint32), or
+* ``/lvds/<board>/up``, encoding ``eha-hil/lvds-up`` (one u16 per register, the documented
+  snapshot).
 
 The registers are turned into the SI columns of :mod:`hil.identify.csvdata` as the MCU
 decodes them (:mod:`firmware_model.mcu.measure`, in float64), with the sensor scales of the
