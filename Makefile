@@ -53,4 +53,4 @@ lint: $(TSTAMP)
 	$(BIN)/ruff check .
 
 clean:
-	rm -rf $(VENV) build *.egg-info .pytest_cache
+	rm -rf $(VENV) build *.egg-info .pytest_cache firmware_model/__pycache__/kernels-*

@@ -4,7 +4,7 @@ Channels per box ``b`` (blocks of fixed-width frames, times in ns of simulated t
 
 * ``/mcu/b/outputs``  uint8 x out_bytes: the box's fieldbus output record, each cycle;
 * ``/mcu/b/inputs``   uint8 x in_bytes: the input record the box gave back, each cycle;
-* ``/lvds/b.k/up``    uint32 x 32: board k's upstream memory (31 words) + the MCU side's
+* ``/lvds/b.k/up``    uint32 x 33: board k's upstream memory (the link's 32 words) + the MCU side's
   upstream CRC-error count, before each MCU step;
 * ``/lvds/b.k/down``  uint16 x 13: board k's downstream registers after each MCU step;
 * ``/fieldbus/frames`` (level "bus" and up): every frame as sent/received, single messages;
@@ -16,8 +16,8 @@ Channels per box ``b`` (blocks of fixed-width frames, times in ns of simulated t
   with the tick in which its last bit arrived; a word that failed its CRC is logged with
   the bit error it carried, a dropped word (no start bit) is not on the receiver's wire;
 * ``/sensors/b.k/raw`` (level "full"): the sensor frames of every tick as the board's
-  masters decoded them (``eha-hil/sensor-raw``: the 17 raw words of
-  ``firmware_model.fpga.layout.RAW_NAMES``, uint32).
+  masters decoded them (``eha-hil/sensor-raw``: the raw words of
+  ``firmware_model.fpga.layout.RAW_NAMES``, uint32; a log of an older layout has fewer).
 
 The Metadata record holds the configuration (JSON), the topology, the box model and each
 board's calibrated angle offset, so a replay needs nothing but the file.
@@ -43,7 +43,7 @@ from hil.framelog import FrameLogWriter
 from plant.config import Config
 
 UP_WIDTH = B.UP_WORDS + 1
-ENC_MCU_UP = "eha-hil/mcu-up"        # 31 upstream words + CRC-error count, uint32
+ENC_MCU_UP = "eha-hil/mcu-up"        # the link's upstream words + CRC-error count, uint32
 ENC_MCU_DOWN = "eha-hil/lvds-down-registers"  # 13 downstream registers, uint16
 ENC_RECORD = "eha-hil/process-record"  # a box's fieldbus record, bytes
 FLUSH_CYCLES = 100  # one block per channel per 100 ms of simulated time
