@@ -671,7 +671,8 @@ def implausible_parameters(fit: FitResult, exp: Experiment) -> list[str]:
 def _verdict(a: ResidualAnalysis) -> tuple[bool, str]:
     """``unexplained`` when a judged channel's residual still holds material structure:
     not white and more than 1 % of its variance predictable from its past (pressures and
-    strain), or more than 1.5 x the quantisation floor (encoder speeds)."""
+    strain), or more than 1.5 x the quantisation floor by at least 1 % of the speed (encoder
+    speeds)."""
     bad = [r for r in a.channels.values() if r.judged and not r.white
            and (r.floor_ratio > 0 or r.predictable_share > MATERIAL_SHARE)]
     if not bad:
@@ -680,7 +681,7 @@ def _verdict(a: ResidualAnalysis) -> tuple[bool, str]:
     for r in bad:
         if r.floor_ratio > 0:
             parts.append(f"{r.channel}: residual {r.floor_ratio:.1f} x the encoder's "
-                         "quantisation floor")
+                         f"quantisation floor ({r.excess_share:.1%} of the speed beyond it)")
             continue
         what = (f"{r.channel}: Ljung-Box p={r.ljung_box_p:.2g}, "
                 f"{r.predictable_share:.1%} of the residual predictable")
