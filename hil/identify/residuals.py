@@ -14,9 +14,10 @@ Per channel:
   here at its order even though its frequency changes with speed;
 * the strongest **frequency** of the residual (for describing what is left);
 * the **predictable share**: the part of the residual variance an AR(20) model predicts
-  from the residual's own past (about 20/N for white noise). Structure counts as material
-  when this share exceeds 1 %: a long record makes any imperfection statistically
-  significant, and the verdict ``unexplained`` should be about structure that matters.
+  from the residual's own past, per degree of freedom left (about 0 for white noise).
+  Structure counts as material when this share exceeds 1 %: a long record makes any
+  imperfection statistically significant, and the verdict ``unexplained`` should be about
+  structure that matters.
 
 The verdict "white" uses the channels whose measurement noise is white by construction:
 pressures and strain force. The encoder speeds are differences of quantised angles, whose
@@ -187,7 +188,10 @@ def whiten(r: np.ndarray, noise_part: np.ndarray | None, fs: float) -> np.ndarra
 
 
 def predictable_share(r: np.ndarray, order: int = 20) -> float:
-    """1 - (one-step AR(``order``) prediction error variance) / (residual variance)."""
+    """1 - (one-step AR(``order``) prediction error variance) / (residual variance), the
+    error variance per degree of freedom left (an adjusted R^2): in-sample, ``order``
+    coefficients fitted to white noise predict ``order/n`` of it by chance, 0.7 % of a 3 s
+    validation part at 1 kHz, near the 1 % that counts as material."""
     r = r - r.mean()
     n = r.size
     if n <= 4 * order:
@@ -199,7 +203,8 @@ def predictable_share(r: np.ndarray, order: int = 20) -> float:
     coef, *_ = np.linalg.lstsq(x.T @ x, x.T @ y, rcond=None)
     e = y - x @ coef
     v = float(y @ y)
-    return float(1.0 - (e @ e) / v) if v > 0 else 0.0
+    m = y.size
+    return float(1.0 - (e @ e) / (m - order) / (v / m)) if v > 0 else 0.0
 
 
 def analyse(exp: Experiment, residual: dict[str, np.ndarray], mask: np.ndarray,
