@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from hil.identify import stats
 
@@ -51,3 +52,26 @@ def test_ljung_box_white_and_not():
     w = rng.standard_normal(5000)
     assert stats.ljung_box(w, 30)[1] > 0.001
     assert stats.ljung_box(np.convolve(w, np.ones(5), "same"), 30)[1] < 1e-10
+
+
+def test_predictable_share_of_white_noise_is_near_zero_at_any_length():
+    """Adjusted for the AR's own fit: a short white record would otherwise look 20/n
+    predictable (0.7 % at n = 3000, near the 1 % that counts as material)."""
+    from hil.identify.residuals import predictable_share
+
+    rng = np.random.default_rng(11)
+    shares = [predictable_share(rng.standard_normal(3000)) for _ in range(40)]
+    assert abs(float(np.mean(shares))) < 0.1 * 20 / 3000
+    assert max(shares) < 0.01
+
+
+def test_predictable_share_of_an_ar1_is_its_explained_variance():
+    from hil.identify.residuals import predictable_share
+
+    rng = np.random.default_rng(12)
+    e = rng.standard_normal(20000)
+    x = np.zeros_like(e)
+    for k in range(1, x.size):
+        x[k] = 0.5 * x[k - 1] + e[k]
+    # var(x) = 1/(1 - 0.25), the innovation's 1: a quarter of x is predictable
+    assert predictable_share(x) == pytest.approx(0.25, abs=0.02)
