@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hil import cli_progress
+from hil import cli_progress, interrupts
 from hil.cli_args import (
     Parser,
     add_config_options,
@@ -628,6 +628,7 @@ def _verb(args: argparse.Namespace) -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    interrupts.install()  # a Ctrl-C while numba loads machine code is raised, not lost
     try:
         parser = build_parser()
         args = parser.parse_args(argv)

@@ -1,0 +1,61 @@
+"""A Ctrl-C inside numba's compiler lock is deferred to the lock's release, not lost."""
+
+from __future__ import annotations
+
+import threading
+
+import pytest
+from numba.core import event
+
+from hil.interrupts import DeferredInterrupt
+
+
+def test_outside_the_lock_ctrl_c_raises_at_once():
+    d = DeferredInterrupt()
+    with pytest.raises(KeyboardInterrupt):
+        d.handler(2, None)
+
+
+def test_inside_the_lock_it_waits_for_the_outermost_release():
+    d = DeferredInterrupt()
+    ev = event.Event("numba:compiler_lock", event.EventStatus.START)
+    d.on_start(ev)
+    d.on_start(ev)  # the lock is re-entrant
+    d.handler(2, None)  # deferred: no exception inside the lock
+    d.on_end(ev)
+    with pytest.raises(KeyboardInterrupt):
+        d.on_end(ev)
+    d.on_end(ev)  # once raised, a later release does not raise again
+    assert not d.pending
+
+
+def test_other_threads_holding_the_lock_do_not_defer_the_main_threads_ctrl_c():
+    d = DeferredInterrupt()
+    ev = event.Event("numba:compiler_lock", event.EventStatus.START)
+    t = threading.Thread(target=d.on_start, args=(ev,))
+    t.start()
+    t.join()
+    with pytest.raises(KeyboardInterrupt):
+        d.handler(2, None)
+
+
+def test_numba_announces_its_compiler_lock():
+    """The deferral rests on numba's event API: the lock's start and end reach a listener."""
+    from numba import njit
+
+    seen: list[str] = []
+
+    class Rec(event.Listener):
+        def on_start(self, ev):
+            seen.append("start")
+
+        def on_end(self, ev):
+            seen.append("end")
+
+    rec = Rec()
+    event.register("numba:compiler_lock", rec)
+    try:
+        njit(lambda x: x + 1)(1)
+    finally:
+        event.unregister("numba:compiler_lock", rec)
+    assert seen and seen.count("start") == seen.count("end") and seen[0] == "start"
