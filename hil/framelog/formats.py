@@ -20,6 +20,7 @@ ENC_LVDS_WORD = "eha-hil/lvds-word"
 ENC_LVDS_UP = "eha-hil/lvds-up"
 ENC_LVDS_DOWN = "eha-hil/lvds-down"
 ENC_ETHERCAT = "eha-hil/ethercat"
+ENC_ETHERCAT_FCS = "eha-hil/ethercat-fcs"  # an EtherCAT PDU + its Ethernet FCS (bus run)
 ENC_SENSOR_RAW = "eha-hil/sensor-raw"
 ENC_JSON = "json"
 
