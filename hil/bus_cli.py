@@ -223,3 +223,7 @@ def add_parsers(sub, bsub, common, config_fn, wrap) -> None:
     p.add_argument("--no-replay", dest="replay", action="store_false",
                    help="skip the replay real-time factor")
     p.set_defaults(func=wrap(cmd_bench_bus, config_fn))
+
+    from hil.replay import log_bench
+
+    log_bench.add_parser(bsub, common, config_fn, wrap)

@@ -34,6 +34,7 @@ import numpy as np
 from mcap.exceptions import UnsupportedCompressionError
 from mcap.writer import CompressionType, Writer
 
+from hil.framelog import batch
 from hil.framelog.formats import (
     BLOCK_MESSAGE_ENCODING,
     DTYPE_CODES,
@@ -170,6 +171,7 @@ class FrameLogWriter:
             raise ValueError(f"compression {compression!r} unavailable ({exc}); "
                              "use compression='none'") from None
         self._writer.start(profile=profile, library=f"eha-hil/{package_version()}")
+        self._fast = batch.supported(self._writer)
         self._writer.add_metadata(METADATA_NAME, {
             "level": level, "version": package_version(), "time": "ns of simulated time",
             **meta})
@@ -355,7 +357,8 @@ class FrameLogWriter:
 
     def write_messages(self, channel_id: int, t_ns: np.ndarray, messages: list[bytes]) -> None:
         """Log ``messages[i]`` at ``t_ns[i]`` (int ns, non-decreasing), one MCAP message each,
-        on a single-frame channel (e.g. :meth:`add_protobuf_channel`)."""
+        on a single-frame channel (e.g. :meth:`add_protobuf_channel`): the same records as
+        :meth:`write` per message, built in one go (:mod:`hil.framelog.batch`)."""
         ch = self._channel(channel_id)
         if ch.block:
             raise ValueError(f"{ch.topic} is a block channel: use write_block")
@@ -369,11 +372,8 @@ class FrameLogWriter:
         if times[0] < 0 or any(b < a for a, b in zip(times, times[1:], strict=False)):
             raise ValueError(f"{ch.topic}: message times must be >= 0 and non-decreasing")
         self._advance(ch, times[0], times[-1])
-        add, seq = self._writer.add_message, ch.count
-        for t_i, data in zip(times, messages, strict=True):
-            add(channel_id, t_i, data, t_i, seq & 0xFFFFFFFF)
-            seq += 1
-        ch.count = seq
+        batch.add_messages(self._writer, channel_id, times, messages, ch.count, self._fast)
+        ch.count += len(messages)
 
     @staticmethod
     def _cast(ch: _Channel, f: np.ndarray) -> np.ndarray:

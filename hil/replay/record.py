@@ -24,7 +24,7 @@ board's calibrated angle offset, so a replay needs nothing but the file.
 
 Beside these raw channels, the decoded signals of :mod:`hil.replay.signals` (protobuf, SI
 units, one message per sample) go to the log and/or a live view (:class:`SignalOut`):
-``/signals/actuator/b.k`` each MCU step (each fieldbus cycle at level "bus"),
+``/signals/actuator/b.k`` each fieldbus cycle (each MCU step at level "full"),
 ``/signals/box/b/outputs`` and ``/signals/box/b/inputs`` and ``/signals/bus`` each cycle.
 Every raw channel has a schema of encoding ``eha-hil/layout`` (JSON, :mod:`hil.framelog.layout`)
 that names its fields and their byte offsets.
@@ -41,6 +41,7 @@ import numpy as np
 from firmware_model.calibration import calibration
 from firmware_model.fpga import layout as B
 from firmware_model.lvds import link as LK
+from firmware_model.mcu import dpram
 from hil.actuator import TRACE_WIDTH, TRACE_WORDS
 from hil.fieldbus.boxes import StackBox
 from hil.fieldbus.chain import CYCLE_TICKS
@@ -130,8 +131,10 @@ class RecordingStackBox(StackBox):
         self.out = out if out is not None else SignalOut(log)
         self.cal = calibration(cfg)
         self.period_ticks = cfg.get("mcu.period_ticks")
-        self.every = CYCLE_TICKS // self.period_ticks if (log is not None and
-                                                          log.level == "bus") else 1
+        # actuator signals each MCU step at level full, else each fieldbus cycle (its last
+        # MCU step): a fifth of the messages, what keeps the default level's cost low
+        full = log is not None and log.level == "full"
+        self.every = 1 if full else CYCLE_TICKS // self.period_ticks
         st = signal_topics(b)
         self.sig_rec = {d: (self.out.add(st[d], SG.record_message(box, d)), d)
                         for d in ("outputs", "inputs")}
@@ -172,22 +175,43 @@ class RecordingStackBox(StackBox):
         self.buf_trace: list[list[tuple[int, np.ndarray]]] = [[] for _ in self.stacks]
         self.buf_out: list[tuple[int, bytes]] = []
         self.buf_in: list[tuple[int, bytes]] = []
-        self.buf_up: list[list[tuple[int, np.ndarray]]] = [[] for _ in self.stacks]
-        self.buf_down: list[list[tuple[int, np.ndarray]]] = [[] for _ in self.stacks]
+        # per MCU step (preallocated: this runs at 5 kHz): the MCU board's whole dual-port
+        # memory after the step, i.e. every board's upstream block as the MCU read it and
+        # downstream block as it wrote it, in one copy; and each link's CRC-error count
+        if not hasattr(self, "t_steps"):
+            cap = FLUSH_CYCLES * CYCLE_TICKS // self.period_ticks + 8
+            self.t_steps = np.zeros(cap, np.int64)
+            words = 0 if self.board is None else len(self.board.ram.words)
+            self.ram_rows = np.zeros((cap, words), np.uint16)
+            self.crc_rows = np.zeros((cap, len(self.stacks)), np.uint32)
+        self.n_steps = 0
 
     def apply(self, data: bytes) -> None:
         self.buf_out.append((self.tick, bytes(data)))
         super().apply(data)
 
     def _mcu_step(self, tick: int) -> None:
-        for k, s in enumerate(self.stacks):
-            up = np.empty(UP_WIDTH, dtype=np.uint32)
-            up[:-1] = s.mcu_link.up
-            up[-1] = s.mcu_link.up_crc_errors
-            self.buf_up[k].append((tick, up))
+        i = self.n_steps
+        if i == len(self.t_steps):  # more steps than a flush holds: grow
+            self.t_steps = np.concatenate([self.t_steps, np.zeros_like(self.t_steps)])
+            self.ram_rows = np.concatenate([self.ram_rows, np.zeros_like(self.ram_rows)])
+            self.crc_rows = np.concatenate([self.crc_rows, np.zeros_like(self.crc_rows)])
         super()._mcu_step(tick)
+        self.t_steps[i] = tick
+        self.ram_rows[i] = self.board.ram.words
         for k, s in enumerate(self.stacks):
-            self.buf_down[k].append((tick, s.mcu_link.down.astype(np.uint16)))
+            self.crc_rows[i, k] = s.mcu_link.up_crc_errors
+        self.n_steps = i + 1
+
+    def _up_down(self, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """Board ``k``'s upstream frames (n, 33: 32 words + CRC-error count, uint32) and
+        downstream registers (n, 16, uint16) of the buffered MCU steps."""
+        n = self.n_steps
+        u, d = dpram.up_base(k), dpram.down_base(k)
+        up = np.empty((n, UP_WIDTH), np.uint32)
+        up[:, :B.UP_WORDS] = self.ram_rows[:n, u:u + B.UP_WORDS]
+        up[:, B.UP_WORDS] = self.crc_rows[:n, k]
+        return up, self.ram_rows[:n, d:d + B.DOWN_WORDS]
 
     def _advance_stacks(self, n_ticks: int) -> None:
         if not self.traced:
@@ -208,27 +232,23 @@ class RecordingStackBox(StackBox):
         """Write the buffered frames as one block per channel, and their decoded signals."""
         ns = self.tick_ns
 
-        def rows_of(rows: list, as_bytes: bool) -> tuple[np.ndarray, np.ndarray]:
-            t = np.array([r[0] for r in rows], dtype=np.int64)
-            if as_bytes:
+        def put(ch: int, rows: list) -> None:
+            if rows and self.log is not None:
+                t = np.array([r[0] for r in rows], dtype=np.int64)
                 f = np.frombuffer(b"".join(r[1] for r in rows), dtype=np.uint8).reshape(
                     len(rows), -1)
-            else:
-                f = np.stack([r[1] for r in rows])
-            return t, f
-
-        def put(ch: int, rows: list, as_bytes: bool) -> None:
-            if rows and self.log is not None:
-                t, f = rows_of(rows, as_bytes)
                 self.log.write_block(ch, t * ns, f)
 
         if self.out_dtype.itemsize:
-            put(self.ch_out, self.buf_out, True)
-        put(self.ch_in, self.buf_in, True)
+            put(self.ch_out, self.buf_out)
+        put(self.ch_in, self.buf_in)
+        n = self.n_steps
+        t_steps = self.t_steps[:n] * ns
         for k in range(len(self.stacks)):
-            if self.log is not None:
-                put(self.ch_up[k], self.buf_up[k], False)
-                put(self.ch_down[k], self.buf_down[k], False)
+            if self.log is not None and n:
+                up, down = self._up_down(k)
+                self.log.write_block(self.ch_up[k], t_steps, up)
+                self.log.write_block(self.ch_down[k], t_steps, down)
             if self.traced and self.buf_trace[k]:
                 t = np.concatenate([t0 + np.arange(len(rows), dtype=np.int64)
                                     for t0, rows in self.buf_trace[k]]) * ns
@@ -258,20 +278,19 @@ class RecordingStackBox(StackBox):
             out_t, out_f = self._last_out
         else:
             self._last_out = (out_t[-1:], out_f[-1:])
+        n = self.n_steps
+        # each kept step, and the step before it (for the piston speed)
+        keep = np.arange(self.every - 1, n, self.every)
         for k, slot in enumerate(self.act):
-            if not self.buf_up[k]:
+            if not len(keep):
                 continue
-            t = np.array([r[0] for r in self.buf_up[k]], dtype=np.int64)
-            up = np.stack([r[1] for r in self.buf_up[k]])
-            down = np.stack([r[1] for r in self.buf_down[k]])
-            cols = SG.actuator_columns(self.cal, up, down, self.x_last[k],
+            t = self.t_steps[keep]
+            up, down = self._up_down(k)
+            x_prev = self.x_last[k] if self.every == 1 else SG.piston_x(self.cal, up[keep - 1])
+            cols = SG.actuator_columns(self.cal, up[keep], down[keep], x_prev,
                                        self.period_ticks * ns * 1e-9)
             self.x_last[k] = float(cols["x_piston_m"][-1])
             cols.update(SG.pc_command_columns(out_t, out_f, self.box, slot, t))
-            if self.every > 1:
-                keep = slice(self.every - 1, None, self.every)
-                cols = {n: v[keep] for n, v in cols.items()}
-                t = t[keep]
             self.out.write(self.sig_act[k], t * ns, cols)
 
 
@@ -345,15 +364,28 @@ def run_logged(topo: Topology, cfg: Config, cycles: int, pc: Callable[[int, Mast
                                      schema_name=ENC_FIELDBUS, schema_encoding=LAYOUT_ENCODING,
                                      schema_data=lay.schema())
         bus_sig: BusSignals | None = None
+        # the frames of the last cycles, written with the blocks (one batch per
+        # FLUSH_CYCLES: a message at a time costs ~9 us, see hil.framelog.batch)
+        bus_t: list[int] = []
+        bus_frames: list[bytes] = []
 
         def tap(cycle: int, tick: int, frame: bytes, direction: str) -> None:
             if ch_bus is not None:
-                log.write(ch_bus, tick * tick_ns + (1 if direction == "rx" else 0), frame)
+                bus_t.append(tick * tick_ns + (1 if direction == "rx" else 0))
+                bus_frames.append(bytes(frame))
             bus_sig.tap(direction, frame)
+
+        def flush_frames() -> None:
+            if bus_frames:
+                log.write_messages(ch_bus, np.array(bus_t, dtype=np.int64), bus_frames)
+                bus_t.clear()
+                bus_frames.clear()
 
         def pc_signals(cycle: int, m: Master) -> None:
             if cycle > 0:
                 bus_sig.end_cycle()
+                if cycle % FLUSH_CYCLES == 0:
+                    flush_frames()
             pc(cycle, m)
 
         with BusSystem(topo, cfg, "inproc", model="stack", tap=tap) as bs:
@@ -383,6 +415,7 @@ def run_logged(topo: Topology, cfg: Config, cycles: int, pc: Callable[[int, Mast
                     progress(done, cycles)
             bus_sig.end_cycle()
             bus_sig.flush()
+            flush_frames()
             for b in boxes:
                 b.flush()
         return rec

@@ -29,6 +29,7 @@ from hil.fieldbus import pdo
 from hil.fieldbus.topology import Box
 from hil.framelog.identify_export import signals as up_signals
 from hil.framelog.protobuf import Field, MessageType
+from protocols.biss import LINEAR_COUNT_M
 
 PACKAGE = "eha_hil"
 _STATUS_FIELDS = tuple(Field(name.lower(), "bool", "", f"board status bit {bit}: {doc}")
@@ -155,11 +156,19 @@ def _commands(mode: np.ndarray, command: np.ndarray, prefix: str = "") -> dict[s
                                                     math.nan)}
 
 
+def piston_x(cal: FirmwareCalibration, up: np.ndarray) -> np.ndarray:
+    """Piston position, m, of upstream frames ``up`` (n, >= 31 words), as the MCU reads it."""
+    u = np.asarray(up).astype(np.int64) & 0xFFFF
+    count = (u[:, B.U_PISTON_HI] << 16) | u[:, B.U_PISTON_LO]
+    return (count - cal.biss_zero_count) * LINEAR_COUNT_M
+
+
 def actuator_columns(cal: FirmwareCalibration, up: np.ndarray, down: np.ndarray,
-                     x_before: float, period_s: float) -> dict[str, np.ndarray]:
-    """SI columns of ``n`` MCU steps of one board: ``up`` (n, 32) the words the MCU read
-    (31 registers + its upstream CRC-error count), ``down`` (n, 16) the registers it wrote.
-    ``x_before`` is the piston position of the step before the first (NaN: unknown)."""
+                     x_before: float | np.ndarray, period_s: float) -> dict[str, np.ndarray]:
+    """SI columns of ``n`` MCU steps of one board: ``up`` (n, 33) the words the MCU read
+    (32 words + its upstream CRC-error count), ``down`` (n, 16) the registers it wrote.
+    ``x_before``: the piston position one MCU step (``period_s``) before each sample, (n,);
+    or, for consecutive steps, a float: the position before the first (NaN: unknown)."""
     u = np.asarray(up).astype(np.int64)
     d = np.asarray(down).astype(np.int64) & 0xFFFF
 
@@ -178,7 +187,8 @@ def actuator_columns(cal: FirmwareCalibration, up: np.ndarray, down: np.ndarray,
         "board_control": d[:, B.D_CONTROL],
         "f_pressure_n": cal.kc_m2 * (si["p_cyl_a"] - si["p_cyl_b"]),
         "f_strain_n": si["f_strain"], "x_piston_m": x,
-        "v_piston_m_s": np.diff(x, prepend=x_before) / period_s,
+        "v_piston_m_s": (x - x_before if isinstance(x_before, np.ndarray) else
+                         np.diff(x, prepend=x_before)) / period_s,
         "omega_m_rad_s": s16(u[:, B.U_SPEED]) * rad_per_count,
         "iq_a": si["iq"], "id_a": s16(u[:, B.U_ID]) * 1e-3, "ia_a": s16(u[:, B.U_IA]) * 1e-3,
         "ib_a": s16(u[:, B.U_IB]) * 1e-3, "vd_v": s16(u[:, B.U_VD_OUT]) * 1e-3,
