@@ -47,18 +47,22 @@ def _run_bus(args: argparse.Namespace, cfg, topo, cycles: int, model: str, pc):
     from hil.transports import TransportError
 
     t0 = time.perf_counter()
-    if args.log:
+    live_addr = getattr(args, "foxglove", None)
+    if args.log or live_addr is not None:
         from hil.transports import backend
 
+        what = "--log" if args.log else "--foxglove"
         if not backend(args.transport).in_memory:
-            raise BusUsageError("--log records the in-process run; use --transport inproc")
+            raise BusUsageError(f"{what} records the in-process run; use --transport inproc")
         if model != "stack":
-            raise BusUsageError("--log records the MCU model: use --model stack")
+            raise BusUsageError(f"{what} records the MCU model: use --model stack")
         from hil.replay.record import run_logged
 
-        cli_progress.output("log", args.log, cli_progress.readable_log)
-        rec = run_logged(topo, cfg, cycles, pc, args.log, level=args.level,
-                         progress=_progress("bus run", not args.json))
+        if args.log:
+            cli_progress.output("log", args.log, cli_progress.readable_log)
+        with _live_view(live_addr) as live:
+            rec = run_logged(topo, cfg, cycles, pc, args.log, level=args.level,
+                             progress=_progress("bus run", not args.json), live=live)
     else:
         try:
             with BusSystem(topo, cfg, args.transport, model=model) as bs:
@@ -66,6 +70,24 @@ def _run_bus(args: argparse.Namespace, cfg, topo, cycles: int, model: str, pc):
         except TransportError as exc:
             raise BusUsageError(str(exc)) from None
     return rec, time.perf_counter() - t0
+
+
+def _live_view(address: str | None):
+    """A Foxglove live view for ``--foxglove [HOST:PORT]`` (None: a context giving None)."""
+    import contextlib
+    import sys
+
+    if address is None:
+        return contextlib.nullcontext()
+    from hil.live import FoxgloveLive, LiveError, parse_address
+
+    try:
+        live = FoxgloveLive(*parse_address(address))
+    except (ValueError, LiveError) as exc:
+        raise BusUsageError(str(exc)) from None
+    print(f"foxglove: live view at {live.url} (Foxglove Studio: Open connection > Foxglove "
+          "WebSocket)", file=sys.stderr)
+    return live
 
 
 def cmd_bus_run(args: argparse.Namespace, cfg) -> int:
@@ -205,6 +227,9 @@ def add_parsers(sub, bsub, common, config_fn, wrap) -> None:
                    help="log MCU inputs/outputs for replay")
     p.add_argument("--level", default="mcu", choices=("bus", "mcu", "full"),
                    help="log detail")
+    p.add_argument("--foxglove", nargs="?", const="", metavar="HOST:PORT",
+                   help="stream the decoded signals to Foxglove Studio (WebSocket; default "
+                   "127.0.0.1:8765, loopback)")
     p.set_defaults(func=wrap(cmd_bus_run, config_fn))
 
     p = sub.add_parser("replay", parents=[common(plot=False)],

@@ -164,3 +164,11 @@ class MessageType:
                 row[f.name] = v
             out.append(json.dumps(row, separators=(",", ":")).encode())
         return out
+
+
+def markdown_table(message: MessageType) -> str:
+    """The message's fields as a Markdown table (``docs/framelog.md`` carries this output)."""
+    rows = ["| # | field | type | unit | meaning |", "|---|---|---|---|---|"]
+    for number, f in enumerate(message.fields, 1):
+        rows.append(f"| {number} | `{f.name}` | {f.kind} | {f.unit or '-'} | {f.doc} |")
+    return "\n".join(rows)

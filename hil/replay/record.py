@@ -239,9 +239,10 @@ class RecordingStackBox(StackBox):
                     len(rows), -1)
                 self.log.write_block(ch, t * ns, f)
 
-        if self.out_dtype.itemsize:
-            put(self.ch_out, self.buf_out)
-        put(self.ch_in, self.buf_in)
+        if self.log is not None:
+            if self.out_dtype.itemsize:
+                put(self.ch_out, self.buf_out)
+            put(self.ch_in, self.buf_in)
         n = self.n_steps
         t_steps = self.t_steps[:n] * ns
         for k in range(len(self.stacks)):
