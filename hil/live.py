@@ -78,6 +78,10 @@ class FoxgloveLive:
         for t, data in zip(t_ns.tolist(), payloads, strict=True):
             ch.log(data, log_time=t)
 
+    def subscribed(self, topic: str) -> bool:
+        """True if a client is subscribed to ``topic``."""
+        return any(ch.topic() == topic and ch.has_sinks() for ch in self._channels)
+
     @property
     def url(self) -> str:
         return f"ws://{self.host}:{self.port}"

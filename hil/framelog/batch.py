@@ -16,8 +16,10 @@ entries with one numpy call.
 These are the Writer's private attributes (mcap 1.x). :func:`supported` checks that they
 are there and have the expected types; if not, :func:`add_messages` falls back to
 ``add_message`` per message, so a future mcap release can make logging slower but never
-wrong. ``tests/framelog/test_batch.py`` compares a batch-written file with one written by
-``add_message``, byte for byte.
+wrong. A batch goes into the open chunk whole (the chunk closes after it if it is then over
+size), so with small chunks the chunk boundaries differ from ``add_message``'s; otherwise
+the file is the same: ``tests/framelog/test_batch.py`` compares the two byte for byte, and
+the messages read back by the mcap library's reader.
 """
 
 from __future__ import annotations
