@@ -178,12 +178,13 @@ class RecordingStackBox(StackBox):
         # per MCU step (preallocated: this runs at 5 kHz): the MCU board's whole dual-port
         # memory after the step, i.e. every board's upstream block as the MCU read it and
         # downstream block as it wrote it, in one copy; and each link's CRC-error count
-        if not hasattr(self, "t_steps"):
+        if not hasattr(self, "ram_rows"):
             cap = FLUSH_CYCLES * CYCLE_TICKS // self.period_ticks + 8
-            self.t_steps = np.zeros(cap, np.int64)
             words = 0 if self.board is None else len(self.board.ram.words)
-            self.ram_rows = np.zeros((cap, words), np.uint16)
-            self.crc_rows = np.zeros((cap, len(self.stacks)), np.uint32)
+            dtype = np.int64 if self.board is None else self.board.ram.words.dtype
+            self.ram_rows = np.zeros((cap, words), dtype)  # its dtype: a plain copy
+        self.t_steps: list[int] = []
+        self.crc_rows: list[tuple[int, ...]] = []
         self.n_steps = 0
 
     def apply(self, data: bytes) -> None:
@@ -192,15 +193,12 @@ class RecordingStackBox(StackBox):
 
     def _mcu_step(self, tick: int) -> None:
         i = self.n_steps
-        if i == len(self.t_steps):  # more steps than a flush holds: grow
-            self.t_steps = np.concatenate([self.t_steps, np.zeros_like(self.t_steps)])
+        if i == len(self.ram_rows):  # more steps than a flush holds: grow
             self.ram_rows = np.concatenate([self.ram_rows, np.zeros_like(self.ram_rows)])
-            self.crc_rows = np.concatenate([self.crc_rows, np.zeros_like(self.crc_rows)])
         super()._mcu_step(tick)
-        self.t_steps[i] = tick
+        self.t_steps.append(tick)
         self.ram_rows[i] = self.board.ram.words
-        for k, s in enumerate(self.stacks):
-            self.crc_rows[i, k] = s.mcu_link.up_crc_errors
+        self.crc_rows.append(tuple(s.mcu_link.up_crc_errors for s in self.stacks))
         self.n_steps = i + 1
 
     def _up_down(self, k: int) -> tuple[np.ndarray, np.ndarray]:
@@ -210,8 +208,8 @@ class RecordingStackBox(StackBox):
         u, d = dpram.up_base(k), dpram.down_base(k)
         up = np.empty((n, UP_WIDTH), np.uint32)
         up[:, :B.UP_WORDS] = self.ram_rows[:n, u:u + B.UP_WORDS]
-        up[:, B.UP_WORDS] = self.crc_rows[:n, k]
-        return up, self.ram_rows[:n, d:d + B.DOWN_WORDS]
+        up[:, B.UP_WORDS] = [r[k] for r in self.crc_rows]
+        return up, self.ram_rows[:n, d:d + B.DOWN_WORDS].astype(np.uint16)
 
     def _advance_stacks(self, n_ticks: int) -> None:
         if not self.traced:
@@ -244,7 +242,7 @@ class RecordingStackBox(StackBox):
                 put(self.ch_out, self.buf_out)
             put(self.ch_in, self.buf_in)
         n = self.n_steps
-        t_steps = self.t_steps[:n] * ns
+        t_steps = np.array(self.t_steps, dtype=np.int64) * ns
         for k in range(len(self.stacks)):
             if self.log is not None and n:
                 up, down = self._up_down(k)
@@ -285,7 +283,7 @@ class RecordingStackBox(StackBox):
         for k, slot in enumerate(self.act):
             if not len(keep):
                 continue
-            t = self.t_steps[keep]
+            t = np.array(self.t_steps, dtype=np.int64)[keep]
             up, down = self._up_down(k)
             x_prev = self.x_last[k] if self.every == 1 else SG.piston_x(self.cal, up[keep - 1])
             cols = SG.actuator_columns(self.cal, up[keep], down[keep], x_prev,
