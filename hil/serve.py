@@ -269,6 +269,23 @@ def _status_line(st: ServeStats, errors: int) -> str:
             f"errors {errors}  load {load:.0f}%")
 
 
+def _live_view(args: argparse.Namespace, chain: Chain, cfg):  # noqa: ANN202
+    """``--foxglove``: (live view, boxes sending to it), or (None, [])."""
+    if getattr(args, "foxglove", None) is None:
+        return None, []
+    from hil.live import FoxgloveLive, LiveError, parse_address
+    from hil.replay.record import signal_boxes
+
+    try:
+        live = FoxgloveLive(*parse_address(args.foxglove))
+    except (ValueError, LiveError) as exc:
+        raise _usage(str(exc)) from None
+    boxes = signal_boxes(chain, cfg, live)
+    print(f"eha-hil serve: foxglove live view at {live.url} ({len(boxes)} box(es) with "
+          "decoded signals, sent every 100 ms)", file=sys.stderr, flush=True)
+    return live, boxes
+
+
 def cmd_serve(args: argparse.Namespace, cfg) -> int:
     from hil.fieldbus.topology import TopologyError, load_topology
 
@@ -278,6 +295,7 @@ def cmd_serve(args: argparse.Namespace, cfg) -> int:
         raise _usage(str(exc)) from None
     model = args.model or ("stack" if topo.n_actuators <= 5 else "echo")
     chain = Chain(topo, cfg, model, paced=True)
+    live, live_boxes = _live_view(args, chain, cfg)
     if args.realtime:
         _realtime_priority()
     end, where, release = _open_end(args)
@@ -311,6 +329,10 @@ def cmd_serve(args: argparse.Namespace, cfg) -> int:
         end.close()
         if release is not None:
             release()
+        if live is not None:
+            for b in live_boxes:
+                b.flush()
+            live.close()
     if tty and not args.quiet:
         print(file=sys.stderr)
 
@@ -405,4 +427,7 @@ def add_parser(sub, common, config_fn, wrap) -> None:
                    "CAP_SYS_NICE): far fewer overruns on a busy machine")
     p.add_argument("-q", "--quiet", action="store_true",
                    help="no status line on stderr (the ready line is still printed)")
+    p.add_argument("--foxglove", nargs="?", const="", metavar="HOST:PORT",
+                   help="stream the boxes' decoded signals to Foxglove Studio (WebSocket; "
+                   "default 127.0.0.1:8765, loopback)")
     p.set_defaults(func=wrap(cmd_serve, config_fn))

@@ -293,6 +293,19 @@ class RecordingStackBox(StackBox):
             self.out.write(self.sig_act[k], t * ns, cols)
 
 
+def signal_boxes(chain, cfg: Config, live: object) -> list[RecordingStackBox]:  # noqa: ANN001
+    """Replace the stack boxes of ``chain`` (before it runs) by boxes that send their
+    decoded signals to ``live`` (no log); call :meth:`RecordingStackBox.flush` at the end.
+    Echo boxes stay as they are (they have no MCU to decode)."""
+    out = SignalOut(None, live)
+    recs = []
+    for i, b in enumerate(chain.boxes):
+        if isinstance(b, StackBox):
+            chain.boxes[i] = RecordingStackBox(b.box, cfg, None, out)
+            recs.append(chain.boxes[i])
+    return recs
+
+
 class BusSignals:
     """``/signals/bus``: the master's counters and the WKC of each cycle, buffered and
     written every :data:`FLUSH_CYCLES` cycles."""

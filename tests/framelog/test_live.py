@@ -119,3 +119,59 @@ def test_parse_address(text, want) -> None:  # noqa: ANN001
 def test_parse_address_rejects(text) -> None:  # noqa: ANN001
     with pytest.raises(ValueError, match="--foxglove"):
         parse_address(text)
+
+
+class _Collect:
+    """A stand-in live view: keeps what it is given."""
+
+    def __init__(self) -> None:
+        self.channels: list = []
+        self.messages: list = []
+
+    def add(self, topic, message):  # noqa: ANN001, ANN201
+        self.channels.append((topic, message))
+        return len(self.channels) - 1
+
+    def log(self, handle, t_ns, payloads):  # noqa: ANN001, ANN201
+        self.messages += [(self.channels[handle][0], t, p)
+                          for t, p in zip(t_ns.tolist(), payloads, strict=True)]
+
+
+def test_serve_chain_sends_decoded_signals() -> None:
+    """What ``serve --foxglove`` wires: the paced chain's stack boxes send their signals."""
+    from hil.fieldbus.chain import Chain
+    from hil.fieldbus.master import Master
+    from hil.replay.record import signal_boxes
+
+    topo = load_topology("bench_one_box")
+    cfg = load_config(None)
+    chain = Chain(topo, cfg, "stack", paced=True)
+    live = _Collect()
+    boxes = signal_boxes(chain, cfg, live)
+    assert len(boxes) == 1 and {t for t, _ in live.channels} == {
+        "/signals/box/0/outputs", "/signals/box/0/inputs", "/signals/actuator/0.0"}
+    master = Master(topo)
+    for _ in range(150):
+        master.set_actuator(0, "force", 100.0)
+        for f in master.frames():
+            master.receive(chain.handle(f))
+        master.end_cycle()
+        chain.advance()
+    for b in boxes:
+        b.flush()
+    act = [(t, p) for topic, t, p in live.messages if topic == "/signals/actuator/0.0"]
+    assert len(act) == 150
+    message = dict(live.channels)["/signals/actuator/0.0"]
+    decode = DecoderFactory().decoder_for("protobuf", Schema(
+        id=1, name=message.full_name, encoding="protobuf", data=message.schema))
+    last = decode(act[-1][1])
+    assert last.force_command_n == pytest.approx(100.0) and last.enabled
+
+
+def test_serve_foxglove_bad_address_is_one_line(capsys) -> None:  # noqa: ANN001
+    from hil.cli import main
+
+    assert main(["serve", "--transport", "udp", "--port", "0", "--seconds", "0.01",
+                 "--foxglove", "host:port"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--foxglove" in err[0] and "Traceback" not in err[0]
