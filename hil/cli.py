@@ -349,6 +349,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     if args.config is None and (args.scenario == "thesis" or args.scenario in scenarios.THESIS):
         args.config = THESIS_PRESET
     if args.scenario == "thesis":
+        if getattr(args, "series", None):
+            raise UsageError("--series: 'thesis' runs several scenarios; give one (f3 ... f8)")
         return cmd_run_thesis(args)
     try:
         scenario = scenarios.get(args.scenario)
@@ -369,6 +371,14 @@ def cmd_run(args: argparse.Namespace) -> int:
     if args.plot and res.plot:
         res.plot(res, Path(args.plot))
         text += f"\nplot written to {args.plot}"
+    if getattr(args, "series", None):
+        from hil.series_export import write_series
+
+        try:
+            rows = write_series(res, args.series)
+        except ValueError as exc:
+            raise UsageError(str(exc)) from None
+        text += f"\nseries written to {args.series} ({rows} rows)"
     data = {"scenario": res.name, "title": res.title, "config": cfg.sources, "ok": res.ok,
             "metrics": [{"name": m.name, "value": m.value, "unit": m.unit,
                          "requirement": m.requirement, "ok": m.ok} for m in res.metrics],
@@ -603,6 +613,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--plot-dir", default=None, type=output_dir,
                    help="directory for one plot per scenario, NAME.png (with 'thesis' "
                    "default thesis-plots)")
+    p.add_argument("--series", metavar="FILE", type=output_file((".csv", ".parquet", ".mcap")),
+                   help="write the time series behind the metrics to FILE (.csv, .parquet "
+                   "or .mcap; README, Scenarios)")
     p.set_defaults(func=cmd_run)
 
     cfgp = sub.add_parser("config", help="inspect configurations")
