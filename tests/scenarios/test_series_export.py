@@ -94,6 +94,7 @@ def test_cli_current_step_series(tmp_path: Path, capsys) -> None:  # noqa: ANN00
     assert {"t_s", "iq_a", "id_a"} <= set(df.columns)
     # the step's target current is reached: what the metrics were computed from
     assert df["iq_a"].iloc[-50:].mean() == pytest.approx(10.0, abs=0.3)
+    capsys.readouterr()
     with pytest.raises(SystemExit) as exc:  # argparse's usage error
         main(["run", "current-step", "--series", str(tmp_path / "x.txt")])
     assert exc.value.code == 2
