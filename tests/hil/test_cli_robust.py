@@ -34,7 +34,8 @@ PNG = b"\x89PNG\r\n\x1a\n" + bytes(range(256)) * 4
 UNTYPED_PATHS = {"config": "config", "preset": "config", "topology": "input",
                  "port": "device", "log": "input", "out": "output"}
 #: Options that take a value which is neither a number nor a path.
-TEXT = {"set", "effect", "magnitude", "host", "scenario", "topic", "field", "board", "case"}
+TEXT = {"set", "effect", "magnitude", "host", "scenario", "topic", "field", "board", "case",
+        "foxglove"}  # foxglove: HOST:PORT, checked by hil.live.parse_address (its tests)
 
 #: Extra arguments that keep a verb cheap when the value under test is valid (tiny
 #: durations, --json for no progress lines), and placeholders for required positionals.
