@@ -16,6 +16,8 @@ step's target) go to the file's metadata, as do the metrics.
 * MCAP: one protobuf channel per table (``/series/<table>``, one message per row, log time
   the table's time column in ns when it has one, else the row number), metrics and
   constants in a Metadata record; Foxglove plots it.
+* Live (``run NAME --foxglove``): the same channels on a Foxglove WebSocket server, sent
+  when a client has subscribed (:func:`publish_live`).
 
 Units come from the names' suffixes where they are unambiguous (``_s``, ``_hz``, ``_db``,
 ``_deg``, ``_n``, ``_a``, ``_w``, ``_pa``, ``_mpa``, ``_m``, ``_m_s``, ``_mm_s``,
@@ -198,30 +200,72 @@ def write_series(res, path: str | Path) -> int:  # noqa: ANN001 - ScenarioResult
     return sum(t.rows for t in tabs)
 
 
-def _write_mcap(tabs: list[Table], meta: dict[str, str], p: Path) -> int:
+@dataclass
+class SeriesChannel:
+    """One table as a protobuf channel: topic, message type, log times (ns), messages."""
+
+    topic: str
+    message: object  # hil.framelog.protobuf.MessageType
+    t_ns: np.ndarray
+    payloads: list[bytes]
+
+
+def channels(tabs: list[Table]) -> list[SeriesChannel]:
+    """The tables as protobuf channels ``/series/<table>`` (one message per row)."""
     from hil.framelog.protobuf import Field, MessageType
+
+    out = []
+    used: set[str] = set()
+    for t in tabs:
+        fields, seen = [], set()
+        for c in t.columns:
+            f = _field_name(c)
+            while f in seen:
+                f += "_"
+            seen.add(f)
+            fields.append(Field(f, "double", unit_of(c), c))
+        mname = _field_name(t.name).replace("_", " ").title().replace(" ", "")
+        while mname in used:
+            mname += "X"
+        used.add(mname)
+        msg = MessageType(f"eha_hil.series.{mname}", fields)
+        cols = {f.name: a for f, a in zip(fields, t.columns.values(), strict=True)}
+        out.append(SeriesChannel(f"/series/{t.name}", msg, _time_ns(t),
+                                 msg.encode(cols, t.rows)))
+    return out
+
+
+def _write_mcap(tabs: list[Table], meta: dict[str, str], p: Path) -> int:
     from hil.framelog.writer import FrameLogWriter
 
     with FrameLogWriter(p, level="bus", metadata={"content": "scenario series"}) as w:
         w.add_metadata("eha-hil.series", meta)
-        used: set[str] = set()
-        for t in tabs:
-            fields, seen = [], set()
-            for c in t.columns:
-                f = _field_name(c)
-                while f in seen:
-                    f += "_"
-                seen.add(f)
-                fields.append(Field(f, "double", unit_of(c), c))
-            mname = _field_name(t.name).replace("_", " ").title().replace(" ", "")
-            while mname in used:
-                mname += "X"
-            used.add(mname)
-            msg = MessageType(f"eha_hil.series.{mname}", fields)
-            ch = w.add_protobuf_channel(f"/series/{t.name}", msg)
-            cols = {f.name: a for f, a in zip(fields, t.columns.values(), strict=True)}
-            w.write_messages(ch, _time_ns(t), msg.encode(cols, t.rows))
+        for c in channels(tabs):
+            w.write_messages(w.add_protobuf_channel(c.topic, c.message), c.t_ns, c.payloads)
     return sum(t.rows for t in tabs)
+
+
+def publish_live(res, live, wait_s: float | None = None, linger_s: float = 2.0,  # noqa: ANN001
+                 poll_s: float = 0.1) -> bool:
+    """Offer a scenario's series on the live view ``live`` (:class:`hil.live.FoxgloveLive`)
+    and send them once a client has subscribed to one of them (waiting ``wait_s`` seconds,
+    None: until interrupted), then keep serving ``linger_s``. A live view only delivers
+    what is sent after a client subscribes, hence the wait. True if they were sent."""
+    import time
+
+    tabs, _ = tables(res.series, res.name)
+    chans = channels(tabs)
+    handles = [live.add(c.topic, c.message) for c in chans]
+    deadline = None if wait_s is None else time.monotonic() + wait_s
+    while not any(live.subscribed(c.topic) for c in chans):
+        if deadline is not None and time.monotonic() > deadline:
+            return False
+        time.sleep(poll_s)
+    time.sleep(min(0.5, linger_s))  # let the client subscribe to the rest too
+    for h, c in zip(handles, chans, strict=True):
+        live.log(h, c.t_ns, c.payloads)
+    time.sleep(linger_s)
+    return True
 
 
 def describe(tabs: list[Table]) -> str:
@@ -229,4 +273,5 @@ def describe(tabs: list[Table]) -> str:
     return "\n".join(f"{t.name}: {t.rows} rows, {', '.join(t.columns)}" for t in tabs)
 
 
-__all__ = ["FORMATS", "Table", "describe", "tables", "unit_of", "write_series"]
+__all__ = ["FORMATS", "SeriesChannel", "Table", "channels", "describe", "publish_live", "tables",
+           "unit_of", "write_series"]

@@ -100,3 +100,56 @@ def test_cli_current_step_series(tmp_path: Path, capsys) -> None:  # noqa: ANN00
     assert exc.value.code == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--series" in err[0]
+
+
+def test_series_live_to_a_websocket_client() -> None:
+    """``run --foxglove``: a client subscribes, gets every row, decodes it with the schema
+    the server advertised."""
+    import asyncio
+    import base64
+    import json
+    import struct
+    import threading
+
+    import websockets
+    from mcap.records import Schema
+
+    from hil.live import FoxgloveLive
+    from hil.series_export import publish_live
+
+    res = _result()
+    got: list = []
+
+    async def client(url: str) -> None:
+        async with websockets.connect(url, subprotocols=["foxglove.sdk.v1",
+                                                         "foxglove.websocket.v1"]) as ws:
+            channel = None
+            while channel is None:
+                msg = json.loads(await asyncio.wait_for(ws.recv(), 30))
+                if msg.get("op") == "advertise":
+                    channel = next((c for c in msg["channels"]
+                                    if c["topic"] == "/series/demo"), None)
+            got.append(channel)
+            sub = json.dumps({"op": "subscribe",
+                              "subscriptions": [{"id": 1, "channelId": channel["id"]}]})
+            await ws.send(sub)
+            while len(got) < 1 + 11:
+                data = await asyncio.wait_for(ws.recv(), 30)
+                if isinstance(data, str):  # "unknown channel": subscribed too early
+                    if json.loads(data).get("op") == "status":
+                        await asyncio.sleep(0.1)
+                        await ws.send(sub)
+                elif data[0] == 1:
+                    got.append((struct.unpack_from("<IQ", data, 1)[1], data[13:]))
+
+    with FoxgloveLive(port=0) as live:
+        th = threading.Thread(target=lambda: asyncio.run(client(live.url)))
+        th.start()
+        assert publish_live(res, live, wait_s=30, linger_s=0.5)
+        th.join(30)
+    channel, rows = got[0], got[1:]
+    decode = DecoderFactory().decoder_for("protobuf", Schema(
+        id=1, name=channel["schemaName"], encoding="protobuf",
+        data=base64.b64decode(channel["schema"])))
+    assert [t for t, _ in rows] == [round(x * 1e9) for x in res.series["t_s"]]
+    assert [decode(d).iq_a for _, d in rows] == pytest.approx(res.series["iq_a"])
