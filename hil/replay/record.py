@@ -175,16 +175,18 @@ class RecordingStackBox(StackBox):
         self.buf_trace: list[list[tuple[int, np.ndarray]]] = [[] for _ in self.stacks]
         self.buf_out: list[tuple[int, bytes]] = []
         self.buf_in: list[tuple[int, bytes]] = []
-        # per MCU step (preallocated: this runs at 5 kHz): the MCU board's whole dual-port
-        # memory after the step, i.e. every board's upstream block as the MCU read it and
-        # downstream block as it wrote it, in one copy; and each link's CRC-error count
+        # per MCU step (preallocated: this runs at 5 kHz): the MCU board's dual-port memory
+        # after the step, i.e. each board's upstream block as the MCU read it and downstream
+        # block as it wrote it, in one copy; and each link's CRC-error count
         if not hasattr(self, "ram_rows"):
             cap = FLUSH_CYCLES * CYCLE_TICKS // self.period_ticks + 8
-            words = 0 if self.board is None else len(self.board.ram.words)
+            # the blocks of the boards in use (they come first), in the memory's dtype: one
+            # plain copy of len(stacks) x 64 words
+            self.ram_words = dpram.BOARD_STRIDE * len(self.stacks) if self.board else 0
             dtype = np.int64 if self.board is None else self.board.ram.words.dtype
-            self.ram_rows = np.zeros((cap, words), dtype)  # its dtype: a plain copy
+            self.ram_rows = np.zeros((cap, self.ram_words), dtype)
         self.t_steps: list[int] = []
-        self.crc_rows: list[tuple[int, ...]] = []
+        self.crc_rows: list[list[int]] = []
         self.n_steps = 0
 
     def apply(self, data: bytes) -> None:
@@ -197,8 +199,8 @@ class RecordingStackBox(StackBox):
             self.ram_rows = np.concatenate([self.ram_rows, np.zeros_like(self.ram_rows)])
         super()._mcu_step(tick)
         self.t_steps.append(tick)
-        self.ram_rows[i] = self.board.ram.words
-        self.crc_rows.append(tuple(s.mcu_link.up_crc_errors for s in self.stacks))
+        self.ram_rows[i] = self.board.ram.words[:self.ram_words]
+        self.crc_rows.append([s.mcu_link.up_crc_errors for s in self.stacks])
         self.n_steps = i + 1
 
     def _up_down(self, k: int) -> tuple[np.ndarray, np.ndarray]:

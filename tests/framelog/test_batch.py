@@ -46,3 +46,15 @@ def test_same_bytes_as_add_message(sizes: str, chunk_size: int) -> None:
     msgs = list(make_reader(io.BytesIO(fast), validate_crcs=True).iter_messages(topics=["/a"]))
     assert [m.data for _, _, m in msgs] == payloads
     assert [m.sequence for _, _, m in msgs][:4] == [2**32 - 3, 2**32 - 2, 2**32 - 1, 0]
+
+
+def test_bench_log_reports_both_encodings() -> None:
+    """``eha-hil bench log``'s encoding comparison: sizes from the files it wrote."""
+    from hil.replay.log_bench import bench_encodings, format_report
+    from hil.replay.signals import ACTUATOR
+
+    enc = {e.encoding: e for e in bench_encodings(50)}
+    assert enc["protobuf"].message_bytes == ACTUATOR.size
+    assert enc["json"].message_bytes > enc["protobuf"].message_bytes
+    assert all(e.file_bytes > 0 and e.encode_write_us > 0 for e in enc.values())
+    assert "protobuf" in format_report(None, list(enc.values()))
