@@ -6,9 +6,11 @@ Chosen per channel, the file's own description first:
    stored in the file (``mcap_protobuf``'s decoder factory); every scalar field (nested
    messages flattened as ``a.b``), booleans as 0/1. Units from the channel metadata
    ``eha-hil.units`` when the writer put them there.
-2. A schema of encoding ``eha-hil/layout`` with a fixed frame size
+2. A decoder registered for the frame encoding (:mod:`hil.framelog.decoders`): it knows
+   more than a byte layout can say (an LVDS line word's address, data and CRC check; an
+   EtherCAT frame's datagrams).
+3. A schema of encoding ``eha-hil/layout`` with a fixed frame size
    (:mod:`hil.framelog.layout`): its fields at their offsets, scaled to their units.
-3. A decoder registered for the frame encoding (:mod:`hil.framelog.decoders`).
 4. Nothing known: the frame's ``length``.
 """
 
@@ -103,6 +105,9 @@ def channel_decoder(ch: ChannelInfo) -> ChannelDecoder:
     """The decoder of channel ``ch`` (see the module docstring)."""
     if ch.message_encoding == "protobuf" and ch.schema_encoding == "protobuf":
         return _protobuf(ch)
+    if has_decoder(ch.encoding):
+        enc = ch.encoding
+        return ChannelDecoder(lambda data: decode(enc, data), {}, "registered")
     if ch.schema_encoding == LY.SCHEMA_ENCODING and ch.schema_data:
         try:
             lay = LY.parse(ch.schema_data)
@@ -110,7 +115,4 @@ def channel_decoder(ch: ChannelInfo) -> ChannelDecoder:
             lay = None
         if lay is not None and lay.size and lay.fields:
             return _layout(ch, lay)
-    if has_decoder(ch.encoding):
-        enc = ch.encoding
-        return ChannelDecoder(lambda data: decode(enc, data), {}, "registered")
     return ChannelDecoder(lambda data: {"length": len(data)}, {}, "length")
