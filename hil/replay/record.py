@@ -51,9 +51,9 @@ from hil.fieldbus.topology import Topology
 from hil.framelog import FrameLogWriter
 from hil.framelog.layout import SCHEMA_ENCODING as LAYOUT_ENCODING
 from hil.framelog.layout import Layout
-from hil.framelog.protobuf import MessageType
 from hil.replay import layouts as LY
 from hil.replay import signals as SG
+from hil.replay.signal_out import SignalOut
 from plant.config import Config
 
 UP_WIDTH = B.UP_WORDS + 1
@@ -62,34 +62,6 @@ ENC_MCU_DOWN = LY.ENC_MCU_DOWN
 ENC_RECORD = LY.ENC_RECORD
 ENC_FIELDBUS = "eha-hil/ethercat-fcs"  # an EtherCAT PDU + FCS (hil.fieldbus.wire)
 FLUSH_CYCLES = 100  # one block per channel per 100 ms of simulated time
-
-
-class SignalOut:
-    """Where the decoded signals go: the log's protobuf channels and/or a live view (an
-    object with ``add(topic, message)`` -> handle and ``log(handle, t_ns, payloads)``, e.g.
-    :class:`hil.live.FoxgloveLive`). Each block of samples is encoded once for both."""
-
-    def __init__(self, log: FrameLogWriter | None, live: object = None) -> None:
-        self.log = log
-        self.live = live
-        self._channels: list[tuple[MessageType, int | None, object]] = []
-
-    def add(self, topic: str, message: MessageType) -> int:
-        cid = None if self.log is None else self.log.add_protobuf_channel(topic, message)
-        handle = None if self.live is None else self.live.add(topic, message)
-        self._channels.append((message, cid, handle))
-        return len(self._channels) - 1
-
-    def write(self, channel: int, t_ns: np.ndarray, columns: dict[str, np.ndarray]) -> None:
-        message, cid, handle = self._channels[channel]
-        n = len(t_ns)
-        if not n:
-            return
-        payloads = message.encode(columns, n)
-        if cid is not None:
-            self.log.write_messages(cid, t_ns, payloads)
-        if handle is not None:
-            self.live.log(handle, t_ns, payloads)
 
 
 def signal_topics(box: int, board: int | None = None) -> dict[str, str]:
@@ -136,7 +108,7 @@ class RecordingStackBox(StackBox):
         full = log is not None and log.level == "full"
         self.every = 1 if full else CYCLE_TICKS // self.period_ticks
         st = signal_topics(b)
-        self.sig_rec = {d: (self.out.add(st[d], SG.record_message(box, d)), d)
+        self.sig_rec = {d: self.out.add(st[d], SG.record_message(box, d))
                         for d in ("outputs", "inputs")}
         self.sig_act = [self.out.add(signal_topics(b, k)["actuator"], SG.ACTUATOR)
                         for k in range(len(self.stacks))]
@@ -274,7 +246,7 @@ class RecordingStackBox(StackBox):
                 len(rows), -1)
             if d == "outputs":
                 out_t, out_f = t, f
-            self.out.write(self.sig_rec[d][0], t * ns, SG.record_columns(self.box, d, f))
+            self.out.write(self.sig_rec[d], t * ns, SG.record_columns(self.box, d, f))
         if out_t is None:  # no output record this block: the last one still stands
             out_t, out_f = self._last_out
         else:
