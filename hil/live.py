@@ -2,7 +2,7 @@
 
 The official ``foxglove-sdk`` runs the WebSocket server (protocol ``foxglove.websocket.v1``)
 in its own threads; we give it one channel per decoded-signal topic with the same protobuf
-schema and the same message bytes as the log (:class:`hil.replay.record.SignalOut` encodes
+schema and the same message bytes as the log (:class:`hil.replay.signal_out.SignalOut` encodes
 once for both). Log times are the samples' simulated times. Each live view has its own SDK
 context, so two in one process do not share channels.
 """
