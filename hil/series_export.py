@@ -124,8 +124,8 @@ def tables(series: dict, name: str) -> tuple[list[Table], dict[str, float]]:
     parents = [p for p, _ in groups]
     for (parent, n), c in groups.items():
         tname = parent or name
-        if parents.count(parent) > 1:
-            tname = f"{tname}_{n}"
+        if parents.count(parent) > 1:  # several lengths: name each by its first column
+            tname = f"{tname}_{next(iter(c)).rsplit('.', 1)[-1]}"
         out.append(Table(tname, c))
     return out, scalars
 
