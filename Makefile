@@ -2,13 +2,15 @@
 #   make run   - create .venv, install eha-hil, run the main job on the default actuator
 #   make test  - create .venv, install eha-hil with its test extra, run the whole suite
 #   make test-fast - the same without the tests marked slow (under a minute)
+#   make system-deps - (root, apt) the system tools some tests use, else they skip:
+#                  tshark + dumpcap (capture tests), iproute2 (ip netns)
 PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 TSTAMP := $(VENV)/.installed-test
 
-.PHONY: run test test-fast bench lint clean
+.PHONY: run test test-fast bench lint clean system-deps
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -42,8 +44,13 @@ bench: $(STAMP)
 	$(BIN)/eha-hil bench fpga
 	$(BIN)/eha-hil bench stack
 
+system-deps:
+	echo "wireshark-common wireshark-common/install-setuid boolean false" | debconf-set-selections
+	DEBIAN_FRONTEND=noninteractive apt-get update -qq
+	DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends tshark iproute2
+
 lint: $(TSTAMP)
 	$(BIN)/ruff check .
 
 clean:
-	rm -rf $(VENV) build *.egg-info .pytest_cache
+	rm -rf $(VENV) build *.egg-info .pytest_cache firmware_model/__pycache__/kernels-*

@@ -31,6 +31,8 @@ from dataclasses import dataclass
 from types import MappingProxyType
 from typing import Any, Protocol
 
+from firmware_model.fpga.layout import ANALOG_INPUTS
+
 
 class _ConfigLike(Protocol):
     def get(self, dotted: str) -> Any: ...
@@ -53,8 +55,8 @@ class FirmwareCalibration:
     pwm_hz: float              # the board's PWM carrier
     # Sensor scales the programs decode with.
     strain_full_scale_n: float
-    temperature_v_at_0c: float
-    temperature_v_per_c: float
+    #: Analog input name -> (volts at zero, gain) the MCU decodes it with (``ANALOG_INPUTS``).
+    analog: Mapping[str, tuple[float, float]]
     ssi_mount_rad: float       # the PC's calibration table: SSI zero against the d axis
     biss_zero_count: int       # piston encoder count at mid-stroke
     abi_counts_per_rev: int
@@ -91,8 +93,7 @@ class FirmwareCalibration:
             force_at_rated_n=fw["force_at_rated_n"], iq_rated_a=fw["iq_rated_a"],
             pole_pairs=fw["pole_pairs"], dc_bus_v=fw["dc_bus_v"], pwm_hz=fw["pwm_hz"],
             strain_full_scale_n=fw["strain_full_scale_n"],
-            temperature_v_at_0c=fw["temperature_v_at_0c"],
-            temperature_v_per_c=fw["temperature_v_per_c"],
+            analog=MappingProxyType({a.name: a.scales(fw) for a in ANALOG_INPUTS}),
             ssi_mount_rad=fw["ssi_mount_rad"], biss_zero_count=fw["biss_zero_count"],
             abi_counts_per_rev=fw["abi_counts_per_rev"],
             ssi_bits=s["ssi_bits"], biss_bits=s["biss_bits"], strain_odr_hz=s["strain_odr_hz"],

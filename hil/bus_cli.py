@@ -42,10 +42,21 @@ def demo_pc(amplitude_n: float = 300.0, frequency_hz: float = 2.0):
 
 
 def _run_bus(args: argparse.Namespace, cfg, topo, cycles: int, model: str, pc):
-    """(record, wall seconds) of the run, logged to ``args.log`` if given."""
+    """(record, wall seconds) of the run, logged to ``args.log``, captured to
+    ``args.capture`` and its CAN traffic logged to ``args.can_log`` if given."""
+    from hil.fieldbus.capture import CaptureError, CaptureWriter
     from hil.fieldbus.system import BusSystem
-    from hil.transports import TransportError
+    from hil.transports import TransportError, prefixed_options
 
+    try:
+        opts = prefixed_options(args.transport, {"udp_port": args.udp_port,
+                                                 "can_interface": args.can_interface,
+                                                 "can_channel": args.can_channel})
+    except TransportError as exc:
+        raise BusUsageError(str(exc)) from None
+    tick_ns = cfg.get("sim.tick_ns")
+    meta = {"topology": args.topology, "model": model, "mode": "lockstep (bus run)",
+            "config": json.dumps(cfg.data)}
     t0 = time.perf_counter()
     live_addr = getattr(args, "foxglove", None)
     if args.log or live_addr is not None:
@@ -56,20 +67,47 @@ def _run_bus(args: argparse.Namespace, cfg, topo, cycles: int, model: str, pc):
             raise BusUsageError(f"{what} records the in-process run; use --transport inproc")
         if model != "stack":
             raise BusUsageError(f"{what} records the MCU model: use --model stack")
+        if args.crc_trailer is not None:
+            raise BusUsageError(f"--crc-trailer/--no-crc-trailer: not with {what} (the logged "
+                                "run keeps the in-process default, with the trailer)")
         from hil.replay.record import run_logged
 
         if args.log:
             cli_progress.output("log", args.log, cli_progress.readable_log)
-        with _live_view(live_addr) as live:
-            rec = run_logged(topo, cfg, cycles, pc, args.log, level=args.level,
-                             progress=_progress("bus run", not args.json), live=live)
-    else:
         try:
-            with BusSystem(topo, cfg, args.transport, model=model) as bs:
-                rec = bs.run(cycles, pc)
-        except TransportError as exc:
+            cap = (CaptureWriter(args.capture, crc_trailer=True, metadata=meta)
+                   if args.capture else None)
+        except CaptureError as exc:
             raise BusUsageError(str(exc)) from None
-    return rec, time.perf_counter() - t0
+        try:
+            with _live_view(live_addr) as live:
+                rec = run_logged(topo, cfg, cycles, pc, args.log, level=args.level,
+                                 progress=_progress("bus run", not args.json),
+                                 capture=None if cap is None else cap.tap(tick_ns), live=live)
+        finally:
+            if cap is not None:
+                cap.close()
+        return rec, time.perf_counter() - t0, cap, None
+    cap = recorder = None
+    try:
+        with BusSystem(topo, cfg, args.transport, model=model, transport_options=opts,
+                       crc_trailer=args.crc_trailer) as bs:
+            end = getattr(bs.m_end, "inner", bs.m_end)  # below any fault wrapper
+            try:
+                if args.can_log:
+                    recorder = end.record_to(args.can_log)
+                if args.capture:
+                    cap = CaptureWriter(args.capture, bs.crc_trailer, end.capture_endpoints,
+                                        metadata=meta)
+                    bs.tap = cap.tap(tick_ns)
+                rec = bs.run(cycles, pc)
+            finally:
+                for what in (recorder, cap):
+                    if what is not None:
+                        what.close()
+    except (TransportError, CaptureError) as exc:
+        raise BusUsageError(str(exc)) from None
+    return rec, time.perf_counter() - t0, cap, recorder
 
 
 def _live_view(address: str | None):
@@ -104,11 +142,14 @@ def cmd_bus_run(args: argparse.Namespace, cfg) -> int:
             cli_progress.at(f"at t={cycle * 1e-3:.3f} s")
             sine(cycle, m)
 
-        rec, wall = _run_bus(args, cfg, topo, cycles, model, pc)
+        rec, wall, cap, recorder = _run_bus(args, cfg, topo, cycles, model, pc)
     data = {"topology": topo.name, "boxes": len(topo.boxes), "actuators": topo.n_actuators,
             "transport": args.transport, "model": model, "cycles": cycles,
             "wall_s": wall, "real_time_factor": args.seconds / wall,
-            "master": rec.master, "chain": rec.chain, "log": args.log}
+            "master": rec.master, "chain": rec.chain, "log": args.log,
+            "capture": args.capture, "captured_frames": None if cap is None else cap.frames,
+            "can_log": args.can_log,
+            "can_messages": None if recorder is None else recorder.messages}
     if args.json:
         print(json.dumps(data, indent=2))
     else:
@@ -119,6 +160,12 @@ def cmd_bus_run(args: argparse.Namespace, cfg) -> int:
         print(table(["master counter", "value"], rows))
         if args.log:
             print(f"log: {args.log} (eha-hil log info {args.log}; eha-hil replay {args.log})")
+        if cap is not None:
+            print(f"capture: {args.capture}, {cap.frames} frames (wireshark {args.capture}; "
+                  f"eha-hil log info {args.capture})")
+        if recorder is not None:
+            print(f"CAN log: {args.can_log}, {recorder.messages} CAN messages (eha-hil log "
+                  f"info {args.can_log}; eha-hil replay {args.can_log})")
     bad = rec.master["wkc_errors"] + rec.master["lost_frames"] + rec.master["bad_frames"]
     return 1 if bad else 0
 
@@ -128,11 +175,57 @@ def _progress(label: str, enabled: bool):
     return cli_progress.reporter(label, enabled, "cycles", note=False)
 
 
+def cmd_replay_traffic(args: argparse.Namespace, cfg) -> int:
+    """Replay a capture or CAN log of a bus run through a fresh chain (exit 0: every logged
+    reply matches; 1: a divergence; 2: the file cannot be read or holds no exchange)."""
+    from hil.fieldbus.traffic import TrafficError, read_traffic
+    from hil.fieldbus.traffic_replay import replay_traffic
+    from plant.config import Config, load_config
+
+    try:
+        traffic = read_traffic(args.log)
+    except TrafficError as exc:
+        _replay_note(str(exc))
+        return EXIT_USAGE
+    meta = traffic.metadata
+    if cfg is None:
+        cfg = (Config(json.loads(meta["config"]), [f"{args.log} (capture metadata)"])
+               if "config" in meta else load_config(None))
+    topo = _topology(args.topology or meta.get("topology", "bench_one_box"))
+    model = args.model or meta.get("model") or ("stack" if topo.n_actuators <= 5 else "echo")
+    t0 = time.perf_counter()
+    res = replay_traffic(traffic, topo, cfg, model)
+    wall = time.perf_counter() - t0
+    data = {"ok": res.ok, "format": traffic.kind, "topology": topo.name, "model": model,
+            **{k: v for k, v in res.__dict__.items()}, "wall_s": wall}
+    if args.json:
+        print(json.dumps(data, indent=2))
+    elif res.divergence is not None:
+        print(f"replay {args.log}: first divergence at {res.divergence}")
+    elif res.ok:
+        print(f"replay {args.log}: {res.compared} replies of {topo.name} ({model} model) "
+              f"match bit for bit ({res.requests} requests, {res.unanswered} without a logged "
+              f"reply, {res.skipped} frames skipped; {wall:.2f} s)")
+    else:
+        _replay_note(f"{args.log}: no request/reply pair to replay ({len(traffic.frames)} "
+                     f"fieldbus frames: {res.requests} requests, {res.unmatched} unmatched "
+                     f"replies, {res.skipped} skipped)")
+        return EXIT_USAGE
+    return 0 if res.ok else 1
+
+
 def cmd_replay(args: argparse.Namespace, cfg) -> int:
     """Exit 0: the whole log matches; 1: a divergence, or a truncated log replayed up to
     its readable end (one line on stderr says where it ends); 2: nothing could be replayed
     (foreign or damaged file, bad metadata, no MCU data), one line ``eha-hil replay: FILE:
-    what`` on stderr."""
+    what`` on stderr. Captures and CAN logs go to :func:`cmd_replay_traffic`."""
+    from hil.fieldbus.traffic import is_traffic_file
+
+    if is_traffic_file(args.log):
+        return cmd_replay_traffic(args, cfg)
+    if args.topology or args.model:
+        raise BusUsageError("--topology/--model: only for a capture or CAN log (an MCAP log "
+                            "names its own)")
     from hil.replay.fpga_replay import warm_up
     from hil.replay.replay import ReplayError, replay_mcu
     from plant.config import load_config
@@ -199,6 +292,18 @@ def cmd_bench_bus(args: argparse.Namespace, cfg) -> int:
     return 0
 
 
+def add_wire_options(p: argparse.ArgumentParser) -> None:
+    """``--capture`` and ``--crc-trailer``: shared by ``bus run`` and ``serve``."""
+    p.add_argument("--capture", metavar="FILE.pcapng|.pcap",
+                   type=output_file((".pcapng", ".pcap")),
+                   help="write every fieldbus frame to a Wireshark capture (EtherCAT over "
+                   "Ethernet, or over UDP on the udp transport)")
+    p.add_argument("--crc-trailer", action=argparse.BooleanOptionalAction, default=None,
+                   help="append a CRC-32 to every EtherCAT frame (and expect one): the "
+                   "default on inproc, serial and can; off on udp, whose standard frame has "
+                   "none (docs/fieldbus.md)")
+
+
 def add_parsers(sub, bsub, common, config_fn, wrap) -> None:
     """Register ``bus run``, ``replay`` and ``bench bus`` on the eha-hil parser."""
     from hil.transports import BACKENDS
@@ -227,6 +332,20 @@ def add_parsers(sub, bsub, common, config_fn, wrap) -> None:
                    help="log MCU inputs/outputs for replay")
     p.add_argument("--level", default="mcu", choices=("bus", "mcu", "full"),
                    help="log detail")
+    add_wire_options(p)
+    p.add_argument("--udp-port", type=int_range(0, 65535), metavar="PORT",
+                   help="udp: the chain's port (default 34980, EtherCAT's: Wireshark decodes "
+                   "it without options; 0: any free port)")
+    p.add_argument("--can-interface", choices=("virtual", "socketcan"),
+                   help="can: python-can interface (default virtual, in-process; socketcan: "
+                   "a vcan or real CAN device)")
+    p.add_argument("--can-channel", metavar="NAME",
+                   help="can: channel (virtual: any name, default a private one; socketcan: "
+                   "the device, default vcan0)")
+    p.add_argument("--can-log", metavar="FILE.blf|.asc|.log",
+                   type=output_file((".blf", ".asc", ".log")),
+                   help="can: log every CAN message of the run (python-can's BLF, ASC or "
+                   "candump writer, by the file name)")
     p.add_argument("--foxglove", nargs="?", const="", metavar="HOST:PORT",
                    help="stream the decoded signals to Foxglove Studio (WebSocket; default "
                    "127.0.0.1:8765, loopback)")
@@ -235,8 +354,14 @@ def add_parsers(sub, bsub, common, config_fn, wrap) -> None:
     p = sub.add_parser("replay", parents=[common(plot=False)],
                        help="feed a log's MCU inputs to the current MCU model; compare outputs "
                        "bit for bit")
-    p.add_argument("log", metavar="LOG.mcap", type=input_file("frame log (.mcap)"),
-                   help="frame log written by eha-hil bus run --log")
+    p.add_argument("log", metavar="LOG", type=input_file("frame log (.mcap)"),
+                   help="frame log written by eha-hil bus run --log (.mcap), or its traffic: "
+                   "a --capture (.pcapng/.pcap) or --can-log (.blf/.asc/.log)")
+    p.add_argument("--topology", help="capture/CAN log: the run's topology (default: from "
+                   "the pcapng's metadata, else bench_one_box)")
+    p.add_argument("--model", choices=("stack", "echo"),
+                   help="capture/CAN log: the run's box model (default: from the metadata, "
+                   "else as bus run chooses)")
     p.set_defaults(func=wrap(cmd_replay, config_fn, use_log_config=True))
 
     p = bsub.add_parser("bus", parents=[common(plot=False)],

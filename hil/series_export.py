@@ -122,7 +122,7 @@ def tables(series: dict, name: str) -> tuple[list[Table], dict[str, float]]:
         groups.setdefault((parent, len(a)), {})[path] = a
     out = []
     parents = [p for p, _ in groups]
-    for (parent, n), c in groups.items():
+    for (parent, _), c in groups.items():
         tname = parent or name
         if parents.count(parent) > 1:  # several lengths: name each by its first column
             tname = f"{tname}_{next(iter(c)).rsplit('.', 1)[-1]}"

@@ -1,10 +1,11 @@
 """``eha-hil serve``: the simulated robot's side of the fieldbus, paced to the wall clock.
 
 The chain of joint driver boxes (:class:`~hil.fieldbus.chain.Chain`, plant + driver boards
-+ MCU per actuator with the ``stack`` model) answers EtherCAT frames (``PDU || FCS``,
-:mod:`hil.fieldbus.wire`) on a serial port (COBS + CRC-32 framing) or a UDP socket, so that
-a real master (an MCU board, the PC's EtherCAT code, or another program such as
-:class:`hil.fieldbus.master.Master` in another process) closes the loop in real time.
++ MCU per actuator with the ``stack`` model) answers EtherCAT frames (the PDU, with a CRC-32
+trailer on serial and without on udp by default: :mod:`hil.fieldbus.wire`) on a serial port
+(COBS + CRC-32 framing) or a UDP socket, so that a real master (an MCU board, the PC's
+EtherCAT code, or another program such as :class:`hil.fieldbus.master.Master` in another
+process) closes the loop in real time.
 
 Pacing (:class:`PacedServer`): cycle ``k`` of the boxes (20 ticks, 1 ms of simulated time)
 is released at ``t0 + k * 1 ms`` of ``time.perf_counter`` and must be finished by
@@ -64,7 +65,7 @@ class ServeStats:
     handle_s: float = 0.0       # wall time spent answering frames
     frames_received: int = 0    # frames the transport delivered
     frames_served: int = 0      # frames answered
-    bad_frames: int = 0         # FCS / PDU failed: not answered (chain)
+    bad_frames: int = 0         # CRC trailer / PDU failed: not answered (chain)
     stale_frames: int = 0       # older than the newest frame seen: not answered (chain)
     missed_cycles: int = 0      # master cycle numbers skipped within a session
     incomplete_cycles: int = 0  # master cycles whose frames did not cover every box
@@ -90,13 +91,16 @@ class PacedServer:
     time pass (``None``: until ``stop()`` returns True) or the transport fails."""
 
     def __init__(self, chain: Chain, end, period_s: float = PERIOD_S,
-                 clock: Callable[[], float] = time.perf_counter) -> None:
+                 clock: Callable[[], float] = time.perf_counter,
+                 capture: Callable[[int, str, bytes], None] | None = None) -> None:
         if not chain.paced:
             raise ValueError("PacedServer needs Chain(..., paced=True)")
         self.chain = chain
         self.end = end
         self.period = period_s
         self.clock = clock
+        #: capture(wall time ns, "tx"/"rx", frame): every frame received and reply sent.
+        self.capture = capture
         self.stats = ServeStats()
         self.error: str | None = None  # a transport failure that ended the run
         self._windows = [(w.lad, w.end) for w in chain.plan.windows]
@@ -110,6 +114,8 @@ class PacedServer:
         st = self.stats
         t = self.clock()
         st.frames_received += 1
+        if self.capture is not None:
+            self.capture(time.time_ns(), "tx", frame)
         if t - self._last_frame_t > SESSION_GAP_S:
             # A new master session (restarted, cycle numbers from anywhere): do not judge
             # its first frame stale against the previous session's numbers.
@@ -120,6 +126,8 @@ class PacedServer:
             try:
                 self.end.send(reply)
                 st.frames_served += 1
+                if self.capture is not None:
+                    self.capture(time.time_ns(), "rx", reply)
             except TransportError as exc:
                 st.send_errors += 1
                 self.error = f"send: {exc}"
@@ -132,7 +140,7 @@ class PacedServer:
     def _audit(self, frame: bytes, t: float) -> None:
         """Track the master's cycle numbers: skipped ones and cycles not covering every box
         (the last cycle of a session is not judged: it may be cut short)."""
-        dgs = wire.open_frame(frame)
+        dgs = wire.open_frame(frame, self.chain.crc_trailer)
         if not dgs:
             return
         covered = 0
@@ -245,8 +253,11 @@ def _open_end(args: argparse.Namespace):
     declared = inspect.signature(kind.listen).parameters
     opts = {k: v for k, v in (("host", args.host), ("baudrate", args.baudrate))
             if k in declared}
+    port = args.port if args.port is not None else kind.default_listen_address
+    if port is None:
+        raise _usage(f"--port: required with --transport {args.transport}")
     try:
-        listening = kind.listen(args.port, **opts)
+        listening = kind.listen(port, **opts)
     except TransportError as exc:
         raise _usage(str(exc)) from None
     return listening.end, listening.where, listening.close
@@ -293,17 +304,37 @@ def cmd_serve(args: argparse.Namespace, cfg) -> int:
         topo = load_topology(args.topology)
     except TopologyError as exc:
         raise _usage(str(exc)) from None
+    from hil.fieldbus.capture import CaptureError, CaptureWriter
+    from hil.transports import backend
+
     model = args.model or ("stack" if topo.n_actuators <= 5 else "echo")
-    chain = Chain(topo, cfg, model, paced=True)
+    trailer = (backend(args.transport).crc_trailer_by_default if args.crc_trailer is None
+               else args.crc_trailer)
+    chain = Chain(topo, cfg, model, paced=True, crc_trailer=trailer)
     live, live_boxes = _live_view(args, chain, cfg)
     if args.realtime:
         _realtime_priority()
     end, where, release = _open_end(args)
-    server = PacedServer(chain, end)
+    cap = None
+    if args.capture:
+
+        def endpoints():
+            ends = end.capture_endpoints()  # (ours: the chain's, the master's)
+            return None if ends is None else (ends[1], ends[0])
+
+        try:
+            cap = CaptureWriter(args.capture, trailer, endpoints)
+        except CaptureError as exc:
+            end.close()
+            if release is not None:
+                release()
+            raise _usage(str(exc)) from None
+    server = PacedServer(chain, end, capture=None if cap is None else cap.write)
     frames = [{"lad": lad, "length": n, "wkc": wkc} for lad, n, wkc in chain.plan.frames]
     plan = ", ".join(f"LRW lad {f['lad']} len {f['length']} WKC {f['wkc']}" for f in frames)
     print(f"eha-hil serve: ready on {where}; {topo.name}, {model} model, "
-          f"{len(frames)} frame(s) per 1 ms cycle: {plan}", file=sys.stderr, flush=True)
+          f"{len(frames)} frame(s) per 1 ms cycle: {plan}; "
+          f"{'with' if trailer else 'without'} CRC-32 trailer", file=sys.stderr, flush=True)
 
     tty = sys.stderr.isatty()
 
@@ -329,6 +360,8 @@ def cmd_serve(args: argparse.Namespace, cfg) -> int:
         end.close()
         if release is not None:
             release()
+        if cap is not None:
+            cap.close()
         if live is not None:
             for b in live_boxes:
                 b.flush()
@@ -350,10 +383,16 @@ def cmd_serve(args: argparse.Namespace, cfg) -> int:
             failures.append(f"{getattr(st, key)} {what}")
     if terrors:
         failures.append(f"{terrors} frames damaged on the transport")
+    if st.bad_frames and not st.frames_served:
+        failures.append("(no frame decoded: does the master add a CRC-32 trailer? then "
+                        "--crc-trailer)" if not trailer else "(no frame decoded: does the "
+                        "master send bare EtherCAT frames? then --no-crc-trailer)")
     if st.overruns > allowed:
         failures.append(f"{st.overruns} overruns > {args.max_overrun_percent:g}% of "
                         f"{st.cycles} cycles")
     data = {"transport": args.transport, "where": where, "topology": topo.name,
+            "crc_trailer": trailer, "capture": args.capture,
+            "captured_frames": None if cap is None else cap.frames,
             "boxes": len(topo.boxes), "actuators": topo.n_actuators, "model": model,
             "period_ms": PERIOD_S * 1e3, "frames_per_cycle": frames,
             "max_overrun_percent": args.max_overrun_percent,
@@ -389,6 +428,8 @@ def cmd_serve(args: argparse.Namespace, cfg) -> int:
         ]
         print(f"serve {where}: {topo.name}, {model} model")
         print(table(["", "value"], rows))
+        if cap is not None:
+            print(f"capture: {args.capture}, {cap.frames} frames")
         print("ok" if not failures else "FAILED: " + "; ".join(failures))
     return 0 if not failures else 1
 
@@ -404,9 +445,10 @@ def add_parser(sub, common, config_fn, wrap) -> None:
         "(docs/fieldbus.md, 'Serving the simulated robot to real hardware').")
     p.add_argument("--transport", default="serial", choices=serve_backends(),
                    help="serial (COBS + CRC-32 frames) or udp")
-    p.add_argument("--port", required=True,
-                   help="serial: device path or pyserial URL, or 'pty' for a new "
-                   "pseudo-terminal whose path is printed; udp: local port number (0: any)")
+    p.add_argument("--port",
+                   help="serial (required): device path or pyserial URL, or 'pty' for a new "
+                   "pseudo-terminal whose path is printed; udp: local port number (default "
+                   "34980, EtherCAT's; 0: any)")
     p.add_argument("--host", default="127.0.0.1",
                    help="udp: local address to bind (0.0.0.0 for all)")
     p.add_argument("--baudrate", type=int_range(50, 100_000_000), default=3_000_000,
@@ -427,6 +469,9 @@ def add_parser(sub, common, config_fn, wrap) -> None:
                    "CAP_SYS_NICE): far fewer overruns on a busy machine")
     p.add_argument("-q", "--quiet", action="store_true",
                    help="no status line on stderr (the ready line is still printed)")
+    from hil.bus_cli import add_wire_options
+
+    add_wire_options(p)
     p.add_argument("--foxglove", nargs="?", const="", metavar="HOST:PORT",
                    help="stream the boxes' decoded signals to Foxglove Studio (WebSocket; "
                    "default 127.0.0.1:8765, loopback)")

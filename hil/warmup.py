@@ -1,9 +1,10 @@
 """``python -m hil.warmup``: compile the numba kernels once, right after installing.
 
 numba compiles a ``cache=True`` function on its first call and keeps the machine code in
-``__pycache__`` next to the source. Without this step the compiling happens in the user's
-first ``eha-hil main`` / ``eha-hil run thesis`` (tens of seconds on the project's 2-core
-machine), which then looks hung; ``make`` runs this module right after each install instead.
+the cache folder of this version of the kernels' sources (:mod:`firmware_model.jit_cache`).
+Without this step the compiling happens in the user's first ``eha-hil main`` /
+``eha-hil run thesis`` (tens of seconds on the project's 2-core machine), which then looks
+hung; ``make`` runs this module right after each install instead.
 
 Each step is the smallest call that reaches a group of kernels with the argument types the
 commands and the tests use (numba keys its cache on the types, not the values). A failing

@@ -19,6 +19,8 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
+from firmware_model.fpga.layout import ANALOG_INPUTS
+
 DEFAULT_PRESET = "hydra_default"
 
 #: Keys that take one of a fixed set of strings.
@@ -189,6 +191,18 @@ FIRMWARE_NOMINAL: dict[str, str] = {
     "firmware.biss_zero_count": "sensors.biss_zero_count",
     "firmware.abi_counts_per_rev": "sensors.abi_counts_per_rev",
 }
+#: Keys an analog sensor declares in its row of ``ANALOG_INPUTS`` rather than in the preset:
+#: its true scales (``sensors.<key>``) and the firmware's (``firmware.<key>``), with the
+#: same default and range; and whether the part is fitted (``sensors.<key>``, false).
+DECLARED: dict[str, Any] = {}
+for _a in ANALOG_INPUTS:
+    for _name, _default, _lo, _hi in _a.keys:
+        for _section in ("sensors", "firmware"):
+            DECLARED[f"{_section}.{_name}"] = float(_default)
+            RANGES[f"{_section}.{_name}"] = _span(_lo, _hi)
+        FIRMWARE_NOMINAL[f"firmware.{_name}"] = f"sensors.{_name}"
+    if _a.fitted_key is not None:
+        DECLARED[f"sensors.{_a.fitted_key}"] = False
 RANGES.update({fw: RANGES[plant] for fw, plant in FIRMWARE_NOMINAL.items()})
 
 class ConfigError(Exception):
@@ -255,8 +269,13 @@ def _preset_text(name: str) -> str:
 
 
 def schema() -> dict[str, Any]:
-    """The default preset, which doubles as the schema of every configuration."""
-    return _read_toml_text(_preset_text(DEFAULT_PRESET), f"preset {DEFAULT_PRESET}")
+    """The default preset, which doubles as the schema of every configuration, with the
+    keys the sensors declare (:data:`DECLARED`) where it does not hold them."""
+    tree = _read_toml_text(_preset_text(DEFAULT_PRESET), f"preset {DEFAULT_PRESET}")
+    for dotted, default in DECLARED.items():
+        section, key = dotted.split(".")
+        tree[section].setdefault(key, default)
+    return tree
 
 
 def _flatten(tree: Mapping[str, Any], prefix: str = "") -> Iterable[tuple[str, Any]]:

@@ -99,6 +99,7 @@ from plant.layout import (
     Y_P_PUMP_A,
     Y_P_PUMP_B,
     Y_T_OIL,
+    Y_T_ROD,
     Y_TAU_P,
     Y_TAU_Q,
     Y_TEMP,
@@ -250,6 +251,7 @@ def physical_outputs(x, p, u, y):
     y[Y_IC] = -i_a - i_b
     y[Y_VP] = x[S_VP]
     y[Y_T_OIL] = x[S_TOIL]
+    y[Y_T_ROD] = x[S_TROD]
     y[Y_X_CART] = x[S_XL]
     y[Y_E_IN] = x[S_EIN]
     y[Y_E_DISS] = x[S_EDISS]

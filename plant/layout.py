@@ -119,8 +119,10 @@ OUTPUT_NAMES = (
     "t_oil",          # degC
     "x_cart",         # m
     "e_in", "e_diss", "e_ext", "e_stored",  # J
+    "t_rod",          # connecting-rod (strain gauge) temperature, degC
 )
 (Y_THETA_M, Y_OMEGA_M, Y_X_PISTON, Y_P_ACC, Y_P_PUMP_A, Y_P_PUMP_B, Y_P_CYL_A, Y_P_CYL_B,
  Y_F_STRAIN, Y_TEMP, Y_V_PISTON, Y_TAU_P, Y_TAU_Q, Y_F_ROD, Y_IQ, Y_ID, Y_IA, Y_IB, Y_IC,
- Y_VP, Y_T_OIL, Y_X_CART, Y_E_IN, Y_E_DISS, Y_E_EXT, Y_E_STORED) = range(len(OUTPUT_NAMES))
+ Y_VP, Y_T_OIL, Y_X_CART, Y_E_IN, Y_E_DISS, Y_E_EXT, Y_E_STORED, Y_T_ROD) = range(
+    len(OUTPUT_NAMES))
 N_OUTPUTS = len(OUTPUT_NAMES)

@@ -450,13 +450,17 @@ def encode_ipv4_udp(
     return hdr + udp + payload
 
 
-def decode_ipv4_udp(packet: bytes, allow_trailing: bool = True) -> UdpDatagram:
+def decode_ipv4_udp(packet: bytes, allow_trailing: bool = True,
+                    check_udp_checksum: bool = True) -> UdpDatagram:
     """Parse IPv4 + UDP.
 
     Raises :class:`CrcError` if the IPv4 header checksum or a non-zero UDP checksum is
     wrong; :class:`FrameError` for anything else malformed (not IPv4, not UDP, fragments,
     lengths inconsistent with the buffer). ``allow_trailing`` accepts Ethernet padding
-    after the IP total length.
+    after the IP total length. ``check_udp_checksum=False`` skips the UDP checksum, as
+    Wireshark does by default: a capture taken on the sending host (loopback included)
+    holds datagrams whose checksum the kernel left to the NIC ("checksum offload"), so
+    their field is only partly computed and would fail.
     """
     packet = as_bytes(packet, "IPv4 packet")
     h = IPV4_HEADER.unpack_from(packet)
@@ -481,7 +485,7 @@ def decode_ipv4_udp(packet: bytes, allow_trailing: bool = True) -> UdpDatagram:
         raise FrameError(f"UDP length {udp_len} does not match IPv4 payload {total - ihl}")
     udp = packet[ihl:total]
     src, dst = bytes(h["src"]), bytes(h["dst"])
-    if int(u["checksum"]) != 0:
+    if check_udp_checksum and int(u["checksum"]) != 0:
         pseudo = src + dst + struct.pack(">BBH", 0, IPPROTO_UDP, udp_len)
         if ones_complement_sum(pseudo + udp) != 0xFFFF:
             raise CrcError("UDP checksum wrong")

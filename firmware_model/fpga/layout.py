@@ -8,7 +8,14 @@ them as tables.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+from dataclasses import dataclass
 from enum import IntEnum
+from typing import Any
+
+import numpy as np
+
+from protocols import pressure_adc as padc
 
 # --- downstream memory (MCU -> driver), 16-bit words ------------------------------------
 DOWN_REGISTERS = (
@@ -44,8 +51,80 @@ class BoardMode(IntEnum):
     VOLTAGE = 2   # vd_ref / vq_ref straight to the modulator
 
 
+# --- the 8-channel ADC's inputs: one row per analog sensor ---------------------------------
+@dataclass(frozen=True)
+class AnalogInput:
+    """A linear analog sensor on the driver board's 8-channel ADC, as the whole chain needs
+    it: the board copies its 12-bit code (raw word ``name``) from ADC channel
+    ``adc_channel`` to the upstream register ``name`` at ``register``; the MCU turns it into
+    the SI measurement ``si_name``.
+
+    Transfer: ``V = v_at_zero + x * gain`` when ``volts_per_unit``, else
+    ``V = v_at_zero + x / gain`` (gain in SI units per volt). ``v_at_zero`` and ``gain`` are
+    numbers (facts of the part, the same for plant and firmware) or the name of a key that
+    exists twice: ``sensors.<key>`` (the part's truth, which the plant digitises with) and
+    ``firmware.<key>`` (what the MCU decodes with). ``keys`` declares such keys that the
+    preset does not hold: (name, default, lo, hi); ``fitted_key`` a ``sensors.<key>``
+    (boolean, default false) saying whether the part is mounted: an empty input reads 0 V.
+    The part's plant side (which plant output it measures) is in its module under
+    :mod:`plant.sensors` (``ANALOG_SOURCES``).
+    """
+
+    name: str
+    adc_channel: int
+    register: int
+    unit: str
+    meaning: str
+    v_at_zero: float | str
+    gain: float | str
+    volts_per_unit: bool
+    keys: tuple[tuple[str, float, float, float], ...] = ()
+    fitted_key: str | None = None
+    measurement: str = ""   # the MCU's name of the SI value, if not ``name``
+
+    @property
+    def si_name(self) -> str:
+        """The attribute of the MCU's measurements that holds the SI value."""
+        return self.measurement or self.name
+
+    def scales(self, keys: Mapping[str, Any]) -> tuple[float, float]:
+        """(v_at_zero, gain) with the key values of ``keys`` (``[sensors]`` for the part's
+        truth, ``[firmware]`` for what the MCU decodes with)."""
+        return tuple(float(keys[v]) if isinstance(v, str) else float(v)  # type: ignore[return-value]
+                     for v in (self.v_at_zero, self.gain))
+
+    def register_row(self) -> tuple[int, str, str, str, str]:
+        """Its upstream register, as a row of :data:`UP_REGISTERS`."""
+        return (self.register, self.name, "u16", "ADC code", self.meaning)
+
+
+_P = padc.DEFAULT
+#: The thesis does not give the board's ADC pin-out: the channel assignment is an assumption.
+ANALOG_INPUTS = (
+    AnalogInput("p_acc", 0, 0x0C, "Pa", "accumulator pressure, 12-bit code (1..3.3 V = 0..7 MPa)",
+                _P.v_at_zero, _P.pa_per_v, False),
+    AnalogInput("p_pump_a", 1, 0x0D, "Pa", "pump port A pressure",
+                _P.v_at_zero, _P.pa_per_v, False),
+    AnalogInput("p_pump_b", 2, 0x0E, "Pa", "pump port B pressure",
+                _P.v_at_zero, _P.pa_per_v, False),
+    AnalogInput("p_cyl_a", 3, 0x0F, "Pa", "cylinder chamber A pressure",
+                _P.v_at_zero, _P.pa_per_v, False),
+    AnalogInput("p_cyl_b", 4, 0x10, "Pa", "cylinder chamber B pressure",
+                _P.v_at_zero, _P.pa_per_v, False),
+    AnalogInput("temperature", 5, 0x13, "degC",
+                "oil temperature, 12-bit code (0.5 V + 10 mV/degC)",
+                "temperature_v_at_0c", "temperature_v_per_c", True, measurement="temperature_c"),
+    AnalogInput("rod_temperature", 6, 0x1F, "degC",
+                "connecting-rod temperature, 12-bit code (MCP9701: 0.4 V + 19.5 mV/degC)",
+                "rod_temperature_v_at_0c", "rod_temperature_v_per_c", True,
+                keys=(("rod_temperature_v_at_0c", 0.4, 0.0, 10.0),
+                      ("rod_temperature_v_per_c", 0.0195, 1e-4, 1.0)),
+                fitted_key="rod_temperature_fitted", measurement="rod_temperature_c"),
+)
+N_ANALOG = len(ANALOG_INPUTS)
+
 # --- upstream memory (driver -> MCU), 16-bit words ----------------------------------------
-UP_REGISTERS = (
+_FIXED_UP_REGISTERS = (
     (0x00, "status", "u16", "bits", "see STATUS_BITS"),
     (0x01, "state", "u16", "enum", "enable state machine: 0 disabled, 1 enabled, 2 fault"),
     (0x02, "ssi_angle", "u16", "count", "motor SSI absolute angle, 0..2047 per rev"),
@@ -58,14 +137,8 @@ UP_REGISTERS = (
     (0x09, "id", "s16", "mA", "measured d-axis current"),
     (0x0A, "ia", "s16", "mA", "phase a current"),
     (0x0B, "ib", "s16", "mA", "phase b current"),
-    (0x0C, "p_acc", "u16", "ADC code", "accumulator pressure, 12-bit code (1..3.3 V = 0..7 MPa)"),
-    (0x0D, "p_pump_a", "u16", "ADC code", "pump port A pressure"),
-    (0x0E, "p_pump_b", "u16", "ADC code", "pump port B pressure"),
-    (0x0F, "p_cyl_a", "u16", "ADC code", "cylinder chamber A pressure"),
-    (0x10, "p_cyl_b", "u16", "ADC code", "cylinder chamber B pressure"),
     (0x11, "strain_lo", "u16", "code", "AD7195 code bits 15..0 (offset binary, +/-3000 N)"),
     (0x12, "strain_hi", "u16", "code", "bits 7..0: AD7195 code bits 23..16; 15..8: sample count"),
-    (0x13, "temperature", "u16", "ADC code", "oil temperature, 12-bit code (0.5 V + 10 mV/degC)"),
     (0x14, "hall", "u16", "code", "hall sensor code Ha<<2|Hb<<1|Hc (debug/calibration)"),
     (0x15, "vd_out", "s16", "mV", "d-axis voltage applied"),
     (0x16, "vq_out", "s16", "mV", "q-axis voltage applied"),
@@ -78,12 +151,17 @@ UP_REGISTERS = (
     (0x1D, "sequence_echo", "u16", "count", "last downstream sequence word received"),
     (0x1E, "tick", "u16", "tick", "FPGA tick counter, low 16 bits"),
 )
+#: One row per 16-bit word (address order): the board's own registers and one per analog
+#: input. The link carries UP_WORDS words whatever the map uses (a property of the link).
+UP_REGISTERS = tuple(sorted(_FIXED_UP_REGISTERS + tuple(a.register_row() for a in ANALOG_INPUTS)))
 UP_WORDS = 32
+if [r[0] for r in UP_REGISTERS] != list(range(len(UP_REGISTERS))) or len(UP_REGISTERS) > UP_WORDS:
+    raise ImportError("upstream register map: addresses must be 0, 1, ... without gaps or "
+                      f"repeats and fit the link's {UP_WORDS} words")
 (U_STATUS, U_STATE, U_SSI, U_ABI, U_SPEED, U_THETA_E, U_PISTON_LO, U_PISTON_HI, U_IQ, U_ID,
  U_IA, U_IB, U_P_ACC, U_P_PUMP_A, U_P_PUMP_B, U_P_CYL_A, U_P_CYL_B, U_STRAIN_LO,
  U_STRAIN_HI, U_TEMPERATURE, U_HALL, U_VD_OUT, U_VQ_OUT, U_ERR_SSI, U_ERR_BISS,
- U_ERR_STRAIN, U_ERR_LINK_CRC, U_OC_TRIPS, U_WD_TRIPS, U_SEQ_ECHO, U_TICK) = range(
-    len(UP_REGISTERS))
+ U_ERR_STRAIN, U_ERR_LINK_CRC, U_OC_TRIPS, U_WD_TRIPS, U_SEQ_ECHO, U_TICK) = range(0x1F)
 
 STATUS_BITS = (
     (0, "ENABLED", "PWM running"),
@@ -119,7 +197,21 @@ RAW_NAMES = (
 (R_SSI, R_SSI_OK, R_ABI, R_BISS, R_BISS_OK, R_STRAIN, R_STRAIN_NEW, R_STRAIN_OK, R_P_ACC,
  R_P_PUMP_A, R_P_PUMP_B, R_P_CYL_A, R_P_CYL_B, R_TEMP, R_IA, R_IB, R_HALL) = range(
     len(RAW_NAMES))
+
+
+#: Raw words of analog inputs the list above does not name yet are appended, so that the
+#: words of every older layout keep their index (logs are written by index).
+RAW_NAMES += tuple(a.name for a in ANALOG_INPUTS if a.name not in RAW_NAMES)
 N_RAW = len(RAW_NAMES)
+#: Raw words and upstream registers of the first layout. Later layouts only append (a
+#: sensor added since), so a log written with n words holds the first n of today's.
+FIRST_N_RAW = 17
+FIRST_N_UP = 31
+#: Per analog input (in :data:`ANALOG_INPUTS` order): its raw word, upstream register and
+#: ADC channel; constant arrays, which the compiled code takes as constants.
+ANALOG_RAW = np.array([RAW_NAMES.index(a.name) for a in ANALOG_INPUTS], dtype=np.int64)
+ANALOG_UP = np.array([a.register for a in ANALOG_INPUTS], dtype=np.int64)
+ANALOG_CHANNEL = np.array([a.adc_channel for a in ANALOG_INPUTS], dtype=np.int64)
 
 # --- constant parameters (C_*), set once from the configuration ---------------------------
 PARAM_NAMES = (

@@ -18,8 +18,9 @@ in the same layout as the value-level :func:`plant.sensors.harness.digitise`:
   0x58, 24-bit code + status) through :class:`protocols.ad7195.AD7195Master`:
   ``strain_new = 1``; a rejected read (stale, ERR, wrong channel, parity) gives
   ``strain_ok = 0`` and the previous code is held.
-* Pressure/temperature ADC: one 8-channel scan as bytes (:func:`protocols.pressure_adc.
-  unpack_scan`), channel assignment :data:`PRESSURE_CHANNELS`, :data:`TEMPERATURE_CHANNEL`.
+* The 8-channel ADC (pressures, temperatures): one scan as bytes
+  (:func:`protocols.pressure_adc.unpack_scan`); each channel's code goes to the raw word of
+  its row of :data:`layout.ANALOG_INPUTS`.
 * Phase-current ADC: a 4-byte frame, :data:`CURRENT_FRAME` (assumed format, see there).
 * Hall: three logic levels Ha, Hb, Hc -> code ``Ha << 2 | Hb << 1 | Hc``.
 
@@ -48,11 +49,8 @@ from protocols.errors import CodecError, FrameError
 from protocols.pressure_adc import unpack_scan
 from protocols.ssi import SsiCodec, SsiFormat, SsiMaster, SsiSlave, SsiTiming
 
-#: Pressure ADC channels of p_acc, p_pump_a, p_pump_b, p_cyl_a, p_cyl_b (register order).
-#: The thesis does not give the board's ADC pin-out: this assignment is an assumption.
-PRESSURE_CHANNELS = (0, 1, 2, 3, 4)
-#: Pressure ADC channel of the oil temperature sensor (same ADC; assumption).
-TEMPERATURE_CHANNEL = 5
+#: (raw word, ADC channel) of each analog input (``layout.ANALOG_INPUTS``).
+_ANALOG = list(zip(B.ANALOG_RAW.tolist(), B.ANALOG_CHANNEL.tolist(), strict=True))
 #: Phase-current ADC frame, assumed (the chip is not named): ia code then ib code, each a
 #: little-endian uint16 holding a 12-bit offset-binary code with the top four bits zero.
 CURRENT_FRAME = struct.Struct("<HH")
@@ -219,15 +217,14 @@ class BitLevelMasters:
         raw[B.R_STRAIN] = self._strain_code
         raw[B.R_STRAIN_OK] = self._strain_ok
 
-        # Pressure/temperature ADC scan.
+        # The 8-channel ADC's scan.
         try:
             self._adc = unpack_scan(wires.pressure_scan)
         except CodecError:
             self.adc_errors += 1
         adc = self._adc
-        for j, ch in enumerate(PRESSURE_CHANNELS):
-            raw[B.R_P_ACC + j] = adc[ch]
-        raw[B.R_TEMP] = adc[TEMPERATURE_CHANNEL]
+        for r, ch in _ANALOG:
+            raw[r] = adc[ch]
 
         # Phase currents.
         try:
@@ -258,10 +255,8 @@ def pack_currents(ia_code: int, ib_code: int) -> bytes:
 __all__ = [
     "ABI_BITS",
     "CURRENT_FRAME",
-    "PRESSURE_CHANNELS",
     "STRAIN_CHANNEL",
     "STRAIN_MODE",
-    "TEMPERATURE_CHANNEL",
     "BitLevelMasters",
     "SensorWires",
     "boot_strain",

@@ -28,6 +28,8 @@ from firmware_model.fpga.foc import (
     svpwm,
 )
 from firmware_model.fpga.layout import (
+    ANALOG_RAW,
+    ANALOG_UP,
     C_ADC_MID,
     C_ADC_SHIFT,
     C_I_TO_MA,
@@ -81,13 +83,11 @@ from firmware_model.fpga.layout import (
     R_HALL,
     R_IA,
     R_IB,
-    R_P_ACC,
     R_SSI,
     R_SSI_OK,
     R_STRAIN,
     R_STRAIN_NEW,
     R_STRAIN_OK,
-    R_TEMP,
     RING_BASE,
     ST_ENABLED,
     ST_ENCODER_ERROR,
@@ -106,7 +106,6 @@ from firmware_model.fpga.layout import (
     U_ID,
     U_IQ,
     U_OC_TRIPS,
-    U_P_ACC,
     U_PISTON_HI,
     U_PISTON_LO,
     U_SEQ_ECHO,
@@ -115,7 +114,6 @@ from firmware_model.fpga.layout import (
     U_STATE,
     U_STATUS,
     U_STRAIN_HI,
-    U_TEMPERATURE,
     U_THETA_E,
     U_TICK,
     U_VD_OUT,
@@ -253,9 +251,8 @@ def control_tick(c, st, down, up, raw):
     up[U_ID] = _u16(sat_s(mul_shift(i_d, i_to_ma, 15), 16))
     up[U_IA] = _u16(sat_s(mul_shift(i_a, i_to_ma, 15), 16))
     up[U_IB] = _u16(sat_s(mul_shift(i_b, i_to_ma, 15), 16))
-    for j in range(5):  # the five pressure channels, in the same order in both layouts
-        up[U_P_ACC + j] = raw[R_P_ACC + j]
-    up[U_TEMPERATURE] = raw[R_TEMP]
+    for j in range(ANALOG_UP.size):  # the analog inputs' ADC codes, as the masters read them
+        up[ANALOG_UP[j]] = raw[ANALOG_RAW[j]]
     up[U_HALL] = raw[R_HALL]
     v_to_mv = c[C_V_TO_MV]
     up[U_VD_OUT] = _u16(sat_s(mul_shift(v_d, v_to_mv, 15), 16))

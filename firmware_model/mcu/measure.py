@@ -15,6 +15,7 @@ from firmware_model.calibration import FirmwareCalibration, calibration
 from firmware_model.fpga import layout as B
 from protocols import pressure_adc as padc
 from protocols.ad7195 import MIDSCALE
+from protocols.biss import LINEAR_COUNT_M
 
 F32 = np.float32
 TWO_PI = 2.0 * math.pi
@@ -37,12 +38,49 @@ def _volt_table(lsb: float) -> list:
     return table
 
 
+def analog_decoder(a: B.AnalogInput, cal: FirmwareCalibration) -> tuple[float, float, float]:
+    """(v0, mul, div) with which the MCU decodes analog input ``a``:
+    ``SI = (V - v0) * mul / div`` (one of mul, div is 1, so the products are exact)."""
+    v0, gain = cal.analog[a.name]
+    mul, div = (1.0, gain) if a.volts_per_unit else (gain, 1.0)
+    return v0, mul, div
+
+
+def upstream_si(up: np.ndarray, cal: FirmwareCalibration) -> dict[str, np.ndarray]:
+    """SI values of logged upstream memories ``up`` (n rows of at least ``FIRST_N_UP``
+    words) with the calibration's scales, float64 and vectorised, for offline decoding
+    (:meth:`Measurements.update` is the MCU's own, float32, one memory at a time): ``iq``,
+    ``theta_m`` (the ABI counter unwrapped), ``x_piston``, ``f_strain_raw`` and every
+    analog input the rows hold, by its ``si_name``."""
+    u = np.asarray(up).astype(np.int64) & 0xFFFF
+    iq = u[:, B.U_IQ] - ((u[:, B.U_IQ] & 0x8000) << 1)
+    count = (u[:, B.U_PISTON_HI] << 16) | u[:, B.U_PISTON_LO]
+    code = ((u[:, B.U_STRAIN_HI] & 0xFF) << 16) | u[:, B.U_STRAIN_LO]
+    out = {"iq": iq * 1e-3,
+           "theta_m": _unwrap16(u[:, B.U_ABI]) * (TWO_PI / cal.abi_counts_per_rev),
+           "x_piston": (count - cal.biss_zero_count) * LINEAR_COUNT_M,
+           "f_strain_raw": (code - MIDSCALE) * (cal.strain_full_scale_n / MIDSCALE)}
+    for a in B.ANALOG_INPUTS:
+        if a.register < u.shape[1]:
+            v0, mul, div = analog_decoder(a, cal)
+            out[a.si_name] = (u[:, a.register] * padc.DEFAULT.lsb_v - v0) * mul / div
+    return out
+
+
+def _unwrap16(words: np.ndarray) -> np.ndarray:
+    """A 16-bit wrapping counter as int64 counts, continuous; the first value signed."""
+    w = words.astype(np.int64) & 0xFFFF
+    first = w[:1] - ((w[:1] & 0x8000) << 1)
+    step = (np.diff(w) + 0x8000) % 0x10000 - 0x8000
+    return np.concatenate([first, first + np.cumsum(step)])
+
+
 class Measurements:
     """One actuator's measurements, float32 SI, refreshed by :meth:`update`."""
 
-    __slots__ = ("p_acc", "p_pump_a", "p_pump_b", "p_cyl_a", "p_cyl_b", "f_pres", "tau_q",
-                 "f_strain_raw", "omega_m", "v_pump", "x_piston", "iq", "theta_rotor",
-                 "temperature_c", "strain_samples", "status", "_k", "_volts")
+    __slots__ = (*(a.si_name for a in B.ANALOG_INPUTS), "f_pres", "tau_q", "f_strain_raw",
+                 "omega_m", "v_pump", "x_piston", "iq", "theta_rotor", "strain_samples",
+                 "status", "_k", "_analog", "_volts")
 
     def __init__(self, cal: FirmwareCalibration) -> None:
         cal = calibration(cal)
@@ -52,32 +90,30 @@ class Measurements:
         window = cal.fpga["speed_window_ticks"]
         tick_s = cal.tick_ns * 1e-9
         self._k = (
-            F32(adc.lsb_v), F32(adc.v_at_zero), F32(adc.pa_per_v), F32(kc),
+            F32(kc),
             F32(TWO_PI / (cal.abi_counts_per_rev * window * tick_s)),   # rad/s per count
             F32(kp / kc),                                                 # m per rad
             F32(cal.strain_full_scale_n / MIDSCALE), MIDSCALE,
             cal.biss_zero_count, F32(5e-9),
             F32(TWO_PI / (1 << cal.ssi_bits)),
-            F32(cal.temperature_v_at_0c), F32(cal.temperature_v_per_c),
         )
+        self._analog = [(a.si_name, a.register, *map(F32, analog_decoder(a, cal)))
+                        for a in B.ANALOG_INPUTS]
         self._volts = _volt_table(float(F32(adc.lsb_v)))
         z = F32(0.0)
-        for name in self.__slots__[:-2]:
+        for name in self.__slots__[:-3]:
             setattr(self, name, z)
         self.strain_samples = 0
         self.status = 0
 
     def update(self, up: np.ndarray) -> None:
         """Decode the upstream memory ``up`` (int words) into SI values."""
-        (lsb, v0, pa_per_v, kc, rad_per_count, m_per_rad, n_per_code, mid, zero, m_per_count,
-         rad_per_ssi, t_v0, t_vpc) = self._k
+        (kc, rad_per_count, m_per_rad, n_per_code, mid, zero, m_per_count,
+         rad_per_ssi) = self._k
         u = up.tolist()  # Python ints: indexing a list is far cheaper than numpy scalars
         volts = self._volts  # F32(code) * lsb for every 16-bit word, computed once
-        self.p_acc = (volts[u[B.U_P_ACC]] - v0) * pa_per_v
-        self.p_pump_a = (volts[u[B.U_P_PUMP_A]] - v0) * pa_per_v
-        self.p_pump_b = (volts[u[B.U_P_PUMP_B]] - v0) * pa_per_v
-        self.p_cyl_a = (volts[u[B.U_P_CYL_A]] - v0) * pa_per_v
-        self.p_cyl_b = (volts[u[B.U_P_CYL_B]] - v0) * pa_per_v
+        for name, reg, v0, mul, div in self._analog:
+            setattr(self, name, (volts[u[reg]] - v0) * mul / div)
         self.f_pres = kc * (self.p_cyl_a - self.p_cyl_b)
         self.tau_q = kc * (self.p_pump_a - self.p_pump_b)
         hi = u[B.U_STRAIN_HI]
@@ -90,5 +126,4 @@ class Measurements:
         self.x_piston = F32(count - zero) * m_per_count
         self.iq = F32(_s16(u[B.U_IQ])) * F32(1e-3)
         self.theta_rotor = F32(u[B.U_SSI]) * rad_per_ssi
-        self.temperature_c = (volts[u[B.U_TEMPERATURE]] - t_v0) / t_vpc
         self.status = u[B.U_STATUS]

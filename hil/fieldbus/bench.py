@@ -32,7 +32,11 @@ def _bench_pc(cycle: int, m) -> None:
 
 
 def _rate(topo, cfg, transport: str, model: str, cycles: int, pc) -> tuple[float, dict]:
-    with BusSystem(topo, cfg, transport, model=model) as bs:
+    from hil.transports import backend
+
+    # A free port rather than udp's 34980: a benchmark must not meet another run.
+    with BusSystem(topo, cfg, transport, model=model,
+                   transport_options=backend(transport).private_options()) as bs:
         bs.run(WARMUP, pc)
         t0 = time.perf_counter()
         rec = bs.run(cycles, pc)

@@ -83,7 +83,7 @@ class CyclePlan:
 @dataclass
 class ChainStats:
     frames: int = 0
-    bad_frames: int = 0       # FCS or PDU decode failed: discarded
+    bad_frames: int = 0       # CRC trailer or PDU decode failed: discarded
     stale_frames: int = 0     # from an older cycle: discarded
     cycles_advanced: int = 0
     extra: dict = field(default_factory=dict)
@@ -93,8 +93,10 @@ class Chain:
     """All boxes of a topology, with their models, answering frames."""
 
     def __init__(self, topo: Topology, cfg: Config, model: str = "stack",
-                 paced: bool = False) -> None:
+                 paced: bool = False, crc_trailer: bool = True) -> None:
         self.topology = topo
+        #: Frames carry the CRC-32 trailer (:mod:`hil.fieldbus.wire`); replies get one too.
+        self.crc_trailer = crc_trailer
         #: True: time moves only by :meth:`advance` (wall-clock pacing), not by frame idx.
         self.paced = paced
         self.last_idx = 0
@@ -105,8 +107,8 @@ class Chain:
         self.stats = ChainStats()
 
     def handle(self, frame: bytes) -> bytes | None:
-        """Process one sealed frame; the reply, or None if the frame was discarded."""
-        dgs = wire.open_frame(frame)
+        """Process one frame; the reply, or None if the frame was discarded."""
+        dgs = wire.open_frame(frame, self.crc_trailer)
         if dgs is None:
             self.stats.bad_frames += 1
             return None
@@ -126,7 +128,7 @@ class Chain:
                 self._advance()
         self.started = True
         out = [self._process(d) for d in dgs]
-        return wire.seal(ec.encode_pdu(out))
+        return wire.seal(ec.encode_pdu(out), self.crc_trailer)
 
     def advance(self) -> None:
         """Paced mode: move every box on by one fieldbus cycle (20 ticks)."""

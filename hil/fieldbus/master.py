@@ -26,7 +26,7 @@ class MasterStats:
     frames_sent: int = 0
     frames_ok: int = 0
     wkc_errors: int = 0      # reply with the wrong working counter: inputs not applied
-    bad_frames: int = 0      # FCS/PDU failure: discarded
+    bad_frames: int = 0      # CRC trailer/PDU failure: discarded
     stale_frames: int = 0    # reply from another cycle (delayed/duplicated): discarded
     lost_frames: int = 0     # no reply of this cycle came back for the frame (or only bad ones)
 
@@ -37,8 +37,10 @@ class MasterStats:
 class Master:
     """Process image and frame handling; no I/O of its own (the bus system moves frames)."""
 
-    def __init__(self, topo: Topology) -> None:
+    def __init__(self, topo: Topology, crc_trailer: bool = True) -> None:
         self.topology = topo
+        #: Frames carry the CRC-32 trailer (:mod:`hil.fieldbus.wire`); replies must too.
+        self.crc_trailer = crc_trailer
         self.plan = CyclePlan.build(topo)
         self.image = bytearray(self.plan.image_bytes)
         self.stats = MasterStats()
@@ -104,13 +106,13 @@ class Master:
         out = []
         for lad, n, _ in self.plan.frames:
             d = ec.Datagram.logical(ec.Command.LRW, lad, bytes(self.image[lad:lad + n]), idx=idx)
-            out.append(wire.seal(ec.encode_pdu([d])))
+            out.append(wire.seal(ec.encode_pdu([d]), self.crc_trailer))
         self.stats.frames_sent += len(out)
         return out
 
     def receive(self, frame: bytes) -> bool:
         """Check one reply; apply its inputs if it is good. True if applied."""
-        dgs = wire.open_frame(frame)
+        dgs = wire.open_frame(frame, self.crc_trailer)
         if dgs is None or len(dgs) != 1 or dgs[0].cmd != ec.Command.LRW:
             self.stats.bad_frames += 1
             return False

@@ -2,7 +2,9 @@
 
 ``python -m hil.fieldbus.serve_chain --transport udp --port 0 --topology hydra_full``
 prints ``READY <port or path>`` on stdout once it listens, then serves until killed or
-until the transport closes.
+until the transport closes; if it cannot listen (a port already taken), one line
+``ERROR <reason>`` and exit 2. ``--crc-trailer``: frames carry the CRC-32 trailer
+(:mod:`hil.fieldbus.wire`).
 """
 
 from __future__ import annotations
@@ -28,16 +30,22 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--model", default="stack", choices=("stack", "echo"))
     ap.add_argument("--config-json", required=True)
     ap.add_argument("--faults-json", help="LVDS and sensor faults to put on the boxes")
+    ap.add_argument("--crc-trailer", action="store_true",
+                    help="frames carry the CRC-32 trailer")
     args = ap.parse_args(argv)
     cfg = Config(json.loads(args.config_json), ["chain process"])
-    chain = Chain(load_topology(args.topology), cfg, args.model)
+    chain = Chain(load_topology(args.topology), cfg, args.model, crc_trailer=args.crc_trailer)
     if args.faults_json:
         from hil.fieldbus.faults import install_box_faults, parse_faults
 
         plan = parse_faults(json.loads(args.faults_json), "faults (from the master)")
         if plan.box_faults:
             install_box_faults(chain, plan)
-    listening = backend(args.transport).listen(args.port)
+    try:
+        listening = backend(args.transport).listen(args.port)
+    except TransportError as exc:
+        print(f"ERROR {exc}", flush=True)
+        return 2
     end = listening.end
     print(f"READY {listening.address}", flush=True)
     try:

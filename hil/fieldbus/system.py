@@ -47,19 +47,26 @@ class BusSystem:
     def __init__(self, topo: Topology, cfg: Config, transport: str = "inproc",
                  model: str = "stack", reply_timeout_s: float = 2.0,
                  remote: bool | None = None, tap: TapFn | None = None,
-                 transport_options: dict | None = None, faults: object = None) -> None:
+                 transport_options: dict | None = None, faults: object = None,
+                 crc_trailer: bool | None = None) -> None:
         from hil.transports import TransportError, backend, transport_pair
 
+        kind = backend(transport)
+        #: Frames carry the CRC-32 trailer (hil.fieldbus.wire): the backend's default
+        #: (every one but udp) unless given.
+        self.crc_trailer = kind.crc_trailer_by_default if crc_trailer is None else crc_trailer
+        if faults is not None and not self.crc_trailer:
+            _refuse_undetectable_flips(faults)
         self.topology = topo
-        self.master = Master(topo)
+        self.master = Master(topo, self.crc_trailer)
         self.transport = transport
         #: In-process chain on a pty/CAN pair: how long to wait for a sent frame to arrive.
         self.inline_wait_s = 0.5
         self.reply_timeout_s = reply_timeout_s
         self.tap = tap
         self.proc: subprocess.Popen | None = None
+        self.m_end = self.s_end = None
         self._release = None  # what the remote peer's set-up made (e.g. a pty)
-        kind = backend(transport)
         self._in_memory = kind.in_memory
         self.chain: Chain | None = None
         opts = dict(transport_options or {})
@@ -79,7 +86,7 @@ class BusSystem:
                     raise ValueError("faults for a remote chain must be a plain declaration "
                                      "(dict or list), not a FaultPlan") from None
         if not remote:
-            self.chain = Chain(topo, cfg, model)
+            self.chain = Chain(topo, cfg, model, crc_trailer=self.crc_trailer)
             self.m_end, self.s_end = transport_pair(transport, **opts)
         else:
             try:
@@ -88,9 +95,16 @@ class BusSystem:
                 raise ValueError(f"transport {transport!r} cannot run the chain in another "
                                  "process") from None
             self._release = peer.close
-            self.proc = _spawn_chain(["--transport", transport, "--port", peer.child_address],
-                                     topo, cfg, model, self._remote_faults)
-            self.m_end = peer.connect(_ready_line(self.proc))
+            args = ["--transport", transport, "--port", peer.child_address]
+            if self.crc_trailer:
+                args.append("--crc-trailer")
+            self.proc = _spawn_chain(args, topo, cfg, model, self._remote_faults)
+            try:
+                address = _ready_line(self.proc)
+            except BaseException:
+                self.close()
+                raise
+            self.m_end = peer.connect(address)
             self.s_end = None
         self.faults = None
         if faults is not None:
@@ -174,6 +188,7 @@ class BusSystem:
         for end in (self.m_end, self.s_end):
             if end is not None:
                 end.close()
+        self.m_end = self.s_end = None
         if self.proc is not None:
             self.proc.terminate()
             try:
@@ -204,8 +219,27 @@ def _spawn_chain(args: list[str], topo: Topology, cfg: Config, model: str,
                             env=env)
 
 
+def _refuse_undetectable_flips(faults: object) -> None:
+    """Bit flips on the fieldbus are injected above the transport, so only the CRC-32
+    trailer can catch them: without it a flipped frame would be applied as if sent."""
+    from hil.fieldbus.faults import FaultError, parse_faults
+
+    plan = parse_faults(faults)
+    for entry in plan.fieldbus:
+        if entry.kind == "bitflip":
+            raise FaultError(f"{plan.where}: {entry.name}: fieldbus bit flips need the CRC-32 "
+                             "trailer to be caught; run with crc_trailer=True (--crc-trailer)")
+
+
 def _ready_line(proc: subprocess.Popen) -> str:
+    """The address the chain process listens on (its ``READY`` line); a TransportError with
+    its one-line reason if it could not listen (e.g. the port is taken)."""
+    from hil.transports import TransportError
+
     line = proc.stdout.readline()
+    if line.startswith("ERROR "):
+        proc.wait(5)
+        raise TransportError(line[len("ERROR "):].strip())
     if not line.startswith("READY"):
         err = proc.stderr.read() if proc.poll() is not None else ""
         raise RuntimeError(f"chain process did not start: {line.strip()} {err.strip()}")

@@ -27,7 +27,8 @@ def configure_log(parser: argparse.ArgumentParser) -> None:
     sub = parser.add_subparsers(dest="log_command", metavar="ACTION", required=True)
     p = sub.add_parser("info", help="summarise a frame log (channels, counts, time range, "
                        "whether it is complete)")
-    p.add_argument("log", metavar="LOG", help="MCAP frame log")
+    p.add_argument("log", metavar="LOG", help="MCAP frame log, or a capture (.pcapng, "
+                   ".pcap) or CAN log (.blf, .asc, .log) of the fieldbus")
     p.add_argument("--json", action="store_true", help="print JSON instead of text")
     p = sub.add_parser("export", help="decode frames to CSV (t_s, topic, decoded fields), "
                        "or one board's measurements as an identification CSV")
@@ -62,7 +63,27 @@ def _truncated(info: LogInfo) -> int:
     return EXIT_TRUNCATED
 
 
+def _traffic_info(args: argparse.Namespace) -> int:
+    """A capture or CAN log (hil.fieldbus.traffic): 1 if it is cut or damaged."""
+    from hil.fieldbus.traffic import TrafficError, read_traffic, summary, summary_text
+
+    try:
+        s = summary(read_traffic(args.log))
+    except TrafficError as exc:
+        raise FrameLogError(str(exc)) from None
+    print(json.dumps(s, indent=2) if args.json else summary_text(s))
+    for note in s["notes"]:
+        if note.startswith("damaged"):
+            print(f"eha-hil log: {args.log}: {note}", file=sys.stderr)
+            return EXIT_TRUNCATED
+    return 0
+
+
 def _info(args: argparse.Namespace) -> int:
+    from hil.fieldbus.traffic import is_traffic_file
+
+    if is_traffic_file(args.log):
+        return _traffic_info(args)
     info = FrameLogReader(args.log).info()
     if args.json:
         print(json.dumps(info.to_dict(), indent=2))

@@ -26,7 +26,13 @@ from collections.abc import Callable
 
 import numpy as np
 
-from firmware_model.fpga.layout import DOWN_REGISTERS, RAW_NAMES, UP_REGISTERS
+from firmware_model.fpga.layout import (
+    DOWN_REGISTERS,
+    FIRST_N_RAW,
+    FIRST_N_UP,
+    RAW_NAMES,
+    UP_REGISTERS,
+)
 from hil.framelog.formats import (
     ENC_ETHERCAT,
     ENC_ETHERCAT_FCS,
@@ -88,11 +94,16 @@ def decode_block(encoding: str, frames: np.ndarray) -> dict[str, np.ndarray] | N
 
 
 # --- LVDS -----------------------------------------------------------------------------------
+# A log written with an older layout holds the first registers / raw words of today's
+# (layouts only append): frames of FIRST_N_UP .. len(UP_REGISTERS) words decode.
 _UP_NAMES = tuple(r[1] for r in UP_REGISTERS)
 _UP_SIGNED = np.array([r[2] == "s16" for r in UP_REGISTERS])
-_UP_STRUCT = struct.Struct("<" + "".join("h" if r[2] == "s16" else "H" for r in UP_REGISTERS))
+_UP_WIDTHS = range(FIRST_N_UP, len(UP_REGISTERS) + 1)
+_UP_STRUCTS = {2 * n: struct.Struct("<" + "".join("h" if r[2] == "s16" else "H"
+                                                  for r in UP_REGISTERS[:n]))
+               for n in _UP_WIDTHS}
 _DOWN = {r[0]: (r[1], r[2] == "s16") for r in DOWN_REGISTERS}
-_RAW_STRUCT = struct.Struct(f"<{len(RAW_NAMES)}I")
+_RAW_WIDTHS = range(FIRST_N_RAW, len(RAW_NAMES) + 1)
 
 
 def _lvds_word(data: bytes) -> dict[str, Value]:
@@ -112,20 +123,27 @@ def _lvds_word_batch(frames: np.ndarray) -> dict[str, np.ndarray]:
 
 
 def _lvds_up(data: bytes) -> dict[str, Value]:
-    if len(data) != _UP_STRUCT.size:
-        raise DecodeError(f"lvds-up frame must be {_UP_STRUCT.size} bytes "
-                          f"({len(UP_REGISTERS)} x u16), got {len(data)}")
-    return dict(zip(_UP_NAMES, _UP_STRUCT.unpack(data), strict=True))
+    layout = _UP_STRUCTS.get(len(data))
+    if layout is None:
+        raise DecodeError(f"lvds-up frame must be {_sizes(_UP_WIDTHS, 2)} bytes "
+                          f"(u16 registers), got {len(data)}")
+    return dict(zip(_UP_NAMES, layout.unpack(data), strict=False))
+
+
+def _sizes(widths: range, per_word: int) -> str:
+    """The frame sizes a log of some layout may have, for a message: ``62`` or ``62..64``."""
+    lo, hi = per_word * widths[0], per_word * widths[-1]
+    return str(hi) if lo == hi else f"{lo}..{hi}"
 
 
 def _lvds_up_batch(frames: np.ndarray) -> dict[str, np.ndarray]:
-    if frames.shape[1] != len(UP_REGISTERS):
-        raise DecodeError(f"lvds-up frames must be {len(UP_REGISTERS)} words wide, "
+    if frames.shape[1] not in _UP_WIDTHS:
+        raise DecodeError(f"lvds-up frames must be {_sizes(_UP_WIDTHS, 1)} words wide, "
                           f"got {frames.shape[1]}")
     u = np.ascontiguousarray(frames, dtype=np.uint16)
     s = u.view(np.int16)
     return {n: (s[:, i] if _UP_SIGNED[i] else u[:, i]).astype(np.int64)
-            for i, n in enumerate(_UP_NAMES)}
+            for i, n in enumerate(_UP_NAMES[:frames.shape[1]])}
 
 
 def _lvds_down(data: bytes) -> dict[str, Value]:
@@ -188,17 +206,18 @@ def _ethercat_fcs(data: bytes) -> dict[str, Value]:
 
 # --- sensors, JSON --------------------------------------------------------------------------
 def _sensor_raw(data: bytes) -> dict[str, Value]:
-    if len(data) != _RAW_STRUCT.size:
-        raise DecodeError(f"sensor-raw frame must be {_RAW_STRUCT.size} bytes "
-                          f"({len(RAW_NAMES)} x u32), got {len(data)}")
-    return dict(zip(RAW_NAMES, _RAW_STRUCT.unpack(data), strict=True))
+    n, rest = divmod(len(data), 4)
+    if rest or n not in _RAW_WIDTHS:
+        raise DecodeError(f"sensor-raw frame must be {_sizes(_RAW_WIDTHS, 4)} bytes "
+                          f"(u32 words), got {len(data)}")
+    return dict(zip(RAW_NAMES, struct.unpack(f"<{n}I", data), strict=False))
 
 
 def _sensor_raw_batch(frames: np.ndarray) -> dict[str, np.ndarray]:
-    if frames.shape[1] != len(RAW_NAMES):
-        raise DecodeError(f"sensor-raw frames must be {len(RAW_NAMES)} wide, "
+    if frames.shape[1] not in _RAW_WIDTHS:
+        raise DecodeError(f"sensor-raw frames must be {_sizes(_RAW_WIDTHS, 1)} wide, "
                           f"got {frames.shape[1]}")
-    return {n: frames[:, i].astype(np.int64) for i, n in enumerate(RAW_NAMES)}
+    return {n: frames[:, i].astype(np.int64) for i, n in enumerate(RAW_NAMES[:frames.shape[1]])}
 
 
 def _flatten(obj: object, prefix: str, out: dict[str, Value]) -> None:
@@ -244,7 +263,7 @@ def encode_lvds_word(addr: int, data: int) -> bytes:
 
 
 def encode_lvds_up(registers: np.ndarray | list[int]) -> bytes:
-    """62-byte frame of the 31 upstream registers (raw 16-bit words, or signed values)."""
+    """Frame of the upstream registers (raw 16-bit words, or signed values), 2 bytes each."""
     r = np.asarray(registers, dtype=np.int64)
     if r.shape != (len(UP_REGISTERS),):
         raise ValueError(f"need {len(UP_REGISTERS)} upstream registers, got shape {r.shape}")

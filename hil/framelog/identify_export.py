@@ -4,9 +4,10 @@ What identification needs of a run is what the MCU read from one driver board: t
 board's upstream register memory (``UP_REGISTERS`` of ``firmware_model/fpga/layout.py``),
 which every MCU-level log carries once per MCU step:
 
-* ``/lvds/<b>.<k>/up``, encoding ``eha-hil/mcu-up`` (``eha-hil bus run --log``: 31
-  registers + the MCU side's CRC-error count, uint32), or
-* ``/lvds/<board>/up``, encoding ``eha-hil/lvds-up`` (31 x u16, the documented snapshot).
+* ``/lvds/<b>.<k>/up``, encoding ``eha-hil/mcu-up`` (``eha-hil bus run --log``: the link's
+  upstream words + the MCU side's CRC-error count, uint32), or
+* ``/lvds/<board>/up``, encoding ``eha-hil/lvds-up`` (one u16 per register, the documented
+  snapshot).
 
 The registers are turned into the SI columns of :mod:`hil.identify.csvdata` as the MCU
 decodes them (:mod:`firmware_model.mcu.measure`, in float64), with the sensor scales of the
@@ -30,7 +31,6 @@ no model for (``cart``), several boards and no ``board`` chosen -- is a
 from __future__ import annotations
 
 import json
-import math
 import os
 import re
 import sys
@@ -52,8 +52,12 @@ LOAD_CASE_OF_KIND: dict[str, str] = {"fixed": "fixed_piston", "free": "free_pist
 COLUMNS: tuple[str, ...] = ("t", "iq", "theta_m", "p_pump_a", "p_pump_b", "p_cyl_a",
                             "p_cyl_b", "p_acc", "x_piston", "f_strain", "temp_c")
 _BOARD_OF_TOPIC = re.compile(r"^/lvds/(?P<board>[^/]+)/up$")
-_PRESSURES = (("p_pump_a", B.U_P_PUMP_A), ("p_pump_b", B.U_P_PUMP_B),
-              ("p_cyl_a", B.U_P_CYL_A), ("p_cyl_b", B.U_P_CYL_B), ("p_acc", B.U_P_ACC))
+#: CSV column -> the MCU's measurement it holds (:func:`firmware_model.mcu.measure.
+#: upstream_si`), in column order.
+_COLUMNS = (("iq", "iq"), ("theta_m", "theta_m"), ("p_pump_a", "p_pump_a"),
+            ("p_pump_b", "p_pump_b"), ("p_cyl_a", "p_cyl_a"), ("p_cyl_b", "p_cyl_b"),
+            ("p_acc", "p_acc"), ("x_piston", "x_piston"), ("f_strain", "f_strain_raw"),
+            ("temp_c", "temperature_c"))
 
 
 @dataclass(frozen=True)
@@ -118,47 +122,15 @@ def _boards(info: LogInfo) -> dict[str, tuple[str, str]]:
     return out
 
 
-def _unwrap16(words: np.ndarray) -> np.ndarray:
-    """A 16-bit wrapping counter as int64 counts, continuous; the first value signed."""
-    w = words.astype(np.int64) & 0xFFFF
-    first = w[:1] - ((w[:1] & 0x8000) << 1)
-    step = (np.diff(w) + 0x8000) % 0x10000 - 0x8000
-    return np.concatenate([first, first + np.cumsum(step)])
-
-
 def signals(up: np.ndarray, cfg) -> dict[str, np.ndarray]:  # noqa: ANN001 - Config
     """SI columns (without ``t``) of upstream register frames ``up`` (n, >= 31 words),
-    with the sensor scales of the firmware calibration ``cfg`` (a configuration or a
-    :class:`~firmware_model.calibration.FirmwareCalibration`): what the MCU decodes with."""
+    decoded by the MCU's model with the sensor scales of the firmware calibration ``cfg``
+    (a configuration or a :class:`~firmware_model.calibration.FirmwareCalibration`)."""
     from firmware_model.calibration import calibration
-    from protocols import pressure_adc as padc
-    from protocols.ad7195 import MIDSCALE
-    from protocols.biss import LINEAR_COUNT_M
+    from firmware_model.mcu.measure import upstream_si
 
-    u = np.asarray(up).astype(np.int64) & 0xFFFF
-    cal = calibration(cfg)
-    s = {k: getattr(cal, k) for k in ("abi_counts_per_rev", "biss_zero_count",
-                                      "strain_full_scale_n", "temperature_v_at_0c",
-                                      "temperature_v_per_c")}
-    adc = padc.DEFAULT
-
-    def volts(col: int) -> np.ndarray:
-        return u[:, col] * adc.lsb_v
-
-    def s16(col: int) -> np.ndarray:
-        return u[:, col] - ((u[:, col] & 0x8000) << 1)
-
-    out = {"iq": s16(B.U_IQ) * 1e-3,
-           "theta_m": _unwrap16(u[:, B.U_ABI]) * (2.0 * math.pi / s["abi_counts_per_rev"])}
-    for name, col in _PRESSURES:
-        out[name] = (volts(col) - adc.v_at_zero) * adc.pa_per_v
-    count = (u[:, B.U_PISTON_HI] << 16) | u[:, B.U_PISTON_LO]
-    out["x_piston"] = (count - s["biss_zero_count"]) * LINEAR_COUNT_M
-    code = ((u[:, B.U_STRAIN_HI] & 0xFF) << 16) | u[:, B.U_STRAIN_LO]
-    out["f_strain"] = (code - MIDSCALE) * (s["strain_full_scale_n"] / MIDSCALE)
-    out["temp_c"] = (volts(B.U_TEMPERATURE) - s["temperature_v_at_0c"]) / s[
-        "temperature_v_per_c"]
-    return out
+    si = upstream_si(up, calibration(cfg))
+    return {column: si[name] for column, name in _COLUMNS}
 
 
 def export_identify(log_path: str | os.PathLike[str], out_path: str | os.PathLike[str],

@@ -234,7 +234,7 @@ class FrameLogWriter:
         """A channel of fixed-width frames logged in blocks (:meth:`write_block`).
 
         One frame is ``width`` elements of ``dtype`` (little endian), e.g. an upstream LVDS
-        snapshot is 31 x uint16. The frame encoding goes into the channel metadata; the
+        snapshot is 32 x uint16. The frame encoding goes into the channel metadata; the
         MCAP message encoding is ``eha-hil/block``.
         """
         code = dtype_code(dtype)

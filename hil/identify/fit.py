@@ -64,6 +64,13 @@ Z95 = 1.959963984540054
 WEIGHTS_SETTLED = 0.5
 #: Estimation samples a long record's fit iterates on before its last step on all of them.
 ITERATION_SAMPLES = 30_000
+#: Jacobians the first of several passes takes, on weights carried over from an earlier fit,
+#: before they are re-estimated: a refit starts from a linearised guess, often far from the
+#: optimum (a Coulomb friction's score-test size), where the residual is up to ten times its
+#: final size; a few steps bring it near that, and the next pass goes on from there.
+WEIGHTING_JACOBIANS = 3
+#: A step that lowers the cost by less than this many residual variances ends the fit.
+CONVERGED_GAIN = 1.0
 
 #: Longest first-order sensor lag the baseline may fit (a 160 Hz sensor).
 MAX_SENSOR_LAG_S = 1e-3
@@ -258,6 +265,9 @@ class OutputErrorFit:
         """
         self._ref = {n: max(abs(theta0[IDX[n]]), 1e-12) for n in free if n in LOG_PARAMS}
         mask = self.fit_mask()
+        # weights carried over from a fit without the effect now in are stale: re-estimated
+        # after a short first pass (a fit's own start residual is close enough to run on)
+        carried = sigma is not None
         if sigma is None:
             # weights from the start's own residual: near the final ones, so one pass usually
             # settles them (signal scales would weight a 2 kPa-noise pressure like a speed)
@@ -278,9 +288,11 @@ class OutputErrorFit:
         if where.size > ITERATION_SAMPLES:
             iter_mask = mask.copy()
             iter_mask[where[ITERATION_SAMPLES]:] = False
+        converged = False
         for k in range(passes):
             if k > 0:
-                if all(abs(sigma[c] / used[c] - 1.0) < WEIGHTS_SETTLED for c in sigma):
+                if converged and all(abs(sigma[c] / used[c] - 1.0) < WEIGHTS_SETTLED
+                                     for c in sigma):
                     break  # weights settled: a second pass would not move the optimum
                 # re-weight the last residual and Jacobian instead of simulating them again
                 n_t = int(iter_mask.sum())
@@ -288,8 +300,14 @@ class OutputErrorFit:
                 r = r * scale
                 j = j * scale[:, None]
             fun, jac = self._problem(free, theta0, sigma, iter_mask)
-            x, r, j = levenberg_marquardt(fun, jac, x, lo, hi, max_jac=max(3, max_nfev // 3),
-                                          r0=r, j0=j)
+            max_jac = max(3, max_nfev // 3)
+            if carried and k < passes - 1:
+                max_jac = min(max_jac, WEIGHTING_JACOBIANS)
+            # the last pass's Jacobian at its optimum is needed only if no step on all the
+            # samples follows (that step takes its own)
+            final_jac = iter_mask is mask or k < passes - 1
+            x, r, j, converged = levenberg_marquardt(fun, jac, x, lo, hi, max_jac=max_jac,
+                                                     r0=r, j0=j, final_jac=final_jac)
             used = sigma
             theta = self._to_theta(x, free, theta0)
             out = self.model.outputs(theta)
@@ -298,7 +316,7 @@ class OutputErrorFit:
                      for c in self.exp.channels}
         if iter_mask is not mask:
             fun, jac = self._problem(free, theta0, sigma, mask)
-            x, r, j = levenberg_marquardt(fun, jac, x, lo, hi, max_jac=1, final_jac=False)
+            x, r, j, _ = levenberg_marquardt(fun, jac, x, lo, hi, max_jac=1, final_jac=False)
             used = sigma
         theta = self._to_theta(x, free, theta0)
         states = self.model.states(theta)
@@ -363,8 +381,9 @@ def levenberg_marquardt(
     r0: np.ndarray | None = None,
     j0: np.ndarray | None = None,
     final_jac: bool = True,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Minimise ``|fun(x)|^2`` within the box ``lo <= x <= hi``; returns ``(x, r, J)``.
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
+    """Minimise ``|fun(x)|^2`` within the box ``lo <= x <= hi``; returns ``(x, r, J,
+    converged)``, ``converged`` False when it stopped at ``max_jac`` Jacobians.
 
     Levenberg-Marquardt on the normal equations: the residual has hundreds of thousands of
     rows and the parameters a dozen, so each step costs one product ``J'J`` (a library solver
@@ -394,7 +413,7 @@ def levenberg_marquardt(
         at_hi = (hi - x <= 1e-9 * span) & (gn < 0)
         move = ~(at_lo | at_hi)
         if not move.any():
-            return x, r, j
+            return x, r, j, True
         an_m = an[np.ix_(move, move)]
         for _ in range(12):
             step = np.zeros_like(x)
@@ -414,13 +433,15 @@ def levenberg_marquardt(
                 improved = True
                 break
             lam *= 8.0
-        # a cost change below a tenth of one residual variance moves no parameter by more than
-        # a small fraction of its standard error
-        if not improved or gain <= 0.1 * cost / r.size or np.max(np.abs(step)) < 1e-8 \
-                or n_jac >= max_jac:
+        # a cost change below one residual variance moves no parameter by more than about
+        # one standard error of white residuals: a fraction of the real one, the residuals
+        # being correlated over tens of samples (the covariance is HAC for that reason)
+        converged = (not improved or gain <= CONVERGED_GAIN * cost / r.size
+                     or np.max(np.abs(step)) < 1e-8)
+        if converged or n_jac >= max_jac:
             if improved and final_jac:
                 j = jac(x)  # the Jacobian at the returned point, for the covariance
-            return x, r, j
+            return x, r, j, converged
         j = jac(x)
         n_jac += 1
 

@@ -146,9 +146,12 @@ def _friction_sign(u, w):
 
     Both laws have slope 1 at zero (so ``eps`` keeps its meaning) and reach +-1; tanh does so
     exponentially, atan algebraically (1 - 2/(pi u)): ``w`` in 0..1 is the shape."""
-    th = math.tanh(u)
-    s = (1.0 - w) * th
-    ds = (1.0 - w) * (1.0 - th * th)
+    s = 0.0
+    ds = 0.0
+    if w != 1.0:  # (a pure atan law is common: its tanh would be a third of the solve)
+        th = math.tanh(u)
+        s = (1.0 - w) * th
+        ds = (1.0 - w) * (1.0 - th * th)
     if w != 0.0:
         q = 0.5 * math.pi * u
         s += w * (2.0 / math.pi) * math.atan(q)
@@ -332,15 +335,43 @@ def sensor_lag(y: np.ndarray, tau: float, dt: float, n_valid: int | None = None
     5 kHz record, where the free piston rings on ``k_s``. Only the first ``n_valid`` samples
     are filtered (the rest is returned as is); a signal with a non-finite value falls back
     to that recursion, which keeps the damage local."""
-    n = y.size if n_valid is None else max(2, min(n_valid, y.size))
-    head = y[:n]
-    if not np.all(np.isfinite(head)):
-        return _sensor_lag_foh(y, tau, dt)
-    ext = np.concatenate([head, head[::-1]])
-    f = np.fft.rfftfreq(ext.size, dt)
-    out = y.copy()
-    out[:n] = np.fft.irfft(np.fft.rfft(ext) / (1.0 + 2j * math.pi * f * tau), ext.size)[:n]
+    return sensor_lags([y], tau, dt, n_valid)[0]
+
+
+def sensor_lags(ys: list[np.ndarray], tau: float, dt: float, n_valid: int | None = None
+                ) -> list[np.ndarray]:
+    """:func:`sensor_lag` of several equally long signals with the same lag, in one batched
+    transform (the four pressure sensors share theirs: a third of a simulation's cost)."""
+    size = ys[0].size
+    n = size if n_valid is None else max(2, min(n_valid, size))
+    heads = np.stack([y[:n] for y in ys])
+    if not np.all(np.isfinite(heads)):
+        return [_sensor_lag_foh(y, tau, dt) for y in ys]
+    ext = np.concatenate([heads, heads[:, ::-1]], axis=1)
+    filtered = np.fft.irfft(np.fft.rfft(ext, axis=1) * _lag_response(ext.shape[1], tau, dt),
+                            ext.shape[1], axis=1)
+    out = []
+    for i, y in enumerate(ys):
+        o = y.copy()
+        o[:n] = filtered[i, :n]
+        out.append(o)
     return out
+
+
+def _lag_response(size: int, tau: float, dt: float) -> np.ndarray:
+    """``1/(1 + j w tau)`` on the ``rfft`` bins of ``size`` samples ``dt`` apart (a fit's
+    Jacobian simulates one lag many times: the last few are kept)."""
+    key = (size, float(tau), float(dt))
+    hit = _LAG_CACHE.get(key)
+    if hit is None:
+        if len(_LAG_CACHE) > 16:
+            _LAG_CACHE.clear()
+        hit = 1.0 / (1.0 + 2j * math.pi * np.fft.rfftfreq(size, dt) * tau)
+        _LAG_CACHE[key] = hit
+    return hit
+
+
+_LAG_CACHE: dict[tuple[int, float, float], np.ndarray] = {}
 
 
 def _sensor_lag_foh(y: np.ndarray, tau: float, dt: float) -> np.ndarray:
@@ -484,18 +515,23 @@ class FastModel:
                 y = exp.window_diff(z[:, 3])
             else:  # pragma: no cover - channels come from prepare()
                 raise KeyError(ch)
-            lag = (theta[IDX["lag_strain_s"]] if ch == "f_strain"
-                   else theta[IDX["lag_pressure_s"]] if ch in PRESSURE_CHANNELS else 0.0)
-            if lag > 0.0:
-                y = sensor_lag(y, lag, exp.dt, n_stop)
+            out[ch] = y
+        # the sensors' lags, channels sharing one filtered together
+        for names, lag in ((PRESSURE_CHANNELS, theta[IDX["lag_pressure_s"]]),
+                           (("f_strain",), theta[IDX["lag_strain_s"]])):
+            lagged = [ch for ch in names if ch in out]
+            if lag > 0.0 and lagged:
+                for ch, y in zip(lagged, sensor_lags([out[ch] for ch in lagged], lag, exp.dt,
+                                                     n_stop), strict=True):
+                    out[ch] = y
+        for ch in out:
             if ch in SAT_CHANNELS:
                 beta = theta[IDX[f"sat_{ch}"]]
                 if ch in PRESSURE_CHANNELS:
                     beta += theta[IDX[SAT_PRESSURE]]
                 level = exp.plateaus.get(ch)
                 if beta != 0.0 and level is not None:
-                    y = y + beta * (np.minimum(y, level) - y)
-            out[ch] = y
+                    out[ch] = out[ch] + beta * (np.minimum(out[ch], level) - out[ch])
         return out
 
 

@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.optimize import minimize_scalar
+from threadpoolctl import threadpool_limits
 
 from hil.identify.candidates import (
     MIN_MAGNITUDE,
@@ -388,7 +389,18 @@ def identify(
     ``intersample`` (``zoh``, ``foh``, ``bl``) says how the logged current behaved between
     samples; None takes the ``# intersample:`` header line, else estimates it. Raises
     :class:`~hil.identify.checks.RefusedData` for a record that cannot be identified.
+
+    The linear algebra runs on one BLAS thread: its products are tall and thin, OpenBLAS's
+    extra threads spin between them (half again the CPU time for no shorter wall time), and
+    the simulations already take a thread per core (:func:`~hil.identify.model.map_threads`).
     """
+    with threadpool_limits(limits=1, user_api="blas"):
+        return _identify(data, cfg, max_effects, progress, intersample)
+
+
+def _identify(data: MeasuredData, cfg: Config, max_effects: int,
+              progress: Callable[[str], None] | None, intersample: str | None
+              ) -> IdentifyReport:
     import time
 
     t_start = time.perf_counter()
@@ -659,7 +671,8 @@ def implausible_parameters(fit: FitResult, exp: Experiment) -> list[str]:
 def _verdict(a: ResidualAnalysis) -> tuple[bool, str]:
     """``unexplained`` when a judged channel's residual still holds material structure:
     not white and more than 1 % of its variance predictable from its past (pressures and
-    strain), or more than 1.5 x the quantisation floor (encoder speeds)."""
+    strain), or more than 1.5 x the quantisation floor by at least 1 % of the speed (encoder
+    speeds)."""
     bad = [r for r in a.channels.values() if r.judged and not r.white
            and (r.floor_ratio > 0 or r.predictable_share > MATERIAL_SHARE)]
     if not bad:
@@ -668,7 +681,7 @@ def _verdict(a: ResidualAnalysis) -> tuple[bool, str]:
     for r in bad:
         if r.floor_ratio > 0:
             parts.append(f"{r.channel}: residual {r.floor_ratio:.1f} x the encoder's "
-                         "quantisation floor")
+                         f"quantisation floor ({r.excess_share:.1%} of the speed beyond it)")
             continue
         what = (f"{r.channel}: Ljung-Box p={r.ljung_box_p:.2g}, "
                 f"{r.predictable_share:.1%} of the residual predictable")

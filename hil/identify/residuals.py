@@ -23,7 +23,10 @@ pressures and strain force. The encoder speeds are differences of quantised angl
 residual is coloured even for a perfect model; they are judged instead by their **excess
 over the quantisation floor**: a window difference of an encoder with count ``q`` carries
 ``q / sqrt(6) / (W dt)`` rms of pure quantisation noise, and a residual above 1.5 times that
-is structure (a backlash, a slipping coupling, a model error).
+is structure (a backlash, a slipping coupling, a model error) when its excess over the floor
+is material too: at least 1 % of the speed's own rms. The floor falls with the sample rate
+(it is a count per window), so at 1 kHz a parameter the record cannot pin, held at its
+configured value, leaves a speed error of a fraction of a percent several floors high.
 """
 
 from __future__ import annotations
@@ -42,6 +45,8 @@ PAIRS = (("p_pump_a", "p_pump_b"), ("p_cyl_a", "p_cyl_b"))
 SPEEDS = {"omega_m": "theta_m", "v_piston": "x_piston"}
 #: Residual rms of an encoder speed above this multiple of its quantisation floor is structure.
 MAX_FLOOR_RATIO = 1.5
+#: ... and its excess over that floor, as a share of the speed's rms, above this is material.
+MATERIAL_EXCESS = 0.01
 ORDERS = np.arange(0.25, 10.0 + 1e-9, 0.25)
 
 
@@ -66,6 +71,7 @@ class ChannelResidual:
     peak_hz: float = 0.0
     peak_hz_ratio: float = 0.0  # spectral peak / median of the spectrum
     floor_ratio: float = 0.0  # encoder speeds: residual rms / quantisation floor (0: n/a)
+    excess_share: float = 0.0  # encoder speeds: rms beyond the floor / the speed's rms
     predictable_share: float = 0.0  # AR(20) one-step predictable share of the variance
 
     def summary(self) -> dict:
@@ -76,7 +82,8 @@ class ChannelResidual:
             "ccf_lags_outside_99": self.ccf_outside,
             "peak_order": self.peak_order, "peak_order_ratio": self.peak_order_ratio,
             "peak_hz": self.peak_hz, "peak_hz_ratio": self.peak_hz_ratio,
-            "floor_ratio": self.floor_ratio, "predictable_share": self.predictable_share,
+            "floor_ratio": self.floor_ratio, "excess_share": self.excess_share,
+            "predictable_share": self.predictable_share,
             "vs_state_max_z": {k: v["max_z"] for k, v in self.vs_state.items()},
         }
 
@@ -249,8 +256,12 @@ def analyse(exp: Experiment, residual: dict[str, np.ndarray], mask: np.ndarray,
                 floor = q_enc / np.sqrt(6.0) / (exp.speed_window * exp.dt)
                 expected = floor * floor + (float(np.mean(d * d)) if d is not None else 0.0)
                 res.floor_ratio = res.rms / np.sqrt(expected)
+                speed_rms = float(np.nanstd(exp.measured[c][mask]))
+                res.excess_share = (float(np.sqrt(max(res.rms ** 2 - expected, 0.0))) / speed_rms
+                                    if speed_rms > 0 else np.inf)
                 res.judged = is_judged = True
-                res.white = res.floor_ratio < MAX_FLOOR_RATIO
+                res.white = (res.floor_ratio < MAX_FLOOR_RATIO
+                             or res.excess_share < MATERIAL_EXCESS)
         if is_judged and not res.white:
             all_white = False
         corr_len = stats.correlation_length(r, 400)

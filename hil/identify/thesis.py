@@ -107,9 +107,10 @@ def stepped_sine(cfg: Config, freqs: tuple[float, ...] = ZONE_FREQS_HZ,
 
 
 def thesis_residual(preset: str = "hydra_linear", coulomb_n: float = 80.0,
-                    amplitude_n: float = 300.0, freqs: tuple[float, ...] = ZONE_FREQS_HZ
-                    ) -> ThesisResidual:
-    """Run the stepped sine with pump Coulomb friction off and on, and identify the latter.
+                    amplitude_n: float = 300.0, freqs: tuple[float, ...] = ZONE_FREQS_HZ,
+                    max_effects: int = 6) -> ThesisResidual:
+    """Run the stepped sine with pump Coulomb friction off and on, and identify the latter
+    (adding at most ``max_effects`` effects).
 
     Sensor noise and quantisation are on in both runs (the thesis measured with sensors).
     """
@@ -122,7 +123,7 @@ def thesis_residual(preset: str = "hydra_linear", coulomb_n: float = 80.0,
                                    source="pump Coulomb on")
     fric = stepped_sine(fric_cfg, freqs, amplitude_n)
     analytic = analytic_fixed(np.asarray(freqs, float), LinearParams.from_config(base))
-    rep = identify(fric.data, load_config("hydra_default"))
+    rep = identify(fric.data, load_config("hydra_default"), max_effects=max_effects)
     return ThesisResidual(amplitude_n, coulomb_n, lin, fric, analytic, rep)
 
 

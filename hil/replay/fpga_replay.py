@@ -60,6 +60,22 @@ def _replay(c, st, down, up, raw, trace):
     return -1, -1
 
 
+def current_trace(frames: np.ndarray) -> np.ndarray | None:
+    """A logged trace in today's columns (:data:`TRACE_WIDTH`), or None if its width fits no
+    layout. A log written before raw words were appended gets them as zero columns: the
+    inputs of parts that did not exist then read 0, and their registers were 0 too."""
+    if frames.ndim != 2:
+        return None
+    missing = TRACE_WIDTH - frames.shape[1]
+    if missing == 0:
+        return frames
+    if not 0 < missing <= B.N_RAW - B.FIRST_N_RAW:
+        return None
+    at = TRACE_RAW + B.N_RAW - missing
+    zeros = np.zeros((frames.shape[0], missing), dtype=frames.dtype)
+    return np.concatenate([frames[:, :at], zeros, frames[:, at:]], axis=1)
+
+
 def column_name(col: int) -> str:
     """The output a trace column holds."""
     if TRACE_UP <= col < TRACE_ON:

@@ -4,7 +4,7 @@ Channels per box ``b`` (blocks of fixed-width frames, times in ns of simulated t
 
 * ``/mcu/b/outputs``  uint8 x out_bytes: the box's fieldbus output record, each cycle;
 * ``/mcu/b/inputs``   uint8 x in_bytes: the input record the box gave back, each cycle;
-* ``/lvds/b.k/up``    uint32 x 32: board k's upstream memory (31 words) + the MCU side's
+* ``/lvds/b.k/up``    uint32 x 33: board k's upstream memory (the link's 32 words) + the MCU side's
   upstream CRC-error count, before each MCU step;
 * ``/lvds/b.k/down``  uint16 x 13: board k's downstream registers after each MCU step;
 * ``/fieldbus/frames`` (level "bus" and up): every frame as sent/received, single messages;
@@ -16,8 +16,8 @@ Channels per box ``b`` (blocks of fixed-width frames, times in ns of simulated t
   with the tick in which its last bit arrived; a word that failed its CRC is logged with
   the bit error it carried, a dropped word (no start bit) is not on the receiver's wire;
 * ``/sensors/b.k/raw`` (level "full"): the sensor frames of every tick as the board's
-  masters decoded them (``eha-hil/sensor-raw``: the 17 raw words of
-  ``firmware_model.fpga.layout.RAW_NAMES``, uint32).
+  masters decoded them (``eha-hil/sensor-raw``: the raw words of
+  ``firmware_model.fpga.layout.RAW_NAMES``, uint32; a log of an older layout has fewer).
 
 The Metadata record holds the configuration (JSON), the topology, the box model and each
 board's calibrated angle offset, so a replay needs nothing but the file.
@@ -153,8 +153,9 @@ class RecordingStackBox(StackBox):
         if not hasattr(self, "ram_rows"):
             cap = FLUSH_CYCLES * CYCLE_TICKS // self.period_ticks + 8
             # the blocks of the boards in use (they come first), in the memory's dtype: one
-            # plain copy of len(stacks) x 64 words
-            self.ram_words = dpram.BOARD_STRIDE * len(self.stacks) if self.board else 0
+            # plain copy up to the last board's upstream block
+            self.ram_words = (dpram.up_base(len(self.stacks) - 1) + B.UP_WORDS
+                              if self.board else 0)
             dtype = np.int64 if self.board is None else self.board.ram.words.dtype
             self.ram_rows = np.zeros((cap, self.ram_words), dtype)
         self.t_steps: list[int] = []
@@ -327,13 +328,16 @@ class BusSignals:
 def run_logged(topo: Topology, cfg: Config, cycles: int, pc: Callable[[int, Master], None],
                log_path: str | Path | None, level: str = "mcu",
                progress: Callable[[int, int], None] | None = None,
-               faults: object = None, live: object = None) -> BusRecord:
+               faults: object = None, live: object = None,
+               capture: Callable[[int, int, bytes, str], None] | None = None) -> BusRecord:
     """Run ``cycles`` cycles in-process with the stack model and log them to ``log_path``.
 
     ``faults``: a fault declaration (:func:`hil.fieldbus.faults.parse_faults`); the log holds
     what the master sent and received and what each MCU took in and gave out, faults and
     all, so the replay reproduces a faulty run too. ``live``: a live view the decoded
-    signals also go to (:class:`SignalOut`); ``log_path`` None: only there."""
+    signals also go to (:class:`SignalOut`); ``log_path`` None: only there. ``capture``: a
+    further tap that sees every fieldbus frame (e.g.
+    :meth:`hil.fieldbus.capture.CaptureWriter.tap`)."""
     import contextlib
 
     tick_ns = cfg.get("sim.tick_ns")
@@ -360,6 +364,8 @@ def run_logged(topo: Topology, cfg: Config, cycles: int, pc: Callable[[int, Mast
                 bus_t.append(tick * tick_ns + (1 if direction == "rx" else 0))
                 bus_frames.append(bytes(frame))
             bus_sig.tap(direction, frame)
+            if capture is not None:
+                capture(cycle, tick, frame, direction)
 
         def flush_frames() -> None:
             if bus_frames:

@@ -29,9 +29,9 @@ from hil.fieldbus.chain import CYCLE_TICKS
 from hil.fieldbus.topology import Topology, TopologyError, load_topology
 from hil.framelog import FrameLogError, FrameLogReader
 from hil.framelog.reader import LogInfo
-from hil.replay.fpga_replay import column_name, replay_board_detail
+from hil.replay.fpga_replay import column_name, current_trace, replay_board_detail
 from hil.replay.record import UP_WIDTH, topics
-from plant.config import Config, ConfigError, schema, with_nominal_firmware
+from plant.config import DECLARED, Config, ConfigError, schema, with_nominal_firmware
 
 DOWN_NAMES = [name for _addr, name, *_ in B.DOWN_REGISTERS]
 
@@ -124,7 +124,8 @@ def _metadata(path: str | Path, info: LogInfo) -> tuple[Config, Topology, dict[s
         if not isinstance(data, dict):
             raise ValueError("not a JSON object")
         logged = with_nominal_firmware(_flat(data))  # logs from before [firmware]
-        missing = sorted(set(_flat(schema())) - set(logged))
+        # A sensor's declared keys missing from an older log keep their defaults.
+        missing = sorted(set(_flat(schema())) - set(logged) - set(DECLARED))
         if missing:
             raise ValueError(f"no key {missing[0]}")
         cfg = Config(schema(), [f"log {path}"]).with_overrides(logged, f"log {path}")
@@ -206,8 +207,9 @@ def replay_mcu(path: str | Path, config_override: Config | None = None) -> Repla
             _check_width(path, topics(box.id, k)["up"], ups[k].frames, UP_WIDTH)
             _check_width(path, topics(box.id, k)["down"], downs[k].frames, B.DOWN_WORDS)
             if topics(box.id, k)["trace"] in blk:
-                _check_width(path, topics(box.id, k)["trace"],
-                             blk[topics(box.id, k)["trace"]].frames, TRACE_WIDTH)
+                tr = blk[topics(box.id, k)["trace"]]
+                if current_trace(tr.frames) is None:
+                    _check_width(path, topics(box.id, k)["trace"], tr.frames, TRACE_WIDTH)
         n_cycles = len(ins.t_ns)
         covered = min([len(x.t_ns) for x in ups + downs]) // per if n_act else n_cycles
         if info.truncated:
@@ -284,11 +286,12 @@ def replay_mcu(path: str | Path, config_override: Config | None = None) -> Repla
                 traces.append((box.id, k, blk[topic]))
     fpga_ticks = 0
     for box_id, k, tr in traces:
-        row, col, got = replay_board_detail(cfg, tr.frames)
+        frames = current_trace(tr.frames)
+        row, col, got = replay_board_detail(cfg, frames)
         fpga_ticks += len(tr.t_ns) if row < 0 else row
         if row >= 0:
             div = Divergence(int(tr.t_ns[row]) * 1e-9, f"/fpga/{box_id}.{k}/trace",
-                             column_name(col), int(tr.frames[row, col]), got)
+                             column_name(col), int(frames[row, col]), got)
             if first is None or div.t_s < first.t_s:
                 first = div
     if planned == 0:

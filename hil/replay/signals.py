@@ -7,8 +7,10 @@ carries what those frames mean, one message per sample (``docs/framelog.md``):
   force, the MCU's references to the board, what the MCU read from the board (pressures,
   forces, piston, motor, currents, voltages, temperature) and the board's status bits and
   error counters. Decoded from the MCU's side of the LVDS link (the words it read and
-  wrote) with the MCU's conversions (:func:`hil.framelog.identify_export.signals`) and the
-  run's firmware calibration.
+  wrote) with the MCU's conversions (:func:`firmware_model.mcu.measure.upstream_si`) and
+  the run's firmware calibration; one field per analog input of the board
+  (``firmware_model.fpga.layout.ANALOG_INPUTS``: the five pressures, the oil and rod
+  temperatures).
 * ``/signals/box/<b>/outputs`` and ``.../inputs``, each fieldbus cycle: the box's process
   record (:mod:`hil.fieldbus.pdo`) field by field, in SI units.
 * ``/signals/bus``, each fieldbus cycle: the master's counters and the cycle's WKC.
@@ -25,13 +27,18 @@ import numpy as np
 
 from firmware_model.calibration import FirmwareCalibration
 from firmware_model.fpga import layout as B
+from firmware_model.mcu.measure import upstream_si
 from hil.fieldbus import pdo
 from hil.fieldbus.topology import Box
-from hil.framelog.identify_export import signals as up_signals
 from hil.framelog.protobuf import Field, MessageType
-from protocols.biss import LINEAR_COUNT_M
 
 PACKAGE = "eha_hil"
+#: One field per analog input of the board (pressures, temperatures), from its declaration.
+_ANALOG_UNIT_SUFFIX = {"Pa": "pa", "degC": "c"}
+_ANALOG = tuple((a, f"{a.name}_{_ANALOG_UNIT_SUFFIX.get(a.unit, a.unit.lower())}")
+                for a in B.ANALOG_INPUTS)
+_ANALOG_FIELDS = tuple(Field(field, "double", a.unit, a.meaning.split(",")[0])
+                       for a, field in _ANALOG)
 _STATUS_FIELDS = tuple(Field(name.lower(), "bool", "", f"board status bit {bit}: {doc}")
                        for bit, name, doc in B.STATUS_BITS)
 
@@ -47,11 +54,7 @@ ACTUATOR = MessageType(f"{PACKAGE}.ActuatorSignals", (
     Field("board_mode", "fixed32", "", "board mode register: 0 off, 1 current, 2 voltage"),
     Field("board_control", "fixed32", "", "board control register: bit 0 enable, 1 clear"),
     # what the MCU read
-    Field("p_acc_pa", "double", "Pa", "accumulator pressure, gauge"),
-    Field("p_pump_a_pa", "double", "Pa", "pump port A pressure, gauge"),
-    Field("p_pump_b_pa", "double", "Pa", "pump port B pressure, gauge"),
-    Field("p_cyl_a_pa", "double", "Pa", "cylinder chamber A pressure, gauge"),
-    Field("p_cyl_b_pa", "double", "Pa", "cylinder chamber B pressure, gauge"),
+    *_ANALOG_FIELDS,
     Field("f_pressure_n", "double", "N", "pressure force k_c (p_cyl_a - p_cyl_b)"),
     Field("f_strain_n", "double", "N", "strain-gauge force"),
     Field("x_piston_m", "double", "m", "piston position about mid-stroke"),
@@ -63,7 +66,6 @@ ACTUATOR = MessageType(f"{PACKAGE}.ActuatorSignals", (
     Field("ib_a", "double", "A", "phase b current"),
     Field("vd_v", "double", "V", "d-axis voltage applied"),
     Field("vq_v", "double", "V", "q-axis voltage applied"),
-    Field("temperature_c", "double", "degC", "oil temperature"),
     # status and errors
     Field("status", "fixed32", "", "board status word (the bits below)"),
     Field("state", "fixed32", "", "board state: 0 disabled, 1 enabled, 2 fault"),
@@ -158,9 +160,7 @@ def _commands(mode: np.ndarray, command: np.ndarray, prefix: str = "") -> dict[s
 
 def piston_x(cal: FirmwareCalibration, up: np.ndarray) -> np.ndarray:
     """Piston position, m, of upstream frames ``up`` (n, >= 31 words), as the MCU reads it."""
-    u = np.asarray(up).astype(np.int64) & 0xFFFF
-    count = (u[:, B.U_PISTON_HI] << 16) | u[:, B.U_PISTON_LO]
-    return (count - cal.biss_zero_count) * LINEAR_COUNT_M
+    return upstream_si(np.asarray(up)[:, :len(B.UP_REGISTERS)], cal)["x_piston"]
 
 
 def actuator_columns(cal: FirmwareCalibration, up: np.ndarray, down: np.ndarray,
@@ -176,7 +176,7 @@ def actuator_columns(cal: FirmwareCalibration, up: np.ndarray, down: np.ndarray,
         a = a & 0xFFFF
         return a - ((a & 0x8000) << 1)
 
-    si = up_signals(u[:, :len(B.UP_REGISTERS)], cal)
+    si = upstream_si(u[:, :len(B.UP_REGISTERS)], cal)
     rad_per_count = 2.0 * math.pi / (cal.abi_counts_per_rev * cal.fpga["speed_window_ticks"]
                                      * cal.tick_s)
     x = si["x_piston"]
@@ -186,21 +186,21 @@ def actuator_columns(cal: FirmwareCalibration, up: np.ndarray, down: np.ndarray,
         "vq_ff_v": s16(d[:, B.D_VQ_FF]) * 1e-3, "board_mode": d[:, B.D_MODE],
         "board_control": d[:, B.D_CONTROL],
         "f_pressure_n": cal.kc_m2 * (si["p_cyl_a"] - si["p_cyl_b"]),
-        "f_strain_n": si["f_strain"], "x_piston_m": x,
+        "f_strain_n": si["f_strain_raw"], "x_piston_m": x,
         "v_piston_m_s": (x - x_before if isinstance(x_before, np.ndarray) else
                          np.diff(x, prepend=x_before)) / period_s,
         "omega_m_rad_s": s16(u[:, B.U_SPEED]) * rad_per_count,
         "iq_a": si["iq"], "id_a": s16(u[:, B.U_ID]) * 1e-3, "ia_a": s16(u[:, B.U_IA]) * 1e-3,
         "ib_a": s16(u[:, B.U_IB]) * 1e-3, "vd_v": s16(u[:, B.U_VD_OUT]) * 1e-3,
-        "vq_v": s16(u[:, B.U_VQ_OUT]) * 1e-3, "temperature_c": si["temp_c"],
+        "vq_v": s16(u[:, B.U_VQ_OUT]) * 1e-3,
         "status": status, "state": u[:, B.U_STATE] & 0xFFFF,
         "err_ssi": u[:, B.U_ERR_SSI], "err_biss": u[:, B.U_ERR_BISS],
         "err_strain": u[:, B.U_ERR_STRAIN], "err_link_down": u[:, B.U_ERR_LINK_CRC],
         "err_link_up": u[:, B.UP_WORDS], "oc_trips": u[:, B.U_OC_TRIPS],
         "wd_trips": u[:, B.U_WD_TRIPS],
     }
-    for name in ("p_acc", "p_pump_a", "p_pump_b", "p_cyl_a", "p_cyl_b"):
-        cols[f"{name}_pa"] = si[name]
+    for a, field in _ANALOG:
+        cols[field] = si[a.si_name]
     for (bit, _, _), f in zip(B.STATUS_BITS, _STATUS_FIELDS, strict=True):
         cols[f.name] = (status >> bit) & 1
     return cols

@@ -35,6 +35,7 @@ from hil.transports.base import (
     TransportStats,
     backend,
     open_transport,
+    prefixed_options,
     transport_pair,
 )
 from hil.transports.bench import round_trip_rate
@@ -53,6 +54,7 @@ __all__ = [
     "TransportStats",
     "backend",
     "open_transport",
+    "prefixed_options",
     "pty_pair",
     "round_trip_rate",
     "transport_pair",

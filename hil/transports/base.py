@@ -117,6 +117,12 @@ class Transport(abc.ABC):
     #: ``eha-hil serve`` offers it: a master in another process or on another machine can
     #: reach an end that :meth:`listen` opened.
     serves_remote_masters: ClassVar[bool] = False
+    #: The fieldbus appends its CRC-32 trailer to every frame on this backend unless told
+    #: otherwise (``hil.fieldbus.wire``). Off where the carrier's own format has no room
+    #: for one (udp: EtherCAT over UDP is the bare PDU, the UDP checksum guards it).
+    crc_trailer_by_default: ClassVar[bool] = True
+    #: What :meth:`listen` listens on when the user names nothing (None: they must).
+    default_listen_address: ClassVar[str | None] = None
 
     def __init__(self, role: str, max_frame: int = DEFAULT_MAX_FRAME) -> None:
         if role not in ROLES:
@@ -249,6 +255,25 @@ class Transport(abc.ABC):
         on, and how to connect once the child has said where it listens."""
         raise TransportError(f"{cls.name}: cannot reach a chain in another process")
 
+    @classmethod
+    def private_options(cls) -> dict[str, Any]:
+        """Options for a bus run that must not meet another one on this machine (a
+        benchmark, a test): none needed where pairs are private anyway."""
+        return {}
+
+    def record_to(self, path: str) -> Any:
+        """Start writing the traffic of this end's bus to ``path`` in the bus's own log
+        format; returns the recorder (``.close()`` ends it). TransportError if this
+        backend has none (only ``can`` does: BLF, ASC, candump)."""
+        raise TransportError(f"{self.name}: no traffic log of its own (CAN logs need the "
+                             "can transport)")
+
+    def capture_endpoints(self) -> tuple[tuple[str, int], tuple[str, int]] | None:
+        """For a capture file: (this end's, the peer's) IPv4 address and port when the
+        frames travel as UDP datagrams, so the capture shows them as such; None when the
+        carrier is not IP (the capture then shows raw EtherCAT over Ethernet)."""
+        return None
+
 
 @dataclasses.dataclass
 class Listening:
@@ -270,6 +295,24 @@ class RemotePeer:
     child_address: str
     connect: Callable[[str], Transport]
     close: Callable[[], None] | None = None
+
+
+def prefixed_options(name: str, given: dict[str, Any]) -> dict[str, Any]:
+    """Backend options from command-line values named ``<backend>_<option>`` (e.g.
+    ``udp_port``, ``can_channel``): those of backend ``name`` with the prefix removed;
+    None values are left out; a value given for another backend is a TransportError
+    naming the flag (``--can-channel: only with --transport can``)."""
+    out = {}
+    for key, value in given.items():
+        owner, _, option = key.partition("_")
+        if value is None:
+            continue
+        if owner not in _REGISTRY or not option:
+            raise TransportError(f"{key}: not a <backend>_<option> name")
+        if owner != name:
+            raise TransportError(f"--{key.replace('_', '-')}: only with --transport {owner}")
+        out[option] = value
+    return out
 
 
 def backend(name: str) -> type[Transport]:

@@ -257,6 +257,10 @@ class CanTransport(Transport):
             raise TransportError(f"can: bus_options must be a dict, got {bus_options!r}")
         self.fd = fd
         self.extended = extended
+        self.base_id = base_id
+        self.interface: str | None = None if bus is not None else interface
+        self.channel = channel
+        self._bus_options = bus_options
         self.tx_id = base_id if role == "master" else base_id + 1
         self.rx_id = base_id + 1 if role == "master" else base_id
         self.send_timeout = float(send_timeout)
@@ -270,6 +274,7 @@ class CanTransport(Transport):
                 if interface not in DEFAULT_CHANNELS:
                     raise TransportError(f"can: interface {interface!r} needs channel=")
                 channel = DEFAULT_CHANNELS[interface]
+                self.channel = channel
             try:
                 self.bus = can.Bus(interface=interface, channel=channel, fd=fd,
                                    **(bus_options or {}))
@@ -317,6 +322,16 @@ class CanTransport(Transport):
                 return frame
             if deadline is not None and remaining(deadline) == 0.0:
                 return None
+
+    def record_to(self, path: str) -> Any:
+        """A :class:`~hil.transports.canlog.CanLogRecorder` on this end's channel: every
+        segment on the bus, both directions, to a BLF / ASC / candump file."""
+        from hil.transports.canlog import CanLogRecorder
+
+        if self.interface is None:
+            raise TransportError("can: a log needs the interface and channel (this end was "
+                                 "given an open bus)")
+        return CanLogRecorder(path, self.interface, self.channel, self.fd, self._bus_options)
 
     def _close(self) -> None:
         if self._owns_bus:

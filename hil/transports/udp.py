@@ -64,6 +64,8 @@ class UdpTransport(Transport):
     name = "udp"
     remote_by_default = True
     serves_remote_masters = True
+    crc_trailer_by_default = False
+    default_listen_address = str(ETHERCAT_UDP_PORT)
 
     def __init__(
         self,
@@ -203,11 +205,25 @@ class UdpTransport(Transport):
         h, p = end.address[0], end.address[1]
         return Listening(end, str(p), f"udp {h}:{p}")
 
+    def capture_endpoints(self) -> tuple[tuple[str, int], tuple[str, int]] | None:
+        peer = self._peer
+        if peer is None:
+            return None
+        return self.address, (peer[0], peer[1])
+
     @classmethod
-    def remote_master(cls, **options: Any) -> RemotePeer:
-        """The child listens on any free port and reports it; the master sends there."""
-        return RemotePeer("0", lambda address: cls("master", remote_port=int(address),
-                                                   **options))
+    def private_options(cls) -> dict[str, Any]:
+        """A free port for the chain instead of 34980, which another run may hold."""
+        return {"port": 0}
+
+    @classmethod
+    def remote_master(cls, port: int = ETHERCAT_UDP_PORT, **options: Any) -> RemotePeer:
+        """The child listens on ``port`` (default 34980, EtherCAT's, so that a capture
+        decodes as EtherCAT without options; 0: any free port) and reports it; the master
+        sends there from an ephemeral port."""
+        _check_port(port, "port")
+        return RemotePeer(str(port), lambda address: cls("master", remote_port=int(address),
+                                                         **options))
 
     @classmethod
     def _pair(cls, host: str = "127.0.0.1",

@@ -21,6 +21,9 @@ encoder), ``strain_flip_mask`` (AD7195); each part's module says what they do.
 
 from __future__ import annotations
 
+import importlib
+import pkgutil
+
 import numpy as np
 from numba import njit
 
@@ -28,25 +31,44 @@ from firmware_model.fpga import layout as B
 from firmware_model.fpga.masters import boot_strain, pack_currents, ssi_format
 from plant import layout as L
 from plant.config import Config
-from plant.sensors.chips import K_MOTOR_DEAD, K_PISTON_DEAD, chip_params
+from plant.sensors.chips import K_MOTOR_DEAD, K_PISTON_DEAD, analog_code, chip_params
 from plant.sensors.current_sense import current_code, current_frame
 from plant.sensors.hall_sensor import hall_code, hall_levels
 from plant.sensors.motor_encoder import MotorEncoderLines, abi_count, ssi_count
 from plant.sensors.piston_encoder import PistonEncoderLine, biss_count
-from plant.sensors.pressure_sensors import (
-    PRESSURE_ROWS,
-    SCAN_CHANNELS,
-    adc_scan,
-    pressure_code,
-    temperature_code,
-)
 from plant.sensors.strain_gauge import (
     StrainAdcLine,
     strain_clamped,
     strain_code,
     strain_conversions,
 )
+from protocols.pressure_adc import DEFAULT as ADC
+from protocols.pressure_adc import pack_scan
 from protocols.ssi import SsiCodec, SsiFormat, SsiTiming
+
+
+def _analog_rows() -> np.ndarray:
+    """The plant output each analog input reads (``ANALOG_INPUTS`` order), from the
+    ``ANALOG_SOURCES`` of the part modules in :mod:`plant.sensors`."""
+    import plant.sensors
+
+    sources: dict[str, int] = {}
+    for info in pkgutil.iter_modules(plant.sensors.__path__):
+        part = importlib.import_module(f"plant.sensors.{info.name}")
+        for name, row in getattr(part, "ANALOG_SOURCES", {}).items():
+            if name in sources:
+                raise ImportError(f"analog input {name!r} has two parts ({info.name})")
+            sources[name] = row
+    names = [a.name for a in B.ANALOG_INPUTS]
+    if sorted(sources) != sorted(names):
+        raise ImportError(f"analog inputs without a part or parts without an input: "
+                          f"{sorted(set(names) ^ set(sources))}")
+    return np.array([sources[n] for n in names], dtype=np.int64)
+
+
+#: The plant output each analog input measures (``ANALOG_INPUTS`` order); a constant of
+#: the compiled code.
+ANALOG_ROWS = _analog_rows()
 
 
 @njit(cache=True)
@@ -76,9 +98,8 @@ def digitise(y, k, tick, raw):
         else:
             raw[B.R_STRAIN] = strain_code(f, k)
             raw[B.R_STRAIN_OK] = 1
-    for j in range(5):
-        raw[B.R_P_ACC + j] = pressure_code(y[PRESSURE_ROWS[j]], k)
-    raw[B.R_TEMP] = temperature_code(y[L.Y_TEMP], k)
+    for j in range(ANALOG_ROWS.size):
+        raw[B.ANALOG_RAW[j]] = analog_code(y[ANALOG_ROWS[j]], k, j)
     raw[B.R_IA] = current_code(y[L.Y_IA], k)
     raw[B.R_IB] = current_code(y[L.Y_IB], k)
     raw[B.R_HALL] = hall_code(theta, k)
@@ -105,10 +126,12 @@ class SensorLines:
         self.piston_encoder = PistonEncoderLine(s["biss_bits"])
         self.strain_adc = StrainAdcLine(s["strain_full_scale_n"])
         boot_strain(cfg, self.strain_adc.device.transfer)
-        self.pressure_scan = bytes(2 * SCAN_CHANNELS)
+        self.pressure_scan = bytes(2 * ADC.channels)
         self.current_frame = pack_currents(0, 0)
         self.hall_levels: tuple[int, int, int] = (0, 0, 0)
-        self._scan = [0] * SCAN_CHANNELS
+        self._scan = [0] * ADC.channels
+        self._analog = list(enumerate(zip(B.ANALOG_CHANNEL.tolist(), ANALOG_ROWS.tolist(),
+                                          strict=True)))
 
     # --- the wires -------------------------------------------------------------------------
     @property
@@ -181,6 +204,13 @@ class SensorLines:
         self.strain_adc.flip_mask = mask
 
     # --- one tick ---------------------------------------------------------------------------
+    def _adc_scan(self, y: np.ndarray) -> bytes:
+        """The packed 8-channel scan of the plant outputs ``y``; empty channels read 0."""
+        scan, k = self._scan, self.k
+        for j, (ch, row) in self._analog:
+            scan[ch] = analog_code(float(y[row]), k, j)
+        return pack_scan(scan)
+
     def update(self, y: np.ndarray, tick: int) -> None:
         """Put the plant outputs ``y`` (``plant.layout.Y_*``) of ``tick`` on the wires."""
         k = self.k
@@ -188,9 +218,9 @@ class SensorLines:
         self.motor_encoder.update(theta, k)
         self.piston_encoder.update(float(y[L.Y_X_PISTON]), k)
         self.strain_adc.update(float(y[L.Y_F_STRAIN]), tick, k)
-        self.pressure_scan = adc_scan(y, k, self._scan)
+        self.pressure_scan = self._adc_scan(y)
         self.current_frame = current_frame(float(y[L.Y_IA]), float(y[L.Y_IB]), k)
         self.hall_levels = hall_levels(hall_code(theta, k))
 
 
-__all__ = ["SensorLines", "digitise"]
+__all__ = ["ANALOG_ROWS", "SensorLines", "digitise"]

@@ -12,10 +12,11 @@ from hil.fieldbus.topology import load_topology
 from .conftest import force_profile, full_robot_pc
 
 #: (transport, remote, transport options): udp and the pty-served serial run the chain in
-#: another process; serial over a pty and over loop://, and can, run it inline.
+#: another process; serial over a pty and over loop://, and can, run it inline. udp on a
+#: free port (the default, 34980, may be taken by a parallel run).
 BACKENDS = [
     ("inproc", None, None),
-    ("udp", None, None),
+    ("udp", None, {"port": 0}),
     ("serial", None, None),
     ("serial", True, None),
     ("serial", None, {"url": "loop://"}),
@@ -46,7 +47,7 @@ def test_full_robot_image(cfg, full, backend, full_reference):
     for key in ("wkc_errors", "bad_frames", "stale_frames", "lost_frames"):
         assert rec.master[key] == 0, key
     # loop:// is one port for both sides: it receives the requests and the replies
-    shared = backend[2] is not None
+    shared = backend[2] is not None and "url" in backend[2]
     assert rec.transport["frames_received"] == n_frames * (2 if shared else 1)
     for j, x in enumerate(inputs):
         assert x["fresh"]

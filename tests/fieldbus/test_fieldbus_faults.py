@@ -86,8 +86,14 @@ def test_box_faults_checked_against_topology(cfg, bench, full):
         BusSystem(full, cfg, model="echo", faults=[{"link": "lvds.down", "kind": "dead",
                                                     "box": 0, "slot": 0}])
     with pytest.raises(FaultError, match="'box'"):  # validated before the chain starts
-        BusSystem(bench, cfg, "udp", faults=[{"link": "lvds.down", "kind": "dead",
-                                              "box": 5, "slot": 0}])
+        BusSystem(bench, cfg, "udp", transport_options={"port": 0},
+                  faults=[{"link": "lvds.down", "kind": "dead", "box": 5, "slot": 0}])
+    # bit flips without the CRC-32 trailer (udp's standard frame) would go unnoticed
+    flip = [{"link": "fieldbus.down", "kind": "bitflip", "rate": 0.1}]
+    with pytest.raises(FaultError, match="fault #0 .*need the CRC-32 trailer"):
+        BusSystem(bench, cfg, "udp", transport_options={"port": 0}, faults=flip)
+    with pytest.raises(FaultError, match="need the CRC-32 trailer"):
+        BusSystem(bench, cfg, "inproc", faults=flip, crc_trailer=False)
 
 
 @pytest.mark.slow
@@ -99,8 +105,8 @@ def test_box_faults_reach_a_chain_in_another_process(cfg, bench):
               {"link": "sensor", "kind": "noisy", "box": 0, "slot": 0, "signal": "p_cyl_a",
                "sigma": 1e5, "start_s": 0.03, "end_s": 0.06, "seed": 5}]
     out = {}
-    for tr in ("inproc", "udp"):
-        with BusSystem(bench, cfg, tr, faults=faults) as bs:
+    for tr, opts in (("inproc", None), ("udp", {"port": 0})):
+        with BusSystem(bench, cfg, tr, faults=faults, transport_options=opts) as bs:
             out[tr] = bs.run(80, lambda c, m: force_profile(c + 100, m)).inputs
     clean = BusSystem(bench, cfg, "inproc")
     base = clean.run(80, lambda c, m: force_profile(c + 100, m)).inputs
@@ -139,8 +145,11 @@ def _check_counters(rec):
 @pytest.mark.slow
 def test_mixed_faults_deterministic_across_transports(cfg, bench):
     recs = {}
-    for transport in ("inproc", "udp", "serial"):
-        with BusSystem(bench, cfg, transport, faults=MIXED) as bs:
+    # Bit flips are injected above the transport: only the CRC-32 trailer catches them, so
+    # udp (whose standard frame has none) runs with it here.
+    for transport, opts in (("inproc", None), ("udp", {"port": 0}), ("serial", None)):
+        with BusSystem(bench, cfg, transport, faults=MIXED, transport_options=opts,
+                       crc_trailer=True) as bs:
             # The first cycles with the patient default timeout (a fresh chain process
             # loads its compiled code); in the fault window a lost frame costs one timeout
             # of wall time: short, but long enough for any reply that does come.

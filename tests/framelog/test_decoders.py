@@ -13,6 +13,8 @@ from hypothesis import strategies as st
 from firmware_model.fpga.layout import (
     D_IQ_REF,
     D_SEQUENCE,
+    FIRST_N_RAW,
+    FIRST_N_UP,
     RAW_NAMES,
     U_IQ,
     U_TICK,
@@ -60,8 +62,19 @@ def test_lvds_up_names_and_signs() -> None:
     d = D.decode(ENC_LVDS_UP, D.encode_lvds_up(regs))
     assert list(d) == [r[1] for r in UP_REGISTERS]
     assert d["iq"] == -1234 and d["tick"] == 0xFFFF and d["state"] == 3
-    with pytest.raises(D.DecodeError, match="62 bytes"):
-        D.decode(ENC_LVDS_UP, bytes(64))
+    with pytest.raises(D.DecodeError, match=f"{2 * len(UP_REGISTERS)} bytes"):
+        D.decode(ENC_LVDS_UP, bytes(2 * len(UP_REGISTERS) + 2))
+    with pytest.raises(D.DecodeError, match="lvds-up frame"):
+        D.decode(ENC_LVDS_UP, bytes(2 * FIRST_N_UP - 2))
+
+
+def test_frames_of_the_first_layout_decode_by_todays_names() -> None:
+    """A log written before registers or raw words were appended holds the first ones."""
+    regs = D.decode(ENC_LVDS_UP, bytes(range(2 * FIRST_N_UP)))
+    assert list(regs) == [r[1] for r in UP_REGISTERS[:FIRST_N_UP]]
+    assert regs["tick"] == int.from_bytes(bytes((60, 61)), "little")
+    raw = D.decode(ENC_SENSOR_RAW, np.arange(FIRST_N_RAW, dtype="<u4").tobytes())
+    assert list(raw) == list(RAW_NAMES[:FIRST_N_RAW]) and raw["hall"] == FIRST_N_RAW - 1
 
 
 def test_lvds_down_names_signs_and_unknown_addresses() -> None:

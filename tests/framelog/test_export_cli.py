@@ -90,7 +90,7 @@ def test_summary_text(log: Path) -> None:
     text = summary_text(FrameLogReader(log).info())
     assert "state: complete" in text and "level mcu" in text
     assert "config=<180 characters, 31 lines>" in text and "seed=5" in text
-    assert "/lvds/0/up" in text and "block 31 x uint16" in text
+    assert "/lvds/0/up" in text and f"block {len(UP_REGISTERS)} x uint16" in text
     line = next(ln for ln in text.splitlines() if ln.startswith("/lvds/0/up"))
     assert line.split()[-4:] == ["1", "2", "0.001200", "0.001400"]
 

@@ -1,10 +1,12 @@
 """Rules of the layout, checked on the source: only hil/transports/ knows a transport by
 name; the firmware models do not import the plant or the harness; the plant does not import
-the harness."""
+the harness; the harness holds no model arithmetic of a hardware part."""
 
 from __future__ import annotations
 
 import ast
+import importlib
+import re
 from pathlib import Path
 
 from hil.transports import BACKENDS
@@ -71,3 +73,115 @@ def test_layers_import_only_downwards():
             if wrong:
                 bad[str(path.relative_to(ROOT))] = sorted(wrong)
     assert not bad
+
+
+# --- the harness holds no model of a hardware part --------------------------------------------
+#: The packages that hold the hardware parts' models and codecs.
+PARTS = ("protocols", "firmware_model", "plant")
+#: Names of indices and sizes (wiring: where a word or a value sits, how many there are),
+#: as opposed to a part's scales, offsets, masks and Q-format shifts.
+_INDEX = re.compile(r"^((FIRST_)?N|U|R|D|F|C|K|P|S|Y|IN|LK|TRACE|ST|STATE|CTRL|RING)_"
+                    r"|_(WORDS|W|WIDTH|BITS|BYTES|BASE)$")
+_ARITHMETIC = (ast.Add, ast.Sub, ast.Mult, ast.Div, ast.FloorDiv, ast.Mod, ast.Pow,
+               ast.LShift, ast.RShift, ast.BitAnd, ast.BitOr, ast.BitXor)
+_KERNEL_DECORATORS = {"njit", "jit", "vectorize", "guvectorize", "cfunc", "stencil"}
+
+#: hil/ modules that may do what the rule forbids, each with its reason.
+ALLOWED = {
+    ("hil/actuator.py", "kernel"):
+        "the stack's compiled wiring loop: calls the parts' kernels tick by tick",
+    ("hil/replay/fpga_replay.py", "kernel"):
+        "feeds logged words through the board's compiled tick and compares its outputs",
+    ("hil/identify/model.py", "kernel"):
+        "identification: the reduced model fitted to measured data, not the plant's parts",
+    ("hil/identify/rig.py", "kernel"):
+        "identification: the independent generator of rig data, which must differ from "
+        "the plant's model (DESIGN.md, data formats)",
+    ("hil/fieldbus/chain.py", "protocols.ethercat.DATAGRAM_OVERHEAD"):
+        "the fieldbus is the harness's: it sizes its frames from the codec's limits",
+    ("hil/fieldbus/chain.py", "protocols.ethercat.ETH_MAX_PAYLOAD"):
+        "the fieldbus is the harness's: it sizes its frames from the codec's limits",
+}
+
+
+def _numeric(module: str, name: str) -> bool:
+    try:
+        value = getattr(importlib.import_module(module), name)
+    except (ImportError, AttributeError):
+        return False
+    return type(value) in (int, float)
+
+
+def _part_names(tree: ast.AST) -> tuple[dict[str, str], dict[str, str]]:
+    """(numeric constants, modules) imported from the parts' packages: local name -> full."""
+    consts, modules = {}, {}
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom) and node.module and node.level == 0 \
+                and node.module.split(".")[0] in PARTS:
+            for a in node.names:
+                full = f"{node.module}.{a.name}"
+                try:
+                    importlib.import_module(full)
+                    modules[a.asname or a.name] = full
+                except ImportError:
+                    if _numeric(node.module, a.name) and not _INDEX.search(a.name):
+                        consts[a.asname or a.name] = full
+        elif isinstance(node, ast.Import):
+            for a in node.names:
+                if a.name.split(".")[0] in PARTS:
+                    modules[a.asname or a.name] = a.name
+    return consts, modules
+
+
+def part_arithmetic(source: str) -> list[tuple[int, str]]:
+    """(line, what) of every numba kernel defined in ``source``, and of every arithmetic or
+    bit operation with a numeric constant of a part's module (a scale, an offset, a mask,
+    a code's mid-scale: not an index or a size) as an operand."""
+    tree = ast.parse(source)
+    consts, modules = _part_names(tree)
+    found = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.FunctionDef):
+            for d in node.decorator_list:
+                f = d.func if isinstance(d, ast.Call) else d
+                if (f.attr if isinstance(f, ast.Attribute) else getattr(f, "id", "")) \
+                        in _KERNEL_DECORATORS:
+                    found.append((node.lineno, "kernel"))
+        elif isinstance(node, ast.BinOp) and isinstance(node.op, _ARITHMETIC):
+            for side in (node.left, node.right):
+                if isinstance(side, ast.Name) and side.id in consts:
+                    found.append((node.lineno, consts[side.id]))
+                elif isinstance(side, ast.Attribute) and isinstance(side.value, ast.Name) \
+                        and side.value.id in modules and not _INDEX.search(side.attr) \
+                        and _numeric(modules[side.value.id], side.attr):
+                    found.append((node.lineno, f"{modules[side.value.id]}.{side.attr}"))
+    return found
+
+
+def test_the_harness_holds_no_model_arithmetic_of_a_part():
+    bad, used = {}, set()
+    for path in _sources("hil"):
+        rel = str(path.relative_to(ROOT))
+        for line, what in part_arithmetic(path.read_text()):
+            if (rel, what) in ALLOWED:
+                used.add((rel, what))
+            else:
+                bad.setdefault(rel, []).append((line, what))
+    assert not bad, bad
+    assert used == set(ALLOWED), f"exceptions no longer needed: {set(ALLOWED) - used}"
+
+
+def test_the_arithmetic_check_finds_a_parts_scale_and_a_kernel():
+    snippet = (
+        "from numba import njit\n"
+        "from protocols.ad7195 import MIDSCALE\n"
+        "from protocols import biss\n"
+        "from firmware_model.fpga import layout as B\n"
+        "@njit(cache=True)\n"
+        "def decode(code):\n"
+        "    return code - MIDSCALE\n"
+        "x = count * biss.LINEAR_COUNT_M\n"
+        "y = up[B.U_IQ] + B.N_RAW\n"   # an index and a size: wiring, not a model
+    )
+    assert sorted(part_arithmetic(snippet)) == [(6, "kernel"), (7, "protocols.ad7195.MIDSCALE"),
+                                                 (8, "protocols.biss.LINEAR_COUNT_M")]

@@ -27,6 +27,7 @@ from firmware_model.mcu.measure import Measurements
 from hil.actuator import FpgaStack
 from plant import layout as L
 from plant.config import Config, load_config
+from protocols.pressure_adc import DEFAULT as PRESSURE_ADC
 
 F32 = np.float32
 PC_TICKS = 20  # the PC hands a fresh command every 20 ticks (1 kHz)
@@ -94,14 +95,14 @@ CTRL_FLOATS = ("dt", "kt_eq", "kp", "kd", "bemf", "k_pos", "cos_alpha", "f_lim",
 CTRL_BLOCKS = ("derivative", "observer", "velocity_pi", "force_pi", "highpass",
                "seal_observer")
 MEAS_FLOATS = tuple(n for n in Measurements.__slots__
-                    if n not in ("strain_samples", "status", "_k", "_volts"))
+                    if n not in ("strain_samples", "status", "_k", "_analog", "_volts"))
 
 
 def test_volt_table_holds_the_float32_products(cfg):
     """The ADC decode looks its first product up: every entry is the float32 the
     Cortex-M4 computes for F32(code) * F32(lsb), and a float32."""
     m = Measurements(cfg)
-    lsb = m._k[0]
+    lsb = F32(PRESSURE_ADC.lsb_v)
     codes = np.random.default_rng(0).integers(0, 1 << 16, 2000).tolist() + [0, 4095, 65535]
     for c in codes:
         v = m._volts[c]
@@ -202,7 +203,8 @@ def test_the_float32_check_catches_a_float64_constant(cfg, where):
     assert not float32_leaks(rig.mcu, seen)
     ctrl, meas = rig.mcu.ctrl[0], rig.mcu.meas[0]
     if where == "meas.v0":  # the ADC's zero-pressure voltage, used in every pressure decode
-        meas._k = (meas._k[0], np.float64(meas._k[1]), *meas._k[2:])
+        meas._analog = [(n, r, np.float64(v0) if n == "p_cyl_a" else v0, mul, div)
+                        for n, r, v0, mul, div in meas._analog]
     else:
         attr = where.split(".")[1]
         setattr(ctrl, attr, np.float64(getattr(ctrl, attr)))

@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from hil.framelog import FrameLogReader
+from hil.replay.fpga_replay import current_trace
 from hil.replay.record import run_logged, topics
 from hil.replay.replay import _metadata, replay_mcu
 
@@ -62,6 +63,16 @@ def test_same_run_today_writes_the_same_frames(tmp_path):
     for topic in block_topics:
         a, b = old.blocks(topic), new.blocks(topic)
         assert np.array_equal(a.t_ns, b.t_ns), topic
-        assert np.array_equal(a.frames, b.frames), topic
+        assert np.array_equal(_today(topic, a.frames, b.frames.shape[1]), b.frames), topic
     assert old.blocks("/fieldbus/frames").frames.tobytes() == \
         new.blocks("/fieldbus/frames").frames.tobytes()
+
+
+def _today(topic, frames, width):
+    """Old frames in today's layout: raw words appended since (sensors added, none fitted
+    on this actuator) read 0, in the sensor frames and in the board trace."""
+    if topic.endswith("/trace"):
+        return current_trace(frames)
+    if topic.endswith("/raw") and frames.shape[1] < width:
+        return np.pad(frames, ((0, 0), (0, width - frames.shape[1])))
+    return frames

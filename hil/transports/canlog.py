@@ -1,0 +1,137 @@
+"""CAN traffic logs in python-can's file formats: BLF (Vector), ASC (Vector text) and
+candump ``.log`` (Linux can-utils).
+
+:class:`CanLogRecorder` is a listener on the bus, like a CAN logger plugged into the
+cable: it opens its own python-can bus on the transport's interface and channel (the
+``virtual`` interface and SocketCAN both deliver every frame to every other bus object on
+the channel), and writes each message it hears with ``can.Logger``, which picks
+``BLFWriter``, ``ASCWriter`` or ``CanutilsLogWriter`` from the file name. Timestamps are
+what the interface stamps: wall time of the send (virtual) or the kernel's receive time
+(SocketCAN).
+
+:func:`read_can_log` reads such a file back through ``can.LogReader``;
+:func:`reassemble` turns the segments of one CAN ID back into the frames
+(:class:`~hil.transports.canbus.Reassembler`), counting what does not reassemble.
+"""
+
+from __future__ import annotations
+
+import os
+import threading
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import can
+
+from hil.transports.base import TransportError, TransportStats
+from hil.transports.canbus import Reassembler
+
+#: File name endings of the formats, as ``can.Logger`` and ``can.LogReader`` choose them.
+CAN_LOG_SUFFIXES = (".blf", ".asc", ".log")
+
+
+def check_log_name(path: str | os.PathLike[str]) -> Path:
+    p = Path(path)
+    if p.suffix.lower() not in CAN_LOG_SUFFIXES:
+        raise TransportError(f"{path}: a CAN log file name ends .blf, .asc or .log")
+    return p
+
+
+class CanLogRecorder:
+    """Write every message on a CAN channel to ``path`` until :meth:`close`."""
+
+    def __init__(self, path: str | os.PathLike[str], interface: str, channel: str | int,
+                 fd: bool = True, bus_options: dict[str, Any] | None = None) -> None:
+        self.path = check_log_name(path)
+        self.messages = 0
+        try:
+            self._bus = can.Bus(interface=interface, channel=channel, fd=fd,
+                                **(bus_options or {}))
+        except (can.CanError, ImportError, OSError, ValueError, TypeError) as exc:
+            raise TransportError(f"can log: cannot open {interface} channel {channel!r}: "
+                                 f"{' '.join(str(exc).split())}") from None
+        try:
+            self._writer = can.Logger(str(self.path))
+        except (OSError, ValueError) as exc:
+            self._bus.shutdown()
+            raise TransportError(f"{path}: cannot write: "
+                                 f"{getattr(exc, 'strerror', None) or exc}") from None
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._listen, name="can-log", daemon=True)
+        self._thread.start()
+
+    def _listen(self) -> None:
+        while not self._stop.is_set():
+            msg = self._bus.recv(0.05)
+            if msg is not None:
+                self._write(msg)
+
+    def _write(self, msg: can.Message) -> None:
+        self._writer.on_message_received(msg)
+        self.messages += 1
+
+    def close(self) -> None:
+        """Stop listening, write what is still queued, close the file."""
+        if self._stop.is_set():
+            return
+        self._stop.set()
+        self._thread.join()
+        while (msg := self._bus.recv(0.05)) is not None:
+            self._write(msg)
+        self._writer.stop()
+        self._bus.shutdown()
+
+    def __enter__(self) -> CanLogRecorder:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+class CanLogError(Exception):
+    """A CAN log that cannot be read (one line)."""
+
+
+def read_can_log(path: str | os.PathLike[str]) -> list[can.Message]:
+    """Every message of a BLF, ASC or candump file, through ``can.LogReader``."""
+    p = check_log_name(path) if Path(path).suffix else Path(path)
+    try:
+        return list(can.LogReader(str(p)))
+    except (OSError, ValueError, EOFError, IndexError, KeyError, can.CanError) as exc:
+        raise CanLogError(f"{path}: not a readable CAN log: "
+                          f"{' '.join(str(exc).split()) or type(exc).__name__}") from None
+    except Exception as exc:  # a reader's own parse failure (struct.error, zlib.error...)
+        raise CanLogError(f"{path}: not a readable CAN log: {type(exc).__name__}: "
+                          f"{' '.join(str(exc).split())}") from None
+
+
+@dataclass(frozen=True)
+class LoggedFrame:
+    """One frame rebuilt from a CAN log: when its last segment was logged, its CAN ID."""
+
+    timestamp: float
+    arbitration_id: int
+    frame: bytes
+
+
+def reassemble(messages: list[can.Message], ids: tuple[int, ...], fd: bool | None = None,
+               stats: dict[int, TransportStats] | None = None) -> Iterator[LoggedFrame]:
+    """The frames carried on each of ``ids``, in log order. ``fd``: CAN-FD segments
+    (None: from the messages: FD if any message on those IDs is). ``stats`` (if given)
+    gets a :class:`TransportStats` per ID with the reassembly's error counts."""
+    mine = [m for m in messages if m.arbitration_id in ids and not m.is_error_frame
+            and not m.is_remote_frame]
+    if fd is None:
+        fd = any(m.is_fd for m in mine)
+    stats = {} if stats is None else stats
+    asm = {}
+    for i in ids:
+        stats[i] = TransportStats()
+        asm[i] = Reassembler(fd, max_frame=63_482 if fd else 6_138, stats=stats[i])
+    for m in mine:
+        frame = asm[m.arbitration_id].feed(bytes(m.data))
+        if frame is not None:
+            stats[m.arbitration_id].frames_received += 1
+            yield LoggedFrame(m.timestamp, m.arbitration_id, frame)
