@@ -58,28 +58,32 @@ def _run_bus(args: argparse.Namespace, cfg, topo, cycles: int, model: str, pc):
     meta = {"topology": args.topology, "model": model, "mode": "lockstep (bus run)",
             "config": json.dumps(cfg.data)}
     t0 = time.perf_counter()
-    if args.log:
+    live_addr = getattr(args, "foxglove", None)
+    if args.log or live_addr is not None:
         from hil.transports import backend
 
+        what = "--log" if args.log else "--foxglove"
         if not backend(args.transport).in_memory:
-            raise BusUsageError("--log records the in-process run; use --transport inproc")
+            raise BusUsageError(f"{what} records the in-process run; use --transport inproc")
         if model != "stack":
-            raise BusUsageError("--log records the MCU model: use --model stack")
+            raise BusUsageError(f"{what} records the MCU model: use --model stack")
         if args.crc_trailer is not None:
-            raise BusUsageError("--crc-trailer/--no-crc-trailer: not with --log (the logged "
+            raise BusUsageError(f"--crc-trailer/--no-crc-trailer: not with {what} (the logged "
                                 "run keeps the in-process default, with the trailer)")
         from hil.replay.record import run_logged
 
-        cli_progress.output("log", args.log, cli_progress.readable_log)
+        if args.log:
+            cli_progress.output("log", args.log, cli_progress.readable_log)
         try:
             cap = (CaptureWriter(args.capture, crc_trailer=True, metadata=meta)
                    if args.capture else None)
         except CaptureError as exc:
             raise BusUsageError(str(exc)) from None
         try:
-            rec = run_logged(topo, cfg, cycles, pc, args.log, level=args.level,
-                             progress=_progress("bus run", not args.json),
-                             capture=None if cap is None else cap.tap(tick_ns))
+            with _live_view(live_addr) as live:
+                rec = run_logged(topo, cfg, cycles, pc, args.log, level=args.level,
+                                 progress=_progress("bus run", not args.json),
+                                 capture=None if cap is None else cap.tap(tick_ns), live=live)
         finally:
             if cap is not None:
                 cap.close()
@@ -104,6 +108,24 @@ def _run_bus(args: argparse.Namespace, cfg, topo, cycles: int, model: str, pc):
     except (TransportError, CaptureError) as exc:
         raise BusUsageError(str(exc)) from None
     return rec, time.perf_counter() - t0, cap, recorder
+
+
+def _live_view(address: str | None):
+    """A Foxglove live view for ``--foxglove [HOST:PORT]`` (None: a context giving None)."""
+    import contextlib
+    import sys
+
+    if address is None:
+        return contextlib.nullcontext()
+    from hil.live import FoxgloveLive, LiveError, parse_address
+
+    try:
+        live = FoxgloveLive(*parse_address(address))
+    except (ValueError, LiveError) as exc:
+        raise BusUsageError(str(exc)) from None
+    print(f"foxglove: live view at {live.url} (Foxglove Studio: Open connection > Foxglove "
+          "WebSocket)", file=sys.stderr)
+    return live
 
 
 def cmd_bus_run(args: argparse.Namespace, cfg) -> int:
@@ -324,6 +346,9 @@ def add_parsers(sub, bsub, common, config_fn, wrap) -> None:
                    type=output_file((".blf", ".asc", ".log")),
                    help="can: log every CAN message of the run (python-can's BLF, ASC or "
                    "candump writer, by the file name)")
+    p.add_argument("--foxglove", nargs="?", const="", metavar="HOST:PORT",
+                   help="stream the decoded signals to Foxglove Studio (WebSocket; default "
+                   "127.0.0.1:8765, loopback)")
     p.set_defaults(func=wrap(cmd_bus_run, config_fn))
 
     p = sub.add_parser("replay", parents=[common(plot=False)],
@@ -348,3 +373,7 @@ def add_parsers(sub, bsub, common, config_fn, wrap) -> None:
     p.add_argument("--no-replay", dest="replay", action="store_false",
                    help="skip the replay real-time factor")
     p.set_defaults(func=wrap(cmd_bench_bus, config_fn))
+
+    from hil.replay import log_bench
+
+    log_bench.add_parser(bsub, common, config_fn, wrap)

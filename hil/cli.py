@@ -343,12 +343,33 @@ def cmd_run_thesis(args: argparse.Namespace) -> int:
     return 0 if ok else 1
 
 
+def _run_live(res, address: str) -> str:  # noqa: ANN001 - ScenarioResult
+    """``run --foxglove``: serve the scenario's series until a client takes them."""
+    from hil.live import FoxgloveLive, LiveError, parse_address
+    from hil.series_export import publish_live
+
+    try:
+        live = FoxgloveLive(*parse_address(address))
+    except (ValueError, LiveError) as exc:
+        raise UsageError(str(exc)) from None
+    with live:
+        print(f"foxglove: {res.name}'s series on {live.url}: open it in Foxglove Studio "
+              "(Open connection > Foxglove WebSocket) and subscribe (e.g. a Plot panel); "
+              "Ctrl-C to give up", file=sys.stderr, flush=True)
+        publish_live(res, live)
+    return f"\nseries sent to Foxglove at {live.url}"
+
+
 def cmd_run(args: argparse.Namespace) -> int:
     from hil import scenarios
 
     if args.config is None and (args.scenario == "thesis" or args.scenario in scenarios.THESIS):
         args.config = THESIS_PRESET
     if args.scenario == "thesis":
+        for opt in ("series", "foxglove"):
+            if getattr(args, opt, None) is not None:
+                raise UsageError(f"--{opt}: 'thesis' runs several scenarios; give one "
+                                 "(f3 ... f8)")
         return cmd_run_thesis(args)
     try:
         scenario = scenarios.get(args.scenario)
@@ -369,6 +390,16 @@ def cmd_run(args: argparse.Namespace) -> int:
     if args.plot and res.plot:
         res.plot(res, Path(args.plot))
         text += f"\nplot written to {args.plot}"
+    if getattr(args, "foxglove", None) is not None:
+        text += _run_live(res, args.foxglove)
+    if getattr(args, "series", None):
+        from hil.series_export import write_series
+
+        try:
+            rows = write_series(res, args.series)
+        except ValueError as exc:
+            raise UsageError(str(exc)) from None
+        text += f"\nseries written to {args.series} ({rows} rows)"
     data = {"scenario": res.name, "title": res.title, "config": cfg.sources, "ok": res.ok,
             "metrics": [{"name": m.name, "value": m.value, "unit": m.unit,
                          "requirement": m.requirement, "ok": m.ok} for m in res.metrics],
@@ -603,6 +634,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--plot-dir", default=None, type=output_dir,
                    help="directory for one plot per scenario, NAME.png (with 'thesis' "
                    "default thesis-plots)")
+    p.add_argument("--foxglove", nargs="?", const="", metavar="HOST:PORT",
+                   help="after the run, serve its series to Foxglove Studio (WebSocket; "
+                   "default 127.0.0.1:8765, loopback) until a client has taken them")
+    p.add_argument("--series", metavar="FILE", type=output_file((".csv", ".parquet", ".mcap")),
+                   help="write the time series behind the metrics to FILE (.csv, .parquet "
+                   "or .mcap; README, Scenarios)")
     p.set_defaults(func=cmd_run)
 
     cfgp = sub.add_parser("config", help="inspect configurations")

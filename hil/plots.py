@@ -19,8 +19,27 @@ def _pyplot():
     return plt
 
 
-def plot_bode(results: list[BodeResult], path: str | Path) -> None:
-    """Gain and phase of each result: simulated markers over the analytic curve."""
+#: How the thesis's figures are drawn on our plots: grey dashes, labelled "thesis: ...".
+THESIS_STYLE = {"color": "0.35", "ls": "--", "lw": 1.0}
+
+
+def mark_thesis(ax, *, x: float | None = None, y: float | None = None,  # noqa: ANN001
+                label: str = "") -> None:
+    """A thesis figure on ``ax``: a vertical line at ``x``, a horizontal one at ``y``, or a
+    cross at (x, y) when both are given; labelled ``thesis: <label>`` in the legend."""
+    text = f"thesis: {label}" if label else None
+    if x is not None and y is not None:
+        ax.plot([x], [y], "x", color="k", ms=10, mew=2, label=text)
+    elif x is not None:
+        ax.axvline(x, label=text, **THESIS_STYLE)
+    elif y is not None:
+        ax.axhline(y, label=text, **THESIS_STYLE)
+
+
+def plot_bode(results: list[BodeResult], path: str | Path,
+              thesis_hz: list[tuple[float, str]] = ()) -> None:
+    """Gain and phase of each result: simulated markers over the analytic curve;
+    ``thesis_hz``: the thesis's frequencies, (Hz, label), marked on every panel."""
     plt = _pyplot()
     titles = {
         "fixed": "piston fixed: tau_p -> tau_q  (d_s k_s / G1)",
@@ -41,14 +60,18 @@ def plot_bode(results: list[BodeResult], path: str | Path) -> None:
         ax_p.set_xlabel("frequency [Hz]")
         for ax in (ax_g, ax_p):
             ax.grid(True, which="both", alpha=0.3)
+            for hz, what in thesis_hz:
+                mark_thesis(ax, x=hz, label=what if ax is ax_g else "")
         ax_g.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
 
 
-def plot_tn_curve(curve: TNCurve, path: str | Path) -> None:
-    """The six panels of thesis Fig. 2.4 from a simulated sweep."""
+def plot_tn_curve(curve: TNCurve, path: str | Path,
+                  thesis: dict[str, float] | None = None) -> None:
+    """The six panels of thesis Fig. 2.4 from a simulated sweep; ``thesis`` (keys
+    ``stall_force_n``, ``no_load_velocity_mm_s``, ``peak_efficiency``) marks its figures."""
     plt = _pyplot()
     pts = curve.points
     v = np.array([p.velocity_m_s for p in pts]) * 1e3
@@ -65,11 +88,21 @@ def plot_tn_curve(curve: TNCurve, path: str | Path) -> None:
     ]
     fig, axes = plt.subplots(3, 2, figsize=(9, 9))
     for ax, (title, x, y, xl, yl) in zip(axes.flat, panels, strict=True):
-        ax.plot(x, y, "o-", ms=3)
+        ax.plot(x, y, "o-", ms=3, label="simulated")
         ax.set_title(title, fontsize=10)
         ax.set_xlabel(xl)
         ax.set_ylabel(yl)
         ax.grid(True, alpha=0.3)
+    if thesis:
+        tn, eff = axes.flat[0], axes.flat[5]
+        mark_thesis(tn, x=0.0, y=thesis["stall_force_n"],
+                    label=f"stall {thesis['stall_force_n']:g} N")
+        mark_thesis(tn, x=thesis["no_load_velocity_mm_s"], y=0.0,
+                    label=f"no load {thesis['no_load_velocity_mm_s']:g} mm/s")
+        mark_thesis(eff, y=100 * thesis["peak_efficiency"],
+                    label=f"peak {100 * thesis['peak_efficiency']:g} %")
+        tn.legend(fontsize=8)
+        eff.legend(fontsize=8)
     fig.suptitle(f"Simulated T-N curve at i_q = {curve.iq_a:g} A")
     fig.tight_layout()
     fig.savefig(path, dpi=110)

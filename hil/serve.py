@@ -280,6 +280,23 @@ def _status_line(st: ServeStats, errors: int) -> str:
             f"errors {errors}  load {load:.0f}%")
 
 
+def _live_view(args: argparse.Namespace, chain: Chain, cfg):  # noqa: ANN202
+    """``--foxglove``: (live view, boxes sending to it), or (None, [])."""
+    if getattr(args, "foxglove", None) is None:
+        return None, []
+    from hil.live import FoxgloveLive, LiveError, parse_address
+    from hil.replay.record import signal_boxes
+
+    try:
+        live = FoxgloveLive(*parse_address(args.foxglove))
+    except (ValueError, LiveError) as exc:
+        raise _usage(str(exc)) from None
+    boxes = signal_boxes(chain, cfg, live)
+    print(f"eha-hil serve: foxglove live view at {live.url} ({len(boxes)} box(es) with "
+          "decoded signals, sent every 100 ms)", file=sys.stderr, flush=True)
+    return live, boxes
+
+
 def cmd_serve(args: argparse.Namespace, cfg) -> int:
     from hil.fieldbus.topology import TopologyError, load_topology
 
@@ -294,6 +311,7 @@ def cmd_serve(args: argparse.Namespace, cfg) -> int:
     trailer = (backend(args.transport).crc_trailer_by_default if args.crc_trailer is None
                else args.crc_trailer)
     chain = Chain(topo, cfg, model, paced=True, crc_trailer=trailer)
+    live, live_boxes = _live_view(args, chain, cfg)
     if args.realtime:
         _realtime_priority()
     end, where, release = _open_end(args)
@@ -344,6 +362,10 @@ def cmd_serve(args: argparse.Namespace, cfg) -> int:
             release()
         if cap is not None:
             cap.close()
+        if live is not None:
+            for b in live_boxes:
+                b.flush()
+            live.close()
     if tty and not args.quiet:
         print(file=sys.stderr)
 
@@ -450,4 +472,7 @@ def add_parser(sub, common, config_fn, wrap) -> None:
     from hil.bus_cli import add_wire_options
 
     add_wire_options(p)
+    p.add_argument("--foxglove", nargs="?", const="", metavar="HOST:PORT",
+                   help="stream the boxes' decoded signals to Foxglove Studio (WebSocket; "
+                   "default 127.0.0.1:8765, loopback)")
     p.set_defaults(func=wrap(cmd_serve, config_fn))

@@ -14,7 +14,7 @@ import json
 import sys
 from pathlib import Path
 
-from hil.framelog.export import export_csv, summary_text
+from hil.framelog.export import export_csv, export_parquet, summary_text
 from hil.framelog.reader import FrameLogError, FrameLogReader, LogInfo
 
 EXIT_TRUNCATED = 1
@@ -33,7 +33,8 @@ def configure_log(parser: argparse.ArgumentParser) -> None:
     p = sub.add_parser("export", help="decode frames to CSV (t_s, topic, decoded fields), "
                        "or one board's measurements as an identification CSV")
     p.add_argument("log", metavar="LOG", help="MCAP frame log")
-    p.add_argument("out", metavar="OUT", help="CSV file to write ('-': stdout)")
+    p.add_argument("out", metavar="OUT", help="file to write: .parquet for Parquet, else CSV "
+                   "('-': stdout)")
     p.add_argument("--format", choices=("frames", "identify"), default="frames",
                    help="frames (default): one row per frame with its decoded fields; "
                    "identify: what the MCU read from one board, in SI units, as the input of "
@@ -117,7 +118,12 @@ def _export(args: argparse.Namespace) -> int:
                   f"{res.sample_rate_hz:g} Hz; {res.skipped} leading frame(s) from before the "
                   f"first upstream sweep left out) to {args.out}")
         return _truncated(info)
-    n = export_csv(args.log, args.out, topics=args.topic, fields=args.field, info=info)
+    if out.suffix.lower() == ".parquet":
+        if args.out == "-":
+            raise FrameLogError("Parquet cannot go to stdout: give a .parquet file name")
+        n = export_parquet(args.log, args.out, topics=args.topic, fields=args.field, info=info)
+    else:
+        n = export_csv(args.log, args.out, topics=args.topic, fields=args.field, info=info)
     if args.out != "-":
         print(f"wrote {n} rows to {args.out}")
     return _truncated(info)

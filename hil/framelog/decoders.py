@@ -11,6 +11,7 @@ Shipped encodings (byte layouts in ``docs/framelog.md``):
 * ``eha-hil/lvds-up``: upstream snapshot, 31 x u16 LE in register order (UP_REGISTERS).
 * ``eha-hil/lvds-down``: downstream writes, (addr u8, data u16 LE) triplets (DOWN_REGISTERS).
 * ``eha-hil/ethercat``: one Ethernet frame carrying EtherCAT (direct or over UDP).
+* ``eha-hil/ethercat-fcs``: an EtherCAT PDU and its Ethernet FCS (what ``bus run`` logs).
 * ``eha-hil/sensor-raw``: the sensor masters' raw inputs of one tick, 17 x u32 LE (RAW_NAMES).
 * ``json``: a JSON object; numbers (nested objects flattened as ``a.b``), bools as 0/1.
 """
@@ -20,6 +21,7 @@ from __future__ import annotations
 import json
 import math
 import struct
+import zlib
 from collections.abc import Callable
 
 import numpy as np
@@ -33,6 +35,7 @@ from firmware_model.fpga.layout import (
 )
 from hil.framelog.formats import (
     ENC_ETHERCAT,
+    ENC_ETHERCAT_FCS,
     ENC_JSON,
     ENC_LVDS_DOWN,
     ENC_LVDS_UP,
@@ -180,6 +183,27 @@ def _ethercat(data: bytes) -> dict[str, Value]:
     return out
 
 
+def _ethercat_fcs(data: bytes) -> dict[str, Value]:
+    # An EtherCAT PDU followed by its Ethernet FCS (hil.fieldbus.wire), as bus run logs it.
+    if len(data) <= 4:
+        raise DecodeError(f"ethercat-fcs frame of {len(data)} bytes has no PDU")
+    pdu = data[:-4]
+    fcs_ok = int((zlib.crc32(pdu) & 0xFFFFFFFF).to_bytes(4, "little") == data[-4:])
+    try:
+        dgs = ethercat.decode_pdu(pdu, allow_trailing=False)
+    except CodecError as exc:
+        raise DecodeError(f"EtherCAT PDU: {exc}") from None
+    out: dict[str, Value] = {"frame_bytes": len(data), "fcs_ok": fcs_ok, "datagrams": len(dgs)}
+    for i, d in enumerate(dgs):
+        p = f"dg{i}."
+        out[p + "cmd"] = d.cmd
+        out[p + "idx"] = d.idx
+        out[p + "address"] = d.adp | d.ado << 16
+        out[p + "length"] = len(d.data)
+        out[p + "wkc"] = d.wkc
+    return out
+
+
 # --- sensors, JSON --------------------------------------------------------------------------
 def _sensor_raw(data: bytes) -> dict[str, Value]:
     n, rest = divmod(len(data), 4)
@@ -227,6 +251,7 @@ register_decoder(ENC_LVDS_WORD, _lvds_word, _lvds_word_batch)
 register_decoder(ENC_LVDS_UP, _lvds_up, _lvds_up_batch)
 register_decoder(ENC_LVDS_DOWN, _lvds_down)
 register_decoder(ENC_ETHERCAT, _ethercat)
+register_decoder(ENC_ETHERCAT_FCS, _ethercat_fcs)
 register_decoder(ENC_SENSOR_RAW, _sensor_raw, _sensor_raw_batch)
 register_decoder(ENC_JSON, _json)
 

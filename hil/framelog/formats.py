@@ -20,6 +20,7 @@ ENC_LVDS_WORD = "eha-hil/lvds-word"
 ENC_LVDS_UP = "eha-hil/lvds-up"
 ENC_LVDS_DOWN = "eha-hil/lvds-down"
 ENC_ETHERCAT = "eha-hil/ethercat"
+ENC_ETHERCAT_FCS = "eha-hil/ethercat-fcs"  # an EtherCAT PDU + its Ethernet FCS (bus run)
 ENC_SENSOR_RAW = "eha-hil/sensor-raw"
 ENC_JSON = "json"
 
@@ -30,6 +31,8 @@ META_FRAMING = "eha-hil.framing"          # "single" | "block"
 META_FRAME_ENCODING = "eha-hil.frame_encoding"
 META_DTYPE = "eha-hil.dtype"              # block channels: numpy dtype name, e.g. "uint16"
 META_WIDTH = "eha-hil.width"              # block channels: elements per frame
+META_UNITS = "eha-hil.units"              # decoded-signal channels: JSON {field: SI unit}
+META_LAYOUT = "eha-hil.layout"            # raw channels: where the byte layout is documented
 
 # --- levels of detail -------------------------------------------------------------------
 #: Link kinds a simulation may log; a level includes the kinds listed for it.

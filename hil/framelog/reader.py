@@ -135,6 +135,7 @@ class ChannelInfo:
     frame_count: int = 0
     first_ns: int | None = None
     last_ns: int | None = None
+    schema_data: bytes = field(default=b"", repr=False)
 
 
 @dataclass(frozen=True)
@@ -174,8 +175,12 @@ class LogInfo:
                             f"{', '.join(c.topic for c in self.channels) or 'none'})")
 
     def to_dict(self) -> dict:
-        """Plain JSON-serialisable dict (for ``log info --json``)."""
-        return asdict(self)
+        """Plain JSON-serialisable dict (for ``log info --json``); a schema's data as its
+        size in bytes."""
+        d = asdict(self)
+        for c in d["channels"]:
+            c["schema_data"] = len(c["schema_data"])
+        return d
 
 
 class Blocks(NamedTuple):
@@ -209,7 +214,7 @@ class _Scan:
     profile: str = ""
     library: str = ""
     metadata: dict[str, dict[str, str]] = field(default_factory=dict)
-    schemas: dict[int, tuple[str, str]] = field(default_factory=dict)
+    schemas: dict[int, tuple[str, str, bytes]] = field(default_factory=dict)
     channels: dict[int, _Chan] = field(default_factory=dict)
     chunks: int = 0
     complete: bool = False
@@ -380,7 +385,8 @@ class FrameLogReader:
     @staticmethod
     def _schema(cur: _Cursor, scan: _Scan) -> None:
         sid = cur.u16()
-        scan.schemas[sid] = (cur.text(), cur.text())
+        name, encoding = cur.text(), cur.text()
+        scan.schemas[sid] = (name, encoding, bytes(cur.take(cur.u32())))
 
     def _chunk(self, body: memoryview, scan: _Scan, wanted: Callable[[_Chan], bool] | None,
                keep: dict[int, bool]) -> Iterator[_Msg]:
@@ -462,12 +468,12 @@ class FrameLogReader:
             pass
         chans = []
         for ch in sorted(scan.channels.values(), key=lambda c: c.id):
-            sname, senc = scan.schemas.get(ch.schema_id, ("", ""))
+            sname, senc, sdata = scan.schemas.get(ch.schema_id, ("", "", b""))
             chans.append(ChannelInfo(
                 ch.id, ch.topic, ch.encoding, ch.message_encoding,
                 "block" if ch.block else "single", sname, senc, dict(ch.metadata),
                 None if ch.dtype is None else ch.dtype.name, ch.width,
-                ch.messages, ch.frames, ch.first_ns, ch.last_ns))
+                ch.messages, ch.frames, ch.first_ns, ch.last_ns, sdata))
         firsts = [c.first_ns for c in chans if c.first_ns is not None]
         lasts = [c.last_ns for c in chans if c.last_ns is not None]
         return LogInfo(

@@ -34,6 +34,7 @@ import numpy as np
 from mcap.exceptions import UnsupportedCompressionError
 from mcap.writer import CompressionType, Writer
 
+from hil.framelog import batch
 from hil.framelog.formats import (
     BLOCK_MESSAGE_ENCODING,
     DTYPE_CODES,
@@ -42,6 +43,7 @@ from hil.framelog.formats import (
     META_DTYPE,
     META_FRAME_ENCODING,
     META_FRAMING,
+    META_UNITS,
     META_WIDTH,
     METADATA_NAME,
     PROFILE,
@@ -49,6 +51,9 @@ from hil.framelog.formats import (
     level_includes,
     pack_block,
 )
+from hil.framelog.protobuf import MESSAGE_ENCODING as PB_MESSAGE_ENCODING
+from hil.framelog.protobuf import SCHEMA_ENCODING as PB_SCHEMA_ENCODING
+from hil.framelog.protobuf import MessageType
 
 Compression = Literal["zstd", "lz4", "none"]
 _COMPRESSION = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4,
@@ -166,6 +171,7 @@ class FrameLogWriter:
             raise ValueError(f"compression {compression!r} unavailable ({exc}); "
                              "use compression='none'") from None
         self._writer.start(profile=profile, library=f"eha-hil/{package_version()}")
+        self._fast = batch.supported(self._writer)
         self._writer.add_metadata(METADATA_NAME, {
             "level": level, "version": package_version(), "time": "ns of simulated time",
             **meta})
@@ -262,6 +268,18 @@ class FrameLogWriter:
         return self._register(topic, ENC_JSON, sid, meta,
                               _Channel(topic, ENC_JSON, False, json_fields=frozenset(fields)))
 
+    def add_protobuf_channel(self, topic: str, message: MessageType,
+                             metadata: dict[str, str] | None = None) -> int:
+        """A channel of ``message`` (:class:`~hil.framelog.protobuf.MessageType`) samples,
+        one per MCAP message: encoding ``protobuf``, schema the message's
+        ``FileDescriptorSet``; channel metadata ``eha-hil.units`` maps fields to SI units.
+        Write with :meth:`write_messages`."""
+        sid = self._schema(message.full_name, PB_SCHEMA_ENCODING, message.schema)
+        meta = {**(metadata or {}), META_FRAMING: "single", META_FRAME_ENCODING:
+                PB_MESSAGE_ENCODING, META_UNITS: json.dumps(message.units(), sort_keys=True)}
+        return self._register(topic, PB_MESSAGE_ENCODING, sid, meta,
+                              _Channel(topic, PB_MESSAGE_ENCODING, False))
+
     # -- messages ------------------------------------------------------------------------
     def _channel(self, channel_id: int) -> _Channel:
         self._check_open()
@@ -336,6 +354,26 @@ class FrameLogWriter:
         self._writer.add_message(channel_id, first, pack_block(t, f), last,
                                  ch.count & 0xFFFFFFFF)
         ch.count += 1
+
+    def write_messages(self, channel_id: int, t_ns: np.ndarray, messages: list[bytes]) -> None:
+        """Log ``messages[i]`` at ``t_ns[i]`` (int ns, non-decreasing), one MCAP message each,
+        on a single-frame channel (e.g. :meth:`add_protobuf_channel`): the same records as
+        :meth:`write` per message, built in one go (:mod:`hil.framelog.batch`)."""
+        ch = self._channel(channel_id)
+        if ch.block:
+            raise ValueError(f"{ch.topic} is a block channel: use write_block")
+        t = np.asarray(t_ns)
+        if t.ndim != 1 or t.shape[0] != len(messages) or t.dtype.kind not in "iu":
+            raise ValueError(f"{ch.topic}: need (n,) integer times for {len(messages)} "
+                             f"messages, got {t.shape} {t.dtype}")
+        if not len(messages):
+            return
+        times = t.astype(np.int64).tolist()
+        if times[0] < 0 or any(b < a for a, b in zip(times, times[1:], strict=False)):
+            raise ValueError(f"{ch.topic}: message times must be >= 0 and non-decreasing")
+        self._advance(ch, times[0], times[-1])
+        batch.add_messages(self._writer, channel_id, times, messages, ch.count, self._fast)
+        ch.count += len(messages)
 
     @staticmethod
     def _cast(ch: _Channel, f: np.ndarray) -> np.ndarray:

@@ -21,6 +21,13 @@ Channels per box ``b`` (blocks of fixed-width frames, times in ns of simulated t
 
 The Metadata record holds the configuration (JSON), the topology, the box model and each
 board's calibrated angle offset, so a replay needs nothing but the file.
+
+Beside these raw channels, the decoded signals of :mod:`hil.replay.signals` (protobuf, SI
+units, one message per sample) go to the log and/or a live view (:class:`SignalOut`):
+``/signals/actuator/b.k`` each fieldbus cycle (each MCU step at level "full"),
+``/signals/box/b/outputs`` and ``/signals/box/b/inputs`` and ``/signals/bus`` each cycle.
+Every raw channel has a schema of encoding ``eha-hil/layout`` (JSON, :mod:`hil.framelog.layout`)
+that names its fields and their byte offsets.
 """
 
 from __future__ import annotations
@@ -31,8 +38,10 @@ from pathlib import Path
 
 import numpy as np
 
+from firmware_model.calibration import calibration
 from firmware_model.fpga import layout as B
 from firmware_model.lvds import link as LK
+from firmware_model.mcu import dpram
 from hil.actuator import TRACE_WIDTH, TRACE_WORDS
 from hil.fieldbus.boxes import StackBox
 from hil.fieldbus.chain import CYCLE_TICKS
@@ -40,13 +49,30 @@ from hil.fieldbus.master import Master
 from hil.fieldbus.system import BusRecord, BusSystem
 from hil.fieldbus.topology import Topology
 from hil.framelog import FrameLogWriter
+from hil.framelog.layout import SCHEMA_ENCODING as LAYOUT_ENCODING
+from hil.framelog.layout import Layout
+from hil.replay import layouts as LY
+from hil.replay import signals as SG
+from hil.replay.signal_out import SignalOut
 from plant.config import Config
 
 UP_WIDTH = B.UP_WORDS + 1
-ENC_MCU_UP = "eha-hil/mcu-up"        # the link's upstream words + CRC-error count, uint32
-ENC_MCU_DOWN = "eha-hil/lvds-down-registers"  # 13 downstream registers, uint16
-ENC_RECORD = "eha-hil/process-record"  # a box's fieldbus record, bytes
+ENC_MCU_UP = LY.ENC_MCU_UP
+ENC_MCU_DOWN = LY.ENC_MCU_DOWN
+ENC_RECORD = LY.ENC_RECORD
+ENC_FIELDBUS = "eha-hil/ethercat-fcs"  # an EtherCAT PDU + FCS (hil.fieldbus.wire)
 FLUSH_CYCLES = 100  # one block per channel per 100 ms of simulated time
+
+
+def signal_topics(box: int, board: int | None = None) -> dict[str, str]:
+    """Decoded-signal topics of box ``box`` (and of its board ``board``)."""
+    t = {"outputs": f"/signals/box/{box}/outputs", "inputs": f"/signals/box/{box}/inputs"}
+    if board is not None:
+        t["actuator"] = f"/signals/actuator/{box}.{board}"
+    return t
+
+
+BUS_SIGNAL_TOPIC = "/signals/bus"
 
 
 def topics(box: int, board: int | None = None) -> dict[str, str]:
@@ -62,56 +88,103 @@ def topics(box: int, board: int | None = None) -> dict[str, str]:
 class RecordingStackBox(StackBox):
     """A :class:`StackBox` that logs the MCU's inputs and outputs."""
 
-    def __init__(self, box, cfg: Config, log: FrameLogWriter) -> None:  # noqa: ANN001
+    def __init__(self, box, cfg: Config, log: FrameLogWriter | None,  # noqa: ANN001
+                 out: SignalOut | None = None) -> None:
         super().__init__(box, cfg)
         self.log = log
         self.tick_ns = cfg.get("sim.tick_ns")
         b = box.id
-        tp = topics(b)
-        self.ch_out = log.add_block_channel(tp["outputs"], ENC_RECORD, dtype=np.uint8,
-                                            width=max(self.out_dtype.itemsize, 1))
-        self.ch_in = log.add_block_channel(tp["inputs"], ENC_RECORD, dtype=np.uint8,
-                                           width=self.in_dtype.itemsize)
+        self.traced = log is not None and log.level == "full"
         self.ch_up, self.ch_down = [], []
+        self.ch_trace, self.ch_words, self.ch_raw = [], [], []
+        if log is not None:
+            self._add_raw_channels(log, box)
+        # decoded signals
+        self.out = out if out is not None else SignalOut(log)
+        self.cal = calibration(cfg)
+        self.period_ticks = cfg.get("mcu.period_ticks")
+        # actuator signals each MCU step at level full, else each fieldbus cycle (its last
+        # MCU step): a fifth of the messages, what keeps the default level's cost low
+        full = log is not None and log.level == "full"
+        self.every = 1 if full else CYCLE_TICKS // self.period_ticks
+        st = signal_topics(b)
+        self.sig_rec = {d: self.out.add(st[d], SG.record_message(box, d))
+                        for d in ("outputs", "inputs")}
+        self.sig_act = [self.out.add(signal_topics(b, k)["actuator"], SG.ACTUATOR)
+                        for k in range(len(self.stacks))]
+        self.x_last = [float("nan")] * len(self.stacks)
+        self._last_out = (np.zeros(0, np.int64),
+                          np.zeros((0, max(self.out_dtype.itemsize, 1)), np.uint8))
+        self._reset_buffers()
+
+    def _add_raw_channels(self, log: FrameLogWriter, box) -> None:  # noqa: ANN001
+        b = box.id
+        tp = topics(b)
+
+        def block(topic: str, lay: Layout, dtype: type, width: int) -> int:
+            return log.add_block_channel(topic, lay.encoding, dtype=dtype, width=width,
+                                         schema_name=lay.encoding,
+                                         schema_encoding=LAYOUT_ENCODING,
+                                         schema_data=lay.schema())
+
+        self.ch_out = block(tp["outputs"], LY.process_record(box, "outputs"), np.uint8,
+                            max(self.out_dtype.itemsize, 1))
+        self.ch_in = block(tp["inputs"], LY.process_record(box, "inputs"), np.uint8,
+                           self.in_dtype.itemsize)
         for k in range(len(self.stacks)):
             tk = topics(b, k)
-            self.ch_up.append(log.add_block_channel(tk["up"], ENC_MCU_UP, dtype=np.uint32,
-                                                    width=UP_WIDTH))
-            self.ch_down.append(log.add_block_channel(tk["down"], ENC_MCU_DOWN,
-                                                      dtype=np.uint16, width=B.DOWN_WORDS))
-        self.traced = log.level == "full"
-        self.ch_trace = [log.add_block_channel(topics(b, k)["trace"], "eha-hil/fpga-trace",
-                                               dtype=np.int64, width=TRACE_WIDTH)
-                         for k in range(len(self.stacks))] if self.traced else []
-        self.ch_words = [tuple(log.add_block_channel(f"/lvds/{b}.{k}/{d}_words",
-                                                     "eha-hil/lvds-word", dtype=np.uint64,
-                                                     width=1) for d in ("down", "up"))
-                         for k in range(len(self.stacks))] if self.traced else []
-        self.ch_raw = [log.add_block_channel(f"/sensors/{b}.{k}/raw", "eha-hil/sensor-raw",
-                                             dtype=np.uint32, width=B.N_RAW)
-                       for k in range(len(self.stacks))] if self.traced else []
-        self._reset_buffers()
+            self.ch_up.append(block(tk["up"], LY.mcu_up(), np.uint32, UP_WIDTH))
+            self.ch_down.append(block(tk["down"], LY.mcu_down(), np.uint16, B.DOWN_WORDS))
+            if self.traced:
+                self.ch_trace.append(block(tk["trace"], LY.fpga_trace(), np.int64,
+                                           TRACE_WIDTH))
+                self.ch_words.append(tuple(block(f"/lvds/{b}.{k}/{d}_words", LY.lvds_word(),
+                                                 np.uint64, 1) for d in ("down", "up")))
+                self.ch_raw.append(block(f"/sensors/{b}.{k}/raw", LY.sensor_raw(), np.uint32,
+                                         B.N_RAW))
 
     def _reset_buffers(self) -> None:
         self.buf_trace: list[list[tuple[int, np.ndarray]]] = [[] for _ in self.stacks]
         self.buf_out: list[tuple[int, bytes]] = []
         self.buf_in: list[tuple[int, bytes]] = []
-        self.buf_up: list[list[tuple[int, np.ndarray]]] = [[] for _ in self.stacks]
-        self.buf_down: list[list[tuple[int, np.ndarray]]] = [[] for _ in self.stacks]
+        # per MCU step (preallocated: this runs at 5 kHz): the MCU board's dual-port memory
+        # after the step, i.e. each board's upstream block as the MCU read it and downstream
+        # block as it wrote it, in one copy; and each link's CRC-error count
+        if not hasattr(self, "ram_rows"):
+            cap = FLUSH_CYCLES * CYCLE_TICKS // self.period_ticks + 8
+            # the blocks of the boards in use (they come first), in the memory's dtype: one
+            # plain copy up to the last board's upstream block
+            self.ram_words = (dpram.up_base(len(self.stacks) - 1) + B.UP_WORDS
+                              if self.board else 0)
+            dtype = np.int64 if self.board is None else self.board.ram.words.dtype
+            self.ram_rows = np.zeros((cap, self.ram_words), dtype)
+        self.t_steps: list[int] = []
+        self.crc_rows: list[list[int]] = []
+        self.n_steps = 0
 
     def apply(self, data: bytes) -> None:
         self.buf_out.append((self.tick, bytes(data)))
         super().apply(data)
 
     def _mcu_step(self, tick: int) -> None:
-        for k, s in enumerate(self.stacks):
-            up = np.empty(UP_WIDTH, dtype=np.uint32)
-            up[:-1] = s.mcu_link.up
-            up[-1] = s.mcu_link.up_crc_errors
-            self.buf_up[k].append((tick, up))
+        i = self.n_steps
+        if i == len(self.ram_rows):  # more steps than a flush holds: grow
+            self.ram_rows = np.concatenate([self.ram_rows, np.zeros_like(self.ram_rows)])
         super()._mcu_step(tick)
-        for k, s in enumerate(self.stacks):
-            self.buf_down[k].append((tick, s.mcu_link.down.astype(np.uint16)))
+        self.t_steps.append(tick)
+        self.ram_rows[i] = self.board.ram.words[:self.ram_words]
+        self.crc_rows.append([s.mcu_link.up_crc_errors for s in self.stacks])
+        self.n_steps = i + 1
+
+    def _up_down(self, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """Board ``k``'s upstream frames (n, 33: 32 words + CRC-error count, uint32) and
+        downstream registers (n, 16, uint16) of the buffered MCU steps."""
+        n = self.n_steps
+        u, d = dpram.up_base(k), dpram.down_base(k)
+        up = np.empty((n, UP_WIDTH), np.uint32)
+        up[:, :B.UP_WORDS] = self.ram_rows[:n, u:u + B.UP_WORDS]
+        up[:, B.UP_WORDS] = [r[k] for r in self.crc_rows]
+        return up, self.ram_rows[:n, d:d + B.DOWN_WORDS].astype(np.uint16)
 
     def _advance_stacks(self, n_ticks: int) -> None:
         if not self.traced:
@@ -129,26 +202,27 @@ class RecordingStackBox(StackBox):
             self.flush()
 
     def flush(self) -> None:
-        """Write the buffered frames as one block per channel."""
+        """Write the buffered frames as one block per channel, and their decoded signals."""
         ns = self.tick_ns
 
-        def put(ch: int, rows: list, as_bytes: bool) -> None:
-            if not rows:
-                return
-            t = np.array([r[0] for r in rows], dtype=np.int64) * ns
-            if as_bytes:
+        def put(ch: int, rows: list) -> None:
+            if rows and self.log is not None:
+                t = np.array([r[0] for r in rows], dtype=np.int64)
                 f = np.frombuffer(b"".join(r[1] for r in rows), dtype=np.uint8).reshape(
                     len(rows), -1)
-            else:
-                f = np.stack([r[1] for r in rows])
-            self.log.write_block(ch, t, f)
+                self.log.write_block(ch, t * ns, f)
 
-        if self.out_dtype.itemsize:
-            put(self.ch_out, self.buf_out, True)
-        put(self.ch_in, self.buf_in, True)
+        if self.log is not None:
+            if self.out_dtype.itemsize:
+                put(self.ch_out, self.buf_out)
+            put(self.ch_in, self.buf_in)
+        n = self.n_steps
+        t_steps = np.array(self.t_steps, dtype=np.int64) * ns
         for k in range(len(self.stacks)):
-            put(self.ch_up[k], self.buf_up[k], False)
-            put(self.ch_down[k], self.buf_down[k], False)
+            if self.log is not None and n:
+                up, down = self._up_down(k)
+                self.log.write_block(self.ch_up[k], t_steps, up)
+                self.log.write_block(self.ch_down[k], t_steps, down)
             if self.traced and self.buf_trace[k]:
                 t = np.concatenate([t0 + np.arange(len(rows), dtype=np.int64)
                                     for t0, rows in self.buf_trace[k]]) * ns
@@ -159,58 +233,181 @@ class RecordingStackBox(StackBox):
                     tw, words = LK.line_words(tr[:, TRACE_WORDS + d * LK.WORDS_W:], t)
                     if len(tw):
                         self.log.write_block(ch, tw, words[:, None])
+        self._write_signals()
         self._reset_buffers()
+
+    def _write_signals(self) -> None:
+        ns = self.tick_ns
+        out_t = out_f = None
+        for d, rows in (("outputs", self.buf_out), ("inputs", self.buf_in)):
+            if not rows or (d == "outputs" and not self.out_dtype.itemsize):
+                continue
+            t = np.array([r[0] for r in rows], dtype=np.int64)
+            f = np.frombuffer(b"".join(r[1] for r in rows), dtype=np.uint8).reshape(
+                len(rows), -1)
+            if d == "outputs":
+                out_t, out_f = t, f
+            self.out.write(self.sig_rec[d], t * ns, SG.record_columns(self.box, d, f))
+        if out_t is None:  # no output record this block: the last one still stands
+            out_t, out_f = self._last_out
+        else:
+            self._last_out = (out_t[-1:], out_f[-1:])
+        n = self.n_steps
+        # each kept step, and the step before it (for the piston speed)
+        keep = np.arange(self.every - 1, n, self.every)
+        for k, slot in enumerate(self.act):
+            if not len(keep):
+                continue
+            t = np.array(self.t_steps, dtype=np.int64)[keep]
+            up, down = self._up_down(k)
+            x_prev = self.x_last[k] if self.every == 1 else SG.piston_x(self.cal, up[keep - 1])
+            cols = SG.actuator_columns(self.cal, up[keep], down[keep], x_prev,
+                                       self.period_ticks * ns * 1e-9)
+            self.x_last[k] = float(cols["x_piston_m"][-1])
+            cols.update(SG.pc_command_columns(out_t, out_f, self.box, slot, t))
+            self.out.write(self.sig_act[k], t * ns, cols)
+
+
+def signal_boxes(chain, cfg: Config, live: object) -> list[RecordingStackBox]:  # noqa: ANN001
+    """Replace the stack boxes of ``chain`` (before it runs) by boxes that send their
+    decoded signals to ``live`` (no log); call :meth:`RecordingStackBox.flush` at the end.
+    Echo boxes stay as they are (they have no MCU to decode)."""
+    out = SignalOut(None, live)
+    recs = []
+    for i, b in enumerate(chain.boxes):
+        if isinstance(b, StackBox):
+            chain.boxes[i] = RecordingStackBox(b.box, cfg, None, out)
+            recs.append(chain.boxes[i])
+    return recs
+
+
+class BusSignals:
+    """``/signals/bus``: the master's counters and the WKC of each cycle, buffered and
+    written every :data:`FLUSH_CYCLES` cycles."""
+
+    def __init__(self, out: SignalOut, master: Master, tick_ns: int) -> None:
+        self.out = out
+        self.master = master
+        self.tick_ns = tick_ns
+        self.ch = out.add(BUS_SIGNAL_TOPIC, SG.BUS)
+        self.wkc_expected = sum(w for _, _, w in master.plan.frames)
+        self.rows: list[tuple[int, ...]] = []
+        self.wkc = 0
+        self.frames = 0
+
+    def tap(self, direction: str, frame: bytes) -> None:
+        """A frame of the current cycle; a reply's working counter is the 2 bytes before
+        its FCS (the master sends one datagram per frame)."""
+        if direction == "tx":
+            self.frames += 1
+        elif len(frame) >= 6:
+            self.wkc += int.from_bytes(frame[-6:-4], "little")
+
+    def end_cycle(self) -> None:
+        """Called at the start of each cycle but the first, and once after the last."""
+        m = self.master
+        st = m.stats
+        self.rows.append((m.cycle - 1, self.frames, self.wkc, st.frames_sent, st.frames_ok,
+                          st.wkc_errors, st.bad_frames, st.stale_frames, st.lost_frames))
+        self.wkc = self.frames = 0
+        if len(self.rows) >= FLUSH_CYCLES:
+            self.flush()
+
+    def flush(self) -> None:
+        if not self.rows:
+            return
+        a = np.array(self.rows, dtype=np.int64)
+        cols = {"cycle": a[:, 0], "frames": a[:, 1], "wkc": a[:, 2],
+                "wkc_expected": self.wkc_expected,
+                **{name: a[:, 3 + i] for i, name in enumerate(SG.MASTER_COUNTERS)}}
+        # stamped at the end of the cycle (when its replies are in)
+        self.out.write(self.ch, (a[:, 0] + 1) * CYCLE_TICKS * self.tick_ns - 1, cols)
+        self.rows = []
 
 
 def run_logged(topo: Topology, cfg: Config, cycles: int, pc: Callable[[int, Master], None],
-               log_path: str | Path, level: str = "mcu",
+               log_path: str | Path | None, level: str = "mcu",
                progress: Callable[[int, int], None] | None = None,
-               faults: object = None,
+               faults: object = None, live: object = None,
                capture: Callable[[int, int, bytes, str], None] | None = None) -> BusRecord:
     """Run ``cycles`` cycles in-process with the stack model and log them to ``log_path``.
 
     ``faults``: a fault declaration (:func:`hil.fieldbus.faults.parse_faults`); the log holds
     what the master sent and received and what each MCU took in and gave out, faults and
-    all, so the replay reproduces a faulty run too. ``capture``: a further tap that sees
-    every fieldbus frame (e.g. :meth:`hil.fieldbus.capture.CaptureWriter.tap`)."""
-    with FrameLogWriter(log_path, level=level, flush_every_ns=FLUSH_CYCLES * CYCLE_TICKS
-                        * cfg.get("sim.tick_ns")) as log:
+    all, so the replay reproduces a faulty run too. ``live``: a live view the decoded
+    signals also go to (:class:`SignalOut`); ``log_path`` None: only there. ``capture``: a
+    further tap that sees every fieldbus frame (e.g.
+    :meth:`hil.fieldbus.capture.CaptureWriter.tap`)."""
+    import contextlib
+
+    tick_ns = cfg.get("sim.tick_ns")
+    with contextlib.ExitStack() as stack:
+        log = None
+        if log_path is not None:
+            log = stack.enter_context(FrameLogWriter(
+                log_path, level=level, flush_every_ns=FLUSH_CYCLES * CYCLE_TICKS * tick_ns))
+        out = SignalOut(log, live)
         ch_bus = None
-        if level in ("bus", "mcu", "full"):
-            ch_bus = log.add_channel("/fieldbus/frames", "eha-hil/ethercat-fcs",
-                                     schema_name="eha-hil/ethercat-fcs")
-        tick_ns = cfg.get("sim.tick_ns")
+        if log is not None:
+            lay = Layout(ENC_FIELDBUS, 0, ())  # frames vary in length: no fixed layout
+            ch_bus = log.add_channel("/fieldbus/frames", ENC_FIELDBUS,
+                                     schema_name=ENC_FIELDBUS, schema_encoding=LAYOUT_ENCODING,
+                                     schema_data=lay.schema())
+        bus_sig: BusSignals | None = None
+        # the frames of the last cycles, written with the blocks (one batch per
+        # FLUSH_CYCLES: a message at a time costs ~9 us, see hil.framelog.batch)
+        bus_t: list[int] = []
+        bus_frames: list[bytes] = []
 
         def tap(cycle: int, tick: int, frame: bytes, direction: str) -> None:
             if ch_bus is not None:
-                log.write(ch_bus, tick * tick_ns + (1 if direction == "rx" else 0), frame)
+                bus_t.append(tick * tick_ns + (1 if direction == "rx" else 0))
+                bus_frames.append(bytes(frame))
+            bus_sig.tap(direction, frame)
             if capture is not None:
                 capture(cycle, tick, frame, direction)
 
-        use_tap = ch_bus is not None or capture is not None
-        with BusSystem(topo, cfg, "inproc", model="stack", tap=tap if use_tap else None) as bs:
-            boxes = [RecordingStackBox(b, cfg, log) for b in topo.boxes]
+        def flush_frames() -> None:
+            if bus_frames:
+                log.write_messages(ch_bus, np.array(bus_t, dtype=np.int64), bus_frames)
+                bus_t.clear()
+                bus_frames.clear()
+
+        def pc_signals(cycle: int, m: Master) -> None:
+            if cycle > 0:
+                bus_sig.end_cycle()
+                if cycle % FLUSH_CYCLES == 0:
+                    flush_frames()
+            pc(cycle, m)
+
+        with BusSystem(topo, cfg, "inproc", model="stack", tap=tap) as bs:
+            bus_sig = BusSignals(out, bs.master, tick_ns)
+            boxes = [RecordingStackBox(b, cfg, log, out) for b in topo.boxes]
             bs.chain.boxes = boxes
             if faults is not None:
                 bs._install_faults(faults)  # after the recording boxes replaced the plain ones
             offsets = {f"{b.box.id}.{k}": int(s.board.calibrated_offset)
                        for b in boxes for k, s in enumerate(b.stacks)}
-            log.add_metadata("eha-hil.replay", {
-                "config": json.dumps(cfg.data), "topology": topo.source,
-                "model": "stack", "offsets": json.dumps(offsets),
-                "cycles": str(cycles)})
+            if log is not None:
+                log.add_metadata("eha-hil.replay", {
+                    "config": json.dumps(cfg.data), "topology": topo.source,
+                    "model": "stack", "offsets": json.dumps(offsets),
+                    "cycles": str(cycles)})
             step = max(cycles // 20, 1)
             rec = None
             done = 0
             while done < cycles:
                 n = min(step, cycles - done)
-                part = bs.run(n, pc)
+                part = bs.run(n, pc_signals)
                 rec = part if rec is None else BusRecord(
                     np.concatenate([rec.inputs, part.inputs]), part.master, part.chain,
                     part.transport)
                 done += n
                 if progress:
                     progress(done, cycles)
+            bus_sig.end_cycle()
+            bus_sig.flush()
+            flush_frames()
             for b in boxes:
                 b.flush()
         return rec

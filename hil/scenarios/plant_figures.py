@@ -66,7 +66,9 @@ def f1(cfg: Config, progress: Progress = None) -> ScenarioResult:
 def _plot_f1(res: ScenarioResult, path: Path) -> None:
     from hil.plots import plot_bode
 
-    plot_bode([res.series["bode"]], path)
+    plot_bode([res.series["bode"]], path, thesis_hz=[
+        (THESIS_F1["model_peak_hz"], f"model peak {THESIS_F1['model_peak_hz']:g} Hz"),
+        (THESIS_F1["measured_peak_hz"], f"measured {THESIS_F1['measured_peak_hz']:g} Hz")])
 
 
 @register("f2", "thesis F2: T-N curve at 18 A on the plant alone (stall ~1700 N, no-load "
@@ -93,7 +95,7 @@ def f2(cfg: Config, progress: Progress = None) -> ScenarioResult:
 def _plot_f2(res: ScenarioResult, path: Path) -> None:
     from hil.plots import plot_tn_curve
 
-    plot_tn_curve(res.series["curve"], path)
+    plot_tn_curve(res.series["curve"], path, thesis=THESIS_F2)
 
 
 __all__ = ["F1_FREQS", "F2_BANDS", "THESIS_F1", "THESIS_F2", "f1", "f2", "within_band"]

@@ -68,6 +68,21 @@ def f3(cfg: Config, progress: Progress = None) -> ScenarioResult:
                           plot=_plot_f3)
 
 
+def _mark_metrics(ax, res: ScenarioResult, unit: str, axis: str,  # noqa: ANN001
+                  label: bool = True) -> None:
+    """Mark every metric of ``res`` in ``unit`` that has a thesis figure, as a line across
+    the ``axis`` ("x": vertical)."""
+    from hil.plots import mark_thesis
+
+    for m in res.metrics:
+        if m.unit == unit and m.thesis is not None:
+            text = f"{m.name} {m.thesis:g} {unit}" if label else ""
+            if axis == "x":
+                mark_thesis(ax, x=m.thesis, label=text)
+            else:
+                mark_thesis(ax, y=m.thesis, label=text)
+
+
 def _plot_f3(res: ScenarioResult, path: Path) -> None:
     from hil.plots import _pyplot
 
@@ -77,6 +92,7 @@ def _plot_f3(res: ScenarioResult, path: Path) -> None:
     ax.plot(s["t_v"] * 1e3, s["f_v"], "b", label="velocity based (Fig. 5.1)")
     ax.plot(s["t_c"] * 1e3, s["f_c"], "r", label="current based (Fig. 5.2)")
     ax.axhline(STEP_N, color="k", ls=":", lw=0.8)
+    _mark_metrics(ax, res, "ms", "x")
     ax.set_xlim(-10, 200)
     ax.set_xlabel("time after the step [ms]")
     ax.set_ylabel("pressure force k_c p [N]")
@@ -139,13 +155,18 @@ def f4(cfg: Config, progress: Progress = None) -> ScenarioResult:
 
 
 def _plot_f4(res: ScenarioResult, path: Path) -> None:
-    from hil.plots import _pyplot
+    from hil.plots import _pyplot, mark_thesis
 
     plt = _pyplot()
     s = res.series
     fig, ax = plt.subplots(figsize=(7, 4))
     ax.plot(np.degrees(s["th_v"]), s["e_v"] / 1e6, "b.-", label="velocity based")
     ax.plot(np.degrees(s["th_c"]), s["e_c"] / 1e6, "r.-", label="current based")
+    for m in res.metrics:  # a p-p figure: +/- half of it about the mean error
+        if m.unit == "MPa" and m.thesis is not None:
+            for side in (1, -1):
+                mark_thesis(ax, y=side * m.thesis / 2,
+                            label=f"{m.name} {m.thesis:g} MPa" if side > 0 else "")
     ax.set_xlabel("pump rotor angle [deg]")
     ax.set_ylabel("pressure tracking error [MPa]")
     ax.set_title("F4: " + res.title)
@@ -245,6 +266,8 @@ def _plot_bodes(res: ScenarioResult, path: Path) -> None:
         ag.semilogx(f, 20 * np.log10(np.abs(h)), "o-", ms=4, label=name)
         ap.semilogx(f, np.degrees(np.unwrap(np.angle(h))), "o-", ms=4)
     ag.axhline(-3.0, color="r", ls=":", lw=0.8)
+    _mark_metrics(ag, res, "Hz", "x")
+    _mark_metrics(ap, res, "Hz", "x", label=False)
     ag.set_ylabel("gain [dB]")
     ap.set_ylabel("phase [deg]")
     ap.set_xlabel("frequency [Hz]")

@@ -1,0 +1,123 @@
+"""Many MCAP Message records at once, into the mcap library's open chunk.
+
+``mcap.writer.Writer.add_message`` costs ~9 us of Python per message (a ``Message``
+dataclass, five ``struct.pack`` calls and a seek-back per record, statistics and index
+updates one at a time, and two more ``struct.pack`` per message for its index entry when the
+chunk closes; measured by ``eha-hil bench log``). A ``bus run`` log has
+thousands of small messages per simulated second (one decoded-signal sample per
+actuator and MCU step, two fieldbus frames per cycle), and that alone would cost about
+half of the run's own time. :func:`add_messages` builds the records of a whole batch with
+one ``struct.pack`` per message (or a numpy structured array when every payload has the
+same length) and makes exactly the updates ``add_message`` would: statistics (count,
+start and end time, per-channel counts), the chunk builder's message index, count and
+time range, then the chunk-size check; the index of a channel written this way writes its
+entries with one numpy call.
+
+These are the Writer's private attributes (mcap 1.x). :func:`supported` checks that they
+are there and have the expected types; if not, :func:`add_messages` falls back to
+``add_message`` per message, so a future mcap release can make logging slower but never
+wrong. A batch goes into the open chunk whole (the chunk closes after it if it is then over
+size), so with small chunks the chunk boundaries differ from ``add_message``'s; otherwise
+the file is the same: ``tests/framelog/test_batch.py`` compares the two byte for byte, and
+the messages read back by the mcap library's reader.
+"""
+
+from __future__ import annotations
+
+import struct
+from collections.abc import Sequence
+
+import numpy as np
+from mcap.records import MessageIndex, Opcode
+from mcap.writer import Writer
+
+_HEAD = struct.Struct("<BQHIQQ")  # opcode, record length, channel, sequence, log, publish
+
+
+class _MessageIndex(MessageIndex):
+    """A MessageIndex that writes its (time, offset) pairs with one numpy call instead of
+    two ``struct.pack`` per message (the same bytes)."""
+
+    def write(self, stream) -> None:  # noqa: ANN001 - mcap's RecordBuilder
+        stream.start_record(Opcode.MESSAGE_INDEX)
+        stream.write2(self.channel_id)
+        stream.write4(len(self.records) * 16)
+        stream.write(np.asarray(self.records, dtype="<u8").reshape(-1, 2).tobytes())
+        stream.finish_record()
+
+
+def supported(w: Writer) -> bool:
+    """True if ``w`` has the private state :func:`add_messages` updates."""
+    stats = getattr(w, "_Writer__statistics", None)
+    cb = getattr(w, "_Writer__chunk_builder", None)
+    rw = getattr(cb, "record_writer", None)
+    return (stats is not None and cb is not None
+            and hasattr(stats, "channel_message_counts") and hasattr(stats, "message_count")
+            and isinstance(getattr(cb, "message_indices", None), dict)
+            and hasattr(cb, "num_messages") and hasattr(getattr(rw, "_buffer", None), "write")
+            and callable(getattr(w, "_Writer__maybe_finalize_chunk", None)))
+
+
+def add_messages(w: Writer, channel_id: int, times: Sequence[int], data: Sequence[bytes],
+                 seq0: int, fast: bool = True) -> None:
+    """Messages ``data[i]`` at log and publish time ``times[i]``, sequence ``seq0 + i``
+    (mod 2^32), on ``channel_id``; as ``add_message`` for each, in one go."""
+    n = len(data)
+    if not n:
+        return
+    if not fast:
+        for i in range(n):
+            w.add_message(channel_id, times[i], data[i], times[i], (seq0 + i) & 0xFFFFFFFF)
+        return
+    stats = w._Writer__statistics  # noqa: SLF001 - see the module docstring
+    cb = w._Writer__chunk_builder  # noqa: SLF001
+    t_first, t_last = min(times), max(times)
+    if stats.message_count == 0:
+        stats.message_start_time = t_first
+    else:
+        stats.message_start_time = min(t_first, stats.message_start_time)
+    stats.message_end_time = max(t_last, stats.message_end_time)
+    stats.channel_message_counts[channel_id] += n
+    stats.message_count += n
+
+    if cb.num_messages == 0:
+        cb.message_start_time = t_first
+    else:
+        cb.message_start_time = min(cb.message_start_time, t_first)
+    cb.message_end_time = max(cb.message_end_time, t_last)
+    index = cb.message_indices.get(channel_id)
+    if not index:
+        index = cb.message_indices[channel_id] = _MessageIndex(channel_id=channel_id,
+                                                               records=[])
+    base = cb.record_writer.count
+    size = len(data[0])
+    if all(len(d) == size for d in data):
+        rec = np.zeros(n, np.dtype([("op", "u1"), ("len", "<u8"), ("ch", "<u2"), ("seq", "<u4"),
+                                    ("log", "<u8"), ("pub", "<u8"), ("data", "u1", (size,))]))
+        rec["op"] = Opcode.MESSAGE
+        rec["len"] = _HEAD.size - 9 + size
+        rec["ch"] = channel_id
+        rec["seq"] = (np.arange(n, dtype=np.int64) + seq0) & 0xFFFFFFFF
+        t = np.asarray(times, dtype=np.uint64)
+        rec["log"] = t
+        rec["pub"] = t
+        rec["data"] = np.frombuffer(b"".join(data), np.uint8).reshape(n, size)
+        blob = rec.tobytes()
+        step = rec.itemsize
+        offsets = range(base, base + n * step, step)
+    else:
+        parts, offsets, pos = [], [], base
+        pack = _HEAD.pack
+        op = Opcode.MESSAGE
+        for i in range(n):
+            d = data[i]
+            parts.append(pack(op, _HEAD.size - 9 + len(d), channel_id,
+                              (seq0 + i) & 0xFFFFFFFF, times[i], times[i]))
+            parts.append(d)
+            offsets.append(pos)
+            pos += _HEAD.size + len(d)
+        blob = b"".join(parts)
+    index.records.extend(zip(times, offsets, strict=True))
+    cb.num_messages += n
+    cb.record_writer._buffer.write(blob)  # noqa: SLF001
+    w._Writer__maybe_finalize_chunk()  # noqa: SLF001

@@ -1,0 +1,36 @@
+"""Where a run's decoded signals go: the log's protobuf channels and/or a live view."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from hil.framelog import FrameLogWriter
+from hil.framelog.protobuf import MessageType
+
+
+class SignalOut:
+    """Where the decoded signals go: the log's protobuf channels and/or a live view (an
+    object with ``add(topic, message)`` -> handle and ``log(handle, t_ns, payloads)``, e.g.
+    :class:`hil.live.FoxgloveLive`). Each block of samples is encoded once for both."""
+
+    def __init__(self, log: FrameLogWriter | None, live: object = None) -> None:
+        self.log = log
+        self.live = live
+        self._channels: list[tuple[MessageType, int | None, object]] = []
+
+    def add(self, topic: str, message: MessageType) -> int:
+        cid = None if self.log is None else self.log.add_protobuf_channel(topic, message)
+        handle = None if self.live is None else self.live.add(topic, message)
+        self._channels.append((message, cid, handle))
+        return len(self._channels) - 1
+
+    def write(self, channel: int, t_ns: np.ndarray, columns: dict[str, np.ndarray]) -> None:
+        message, cid, handle = self._channels[channel]
+        n = len(t_ns)
+        if not n:
+            return
+        payloads = message.encode(columns, n)
+        if cid is not None:
+            self.log.write_messages(cid, t_ns, payloads)
+        if handle is not None:
+            self.live.log(handle, t_ns, payloads)

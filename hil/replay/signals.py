@@ -1,0 +1,226 @@
+"""The decoded signals of a fieldbus run, in SI units, as protobuf messages a viewer plots.
+
+Beside the raw frames the replay needs (:mod:`hil.replay.record`), a ``bus run`` log
+carries what those frames mean, one message per sample (``docs/framelog.md``):
+
+* ``/signals/actuator/<b>.<k>`` (:data:`ACTUATOR`), each MCU step: the PC's command in
+  force, the MCU's references to the board, what the MCU read from the board (pressures,
+  forces, piston, motor, currents, voltages, temperature) and the board's status bits and
+  error counters. Decoded from the MCU's side of the LVDS link (the words it read and
+  wrote) with the MCU's conversions (:func:`firmware_model.mcu.measure.upstream_si`) and
+  the run's firmware calibration; one field per analog input of the board
+  (``firmware_model.fpga.layout.ANALOG_INPUTS``: the five pressures, the oil and rod
+  temperatures).
+* ``/signals/box/<b>/outputs`` and ``.../inputs``, each fieldbus cycle: the box's process
+  record (:mod:`hil.fieldbus.pdo`) field by field, in SI units.
+* ``/signals/bus``, each fieldbus cycle: the master's counters and the cycle's WKC.
+
+Each function here turns buffered raw data into columns (field -> numpy array); encoding
+them is :meth:`hil.framelog.protobuf.MessageType.encode`.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from firmware_model.calibration import FirmwareCalibration
+from firmware_model.fpga import layout as B
+from firmware_model.mcu.measure import upstream_si
+from hil.fieldbus import pdo
+from hil.fieldbus.topology import Box
+from hil.framelog.protobuf import Field, MessageType
+
+PACKAGE = "eha_hil"
+#: One field per analog input of the board (pressures, temperatures), from its declaration.
+_ANALOG_UNIT_SUFFIX = {"Pa": "pa", "degC": "c"}
+_ANALOG = tuple((a, f"{a.name}_{_ANALOG_UNIT_SUFFIX.get(a.unit, a.unit.lower())}")
+                for a in B.ANALOG_INPUTS)
+_ANALOG_FIELDS = tuple(Field(field, "double", a.unit, a.meaning.split(",")[0])
+                       for a, field in _ANALOG)
+_STATUS_FIELDS = tuple(Field(name.lower(), "bool", "", f"board status bit {bit}: {doc}")
+                       for bit, name, doc in B.STATUS_BITS)
+
+ACTUATOR = MessageType(f"{PACKAGE}.ActuatorSignals", (
+    # commands: the PC's (fieldbus record, held between cycles) and the MCU's to the board
+    Field("pc_mode", "fixed32", "", "PC command mode: 0 off, 1 force, 2 position"),
+    Field("pc_enable", "bool", "", "PC enable flag"),
+    Field("force_command_n", "double", "N", "PC force command (NaN unless mode 1)"),
+    Field("position_command_m", "double", "m", "PC position command (NaN unless mode 2)"),
+    Field("iq_ref_a", "double", "A", "q-axis current reference the MCU wrote"),
+    Field("id_ref_a", "double", "A", "d-axis current reference the MCU wrote"),
+    Field("vq_ff_v", "double", "V", "q-axis voltage feed-forward the MCU wrote"),
+    Field("board_mode", "fixed32", "", "board mode register: 0 off, 1 current, 2 voltage"),
+    Field("board_control", "fixed32", "", "board control register: bit 0 enable, 1 clear"),
+    # what the MCU read
+    *_ANALOG_FIELDS,
+    Field("f_pressure_n", "double", "N", "pressure force k_c (p_cyl_a - p_cyl_b)"),
+    Field("f_strain_n", "double", "N", "strain-gauge force"),
+    Field("x_piston_m", "double", "m", "piston position about mid-stroke"),
+    Field("v_piston_m_s", "double", "m/s", "piston speed: position change over the MCU step"),
+    Field("omega_m_rad_s", "double", "rad/s", "motor speed (ABI count over the speed window)"),
+    Field("iq_a", "double", "A", "measured q-axis current"),
+    Field("id_a", "double", "A", "measured d-axis current"),
+    Field("ia_a", "double", "A", "phase a current"),
+    Field("ib_a", "double", "A", "phase b current"),
+    Field("vd_v", "double", "V", "d-axis voltage applied"),
+    Field("vq_v", "double", "V", "q-axis voltage applied"),
+    # status and errors
+    Field("status", "fixed32", "", "board status word (the bits below)"),
+    Field("state", "fixed32", "", "board state: 0 disabled, 1 enabled, 2 fault"),
+    *_STATUS_FIELDS,
+    Field("err_ssi", "fixed32", "", "SSI frames rejected"),
+    Field("err_biss", "fixed32", "", "BiSS frames rejected"),
+    Field("err_strain", "fixed32", "", "AD7195 reads rejected"),
+    Field("err_link_down", "fixed32", "", "downstream LVDS words the board discarded (CRC)"),
+    Field("err_link_up", "fixed32", "", "upstream LVDS words the MCU discarded (CRC)"),
+    Field("oc_trips", "fixed32", "", "over-current trips"),
+    Field("wd_trips", "fixed32", "", "link watchdog trips"),
+), "one actuator, each MCU step")
+
+BUS = MessageType(f"{PACKAGE}.BusCycle", (
+    Field("cycle", "fixed64", "", "fieldbus cycle number"),
+    Field("frames", "fixed32", "", "frames sent this cycle"),
+    Field("wkc", "fixed32", "", "sum of the working counters of this cycle's replies"),
+    Field("wkc_expected", "fixed32", "", "sum of the working counters the plan expects"),
+    Field("frames_sent", "fixed64", "", "master counter: frames sent"),
+    Field("frames_ok", "fixed64", "", "master counter: replies applied"),
+    Field("wkc_errors", "fixed64", "", "master counter: replies with a wrong working counter"),
+    Field("bad_frames", "fixed64", "", "master counter: replies that failed FCS/PDU checks"),
+    Field("stale_frames", "fixed64", "", "master counter: replies from another cycle"),
+    Field("lost_frames", "fixed64", "", "master counter: frames that did not come back"),
+), "the fieldbus, each cycle")
+
+#: The master counters in BUS, in MasterStats' names.
+MASTER_COUNTERS = ("frames_sent", "frames_ok", "wkc_errors", "bad_frames", "stale_frames",
+                   "lost_frames")
+
+
+def _record_fields(fields: tuple[pdo.Field, ...], prefix: str) -> list[Field]:
+    out = []
+    for f in fields:
+        if f.lsb == 0.0:  # the command: its unit depends on the mode
+            out += [Field(f"{prefix}force_command_n", "double", "N", "force command (mode 1)"),
+                    Field(f"{prefix}position_command_m", "double", "m",
+                          "position command (mode 2)")]
+        elif f.unit:
+            out.append(Field(f"{prefix}{f.name}_{_suffix(f.unit)}", "double", f.unit, f.doc))
+        else:
+            out.append(Field(f"{prefix}{f.name}", "fixed32", "", f.doc))
+    return out
+
+
+def _suffix(unit: str) -> str:
+    return {"m/s^2": "m_s2", "N m": "nm", "N/N": "n_n", "degC": "c"}.get(
+        unit, unit.lower().replace("/", "_"))
+
+
+def record_message(box: Box, direction: str) -> MessageType:
+    """The message of box ``box``'s ``outputs`` or ``inputs`` record: per slot ``s<k>_``
+    fields in SI units (one type per slot layout, shared by boxes of the same layout)."""
+    which = 0 if direction == "outputs" else 1
+    fields = []
+    for k, s in enumerate(box.slots):
+        fields += _record_fields(pdo.SLOT_FIELDS[s.kind][which], f"s{k}_")
+    kinds = "_".join(s.kind for s in box.slots) or "empty"
+    return MessageType(f"{PACKAGE}.Box{direction.capitalize()}_{kinds}", fields,
+                       f"the {direction} record of a box, each cycle")
+
+
+def record_columns(box: Box, direction: str, records: np.ndarray) -> dict[str, np.ndarray]:
+    """SI columns of ``records`` ((n, bytes) uint8 rows of the box's record)."""
+    which = 0 if direction == "outputs" else 1
+    cols: dict[str, np.ndarray] = {}
+    off = 0
+    for k, s in enumerate(box.slots):
+        decl = pdo.SLOT_FIELDS[s.kind][which]
+        dt = pdo.record_dtype(decl)
+        if not dt.itemsize:
+            continue
+        rec = np.ascontiguousarray(records[:, off:off + dt.itemsize]).view(dt)[:, 0]
+        off += dt.itemsize
+        for f in decl:
+            if f.lsb == 0.0:
+                cols.update(_commands(rec["mode"], rec[f.name].astype(np.int64), f"s{k}_"))
+            elif f.unit:
+                cols[f"s{k}_{f.name}_{_suffix(f.unit)}"] = rec[f.name] * f.lsb
+            else:
+                cols[f"s{k}_{f.name}"] = rec[f.name]
+    return cols
+
+
+def _commands(mode: np.ndarray, command: np.ndarray, prefix: str = "") -> dict[str, np.ndarray]:
+    force = mode == pdo.MODE_CODES["force"]
+    pos = mode == pdo.MODE_CODES["position"]
+    return {f"{prefix}force_command_n": np.where(force, command * pdo.FORCE_CMD_LSB, math.nan),
+            f"{prefix}position_command_m": np.where(pos, command * pdo.POSITION_CMD_LSB,
+                                                    math.nan)}
+
+
+def piston_x(cal: FirmwareCalibration, up: np.ndarray) -> np.ndarray:
+    """Piston position, m, of upstream frames ``up`` (n, >= 31 words), as the MCU reads it."""
+    return upstream_si(np.asarray(up)[:, :len(B.UP_REGISTERS)], cal)["x_piston"]
+
+
+def actuator_columns(cal: FirmwareCalibration, up: np.ndarray, down: np.ndarray,
+                     x_before: float | np.ndarray, period_s: float) -> dict[str, np.ndarray]:
+    """SI columns of ``n`` MCU steps of one board: ``up`` (n, 33) the words the MCU read
+    (32 words + its upstream CRC-error count), ``down`` (n, 16) the registers it wrote.
+    ``x_before``: the piston position one MCU step (``period_s``) before each sample, (n,);
+    or, for consecutive steps, a float: the position before the first (NaN: unknown)."""
+    u = np.asarray(up).astype(np.int64)
+    d = np.asarray(down).astype(np.int64) & 0xFFFF
+
+    def s16(a: np.ndarray) -> np.ndarray:
+        a = a & 0xFFFF
+        return a - ((a & 0x8000) << 1)
+
+    si = upstream_si(u[:, :len(B.UP_REGISTERS)], cal)
+    rad_per_count = 2.0 * math.pi / (cal.abi_counts_per_rev * cal.fpga["speed_window_ticks"]
+                                     * cal.tick_s)
+    x = si["x_piston"]
+    status = u[:, B.U_STATUS] & 0xFFFF
+    cols = {
+        "iq_ref_a": s16(d[:, B.D_IQ_REF]) * 1e-3, "id_ref_a": s16(d[:, B.D_ID_REF]) * 1e-3,
+        "vq_ff_v": s16(d[:, B.D_VQ_FF]) * 1e-3, "board_mode": d[:, B.D_MODE],
+        "board_control": d[:, B.D_CONTROL],
+        "f_pressure_n": cal.kc_m2 * (si["p_cyl_a"] - si["p_cyl_b"]),
+        "f_strain_n": si["f_strain_raw"], "x_piston_m": x,
+        "v_piston_m_s": (x - x_before if isinstance(x_before, np.ndarray) else
+                         np.diff(x, prepend=x_before)) / period_s,
+        "omega_m_rad_s": s16(u[:, B.U_SPEED]) * rad_per_count,
+        "iq_a": si["iq"], "id_a": s16(u[:, B.U_ID]) * 1e-3, "ia_a": s16(u[:, B.U_IA]) * 1e-3,
+        "ib_a": s16(u[:, B.U_IB]) * 1e-3, "vd_v": s16(u[:, B.U_VD_OUT]) * 1e-3,
+        "vq_v": s16(u[:, B.U_VQ_OUT]) * 1e-3,
+        "status": status, "state": u[:, B.U_STATE] & 0xFFFF,
+        "err_ssi": u[:, B.U_ERR_SSI], "err_biss": u[:, B.U_ERR_BISS],
+        "err_strain": u[:, B.U_ERR_STRAIN], "err_link_down": u[:, B.U_ERR_LINK_CRC],
+        "err_link_up": u[:, B.UP_WORDS], "oc_trips": u[:, B.U_OC_TRIPS],
+        "wd_trips": u[:, B.U_WD_TRIPS],
+    }
+    for a, field in _ANALOG:
+        cols[field] = si[a.si_name]
+    for (bit, _, _), f in zip(B.STATUS_BITS, _STATUS_FIELDS, strict=True):
+        cols[f.name] = (status >> bit) & 1
+    return cols
+
+
+def pc_command_columns(out_ticks: np.ndarray, out_records: np.ndarray, box: Box, slot: int,
+                       step_ticks: np.ndarray) -> dict[str, np.ndarray]:
+    """The PC's command to actuator slot ``slot`` as it stood at each MCU step: the output
+    record of the latest cycle applied at or before the step (none yet: mode 0, NaN)."""
+    off = sum(s.sizes[0] for s in box.slots[:slot])
+    dt = pdo.ACTUATOR_OUT_DTYPE
+    n = len(step_ticks)
+    if len(out_ticks) == 0:
+        return {"pc_mode": np.zeros(n, np.int64), "pc_enable": np.zeros(n, bool),
+                **_commands(np.zeros(n, np.int64), np.zeros(n, np.int64))}
+    rec = np.ascontiguousarray(out_records[:, off:off + dt.itemsize]).view(dt)[:, 0]
+    i = np.searchsorted(out_ticks, step_ticks, side="right") - 1
+    have = i >= 0
+    j = np.maximum(i, 0)
+    mode = np.where(have, rec["mode"][j], 0)
+    return {"pc_mode": mode,
+            "pc_enable": have & ((rec["flags"][j] & pdo.FLAG_ENABLE) != 0),
+            **_commands(mode, rec["command"][j].astype(np.int64))}

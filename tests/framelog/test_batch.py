@@ -1,0 +1,60 @@
+"""Batched message records (hil.framelog.batch) make the same file as add_message."""
+
+from __future__ import annotations
+
+import io
+
+import pytest
+from mcap.reader import make_reader
+from mcap.writer import CompressionType, Writer
+
+from hil.framelog import batch
+
+
+def _file(fast: bool, payloads: list[bytes], chunk_size: int) -> bytes:
+    buf = io.BytesIO()
+    w = Writer(buf, chunk_size=chunk_size, compression=CompressionType.NONE)
+    w.start(profile="t", library="t")
+    assert batch.supported(w)
+    sid = w.register_schema("s", "x", b"")
+    a = w.register_channel("/a", "x", sid)
+    b = w.register_channel("/b", "x", sid)
+    w.add_message(b, 5, b"first", 5, 0)  # a message by the library's own path in between
+    times = [10 * i + (i % 3) for i in range(len(payloads))]
+    half = len(payloads) // 2
+    batch.add_messages(w, a, times[:half], payloads[:half], 2**32 - 3, fast)
+    w.add_message(b, 7, b"second", 7, 1)
+    batch.add_messages(w, a, times[half:], payloads[half:], 2**32 - 3 + half, fast)
+    w.finish()
+    return buf.getvalue()
+
+
+@pytest.mark.parametrize("sizes", ["fixed", "varying"])
+@pytest.mark.parametrize("chunk_size", [64, 1 << 20])
+def test_same_bytes_as_add_message(sizes: str, chunk_size: int) -> None:
+    payloads = [bytes([i % 251]) * (9 if sizes == "fixed" else 1 + i % 7) for i in range(40)]
+    fast, slow = _file(True, payloads, chunk_size), _file(False, payloads, chunk_size)
+    if chunk_size > 1000:
+        assert fast == slow  # no chunk closes inside a batch: the very same file
+    # small chunks: a batch stays in one chunk (closed after it), add_message closes one per
+    # message; the messages, their order and the indexes' view of them are the same
+    for stream in (False, True):
+        got = [[(c.topic, m.log_time, m.publish_time, m.sequence, m.data) for _, c, m in
+                make_reader(io.BytesIO(f), validate_crcs=True).iter_messages(
+                    log_time_order=stream)] for f in (fast, slow)]
+        assert got[0] == got[1]
+    msgs = list(make_reader(io.BytesIO(fast), validate_crcs=True).iter_messages(topics=["/a"]))
+    assert [m.data for _, _, m in msgs] == payloads
+    assert [m.sequence for _, _, m in msgs][:4] == [2**32 - 3, 2**32 - 2, 2**32 - 1, 0]
+
+
+def test_bench_log_reports_both_encodings() -> None:
+    """``eha-hil bench log``'s encoding comparison: sizes from the files it wrote."""
+    from hil.replay.log_bench import bench_encodings, format_report
+    from hil.replay.signals import ACTUATOR
+
+    enc = {e.encoding: e for e in bench_encodings(50)}
+    assert enc["protobuf"].message_bytes == ACTUATOR.size
+    assert enc["json"].message_bytes > enc["protobuf"].message_bytes
+    assert all(e.file_bytes > 0 and e.encode_write_us > 0 for e in enc.values())
+    assert "protobuf" in format_report(None, list(enc.values()))
