@@ -167,12 +167,9 @@ def down_writes(frames: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 # --- EtherCAT -------------------------------------------------------------------------------
-def _ethercat(data: bytes) -> dict[str, Value]:
-    try:
-        dgs = ethercat.decode_any(data)
-    except CodecError as exc:
-        raise DecodeError(f"EtherCAT frame: {exc}") from None
-    out: dict[str, Value] = {"frame_bytes": len(data), "datagrams": len(dgs)}
+def _datagram_fields(dgs: list) -> dict[str, Value]:
+    """Command, index, address, length and working counter of each datagram, ``dg<i>.``."""
+    out: dict[str, Value] = {}
     for i, d in enumerate(dgs):
         p = f"dg{i}."
         out[p + "cmd"] = d.cmd
@@ -180,6 +177,16 @@ def _ethercat(data: bytes) -> dict[str, Value]:
         out[p + "address"] = d.adp | d.ado << 16
         out[p + "length"] = len(d.data)
         out[p + "wkc"] = d.wkc
+    return out
+
+
+def _ethercat(data: bytes) -> dict[str, Value]:
+    try:
+        dgs = ethercat.decode_any(data)
+    except CodecError as exc:
+        raise DecodeError(f"EtherCAT frame: {exc}") from None
+    out: dict[str, Value] = {"frame_bytes": len(data), "datagrams": len(dgs)}
+    out.update(_datagram_fields(dgs))
     return out
 
 
@@ -194,13 +201,7 @@ def _ethercat_fcs(data: bytes) -> dict[str, Value]:
     except CodecError as exc:
         raise DecodeError(f"EtherCAT PDU: {exc}") from None
     out: dict[str, Value] = {"frame_bytes": len(data), "fcs_ok": fcs_ok, "datagrams": len(dgs)}
-    for i, d in enumerate(dgs):
-        p = f"dg{i}."
-        out[p + "cmd"] = d.cmd
-        out[p + "idx"] = d.idx
-        out[p + "address"] = d.adp | d.ado << 16
-        out[p + "length"] = len(d.data)
-        out[p + "wkc"] = d.wkc
+    out.update(_datagram_fields(dgs))
     return out
 
 
