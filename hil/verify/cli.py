@@ -59,6 +59,19 @@ def add_parsers(sub: argparse._SubParsersAction,
                    "fast shows what fused multiply-adds change)")
     p.set_defaults(func=cmd_verify_mcu)
 
+    p = vsub.add_parser("current-loop", parents=[common(plot=False)],
+                        help="the driver board's current loop: Python board model against "
+                        "the RTL under Icarus Verilog and cocotb")
+    p.add_argument("--against", required=True, choices=("rtl",),
+                   help="rtl: the Verilog of firmware_model/fpga/rtl (or --rtl DIR)")
+    p.add_argument("--vectors", type=_positive, default=10_000,
+                   help="vectors in all: the golden and edge sets, then random (default "
+                   "10000)")
+    p.add_argument("--rtl", metavar="DIR", default=None,
+                   help="a directory of Verilog with the same ports (default: the project's)")
+    p.add_argument("--seed", type=_positive, default=1, help="random vectors' seed (default 1)")
+    p.set_defaults(func=cmd_verify_current_loop)
+
 
 def cmd_verify_mcu(args: argparse.Namespace) -> int:
     from hil.verify import mcu_builds
@@ -75,18 +88,46 @@ def cmd_verify_mcu(args: argparse.Namespace) -> int:
     except mcu_builds.BuildError as exc:
         print(f"eha-hil: error: {exc}", file=sys.stderr)
         return EXIT_MISMATCH
+    _print_report(args, rep, f"MCU law: Python model vs {args.against} "
+                  f"(-ffp-contract={args.contract}, {rep.build})")
+    return EXIT_MISMATCH if rep.mismatches else 0
+
+
+def _print_report(args: argparse.Namespace, rep, title: str) -> None:
     if args.json:
         print(json.dumps(rep.as_dict(), indent=2))
-    else:
-        rows = [(c.source, c.vectors, c.mismatches) for c in rep.sets]
-        print(table(["set", "vectors", "mismatches"], rows,
-                    title=f"MCU law: Python model vs {args.against} "
-                    f"(-ffp-contract={args.contract}, {rep.build})"))
-        print(f"{rep.vectors} vectors compared, {rep.mismatches} mismatches "
-              f"({rep.seconds:.1f} s)")
-        first = rep.first
-        if first is not None:
-            m = first.first
-            print(f"first mismatch: {first.source}, step {m.step}, field {m.field}: "
-                  f"model {m.model}, build {m.build}")
+        return
+    rows = [(c.source, c.vectors, c.mismatches) for c in rep.sets]
+    print(table(["set", "vectors", "mismatches"], rows, title=title))
+    print(f"{rep.vectors} vectors compared, {rep.mismatches} mismatches ({rep.seconds:.1f} s)")
+    first = rep.first
+    if first is not None:
+        m = first.first
+        print(f"first mismatch: {first.source}, step {m.step}, field {m.field}: "
+              f"model {m.model}, build {m.build}")
+
+
+def cmd_verify_current_loop(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from hil.verify import rtl_run
+    from hil.verify.loop_verify import verify_current_loop
+    from plant.config import load_config
+
+    missing = rtl_run.missing_tools()
+    if missing:
+        raise ToolMissing(f"verify current-loop: {', '.join(missing)} not installed "
+                          "(make system-deps; pip install 'eha-hil[test]')")
+    rtl_dir = Path(args.rtl) if args.rtl else rtl_run.RTL_DIR
+    if not rtl_dir.is_dir():
+        raise ToolMissing(f"--rtl {args.rtl}: not a directory")
+    cfg = load_config(args.config, args.set or ())
+    try:
+        rtl_run.rtl_sources(rtl_dir)
+        rep = verify_current_loop(cfg, args.vectors, args.seed, rtl_dir)
+    except rtl_run.RtlError as exc:
+        print(f"eha-hil: error: {exc}", file=sys.stderr)
+        return EXIT_MISMATCH
+    _print_report(args, rep, f"current loop: Python board model vs RTL ({rtl_dir}, Icarus "
+                  "Verilog + cocotb)")
     return EXIT_MISMATCH if rep.mismatches else 0
