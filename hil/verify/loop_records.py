@@ -1,28 +1,17 @@
-"""One cycle of the driver board's current loop as records: the input words the RTL's ports
-take and every output word it gives (``firmware_model/fpga/rtl/current_loop.v``)."""
+"""The current loop's ports packed into the testbench buses of ``tb_current_loop.v`` (one
+write and one read per cycle through the simulator interface), and back."""
 
 from __future__ import annotations
 
 import numpy as np
 
-#: Input ports (all unsigned words as the ports carry them; enable is 1 bit).
-INPUT_PORTS = ("enable", "ia_code", "ib_code", "theta_e", "iq_ref", "id_ref", "vq_ff",
-               "current_limit", "kp", "ki")
-LOOP_INPUT = np.dtype([(name, "<i8") for name in INPUT_PORTS])
-
-#: Output ports: name -> signed? (the signed ones are read as two's complement).
-OUTPUT_PORTS = {"sin_q15": True, "cos_q15": True, "i_alpha": True, "i_beta": True,
-                "i_d": True, "i_q": True, "v_d": True, "v_q": True, "q_lim": False,
-                "v_alpha": True, "v_beta": True, "count_a": False, "count_b": False,
-                "count_c": False, "integ_d_next": True, "integ_q_next": True}
-LOOP_OUTPUT = np.dtype([(name, "<i8") for name in OUTPUT_PORTS])
-
-#: Port widths in bits (``tb_current_loop.v`` packs the ports in this order, LSB first).
-INPUT_WIDTHS = {"enable": 1, "ia_code": 12, "ib_code": 12, "theta_e": 16, "iq_ref": 16,
-                "id_ref": 16, "vq_ff": 16, "current_limit": 16, "kp": 16, "ki": 16}
-OUTPUT_WIDTHS = {name: 16 for name in OUTPUT_PORTS} | {
-    "q_lim": 15, "count_a": 11, "count_b": 11, "count_c": 11, "integ_d_next": 32,
-    "integ_q_next": 32}
+from firmware_model.fpga.current_loop import (
+    INPUT_PORTS,
+    INPUT_WIDTHS,
+    LOOP_OUTPUT,
+    OUTPUT_PORTS,
+    OUTPUT_WIDTHS,
+)
 
 
 def pack_inputs(inputs: np.ndarray) -> list[int]:

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from firmware_model.fpga import golden
-from hil.verify.loop_records import LOOP_INPUT
+from firmware_model.fpga.current_loop import LOOP_INPUT
 
 KP_BOARD, KI_BOARD = golden.KP_BOARD, golden.KI_BOARD
 

@@ -9,8 +9,8 @@ from pathlib import Path
 
 import numpy as np
 
+from firmware_model.fpga.current_loop import run_model
 from hil.verify.compare import Comparison, compare
-from hil.verify.loop_model import run_model
 from hil.verify.loop_vectors import loop_sets
 from hil.verify.rtl_run import RTL_DIR, run_rtl
 from plant.config import Config

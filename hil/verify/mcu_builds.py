@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hil.verify.mcu_records import CONFIG, INPUT, OUTPUT
+from firmware_model.mcu.c_abi import CONFIG, INPUT, OUTPUT
 
 SOURCE_DIR = Path(__file__).resolve().parents[2] / "firmware_model" / "mcu" / "c"
 LAW = ("mcu_law.c",)

@@ -8,8 +8,7 @@ import numpy as np
 from firmware_model.calibration import FirmwareCalibration, calibration
 from firmware_model.fpga import layout as B
 from firmware_model.fpga.driver_board import LinkMemory
-from firmware_model.mcu.mcu import Mcu
-from hil.verify.mcu_records import (
+from firmware_model.mcu.c_abi import (
     IN_CLEAR_FAULT,
     IN_COMMAND,
     IN_DISABLE,
@@ -18,6 +17,7 @@ from hil.verify.mcu_records import (
     MODES,
     OUTPUT,
 )
+from firmware_model.mcu.mcu import Mcu
 
 F32 = np.float32
 

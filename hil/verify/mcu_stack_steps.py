@@ -9,8 +9,8 @@ import math
 import numpy as np
 
 from firmware_model.fpga import layout as B
+from firmware_model.mcu.c_abi import IN_COMMAND, IN_ENABLE, INPUT, MODES
 from hil.actuator import ActuatorStack
-from hil.verify.mcu_records import IN_COMMAND, IN_ENABLE, INPUT, MODES
 from plant.config import Config
 
 #: Faults, as fractions of the run: (start, end) of each.

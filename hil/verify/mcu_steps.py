@@ -12,7 +12,7 @@ from collections.abc import Iterator
 import numpy as np
 
 from firmware_model.fpga import layout as B
-from hil.verify.mcu_records import (
+from firmware_model.mcu.c_abi import (
     IN_CLEAR_FAULT,
     IN_COMMAND,
     IN_DISABLE,

@@ -11,10 +11,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from firmware_model.fpga import layout as B
+from firmware_model.mcu.c_abi import config_record
 from hil.verify import mcu_builds
 from hil.verify.compare import Comparison, compare
 from hil.verify.mcu_model import run_model
-from hil.verify.mcu_records import config_record
 from hil.verify.mcu_stack_steps import stack_inputs
 from hil.verify.mcu_steps import VARIANTS, random_sets
 from plant.config import Config, load_config

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hil.verify.loop_records import LOOP_INPUT, LOOP_OUTPUT
+from firmware_model.fpga.current_loop import LOOP_INPUT, LOOP_OUTPUT
 
 RTL_DIR = Path(__file__).resolve().parents[2] / "firmware_model" / "fpga" / "rtl"
 TOPLEVEL = "tb_current_loop"

@@ -13,19 +13,18 @@ import numpy as np
 import pytest
 
 from firmware_model.fpga import layout as B
-from firmware_model.fpga.driver_board import DriverBoard
-from hil.cli import main
-from hil.verify import rtl_run
-from hil.verify.compare import compare
-from hil.verify.loop_model import run_model
-from hil.verify.loop_records import (
+from firmware_model.fpga.current_loop import (
     INPUT_WIDTHS,
     LOOP_INPUT,
     OUTPUT_PORTS,
     OUTPUT_WIDTHS,
-    pack_inputs,
-    unpack_outputs,
+    run_model,
 )
+from firmware_model.fpga.driver_board import DriverBoard
+from hil.cli import main
+from hil.verify import rtl_run
+from hil.verify.compare import compare
+from hil.verify.loop_records import pack_inputs, unpack_outputs
 from hil.verify.loop_vectors import loop_sets, random_inputs
 from hil.verify.loop_verify import verify_current_loop
 

@@ -12,11 +12,11 @@ import numpy as np
 import pytest
 
 from firmware_model.fpga import layout as B
+from firmware_model.mcu.c_abi import OUTPUT, config_record
 from hil.cli import main
 from hil.verify import mcu_builds
 from hil.verify.compare import compare
 from hil.verify.mcu_model import run_model
-from hil.verify.mcu_records import OUTPUT, config_record
 from hil.verify.mcu_steps import random_inputs
 from hil.verify.mcu_verify import FIELD_NAMES, verify_mcu
 from plant.config import load_config

@@ -1,6 +1,9 @@
-"""The Python board model's current loop (:func:`firmware_model.fpga.tick.control_tick`,
-current mode) on :data:`~hil.verify.loop_records.LOOP_INPUT` records: the same
-:mod:`firmware_model.fpga.foc` calls in the same order, with the board's constants."""
+"""The driver board's current loop as one block with ports, for the RTL of
+``firmware_model/fpga/rtl/current_loop.v``: the port records (the words its inputs take,
+every output word it gives) and the board model's loop on them
+(:func:`firmware_model.fpga.tick.control_tick`, current mode: the same
+:mod:`firmware_model.fpga.foc` calls in the same order, with the board's constants; a test
+compares the two tick by tick)."""
 
 from __future__ import annotations
 
@@ -12,7 +15,25 @@ from firmware_model.fpga import layout as B
 from firmware_model.fpga.fixed import clamp, mul_shift, sat_s, wrap_s
 from firmware_model.fpga.foc import clarke, inv_park, park, pi_step, q_limit, sin_cos, svpwm
 from firmware_model.fpga.params import board_params
-from hil.verify.loop_records import INPUT_PORTS, LOOP_OUTPUT, OUTPUT_PORTS
+
+#: Input ports (all unsigned words as the ports carry them; enable is 1 bit).
+INPUT_PORTS = ("enable", "ia_code", "ib_code", "theta_e", "iq_ref", "id_ref", "vq_ff",
+               "current_limit", "kp", "ki")
+LOOP_INPUT = np.dtype([(name, "<i8") for name in INPUT_PORTS])
+
+#: Output ports: name -> signed? (the signed ones are read as two's complement).
+OUTPUT_PORTS = {"sin_q15": True, "cos_q15": True, "i_alpha": True, "i_beta": True,
+                "i_d": True, "i_q": True, "v_d": True, "v_q": True, "q_lim": False,
+                "v_alpha": True, "v_beta": True, "count_a": False, "count_b": False,
+                "count_c": False, "integ_d_next": True, "integ_q_next": True}
+LOOP_OUTPUT = np.dtype([(name, "<i8") for name in OUTPUT_PORTS])
+
+#: Port widths in bits (``tb_current_loop.v`` packs the ports in this order, LSB first).
+INPUT_WIDTHS = {"enable": 1, "ia_code": 12, "ib_code": 12, "theta_e": 16, "iq_ref": 16,
+                "id_ref": 16, "vq_ff": 16, "current_limit": 16, "kp": 16, "ki": 16}
+OUTPUT_WIDTHS = {name: 16 for name in OUTPUT_PORTS} | {
+    "q_lim": 15, "count_a": 11, "count_b": 11, "count_c": 11, "integ_d_next": 32,
+    "integ_q_next": 32}
 
 _IN = {name: k for k, name in enumerate(INPUT_PORTS)}
 (E, IA, IB, TH, IQR, IDR, VQFF, ILIM, KP, KI) = (_IN[n] for n in INPUT_PORTS)
