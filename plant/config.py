@@ -28,6 +28,7 @@ CHOICES: dict[str, tuple[str, ...]] = {
     "load.kind": ("fixed", "free", "conrod", "cart"),
     "mcu.controller": ("current", "velocity"),
     "mcu.force_feedback": ("pressure", "strain", "complementary"),
+    "mcu.impl": ("python", "c"),
 }
 
 

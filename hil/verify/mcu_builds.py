@@ -130,7 +130,20 @@ class HostLaw:
         lib.mcu_law_run.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_uint32,
                                     ctypes.c_void_p]
         lib.mcu_law_run.restype = None
+        lib.mcu_law_init.argtypes = [ctypes.c_void_p, ctypes.c_void_p]
+        lib.mcu_law_init.restype = None
+        lib.mcu_law_step.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p]
+        lib.mcu_law_step.restype = None
+        self.state_size = lib.mcu_law_sizes(3)
         self._lib = lib
+
+    def init(self, state: ctypes.Array, config: np.ndarray) -> None:
+        """A fresh program state in ``state`` (``state_size`` bytes)."""
+        self._lib.mcu_law_init(state, np.ascontiguousarray(config, dtype=CONFIG).ctypes.data)
+
+    def step(self, state: ctypes.Array, inp: np.ndarray, out: np.ndarray) -> None:
+        """One cycle: ``inp`` and ``out`` are single records (0-d arrays)."""
+        self._lib.mcu_law_step(state, inp.ctypes.data, out.ctypes.data)
 
     def run(self, config: np.ndarray, inputs: np.ndarray) -> np.ndarray:
         """n steps from a fresh state."""

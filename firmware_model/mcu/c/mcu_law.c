@@ -320,6 +320,7 @@ uint32_t mcu_law_sizes(uint32_t which)
     case 0: return (uint32_t)sizeof(mcu_config);
     case 1: return (uint32_t)sizeof(mcu_input);
     case 2: return (uint32_t)sizeof(mcu_output);
+    case 3: return (uint32_t)sizeof(mcu_state);
     default: return 0;
     }
 }
