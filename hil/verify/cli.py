@@ -6,34 +6,32 @@ import argparse
 import json
 import sys
 from collections.abc import Callable
+from pathlib import Path
 
+from hil.cli_args import float_range, int_range
 from hil.tables import table
 
 EXIT_MISMATCH = 1
 
 
 class ToolMissing(Exception):
-    """A system tool the check needs is not installed."""
+    """The check cannot run: a system tool it needs is not installed, or the command line
+    asks for nothing (one line, exit 2)."""
 
 
-def _positive(text: str) -> int:
-    try:
-        n = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
-    if n < 0:
-        raise argparse.ArgumentTypeError(f"must be >= 0, got {n}")
-    return n
+def _rtl_dir(text: str) -> str:
+    """A directory holding Verilog (``*.v``)."""
+    p = Path(text)
+    if not p.is_dir():
+        raise argparse.ArgumentTypeError(f"{text}: not a directory")
+    if not any(p.glob("*.v")):
+        raise argparse.ArgumentTypeError(f"{text}: no Verilog (*.v) files in it")
+    return text
 
 
-def _seconds(text: str) -> float:
-    try:
-        x = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected seconds, got {text!r}") from None
-    if not 0 <= x <= 60:
-        raise argparse.ArgumentTypeError(f"must be within 0..60 s, got {x:g}")
-    return x
+_rtl_dir.kind = "dir"  # type: ignore[attr-defined]
+COUNT = int_range(0, 100_000_000)
+SEED = int_range(0, 2**32 - 1)
 
 
 def add_parsers(sub: argparse._SubParsersAction,
@@ -47,13 +45,13 @@ def add_parsers(sub: argparse._SubParsersAction,
     p.add_argument("--against", required=True, choices=("host-c", "qemu"),
                    help="host-c: the C as a host shared library; qemu: the Cortex-M4F image "
                    "on QEMU's netduinoplus2")
-    p.add_argument("--steps", type=_positive, default=10_000,
+    p.add_argument("--steps", type=COUNT, default=10_000,
                    help="random input steps, split over the six controller variants "
                    "(default 10000)")
-    p.add_argument("--stack-seconds", type=_seconds, default=0.4,
+    p.add_argument("--stack-seconds", type=float_range(0.0, 60.0, unit="s"), default=0.4,
                    help="seconds of whole-stack run with faults recorded per variant "
                    "(default 0.4 s = 2000 steps; 0: none)")
-    p.add_argument("--seed", type=_positive, default=1, help="random steps' seed (default 1)")
+    p.add_argument("--seed", type=SEED, default=1, help="random steps' seed (default 1)")
     p.add_argument("--contract", choices=("off", "fast"), default="off",
                    help="the build's -ffp-contract (default off, as the firmware is built; "
                    "fast shows what fused multiply-adds change)")
@@ -64,12 +62,12 @@ def add_parsers(sub: argparse._SubParsersAction,
                         "the RTL under Icarus Verilog and cocotb")
     p.add_argument("--against", required=True, choices=("rtl",),
                    help="rtl: the Verilog of firmware_model/fpga/rtl (or --rtl DIR)")
-    p.add_argument("--vectors", type=_positive, default=10_000,
+    p.add_argument("--vectors", type=COUNT, default=10_000,
                    help="vectors in all: the golden and edge sets, then random (default "
                    "10000)")
-    p.add_argument("--rtl", metavar="DIR", default=None,
+    p.add_argument("--rtl", metavar="DIR", default=None, type=_rtl_dir,
                    help="a directory of Verilog with the same ports (default: the project's)")
-    p.add_argument("--seed", type=_positive, default=1, help="random vectors' seed (default 1)")
+    p.add_argument("--seed", type=SEED, default=1, help="random vectors' seed (default 1)")
     p.set_defaults(func=cmd_verify_current_loop)
 
 
@@ -77,6 +75,8 @@ def cmd_verify_mcu(args: argparse.Namespace) -> int:
     from hil.verify import mcu_builds
     from hil.verify.mcu_verify import verify_mcu
 
+    if args.steps == 0 and args.stack_seconds == 0:
+        raise ToolMissing("verify mcu: --steps 0 and --stack-seconds 0 leave nothing to compare")
     target = "host-c" if args.against == "host-c" else "qemu"
     missing = mcu_builds.missing_tools(target)
     if missing:
@@ -108,8 +108,6 @@ def _print_report(args: argparse.Namespace, rep, title: str) -> None:
 
 
 def cmd_verify_current_loop(args: argparse.Namespace) -> int:
-    from pathlib import Path
-
     from hil.verify import rtl_run
     from hil.verify.loop_verify import verify_current_loop
     from plant.config import load_config
@@ -119,8 +117,6 @@ def cmd_verify_current_loop(args: argparse.Namespace) -> int:
         raise ToolMissing(f"verify current-loop: {', '.join(missing)} not installed "
                           "(make system-deps; pip install 'eha-hil[test]')")
     rtl_dir = Path(args.rtl) if args.rtl else rtl_run.RTL_DIR
-    if not rtl_dir.is_dir():
-        raise ToolMissing(f"--rtl {args.rtl}: not a directory")
     cfg = load_config(args.config, args.set or ())
     try:
         rtl_run.rtl_sources(rtl_dir)

@@ -166,9 +166,12 @@ def test_cli_current_loop_bad_input_is_one_line(argv, capsys):
     assert len(err.splitlines()) == 1 and "Traceback" not in err
 
 
-def test_cli_current_loop_missing_rtl_dir_is_one_line(tmp_path, capsys):
-    _need_rtl()
-    assert main(["verify", "current-loop", "--against", "rtl", "--rtl",
-                 str(tmp_path / "none")]) == 2
-    err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1 and "not a directory" in err
+def test_cli_current_loop_rtl_dir_must_hold_verilog(tmp_path, capsys):
+    (tmp_path / "empty").mkdir()
+    for where, why in ((tmp_path / "none", "not a directory"),
+                       (tmp_path / "empty", "no Verilog")):
+        with pytest.raises(SystemExit) as exc:
+            main(["verify", "current-loop", "--against", "rtl", "--rtl", str(where)])
+        assert exc.value.code == 2
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and why in err
