@@ -22,7 +22,8 @@ from firmware_model.mcu.c_abi import (
     OUTPUT,
     config_record,
 )
-from hil.verify.mcu_builds import HostLaw, build_host
+from hil.verify.mcu_builds import BuildError, HostLaw, build_host
+from plant.config import ConfigError
 
 F32 = np.float32
 
@@ -41,7 +42,10 @@ class CMcu:
         cal = calibration(cal)
         self.links = links
         self.period = cal.mcu["period_ticks"]
-        self._law = HostLaw(build_host())
+        try:
+            self._law = HostLaw(build_host())
+        except BuildError as exc:
+            raise ConfigError(f"mcu.impl = 'c': {exc}") from None
         self._state = ctypes.create_string_buffer(self._law.state_size)
         config = config_record(cal)
         self._law.init(self._state, config)

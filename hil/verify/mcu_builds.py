@@ -71,14 +71,24 @@ def _build(compiler: str, flags: tuple[str, ...], sources: tuple[str, ...], name
     out = _cache_dir() / digest.hexdigest()[:16] / name
     if out.exists():
         return out
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_suffix(f".tmp{os.getpid()}")
-    cmd = [compiler, *flags, *sources, "-o", str(tmp)]
-    r = subprocess.run(cmd, cwd=SOURCE_DIR, capture_output=True, text=True)
-    if r.returncode:
-        raise BuildError(f"{' '.join(cmd)} failed:\n{r.stderr.strip()}")
-    tmp.replace(out)
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        tmp = out.with_suffix(f".tmp{os.getpid()}")
+        cmd = [compiler, *flags, *sources, "-o", str(tmp)]
+        r = subprocess.run(cmd, cwd=SOURCE_DIR, capture_output=True, text=True)
+        if r.returncode:
+            raise BuildError(f"{compiler} failed on {' '.join(sources)}: "
+                             f"{_first_error(r.stderr)}")
+        tmp.replace(out)
+    except OSError as exc:
+        raise BuildError(f"cannot build into {out.parent}: {exc}") from None
     return out
+
+
+def _first_error(text: str) -> str:
+    """The compiler's first error line (the rest of its output follows from it)."""
+    lines = [ln.strip() for ln in text.splitlines() if ln.strip()]
+    return next((ln for ln in lines if "error" in ln), lines[0] if lines else "no message")
 
 
 def _contract_flag(contract: str) -> str:
@@ -172,8 +182,9 @@ def run_qemu(elf: Path, config: np.ndarray, inputs: np.ndarray,
         except subprocess.TimeoutExpired as exc:
             raise BuildError(f"{QEMU} did not finish within {timeout_s:g} s") from exc
         if r.returncode:
+            message = (r.stderr or r.stdout).strip().splitlines()
             raise BuildError(f"{QEMU} exited with {r.returncode}: "
-                             f"{(r.stderr or r.stdout).strip() or 'no message'}")
+                             f"{message[-1] if message else 'no message'}")
         out = np.fromfile(work / "mcu_out.bin", dtype=OUTPUT)
     if len(out) != len(inputs):
         raise BuildError(f"the image wrote {len(out)} outputs for {len(inputs)} inputs")

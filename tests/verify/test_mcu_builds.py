@@ -142,3 +142,17 @@ def test_cli_verify_mcu_bad_input_is_one_line(argv, capsys):
     assert exc.value.code == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "Traceback" not in err
+
+
+def test_a_broken_build_is_one_line(monkeypatch, tmp_path):
+    """A compiler error reaches the user as one line naming the compiler's first error."""
+    _need("host-c")
+    src = tmp_path / "c"
+    shutil.copytree(mcu_builds.SOURCE_DIR, src)
+    law = src / "mcu_law.c"
+    law.write_text(law.read_text() + "\nint broken(void) { return }\n")
+    monkeypatch.setattr(mcu_builds, "SOURCE_DIR", src)
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    with pytest.raises(mcu_builds.BuildError) as exc:
+        mcu_builds.build_host()
+    assert "\n" not in str(exc.value) and "error" in str(exc.value)
