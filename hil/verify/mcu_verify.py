@@ -53,13 +53,14 @@ class McuVerification:
                 "sets": [c.as_dict() for c in self.sets], "seconds": self.seconds}
 
 
-def input_sets(base: Config | None, steps: int, seed: int, stack_seconds: float,
-               base_source: str | None = None, base_overrides: Sequence[str] = ()
-               ) -> Iterator[tuple[str, Config, np.ndarray]]:
+def input_sets(steps: int, seed: int, stack_seconds: float, source: str | None = None,
+               overrides: Sequence[str] = ()) -> Iterator[tuple[str, Config, np.ndarray]]:
     """(label, configuration, inputs): whole-stack recordings first (``stack_seconds`` of
-    each variant), then ``steps`` random steps over the variants."""
+    each variant), then ``steps`` random steps over the variants; each variant's
+    configuration is ``source`` (a preset or file, None: the default) with ``overrides``,
+    then the variant's keys."""
     def cfg_for(variant: tuple[str, ...]) -> Config:
-        return load_config(base_source, (*base_overrides, *variant))
+        return load_config(source, (*overrides, *variant))
 
     label = {v: "/".join(x.split("=")[1] for x in v) for v in VARIANTS}
     if stack_seconds > 0:
@@ -88,7 +89,7 @@ def verify_mcu(against: str, steps: int, seed: int = 1, stack_seconds: float = 0
             return mcu_builds.run_qemu(path, config, inputs)
 
     report = McuVerification(against, contract, str(path))
-    for label, cfg, inputs in input_sets(None, steps, seed, stack_seconds, source, overrides):
+    for label, cfg, inputs in input_sets(steps, seed, stack_seconds, source, overrides):
         model = run_model(cfg, inputs)
         built = run(config_record(cfg), inputs)
         report.sets.append(compare(label, model, built, FIELD_NAMES))
