@@ -3,7 +3,8 @@
 #   make test  - create .venv, install eha-hil with its test extra, run the whole suite
 #   make test-fast - the same without the tests marked slow (under a minute)
 #   make system-deps - (root, apt) the system tools some tests use, else they skip:
-#                  tshark + dumpcap (capture tests), iproute2 (ip netns)
+#                  tshark + dumpcap (capture tests), iproute2 (ip netns), the Arm cross
+#                  compiler + newlib and QEMU (MCU law on a Cortex-M4), Icarus Verilog (RTL)
 PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
@@ -47,7 +48,8 @@ bench: $(STAMP)
 system-deps:
 	echo "wireshark-common wireshark-common/install-setuid boolean false" | debconf-set-selections
 	DEBIAN_FRONTEND=noninteractive apt-get update -qq
-	DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends tshark iproute2
+	DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends tshark iproute2 gcc \
+		gcc-arm-none-eabi libnewlib-arm-none-eabi qemu-system-arm iverilog
 
 lint: $(TSTAMP)
 	$(BIN)/ruff check .

@@ -249,7 +249,12 @@ class ActuatorStack:
     def __init__(self, cfg: Config, command: CommandFn, record_every: int = 4) -> None:
         self.config = cfg
         self.fpga = FpgaStack(cfg)
-        self.mcu = Mcu(cfg, [self.fpga.mcu_link])
+        if cfg.get("mcu.impl") == "c":  # the C law built for the host (docs/mcu.md)
+            from hil.mcu_c import CMcu
+
+            self.mcu = CMcu(cfg, [self.fpga.mcu_link])
+        else:
+            self.mcu = Mcu(cfg, [self.fpga.mcu_link])
         self.command = command
         self.tick_s = self.fpga.tick_s
         self.sched = Scheduler(self.fpga, record_every=record_every)

@@ -30,6 +30,7 @@ from hil.cli_args import (
 )
 from hil.scenarios.plant_figures import F2_BANDS, THESIS_F1, THESIS_F2, within_band
 from hil.tables import table
+from hil.verify import cli as verify_cli
 from plant.config import ConfigError, load_config, preset_names
 
 EXIT_USAGE = 2
@@ -642,6 +643,8 @@ def build_parser() -> argparse.ArgumentParser:
                    "or .mcap; README, Scenarios)")
     p.set_defaults(func=cmd_run)
 
+    verify_cli.add_parsers(sub, _common)
+
     cfgp = sub.add_parser("config", help="inspect configurations")
     csub = cfgp.add_subparsers(dest="config_command", metavar="ACTION", required=True)
     p = csub.add_parser("show", parents=[_common(plot=False)],
@@ -671,7 +674,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         args = parser.parse_args(argv)
         cli_progress.start(_verb(args))
         return int(args.func(args))
-    except (ConfigError, UsageError) as exc:
+    except (ConfigError, UsageError, verify_cli.ToolMissing) as exc:
         print(f"eha-hil: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
     except BrokenPipeError:

@@ -86,6 +86,7 @@ class Mcu:
         self.status = [0] * n
         self.tau_ref = [F32(0.0)] * n
         self.iq_ref = [F32(0.0)] * n
+        self.vq_ff = [F32(0.0)] * n
         self.timeout_ticks = round(m["command_timeout_s"] / tick_s)
         self.off_ticks = self.timeout_ticks + round(m["safe_off_delay_s"] / tick_s)
         self._seq = 0
@@ -142,6 +143,7 @@ class Mcu:
                 tau_ref = ctrl.tau_used  # after the force/pressure limit
             self.tau_ref[i] = tau_ref
             self.iq_ref[i] = i_ref
+            self.vq_ff[i] = v_ff
             down = link.down
             # round() on the exact float64 image of the float32 product rounds half to
             # even like np.rint, without numpy's per-call overhead.

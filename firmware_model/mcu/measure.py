@@ -19,6 +19,8 @@ from protocols.biss import LINEAR_COUNT_M
 
 F32 = np.float32
 TWO_PI = 2.0 * math.pi
+#: The iq register's scale (mA -> A).
+A_PER_MA = F32(1e-3)
 
 
 def _s16(w: int) -> int:
@@ -80,7 +82,7 @@ class Measurements:
 
     __slots__ = (*(a.si_name for a in B.ANALOG_INPUTS), "f_pres", "tau_q", "f_strain_raw",
                  "omega_m", "v_pump", "x_piston", "iq", "theta_rotor", "strain_samples",
-                 "status", "_k", "_analog", "_volts")
+                 "status", "_k", "_analog", "_volts", "_lsb_v")
 
     def __init__(self, cal: FirmwareCalibration) -> None:
         cal = calibration(cal)
@@ -99,12 +101,23 @@ class Measurements:
         )
         self._analog = [(a.si_name, a.register, *map(F32, analog_decoder(a, cal)))
                         for a in B.ANALOG_INPUTS]
-        self._volts = _volt_table(float(F32(adc.lsb_v)))
+        self._lsb_v = F32(adc.lsb_v)
+        self._volts = _volt_table(float(self._lsb_v))
         z = F32(0.0)
-        for name in self.__slots__[:-3]:
+        for name in self.__slots__[:-4]:
             setattr(self, name, z)
         self.strain_samples = 0
         self.status = 0
+
+    def scales(self) -> dict[str, object]:
+        """The decode's constants by name, as this object holds them (float32 scales, int
+        offsets; per analog input in ``ANALOG_INPUTS`` order: register, v0, mul, div)."""
+        (kc, rad_per_count, m_per_rad, n_per_code, mid, zero, m_per_count,
+         rad_per_ssi) = self._k
+        return {"adc_lsb_v": self._lsb_v, "kc": kc, "rad_per_count": rad_per_count,
+                "m_per_rad": m_per_rad, "n_per_code": n_per_code, "strain_mid": mid,
+                "biss_zero": zero, "m_per_count": m_per_count, "rad_per_ssi": rad_per_ssi,
+                "a_per_ma": A_PER_MA, "analog": [row[1:] for row in self._analog]}
 
     def update(self, up: np.ndarray) -> None:
         """Decode the upstream memory ``up`` (int words) into SI values."""
@@ -124,6 +137,6 @@ class Measurements:
         self.v_pump = self.omega_m * m_per_rad
         count = (u[B.U_PISTON_HI] << 16) | u[B.U_PISTON_LO]
         self.x_piston = F32(count - zero) * m_per_count
-        self.iq = F32(_s16(u[B.U_IQ])) * F32(1e-3)
+        self.iq = F32(_s16(u[B.U_IQ])) * A_PER_MA
         self.theta_rotor = F32(u[B.U_SSI]) * rad_per_ssi
         self.status = u[B.U_STATUS]

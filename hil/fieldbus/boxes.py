@@ -22,7 +22,7 @@ from firmware_model.mcu.board import McuBoard
 from hil.fieldbus import pdo
 from hil.fieldbus.topology import Box
 from hil.scheduler import Scheduler
-from plant.config import Config
+from plant.config import Config, ConfigError
 from plant.echo_actuator import EchoActuators
 
 
@@ -116,6 +116,9 @@ class McuBox(_BoxBase):
 
     def __init__(self, box: Box, cfg: Config, links: list, offsets: list[int]) -> None:
         super().__init__(box, cfg)
+        if cfg.get("mcu.impl") != "python":
+            raise ConfigError("mcu.impl = 'c' runs in the single-actuator stack only; the "
+                              "fieldbus boxes run the Python MCU (mcu.impl = 'python')")
         self.board = McuBoard(cfg, links, offsets) if links else None
         self.mcu = self.board.mcu if self.board else None
         self.period = cfg.get("mcu.period_ticks")

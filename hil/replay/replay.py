@@ -31,7 +31,14 @@ from hil.framelog import FrameLogError, FrameLogReader
 from hil.framelog.reader import LogInfo
 from hil.replay.fpga_replay import column_name, current_trace, replay_board_detail
 from hil.replay.record import UP_WIDTH, topics
-from plant.config import DECLARED, Config, ConfigError, schema, with_nominal_firmware
+from plant.config import (
+    DECLARED,
+    RUN_CHOICES,
+    Config,
+    ConfigError,
+    schema,
+    with_nominal_firmware,
+)
 
 DOWN_NAMES = [name for _addr, name, *_ in B.DOWN_REGISTERS]
 
@@ -124,8 +131,9 @@ def _metadata(path: str | Path, info: LogInfo) -> tuple[Config, Topology, dict[s
         if not isinstance(data, dict):
             raise ValueError("not a JSON object")
         logged = with_nominal_firmware(_flat(data))  # logs from before [firmware]
-        # A sensor's declared keys missing from an older log keep their defaults.
-        missing = sorted(set(_flat(schema())) - set(logged) - set(DECLARED))
+        # A sensor's declared keys and the run choices missing from an older log keep their
+        # defaults.
+        missing = sorted(set(_flat(schema())) - set(logged) - set(DECLARED) - set(RUN_CHOICES))
         if missing:
             raise ValueError(f"no key {missing[0]}")
         cfg = Config(schema(), [f"log {path}"]).with_overrides(logged, f"log {path}")

@@ -52,6 +52,7 @@ BASE = {
     "eha-hil serve": ["--port", "pty", "--seconds", "0.01", "-q"],
     "eha-hil identify-synth": ["--seconds", "1.01"],
     "eha-hil identify-check": ["--case", "no such case"],  # exits 2 before any run
+    "eha-hil verify mcu": ["--against", "host-c", "--steps", "20", "--stack-seconds", "0"],
 }
 
 
