@@ -125,7 +125,7 @@ class DaskCluster:
     process; False: threads of this process, for tests)."""
 
     def __init__(self, address: str, workers: int | None = None, processes: bool = True,
-                 warn: Callable[[str], None] | None = None) -> None:
+                 warn: Callable[[str], None] | None = None, timeout_s: float = 10.0) -> None:
         try:
             from distributed import Client, LocalCluster
         except ImportError:  # pragma: no cover - a dependency of the package
@@ -140,7 +140,7 @@ class DaskCluster:
                     silence_logs=logging.ERROR)
                 self.client = Client(self.cluster)
             else:
-                self.client = Client(address, timeout="10s")
+                self.client = Client(address, timeout=timeout_s)
         except (OSError, TimeoutError, ValueError) as exc:
             raise BackendError(f"--dask {address}: cannot connect: "
                                f"{' '.join(str(exc).split())}") from None

@@ -79,4 +79,7 @@ def read(path: str | Path) -> pd.DataFrame:
     path = Path(path)
     if path.suffix.lower() == ".parquet":
         return pd.read_parquet(path)
-    return pd.read_csv(path, keep_default_na=False, na_values=[""])
+    df = pd.read_csv(path)
+    # An empty cell is a missing value, except in "error", where it means "no error".
+    df["error"] = ["" if pd.isna(v) else str(v) for v in df["error"]]
+    return df
