@@ -19,6 +19,7 @@ import logging
 import os
 import signal
 from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
 from typing import Any, Protocol
 
 Lost = Callable[[Any, str], Any]
@@ -110,6 +111,21 @@ class LocalPool:
         pass
 
 
+@contextmanager
+def _sigint_ignored() -> Iterator[None]:
+    """SIGINT ignored while child processes start (an ignored signal stays ignored across
+    exec, and Python keeps it so), unless this is not the main thread."""
+    try:
+        old = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    except ValueError:
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, old)
+
+
 def _eha_version() -> str:
     from importlib.metadata import PackageNotFoundError, version
 
@@ -134,10 +150,11 @@ class DaskCluster:
         self.cluster = None
         try:
             if address == "local":
-                self.cluster = LocalCluster(
-                    n_workers=workers or default_workers(), threads_per_worker=1,
-                    processes=processes, dashboard_address=None,
-                    silence_logs=logging.ERROR)
+                with _sigint_ignored():  # its processes inherit it: Ctrl-C is ours to handle
+                    self.cluster = LocalCluster(
+                        n_workers=workers or default_workers(), threads_per_worker=1,
+                        processes=processes, dashboard_address=None,
+                        silence_logs=logging.ERROR)
                 self.client = Client(self.cluster)
             else:
                 self.client = Client(address, timeout=timeout_s)
