@@ -57,11 +57,15 @@ class Outcome:
     backend: str
 
 
+#: How the error of a point its backend lost begins.
+LOST = "lost: "
+
+
 def lost_record(task: Task, why: str) -> dict[str, Any]:
     """The record of a point its backend lost (a worker died): an error, like a raise."""
     p = task.point
     return {"point": p.index, "sample": p.sample, "params": dict(p.overrides), "metrics": [],
-            "ok": None, "error": f"lost: {why}", "cpu_s": 0.0}
+            "ok": None, "error": LOST + why, "cpu_s": 0.0}
 
 
 def run_sweep(scenario: str, base: Config, plan: Plan, backend: Backend,
@@ -76,7 +80,10 @@ def run_sweep(scenario: str, base: Config, plan: Plan, backend: Backend,
     done: dict[int, dict[str, Any]] = {}
     if journal is not None:
         done = journal.start(plan.fingerprint(scenario, base), scenario, total, resume)
-        done = {i: r for i, r in done.items() if i < total}
+        # A point a backend lost (a worker died) is run again; one that raised is not: it
+        # would raise again.
+        done = {i: r for i, r in done.items()
+                if i < total and not r.get("error", "").startswith(LOST)}
     prog = Progress(total, resumed=len(done))
     prog.failed = sum(1 for r in done.values() if r.get("error"))
     if on_point:

@@ -11,8 +11,9 @@ from hil import scenarios
 from hil.scenarios import Metric, ScenarioResult
 from hil.sweep import table
 from hil.sweep.backends import Serial
-from hil.sweep.engine import run_sweep
+from hil.sweep.engine import lost_record, run_sweep
 from hil.sweep.journal import Journal, JournalError
+from hil.sweep.point import evaluate
 from hil.sweep.space import build_plan, parse_param
 from hil.sweep.summary import summarise
 from plant.config import load_config
@@ -111,3 +112,18 @@ def test_a_failing_point_is_recorded_and_the_sweep_finishes(tmp_path, default_cf
     # The journal holds the failures too: a resume does not run them again.
     recs = [json.loads(x) for x in path.read_text().splitlines()[1:]]
     assert sorted(r["point"] for r in recs if r["error"]) == [3, 4]
+
+
+def test_a_point_the_backend_lost_is_run_again_on_resume(tmp_path, default_cfg, fragile):
+    plan = build_plan(default_cfg, [parse_param("mcu.kp_force=1,1.5,2")])
+    path = tmp_path / "j.points.jsonl"
+
+    def loses_point_1(task):  # as a backend reports a worker that died
+        return lost_record(task, "worker process died") if task.point.index == 1 \
+            else evaluate(task)
+
+    first = run_sweep(fragile, default_cfg, plan, Serial(), Journal(path), fn=loses_point_1)
+    assert first.records[1]["error"] == "lost: worker process died"
+    again = run_sweep(fragile, default_cfg, plan, Serial(), Journal(path), resume=True)
+    assert (again.resumed, again.computed) == (2, 1)
+    assert [r["error"] for r in again.records] == ["", "", ""]
