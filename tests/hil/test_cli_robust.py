@@ -35,7 +35,7 @@ UNTYPED_PATHS = {"config": "config", "preset": "config", "topology": "input",
                  "port": "device", "log": "input", "out": "output"}
 #: Options that take a value which is neither a number nor a path.
 TEXT = {"set", "effect", "magnitude", "host", "scenario", "topic", "field", "board", "case",
-        "can_channel"}
+        "can_channel", "param", "tolerance", "seeds", "dask", "scenario_name"}
 
 #: Extra arguments that keep a verb cheap when the value under test is valid (tiny
 #: durations, --json for no progress lines), and placeholders for required positionals.
@@ -52,6 +52,7 @@ BASE = {
     "eha-hil serve": ["--port", "pty", "--seconds", "0.01", "-q"],
     "eha-hil identify-synth": ["--seconds", "1.01"],
     "eha-hil identify-check": ["--case", "no such case"],  # exits 2 before any run
+    "eha-hil bench sweep": ["--points", "2", "--scenario", "current-step"],
 }
 
 
