@@ -16,8 +16,8 @@ from pathlib import Path
 from typing import Any
 
 from hil import cli_progress
-from hil.cli_args import float_range, int_range, output_dir, output_file
-from hil.sweep import space
+from hil.cli_args import EXIT_USAGE, float_range, int_range, output_dir, output_file
+from hil.sweep import requirements, space
 
 OUT_FILE = output_file((".parquet", ".csv"))
 
@@ -30,15 +30,32 @@ def _duration(seconds: float | None) -> str:
         f"{s // 60}m{s % 60:02d}s" if s >= 60 else f"{s}s")
 
 
-def _usage(message: str) -> Exception:
-    from hil.cli import UsageError
+class SweepUsageError(Exception):
+    """A mistake on the command line that the argument types cannot see: one line, exit 2."""
 
-    return UsageError(message)
+
+def _usage(message: str) -> Exception:
+    return SweepUsageError(message)
+
+
+def _one_line_errors(cmd: Callable[[argparse.Namespace], int]
+                     ) -> Callable[[argparse.Namespace], int]:
+    """A verb whose SweepUsageError is printed as ``hil.cli.main`` prints its own, exit 2
+    (its own class: ``python -m hil.cli`` loads hil.cli twice, as __main__ and by name)."""
+
+    def run(args: argparse.Namespace) -> int:
+        try:
+            return cmd(args)
+        except SweepUsageError as exc:
+            print(f"eha-hil: error: {exc}", file=sys.stderr)
+            return EXIT_USAGE
+
+    return run
 
 
 def _resolve_scenario(args: argparse.Namespace) -> str:
     from hil import scenarios
-    from hil.cli import THESIS_PRESET
+    from hil.cli import THESIS_PRESET  # a constant: the same in both copies of hil.cli
 
     if args.scenario == "thesis":
         raise _usage("sweep: one scenario at a time (f3 .. f8, not 'thesis')")
@@ -66,7 +83,7 @@ def _reporter(scenario: str, enabled: bool) -> Callable[[dict | None, Any], None
 
 
 def cmd_sweep(args: argparse.Namespace) -> int:
-    from hil.sweep import plots, summary, table
+    from hil.sweep import plots, requirements, summary, table
     from hil.sweep.backends import BackendError, make_backend
     from hil.sweep.engine import run_sweep
     from hil.sweep.journal import Journal, JournalError, journal_path, readable
@@ -88,6 +105,9 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         jpath = journal_path(args.out)
         journal = Journal(jpath)
         cli_progress.output("journal", jpath, check=readable)
+        if jpath.exists() and not args.resume and show:
+            print(f"eha-hil sweep: starting over: {jpath} is replaced (--resume continues "
+                  "the sweep it holds)", file=sys.stderr)
     try:
         backend = make_backend(args.workers, args.dask,
                                warn=lambda m: print(f"eha-hil sweep: {m}", file=sys.stderr))
@@ -103,10 +123,14 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         raise _usage(str(exc)) from None
     finally:
         backend.close()
-    df = table.frame(plan, outcome.records)
+    try:
+        records = requirements.apply(outcome.records, args.require or [])
+    except ValueError as exc:
+        raise _usage(str(exc)) from None
+    df = table.frame(plan, records)
     title = (f"sweep {scenario}: {len(plan.points)} points ({plan.kind}), "
              f"{base.sources[-1]}")
-    summ = summary.summarise(df, outcome.records)
+    summ = summary.summarise(df, records)
     lines = [summary.text(summ, title)]
     errors = df[df["error"] != ""]
     for _, row in errors.head(5).iterrows():
@@ -122,7 +146,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     if args.plot_dir:
         out_dir = Path(args.plot_dir)
         out_dir.mkdir(exist_ok=True)
-        plot_paths = plots.plot_sweep(df, plan, outcome.records, out_dir, title)
+        plot_paths = plots.plot_sweep(df, plan, records, out_dir, title)
         lines.append(f"plots written to {out_dir}/ ("
                      f"{', '.join(p.name for p in plot_paths)})")
     lines.append(f"{outcome.computed} points computed, {outcome.resumed} from the journal, "
@@ -225,9 +249,14 @@ def add_parsers(sub: Any, bsub: Any, common: Callable[..., argparse.ArgumentPars
     p.add_argument("--dask", metavar="tcp://HOST:PORT|local",
                    help="run the points on a Dask cluster (its scheduler's address), or on "
                    "a LocalCluster")
+    p.add_argument("--require", action="append", type=requirements.parse_requirement,
+                   metavar="'METRIC>=BOUND'",
+                   help="judge METRIC (its name in the table, without the unit) by this bound "
+                   "instead of the scenario's requirement; also <=, >, < (repeatable: all "
+                   "must hold); with --resume, a finished sweep is judged again at no cost")
     p.add_argument("--min-yield", type=float_range(0.0, 1.0), default=None,
                    help="exit 1 when a judged metric's yield is below this fraction")
-    p.set_defaults(func=cmd_sweep)
+    p.set_defaults(func=_one_line_errors(cmd_sweep))
 
     b = bsub.add_parser("sweep", parents=[common(plot=False)],
                         help="speed-up of the local process pool over a serial sweep, wall "
@@ -237,4 +266,4 @@ def add_parsers(sub: Any, bsub: Any, common: Callable[..., argparse.ArgumentPars
     b.add_argument("--points", type=int_range(2, 1000), default=8, help="points, 2..1000")
     b.add_argument("--workers", type=int_range(2, 1024), default=None,
                    help="pool workers (default: one per core)")
-    b.set_defaults(func=cmd_bench_sweep)
+    b.set_defaults(func=_one_line_errors(cmd_bench_sweep))

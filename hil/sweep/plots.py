@@ -63,8 +63,11 @@ def _heat(ax, fig, df: pd.DataFrame, kx: str, ky: str, ycol: str, pcol: str | No
         for (i, j), bad in np.ndenumerate(cells.to_numpy(dtype=bool)):
             if bad:
                 ax.text(j, i, "x", ha="center", va="center", color="red", fontsize=12)
+    lo, hi = im.get_clim()
     for (i, j), v in np.ndenumerate(grid.to_numpy(dtype=float)):
-        ax.text(j, i + 0.3, f"{v:.3g}", ha="center", va="center", color="w", fontsize=7)
+        light = hi > lo and (v - lo) / (hi - lo) > 0.6  # viridis turns yellow up there
+        ax.text(j, i + 0.3, f"{v:.3g}", ha="center", va="center",
+                color="k" if light else "w", fontsize=7)
 
 
 def _monte_carlo(fig, df: pd.DataFrame, plan: Plan, ycol: str, pcol: str | None) -> None:

@@ -35,7 +35,7 @@ UNTYPED_PATHS = {"config": "config", "preset": "config", "topology": "input",
                  "port": "device", "log": "input", "out": "output"}
 #: Options that take a value which is neither a number nor a path.
 TEXT = {"set", "effect", "magnitude", "host", "scenario", "topic", "field", "board", "case",
-        "can_channel", "param", "tolerance", "seeds", "dask", "scenario_name"}
+        "can_channel", "param", "tolerance", "seeds", "dask", "scenario_name", "require"}
 
 #: Extra arguments that keep a verb cheap when the value under test is valid (tiny
 #: durations, --json for no progress lines), and placeholders for required positionals.
