@@ -11,6 +11,8 @@ does not depend on the backend, the number of workers or the order points finish
 * :mod:`hil.sweep.backends` — where points run: serial, local pool, Dask;
 * :mod:`hil.sweep.journal` — finished points on disk, for ``--resume``;
 * :mod:`hil.sweep.engine` — runs a plan on a backend, journal and progress;
+* :mod:`hil.sweep.requirements` — ``--require``: the user's bound on a metric;
 * :mod:`hil.sweep.table`, :mod:`hil.sweep.summary`, :mod:`hil.sweep.plots` — the results;
+* :mod:`hil.sweep.bench` — the local pool against a serial sweep (``bench sweep``);
 * :mod:`hil.sweep.cli` — the ``sweep`` and ``bench sweep`` verbs.
 """
