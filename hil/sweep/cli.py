@@ -126,7 +126,9 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     try:
         records = requirements.apply(outcome.records, args.require or [])
     except ValueError as exc:
-        raise _usage(str(exc)) from None
+        kept = ("; the journal keeps every point: rerun with --resume and the metric's "
+                "name" if args.out else "")
+        raise _usage(f"{exc}{kept}") from None
     df = table.frame(plan, records)
     title = (f"sweep {scenario}: {len(plan.points)} points ({plan.kind}), "
              f"{base.sources[-1]}")
