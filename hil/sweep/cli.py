@@ -97,7 +97,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     if not (args.param or args.tolerance or args.seeds):
         raise _usage("sweep: nothing to vary; give --param, --tolerance or --seeds")
     base = load_config(args.config, args.set or ())
-    plan = space.build_plan(base, args.param or [], args.tolerance or [], args.samples,
+    plan = space.build_plan(base, args.param or [], args.tolerance or [], args.samples or 0,
                             args.seeds or (), args.distribution, args.draw_seed)
     show = not args.json
     journal = None
@@ -213,7 +213,7 @@ def add_parsers(sub: Any, bsub: Any, common: Callable[..., argparse.ArgumentPars
         help="parameter grid or Monte Carlo over a scenario: table, summary with yield, "
         "plots; local process pool or a Dask cluster",
         epilog="Example: eha-hil sweep f7 --tolerance effects.seal_friction.coulomb_n,"
-        "effects.seal_friction.static_n=30%% --tolerance hydraulics.jp_kg=10%% --samples 50 "
+        "effects.seal_friction.static_n=30% --tolerance hydraulics.jp_kg=10% --samples 50 "
         "--out f7.parquet --plot-dir f7-plots. Scenarios: " + ", ".join(names())
         + ". Exit codes: 0 every point ran; 1 a point failed with an error or a yield is "
         "below --min-yield; 2 a mistake; 130 interrupted (resume with --resume).")
@@ -223,14 +223,14 @@ def add_parsers(sub: Any, bsub: Any, common: Callable[..., argparse.ArgumentPars
                    metavar="KEY=START:STOP:COUNT|KEY=V1,V2,...",
                    help="a grid parameter (repeatable: the full factorial, first outermost)")
     p.add_argument("--tolerance", action="append", type=space.parse_tolerance,
-                   metavar="KEY[,KEY...]=P%%|KEY=WIDTH",
+                   metavar="KEY[,KEY...]=P%|KEY=WIDTH",
                    help="a Monte Carlo tolerance, relative (P%% of the key's value) or "
                    "absolute in the key's unit; keys given together move by one draw "
                    "(repeatable)")
     p.add_argument("--distribution", choices=space.DISTRIBUTIONS, default="uniform",
                    help="tolerance draws: uniform over the band, or normal with sigma = a "
                    "third of it, cut at its edges")
-    p.add_argument("--samples", type=int_range(1, 100_000), default=0,
+    p.add_argument("--samples", type=int_range(1, 100_000), default=None,
                    help="Monte Carlo samples (actuators built to tolerance), 1..100000")
     p.add_argument("--draw-seed", type=int_range(0, 2**32 - 1), default=0,
                    help="base seed of the Monte Carlo draws: sample j's values depend on it "
