@@ -132,7 +132,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     df = table.frame(plan, records)
     title = (f"sweep {scenario}: {len(plan.points)} points ({plan.kind}), "
              f"{base.sources[-1]}")
-    summ = summary.summarise(df, records)
+    summ = summary.summarise(df, records, [g.key for g in plan.grid])
     lines = [summary.text(summ, title)]
     errors = df[df["error"] != ""]
     for _, row in errors.head(5).iterrows():

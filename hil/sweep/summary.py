@@ -9,7 +9,7 @@ samples can be trusted (50 of 50 passing still only shows >= 93 %).
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import numpy as np
@@ -39,6 +39,26 @@ class MetricSummary:
 
 
 @dataclass
+class CellYield:
+    """The yield at one grid point over its seeds and samples (a grid with repeats)."""
+
+    values: dict[str, Any]       # the grid keys' values
+    points: int
+    passed: int
+    yield_: float
+    yield_low: float
+    yield_high: float
+    spread: dict[str, tuple[float, float, float]]  # judged metric -> min, median, max
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"values": self.values, "points": self.points, "passed": self.passed,
+                "yield": self.yield_, "yield_low": self.yield_low,
+                "yield_high": self.yield_high,
+                "spread": {k: dict(zip(("min", "median", "max"), v, strict=True))
+                           for k, v in self.spread.items()}}
+
+
+@dataclass
 class Summary:
     points: int
     errors: int
@@ -47,12 +67,14 @@ class Summary:
     yield_: float | None
     yield_low: float | None
     yield_high: float | None
+    cells: list[CellYield] = field(default_factory=list)
 
     def as_dict(self) -> dict[str, Any]:
         return {"points": self.points, "errors": self.errors, "passed": self.passed,
                 "yield": self.yield_, "yield_low": self.yield_low,
                 "yield_high": self.yield_high,
-                "metrics": [m.as_dict() for m in self.metrics]}
+                "metrics": [m.as_dict() for m in self.metrics],
+                "grid_points": [c.as_dict() for c in self.cells]}
 
 
 def clopper_pearson(k: int, n: int, level: float = 0.95) -> tuple[float, float]:
@@ -65,8 +87,12 @@ def clopper_pearson(k: int, n: int, level: float = 0.95) -> tuple[float, float]:
     return lo, hi
 
 
-def summarise(df: pd.DataFrame, records: list[dict[str, Any]]) -> Summary:
-    """The summary of a results table (``records``: for the metrics' units and requirements)."""
+def summarise(df: pd.DataFrame, records: list[dict[str, Any]], grid_keys: list[str] = ()
+              ) -> Summary:
+    """The summary of a results table (``records``: for the metrics' units and requirements).
+    With ``grid_keys`` (a grid whose points repeat over seeds or samples) also the yield at
+    each grid point: which settings hold across the actuators built to tolerance."""
+    grid_keys = list(grid_keys)
     n = len(df)
     out = []
     for meta in metric_meta(records):
@@ -84,7 +110,31 @@ def summarise(df: pd.DataFrame, records: list[dict[str, Any]]) -> Summary:
     judged = any(m.passed is not None for m in out)
     passed = int(df["pass"].fillna(False).sum()) if judged else None
     y = (passed / n, *clopper_pearson(passed, n)) if judged and n else (None, None, None)
-    return Summary(n, int((df["error"] != "").sum()), out, passed, *y)
+    summ = Summary(n, int((df["error"] != "").sum()), out, passed, *y)
+    if judged and grid_keys and n > df.groupby(grid_keys, sort=False).ngroups:
+        summ.cells = _cells(df, records, grid_keys)
+    return summ
+
+
+def _spread(values: pd.Series) -> tuple[float, float, float]:
+    v = values.to_numpy(dtype=float)
+    v = v[np.isfinite(v)]
+    return (float(v.min()), float(np.median(v)), float(v.max())) if len(v) else (math.nan,) * 3
+
+
+def _cells(df: pd.DataFrame, records: list[dict[str, Any]], keys: list[str]
+           ) -> list[CellYield]:
+    judged = [m for m in metric_meta(records) if m["judged"]]
+    cells = []
+    for values, cell in df.groupby(keys, sort=False):
+        values = values if isinstance(values, tuple) else (values,)
+        k, m = int(cell["pass"].fillna(False).sum()), len(cell)
+        cells.append(CellYield(
+            {key: (v.item() if hasattr(v, "item") else v) for key, v in zip(keys, values,
+                                                                              strict=True)},
+            m, k, k / m, *clopper_pearson(k, m),
+            {j["name"]: _spread(cell[metric_column(j)]) for j in judged}))
+    return cells
 
 
 def text(summary: Summary, title: str) -> str:
@@ -105,4 +155,15 @@ def text(summary: Summary, title: str) -> str:
         tail += (f"; every requirement met at {summary.passed} of {summary.points} points "
                  f"(yield {pct(summary.yield_)}, 95 % interval {pct(summary.yield_low)}.."
                  f"{pct(summary.yield_high)})")
-    return body + "\n" + tail
+    out = body + "\n" + tail
+    if summary.cells:
+        keys = list(summary.cells[0].values)
+        names = list(summary.cells[0].spread)
+        rows = [(*(str(v) for v in c.values.values()), c.points, c.passed, pct(c.yield_),
+                 f"{pct(c.yield_low)}..{pct(c.yield_high)}",
+                 *(x for lo, med, _ in c.spread.values() for x in (lo, med)))
+                for c in summary.cells]
+        heads = [h for n in names for h in (f"min {n}", f"median {n}")]
+        out += "\n\n" + table([*keys, "points", "met", "yield", "95 % interval", *heads],
+                               rows, fmt=".4g", title="every requirement, per grid point")
+    return out

@@ -127,3 +127,20 @@ def test_a_point_the_backend_lost_is_run_again_on_resume(tmp_path, default_cfg, 
     again = run_sweep(fragile, default_cfg, plan, Serial(), Journal(path), resume=True)
     assert (again.resumed, again.computed) == (2, 1)
     assert [r["error"] for r in again.records] == ["", "", ""]
+
+
+def test_a_grid_with_repeats_has_a_yield_per_grid_point(default_cfg, monkeypatch):
+    def run(cfg, progress=None):
+        x = cfg.get("mcu.kp_force") + 0.1 * cfg.get("sim.seed")
+        return ScenarioResult("noisy", "test", [Metric("x", x, "", "<= 1.15", x <= 1.15)])
+
+    monkeypatch.setitem(scenarios.SCENARIOS, "noisy", scenarios.Scenario("noisy", "", run))
+    plan = build_plan(default_cfg, [parse_param("mcu.kp_force=1,2")], seeds=(0, 1, 2, 3))
+    out = run_sweep("noisy", default_cfg, plan, Serial())
+    df = table.frame(plan, out.records)
+    s = summarise(df, out.records, ["mcu.kp_force"])
+    assert [c.values for c in s.cells] == [{"mcu.kp_force": 1.0}, {"mcu.kp_force": 2.0}]
+    assert [(c.points, c.passed) for c in s.cells] == [(4, 2), (4, 0)]
+    lo, med, hi = s.cells[0].spread["x"]
+    assert (lo, hi) == (1.0, pytest.approx(1.3)) and med == pytest.approx(1.15)
+    assert summarise(df, out.records).cells == []  # without the grid's keys: none
