@@ -44,6 +44,7 @@ bench: $(STAMP)
 	$(BIN)/eha-hil bench codecs
 	$(BIN)/eha-hil bench fpga
 	$(BIN)/eha-hil bench stack
+	$(BIN)/eha-hil bench sweep
 
 system-deps:
 	echo "wireshark-common wireshark-common/install-setuid boolean false" | debconf-set-selections

@@ -35,7 +35,8 @@ UNTYPED_PATHS = {"config": "config", "preset": "config", "topology": "input",
                  "port": "device", "log": "input", "out": "output"}
 #: Options that take a value which is neither a number nor a path.
 TEXT = {"set", "effect", "magnitude", "host", "scenario", "topic", "field", "board", "case",
-        "can_channel", "foxglove"}  # foxglove: HOST:PORT, checked by hil.live.parse_address
+        "can_channel", "foxglove",  # foxglove: HOST:PORT, checked by hil.live.parse_address
+        "param", "tolerance", "seeds", "dask", "scenario_name", "require"}
 
 #: Extra arguments that keep a verb cheap when the value under test is valid (tiny
 #: durations, --json for no progress lines), and placeholders for required positionals.
@@ -53,6 +54,7 @@ BASE = {
     "eha-hil identify-synth": ["--seconds", "1.01"],
     "eha-hil identify-check": ["--case", "no such case"],  # exits 2 before any run
     "eha-hil verify mcu": ["--against", "host-c", "--steps", "20", "--stack-seconds", "0"],
+    "eha-hil bench sweep": ["--points", "2", "--scenario", "current-step"],
 }
 
 
