@@ -490,7 +490,9 @@ class FastModel:
         dc = theta[IDX["dc"]]
         if exp.temperature is not None and theta[IDX["visc_coeff_per_c"]] != 0.0:
             dc = dc * np.exp(-theta[IDX["visc_coeff_per_c"]] * (exp.temperature - exp.t_ref))
-        f_cyl = tq - dc * vc
+        # with the piston held the cylinder sees the pump's pressures: the same arrays, which
+        # the sensor lag below then filters once
+        f_cyl = tq if exp.load == "fixed" else tq - dc * vc
         if exp.load == "fixed":
             f_rod = f_cyl
         elif exp.load == "conrod":
@@ -499,15 +501,23 @@ class FastModel:
             f_rod = np.zeros_like(tq)
         out: dict[str, np.ndarray] = {}
         pre = exp.precharge
+        sides: dict[tuple[int, float], np.ndarray] = {}
+
+        def side(force: np.ndarray, sign: float) -> np.ndarray:
+            key = (id(force), sign)
+            if key not in sides:
+                sides[key] = pre + np.maximum(sign * force, 0.0) / c.kc
+            return sides[key]
+
         for ch in exp.channels:
             if ch == "p_pump_a":
-                y = pre + np.maximum(tq, 0.0) / c.kc
+                y = side(tq, 1.0)
             elif ch == "p_pump_b":
-                y = pre + np.maximum(-tq, 0.0) / c.kc
+                y = side(tq, -1.0)
             elif ch == "p_cyl_a":
-                y = pre + np.maximum(f_cyl, 0.0) / c.kc
+                y = side(f_cyl, 1.0)
             elif ch == "p_cyl_b":
-                y = pre + np.maximum(-f_cyl, 0.0) / c.kc
+                y = side(f_cyl, -1.0)
             elif ch == "f_strain":
                 y = f_rod + theta[IDX["strain_offset_n"]]
                 drift = theta[IDX["drift_n_per_c"]]
@@ -527,9 +537,11 @@ class FastModel:
                            (("f_strain",), theta[IDX["lag_strain_s"]])):
             lagged = [ch for ch in names if ch in out]
             if lag > 0.0 and lagged:
-                for ch, y in zip(lagged, sensor_lags([out[ch] for ch in lagged], lag, exp.dt,
-                                                     n_stop), strict=True):
-                    out[ch] = y
+                distinct = list({id(out[ch]): out[ch] for ch in lagged}.values())
+                done = dict(zip((id(y) for y in distinct),
+                                sensor_lags(distinct, lag, exp.dt, n_stop), strict=True))
+                for ch in lagged:
+                    out[ch] = done[id(out[ch])]
         for ch in out:
             if ch in SAT_CHANNELS:
                 beta = theta[IDX[f"sat_{ch}"]]
