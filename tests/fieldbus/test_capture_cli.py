@@ -103,6 +103,7 @@ def test_capture_usage_errors_are_one_line(tmp_path, capsys):
     assert err.count("\n") == 1 and "not a pcap or pcapng capture" in err
 
 
+@pytest.mark.slow
 def test_udp_port_taken_is_one_line(capsys):
     import socket
 

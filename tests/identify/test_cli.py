@@ -60,6 +60,7 @@ def report_run(coulomb_csv, tmp_path_factory):
     return code, out.getvalue(), err.getvalue(), rdir
 
 
+@pytest.mark.slow
 def test_identify_text_and_report_dir(report_run):
     code, out, err, rdir = report_run
     assert code == 0
@@ -71,6 +72,7 @@ def test_identify_text_and_report_dir(report_run):
         assert (rdir / name).stat().st_size > 100, name
 
 
+@pytest.mark.slow
 def test_json_summary(report_run):
     """``--json`` prints what ``summary.json`` holds (report.to_json of the same report)."""
     rdir = report_run[3]

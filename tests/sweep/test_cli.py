@@ -53,6 +53,7 @@ def test_mistakes_are_one_line_and_exit_2(capsys, argv, words):
     assert "Traceback" not in err
 
 
+@pytest.mark.slow
 def test_a_scheduler_that_does_not_answer_is_one_line():
     with pytest.raises(BackendError) as err:
         DaskCluster("tcp://127.0.0.1:9", timeout_s=0.5)
@@ -138,6 +139,7 @@ def slow_points(monkeypatch):
                         scenarios.Scenario("slow", "20 ms a point", run))
 
 
+@pytest.mark.slow
 def test_ctrl_c_then_resume_computes_the_rest(tmp_path, capsys, slow_points):
     out = tmp_path / "s.csv"
     argv = ["sweep", "slow", "--seeds", "0..59", "--workers", "1", "--out", str(out)]

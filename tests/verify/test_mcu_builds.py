@@ -74,6 +74,7 @@ def test_the_steps_reach_every_status_bit_the_law_sets():
     assert status & 0x3FF == 0x3FF
 
 
+@pytest.mark.slow
 def test_contracted_host_build_is_caught():
     _need("host-c")
     if not _cpu_has_fma():
@@ -98,6 +99,7 @@ def test_cortex_m4_image_under_qemu_is_bit_identical_to_the_model():
     assert rep.mismatches == 0, rep.as_dict()["first_mismatch"]
 
 
+@pytest.mark.slow
 def test_contracted_image_under_qemu_is_caught():
     _need("qemu")
     rep = verify_mcu("qemu", steps=600, stack_seconds=0, contract="fast")
@@ -105,6 +107,7 @@ def test_contracted_image_under_qemu_is_caught():
     assert rep.first.first.field
 
 
+@pytest.mark.slow
 def test_qemu_reruns_are_identical():
     _need("qemu")
     cfg = load_config()
