@@ -29,6 +29,7 @@ def _counters(path: Path) -> list[int]:
     return [int.from_bytes(d, "little") for _, _, d in FrameLogReader(path).frames()]
 
 
+@pytest.mark.slow
 def test_cut_anywhere_reads_a_prefix(tmp_path: Path) -> None:
     full = tmp_path / "full.mcap"
     _counter_log(full, 60)
@@ -205,6 +206,7 @@ def test_killed_while_writing_leaves_a_readable_log(tmp_path: Path) -> None:
     assert len(counters) > COUNTS // 2
 
 
+@pytest.mark.slow
 def test_killed_writer_lost_only_its_open_chunk(tmp_path: Path) -> None:
     # The same 3000 counts written in-process and closed: its last chunk is the one the
     # killed writer still had open; every chunk before it must be in the killed file.

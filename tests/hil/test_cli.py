@@ -212,6 +212,7 @@ def test_identify_synth_never_overwrites_a_non_csv_file(capsys, tmp_path):
         assert path.read_bytes() == png.read_bytes()
 
 
+@pytest.mark.slow
 def test_main_exits_1_when_an_f2_figure_is_out_of_band(capsys):
     # A stronger motor constant puts the stall force far above the 1600..1800 N band.
     code, out, _ = run(capsys, "main", "--json", "--set", "motor.force_at_rated_n=3000")

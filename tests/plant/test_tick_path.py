@@ -5,6 +5,7 @@ most of a 1.3x slowdown of the RK4 step (docs/architecture.md)."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from numba import njit
 
 from plant import kernel
@@ -22,6 +23,7 @@ def test_per_tick_functions_use_the_tick_options():
         assert fn.targetoptions.get("_nrt") is False, fn.__name__
 
 
+@pytest.mark.slow
 def test_derivatives_compiled_so_has_no_reference_counting():
     plant = Plant(load_config(None, ()))
     opts = {k: v for k, v in TICK.items() if k != "cache"}

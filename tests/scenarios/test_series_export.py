@@ -102,6 +102,7 @@ def test_cli_current_step_series(tmp_path: Path, capsys) -> None:  # noqa: ANN00
     assert len(err) == 1 and "--series" in err[0]
 
 
+@pytest.mark.slow
 def test_series_live_to_a_websocket_client() -> None:
     """``run --foxglove``: a client subscribes, gets every row, decodes it with the schema
     the server advertised."""
