@@ -32,6 +32,26 @@ class Comparison:
         return asdict(self)
 
 
+class ComparedSets:
+    """Totals over a run's compared sets (``self.sets``), for the result classes of both
+    checks."""
+
+    sets: list[Comparison]
+
+    @property
+    def vectors(self) -> int:
+        return sum(c.vectors for c in self.sets)
+
+    @property
+    def mismatches(self) -> int:
+        return sum(c.mismatches for c in self.sets)
+
+    @property
+    def first(self) -> Comparison | None:
+        """The first set with a mismatch."""
+        return next((c for c in self.sets if c.first is not None), None)
+
+
 def _show(value: np.generic) -> str:
     if isinstance(value, np.floating):
         bits = value.view(np.uint32 if value.dtype.itemsize == 4 else np.uint64)

@@ -10,29 +10,17 @@ from pathlib import Path
 import numpy as np
 
 from firmware_model.fpga.current_loop import run_model
-from hil.verify.compare import Comparison, compare
+from hil.verify.compare import ComparedSets, Comparison, compare
 from hil.verify.loop_vectors import loop_sets
 from hil.verify.rtl_run import RTL_DIR, run_rtl
 from plant.config import Config
 
 
 @dataclass
-class LoopVerification:
+class LoopVerification(ComparedSets):
     rtl: str
     sets: list[Comparison] = field(default_factory=list)
     seconds: float = 0.0
-
-    @property
-    def vectors(self) -> int:
-        return sum(c.vectors for c in self.sets)
-
-    @property
-    def mismatches(self) -> int:
-        return sum(c.mismatches for c in self.sets)
-
-    @property
-    def first(self) -> Comparison | None:
-        return next((c for c in self.sets if c.first is not None), None)
 
     def as_dict(self) -> dict:
         first = self.first

@@ -13,7 +13,7 @@ import numpy as np
 from firmware_model.fpga import layout as B
 from firmware_model.mcu.c_abi import config_record
 from hil.verify import mcu_builds
-from hil.verify.compare import Comparison, compare
+from hil.verify.compare import ComparedSets, Comparison, compare
 from hil.verify.mcu_model import run_model
 from hil.verify.mcu_stack_steps import stack_inputs
 from hil.verify.mcu_steps import VARIANTS, random_sets
@@ -25,24 +25,12 @@ FIELD_NAMES = {"down": [name for _, name, *_ in B.DOWN_REGISTERS],
 
 
 @dataclass
-class McuVerification:
+class McuVerification(ComparedSets):
     against: str
     contract: str
     build: str
     sets: list[Comparison] = field(default_factory=list)
     seconds: float = 0.0
-
-    @property
-    def vectors(self) -> int:
-        return sum(c.vectors for c in self.sets)
-
-    @property
-    def mismatches(self) -> int:
-        return sum(c.mismatches for c in self.sets)
-
-    @property
-    def first(self) -> Comparison | None:
-        return next((c for c in self.sets if c.first is not None), None)
 
     def as_dict(self) -> dict:
         first = self.first
