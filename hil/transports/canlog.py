@@ -69,6 +69,10 @@ class CanLogRecorder:
                 self._write(msg)
 
     def _write(self, msg: can.Message) -> None:
+        # the file is one cable: the writer's own channel, not the bus's name, which on the
+        # virtual interface is private and random (BLF would read its trailing digits as a
+        # 16-bit channel number, and "eha-hil-...96191" does not fit)
+        msg.channel = None
         self._writer.on_message_received(msg)
         self.messages += 1
 

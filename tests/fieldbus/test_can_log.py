@@ -103,3 +103,20 @@ def test_socketcan_in_a_private_namespace(tmp_path):
         assert sum(f.direction == "rx" for f in t.frames) == 20
     finally:
         subprocess.run(["ip", "netns", "del", ns], check=False)
+
+
+@pytest.mark.parametrize("suffix", [".blf", ".asc", ".log"])
+def test_a_channel_name_ending_in_a_large_number_is_logged(tmp_path, suffix):
+    """The virtual bus's private channel names are random: one ending in digits that do not
+    fit BLF's 16-bit channel number must still be logged (the file is one cable)."""
+    from hil.transports.canlog import CanLogRecorder, read_can_log
+
+    channel = f"eha-hil-test-{uuid.uuid4().hex[:4]}99999"
+    path = tmp_path / f"one{suffix}"
+    with can.Bus(interface="virtual", channel=channel, fd=True) as bus:
+        rec = CanLogRecorder(path, "virtual", channel)
+        bus.send(can.Message(arbitration_id=0x123, data=bytes(range(12)), is_fd=True,
+                             is_extended_id=False))
+        rec.close()
+    msgs = read_can_log(path)
+    assert [(m.arbitration_id, bytes(m.data)) for m in msgs] == [(0x123, bytes(range(12)))]
