@@ -495,7 +495,8 @@ def _add_external(sub, bsub) -> None:
     """``log`` (frame logs) and ``identify`` (measured data): their modules own the options."""
     from hil.framelog.cli import configure_log, run_log
 
-    p = sub.add_parser("log", help="frame logs (MCAP): info, export to CSV")
+    p = sub.add_parser("log", help="frame logs (MCAP, captures, CAN logs): info, export to "
+                       "CSV or Parquet")
     configure_log(p)
     p.set_defaults(func=run_log)
     try:
