@@ -318,7 +318,7 @@ def add_parsers(sub, bsub, common, config_fn, wrap) -> None:
                    help="shipped topology name or TOML file")
     p.add_argument("--transport", default="inproc", choices=list(BACKENDS),
                    help="frame transport")
-    p.add_argument("--model", choices=("stack", "echo"),
+    p.add_argument("--model", choices=("stack", "robot", "echo"),
                    help="box model: stack (plant + FPGA + MCU) or echo (behavioural); "
                    "default stack for <= 5 actuators, echo otherwise")
     # At least one 1 ms cycle; an hour of a 16-box robot is already a long run.
@@ -359,7 +359,7 @@ def add_parsers(sub, bsub, common, config_fn, wrap) -> None:
                    "a --capture (.pcapng/.pcap) or --can-log (.blf/.asc/.log)")
     p.add_argument("--topology", help="capture/CAN log: the run's topology (default: from "
                    "the pcapng's metadata, else bench_one_box)")
-    p.add_argument("--model", choices=("stack", "echo"),
+    p.add_argument("--model", choices=("stack", "robot", "echo"),
                    help="capture/CAN log: the run's box model (default: from the metadata, "
                    "else as bus run chooses)")
     p.set_defaults(func=wrap(cmd_replay, config_fn, use_log_config=True))

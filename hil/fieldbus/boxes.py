@@ -152,14 +152,27 @@ class StackBox(McuBox):
         self.stacks = [FpgaStack(cfg) for _ in box.actuators]
         super().__init__(box, cfg, [s.mcu_link for s in self.stacks],
                          [s.board.calibrated_offset for s in self.stacks])
+        #: The whole-robot engine that advances this box with all others (hil.robot), and
+        #: the process data it has yet to decode; None on the per-actuator path.
+        self.engine = None
+        self.pending: bytes | None = None
         self._group = _Stacks(self, cfg.get("sim.tick_ns"))
         self.sched = Scheduler(self._group, record_every=0)
         if self.board is not None:
             self.sched.every(self.period, self._mcu_step, "mcu")
         self._fill()
 
+    def apply(self, data: bytes) -> None:
+        """Outputs of this cycle (kept for the engine to decode with every box's, if any)."""
+        if self.engine is not None:
+            self.pending = data
+            return
+        super().apply(data)
+
     def advance(self, ticks: int) -> None:
         """``ticks`` ticks on the scheduler (the MCU at its period, the stacks between)."""
+        if self.engine is not None:
+            raise RuntimeError("this box is advanced by its robot engine, with every box")
         self._group.tick = self.tick
         self.sched.run(ticks)
         self.tick = self._group.tick
@@ -200,11 +213,21 @@ class EchoBox(_BoxBase):
                                 0, 0)
 
 
-BOX_MODELS = {"stack": StackBox, "echo": EchoBox}
+#: "robot": the stack boxes advanced together by one compiled engine (:mod:`hil.robot`).
+BOX_MODELS = {"stack": StackBox, "robot": StackBox, "echo": EchoBox}
+
+
+def box_engine(model: str, boxes: list, cfg: Config) -> object | None:
+    """The engine that advances all ``boxes`` as one for ``model`` "robot", else None."""
+    if model != "robot":
+        return None
+    from hil.robot import RobotEngine
+
+    return RobotEngine(boxes, cfg)
 
 
 def make_box(model: str, box: Box, cfg: Config) -> _BoxBase:
-    """A box model by name ("stack" or "echo")."""
+    """A box model by name ("stack", "robot" or "echo")."""
     try:
         cls = BOX_MODELS[model]
     except KeyError:

@@ -23,7 +23,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from hil.fieldbus import wire
-from hil.fieldbus.boxes import make_box
+from hil.fieldbus.boxes import box_engine, make_box
 from hil.fieldbus.topology import Topology
 from plant.config import Config
 from protocols import ethercat as ec
@@ -102,6 +102,8 @@ class Chain:
         self.last_idx = 0
         self.plan = CyclePlan.build(topo)
         self.boxes = [make_box(model, b, cfg) for b in topo.boxes]
+        #: Model "robot": one engine advances every box (None: each box advances itself).
+        self.engine = box_engine(model, self.boxes, cfg)
         self.cycle = 0
         self.started = False
         self.stats = ChainStats()
@@ -135,8 +137,11 @@ class Chain:
         self._advance()
 
     def _advance(self) -> None:
-        for b in self.boxes:
-            b.advance(CYCLE_TICKS)
+        if self.engine is not None:
+            self.engine.advance(CYCLE_TICKS)
+        else:
+            for b in self.boxes:
+                b.advance(CYCLE_TICKS)
         self.cycle = (self.cycle + 1) & 0xFF
         self.stats.cycles_advanced += 1
 

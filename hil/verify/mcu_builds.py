@@ -144,6 +144,9 @@ class HostLaw:
         lib.mcu_law_init.restype = None
         lib.mcu_law_step.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p]
         lib.mcu_law_step.restype = None
+        lib.mcu_law_step_many.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_uint32,
+                                          ctypes.c_void_p]
+        lib.mcu_law_step_many.restype = None
         self.state_size = lib.mcu_law_sizes(3)
         self._lib = lib
 
@@ -154,6 +157,16 @@ class HostLaw:
     def step(self, state: ctypes.Array, inp: np.ndarray, out: np.ndarray) -> None:
         """One cycle: ``inp`` and ``out`` are single records (0-d arrays)."""
         self._lib.mcu_law_step(state, inp.ctypes.data, out.ctypes.data)
+
+    def step_many(self, states: np.ndarray, inp: np.ndarray, out: np.ndarray) -> None:
+        """One cycle of ``len(inp)`` programs: ``states`` holds their states back to back
+        (``state_size`` bytes each), ``inp`` and ``out`` are arrays of records."""
+        self._lib.mcu_law_step_many(states.ctypes.data, inp.ctypes.data, len(inp),
+                                    out.ctypes.data)
+
+    def init_at(self, address: int, config: np.ndarray) -> None:
+        """A fresh program state at ``address`` (``state_size`` bytes)."""
+        self._lib.mcu_law_init(address, np.ascontiguousarray(config, dtype=CONFIG).ctypes.data)
 
     def run(self, config: np.ndarray, inputs: np.ndarray) -> np.ndarray:
         """n steps from a fresh state."""

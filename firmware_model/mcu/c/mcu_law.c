@@ -314,6 +314,12 @@ void mcu_law_run(const mcu_config *cfg, const mcu_input *in, uint32_t n, mcu_out
         mcu_law_step(&s, &in[k], &out[k]);
 }
 
+void mcu_law_step_many(mcu_state *s, const mcu_input *in, uint32_t n, mcu_output *out)
+{
+    for (uint32_t k = 0; k < n; k++)
+        mcu_law_step(&s[k], &in[k], &out[k]);
+}
+
 uint32_t mcu_law_sizes(uint32_t which)
 {
     switch (which) {

@@ -195,6 +195,9 @@ void mcu_law_init(mcu_state *s, const mcu_config *cfg);
 void mcu_law_step(mcu_state *s, const mcu_input *in, mcu_output *out);
 /* n steps from a fresh state: the host library's batch entry point. */
 void mcu_law_run(const mcu_config *cfg, const mcu_input *in, uint32_t n, mcu_output *out);
+/* One step of n independent programs (one per actuator): state k with in[k] and out[k].
+ * The host's whole-robot engine calls this once per 5 kHz cycle for every actuator. */
+void mcu_law_step_many(mcu_state *s, const mcu_input *in, uint32_t n, mcu_output *out);
 /* sizeof mcu_config, mcu_input, mcu_output, mcu_state for which = 0, 1, 2, 3. */
 uint32_t mcu_law_sizes(uint32_t which);
 
