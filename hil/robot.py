@@ -24,9 +24,12 @@ Same results as the per-actuator path, bit for bit (``tests/hil/test_robot.py``)
 
 from __future__ import annotations
 
+import math
+
 import numba
 import numpy as np
-from numba import njit, prange
+import llvmlite.binding as llvm
+from numba import njit, prange, types
 
 from firmware_model.fpga import layout as B
 from firmware_model.lvds import link as LK
@@ -49,29 +52,153 @@ from plant.config import Config, ConfigError
 _IN_U16 = INPUT.itemsize // 2
 _IN_UP = INPUT.fields["up"][1] // 2
 _IN_CRC = INPUT.fields["up_crc_errors"][1] // 4
+_IN_TICK = INPUT.fields["tick"][1] // 4
+_IN_FLAGS = INPUT.fields["flags"][1] // 4
 _OUT_U16 = OUTPUT.itemsize // 2
 _OUT_DOWN = OUTPUT.fields["down"][1] // 2
 _T_ANALOG = [a.name for a in B.ANALOG_INPUTS].index("temperature")
+_IN_MODE = INPUT.fields["mode"][1] // 4
+_IN_VALUE = INPUT.fields["value"][1] // 4
+_IN_KPOS = INPUT.fields["kp_position"][1] // 4
+_IN_KPF = INPUT.fields["kp_force"][1] // 4
+_OUT_STATUS = OUTPUT.fields["status"][1] // 4
+_OUT_X = OUTPUT.fields["x_piston"][1] // 4
+_OUT_F_STRAIN_RAW = OUTPUT.fields["f_strain_raw"][1] // 4
+_OUT_F_PRES = OUTPUT.fields["f_pres"][1] // 4
+_OUT_F_FIL = OUTPUT.fields["f_fil"][1] // 4
+_OUT_IQ = OUTPUT.fields["iq"][1] // 4
+_OUT_TEMP = OUTPUT.fields["m_analog"][1] // 4 + _T_ANALOG
+#: Byte offsets in an actuator's output record, and the sizes of its input record's fields.
+_O_MODE, _O_FLAGS, _O_COMMAND, _O_KPOS, _O_KPF = (
+    pdo.ACTUATOR_OUT_DTYPE.fields[f.name][1] for f in pdo.ACTUATOR_OUT)
+_IN_SIZES = tuple(np.dtype(f.dtype).itemsize for f in pdo.ACTUATOR_IN)
+_FLAG_ENABLE = pdo.FLAG_ENABLE
+_FLAG_CLEAR = pdo.FLAG_CLEAR_FAULT
+assert [f.name for f in pdo.ACTUATOR_IN] == [
+    "x_piston", "v_piston", "f_pressure", "f_strain", "f_filtered", "iq", "temperature",
+    "status", "err_link_down", "err_link_up"]
+assert [f.name for f in pdo.ACTUATOR_OUT] == ["mode", "flags", "command", "kp_position",
+                                              "kp_force"]
+assert all(OUTPUT.fields[n][1] % 4 == 0 for n in OUTPUT.names)
+
+
+#: The MCU law's host build, linked by name (the library is loaded by :class:`RobotEngine`
+#: before the first call): ``mcu_law_step_many(states, inputs, n, outputs)``, addresses.
+_mcu_law_step_many = types.ExternalFunction(
+    "mcu_law_step_many", types.void(types.intp, types.intp, types.uint32, types.intp))
 
 
 @njit(cache=True, parallel=True)
-def advance_robot(n_ticks, tick0, batched, no_rec, no_trace, x, p, u, y, rng, work, k, raw,
-                  c, st, down, up, mdown, mup, lk, out16, in16, in32):
-    """``n_ticks`` ticks of every stack ``i`` with ``batched[i]``: the program's downstream
-    words (``out16`` rows) into its LVDS memory first, its upstream words and the link's
-    CRC count into the program's input record (``in16``/``in32`` rows) after. ``no_rec``
-    and ``no_trace``: empty record and trace arrays (nothing recorded here)."""
+def advance_robot(n_periods, period, tick0, batched, ptrs, no_rec, no_trace, x, p, u, y, rng,
+                  work, k, raw, c, st, down, up, mdown, mup, lk, in16, in32, out16, err):
+    """``n_periods`` MCU periods of ``period`` ticks from ``tick0`` for every actuator ``i``
+    with ``batched[i]``: its MCU program (state, input and output record at the addresses
+    ``ptrs[i]``) steps, its downstream words go into its LVDS memory, its stack advances
+    one period, its upstream words and the link's CRC count go into its input record.
+    ``err[i]``: the link error counts the program read at its last step. ``no_rec`` and
+    ``no_trace``: empty record and trace arrays (nothing recorded here)."""
     for i in prange(x.shape[0]):
         if not batched[i]:
             continue
-        for w in range(mdown.shape[1]):
-            mdown[i, w] = out16[i, _OUT_DOWN + w]
-        advance_stack(n_ticks, x[i], p[i], u[i], y[i], no_rec, 0, 1, tick0, rng[i], work[i],
-                      k[i], raw[i], c[i], st[i], down[i], up[i], mdown[i], mup[i], lk[i],
-                      no_trace)
-        for w in range(mup.shape[1]):
-            in16[i, _IN_UP + w] = mup[i, w] & 0xFFFF
-        in32[i, _IN_CRC] = lk[i, LK.LK_MASTER_CRC]
+        for n in range(n_periods):
+            t = tick0 + n * period
+            in32[i, _IN_TICK] = t
+            _mcu_law_step_many(ptrs[i, 0], ptrs[i, 1], 1, ptrs[i, 2])
+            in32[i, _IN_FLAGS] = 0
+            if n == n_periods - 1:
+                err[i, 0] = in16[i, _IN_UP + B.U_ERR_LINK_CRC]
+                err[i, 1] = in32[i, _IN_CRC]
+            for w in range(mdown.shape[1]):
+                mdown[i, w] = out16[i, _OUT_DOWN + w]
+            advance_stack(period, x[i], p[i], u[i], y[i], no_rec, 0, 1, t, rng[i], work[i],
+                          k[i], raw[i], c[i], st[i], down[i], up[i], mdown[i], mup[i], lk[i],
+                          no_trace)
+            for w in range(mup.shape[1]):
+                in16[i, _IN_UP + w] = mup[i, w] & 0xFFFF
+            in32[i, _IN_CRC] = lk[i, LK.LK_MASTER_CRC]
+
+
+@njit(cache=True)
+def _le(image, at, n_bytes, signed):
+    """The little-endian integer of ``n_bytes`` at ``image[at]``."""
+    v = 0
+    for b in range(n_bytes):
+        v |= np.int64(image[at + b]) << (8 * b)
+    if signed and v >= np.int64(1) << (8 * n_bytes - 1):
+        v -= np.int64(1) << (8 * n_bytes)
+    return v
+
+
+@njit(cache=True)
+def _put(image, at, n_bytes, v):
+    for b in range(n_bytes):
+        image[at + b] = (v >> (8 * b)) & 0xFF
+
+
+@njit(cache=True)
+def _counts(value, lsb, lo, hi):
+    """:func:`hil.fieldbus.pdo.to_counts` (the same float64 steps): rounded half away from
+    zero, saturated to [lo, hi]."""
+    c = value / lsb
+    r = math.trunc(c + 0.5) if c >= 0 else -math.trunc(-c + 0.5)
+    return np.int64(min(max(r, lo), hi))
+
+
+@njit(cache=True)
+def take_outputs(image, at, got, enabled, clear, in32, inf32, cmd_lsb, gain_lsb):
+    """What :meth:`McuBoard.apply` does with each actuator's output record (at byte
+    ``at[i]`` of ``image``) for the actuators ``got[i]``: the program's input flags (a fresh
+    command and gains; enable, disable and clear-fault edges against ``enabled``/``clear``),
+    mode, command value (``cmd_lsb[mode]`` per count) and gains (``gain_lsb`` per count)."""
+    for i in range(at.shape[0]):
+        if not got[i]:
+            in32[i, _IN_FLAGS] = 0
+            continue
+        o = at[i]
+        mode = _le(image, o + _O_MODE, 1, False)
+        if mode >= cmd_lsb.shape[0]:
+            mode = 0  # an unknown code is "off"
+        flags = _le(image, o + _O_FLAGS, 1, False)
+        on = (flags & _FLAG_ENABLE) != 0
+        cl = (flags & _FLAG_CLEAR) != 0
+        f = IN_COMMAND | IN_GAINS
+        if cl and not clear[i]:
+            f |= IN_CLEAR_FAULT
+        if on and not enabled[i]:
+            f |= IN_ENABLE
+        elif enabled[i] and not on:
+            f |= IN_DISABLE
+        enabled[i], clear[i] = on, cl
+        in32[i, _IN_FLAGS] = f
+        in32[i, _IN_MODE] = mode
+        inf32[i, _IN_VALUE] = np.float32(_le(image, o + _O_COMMAND, 4, True) * cmd_lsb[mode])
+        inf32[i, _IN_KPOS] = np.float32(_le(image, o + _O_KPOS, 2, False) * gain_lsb[0])
+        inf32[i, _IN_KPF] = np.float32(_le(image, o + _O_KPF, 2, False) * gain_lsb[1])
+
+
+@njit(cache=True)
+def give_inputs(image, at, out32, outf32, x_prev, dt, cos_alpha, err, lsb, bounds):
+    """:meth:`McuBoard.report` packed into each actuator's input record (at byte ``at[i]``
+    of ``image``) from its program's last output record: piston position and its change
+    over ``dt`` s (0: no speed), the forces, current, temperature, status and link error
+    counts (``err``); ``lsb``/``bounds``: the fields' scales and ranges in record order."""
+    for i in range(at.shape[0]):
+        o = at[i]
+        x = np.float64(outf32[i, _OUT_X])
+        v = (x - x_prev[i]) / dt if dt > 0 else 0.0
+        x_prev[i] = x
+        f_strain = np.float64(cos_alpha * outf32[i, _OUT_F_STRAIN_RAW])
+        values = (x, v, np.float64(outf32[i, _OUT_F_PRES]), f_strain,
+                  np.float64(outf32[i, _OUT_F_FIL]), np.float64(outf32[i, _OUT_IQ]),
+                  np.float64(outf32[i, _OUT_TEMP]))
+        pos = o
+        for f in range(7):
+            n_bytes = _IN_SIZES[f]
+            _put(image, pos, n_bytes, _counts(values[f], lsb[f], bounds[f, 0], bounds[f, 1]))
+            pos += n_bytes
+        _put(image, pos, 2, out32[i, _OUT_STATUS] & 0xFFFF)
+        _put(image, pos + 2, 2, min(err[i, 0], 0xFFFF))
+        _put(image, pos + 4, 2, min(err[i, 1], 0xFFFF))
 
 
 #: (object path, attribute) of every array the stack's compiled tick works on, in the order
@@ -80,14 +207,6 @@ _ARRAYS = (("plant", "x"), ("plant", "params"), ("plant", "u"), ("plant", "y"),
            ("plant", "rng"), ("plant", "_work"), ("", "chips"), ("", "raw"),
            ("board", "params"), ("board", "state"), ("board", "down"), ("board", "up"),
            ("mcu_link", "down"), ("mcu_link", "up"), ("", "link"))
-
-
-def _counts(value: np.ndarray, lsb: float, dtype: str) -> np.ndarray:
-    """:func:`hil.fieldbus.pdo.to_counts` over an array (same float64 steps)."""
-    info = np.iinfo(np.dtype(dtype))
-    c = value / lsb
-    c = np.where(c >= 0, np.trunc(c + 0.5), -np.trunc(-c + 0.5))
-    return np.clip(c, info.min, info.max).astype(np.int64)
 
 
 class RobotEngine:
@@ -108,9 +227,11 @@ class RobotEngine:
         self.slots = [(b, i) for b in self.boxes for i in range(len(b.stacks))]
         n = self.n = len(self.slots)
         try:
-            self.law = HostLaw(build_host())
+            library = build_host()
         except BuildError as exc:
             raise ConfigError(f"the robot engine runs the MCU law's C build: {exc}") from None
+        self.law = HostLaw(library)
+        llvm.load_library_permanently(str(library))  # for advance_robot's call by name
         self._bind_arrays()
         config = config_record(cfg)
         size = self.law.state_size
@@ -130,26 +251,54 @@ class RobotEngine:
         self.enabled = np.zeros(n, dtype=bool)
         self.clear = np.zeros(n, dtype=bool)
         self.x_prev = np.zeros(n)
+        self.inf32 = self.inp.view(np.float32).reshape(n, _IN_U16 // 2)
+        self.out32 = self.out.view(np.uint32).reshape(n, OUTPUT.itemsize // 4)
+        self.outf32 = self.out.view(np.float32).reshape(n, OUTPUT.itemsize // 4)
+        self._cmd_lsb = np.zeros(len(pdo.MODE_NAMES))
+        for code in pdo.MODE_NAMES:
+            self._cmd_lsb[code] = (pdo.POSITION_CMD_LSB if code == pdo.MODE_CODES["position"]
+                                   else pdo.FORCE_CMD_LSB)
+        self._gain_lsb = np.array([f.lsb for f in pdo.ACTUATOR_OUT[3:5]])
+        fields = pdo.ACTUATOR_IN[:7]
+        self._in_lsb = np.array([f.lsb for f in fields])
+        self._in_bounds = np.array([(np.iinfo(f.dtype).min, np.iinfo(f.dtype).max)
+                                    for f in fields], dtype=np.int64)
         self.tick = self.boxes[0].tick if self.boxes else 0
-        # Where each actuator's records sit in its box's process data.
-        self._out_at = [[b._out_off[b.act[i]] for i in range(len(b.stacks))] for b in self.boxes]
-        self._in_at = [[b._in_off[b.act[i]] for i in range(len(b.stacks))] for b in self.boxes]
-        self._first = np.cumsum([0] + [len(b.stacks) for b in self.boxes])
-        out_w, in_w = pdo.ACTUATOR_OUT_DTYPE.itemsize, pdo.ACTUATOR_IN_DTYPE.itemsize
-        self._out_idx = [np.add.outer(np.array(at, dtype=np.intp), np.arange(out_w))
-                         for at in self._out_at]
-        self._in_idx = [np.add.outer(np.array(at, dtype=np.intp), np.arange(in_w))
-                        for at in self._in_at]
-        self._out_rows = np.zeros((n, out_w), dtype=np.uint8)
+        self._images()
         self._no_rec = np.zeros((0, L.N_OUTPUTS))
         self._no_trace = np.zeros((0, 1), dtype=np.int64)
-        self.err_down = np.zeros(n, dtype=np.int64)
-        self.err_up = np.zeros(n, dtype=np.int64)
+        self.err = np.zeros((n, 2), dtype=np.int64)
+        self._batched = np.ones(n, dtype=bool)
+        self.ptrs = np.array([[self.states.ctypes.data + j * size,
+                               self.inp.ctypes.data + j * INPUT.itemsize,
+                               self.out.ctypes.data + j * OUTPUT.itemsize] for j in range(n)],
+                             dtype=np.int64).reshape(n, 3)
         for b in self.all_boxes:
             b.pending = None
             b.engine = self
 
     # --- set-up --------------------------------------------------------------------------
+    def _images(self) -> None:
+        """One byte image of every box's outputs and one of its inputs (each box's input
+        buffer becomes its slice), and each actuator's record offset in them."""
+        out_at, in_at, out_lo, in_lo = [], [], [0], [0]
+        for b in self.boxes:
+            out_at += [out_lo[-1] + b._out_off[b.act[i]] for i in range(len(b.stacks))]
+            in_at += [in_lo[-1] + b._in_off[b.act[i]] for i in range(len(b.stacks))]
+            out_lo.append(out_lo[-1] + b.out_dtype.itemsize)
+            in_lo.append(in_lo[-1] + b.in_dtype.itemsize)
+        self.out_image = np.zeros(out_lo[-1], dtype=np.uint8)
+        self.in_image = np.zeros(in_lo[-1], dtype=np.uint8)
+        self._out_span = list(zip(out_lo[:-1], out_lo[1:], strict=True))
+        for b, (lo, hi) in zip(self.boxes, zip(in_lo[:-1], in_lo[1:], strict=True),
+                               strict=True):
+            self.in_image[lo:hi] = np.frombuffer(bytes(b._in_buf), dtype=np.uint8)
+            b._in_buf = self.in_image[lo:hi]
+        self._out_at = np.array(out_at, dtype=np.int64)
+        self._in_at = np.array(in_at, dtype=np.int64)
+        self._got = np.zeros(self.n, dtype=bool)
+        self._first = np.cumsum([0] + [len(b.stacks) for b in self.boxes])
+
     def _bind_arrays(self) -> None:
         """Stack the stacks' arrays and rebind every stack to its row."""
         self.arrays = []
@@ -180,31 +329,20 @@ class RobotEngine:
         if self.workers is not None:
             numba.set_num_threads(self.workers)
         self._take_outputs()
-        external = [j for j, (b, i) in enumerate(self.slots)
-                    if getattr(b.stacks[i], "sensors", None)]
-        batched = np.ones(self.n, dtype=bool)
+        wrapped = [(j, s) for j, (b, i) in enumerate(self.slots)
+                   if hasattr(s := b.stacks[i], "sensors")]
+        external = [j for j, s in wrapped if s.sensors]
+        batched = self._batched
+        batched[:] = True
         batched[external] = False
-        for b, i in self.slots:  # LVDS faults switch at cycle boundaries (FaultyStack)
-            s = b.stacks[i]
-            if hasattr(s, "_switch_lvds") and not s.sensors:
+        for _, s in wrapped:  # LVDS faults switch at cycle boundaries (FaultyStack)
+            if not s.sensors:
                 s._switch_lvds(self.tick // ticks)
-        a = self.arrays
-        for t in range(self.tick, self.tick + ticks, self.period):
-            self.inp["tick"] = t
-            self.law.step_many(self.states, self.inp, self.out)
-            self.inp["flags"] = 0
-            if t + self.period >= self.tick + ticks:
-                # The link error counts as the programs read them at their last step.
-                self.err_down[:] = self.in16[:, _IN_UP + B.U_ERR_LINK_CRC]
-                self.err_up[:] = self.in32[:, _IN_CRC]
-            advance_robot(self.period, t, batched, self._no_rec, self._no_trace, *a,
-                          self.out16, self.in16, self.in32)
-            for j in external:
-                b, i = self.slots[j]
-                self.arrays[12][j] = self.out["down"][j]
-                b.stacks[i].advance(self.period)
-            if external:
-                self._refresh_inputs(~batched)
+        advance_robot(ticks // self.period, self.period, self.tick, batched, self.ptrs,
+                      self._no_rec, self._no_trace, *self.arrays, self.in16, self.in32,
+                      self.out16, self.err)
+        if external:
+            self._advance_external(external, ticks)
         for j, (b, i) in enumerate(self.slots):
             if batched[j]:
                 self._inner(b.stacks[i]).plant.tick += ticks
@@ -213,68 +351,45 @@ class RobotEngine:
             b.tick = self.tick
         self._give_inputs(ticks)
 
+    def _advance_external(self, external: list[int], ticks: int) -> None:
+        """The stacks under a sensor fault: their own wrapper advances them tick by tick,
+        between the same steps of their programs as :func:`advance_robot` makes."""
+        size = self.law.state_size
+        for t in range(self.tick, self.tick + ticks, self.period):
+            for j in external:
+                b, i = self.slots[j]
+                self.inp["tick"][j] = t
+                self.law.step_many(self.states[j * size:(j + 1) * size], self.inp[j:j + 1],
+                                   self.out[j:j + 1])
+                self.inp["flags"][j] = 0
+                if t + self.period >= self.tick + ticks:
+                    self.err[j] = (self.in16[j, _IN_UP + B.U_ERR_LINK_CRC],
+                                   self.in32[j, _IN_CRC])
+                self.arrays[12][j] = self.out["down"][j]
+                b.stacks[i].advance(self.period)
+            which = np.zeros(self.n, dtype=bool)
+            which[external] = True
+            self._refresh_inputs(which)
+
     def _take_outputs(self) -> None:
-        """The process data the boxes received since the last cycle, as program inputs
-        (what :meth:`McuBoard.apply` does with it, for every actuator at once)."""
-        rows = self._out_rows
-        got = np.zeros(self.n, dtype=bool)
+        """The process data the boxes received since the last cycle, as program inputs."""
+        got = self._got
+        got[:] = False
         for n_box, b in enumerate(self.boxes):
             if b.pending is None:
                 continue
-            lo, hi = self._first[n_box], self._first[n_box + 1]
-            rows[lo:hi] = np.frombuffer(b.pending, dtype=np.uint8)[self._out_idx[n_box]]
-            got[lo:hi] = True
+            lo, hi = self._out_span[n_box]
+            self.out_image[lo:hi] = np.frombuffer(b.pending, dtype=np.uint8)
+            got[self._first[n_box]:self._first[n_box + 1]] = True
             b.pending = None
-        if not got.any():
-            self.inp["flags"] = 0
-            return
-        r = rows.view(pdo.ACTUATOR_OUT_DTYPE)[:, 0]
-        mode = r["mode"].astype(np.uint32)
-        known = np.isin(mode, list(pdo.MODE_NAMES))
-        mode[~known] = pdo.MODE_CODES["off"]
-        lsb = np.where(mode == pdo.MODE_CODES["position"], pdo.POSITION_CMD_LSB,
-                       pdo.FORCE_CMD_LSB)
-        enable = (r["flags"] & pdo.FLAG_ENABLE) != 0
-        clear = (r["flags"] & pdo.FLAG_CLEAR_FAULT) != 0
-        rising = enable & ~self.enabled
-        flags = np.full(self.n, IN_COMMAND | IN_GAINS, dtype=np.uint32)
-        flags[clear & ~self.clear] |= IN_CLEAR_FAULT
-        flags[rising] |= IN_ENABLE
-        flags[~rising & self.enabled & ~enable] |= IN_DISABLE
-        flags[~got] = 0
-        self.enabled = np.where(got, enable, self.enabled)
-        self.clear = np.where(got, clear, self.clear)
-        inp = self.inp
-        inp["flags"] = flags
-        inp["mode"] = np.where(got, mode, inp["mode"])
-        inp["value"] = np.where(got, r["command"].astype(np.int64) * lsb, inp["value"])
-        inp["kp_position"] = np.where(got, r["kp_position"].astype(np.int64) * 10.0,
-                                      inp["kp_position"])
-        inp["kp_force"] = np.where(got, r["kp_force"].astype(np.int64) * 1e-3, inp["kp_force"])
+        take_outputs(self.out_image, self._out_at, got, self.enabled, self.clear, self.in32,
+                     self.inf32, self._cmd_lsb, self._gain_lsb)
 
     def _give_inputs(self, ticks: int) -> None:
         """Every box's input record from the programs' last outputs (as McuBoard.report)."""
-        o = self.out
-        x = o["x_piston"].astype(np.float64)
-        v = (x - self.x_prev) / (ticks * self.tick_s) if ticks else np.zeros(self.n)
-        self.x_prev = x
-        rec = np.zeros(self.n, dtype=pdo.ACTUATOR_IN_DTYPE)
-        rec["x_piston"] = _counts(x, 1e-9, "i4")
-        rec["v_piston"] = _counts(v, 1e-5, "i2")
-        rec["f_pressure"] = _counts(o["f_pres"].astype(np.float64), 0.1, "i2")
-        rec["f_strain"] = _counts((self.cos_alpha * o["f_strain_raw"]).astype(np.float64),
-                                  0.1, "i2")
-        rec["f_filtered"] = _counts(o["f_fil"].astype(np.float64), 0.1, "i2")
-        rec["iq"] = _counts(o["iq"].astype(np.float64), 1e-3, "i2")
-        rec["temperature"] = _counts(o["m_analog"][:, _T_ANALOG].astype(np.float64), 0.01,
-                                     "i2")
-        rec["status"] = o["status"] & 0xFFFF
-        rec["err_link_down"] = np.minimum(self.err_down, 0xFFFF)
-        rec["err_link_up"] = np.minimum(self.err_up, 0xFFFF)
-        raw = rec.view(np.uint8).reshape(self.n, -1)
-        for n_box, b in enumerate(self.boxes):
-            buf = np.frombuffer(b._in_buf, dtype=np.uint8)
-            buf[self._in_idx[n_box]] = raw[self._first[n_box]:self._first[n_box + 1]]
+        give_inputs(self.in_image, self._in_at, self.out32, self.outf32, self.x_prev,
+                    ticks * self.tick_s, self.cos_alpha, self.err, self._in_lsb,
+                    self._in_bounds)
 
 
 def plant_records(engine: RobotEngine) -> np.ndarray:
