@@ -26,9 +26,9 @@ from __future__ import annotations
 
 import math
 
+import llvmlite.binding as llvm
 import numba
 import numpy as np
-import llvmlite.binding as llvm
 from numba import njit, prange, types
 
 from firmware_model.fpga import layout as B

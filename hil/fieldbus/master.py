@@ -10,6 +10,7 @@ within the timeout is counted as lost.
 
 from __future__ import annotations
 
+import struct
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -18,6 +19,11 @@ from hil.fieldbus import pdo, wire
 from hil.fieldbus.chain import CyclePlan
 from hil.fieldbus.topology import Topology
 from protocols import ethercat as ec
+
+#: The actuator output record as one struct (the same bytes as pdo.ACTUATOR_OUT_DTYPE).
+_OUT = struct.Struct("<" + "".join({"u1": "B", "u2": "H", "i2": "h", "i4": "i"}[f.dtype]
+                                   for f in pdo.ACTUATOR_OUT))
+assert _OUT.size == pdo.ACTUATOR_OUT_DTYPE.itemsize
 
 
 @dataclass
@@ -75,15 +81,13 @@ class Master:
         if mode not in pdo.MODE_CODES:
             raise ValueError(f"unknown mode {mode!r}")
         lsb = pdo.POSITION_CMD_LSB if mode == "position" else pdo.FORCE_CMD_LSB
-        rec = np.zeros(1, dtype=pdo.ACTUATOR_OUT_DTYPE)
-        rec["mode"] = pdo.MODE_CODES[mode]
-        rec["flags"] = (pdo.FLAG_ENABLE if enable else 0) | (
-            pdo.FLAG_CLEAR_FAULT if clear_fault else 0)
-        rec["command"] = pdo.to_counts(value, lsb, "i4")
-        rec["kp_position"] = pdo.to_counts(kp_position, 10.0, "u2")
-        rec["kp_force"] = pdo.to_counts(kp_force, 1e-3, "u2")
-        o = self.act_offsets[j][0]
-        self.image[o:o + rec.itemsize] = rec.tobytes()
+        # One struct pack (the PC loop sets every actuator every cycle).
+        _OUT.pack_into(self.image, self.act_offsets[j][0], pdo.MODE_CODES[mode],
+                       (pdo.FLAG_ENABLE if enable else 0)
+                       | (pdo.FLAG_CLEAR_FAULT if clear_fault else 0),
+                       pdo.to_counts(value, lsb, "i4"),
+                       pdo.to_counts(kp_position, 10.0, "u2") if kp_position else 0,
+                       pdo.to_counts(kp_force, 1e-3, "u2") if kp_force else 0)
 
     # --- inputs ---------------------------------------------------------------------------
     def actuator_inputs(self, j: int) -> dict[str, float]:
