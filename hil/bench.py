@@ -109,3 +109,56 @@ def bench_stack(cfg: Config, seconds: float = 2.0) -> PlantBench:
     wall = time.perf_counter() - t0
     return PlantBench(n * stack.tick_s, wall, stack.fpga.plant.substeps, "full stack",
                       stack.tick_s)
+
+
+@dataclass
+class RobotBench:
+    """Result of ``bench robot`` for one number of workers."""
+
+    workers: int
+    actuators: int
+    simulated_s: float
+    wall_s: float
+    cpu_s: float
+    tick_s: float
+    threading_layer: str
+
+    @property
+    def real_time_factor(self) -> float:
+        return self.simulated_s / self.wall_s
+
+    @property
+    def cpu_real_time_factor(self) -> float:
+        return self.simulated_s / self.cpu_s
+
+    @property
+    def ns_per_actuator_tick(self) -> float:
+        """CPU time (every thread) per actuator per 50 us tick, ns."""
+        return 1e9 * self.cpu_s / (self.actuators * self.simulated_s / self.tick_s)
+
+
+def bench_robot(cfg: Config, seconds: float = 10.0, workers: int = 1,
+                topology: str = "hydra_full") -> RobotBench:
+    """Time the whole robot over the fieldbus: every box's MCU board and its stacks
+    (plant, sensor chips, driver board, LVDS link) in the robot engine (:mod:`hil.robot`)
+    with ``workers`` compute threads, the master and the PC loop (a force sine on every
+    actuator) at 1 kHz in lockstep. CPU time is the process's, all threads."""
+    import numba
+
+    from hil.bus_cli import demo_pc
+    from hil.fieldbus.system import BusSystem
+    from hil.fieldbus.topology import load_topology
+
+    topo = load_topology(topology)
+    numba.set_num_threads(workers)
+    cycles = int(round(seconds * 1000))
+    pc = demo_pc()
+    with BusSystem(topo, cfg, "inproc", model="robot") as bs:
+        bs.chain.engine.workers = workers
+        bs.run(20, pc)  # compile / warm up outside the timing
+        t0, c0 = time.perf_counter(), time.process_time()
+        bs.run(cycles, pc, keep=0)
+        wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+        bs.chain.engine.wait()
+    return RobotBench(workers, topo.n_actuators, cycles * 1e-3, wall, cpu,
+                      cfg.get("sim.tick_ns") * 1e-9, numba.threading_layer())

@@ -20,6 +20,10 @@ class BusUsageError(Exception):
     """A user mistake on the bus commands; one line."""
 
 
+#: Input images ``bus run`` keeps (the last second).
+KEEP_CYCLES = 1000
+
+
 def _topology(name: str):
     from hil.fieldbus.topology import TopologyError, load_topology
 
@@ -100,7 +104,9 @@ def _run_bus(args: argparse.Namespace, cfg, topo, cycles: int, model: str, pc):
                     cap = CaptureWriter(args.capture, bs.crc_trailer, end.capture_endpoints,
                                         metadata=meta)
                     bs.tap = cap.tap(tick_ns)
-                rec = bs.run(cycles, pc)
+                # Only the counters are reported: keep the last second of input images
+                # (memory bounded for an hour-long run of the whole robot).
+                rec = bs.run(cycles, pc, keep=KEEP_CYCLES)
             finally:
                 for what in (recorder, cap):
                     if what is not None:

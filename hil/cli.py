@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -23,6 +24,7 @@ from hil.cli_args import (
     Parser,
     add_config_options,
     float_range,
+    int_list,
     int_range,
     output_dir,
     output_file,
@@ -294,6 +296,33 @@ def cmd_bench_stack(args: argparse.Namespace) -> int:
                  f"PC task, value-level sensors, {cfg.sources[-1]} (target >= 2x real time)")
     _emit(args, text, {"config": cfg.sources, "simulated_s": r.simulated_s,
                        "wall_s": r.wall_s, "real_time_factor": r.real_time_factor})
+    return 0
+
+
+def cmd_bench_robot(args: argparse.Namespace) -> int:
+    from hil.bench import bench_robot
+
+    cfg = _config(args)
+    load = os.getloadavg()[0]
+    rows, data = [], []
+    for w in args.workers:
+        if not args.json:
+            print(f"bench robot: simulating {args.seconds:g} s with {w} worker(s) ...",
+                  file=sys.stderr, flush=True)
+        r = bench_robot(cfg, args.seconds, w)
+        rows.append((w, r.simulated_s, r.wall_s, r.cpu_s, r.real_time_factor,
+                     r.cpu_real_time_factor, r.ns_per_actuator_tick))
+        data.append({"workers": w, "simulated_s": r.simulated_s, "wall_s": r.wall_s,
+                     "cpu_s": r.cpu_s, "real_time_factor": r.real_time_factor,
+                     "cpu_real_time_factor": r.cpu_real_time_factor,
+                     "ns_per_actuator_tick": r.ns_per_actuator_tick,
+                     "threading_layer": r.threading_layer})
+    text = table(["workers", "simulated [s]", "wall [s]", "CPU [s]", "real-time (wall)",
+                  "real-time (CPU)", "CPU ns/actuator/tick"], rows, fmt=".3g",
+                 title=f"hydra_full, {r.actuators} actuators, full stack behind every box "
+                 f"(robot engine), PC loop at 1 kHz, {cfg.sources[-1]}; load average "
+                 f"{load:.2f} on {os.cpu_count()} cores at the start (target >= 1x wall)")
+    _emit(args, text, {"config": cfg.sources, "load_average": load, "runs": data})
     return 0
 
 
@@ -608,6 +637,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seconds", type=positive_float(600, "s"), default=2.0,
                    help="simulated seconds, in (0, 600]")
     p.set_defaults(func=cmd_bench_stack)
+    p = bsub.add_parser("robot", parents=[_common(plot=False)],
+                        help="real-time factor of the whole robot (hydra_full) over the "
+                        "fieldbus, full stack behind every box")
+    p.add_argument("--seconds", type=positive_float(600, "s"), default=10.0,
+                   help="simulated seconds per run, in (0, 600]")
+    p.add_argument("--workers", type=int_list(1, os.cpu_count() or 1), default=[1, 2],
+                   help="comma-separated numbers of compute threads, one run each "
+                   "(default: 1,2)")
+    p.set_defaults(func=cmd_bench_robot)
     p = bsub.add_parser("codecs", parents=[_common(plot=False, config=False)],
                         help="encode+decode throughput of every protocol codec")
     p.add_argument("--seconds", type=positive_float(60, "s"), default=0.5,

@@ -107,6 +107,18 @@ def int_range(lo: int, hi: int, unit: str = "") -> Callable[[str], int]:
     return parse
 
 
+def int_list(lo: int, hi: int, unit: str = "") -> Callable[[str], list[int]]:
+    """Comma-separated integers, each with ``lo <= n <= hi``."""
+    one = int_range(lo, hi, unit)
+
+    def parse(text: str) -> list[int]:
+        return [one(part.strip()) for part in text.split(",")]
+
+    parse.__name__ = "integer list"
+    parse.kind = "number"  # type: ignore[attr-defined]
+    return parse
+
+
 def input_file(what: str = "file") -> Callable[[str], str]:
     """An existing, readable, non-empty regular file (its content is the reader's to judge)."""
 

@@ -25,6 +25,7 @@ Same results as the per-actuator path, bit for bit (``tests/hil/test_robot.py``)
 from __future__ import annotations
 
 import math
+from concurrent.futures import Future, ThreadPoolExecutor
 
 import llvmlite.binding as llvm
 import numba
@@ -88,7 +89,7 @@ _mcu_law_step_many = types.ExternalFunction(
     "mcu_law_step_many", types.void(types.intp, types.intp, types.uint32, types.intp))
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, nogil=True)
 def advance_robot(n_periods, period, tick0, batched, ptrs, no_rec, no_trace, x, p, u, y, rng,
                   work, k, raw, c, st, down, up, mdown, mup, lk, in16, in32, out16, err):
     """``n_periods`` MCU periods of ``period`` ticks from ``tick0`` for every actuator ``i``
@@ -213,7 +214,8 @@ class RobotEngine:
     """All StackBoxes of a chain advanced as one; ``workers`` threads share the actuators
     (``None``: numba's default, one per core)."""
 
-    def __init__(self, boxes: list, cfg: Config, workers: int | None = None) -> None:
+    def __init__(self, boxes: list, cfg: Config, workers: int | None = None,
+                 overlap: bool = True, cycle_ticks: int = 20) -> None:
         from hil.verify.mcu_builds import BuildError, HostLaw, build_host
 
         self.all_boxes = boxes
@@ -273,9 +275,17 @@ class RobotEngine:
                                self.inp.ctypes.data + j * INPUT.itemsize,
                                self.out.ctypes.data + j * OUTPUT.itemsize] for j in range(n)],
                              dtype=np.int64).reshape(n, 3)
-        for b in self.all_boxes:
+        for b in self.boxes:
             b.pending = None
             b.engine = self
+        #: Start a cycle's compute in a background thread as soon as every box has its
+        #: outputs (:meth:`applied`), overlapping it with the master and the PC loop.
+        self.overlap = overlap
+        self.cycle_ticks = cycle_ticks
+        self._pool = ThreadPoolExecutor(1, thread_name_prefix="robot-engine")
+        self._job: Future | None = None
+        self._pending: set[int] = set()
+        self._used: dict[int, bytes] = {}
 
     # --- set-up --------------------------------------------------------------------------
     def _images(self) -> None:
@@ -321,14 +331,49 @@ class RobotEngine:
         self.inp["up_crc_errors"][which] = lk[which, LK.LK_MASTER_CRC]
 
     # --- one fieldbus cycle ----------------------------------------------------------------
+    def applied(self, box: object) -> None:
+        """``box`` has taken this cycle's outputs (``box.pending``). Once every box has,
+        the next cycle's compute starts in the background (``overlap``): it needs nothing
+        that arrives later, since the chain applies a cycle's outputs before the frame of
+        the next cycle triggers :meth:`advance`, which then only waits for it."""
+        if self._job is not None:
+            # A duplicate of a frame already applied: the reference path would apply the
+            # same bytes again, which changes nothing; anything else cannot be undone.
+            if box.pending != self._used.get(id(box)):
+                raise RuntimeError("box outputs changed after the cycle's compute started")
+            box.pending = None
+            return
+        self._pending.add(id(box))
+        if self.overlap and len(self._pending) == len(self.boxes):
+            self._take_outputs()
+            self._job = self._pool.submit(self._compute, self.cycle_ticks)
+
     def advance(self, ticks: int) -> None:
         """``ticks`` ticks (whole MCU periods) of every actuator; then every box's inputs."""
         if ticks % self.period:
             raise ValueError(f"the robot engine advances whole MCU periods ({self.period} "
                              f"ticks), not {ticks}")
+        job, self._job = self._job, None
+        if job is not None and ticks == self.cycle_ticks:
+            job.result()
+        else:
+            if job is not None:
+                job.result()
+                self._finish(self.cycle_ticks)
+            self._take_outputs()
+            self._compute(ticks)
+        self._finish(ticks)
+
+    def wait(self) -> None:
+        """Let a compute started ahead finish (its results are kept for the next
+        :meth:`advance`)."""
+        if self._job is not None:
+            self._job.result()
+
+    def _compute(self, ticks: int) -> None:
+        """The compiled work of one advance (in the background thread when overlapped)."""
         if self.workers is not None:
-            numba.set_num_threads(self.workers)
-        self._take_outputs()
+            numba.set_num_threads(self.workers)  # per thread in numba
         wrapped = [(j, s) for j, (b, i) in enumerate(self.slots)
                    if hasattr(s := b.stacks[i], "sensors")]
         external = [j for j, s in wrapped if s.sensors]
@@ -337,12 +382,15 @@ class RobotEngine:
         batched[external] = False
         for _, s in wrapped:  # LVDS faults switch at cycle boundaries (FaultyStack)
             if not s.sensors:
-                s._switch_lvds(self.tick // ticks)
+                s._switch_lvds(self.tick // self.cycle_ticks)
         advance_robot(ticks // self.period, self.period, self.tick, batched, self.ptrs,
                       self._no_rec, self._no_trace, *self.arrays, self.in16, self.in32,
                       self.out16, self.err)
         if external:
             self._advance_external(external, ticks)
+
+    def _finish(self, ticks: int) -> None:
+        batched = self._batched
         for j, (b, i) in enumerate(self.slots):
             if batched[j]:
                 self._inner(b.stacks[i]).plant.tick += ticks
@@ -381,7 +429,9 @@ class RobotEngine:
             lo, hi = self._out_span[n_box]
             self.out_image[lo:hi] = np.frombuffer(b.pending, dtype=np.uint8)
             got[self._first[n_box]:self._first[n_box + 1]] = True
+            self._used[id(b)] = b.pending
             b.pending = None
+        self._pending.clear()
         take_outputs(self.out_image, self._out_at, got, self.enabled, self.clear, self.in32,
                      self.inf32, self._cmd_lsb, self._gain_lsb)
 

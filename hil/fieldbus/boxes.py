@@ -166,6 +166,7 @@ class StackBox(McuBox):
         """Outputs of this cycle (kept for the engine to decode with every box's, if any)."""
         if self.engine is not None:
             self.pending = data
+            self.engine.applied(self)
             return
         super().apply(data)
 

@@ -34,11 +34,12 @@ TapFn = Callable[[int, int, bytes, str], None]
 class BusRecord:
     """What a run leaves: the input image after every cycle and the counters."""
 
-    inputs: np.ndarray          # (cycles, input bytes) uint8
+    inputs: np.ndarray          # (cycles kept, input bytes) uint8, oldest first
     master: dict[str, int]
     chain: dict[str, int] | None
     transport: dict[str, int]
     faults: dict[str, int] | None = None  # what the fieldbus faults did (hil.fieldbus.faults)
+    first_cycle: int = 0        # the run's cycle (from 0) of ``inputs[0]``
 
 
 class BusSystem:
@@ -130,10 +131,14 @@ class BusSystem:
         if plan.fieldbus:
             self.m_end = FaultyTransport(self.m_end, plan, lambda: self.master.cycle)
 
-    def run(self, cycles: int, pc: PcFn) -> BusRecord:
-        """Run ``cycles`` fieldbus cycles; the input image is recorded after each."""
+    def run(self, cycles: int, pc: PcFn, keep: int | None = None) -> BusRecord:
+        """Run ``cycles`` fieldbus cycles; the input image is recorded after each, of which
+        the last ``keep`` (None: all) are kept, in a ring: memory bounded for any length."""
         m = self.master
-        rows = np.zeros((cycles, len(m.input_image())), dtype=np.uint8)
+        if keep is not None and keep < 0:
+            raise ValueError(f"keep = {keep}: expected >= 0 cycles")
+        n_rows = cycles if keep is None else min(cycles, keep)
+        rows = np.zeros((n_rows, len(m.input_image())), dtype=np.uint8)
         for k in range(cycles):
             pc(m.cycle, m)
             frames = m.frames()
@@ -160,12 +165,16 @@ class BusSystem:
                     self.tap(m.cycle, tick, reply, "rx")
                 m.receive(reply)
             m.end_cycle()
-            rows[k] = np.frombuffer(m.input_image(), dtype=np.uint8)
+            if n_rows:
+                rows[k % n_rows] = np.frombuffer(m.input_image(), dtype=np.uint8)
+        first = cycles - n_rows
+        if n_rows and first % n_rows:
+            rows = np.roll(rows, -(first % n_rows), axis=0)
         return BusRecord(rows, m.stats.as_dict(),
                          None if self.chain is None else self.chain.stats.__dict__.copy(),
                          self.m_end.stats.as_dict(),
                          None if not hasattr(self.m_end, "fault_stats")
-                         else self.m_end.fault_stats.as_dict())
+                         else self.m_end.fault_stats.as_dict(), first)
 
     def _serve_inline(self, expected: int) -> None:
         """Answer the frames the master just sent. In-process queues deliver at once; a pty
