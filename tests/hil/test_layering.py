@@ -90,6 +90,9 @@ _KERNEL_DECORATORS = {"njit", "jit", "vectorize", "guvectorize", "cfunc", "stenc
 ALLOWED = {
     ("hil/actuator.py", "kernel"):
         "the stack's compiled wiring loop: calls the parts' kernels tick by tick",
+    ("hil/robot.py", "kernel"):
+        "the whole robot's compiled wiring loop: calls the stack's and the MCU law's compiled "
+        "steps per actuator, and copies process-data bytes",
     ("hil/replay/fpga_replay.py", "kernel"):
         "feeds logged words through the board's compiled tick and compares its outputs",
     ("hil/identify/model.py", "kernel"):

@@ -1,0 +1,140 @@
+"""The robot engine (hil.robot) against the per-actuator boxes it replaces: the same bytes on
+the fieldbus, the same MCU output words and plant outputs, whatever the number of workers,
+with faults on the fieldbus, the LVDS links and the sensors."""
+
+import numba
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from firmware_model.fpga import layout as B
+from firmware_model.fpga.driver_board import LinkMemory
+from firmware_model.mcu.c_abi import IN_COMMAND, IN_ENABLE, INPUT, OUTPUT, config_record
+from firmware_model.mcu.mcu import Mcu
+from hil.bus_cli import demo_pc
+from hil.fieldbus.system import BusSystem
+from hil.fieldbus.topology import load_topology
+from plant.config import load_config
+
+FAULTS = [
+    {"link": "fieldbus.down", "kind": "drop", "rate": 0.05, "start_s": 0.3, "end_s": 0.5,
+     "frame": 1},
+    {"link": "fieldbus.down", "kind": "duplicate", "rate": 0.2, "start_s": 0.2, "end_s": 0.9},
+    {"link": "fieldbus.down", "kind": "delay", "delay_cycles": 2, "rate": 0.05,
+     "start_s": 1.0, "end_s": 1.3},
+    {"link": "fieldbus.up", "kind": "drop", "rate": 0.05, "start_s": 0.1, "end_s": 0.4},
+    {"link": "lvds.down", "kind": "bitflip", "rate": 0.01, "box": 1, "slot": 0,
+     "start_s": 0.5, "end_s": 1.0},
+    {"link": "lvds.up", "kind": "dead", "box": 2, "slot": 1, "start_s": 1.0, "end_s": 1.1},
+    {"link": "sensor", "kind": "noisy", "box": 3, "slot": 0, "signal": "p_cyl_a",
+     "sigma": 2e5, "start_s": 0.2, "end_s": 0.6},
+    {"link": "sensor", "kind": "dead", "box": 4, "slot": 0, "signal": "theta_m",
+     "start_s": 1.2, "end_s": 1.4},
+]
+
+
+def _stacks(bs):
+    return [s for b in bs.chain.boxes for s in getattr(b, "stacks", [])]
+
+
+def _run(topo, cfg, model, cycles, faults=None, workers=1, overlap=True, sample=False):
+    """(fieldbus input images, per-cycle MCU downstream words and plant outputs or None)."""
+    numba.set_num_threads(workers)
+    with BusSystem(topo, cfg, "inproc", model=model, faults=faults) as bs:
+        if bs.chain.engine is not None:
+            bs.chain.engine.overlap = overlap
+            bs.chain.engine.workers = workers
+        stacks = _stacks(bs)
+        words, plant = [], []
+        pc = demo_pc(400.0, 3.0)
+
+        def sampling_pc(cycle, m):
+            # Called between cycles: with overlap off nothing is being computed now.
+            words.append(np.array([s.mcu_link.down for s in stacks]))
+            plant.append(np.array([s.plant.y for s in stacks]))
+            pc(cycle, m)
+
+        rec = bs.run(cycles, sampling_pc if sample else pc)
+        if bs.chain.engine is not None:
+            bs.chain.engine.wait()
+    return rec, (np.array(words), np.array(plant)) if sample else None
+
+
+@pytest.mark.slow
+def test_robot_engine_is_the_per_actuator_path_bit_for_bit_with_faults():
+    topo, cfg, cycles = load_topology("hydra_full"), load_config("hydra_default"), 2000
+    ref, (ref_words, ref_plant) = _run(topo, cfg, "stack", cycles, FAULTS, sample=True)
+    one, (words, plant) = _run(topo, cfg, "robot", cycles, FAULTS, 1, overlap=False,
+                               sample=True)
+    two, _ = _run(topo, cfg, "robot", cycles, FAULTS, 2, overlap=True)
+    # The faults did happen: frames lost and stale, link words discarded, status bits set.
+    assert ref.master["lost_frames"] > 0 and ref.chain["stale_frames"] > 0
+    assert ref_words.shape == words.shape and ref_words.shape[1] == topo.n_actuators
+    np.testing.assert_array_equal(words, ref_words)        # MCU outputs
+    np.testing.assert_array_equal(plant, ref_plant)        # plant records
+    for rec in (one, two):
+        assert rec.inputs.tobytes() == ref.inputs.tobytes()  # fieldbus records
+        assert rec.master == ref.master and rec.chain == ref.chain
+
+
+def test_workers_and_overlap_do_not_change_results():
+    topo, cfg = load_topology("bench_one_box"), load_config("hydra_default")
+    ref, _ = _run(topo, cfg, "stack", 60)
+    for workers, overlap in ((1, False), (2, True)):
+        rec, _ = _run(topo, cfg, "robot", 60, workers=workers, overlap=overlap)
+        assert rec.inputs.tobytes() == ref.inputs.tobytes(), (workers, overlap)
+
+
+def test_bus_records_keep_the_last_cycles_in_order():
+    topo, cfg = load_topology("hydra_full"), load_config("hydra_default")
+    runs = {}
+    for keep in (None, 7, 0):
+        with BusSystem(topo, cfg, "inproc", model="echo") as bs:
+            runs[keep] = bs.run(30, demo_pc(), keep=keep)
+    assert np.unique(runs[None].inputs, axis=0).shape[0] == 30
+    assert runs[7].first_cycle == 23
+    np.testing.assert_array_equal(runs[7].inputs, runs[None].inputs[23:])
+    assert runs[0].inputs.shape == (0, runs[None].inputs.shape[1])
+
+
+_WORD = st.integers(0, 0xFFFF)
+
+
+@settings(max_examples=40, deadline=None)
+@given(ups=st.lists(st.lists(_WORD, min_size=B.UP_WORDS, max_size=B.UP_WORDS),
+                    min_size=3, max_size=3),
+       forces=st.lists(st.floats(-5e3, 5e3, allow_nan=False), min_size=3, max_size=3),
+       steps=st.integers(1, 6))
+def test_the_batched_mcu_law_steps_as_the_python_model(ups, forces, steps):
+    """``mcu_law_step_many`` (what the engine calls, one program per actuator) against the
+    Python MCU over random upstream memories and force commands."""
+    from hil.verify.mcu_builds import HostLaw, build_host
+
+    cfg = load_config("hydra_default")
+    law = HostLaw(build_host())
+    n = len(ups)
+    states = np.zeros(n * law.state_size, dtype=np.uint8)
+    for j in range(n):
+        law.init_at(states.ctypes.data + j * law.state_size, config_record(cfg))
+    inp, out = np.zeros(n, dtype=INPUT), np.zeros(n, dtype=OUTPUT)
+    links = [LinkMemory(cfg) for _ in range(n)]
+    mcu = Mcu(cfg, links)
+    for j in range(n):
+        mcu.command(j, "force", forces[j], 0)
+        mcu.enable(j, 123)
+        inp[j]["flags"], inp[j]["mode"], inp[j]["value"] = IN_COMMAND | IN_ENABLE, 1, forces[j]
+        inp[j]["angle_offset"] = 123
+    for k in range(steps):
+        tick = 4 * k
+        for j in range(n):
+            links[j].up[:] = np.roll(ups[j], k)
+            inp[j]["up"] = links[j].up
+        inp["tick"] = tick
+        mcu.step(tick)
+        law.step_many(states, inp, out)
+        inp["flags"] = 0
+        for j in range(n):
+            np.testing.assert_array_equal(out[j]["down"], links[j].down)
+            assert int(out[j]["status"]) == mcu.status[j]
+            assert out[j]["i_ref"].tobytes() == np.float32(mcu.iq_ref[j]).tobytes()
