@@ -325,7 +325,8 @@ def add_parsers(sub, bsub, common, config_fn, wrap) -> None:
     p.add_argument("--transport", default="inproc", choices=list(BACKENDS),
                    help="frame transport")
     p.add_argument("--model", choices=("stack", "robot", "echo"),
-                   help="box model: stack (plant + FPGA + MCU) or echo (behavioural); "
+                   help="box model: stack (plant + FPGA + MCU), robot (the same, every box "
+                   "in one compiled engine: docs/robot-engine.md) or echo (behavioural); "
                    "default stack for <= 5 actuators, echo otherwise")
     # At least one 1 ms cycle; an hour of a 16-box robot is already a long run.
     p.add_argument("--seconds", type=float_range(1e-3, 3600, unit="s"), default=1.0,

@@ -85,6 +85,17 @@ def _identify_model(cfg) -> None:
     model.outputs(model.start_vector())
 
 
+def _robot(cfg) -> None:
+    # The robot engine's kernels on one box (needs the MCU law's C build: a C compiler).
+    from hil.bus_cli import demo_pc
+    from hil.fieldbus.system import BusSystem
+    from hil.fieldbus.topology import load_topology
+
+    with BusSystem(load_topology("bench_one_box"), cfg, "inproc", model="robot") as bs:
+        bs.run(2, demo_pc())
+        bs.chain.engine.wait()
+
+
 STEPS: list[tuple[str, Callable]] = [
     ("plant", _plant),
     ("driver board + link", _fpga_value_level),
@@ -92,6 +103,7 @@ STEPS: list[tuple[str, Callable]] = [
     ("board replay", _replay),
     ("fixed-point blocks", _fixed_point),
     ("identification model", _identify_model),
+    ("robot engine", _robot),
 ]
 
 

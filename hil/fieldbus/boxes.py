@@ -218,13 +218,15 @@ class EchoBox(_BoxBase):
 BOX_MODELS = {"stack": StackBox, "robot": StackBox, "echo": EchoBox}
 
 
-def box_engine(model: str, boxes: list, cfg: Config) -> object | None:
-    """The engine that advances all ``boxes`` as one for ``model`` "robot", else None."""
+def box_engine(model: str, boxes: list, cfg: Config, overlap: bool = True) -> object | None:
+    """The engine that advances all ``boxes`` as one for ``model`` "robot", else None;
+    ``overlap``: a cycle's compute may start as soon as every box has its outputs (not for
+    a chain paced by the wall clock, where a box may take new outputs twice a cycle)."""
     if model != "robot":
         return None
     from hil.robot import RobotEngine
 
-    return RobotEngine(boxes, cfg)
+    return RobotEngine(boxes, cfg, overlap=overlap)
 
 
 def make_box(model: str, box: Box, cfg: Config) -> _BoxBase:

@@ -103,7 +103,7 @@ class Chain:
         self.plan = CyclePlan.build(topo)
         self.boxes = [make_box(model, b, cfg) for b in topo.boxes]
         #: Model "robot": one engine advances every box (None: each box advances itself).
-        self.engine = box_engine(model, self.boxes, cfg)
+        self.engine = box_engine(model, self.boxes, cfg, overlap=not paced)
         self.cycle = 0
         self.started = False
         self.stats = ChainStats()

@@ -27,7 +27,7 @@ def main(argv: list[str] | None = None) -> int:
                     help="the backend's address: UDP port (0: any free), serial device, CAN "
                     "channel")
     ap.add_argument("--topology", default="hydra_full")
-    ap.add_argument("--model", default="stack", choices=("stack", "echo"))
+    ap.add_argument("--model", default="stack", choices=("stack", "robot", "echo"))
     ap.add_argument("--config-json", required=True)
     ap.add_argument("--faults-json", help="LVDS and sensor faults to put on the boxes")
     ap.add_argument("--crc-trailer", action="store_true",

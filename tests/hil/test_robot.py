@@ -138,3 +138,15 @@ def test_the_batched_mcu_law_steps_as_the_python_model(ups, forces, steps):
             np.testing.assert_array_equal(out[j]["down"], links[j].down)
             assert int(out[j]["status"]) == mcu.status[j]
             assert out[j]["i_ref"].tobytes() == np.float32(mcu.iq_ref[j]).tobytes()
+
+
+@pytest.mark.slow
+def test_a_capture_of_a_robot_run_replays_bit_for_bit_on_both_paths(tmp_path, capsys):
+    from hil.cli import main
+
+    cap = tmp_path / "robot.pcapng"
+    assert main(["bus", "run", "--topology", "hydra_full", "--model", "robot", "--seconds",
+                 "0.1", "--capture", str(cap)]) == 0
+    for model in ("robot", "stack"):
+        assert main(["replay", str(cap), "--model", model, "--json"]) == 0
+        assert '"ok": true' in capsys.readouterr().out
