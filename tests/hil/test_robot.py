@@ -150,3 +150,19 @@ def test_a_capture_of_a_robot_run_replays_bit_for_bit_on_both_paths(tmp_path, ca
     for model in ("robot", "stack"):
         assert main(["replay", str(cap), "--model", model, "--json"]) == 0
         assert '"ok": true' in capsys.readouterr().out
+
+
+def test_the_law_the_engine_links_has_no_fused_multiply_add():
+    """The engine calls the host build by name: its machine code must round every product
+    on its own, as the Python model does (no vfmadd/vfmsub of any width)."""
+    import shutil
+    import subprocess
+
+    from hil.verify.mcu_builds import build_host
+
+    if shutil.which("objdump") is None:
+        pytest.skip("objdump not installed")
+    asm = subprocess.run(["objdump", "-d", str(build_host())], capture_output=True, text=True,
+                         check=True).stdout
+    assert "mcu_law_step_many" in asm and "mulss" in asm
+    assert not [line for line in asm.splitlines() if "vfm" in line or "vfnm" in line]
