@@ -25,6 +25,7 @@ Same results as the per-actuator path, bit for bit (``tests/hil/test_robot.py``)
 from __future__ import annotations
 
 import math
+import threading
 from concurrent.futures import Future, ThreadPoolExecutor
 
 import llvmlite.binding as llvm
@@ -284,6 +285,8 @@ class RobotEngine:
         self.cycle_ticks = cycle_ticks
         self._pool = ThreadPoolExecutor(1, thread_name_prefix="robot-engine")
         self._job: Future | None = None
+        self._started = threading.Event()
+        self._ready: list[int] | None = None  # prepared, with stacks under sensor faults
         self._pending: set[int] = set()
         self._used: dict[int, bytes] = {}
 
@@ -336,7 +339,7 @@ class RobotEngine:
         the next cycle's compute starts in the background (``overlap``): it needs nothing
         that arrives later, since the chain applies a cycle's outputs before the frame of
         the next cycle triggers :meth:`advance`, which then only waits for it."""
-        if self._job is not None:
+        if self._job is not None or self._ready is not None:
             # A duplicate of a frame already applied: the reference path would apply the
             # same bytes again, which changes nothing; anything else cannot be undone.
             if box.pending != self._used.get(id(box)):
@@ -346,7 +349,15 @@ class RobotEngine:
         self._pending.add(id(box))
         if self.overlap and len(self._pending) == len(self.boxes):
             self._take_outputs()
-            self._job = self._pool.submit(self._compute, self.cycle_ticks)
+            external = self._prepare()
+            if external:  # Python per tick: no gain from a thread, run it at advance
+                self._ready = external
+                return
+            self._job = self._pool.submit(self._kernel, self.cycle_ticks, self._started)
+            # Hand the GIL over until the kernel has released it: else the thread could
+            # wait for the interpreter's switch interval (5 ms) before it starts.
+            self._started.wait()
+            self._started.clear()
 
     def advance(self, ticks: int) -> None:
         """``ticks`` ticks (whole MCU periods) of every actuator; then every box's inputs."""
@@ -354,14 +365,22 @@ class RobotEngine:
             raise ValueError(f"the robot engine advances whole MCU periods ({self.period} "
                              f"ticks), not {ticks}")
         job, self._job = self._job, None
-        if job is not None and ticks == self.cycle_ticks:
+        ready, self._ready = self._ready, None
+        if job is not None:
             job.result()
-        else:
-            if job is not None:
-                job.result()
-                self._finish(self.cycle_ticks)
-            self._take_outputs()
-            self._compute(ticks)
+        elif ready is not None:
+            self._kernel(self.cycle_ticks)
+            self._advance_external(ready, self.cycle_ticks)
+        if (job is not None or ready is not None) and ticks == self.cycle_ticks:
+            self._finish(ticks)
+            return
+        if job is not None or ready is not None:
+            self._finish(self.cycle_ticks)
+        self._take_outputs()
+        external = self._prepare()
+        self._kernel(ticks)
+        if external:
+            self._advance_external(external, ticks)
         self._finish(ticks)
 
     def wait(self) -> None:
@@ -370,10 +389,9 @@ class RobotEngine:
         if self._job is not None:
             self._job.result()
 
-    def _compute(self, ticks: int) -> None:
-        """The compiled work of one advance (in the background thread when overlapped)."""
-        if self.workers is not None:
-            numba.set_num_threads(self.workers)  # per thread in numba
+    def _prepare(self) -> list[int]:
+        """Which stacks the kernel advances (not those under a sensor fault, returned) and
+        the LVDS faults of this cycle switched."""
         wrapped = [(j, s) for j, (b, i) in enumerate(self.slots)
                    if hasattr(s := b.stacks[i], "sensors")]
         external = [j for j, s in wrapped if s.sensors]
@@ -383,11 +401,18 @@ class RobotEngine:
         for _, s in wrapped:  # LVDS faults switch at cycle boundaries (FaultyStack)
             if not s.sensors:
                 s._switch_lvds(self.tick // self.cycle_ticks)
-        advance_robot(ticks // self.period, self.period, self.tick, batched, self.ptrs,
+        return external
+
+    def _kernel(self, ticks: int, started: threading.Event | None = None) -> None:
+        """The compiled work of one advance (in the background thread when overlapped:
+        nothing here but the call, which releases the GIL)."""
+        if started is not None:
+            started.set()
+        if self.workers is not None and self.workers != numba.get_num_threads():
+            numba.set_num_threads(self.workers)  # per thread in numba
+        advance_robot(ticks // self.period, self.period, self.tick, self._batched, self.ptrs,
                       self._no_rec, self._no_trace, *self.arrays, self.in16, self.in32,
                       self.out16, self.err)
-        if external:
-            self._advance_external(external, ticks)
 
     def _finish(self, ticks: int) -> None:
         batched = self._batched
