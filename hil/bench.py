@@ -145,7 +145,6 @@ def bench_robot(cfg: Config, seconds: float = 10.0, workers: int = 1,
     actuator) at 1 kHz in lockstep. CPU time is the process's, all threads."""
     import numba
 
-    import hil.robot  # noqa: F401  (its OpenMP setting must precede numba's first thread launch)
     from hil.bus_cli import demo_pc
     from hil.fieldbus.system import BusSystem
     from hil.fieldbus.topology import load_topology

@@ -25,7 +25,6 @@ Same results as the per-actuator path, bit for bit (``tests/hil/test_robot.py``)
 from __future__ import annotations
 
 import math
-import os
 import threading
 from concurrent.futures import Future, ThreadPoolExecutor
 
@@ -50,12 +49,6 @@ from hil.actuator import advance_stack
 from hil.fieldbus import pdo
 from plant import layout as L
 from plant.config import Config, ConfigError
-
-# The workers meet once per fieldbus cycle; between cycles GNU OpenMP's threads would spin on
-# the cores the master, the PC loop and other users need. Sleeping costs a wake-up (tens of
-# us) per cycle. Read when numba first starts its OpenMP pool (no kernel before this one is
-# parallel); a value the user set is kept.
-os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 #: Actuators a worker takes at a time: the workers share the actuators dynamically, so a
 #: worker the OS has descheduled (the machine is shared) holds back at most this many.
