@@ -380,8 +380,11 @@ def cmd_run(args: argparse.Namespace) -> int:
         if args.plot:
             raise UsageError("--plot and --plot-dir: give one of them")
         args.plot = str(_plot_dir(args.plot_dir) / f"{scenario.name}.png")
-    cfg = _config(args)
-    res = scenario.run(cfg, _progress(scenario.name, not args.json))
+    from hil.scenarios.knobs import split_sets
+
+    config_sets, knob_values = split_sets(args.set or ())
+    cfg = load_config(args.config, config_sets)
+    res = scenario.call(cfg, _progress(scenario.name, not args.json), knob_values)
     rows = [(m.name, m.value, m.unit, m.requirement,
              "" if m.ok is None else ("ok" if m.ok else "MISSED")) for m in res.metrics]
     text = table(["metric", "value", "unit", "requirement", ""], rows, fmt=".4g",
@@ -632,7 +635,11 @@ def build_parser() -> argparse.ArgumentParser:
                        help="run a scenario on the simulated stack (thesis, "
                        + ", ".join(scen) + "; exit 1 if a requirement is missed)",
                        epilog="Scenarios: thesis: all thesis experiments (F3-F8); " + "; ".join(
-                           f"{n}: {SCENARIOS[n].summary}" for n in scen))
+                           f"{n}: {SCENARIOS[n].summary}" for n in scen)
+                       + ". Scenario settings (--set scenario.NAME=VALUE; sweepable): "
+                       + "; ".join(f"{n}: " + ", ".join(k.name for k in SCENARIOS[n].knobs)
+                                   for n in scen if SCENARIOS[n].knobs)
+                       + " (docs/scenarios.md).")
     p.add_argument("scenario", metavar="SCENARIO",
                    help="scenario name, or 'thesis' for all thesis experiments (F3-F8); "
                    "these default to -c hydra_thesis")
