@@ -20,6 +20,7 @@ one seen (mod 256, as above). A frame is answered with the inputs as they stand.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from hil.fieldbus import wire
@@ -105,6 +106,10 @@ class Chain:
         self.cycle = 0
         self.started = False
         self.stats = ChainStats()
+        #: Called after every fieldbus cycle the boxes advance (observers of the slaves'
+        #: own state, which a lost reply hides from the master; lockstep mode advances
+        #: the cycles a lost frame skipped when the next one arrives).
+        self.on_advance: Callable[[], None] | None = None
 
     def handle(self, frame: bytes) -> bytes | None:
         """Process one frame; the reply, or None if the frame was discarded."""
@@ -139,6 +144,8 @@ class Chain:
             b.advance(CYCLE_TICKS)
         self.cycle = (self.cycle + 1) & 0xFF
         self.stats.cycles_advanced += 1
+        if self.on_advance is not None:
+            self.on_advance()
 
     def _process(self, d: ec.Datagram) -> ec.Datagram:
         if d.cmd != ec.Command.LRW:

@@ -4,12 +4,14 @@ The PC loop of ``eha-hil bus run`` (a force sine on every actuator) runs over th
 transport with one fault of :mod:`hil.fieldbus.faults` switched on in a time window: lost,
 corrupted, duplicated or delayed fieldbus frames, a damaged LVDS link, or a stuck, noisy or
 dead sensor. The PC sees the inputs as a real PC would (its process image), and the metrics
-come from there: how often the MCU's command watchdog tripped (``CMD_TIMEOUT`` rising
-edges over all actuators), how often a board was switched off (``SAFE_OFF``), frames lost
-and discarded, the share of stale inputs, and how far the measured force strayed from the
-command. The fault is the scenario's settings (``scenario.link``, ``scenario.kind``,
-``scenario.rate`` ...), so ``eha-hil sweep bus-faults --param scenario.rate=0:0.2:5`` asks
-how the watchdog behaves as the loss rate grows; ``sim.seed`` seeds the fault draws.
+come from there, except the status words, which are also taken from the boxes themselves at
+every cycle (a lost reply hides what happened behind it): how often the MCU's command
+watchdog tripped (``CMD_TIMEOUT`` rising edges over all actuators), how often a board was
+switched off (``SAFE_OFF``), frames lost and discarded, the share of stale inputs, and how
+far the measured force strayed from the command. The fault is the scenario's settings
+(``scenario.link``, ``scenario.kind``, ``scenario.rate`` ...), so ``eha-hil sweep
+bus-faults --param scenario.rate=0.5:0.9:5`` asks how the watchdog behaves as the loss rate
+grows; ``sim.seed`` seeds the fault draws.
 """
 
 from __future__ import annotations
@@ -137,8 +139,23 @@ def bus_faults(cfg: Config, progress: Progress, v: dict[str, Any]) -> ScenarioRe
     force = np.zeros((cycles, n_act))
     command = np.zeros((cycles, n_act))
     fresh = np.zeros((cycles, n_act), dtype=bool)
+    truth = np.zeros((cycles, n_act), dtype=np.uint16)  # the MCUs' own status words
     sine = demo_pc(v["amplitude_n"], v["frequency_hz"])
     step = max(1, cycles // 100)
+    boxes: list[Any] = []
+
+    def box_status() -> None:
+        # After each cycle the boxes advanced: in lockstep, the cycles of lost frames are
+        # advanced when the next frame arrives, so the rows are filled in bursts.
+        row = chain.stats.cycles_advanced - 1
+        if not 0 <= row < cycles:
+            return
+        j = 0
+        for box in boxes:
+            rec = np.frombuffer(box.inputs(), dtype=box.in_dtype)[0]
+            for k in box.act:
+                truth[row, j] = rec[f"s{k}"]["status"]
+                j += 1
 
     def pc(cycle: int, m: Any) -> None:
         if cycle > 0:  # what the last cycle brought back
@@ -156,6 +173,9 @@ def bus_faults(cfg: Config, progress: Progress, v: dict[str, Any]) -> ScenarioRe
             progress(cycle, cycles)
 
     with BusSystem(topo, cfg, "inproc", model=model, faults=faults) as bs:
+        chain = bs.chain
+        boxes.extend(chain.boxes)
+        chain.on_advance = box_status
         rec = bs.run(cycles, pc)
         for j in range(n_act):  # the last cycle's inputs
             got = bs.master.actuator_inputs(j)
@@ -168,13 +188,16 @@ def bus_faults(cfg: Config, progress: Progress, v: dict[str, Any]) -> ScenarioRe
     settled = int(math.ceil(SETTLE_S / CYCLE_S))
     err = force[settled:] - command[settled:]
     rms = float(np.sqrt(np.mean(err ** 2))) if err.size else math.nan
-    trips = rising_edges((status & CMD_TIMEOUT) != 0)
-    offs = rising_edges((status & SAFE_OFF) != 0)
+    trips = rising_edges((truth & CMD_TIMEOUT) != 0)
+    offs = rising_edges((truth & SAFE_OFF) != 0)
+    seen = rising_edges((status & CMD_TIMEOUT) != 0)
     m = rec.master
     metrics = [
-        Metric("watchdog trips", trips, "", "CMD_TIMEOUT rising edges, all actuators: 0",
-               trips == 0),
-        Metric("safe-off events", offs, "", "SAFE_OFF rising edges: 0", offs == 0),
+        Metric("watchdog trips", trips, "", "CMD_TIMEOUT rising edges in the MCUs, all "
+               "actuators: 0", trips == 0),
+        Metric("safe-off events", offs, "", "SAFE_OFF rising edges in the MCUs: 0", offs == 0),
+        Metric("watchdog trips seen", seen, "", "the same in the PC's inputs (a lost reply "
+               "hides a change)"),
         Metric("frames lost", m["lost_frames"], "", "frames that did not come back"),
         Metric("frames discarded", m["bad_frames"], "", "replies failing the frame check"),
         Metric("WKC errors", m["wkc_errors"], ""),
@@ -188,8 +211,8 @@ def bus_faults(cfg: Config, progress: Progress, v: dict[str, Any]) -> ScenarioRe
     return ScenarioResult(
         "bus-faults", f"{topo.name} ({model}), {cycles} cycles, fault: {where}", metrics,
         series={"t_s": t, "command_n": command[:, 0], "force_n": force[:, 0],
-                "cmd_timeout": ((status[:, 0] & CMD_TIMEOUT) != 0).astype(float),
-                "safe_off": ((status[:, 0] & SAFE_OFF) != 0).astype(float),
+                "cmd_timeout": ((truth[:, 0] & CMD_TIMEOUT) != 0).astype(float),
+                "safe_off": ((truth[:, 0] & SAFE_OFF) != 0).astype(float),
                 "fresh": fresh[:, 0].astype(float),
                 "fault_window_s": (np.array([v["start_s"], min(v["end_s"], t[-1])])
                                    if entry else np.array([math.nan, math.nan]))},
@@ -212,10 +235,10 @@ def _plot(res: ScenarioResult, path: Path) -> None:
     a.set_ylabel("force [N]")
     a.legend(loc="upper right")
     a.set_title(res.title)
-    b.step(s["t_s"], s["cmd_timeout"] + 2.2, where="post", label="CMD_TIMEOUT")
-    b.step(s["t_s"], s["safe_off"] + 1.1, where="post", label="SAFE_OFF")
-    b.step(s["t_s"], s["fresh"], where="post", label="fresh inputs")
-    b.set_yticks([0.5, 1.6, 2.7], ["fresh", "SAFE_OFF", "CMD_TIMEOUT"])
+    b.step(s["t_s"], s["cmd_timeout"] + 2.2, where="post", label="CMD_TIMEOUT (MCU)")
+    b.step(s["t_s"], s["safe_off"] + 1.1, where="post", label="SAFE_OFF (MCU)")
+    b.step(s["t_s"], s["fresh"], where="post", label="fresh inputs (PC)")
+    b.set_yticks([0.5, 1.6, 2.7], ["fresh (PC)", "SAFE_OFF", "CMD_TIMEOUT"])
     b.set_xlabel("time [s] (shaded: fault window)")
     for ax in (a, b):
         ax.grid(True, alpha=0.3)

@@ -167,3 +167,77 @@ def test_plan_checks_settings_together():
     with pytest.raises(ConfigError, match="sweep point 0 .*is scenario.effect already"):
         space.build_plan(base, grid, knobs=scen.knobs, scenario=scen.name,
                          settings=scen.settings)
+
+
+def _runs_closed(lost: list[bool], n: int) -> int:
+    """Runs of at least ``n`` consecutive lost cycles that end before the record does."""
+    count = run = 0
+    for x in lost:
+        if x:
+            run += 1
+        else:
+            count += run >= n
+            run = 0
+    return count
+
+
+@pytest.mark.parametrize("model", ["stack", "echo"])
+def test_watchdog_trips_are_the_outages_longer_than_the_timeout(model):
+    """Random frame losses: every run of lost cycles at least command_timeout_s long trips
+    the watchdog once, counted in the boxes (also where the replies telling of it are lost);
+    shorter runs never do. The runs are read off the PC's freshness flags."""
+    cfg = load_config("hydra_default").with_overrides({"sim.seed": 5})
+    res = scenarios.get("bus-faults").call(cfg, None, {
+        "scenario.seconds": 0.6, "scenario.rate": 0.8, "scenario.start_s": 0.0,
+        "scenario.model": model})
+    metrics = {m.name: m.value for m in res.metrics}
+    lost = [f == 0.0 for f in res.series["fresh"]]
+    n = round(cfg.get("mcu.command_timeout_s") / 1e-3)
+    expected = _runs_closed(lost, n)
+    assert expected >= 3  # the draw must make the point
+    assert metrics["watchdog trips"] == expected
+    assert metrics["watchdog trips seen"] <= metrics["watchdog trips"]
+
+
+def test_the_settings_tables_in_the_docs_are_the_declared_ones():
+    """docs/scenarios.md lists every setting of every scenario with its default, and no
+    other: the table rows are parsed and compared with the declarations."""
+    from pathlib import Path
+
+    text = (Path(__file__).resolve().parents[2] / "docs" / "scenarios.md").read_text()
+    documented: dict[str, dict[str, str]] = {}
+    section = None
+    for line in text.splitlines():
+        if line.startswith("## `"):
+            section = line.split("`")[1]
+        elif line.startswith("| `scenario.") and section:
+            cells = [c.strip() for c in line.strip("|").split("|")]
+            documented.setdefault(section, {})[cells[0].strip("`")] = cells[1].strip("`")
+    declared = {n: {k.key: str(k.default) for k in scenarios.get(n).knobs}
+                for n in scenarios.names() if scenarios.get(n).knobs}
+    assert documented == declared
+
+
+def test_bus_run_injects_the_faults_of_a_file_and_replays_them(tmp_path, capsys):
+    """``bus run --faults``: every frame of a dropped window is counted by the fault layer
+    and lost at the master; the run exits 0 (the losses were asked for), its log replays
+    bit for bit; a fault file naming a box the topology lacks is one line, exit 2."""
+    import json
+
+    faults = tmp_path / "f.toml"
+    faults.write_text('[[fault]]\nlink = "fieldbus.down"\nkind = "drop"\nrate = 1.0\n'
+                      'start_s = 0.02\nend_s = 0.05\n')
+    log = tmp_path / "run.mcap"
+    code = _code(["bus", "run", "--seconds", "0.08", "--faults", str(faults), "--log",
+                  str(log), "--json"])
+    data = json.loads(capsys.readouterr().out)
+    assert code == 0
+    assert data["fault_counts"]["down_dropped"] == 30
+    assert data["master"]["lost_frames"] == 30
+    assert _code(["replay", str(log), "--json"]) == 0
+    capsys.readouterr()
+    faults.write_text('[[fault]]\nlink = "lvds.up"\nkind = "dead"\nbox = 3\nslot = 0\n')
+    assert _code(["bus", "run", "--seconds", "0.01", "--faults", str(faults)]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1
+    assert f"--faults {faults}: fault #0 (lvds.up dead): key 'box' = 3" in err
