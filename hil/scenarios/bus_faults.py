@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from firmware_model.mcu.mcu import CMD_TIMEOUT, SAFE_OFF
+from firmware_model.mcu.mcu import CMD_TIMEOUT, SAFE_OFF, flag_set
 from hil.fieldbus.faults import KINDS, LINKS, SENSOR_SIGNALS
 from hil.scenarios import Metric, Progress, ScenarioResult, register
 from hil.scenarios.knobs import Knob
@@ -188,9 +188,9 @@ def bus_faults(cfg: Config, progress: Progress, v: dict[str, Any]) -> ScenarioRe
     settled = int(math.ceil(SETTLE_S / CYCLE_S))
     err = force[settled:] - command[settled:]
     rms = float(np.sqrt(np.mean(err ** 2))) if err.size else math.nan
-    trips = rising_edges((truth & CMD_TIMEOUT) != 0)
-    offs = rising_edges((truth & SAFE_OFF) != 0)
-    seen = rising_edges((status & CMD_TIMEOUT) != 0)
+    trips = rising_edges(flag_set(truth, CMD_TIMEOUT))
+    offs = rising_edges(flag_set(truth, SAFE_OFF))
+    seen = rising_edges(flag_set(status, CMD_TIMEOUT))
     m = rec.master
     metrics = [
         Metric("watchdog trips", trips, "", "CMD_TIMEOUT rising edges in the MCUs, all "
@@ -211,8 +211,8 @@ def bus_faults(cfg: Config, progress: Progress, v: dict[str, Any]) -> ScenarioRe
     return ScenarioResult(
         "bus-faults", f"{topo.name} ({model}), {cycles} cycles, fault: {where}", metrics,
         series={"t_s": t, "command_n": command[:, 0], "force_n": force[:, 0],
-                "cmd_timeout": ((truth[:, 0] & CMD_TIMEOUT) != 0).astype(float),
-                "safe_off": ((truth[:, 0] & SAFE_OFF) != 0).astype(float),
+                "cmd_timeout": flag_set(truth[:, 0], CMD_TIMEOUT).astype(float),
+                "safe_off": flag_set(truth[:, 0], SAFE_OFF).astype(float),
                 "fresh": fresh[:, 0].astype(float),
                 "fault_window_s": (np.array([v["start_s"], min(v["end_s"], t[-1])])
                                    if entry else np.array([math.nan, math.nan]))},
