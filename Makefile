@@ -33,11 +33,13 @@ run: $(STAMP)
 	$(BIN)/eha-hil main
 	$(BIN)/eha-hil run thesis
 
+# The suite runs on one pytest-xdist worker per core: its tests are independent (each makes
+# its own temporary files, ports, namespaces), and most of its time is single-threaded work.
 test: $(TSTAMP)
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q -n auto
 
 test-fast: $(TSTAMP)
-	$(BIN)/python -m pytest -q -m "not slow"
+	$(BIN)/python -m pytest -q -n auto -m "not slow"
 
 bench: $(STAMP)
 	$(BIN)/eha-hil bench plant
