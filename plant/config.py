@@ -242,6 +242,9 @@ class Config:
         data = copy.deepcopy(self.data)
         for key, value in overrides.items():
             _set_checked(data, key, value, source)
+        # The rules between keys hold for an override as for a file (a sweep point, a
+        # scenario's variant): each key alone in range is not enough.
+        _check_consistency(data, source)
         return Config(data, [*self.sources, source])
 
 
