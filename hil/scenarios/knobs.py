@@ -15,7 +15,7 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from plant.config import ConfigError, parse_override
+from plant.config import ConfigError, check_typed, parse_override
 
 #: Keys under this section are a scenario's knobs; every other key is the configuration's.
 PREFIX = "scenario."
@@ -39,38 +39,13 @@ class Knob:
 
     def check(self, value: Any, where: str) -> Any:
         """``value`` converted to the knob's type, or ConfigError naming ``where``."""
-        key, template = self.key, self.default
-        if isinstance(template, bool):
-            if not isinstance(value, bool):
-                raise ConfigError(f"{where}: {key}: expected true or false, got {value!r}")
+        value = check_typed(self.key, value, self.default, where, self.choices)
+        if isinstance(value, bool | str):
             return value
-        if isinstance(template, str):
-            if not isinstance(value, str):
-                raise ConfigError(f"{where}: {key}: expected a string, got {value!r}")
-            if self.choices and value not in self.choices:
-                raise ConfigError(f"{where}: {key}: '{value}' is not one of "
-                                  f"{', '.join(self.choices)}")
-            return value
-        if isinstance(value, bool) or not isinstance(value, int | float):
-            raise ConfigError(f"{where}: {key}: expected a number, got {value!r}")
-        if isinstance(template, int):
-            if isinstance(value, float) and not value.is_integer():
-                raise ConfigError(f"{where}: {key}: expected an integer, got {value!r}")
-            value = int(value)
-        else:
-            value = float(value)
-            if math.isnan(value):
-                raise ConfigError(f"{where}: {key}: must be a number, got {value!r}")
         if not self.lo <= value <= self.hi:
-            raise ConfigError(f"{where}: {key}: must be in [{self.lo:g}, {self.hi:g}]"
+            raise ConfigError(f"{where}: {self.key}: must be in [{self.lo:g}, {self.hi:g}]"
                               f"{' ' + self.unit if self.unit else ''}, got {value!r}")
         return value
-
-    def describe(self) -> str:
-        """One line for help texts: ``scenario.rate=0.05 (1/frame): ...``."""
-        unit = f" {self.unit}" if self.unit else ""
-        opts = f" (one of {', '.join(self.choices)})" if self.choices else ""
-        return f"{self.key}={self.default}{unit}: {self.help}{opts}"
 
 
 def is_knob_key(key: str) -> bool:
