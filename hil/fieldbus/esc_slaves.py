@@ -54,8 +54,8 @@ def _pdos(box: Box, direction: int) -> tuple[Pdo, ...]:
             continue
         base = (0x7000 if direction == 0 else 0x6000) + 0x10 * k
         entries = tuple(PdoEntry(base, j + 1, f.name, f.dtype) for j, f in enumerate(fields))
-        out.append(Pdo((0x1600 if direction == 0 else 0x1A00) + k, s.name, direction,
-                       entries))
+        index = (0x1600 if direction == 0 else 0x1A00) + k
+        out.append(Pdo(index, f"slot {k} {s.kind}", direction, entries))
     return tuple(out)
 
 
