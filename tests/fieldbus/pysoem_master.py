@@ -16,7 +16,7 @@ import time
 
 import pysoem
 
-RECV_TIMEOUT_US = 20_000  # a late reply is waited for, not counted as a wrong WKC
+RECV_TIMEOUT_US = 100_000  # a late reply is waited for, not counted as a wrong WKC
 
 
 def bring_up(ifname: str) -> tuple[pysoem.Master, dict]:
