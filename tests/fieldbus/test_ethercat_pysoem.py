@@ -58,9 +58,9 @@ def netns():
     try:
         # No IPv6 on the pair: the kernel's router solicitations would share the wire.
         for key in ("all", "default"):
-            subprocess.run(["ip", "netns", "exec", name, "sysctl", "-qw",
-                            f"net.ipv6.conf.{key}.disable_ipv6=1"], check=True,
-                           capture_output=True)
+            subprocess.run(["ip", "netns", "exec", name, "sh", "-c",
+                            f"echo 1 > /proc/sys/net/ipv6/conf/{key}/disable_ipv6"],
+                           check=True, capture_output=True)
         for cmd in (["link", "add", "ecm", "type", "veth", "peer", "name", "ecs"],
                     ["link", "set", "ecm", "up"], ["link", "set", "ecs", "up"]):
             subprocess.run(["ip", "-n", name, *cmd], check=True, capture_output=True)
