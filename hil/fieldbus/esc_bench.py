@@ -8,18 +8,21 @@ Per cycle two figures (median and 99th percentile, wall ``time.perf_counter``):
   — what a master waits for on top of the wire;
 * box cycle: one 1 ms step of the slaves' watchdogs and the boxes behind them.
 
-Rows: every box an echo model; the same with the full stack (plant, driver boards, LVDS, MCU)
+Every actuator is enabled with a force command of its own. Rows: every box an echo model;
+the same with the full stack (plant, driver boards, LVDS, MCU)
 behind box 0. CPU time over wall time of the timed loop is given beside.
 """
 
 from __future__ import annotations
 
+import struct
 import time
 
 import numpy as np
 
 from hil.fieldbus.esc_chain import EscChain
 from hil.fieldbus.esc_master import EscMaster
+from hil.fieldbus.pdo import slot_sizes
 from hil.fieldbus.topology import load_topology
 from plant.config import Config
 
@@ -30,6 +33,15 @@ def bench_row(cfg: Config, stack_boxes: tuple[int, ...], cycles: int) -> dict:
     chain = EscChain(load_topology("hydra_full"), cfg, "echo", stack_boxes)
     master = EscMaster(chain)
     master.bring_up()
+    # Every actuator enabled with its own force command (as the bus benchmark's PC loop).
+    j = 0
+    for box, s in zip(chain.topology.boxes, master.slaves, strict=True):
+        o = s.out_lad
+        for slot in box.slots:
+            if slot.kind == "actuator":
+                j += 1
+                struct.pack_into("<BBi", master.image, o, 1, 1, 1000 * j)  # 10 N * j
+            o += slot_sizes(slot.kind)[0]
     rt = np.empty(cycles)
     box = np.empty(cycles)
     bad = 0
