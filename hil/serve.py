@@ -445,6 +445,11 @@ def cmd_serve_ethercat(args: argparse.Namespace, cfg, topo) -> int:
 
     if not args.interface:
         raise _usage("--interface: required with --transport ethercat")
+    for opt, hint in (("capture", "capture the interface with tshark"),
+                      ("foxglove", "not offered for the ESC chain"),
+                      ("port", "the interface is --interface")):
+        if getattr(args, opt, None) is not None:
+            raise _usage(f"--{opt}: not with --transport ethercat ({hint})")
     bad = [b for b in args.stack_boxes if not 0 <= b < len(topo.boxes)]
     if bad:
         raise _usage(f"--stack-box {bad[0]}: {topo.name} has boxes 0..{len(topo.boxes) - 1}")

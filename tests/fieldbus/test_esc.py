@@ -189,3 +189,17 @@ def test_esi_matches_the_sii_the_chain_serves(cfg, full):
         for tag, cat in (("RxPdo", sii.CAT_RXPDO), ("TxPdo", sii.CAT_TXPDO)):
             bits = sum(int(e.text) for p in dev.findall(tag) for e in p.iter("BitLen"))
             assert bits == sii.pdo_bits(esc.sii, cat)
+
+
+@pytest.mark.parametrize("argv, says", [
+    (["--interface", "nosuch0"], "--interface nosuch0: no such network interface"),
+    ([], "--interface: required with --transport ethercat"),
+    (["--interface", "lo", "--stack-box", "16"], "--stack-box 16: hydra_full has boxes 0..15"),
+    (["--interface", "lo", "--capture", "x.pcapng"], "--capture: not with --transport ethercat"),
+])
+def test_serve_ethercat_mistakes_are_one_line(capsys, argv, says):
+    from hil.cli import main
+
+    code = main(["serve", "--transport", "ethercat", "--topology", "hydra_full", *argv])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and says in err and len(err.splitlines()) == 1, err
