@@ -71,7 +71,6 @@ def _writable_mask() -> bytearray:
         base = r.SM0 + k * r.SM_SIZE
         allow(base, base + 5)
         allow(base + 6, base + 7)       # status (5) and PDI control (7) are the PDI's
-    allow(r.DC_START, r.DC_END)
     allow(r.RAM_START, r.MEMORY_SIZE)
     return m
 

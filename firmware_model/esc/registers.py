@@ -54,7 +54,7 @@ N_FMMU = 8
 SM0 = 0x0800
 SM_SIZE = 8
 N_SM = 8
-# --- distributed clocks (accepted, not implemented: read back what was written) -----------------
+# --- distributed clocks: not implemented; writes accepted (WKC counts), reads return 0 -----------
 DC_START = 0x0900
 DC_END = 0x0A00
 # --- process-data RAM ---------------------------------------------------------------------

@@ -70,11 +70,18 @@ def test_broadcast_read_ors_the_slaves(chain):
 
 
 def test_armw_reads_at_the_addressed_slave_and_writes_the_others(chain):
-    chain.escs[1].mem[0x0980] = 0x5A  # a DC register as the shared value
-    d = _one(chain, ec.Command.ARMW, (-1) & 0xFFFF, 0x0980, b"\x00")
+    chain.escs[1].mem[r.IRQ_MASK] = 0x5A  # the shared value
+    d = _one(chain, ec.Command.ARMW, (-1) & 0xFFFF, r.IRQ_MASK, b"\x00")
     assert d.data == b"\x5a" and d.wkc == 3
     # slave 0 saw the master's byte, slave 2 the one read from slave 1
-    assert [e.mem[0x0980] for e in chain.escs] == [0x00, 0x5A, 0x5A]
+    assert [e.mem[r.IRQ_MASK] for e in chain.escs] == [0x00, 0x5A, 0x5A]
+
+
+def test_dc_registers_take_writes_and_read_zero(chain):
+    d = _one(chain, ec.Command.BWR, 0, r.DC_START + 0x30, b"\x00\x10")  # DC speed start
+    assert d.wkc == len(THREE.boxes)
+    d = _one(chain, ec.Command.BRD, 0, r.DC_START + 0x30, bytes(2))
+    assert d.data == bytes(2) and d.wkc == len(THREE.boxes)
 
 
 @pytest.mark.parametrize("cmd", [ec.Command.FPRD, ec.Command.FPWR, ec.Command.FPRW,
