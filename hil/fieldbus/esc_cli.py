@@ -17,6 +17,9 @@ def add_parsers(sub, bsub, common, config_fn, wrap) -> None:
                         "(hydra_full; echo boxes, and the full stack behind one box)")
     p.add_argument("--cycles", type=int_range(10, 1_000_000), default=2000,
                    help="timed cycles of the echo row (the stack row: a quarter), 10..1e6")
+    p.add_argument("--wire", action="store_true",
+                   help="also over a veth pair with SOEM (pysoem) as the master (root; "
+                   "makes and removes its own network namespace)")
     p.set_defaults(func=wrap(_cmd_bench, config_fn))
 
 
@@ -24,5 +27,18 @@ def _cmd_bench(args: argparse.Namespace, cfg) -> int:
     from hil.fieldbus.esc_bench import bench_ethercat, format_table
 
     rows = bench_ethercat(cfg, args.cycles)
+    if args.wire:
+        from hil.bus_cli import BusUsageError
+        from hil.fieldbus.esc_bench import bench_wire
+        from hil.fieldbus.veth import NamespaceError
+
+        try:
+            import pysoem  # noqa: F401
+        except ImportError:
+            raise BusUsageError("--wire: needs pysoem (pip install pysoem)") from None
+        try:
+            rows += bench_wire(args.cycles)
+        except NamespaceError as exc:
+            raise BusUsageError(f"--wire: {exc}") from None
     print(json.dumps(rows, indent=2) if args.json else format_table(rows))
     return 0

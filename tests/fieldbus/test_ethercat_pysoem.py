@@ -2,29 +2,32 @@
 the test's own, with tshark capturing the master's side.
 
 Needs root, ``ip``, ``tshark`` and pysoem; skipped with the reason otherwise. The
-namespace (and with it the veth pair) is created here and deleted at the end.
+namespace (and with it the veth pair) is created for each test and deleted at its end
+(:mod:`hil.fieldbus.veth`); the master is :mod:`hil.fieldbus.soem_master`.
 """
 
 from __future__ import annotations
 
-import json
-import os
 import shutil
 import signal
 import struct
 import subprocess
-import sys
-import uuid
-from pathlib import Path
 
 import pytest
 
 from hil.fieldbus.boxes import make_box
 from hil.fieldbus.esc_slaves import describe_all
 from hil.fieldbus.pdo import slot_sizes
+from hil.fieldbus.veth import (
+    MASTER_IF,
+    NamespaceError,
+    in_ns,
+    run_master,
+    start_serve,
+    stop_serve,
+    veth_namespace,
+)
 
-ROOT = Path(__file__).resolve().parents[2]
-MASTER = Path(__file__).with_name("pysoem_master.py")
 CYCLES = 10_000
 FORCE_N = 450.0
 SOEM_SOURCE_MAC_NOTE = "Source MAC must not be a group address: IEEE 802.3-2002, Section 3.2.3(b)"
@@ -32,85 +35,34 @@ SOEM_SOURCE_MAC_NOTE = "Source MAC must not be a group address: IEEE 802.3-2002,
 pytestmark = pytest.mark.slow
 
 
-def _why_not() -> str | None:
-    if not hasattr(os, "geteuid") or os.geteuid() != 0:
-        return "needs root (network namespace, veth pair, raw sockets)"
-    for tool in ("ip", "tshark"):
-        if shutil.which(tool) is None:
-            return f"needs `{tool}` (make system-deps)"
+@pytest.fixture
+def netns():
+    if shutil.which("tshark") is None:
+        pytest.skip("needs `tshark` (make system-deps)")
     try:
         import pysoem  # noqa: F401
     except ImportError:
-        return "needs pysoem (pip install -e .[test])"
-    return None
-
-
-@pytest.fixture
-def netns():
-    why = _why_not()
-    if why:
-        pytest.skip(why)
-    name = f"ehaec{uuid.uuid4().hex[:8]}"
+        pytest.skip("needs pysoem (pip install -e .[test])")
     try:
-        subprocess.run(["ip", "netns", "add", name], check=True, capture_output=True)
-    except subprocess.CalledProcessError as exc:
-        pytest.skip(f"cannot create a network namespace: {exc.stderr.decode().strip()}")
-    try:
-        # No IPv6 on the pair: the kernel's router solicitations would share the wire.
-        for key in ("all", "default"):
-            subprocess.run(["ip", "netns", "exec", name, "sh", "-c",
-                            f"echo 1 > /proc/sys/net/ipv6/conf/{key}/disable_ipv6"],
-                           check=True, capture_output=True)
-        for cmd in (["link", "add", "ecm", "type", "veth", "peer", "name", "ecs"],
-                    ["link", "set", "ecm", "up"], ["link", "set", "ecs", "up"]):
-            subprocess.run(["ip", "-n", name, *cmd], check=True, capture_output=True)
-        yield name
-    finally:
-        subprocess.run(["ip", "netns", "del", name], capture_output=True)
-
-
-def _in(ns: str, *cmd: str) -> list[str]:
-    return ["ip", "netns", "exec", ns, *cmd]
-
-
-def _serve(ns: str, *extra: str) -> subprocess.Popen:
-    env = dict(os.environ, PYTHONPATH=str(ROOT))
-    p = subprocess.Popen(_in(ns, sys.executable, "-m", "hil.cli", "serve", "--transport",
-                             "ethercat", "--interface", "ecs", "--topology", "hydra_full",
-                             "--realtime", "--json", *extra),
-                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
-    line = p.stderr.readline()
-    assert "ready on ecs" in line, line + p.stderr.read()
-    return p
-
-
-def _stop(p: subprocess.Popen) -> dict:
-    p.send_signal(signal.SIGTERM)
-    out, err = p.communicate(timeout=30)
-    assert p.returncode == 0, err
-    return json.loads(out)
-
-
-def _master(ns: str, *args: str) -> dict:
-    r = subprocess.run(_in(ns, "chrt", "-f", "40", sys.executable, str(MASTER), "ecm", *args),
-                       capture_output=True, text=True, timeout=120)
-    assert r.returncode == 0, r.stderr
-    return json.loads(r.stdout)
+        with veth_namespace() as name:
+            yield name
+    except NamespaceError as exc:
+        pytest.skip(str(exc))
 
 
 def test_soem_brings_hydra_full_to_op_and_cycles(netns, full, tmp_path):
     pcap = tmp_path / "master_side.pcapng"
-    shark = subprocess.Popen(_in(netns, "tshark", "-i", "ecm", "-w", str(pcap), "-q"),
+    shark = subprocess.Popen(in_ns(netns, "tshark", "-i", MASTER_IF, "-w", str(pcap), "-q"),
                              stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     try:
         for line in shark.stderr:  # capture running before the first frame
             if "Capturing on" in line:
                 break
-        serve = _serve(netns)
+        serve = start_serve(netns)
         try:
-            res = _master(netns, "cycles", str(CYCLES), "0.5")
+            res = run_master(netns, "cycles", str(CYCLES), "0.5")
         finally:
-            report = _stop(serve)
+            report = stop_serve(serve)
     finally:
         shark.send_signal(signal.SIGINT)
         shark.communicate(timeout=30)
@@ -162,11 +114,11 @@ def test_soem_brings_hydra_full_to_op_and_cycles(netns, full, tmp_path):
 
 
 def test_soem_force_command_reaches_the_full_stack(netns, full, cfg):
-    serve = _serve(netns, "--stack-box", "0")
+    serve = start_serve(netns, "--stack-box", "0")
     try:
-        res = _master(netns, "force", "0", "0", str(FORCE_N), "1500")
+        res = run_master(netns, "force", "0", "0", str(FORCE_N), "1500")
     finally:
-        _stop(serve)
+        stop_serve(serve)
     assert res["bad_wkc"] == 0, res["bad_wkc_values"]
     # The same box model in this process, given the same output record, predicts the
     # pressure force the inputs carry once it has settled.

@@ -1,10 +1,13 @@
-"""The master side of the pysoem test, run as its own process inside the test's network
-namespace: ``python pysoem_master.py IF MODE``; prints one JSON object.
+"""SOEM (through pysoem) as the master of the ESC chain, run as its own process inside a
+network namespace (``python -m hil.fieldbus.soem_master IF MODE ...``) by the pysoem test
+and ``eha-hil bench ethercat --wire``; prints one JSON object. pysoem is a test extra.
 
 MODE ``cycles N``: config_init, config_map, SAFEOP, OP, N process-data cycles at 1 kHz
 (outputs all zero), then stops sending, waits WAIT s and reads every slave's AL state.
 MODE ``force BOX SLOT NEWTONS N``: as far as OP, then N cycles commanding a force on that
 actuator (mode 1, enable), and reports that actuator's f_pressure input over the cycles.
+MODE ``rtt N``: as far as OP, every actuator enabled with a force command, N cycles at
+1 kHz; the wall time of each cycle's send + receive (the frames' round trip) in us.
 """
 
 from __future__ import annotations
@@ -38,8 +41,11 @@ def bring_up(ifname: str) -> tuple[pysoem.Master, dict]:
     return m, info
 
 
-def paced(m: pysoem.Master, n: int, each=None) -> tuple[int, list[int]]:
-    """n cycles at 1 kHz; (cycles with a WKC other than expected, the first few WKCs)."""
+def paced(m: pysoem.Master, n: int, each=None, rtt: list | None = None
+          ) -> tuple[int, list[int]]:
+    """n cycles at 1 kHz; (cycles with a WKC other than expected, the first few WKCs).
+    ``rtt``: its last element (the start time ``each`` appended) becomes the cycle's
+    send + receive time in us."""
     bad, seen = 0, []
     t_next = time.perf_counter()
     for k in range(n):
@@ -47,6 +53,8 @@ def paced(m: pysoem.Master, n: int, each=None) -> tuple[int, list[int]]:
             each(k)
         m.send_processdata()
         wkc = m.receive_processdata(RECV_TIMEOUT_US)
+        if rtt is not None:
+            rtt[-1] = (time.perf_counter() - rtt[-1]) * 1e6
         if wkc != m.expected_wkc:
             bad += 1
             if len(seen) < 10:
@@ -68,6 +76,21 @@ def main(argv: list[str]) -> None:
         time.sleep(wait)  # nothing sent: the slaves' watchdogs run out
         m.read_state()
         info["after_stop"] = [{"state": s.state, "al_status": s.al_status} for s in m.slaves]
+    elif mode == "rtt":
+        n = int(argv[2])
+        for s in m.slaves:  # every actuator slot: force command, enabled
+            out = bytearray(s.output)
+            for k in range(len(out) // 10):
+                struct.pack_into("<BBi", out, 10 * k, 1, 1, 10_000)
+            s.output = bytes(out)
+        rtt: list[float] = []
+        clock = time.perf_counter
+
+        def timed(_k: int) -> None:
+            rtt.append(clock())
+
+        info["bad_wkc"], info["bad_wkc_values"] = paced(m, n, timed, rtt)
+        info["rtt_us"] = rtt
     elif mode == "force":
         box, slot, newtons, n = int(argv[2]), int(argv[3]), float(argv[4]), int(argv[5])
         s = m.slaves[box]
