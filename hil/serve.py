@@ -474,16 +474,19 @@ def cmd_serve_ethercat(args: argparse.Namespace, cfg, topo) -> int:
         for s, h in old.items():
             signal.signal(s, h)
         link.close()
+    failures = [] if st.frames_answered else ["no EtherCAT frame arrived from a master"]
     data = {"transport": "ethercat", "interface": args.interface, "topology": topo.name,
             "model": model, "stack_boxes": list(args.stack_boxes), **st.as_dict(),
-            "chain": chain.stats.__dict__.copy(), "slaves": chain.watchdog_report()}
+            "chain": chain.stats.__dict__.copy(), "slaves": chain.watchdog_report(),
+            "ok": not failures, "failures": failures}
     if args.json:
         print(json.dumps(data, indent=2))
     else:
         print(f"serve {args.interface}: {st.cycles} cycles in {st.wall_s:.1f} s, "
               f"{st.frames_answered} frames answered, {chain.stats.dropped_frames} dropped, "
               f"{st.overruns} overruns")
-    return 0
+        print("ok" if not failures else "FAILED: " + "; ".join(failures))
+    return 0 if not failures else 1
 
 
 def add_parser(sub, common, config_fn, wrap) -> None:
