@@ -119,7 +119,6 @@ class Esc:
         self.watchdog_trips = 0
         self.last_trip_delay_ns = 0
         self._pending: bytes | None = None
-        self._outputs_written = False
         self.safe_outputs = bytes(desc.out_bytes)
 
     # --- the frame side ---------------------------------------------------------------------
@@ -239,7 +238,6 @@ class Esc:
             return
         start, length, control, _act = self.sm(0)
         if length and lo < start + length <= hi:
-            self._outputs_written = True
             if control & r.SM_WATCHDOG:
                 self.last_output_ns = self.now_ns
                 _U16.pack_into(self.mem, r.WD_STATUS_PD, 1)
