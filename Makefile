@@ -3,7 +3,8 @@
 #   make test  - create .venv, install eha-hil with its test extra, run the whole suite
 #   make test-fast - the same without the tests marked slow (under a minute)
 #   make system-deps - (root, apt) the system tools some tests use, else they skip:
-#                  tshark + dumpcap (capture tests), iproute2 (ip netns), the Arm cross
+#                  tshark + dumpcap (capture tests), iproute2 (ip netns: UDP capture, the
+#                  pysoem EtherCAT master on a veth pair; gcc builds pysoem), the Arm cross
 #                  compiler + newlib and QEMU (MCU law on a Cortex-M4), Icarus Verilog (RTL)
 PYTHON ?= python3
 VENV   := .venv

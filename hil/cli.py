@@ -623,6 +623,9 @@ def build_parser() -> argparse.ArgumentParser:
     from hil import serve
 
     serve.add_parser(sub, _common, _config, _bus_command)
+    from hil.fieldbus import esc_cli
+
+    esc_cli.add_parsers(sub, bsub, _common, _config, _bus_command)
     _add_external(sub, bsub)
     from hil.sweep import cli as sweep_cli
 
