@@ -30,8 +30,8 @@ from plant.config import Config
 from protocols import ethercat as ec
 
 CYCLE_TICKS = 20  # 1 kHz on the 20 kHz clock
-#: Largest datagram data per frame: 1500-byte Ethernet payload - 2 header - 12 datagram.
-MAX_DATAGRAM_DATA = ec.ETH_MAX_PAYLOAD - 2 - ec.DATAGRAM_OVERHEAD
+#: Largest datagram data per frame (the codec's limit).
+MAX_DATAGRAM_DATA = ec.MAX_DATAGRAM_DATA
 
 
 @dataclass(frozen=True)

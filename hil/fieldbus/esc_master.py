@@ -19,7 +19,7 @@ from firmware_model.esc import sii
 from hil.fieldbus.esc_chain import EscChain
 from protocols import ethercat as ec
 
-MAX_LRW = ec.ETH_MAX_PAYLOAD - 2 - ec.DATAGRAM_OVERHEAD
+MAX_LRW = ec.MAX_DATAGRAM_DATA
 STATION_BASE = 0x1001
 
 

@@ -97,10 +97,6 @@ ALLOWED = {
     ("hil/identify/rig.py", "kernel"):
         "identification: the independent generator of rig data, which must differ from "
         "the plant's model (DESIGN.md, data formats)",
-    ("hil/fieldbus/chain.py", "protocols.ethercat.DATAGRAM_OVERHEAD"):
-        "the fieldbus is the harness's: it sizes its frames from the codec's limits",
-    ("hil/fieldbus/chain.py", "protocols.ethercat.ETH_MAX_PAYLOAD"):
-        "the fieldbus is the harness's: it sizes its frames from the codec's limits",
 }
 
 
