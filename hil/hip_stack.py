@@ -1,0 +1,81 @@
+"""The hip joint through the whole stack: the PC's joint loop at 1 kHz on the fieldbus
+master -> process image -> the hip box (MCU at 5 kHz, two driver boards at 20 kHz, two
+EHA plants coupled by the thigh) -> and back, in lockstep (:class:`hil.fieldbus.system.
+BusSystem`, in-process transport).
+
+:func:`run_joint` drives the joint with a reference theta_ref(t) and records, per cycle,
+what the PC commanded and measured. The PC reads the inputs of the previous cycle, as the
+real master does.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from firmware_model.pc.joint_loop import JointController, JointGains
+from hil.fieldbus.system import BusSystem
+from hil.fieldbus.topology import load_topology
+from plant.config import Config
+
+#: Cycles at the start with zero force commands, while the first inputs arrive.
+START_CYCLES = 5
+#: theta_ref(t_s) -> (theta_p, theta_r), rad.
+Reference = Callable[[float], tuple[float, float]]
+
+
+@dataclass
+class JointRecord:
+    """Per PC cycle (1 kHz): time, reference, measured angle, commanded and measured torque."""
+
+    t: np.ndarray           # s
+    theta_ref: np.ndarray   # (n, 2) rad
+    theta: np.ndarray       # (n, 2) rad, from the pistons (forward kinematics)
+    tau_cmd: np.ndarray     # (n, 2) Nm
+    tau: np.ndarray         # (n, 2) Nm, from the rods' gauges (Eq. 6.4-6.6)
+    theta_true: np.ndarray  # (n, 2) rad, the thigh's angle in the plant (truth)
+
+
+def hip_config(cfg: Config, reinforced: bool) -> Config:
+    """The configuration for the hip's cylinders: their rod path's stiffness is the
+    testbed beam's (thesis 5.4; calibrated on F6), reinforced or not."""
+    k = cfg.get("load.beam_axial_stiffness_n_per_m")
+    if reinforced:
+        k *= cfg.get("load.beam_reinforcement_ratio")
+    return cfg.with_overrides({"load.kind": "conrod", "load.conrod_stiffness_n_per_m": k,
+                               "mcu.impl": "python"},
+                              "hip " + ("reinforced" if reinforced else "unreinforced"))
+
+
+def run_joint(cfg: Config, seconds: float, reference: Reference,
+              gains: JointGains | None = None, reinforced: bool = True,
+              progress: Callable[[int, int], None] | None = None) -> JointRecord:
+    """Run the joint stack for ``seconds`` under the position loop."""
+    cfg = hip_config(cfg, reinforced)
+    topo = load_topology("hip_one_box")
+    cycles = int(round(seconds / 1e-3))
+    rec = JointRecord(np.arange(cycles) * 1e-3, *(np.zeros((cycles, 2)) for _ in range(5)))
+    with BusSystem(topo, cfg, "inproc", model="hip") as bus:
+        box = bus.chain.boxes[0]
+        ctl = JointController(box.geometry, gains)
+
+        def pc(cycle: int, master) -> None:  # noqa: ANN001 (hil.fieldbus.master.Master)
+            a, b = master.actuator_inputs(0), master.actuator_inputs(1)
+            ctl.measure((a["x_piston"], b["x_piston"]), (a["f_strain"], b["f_strain"]))
+            f = ctl.command(reference(cycle * 1e-3))
+            if cycle < START_CYCLES:  # no inputs yet: the boards boot, no force
+                f = np.zeros(2)
+            for j in range(2):
+                master.set_actuator(j, "force", float(f[j]))
+            rec.theta_ref[cycle] = ctl.theta_ref
+            rec.theta[cycle] = ctl.theta
+            rec.tau_cmd[cycle] = ctl.tau_cmd
+            rec.tau[cycle] = ctl.tau
+            rec.theta_true[cycle] = box.joint[:2]
+            if progress and cycle % 250 == 0:
+                progress(cycle, cycles)
+
+        bus.run(cycles, pc)
+    return rec
