@@ -613,6 +613,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seconds", type=positive_float(60, "s"), default=0.5,
                    help="wall seconds per codec, in (0, 60]")
     p.set_defaults(func=cmd_bench_codecs)
+    from hil.hip_stack import add_bench_parser
+
+    add_bench_parser(bsub, _common, _config, _emit)
 
     from hil import bus_cli
 
@@ -631,10 +634,10 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("run", parents=[_common()],
                        help="run a scenario on the simulated stack (thesis, "
                        + ", ".join(scen) + "; exit 1 if a requirement is missed)",
-                       epilog="Scenarios: thesis: all thesis experiments (F3-F8); " + "; ".join(
+                       epilog="Scenarios: thesis: all thesis experiments (F3-F9); " + "; ".join(
                            f"{n}: {SCENARIOS[n].summary}" for n in scen))
     p.add_argument("scenario", metavar="SCENARIO",
-                   help="scenario name, or 'thesis' for all thesis experiments (F3-F8); "
+                   help="scenario name, or 'thesis' for all thesis experiments (F3-F9); "
                    "these default to -c hydra_thesis")
     p.add_argument("--plot-dir", default=None, type=output_dir,
                    help="directory for one plot per scenario, NAME.png (with 'thesis' "

@@ -38,22 +38,27 @@ class JointRecord:
     theta_true: np.ndarray  # (n, 2) rad, the thigh's angle in the plant (truth)
 
 
-def hip_config(cfg: Config, reinforced: bool) -> Config:
+def hip_config(cfg: Config, reinforced: bool, rod_damping_ns_per_m: float | None = None
+               ) -> Config:
     """The configuration for the hip's cylinders: their rod path's stiffness is the
-    testbed beam's (thesis 5.4; calibrated on F6), reinforced or not."""
+    testbed beam's (thesis 5.4; calibrated on F6), reinforced or not; its damping the
+    configuration's unless given."""
     k = cfg.get("load.beam_axial_stiffness_n_per_m")
     if reinforced:
         k *= cfg.get("load.beam_reinforcement_ratio")
-    return cfg.with_overrides({"load.kind": "conrod", "load.conrod_stiffness_n_per_m": k,
-                               "mcu.impl": "python"},
+    over = {"load.kind": "conrod", "load.conrod_stiffness_n_per_m": k, "mcu.impl": "python"}
+    if rod_damping_ns_per_m is not None:
+        over["load.conrod_damping_ns_per_m"] = rod_damping_ns_per_m
+    return cfg.with_overrides(over,
                               "hip " + ("reinforced" if reinforced else "unreinforced"))
 
 
 def run_joint(cfg: Config, seconds: float, reference: Reference,
               gains: JointGains | None = None, reinforced: bool = True,
-              progress: Callable[[int, int], None] | None = None) -> JointRecord:
+              progress: Callable[[int, int], None] | None = None,
+              rod_damping_ns_per_m: float | None = None) -> JointRecord:
     """Run the joint stack for ``seconds`` under the position loop."""
-    cfg = hip_config(cfg, reinforced)
+    cfg = hip_config(cfg, reinforced, rod_damping_ns_per_m)
     topo = load_topology("hip_one_box")
     cycles = int(round(seconds / 1e-3))
     rec = JointRecord(np.arange(cycles) * 1e-3, *(np.zeros((cycles, 2)) for _ in range(5)))
@@ -79,3 +84,62 @@ def run_joint(cfg: Config, seconds: float, reference: Reference,
 
         bus.run(cycles, pc)
     return rec
+
+
+@dataclass
+class JointBench:
+    """Result of ``bench joint``: simulated, wall and CPU seconds."""
+
+    simulated_s: float
+    wall_s: float
+    cpu_s: float
+
+    @property
+    def real_time_factor(self) -> float:
+        return self.simulated_s / self.wall_s
+
+    @property
+    def cpu_real_time_factor(self) -> float:
+        return self.simulated_s / self.cpu_s
+
+
+def bench_joint(cfg: Config, seconds: float = 1.0) -> JointBench:
+    """Time the hip joint stack (PC loop + fieldbus + MCU + two coupled stacks + thigh)
+    holding a 5 Hz 0.25 deg sine; a short run first compiles the kernels."""
+    import math
+    import time
+
+    def ref(t: float) -> tuple[float, float]:
+        return (math.radians(0.25) * math.sin(2 * math.pi * 5.0 * t), 0.0)
+
+    run_joint(cfg, 0.01, ref)
+    w0, c0 = time.perf_counter(), time.process_time()
+    run_joint(cfg, seconds, ref)
+    return JointBench(seconds, time.perf_counter() - w0, time.process_time() - c0)
+
+
+def add_bench_parser(bsub, common, config, emit) -> None:  # noqa: ANN001 (argparse parts)
+    """``eha-hil bench joint`` (registered by :mod:`hil.cli`)."""
+    from hil.cli_args import positive_float
+    from hil.tables import table
+
+    def cmd(args) -> int:  # noqa: ANN001
+        cfg = config(args)
+        r = bench_joint(cfg, args.seconds)
+        text = table(["path", "simulated [s]", "wall [s]", "CPU [s]", "real-time factor (wall)",
+                      "real-time factor (CPU)"],
+                     [("hip joint stack", r.simulated_s, r.wall_s, r.cpu_s,
+                       r.real_time_factor, r.cpu_real_time_factor)], fmt=".3g",
+                     title="PC joint loop 1 kHz + fieldbus + MCU 5 kHz + 2 driver boards + "
+                     f"2 plants + thigh at 20 kHz, {cfg.sources[-1]}")
+        emit(args, text, {"config": cfg.sources, "simulated_s": r.simulated_s,
+                          "wall_s": r.wall_s, "cpu_s": r.cpu_s,
+                          "real_time_factor": r.real_time_factor,
+                          "cpu_real_time_factor": r.cpu_real_time_factor})
+        return 0
+
+    p = bsub.add_parser("joint", parents=[common(plot=False)],
+                        help="real-time factor of the hip joint stack (PC loop to the thigh)")
+    p.add_argument("--seconds", type=positive_float(600, "s"), default=1.0,
+                   help="simulated seconds, in (0, 600]")
+    p.set_defaults(func=cmd)

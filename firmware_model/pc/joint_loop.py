@@ -13,8 +13,10 @@ forces) to their force commands:
    saturated at the cylinder's rated force, go to the MCUs, whose 5 kHz force loops are
    the minor torque loop the thesis's position loop rests on.
 
-Gains: the thesis gives K_p = 3000 Nm/rad for pitch and 6000 Nm/rad for roll (6.4.1); K_d
-is not given (docs/hip.md: the one figure calibrated on F9).
+Gains: the thesis gives K_p = 3000 Nm/rad for pitch and 6000 Nm/rad for roll (6.4.1); it
+gives no K_d, which stays 0 by default: the angle comes from the pistons, two cycles old
+by the time its force acts, and a derivative of it excites the thigh's mode on the rods
+(docs/hip.md).
 """
 
 from __future__ import annotations
@@ -36,7 +38,7 @@ class JointGains:
     """Position-loop gains per axis (pitch, roll), and the rate filter."""
 
     kp_nm_per_rad: tuple[float, float] = (3000.0, 6000.0)   # thesis 6.4.1
-    kd_nms_per_rad: tuple[float, float] = (20.0, 20.0)      # not in the thesis
+    kd_nms_per_rad: tuple[float, float] = (0.0, 0.0)        # not in the thesis
     omega_cutoff_hz: float = 150.0   # first-order filter on the differenced angle
     period_s: float = 1e-3           # 1 kHz (thesis 5.5)
 
