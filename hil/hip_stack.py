@@ -19,6 +19,7 @@ from firmware_model.pc.joint_loop import JointController, JointGains
 from hil.fieldbus.system import BusSystem
 from hil.fieldbus.topology import load_topology
 from plant.config import Config
+from plant.hip.thigh import ThighParams
 
 #: Cycles at the start with zero force commands, while the first inputs arrive.
 START_CYCLES = 5
@@ -56,14 +57,18 @@ def hip_config(cfg: Config, reinforced: bool, rod_damping_ns_per_m: float | None
 def run_joint(cfg: Config, seconds: float, reference: Reference,
               gains: JointGains | None = None, reinforced: bool = True,
               progress: Callable[[int, int], None] | None = None,
-              rod_damping_ns_per_m: float | None = None) -> JointRecord:
-    """Run the joint stack for ``seconds`` under the position loop."""
+              rod_damping_ns_per_m: float | None = None,
+              thigh: ThighParams | None = None) -> JointRecord:
+    """Run the joint stack for ``seconds`` under the position loop (``thigh``: the load's
+    parameters, the box's default if None)."""
     cfg = hip_config(cfg, reinforced, rod_damping_ns_per_m)
     topo = load_topology("hip_one_box")
     cycles = int(round(seconds / 1e-3))
     rec = JointRecord(np.arange(cycles) * 1e-3, *(np.zeros((cycles, 2)) for _ in range(5)))
     with BusSystem(topo, cfg, "inproc", model="hip") as bus:
         box = bus.chain.boxes[0]
+        if thigh is not None:
+            box.thigh, box.h[:] = thigh, thigh.as_array()
         ctl = JointController(box.geometry, gains)
 
         def pc(cycle: int, master) -> None:  # noqa: ANN001 (hil.fieldbus.master.Master)
