@@ -22,9 +22,15 @@ from firmware_model.pc.geometry import hip_geometry
 from hil.actuator import advance_stack
 from hil.fieldbus.boxes import StackBox
 from hil.fieldbus.topology import Box
-from plant import layout as L
 from plant.config import Config, ConfigError
-from plant.hip.thigh import J_Z1, N_J, ThighParams, couple_tick, place_anchors, set_pose
+from plant.hip.thigh import (
+    N_J,
+    ThighParams,
+    couple_tick,
+    place_anchors,
+    place_pistons,
+    set_pose,
+)
 
 
 @njit(cache=True)
@@ -66,8 +72,7 @@ class HipBox(StackBox):
         if not set_pose(self.g, self.joint, theta_p, theta_r, 0.0, 0.0):
             raise ValueError(f"hip pose ({math.degrees(theta_p):.1f}, "
                              f"{math.degrees(theta_r):.1f}) deg is outside the workspace")
-        for i, s in enumerate(self.stacks):
-            s.plant.x[L.S_THC] = self.joint[J_Z1 + i]  # pistons where the rods end
+        place_pistons(self.joint, self.stacks[0].plant.x, self.stacks[1].plant.x)
         place_anchors(self.joint, self.stacks[0].plant.params, self.stacks[1].plant.params)
 
     def _advance_stacks(self, n_ticks: int) -> None:

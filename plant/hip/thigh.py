@@ -33,7 +33,7 @@ import numpy as np
 from numba import njit
 
 from firmware_model.pc.kinematics import joint_to_cylinder
-from plant.layout import P_C_ROD, P_K_ROD, P_X_ANCHOR, Y_F_ROD, Y_F_STRAIN
+from plant.layout import P_C_ROD, P_K_ROD, P_X_ANCHOR, S_THC, Y_F_ROD, Y_F_STRAIN
 
 GRAVITY = 9.80665
 
@@ -92,6 +92,13 @@ def set_pose(g, js, tp, tr, wp, wr):
     js[J_CA1], js[J_CA2] = ca[0], ca[1]
     js[J_G00], js[J_G01], js[J_G10], js[J_G11] = G[0, 0], G[0, 1], G[1, 0], G[1, 1]
     return True
+
+
+@njit(cache=True)
+def place_pistons(js, x1, x2):
+    """Pistons (plant states) where the rods end at the joint's pose, rods unloaded."""
+    x1[S_THC] = js[J_Z1]
+    x2[S_THC] = js[J_Z2]
 
 
 @njit(cache=True)
