@@ -616,6 +616,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seconds", type=positive_float(60, "s"), default=0.5,
                    help="wall seconds per codec, in (0, 60]")
     p.set_defaults(func=cmd_bench_codecs)
+    from hil.hip_stack import add_bench_parser
+
+    add_bench_parser(bsub, _common, _config, _emit)
 
     from hil import bus_cli
 
@@ -644,7 +647,7 @@ def build_parser() -> argparse.ArgumentParser:
                                    for n in scen if SCENARIOS[n].knobs)
                        + " (docs/scenarios.md).")
     p.add_argument("scenario", metavar="SCENARIO",
-                   help="scenario name, or 'thesis' for all thesis experiments (F3-F8); "
+                   help="scenario name, or 'thesis' for all thesis experiments (F3-F9); "
                    "these default to -c hydra_thesis")
     p.add_argument("--plot-dir", default=None, type=output_dir,
                    help="directory for one plot per scenario, NAME.png (with 'thesis' "

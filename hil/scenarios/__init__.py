@@ -123,14 +123,21 @@ def names() -> list[str]:
 
 
 #: The thesis experiments ``eha-hil run thesis`` runs, in order, on the full stack.
-THESIS = ("f3", "f4", "f5", "f6", "f7", "f8")
+THESIS = ("f3", "f4", "f5", "f6", "f7", "f8", "f9")
 #: The main job's figures (plant alone), which ``eha-hil main`` runs and prints.
 MAIN = ("f1", "f2")
 
 
 def _load_all() -> None:
     # Importing the modules registers their scenarios.
-    from hil.scenarios import bus_faults, current, identify_rig, plant_figures, thesis  # noqa: F401
+    from hil.scenarios import (  # noqa: F401
+        bus_faults,
+        current,
+        hip,
+        identify_rig,
+        plant_figures,
+        thesis,
+    )
     try:
         from hil.scenarios import strain  # noqa: F401
     except ImportError:  # pragma: no cover - only while F7/F8 are being written

@@ -90,6 +90,8 @@ _KERNEL_DECORATORS = {"njit", "jit", "vectorize", "guvectorize", "cfunc", "stenc
 ALLOWED = {
     ("hil/actuator.py", "kernel"):
         "the stack's compiled wiring loop: calls the parts' kernels tick by tick",
+    ("hil/fieldbus/hip_box.py", "kernel"):
+        "the hip box's compiled wiring loop: both stacks and the thigh's coupling tick by tick",
     ("hil/replay/fpga_replay.py", "kernel"):
         "feeds logged words through the board's compiled tick and compares its outputs",
     ("hil/identify/model.py", "kernel"):
