@@ -364,7 +364,8 @@ def _run_live(res, address: str) -> str:  # noqa: ANN001 - ScenarioResult
 def cmd_run(args: argparse.Namespace) -> int:
     from hil import scenarios
 
-    if args.config is None and (args.scenario == "thesis" or args.scenario in scenarios.THESIS):
+    if args.config is None and (args.scenario == "thesis"
+                                or args.scenario in scenarios.ON_THESIS_PRESET):
         args.config = THESIS_PRESET
     if args.scenario == "thesis":
         for opt in ("series", "foxglove"):
@@ -647,7 +648,7 @@ def build_parser() -> argparse.ArgumentParser:
                                    for n in scen if SCENARIOS[n].knobs)
                        + " (docs/scenarios.md).")
     p.add_argument("scenario", metavar="SCENARIO",
-                   help="scenario name, or 'thesis' for all thesis experiments (F3-F9); "
+                   help="scenario name, or 'thesis' for all thesis experiments (F3-F8); "
                    "these default to -c hydra_thesis")
     p.add_argument("--plot-dir", default=None, type=output_dir,
                    help="directory for one plot per scenario, NAME.png (with 'thesis' "

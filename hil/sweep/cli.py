@@ -63,7 +63,7 @@ def _resolve_scenario(args: argparse.Namespace) -> str:
         scenarios.get(args.scenario)
     except KeyError as exc:
         raise _usage(str(exc.args[0])) from None
-    if args.config is None and args.scenario in scenarios.THESIS:
+    if args.config is None and args.scenario in scenarios.ON_THESIS_PRESET:
         args.config = THESIS_PRESET  # as `eha-hil run` does
     return args.scenario
 

@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from hil.scenarios import SCENARIOS, THESIS, names
+from hil.scenarios import ON_THESIS_PRESET, SCENARIOS, names
 from hil.scenarios.hip import f9_result
 from plant.config import load_config
 
@@ -20,9 +20,9 @@ def f9():
     return f9_result(load_config("hydra_thesis"), FREQS)
 
 
-def test_registered_in_the_thesis_run():
+def test_registered_on_the_thesis_preset():
     names()
-    assert "f9" in SCENARIOS and "f9" in THESIS
+    assert "f9" in SCENARIOS and "f9" in ON_THESIS_PRESET
 
 
 @pytest.mark.slow
