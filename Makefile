@@ -3,7 +3,8 @@
 #   make test  - create .venv, install eha-hil with its test extra, run the whole suite
 #   make test-fast - the same without the tests marked slow (under a minute)
 #   make system-deps - (root, apt) the system tools some tests use, else they skip:
-#                  tshark + dumpcap (capture tests), iproute2 (ip netns), the Arm cross
+#                  tshark + dumpcap (capture tests), iproute2 (ip netns: UDP capture, the
+#                  pysoem EtherCAT master on a veth pair; gcc builds pysoem), the Arm cross
 #                  compiler + newlib and QEMU (MCU law on a Cortex-M4), Icarus Verilog (RTL)
 PYTHON ?= python3
 VENV   := .venv
@@ -33,11 +34,13 @@ run: $(STAMP)
 	$(BIN)/eha-hil main
 	$(BIN)/eha-hil run thesis
 
+# The suite runs on one pytest-xdist worker per core: its tests are independent (each makes
+# its own temporary files, ports, namespaces), and most of its time is single-threaded work.
 test: $(TSTAMP)
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q -n auto
 
 test-fast: $(TSTAMP)
-	$(BIN)/python -m pytest -q -m "not slow"
+	$(BIN)/python -m pytest -q -n auto -m "not slow"
 
 bench: $(STAMP)
 	$(BIN)/eha-hil bench plant

@@ -393,7 +393,8 @@ def _run_live(res, address: str) -> str:  # noqa: ANN001 - ScenarioResult
 def cmd_run(args: argparse.Namespace) -> int:
     from hil import scenarios
 
-    if args.config is None and (args.scenario == "thesis" or args.scenario in scenarios.THESIS):
+    if args.config is None and (args.scenario == "thesis"
+                                or args.scenario in scenarios.ON_THESIS_PRESET):
         args.config = THESIS_PRESET
     if args.scenario == "thesis":
         for opt in ("series", "foxglove"):
@@ -409,8 +410,11 @@ def cmd_run(args: argparse.Namespace) -> int:
         if args.plot:
             raise UsageError("--plot and --plot-dir: give one of them")
         args.plot = str(_plot_dir(args.plot_dir) / f"{scenario.name}.png")
-    cfg = _config(args)
-    res = scenario.run(cfg, _progress(scenario.name, not args.json))
+    from hil.scenarios.knobs import split_sets
+
+    config_sets, knob_values = split_sets(args.set or ())
+    cfg = load_config(args.config, config_sets)
+    res = scenario.call(cfg, _progress(scenario.name, not args.json), knob_values)
     rows = [(m.name, m.value, m.unit, m.requirement,
              "" if m.ok is None else ("ok" if m.ok else "MISSED")) for m in res.metrics]
     text = table(["metric", "value", "unit", "requirement", ""], rows, fmt=".4g",
@@ -651,6 +655,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seconds", type=positive_float(60, "s"), default=0.5,
                    help="wall seconds per codec, in (0, 60]")
     p.set_defaults(func=cmd_bench_codecs)
+    from hil.hip_stack import add_bench_parser
+
+    add_bench_parser(bsub, _common, _config, _emit)
 
     from hil import bus_cli
 
@@ -658,6 +665,9 @@ def build_parser() -> argparse.ArgumentParser:
     from hil import serve
 
     serve.add_parser(sub, _common, _config, _bus_command)
+    from hil.fieldbus import esc_cli
+
+    esc_cli.add_parsers(sub, bsub, _common, _config, _bus_command)
     _add_external(sub, bsub)
     from hil.sweep import cli as sweep_cli
 
@@ -670,7 +680,11 @@ def build_parser() -> argparse.ArgumentParser:
                        help="run a scenario on the simulated stack (thesis, "
                        + ", ".join(scen) + "; exit 1 if a requirement is missed)",
                        epilog="Scenarios: thesis: all thesis experiments (F3-F8); " + "; ".join(
-                           f"{n}: {SCENARIOS[n].summary}" for n in scen))
+                           f"{n}: {SCENARIOS[n].summary}" for n in scen)
+                       + ". Scenario settings (--set scenario.NAME=VALUE; sweepable): "
+                       + "; ".join(f"{n}: " + ", ".join(k.name for k in SCENARIOS[n].knobs)
+                                   for n in scen if SCENARIOS[n].knobs)
+                       + " (docs/scenarios.md).")
     p.add_argument("scenario", metavar="SCENARIO",
                    help="scenario name, or 'thesis' for all thesis experiments (F3-F8); "
                    "these default to -c hydra_thesis")

@@ -56,7 +56,8 @@ def _interval(lo: float | None, hi: float | None, open_lo: bool, unit: str) -> s
     return f"{left}{lo_s}, {hi_s}]" + (f" {unit}" if unit else "")
 
 
-def _parse_float(text: str) -> float:
+def finite_float(text: str) -> float:
+    """A finite number from the command line (argparse type; one line for anything else)."""
     try:
         value = float(text)
     except ValueError:
@@ -72,7 +73,7 @@ def float_range(lo: float | None = None, hi: float | None = None, *, open_lo: bo
     span = _interval(lo, hi, open_lo, unit)
 
     def parse(text: str) -> float:
-        value = _parse_float(text)
+        value = finite_float(text)
         if lo is not None and (value < lo or (open_lo and value == lo)):
             raise argparse.ArgumentTypeError(f"{text}: need a number in {span}")
         if hi is not None and value > hi:

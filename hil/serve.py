@@ -304,6 +304,8 @@ def cmd_serve(args: argparse.Namespace, cfg) -> int:
         topo = load_topology(args.topology)
     except TopologyError as exc:
         raise _usage(str(exc)) from None
+    if args.transport == "ethercat":
+        return cmd_serve_ethercat(args, cfg, topo)
     from hil.fieldbus.capture import CaptureError, CaptureWriter
     from hil.transports import backend
 
@@ -434,6 +436,59 @@ def cmd_serve(args: argparse.Namespace, cfg) -> int:
     return 0 if not failures else 1
 
 
+def cmd_serve_ethercat(args: argparse.Namespace, cfg, topo) -> int:
+    """``--transport ethercat``: the ESC chain (:mod:`hil.fieldbus.esc_chain`) on a raw
+    Ethernet interface for a real master (docs/ethercat-slaves.md)."""
+    from hil.fieldbus.ecat_serve import serve
+    from hil.fieldbus.esc_chain import EscChain
+    from hil.transports.rawether import RawEthernet
+
+    if not args.interface:
+        raise _usage("--interface: required with --transport ethercat")
+    for opt, hint in (("capture", "capture the interface with tshark"),
+                      ("foxglove", "not offered for the ESC chain"),
+                      ("port", "the interface is --interface")):
+        if getattr(args, opt, None) is not None:
+            raise _usage(f"--{opt}: not with --transport ethercat ({hint})")
+    bad = [b for b in args.stack_boxes if not 0 <= b < len(topo.boxes)]
+    if bad:
+        raise _usage(f"--stack-box {bad[0]}: {topo.name} has boxes 0..{len(topo.boxes) - 1}")
+    model = args.model or "echo"
+    chain = EscChain(topo, cfg, model, tuple(args.stack_boxes))
+    try:
+        link = RawEthernet(args.interface)
+    except TransportError as exc:
+        raise _usage(str(exc)) from None
+    if args.realtime:
+        _realtime_priority()
+    print(f"eha-hil serve: ready on {args.interface} (EtherType 0x88a4); {topo.name}, "
+          f"{len(topo.boxes)} slaves, {model} model"
+          + (f", full stack behind box(es) {args.stack_boxes}" if args.stack_boxes else ""),
+          file=sys.stderr, flush=True)
+    stopping = []
+    old = {s: signal.signal(s, lambda signum, frame: stopping.append(signum))
+           for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        st = serve(chain, link, args.seconds, stop=lambda: bool(stopping))
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)
+        link.close()
+    failures = [] if st.frames_answered else ["no EtherCAT frame arrived from a master"]
+    data = {"transport": "ethercat", "interface": args.interface, "topology": topo.name,
+            "model": model, "stack_boxes": list(args.stack_boxes), **st.as_dict(),
+            "chain": chain.stats.__dict__.copy(), "slaves": chain.watchdog_report(),
+            "ok": not failures, "failures": failures}
+    if args.json:
+        print(json.dumps(data, indent=2))
+    else:
+        print(f"serve {args.interface}: {st.cycles} cycles in {st.wall_s:.1f} s, "
+              f"{st.frames_answered} frames answered, {chain.stats.dropped_frames} dropped, "
+              f"{st.overruns} overruns")
+        print("ok" if not failures else "FAILED: " + "; ".join(failures))
+    return 0 if not failures else 1
+
+
 def add_parser(sub, common, config_fn, wrap) -> None:
     """Register ``eha-hil serve`` (``common``: the -c/--set/--json parent; ``wrap`` adapts
     the command to the config and to one-line usage errors, as for ``bus``)."""
@@ -443,8 +498,13 @@ def add_parser(sub, common, config_fn, wrap) -> None:
         "the wall clock, for a real master to close the loop",
         epilog="Example: eha-hil serve --transport serial --port pty --seconds 10 "
         "(docs/fieldbus.md, 'Serving the simulated robot to real hardware').")
-    p.add_argument("--transport", default="serial", choices=serve_backends(),
-                   help="serial (COBS + CRC-32 frames) or udp")
+    p.add_argument("--transport", default="serial", choices=[*serve_backends(), "ethercat"],
+                   help="serial (COBS + CRC-32 frames), udp, or ethercat (raw Ethernet "
+                   "frames, EtherType 0x88A4, ESC slaves for a real master: --interface)")
+    p.add_argument("--interface", help="ethercat: network interface (e.g. eth1, veth0)")
+    p.add_argument("--stack-box", dest="stack_boxes", type=int_range(0, 255), action="append",
+                   default=[], metavar="N",
+                   help="ethercat: box N runs the full stack (repeatable; others: --model)")
     p.add_argument("--port",
                    help="serial (required): device path or pyserial URL, or 'pty' for a new "
                    "pseudo-terminal whose path is printed; udp: local port number (default "

@@ -13,7 +13,7 @@ from __future__ import annotations
 import copy
 import math
 import tomllib
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -242,6 +242,9 @@ class Config:
         data = copy.deepcopy(self.data)
         for key, value in overrides.items():
             _set_checked(data, key, value, source)
+        # The rules between keys hold for an override as for a file (a sweep point, a
+        # scenario's variant): each key alone in range is not enough.
+        _check_consistency(data, source)
         return Config(data, [*self.sources, source])
 
 
@@ -293,6 +296,16 @@ def _flatten(tree: Mapping[str, Any], prefix: str = "") -> Iterable[tuple[str, A
 
 def _check_value(key: str, value: Any, template: Any, where: str) -> Any:
     """Return ``value`` converted to the template's type, or raise ConfigError."""
+    value = check_typed(key, value, template, where, CHOICES.get(key))
+    if isinstance(template, int | float) and not isinstance(template, bool):
+        _check_range(key, value, where)
+    return value
+
+
+def check_typed(key: str, value: Any, template: Any, where: str,
+                choices: Sequence[str] | None = None) -> Any:
+    """``value`` as the type of ``template`` (bool, str within ``choices``, int, finite
+    float), or ConfigError naming ``where`` and ``key``. Ranges are the caller's."""
     if isinstance(template, bool):
         if not isinstance(value, bool):
             raise ConfigError(f"{where}: {key}: expected true or false, got {value!r}")
@@ -300,7 +313,6 @@ def _check_value(key: str, value: Any, template: Any, where: str) -> Any:
     if isinstance(template, str):
         if not isinstance(value, str):
             raise ConfigError(f"{where}: {key}: expected a string, got {value!r}")
-        choices = CHOICES.get(key)
         if choices and value not in choices:
             raise ConfigError(f"{where}: {key}: '{value}' is not one of {', '.join(choices)}")
         return value
@@ -313,7 +325,6 @@ def _check_value(key: str, value: Any, template: Any, where: str) -> Any:
         value = float(value)
         if not math.isfinite(value):
             raise ConfigError(f"{where}: {key}: must be finite, got {value!r}")
-    _check_range(key, value, where)
     return value
 
 

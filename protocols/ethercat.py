@@ -127,6 +127,9 @@ DATAGRAM_LEN_WORD = _BitWord(
 )
 DATAGRAM_TRAILER = _Fields((("wkc", "H"),))
 DATAGRAM_OVERHEAD = DATAGRAM_HEADER.size + DATAGRAM_TRAILER.size  # 12 bytes
+#: Largest data of the one datagram of a frame: the Ethernet payload less the 2-byte
+#: EtherCAT header and the datagram's header and working counter (1486 bytes).
+MAX_DATAGRAM_DATA = ETH_MAX_PAYLOAD - 2 - DATAGRAM_OVERHEAD
 MAX_PDU_LENGTH = (1 << 11) - 1
 
 ETHERNET_HEADER = _Fields((("dst", "6s"), ("src", "6s"), ("ethertype", "H")), order=">")

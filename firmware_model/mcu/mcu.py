@@ -49,6 +49,11 @@ CRC_COUNT_MAX = 0xFFFF
  LINK_ERROR, BOARD_ENABLED, ENCODER_ERROR, STRAIN_ERROR) = (1 << b for b, _, _ in STATUS_BITS)
 
 
+def flag_set(status: np.ndarray, flag: int) -> np.ndarray:
+    """Where status word(s) ``status`` have ``flag`` (one of the bits above) set."""
+    return (np.asarray(status) & flag) != 0
+
+
 
 class CommandMode(StrEnum):
     """What the PC asks of one actuator (:meth:`Mcu.command`, the process data's ``mode``):

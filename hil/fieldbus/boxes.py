@@ -230,10 +230,14 @@ def box_engine(model: str, boxes: list, cfg: Config, overlap: bool = True) -> ob
 
 
 def make_box(model: str, box: Box, cfg: Config) -> _BoxBase:
-    """A box model by name ("stack", "robot" or "echo")."""
+    """A box model by name ("stack", "robot", "echo" or "hip")."""
+    if model == "hip":  # the hip's two coupled stacks (built on StackBox, so imported here)
+        from hil.fieldbus.hip_box import HipBox
+
+        return HipBox(box, cfg)
     try:
         cls = BOX_MODELS[model]
     except KeyError:
         raise ValueError(f"unknown box model {model!r}; choose from "
-                         f"{', '.join(BOX_MODELS)}") from None
+                         f"{', '.join([*BOX_MODELS, 'hip'])}") from None
     return cls(box, cfg)

@@ -20,6 +20,7 @@ one seen (mod 256, as above). A frame is answered with the inputs as they stand.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from hil.fieldbus import wire
@@ -29,8 +30,8 @@ from plant.config import Config
 from protocols import ethercat as ec
 
 CYCLE_TICKS = 20  # 1 kHz on the 20 kHz clock
-#: Largest datagram data per frame: 1500-byte Ethernet payload - 2 header - 12 datagram.
-MAX_DATAGRAM_DATA = ec.ETH_MAX_PAYLOAD - 2 - ec.DATAGRAM_OVERHEAD
+#: Largest datagram data per frame (the codec's limit).
+MAX_DATAGRAM_DATA = ec.MAX_DATAGRAM_DATA
 
 
 @dataclass(frozen=True)
@@ -107,6 +108,10 @@ class Chain:
         self.cycle = 0
         self.started = False
         self.stats = ChainStats()
+        #: Called after every fieldbus cycle the boxes advance (observers of the slaves'
+        #: own state, which a lost reply hides from the master; lockstep mode advances
+        #: the cycles a lost frame skipped when the next one arrives).
+        self.on_advance: Callable[[], None] | None = None
 
     def handle(self, frame: bytes) -> bytes | None:
         """Process one frame; the reply, or None if the frame was discarded."""
@@ -144,6 +149,8 @@ class Chain:
                 b.advance(CYCLE_TICKS)
         self.cycle = (self.cycle + 1) & 0xFF
         self.stats.cycles_advanced += 1
+        if self.on_advance is not None:
+            self.on_advance()
 
     def _process(self, d: ec.Datagram) -> ec.Datagram:
         if d.cmd != ec.Command.LRW:

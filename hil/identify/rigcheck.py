@@ -147,17 +147,26 @@ def judge(case: Case, truth: dict[str, dict[str, float]], found: dict[str, dict[
 
 def run_case(case: Case, seed: int) -> CaseResult:
     """Generate the record, identify it, judge it (runs in a worker process)."""
-    from hil.identify.checks import RefusedData
-    from hil.identify.pipeline import BASELINE_LABELS, identify
     from hil.identify.rig import generate_rig
     from plant.config import load_config
 
     t0, c0 = time.perf_counter(), time.process_time()
     rig = generate_rig(case.load, list(case.effects), seconds=case.seconds, seed=seed,
                        profile=case.profile)
+    return identify_and_judge(case, seed, rig, load_config("hydra_default"), t0, c0)
+
+
+def identify_and_judge(case: Case, seed: int, rig: Any, cfg: Any, t0: float,
+                       c0: float) -> CaseResult:
+    """Identify the rig's record ``rig`` (:class:`hil.identify.rig.RigResult`) starting from
+    ``cfg`` and judge it against the rig's truth; ``t0``/``c0``: wall/CPU clock at the
+    start (the figures include the rig's own simulation)."""
+    from hil.identify.checks import RefusedData
+    from hil.identify.pipeline import BASELINE_LABELS, identify
+
     truth = rig.truth["effects"]
     try:
-        rep = identify(rig.data, load_config("hydra_default"))
+        rep = identify(rig.data, cfg)
     except RefusedData as err:
         return CaseResult(case, seed, False, f"refused: {err}", list(case.effects), [],
                           False, refused=str(err), wall_s=time.perf_counter() - t0,

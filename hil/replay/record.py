@@ -401,7 +401,7 @@ def run_logged(topo: Topology, cfg: Config, cycles: int, pc: Callable[[int, Mast
                 part = bs.run(n, pc_signals)
                 rec = part if rec is None else BusRecord(
                     np.concatenate([rec.inputs, part.inputs]), part.master, part.chain,
-                    part.transport)
+                    part.transport, part.faults)
                 done += n
                 if progress:
                     progress(done, cycles)

@@ -63,7 +63,7 @@ def _resolve_scenario(args: argparse.Namespace) -> str:
         scenarios.get(args.scenario)
     except KeyError as exc:
         raise _usage(str(exc.args[0])) from None
-    if args.config is None and args.scenario in scenarios.THESIS:
+    if args.config is None and args.scenario in scenarios.ON_THESIS_PRESET:
         args.config = THESIS_PRESET  # as `eha-hil run` does
     return args.scenario
 
@@ -96,9 +96,18 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         raise _usage(f"--workers: the cluster at {args.dask} has its own workers")
     if not (args.param or args.tolerance or args.seeds):
         raise _usage("sweep: nothing to vary; give --param, --tolerance or --seeds")
-    base = load_config(args.config, args.set or ())
+    from hil import scenarios
+    from hil.scenarios.knobs import split_sets
+
+    scen = scenarios.get(scenario)
+    config_sets, fixed_knobs = split_sets(args.set or ())
+    base = load_config(args.config, config_sets)
+    scen.settings(fixed_knobs, "--set")  # one line naming the setting, before anything runs
     plan = space.build_plan(base, args.param or [], args.tolerance or [], args.samples or 0,
-                            args.seeds or (), args.distribution, args.draw_seed)
+                            args.seeds or (), args.distribution, args.draw_seed,
+                            knobs=scen.knobs, scenario=scenario,
+                            settings=scen.settings if scen.knobs else None,
+                            fixed=fixed_knobs)
     show = not args.json
     journal = None
     if args.out:

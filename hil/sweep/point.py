@@ -20,6 +20,7 @@ import time
 from dataclasses import dataclass
 from typing import Any
 
+from hil.scenarios.knobs import split_overrides
 from hil.sweep.space import Point
 from plant.config import Config
 
@@ -64,8 +65,10 @@ def evaluate(task: Task) -> dict[str, Any]:
                               "error": ""}
     c0 = time.process_time()
     try:
-        cfg = task.base.with_overrides(point.overrides, f"sweep point {point.index}")
-        res = scenarios.get(task.scenario).run(cfg, None)
+        where = f"sweep point {point.index}"
+        config, knob_values = split_overrides(point.overrides)
+        cfg = task.base.with_overrides(config, where)
+        res = scenarios.get(task.scenario).call(cfg, None, knob_values, where)
         record["metrics"] = [
             {"name": m.name, "value": _plain(m.value), "unit": m.unit,
              "requirement": m.requirement, "ok": None if m.ok is None else bool(m.ok)}

@@ -27,11 +27,14 @@ import itertools
 import json
 import math
 import zlib
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
+from hil.cli_args import finite_float
+from hil.scenarios.knobs import Knob, is_knob_key, resolve, split_overrides
 from plant.config import Config, ConfigError
 
 DISTRIBUTIONS = ("uniform", "normal")
@@ -135,12 +138,9 @@ def _literal(raw: str) -> Any:
 
 def _number(raw: str, text: str) -> float:
     try:
-        value = float(raw)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r}: {raw!r} is not a number") from None
-    if not math.isfinite(value):
-        raise argparse.ArgumentTypeError(f"{text!r}: {raw!r}: need a finite number")
-    return value
+        return finite_float(raw)
+    except argparse.ArgumentTypeError as exc:
+        raise argparse.ArgumentTypeError(f"{text!r}: {exc}") from None
 
 
 def parse_param(text: str) -> GridParam:
@@ -211,22 +211,46 @@ def parse_seeds(text: str) -> tuple[int, ...]:
     return seeds
 
 
+def _label(overrides: dict[str, Any]) -> str:
+    return ", ".join(f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}"
+                     for k, v in overrides.items())
+
+
 # --- the plan ----------------------------------------------------------------------------
-def _typed(base: Config, key: str, value: Any) -> Any:
+class _Keys:
+    """Where a key's rules live: the configuration's, or the scenario's own settings
+    (``scenario.NAME``, :mod:`hil.scenarios.knobs`)."""
+
+    def __init__(self, base: Config, knobs: tuple[Knob, ...], scenario: str) -> None:
+        self.base, self.scenario = base, scenario
+        self.knobs = {k.key: k for k in knobs}
+
+    def nominal(self, key: str) -> Any:
+        """The key's value without the sweep; KeyError/TypeError if there is no such key."""
+        if is_knob_key(key):
+            return self.knobs[key].default
+        return self.base.get(key)
+
+    def check(self, overrides: dict[str, Any], option: str) -> None:
+        """Raise ConfigError naming ``option`` and the key if a value is not allowed."""
+        config, knob_values = split_overrides(overrides)
+        if knob_values:
+            resolve(self.knobs.values(), knob_values, option, self.scenario)
+        if config:
+            self.base.with_overrides(config, option)
+
+
+def _typed(keys: _Keys, key: str, value: Any) -> Any:
     """A grid value converted to the key's type where that loses nothing (2.0 -> 2 for an
     integer key); anything else is left for the configuration's check to refuse."""
     try:
-        template = base.get(key)
+        template = keys.nominal(key)
     except (KeyError, TypeError):
         return value  # the check names the unknown key
     if (isinstance(template, int) and not isinstance(template, bool)
             and isinstance(value, float) and value.is_integer()):
         return int(value)
     return value
-
-
-def _check(base: Config, overrides: dict[str, Any], option: str) -> None:
-    base.with_overrides(overrides, option)  # raises ConfigError naming option and key
 
 
 def draw(tol: Tolerance, draw_seed: int, sample: int, distribution: str) -> float:
@@ -245,40 +269,50 @@ def draw(tol: Tolerance, draw_seed: int, sample: int, distribution: str) -> floa
     return unit * tol.width
 
 
-def _toleranced(base: Config, tol: Tolerance, key: str, deviation: float) -> float:
-    nominal = base.get(key)
+def _toleranced(keys: _Keys, tol: Tolerance, key: str, deviation: float) -> float:
+    nominal = keys.nominal(key)
     return nominal * (1.0 + deviation) if tol.relative else nominal + deviation
 
 
 def build_plan(base: Config, grid: list[GridParam] = (), tolerances: list[Tolerance] = (),
                samples: int = 0, seeds: tuple[int, ...] = (), distribution: str = "uniform",
-               draw_seed: int = 0) -> Plan:
-    """Every point of the sweep, each value checked against the configuration's rules."""
-    grid, tolerances = list(grid), list(tolerances)
+               draw_seed: int = 0, knobs: tuple[Knob, ...] = (),
+               scenario: str = "",
+               settings: Callable[[dict[str, Any], str], Any] | None = None,
+               fixed: dict[str, Any] | None = None) -> Plan:
+    """Every point of the sweep, each value checked against the configuration's rules (or,
+    for ``scenario.NAME`` keys, against the scenario's ``knobs``; ``settings`` checks them
+    together). ``fixed``: scenario settings every point takes (``--set scenario.NAME=V``:
+    the base configuration cannot hold them)."""
+    grid, tolerances, fixed = list(grid), list(tolerances), dict(fixed or {})
+    keys_ = _Keys(base, tuple(knobs), scenario)
+    _check = keys_.check
     keys = [g.key for g in grid] + (["sim.seed"] if seeds else [])
     keys += [k for t in tolerances for k in t.keys]
     for key in keys:
         if keys.count(key) > 1:
             raise ConfigError(f"sweep: {key} is varied twice (--param, --tolerance, --seeds)")
+        if key in fixed:
+            raise ConfigError(f"sweep: {key} is both set (--set) and varied")
     if tolerances and samples < 1:
         raise ConfigError("--tolerance: give the number of Monte Carlo samples (--samples N)")
     if samples and not tolerances:
         raise ConfigError("--samples: nothing to draw; give a --tolerance")
     typed = []
     for g in grid:
-        values = tuple(_typed(base, g.key, v) for v in g.values)
+        values = tuple(_typed(keys_, g.key, v) for v in g.values)
         for v in values:
-            _check(base, {g.key: v}, f"--param {g.key}")
+            _check({g.key: v}, f"--param {g.key}")
         typed.append(GridParam(g.key, values, g.text))
     for s in seeds:
-        _check(base, {"sim.seed": s}, "--seeds")
+        _check({"sim.seed": s}, "--seeds")
     for tol in tolerances:
         for key in tol.keys:
             try:
-                nominal = base.get(key)
+                nominal = keys_.nominal(key)
             except (KeyError, TypeError):
                 # The configuration's own message names the key and the keys there are.
-                _check(base, {key: 0.0}, f"--tolerance {key}")
+                _check({key: 0.0}, f"--tolerance {key}")
                 raise ConfigError(f"--tolerance {key}: unknown key") from None
             if isinstance(nominal, bool) or not isinstance(nominal, float):
                 raise ConfigError(f"--tolerance {key}: a tolerance needs a real-valued key "
@@ -287,7 +321,7 @@ def build_plan(base: Config, grid: list[GridParam] = (), tolerances: list[Tolera
                 raise ConfigError(f"--tolerance {key}: its value is 0, so a relative "
                                   "tolerance moves nothing; give an absolute width")
             for sign in (-1.0, 1.0):  # the band's edges: any draw lies between them
-                _check(base, {key: _toleranced(base, tol, key, sign * tol.width)},
+                _check({key: _toleranced(keys_, tol, key, sign * tol.width)},
                        f"--tolerance {key}")
     n = math.prod(len(g.values) for g in typed) * max(len(seeds), 1) * max(samples, 1)
     if n > MAX_POINTS:
@@ -299,12 +333,15 @@ def build_plan(base: Config, grid: list[GridParam] = (), tolerances: list[Tolera
                                range(samples) if samples else (None,))
     for index, combo in enumerate(combos):
         *values, seed, sample = combo
-        over = dict(zip((g.key for g in typed), values, strict=True))
+        over = dict(fixed)
+        over.update(zip((g.key for g in typed), values, strict=True))
         if seed is not None:
             over["sim.seed"] = seed
         if sample is not None:
             for tol, dev in zip(tolerances, deviations[sample], strict=True):
                 for key in tol.keys:
-                    over[key] = _toleranced(base, tol, key, dev)
+                    over[key] = _toleranced(keys_, tol, key, dev)
+        if settings is not None:  # the scenario's settings together (a kind and its link)
+            settings(split_overrides(over)[1], f"sweep point {index} ({_label(over)})")
         points.append(Point(index, over, sample))
     return Plan(points, typed, tolerances, tuple(seeds), samples, distribution, draw_seed)

@@ -36,7 +36,8 @@ UNTYPED_PATHS = {"config": "config", "preset": "config", "topology": "input",
 #: Options that take a value which is neither a number nor a path.
 TEXT = {"set", "effect", "magnitude", "host", "scenario", "topic", "field", "board", "case",
         "can_channel", "foxglove",  # foxglove: HOST:PORT, checked by hil.live.parse_address
-        "param", "tolerance", "seeds", "dask", "scenario_name", "require"}
+        "param", "tolerance", "seeds", "dask", "scenario_name", "require",
+        "interface"}  # interface: a network interface name, checked by hil.transports.rawether
 
 #: Extra arguments that keep a verb cheap when the value under test is valid (tiny
 #: durations, --json for no progress lines), and placeholders for required positionals.
@@ -47,6 +48,7 @@ BASE = {
     "eha-hil bench fpga": ["--seconds", "0.01", "--bit-seconds", "0.001"],
     "eha-hil bench stack": ["--seconds", "0.01"],
     "eha-hil bench codecs": ["--seconds", "0.001"],
+    "eha-hil bench ethercat": ["--cycles", "10"],
     "eha-hil bench bus": ["--cycles", "5", "--no-replay", "--backends", "inproc"],
     "eha-hil bench identify": ["--seconds", "1.5"],
     "eha-hil bus run": ["--seconds", "0.01"],

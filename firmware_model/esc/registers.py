@@ -1,0 +1,109 @@
+"""ESC register map (ETG.1000.4 / ETG.1000.6 register descriptions), AL states and codes.
+
+Only the addresses this model implements are named; everything else in 0x0000..0x0FFF
+reads as zero and ignores writes. Process-data RAM starts at :data:`RAM_START`.
+"""
+
+from __future__ import annotations
+
+import enum
+
+# --- identity (read only) -----------------------------------------------------------------
+TYPE = 0x0000            # u8 ESC type
+REVISION = 0x0001        # u8
+BUILD = 0x0002           # u16
+FMMUS_SUPPORTED = 0x0004  # u8
+SMS_SUPPORTED = 0x0005   # u8
+RAM_SIZE = 0x0006        # u8, KiB
+PORT_DESCRIPTOR = 0x0007  # u8, 2 bits per port: 00 none, 01 not configured, 10 EBUS, 11 MII
+FEATURES = 0x0008        # u16, bit 2: distributed clocks (0 here)
+# --- addresses ----------------------------------------------------------------------------
+STATION_ADDRESS = 0x0010  # u16 configured station address (FPxx)
+STATION_ALIAS = 0x0012   # u16 (from SII word 4)
+# --- data link ----------------------------------------------------------------------------
+DL_CONTROL = 0x0100      # u32; bit 24: station alias enabled for FPxx
+DL_STATUS = 0x0110       # u16 read only
+# --- application layer --------------------------------------------------------------------
+AL_CONTROL = 0x0120      # u16
+AL_STATUS = 0x0130       # u16 read only
+AL_STATUS_CODE = 0x0134  # u16 read only
+PDI_CONTROL = 0x0140     # u8 (from SII word 0)
+ESC_CONFIG = 0x0141      # u8
+IRQ_MASK = 0x0200        # u16 ECAT event mask
+# --- error counters (writing any byte clears all) ----------------------------------------------
+RX_ERROR = 0x0300        # 0x0300..0x0313
+ERROR_COUNTERS_END = 0x0314
+# --- watchdogs ----------------------------------------------------------------------------
+WD_DIVIDER = 0x0400      # u16: one watchdog increment = 40 ns * (divider + 2)
+WD_TIME_PDI = 0x0410     # u16
+WD_TIME_PD = 0x0420      # u16 process-data watchdog time in increments
+WD_STATUS_PD = 0x0440    # u16 read only, bit 0: 1 = not expired
+WD_COUNTER_PD = 0x0442   # u8 expirations (write clears)
+WD_COUNTER_PDI = 0x0443  # u8
+# --- SII EEPROM interface ----------------------------------------------------------------------
+EEP_CONFIG = 0x0500      # u8 bit 0: PDI owns the EEPROM (1) / master (0)
+EEP_PDI_ACCESS = 0x0501  # u8
+EEP_CONTROL = 0x0502     # u16 command (bits 8..10) / status
+EEP_ADDRESS = 0x0504     # u32 word address
+EEP_DATA = 0x0508        # 4 or 8 bytes
+EEP_END = 0x0510
+# --- FMMUs and sync managers ---------------------------------------------------------------------
+FMMU0 = 0x0600
+FMMU_SIZE = 16
+N_FMMU = 8
+SM0 = 0x0800
+SM_SIZE = 8
+N_SM = 8
+# --- distributed clocks: not implemented; writes accepted (WKC counts), reads return 0 -----------
+DC_START = 0x0900
+DC_END = 0x0A00
+# --- process-data RAM ---------------------------------------------------------------------
+RAM_START = 0x1000
+MEMORY_SIZE = 0x2000     # registers + 4 KiB RAM
+
+# EEPROM control/status bits (0x0502)
+EEP_CMD_MASK = 0x0700
+EEP_CMD_NOP = 0x0000
+EEP_CMD_READ = 0x0100
+EEP_CMD_WRITE = 0x0200
+EEP_CMD_RELOAD = 0x0300
+EEP_STAT_READ8 = 0x0040      # reads return 8 bytes
+EEP_STAT_CMD_ERROR = 0x0800  # command error (e.g. write: EEPROM is read only here)
+EEP_STAT_ERRORS = 0x7800
+EEP_STAT_BUSY = 0x8000
+
+# SM control byte (offset 4) and activate byte (offset 6)
+SM_DIR_MASK = 0x0C
+SM_DIR_READ = 0x00       # ECAT reads (slave inputs)
+SM_DIR_WRITE = 0x04      # ECAT writes (slave outputs)
+SM_WATCHDOG = 0x40       # a write of the buffer retriggers the process-data watchdog
+SM_ENABLE = 0x01         # activate byte bit 0
+
+# FMMU type byte (offset 11)
+FMMU_READ = 0x01
+FMMU_WRITE = 0x02
+
+
+class AlState(enum.IntEnum):
+    """AL states (AL control / AL status bits 0..3)."""
+
+    INIT = 0x1
+    PREOP = 0x2
+    BOOT = 0x3
+    SAFEOP = 0x4
+    OP = 0x8
+
+
+AL_ERROR = 0x10          # AL status: error indicator; AL control: error acknowledge
+
+
+class AlStatusCode(enum.IntEnum):
+    """AL status codes this slave reports (ETG.1000.6 Table "AL Status Codes")."""
+
+    NO_ERROR = 0x0000
+    INVALID_STATE_CHANGE = 0x0011     # e.g. INIT -> OP
+    UNKNOWN_STATE = 0x0012            # not one of 1, 2, 4, 8
+    BOOTSTRAP_NOT_SUPPORTED = 0x0013
+    SM_WATCHDOG = 0x001B              # process-data watchdog expired in OP
+    INVALID_OUTPUT_CONFIG = 0x001D    # output sync manager / FMMU not as in the SII
+    INVALID_INPUT_CONFIG = 0x001E     # input sync manager / FMMU not as in the SII

@@ -1,0 +1,150 @@
+"""The hip joint through the whole stack: the PC's joint loop at 1 kHz on the fieldbus
+master -> process image -> the hip box (MCU at 5 kHz, two driver boards at 20 kHz, two
+EHA plants coupled by the thigh) -> and back, in lockstep (:class:`hil.fieldbus.system.
+BusSystem`, in-process transport).
+
+:func:`run_joint` drives the joint with a reference theta_ref(t) and records, per cycle,
+what the PC commanded and measured. The PC reads the inputs of the previous cycle, as the
+real master does.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from firmware_model.pc.joint_loop import JointController, JointGains
+from hil.fieldbus.system import BusSystem
+from hil.fieldbus.topology import load_topology
+from plant.config import Config
+from plant.hip.thigh import ThighParams
+
+#: Cycles at the start with zero force commands, while the first inputs arrive.
+START_CYCLES = 5
+#: theta_ref(t_s) -> (theta_p, theta_r), rad.
+Reference = Callable[[float], tuple[float, float]]
+
+
+@dataclass
+class JointRecord:
+    """Per PC cycle (1 kHz): time, reference, measured angle, commanded and measured torque."""
+
+    t: np.ndarray           # s
+    theta_ref: np.ndarray   # (n, 2) rad
+    theta: np.ndarray       # (n, 2) rad, from the pistons (forward kinematics)
+    tau_cmd: np.ndarray     # (n, 2) Nm
+    tau: np.ndarray         # (n, 2) Nm, from the rods' gauges (Eq. 6.4-6.6)
+    theta_true: np.ndarray  # (n, 2) rad, the thigh's angle in the plant (truth)
+
+
+def hip_config(cfg: Config, reinforced: bool, rod_damping_ns_per_m: float | None = None
+               ) -> Config:
+    """The configuration for the hip's cylinders: their rod path's stiffness is the
+    testbed beam's (thesis 5.4; calibrated on F6), reinforced or not; its damping the
+    configuration's unless given."""
+    k = cfg.get("load.beam_axial_stiffness_n_per_m")
+    if reinforced:
+        k *= cfg.get("load.beam_reinforcement_ratio")
+    over = {"load.kind": "conrod", "load.conrod_stiffness_n_per_m": k, "mcu.impl": "python"}
+    if rod_damping_ns_per_m is not None:
+        over["load.conrod_damping_ns_per_m"] = rod_damping_ns_per_m
+    return cfg.with_overrides(over,
+                              "hip " + ("reinforced" if reinforced else "unreinforced"))
+
+
+def run_joint(cfg: Config, seconds: float, reference: Reference,
+              gains: JointGains | None = None, reinforced: bool = True,
+              progress: Callable[[int, int], None] | None = None,
+              rod_damping_ns_per_m: float | None = None,
+              thigh: ThighParams | None = None) -> JointRecord:
+    """Run the joint stack for ``seconds`` under the position loop (``thigh``: the load's
+    parameters, the box's default if None)."""
+    cfg = hip_config(cfg, reinforced, rod_damping_ns_per_m)
+    topo = load_topology("hip_one_box")
+    cycles = int(round(seconds / 1e-3))
+    rec = JointRecord(np.arange(cycles) * 1e-3, *(np.zeros((cycles, 2)) for _ in range(5)))
+    with BusSystem(topo, cfg, "inproc", model="hip") as bus:
+        box = bus.chain.boxes[0]
+        if thigh is not None:
+            box.thigh, box.h[:] = thigh, thigh.as_array()
+        ctl = JointController(box.geometry, gains)
+
+        def pc(cycle: int, master) -> None:  # noqa: ANN001 (hil.fieldbus.master.Master)
+            a, b = master.actuator_inputs(0), master.actuator_inputs(1)
+            ctl.measure((a["x_piston"], b["x_piston"]), (a["f_strain"], b["f_strain"]))
+            f = ctl.command(reference(cycle * 1e-3))
+            if cycle < START_CYCLES:  # no inputs yet: the boards boot, no force
+                f = np.zeros(2)
+            for j in range(2):
+                master.set_actuator(j, "force", float(f[j]))
+            rec.theta_ref[cycle] = ctl.theta_ref
+            rec.theta[cycle] = ctl.theta
+            rec.tau_cmd[cycle] = ctl.tau_cmd
+            rec.tau[cycle] = ctl.tau
+            rec.theta_true[cycle] = box.joint[:2]
+            if progress and cycle % 250 == 0:
+                progress(cycle, cycles)
+
+        bus.run(cycles, pc)
+    return rec
+
+
+@dataclass
+class JointBench:
+    """Result of ``bench joint``: simulated, wall and CPU seconds."""
+
+    simulated_s: float
+    wall_s: float
+    cpu_s: float
+
+    @property
+    def real_time_factor(self) -> float:
+        return self.simulated_s / self.wall_s
+
+    @property
+    def cpu_real_time_factor(self) -> float:
+        return self.simulated_s / self.cpu_s
+
+
+def bench_joint(cfg: Config, seconds: float = 1.0) -> JointBench:
+    """Time the hip joint stack (PC loop + fieldbus + MCU + two coupled stacks + thigh)
+    holding a 5 Hz 0.25 deg sine; a short run first compiles the kernels."""
+    import math
+    import time
+
+    def ref(t: float) -> tuple[float, float]:
+        return (math.radians(0.25) * math.sin(2 * math.pi * 5.0 * t), 0.0)
+
+    run_joint(cfg, 0.01, ref)
+    w0, c0 = time.perf_counter(), time.process_time()
+    run_joint(cfg, seconds, ref)
+    return JointBench(seconds, time.perf_counter() - w0, time.process_time() - c0)
+
+
+def add_bench_parser(bsub, common, config, emit) -> None:  # noqa: ANN001 (argparse parts)
+    """``eha-hil bench joint`` (registered by :mod:`hil.cli`)."""
+    from hil.cli_args import positive_float
+    from hil.tables import table
+
+    def cmd(args) -> int:  # noqa: ANN001
+        cfg = config(args)
+        r = bench_joint(cfg, args.seconds)
+        text = table(["path", "simulated [s]", "wall [s]", "CPU [s]", "real-time factor (wall)",
+                      "real-time factor (CPU)"],
+                     [("hip joint stack", r.simulated_s, r.wall_s, r.cpu_s,
+                       r.real_time_factor, r.cpu_real_time_factor)], fmt=".3g",
+                     title="PC joint loop 1 kHz + fieldbus + MCU 5 kHz + 2 driver boards + "
+                     f"2 plants + thigh at 20 kHz, {cfg.sources[-1]}")
+        emit(args, text, {"config": cfg.sources, "simulated_s": r.simulated_s,
+                          "wall_s": r.wall_s, "cpu_s": r.cpu_s,
+                          "real_time_factor": r.real_time_factor,
+                          "cpu_real_time_factor": r.cpu_real_time_factor})
+        return 0
+
+    p = bsub.add_parser("joint", parents=[common(plot=False)],
+                        help="real-time factor of the hip joint stack (PC loop to the thigh)")
+    p.add_argument("--seconds", type=positive_float(600, "s"), default=1.0,
+                   help="simulated seconds, in (0, 600]")
+    p.set_defaults(func=cmd)
