@@ -222,8 +222,8 @@ def box_engine(model: str, boxes: list, cfg: Config, overlap: bool = True) -> ob
     """The engine that advances all ``boxes`` as one for ``model`` "robot", else None;
     ``overlap``: a cycle's compute may start as soon as every box has its outputs (not for
     a chain paced by the wall clock, where a box may take new outputs twice a cycle)."""
-    if model != "robot":
-        return None
+    if model != "robot" or not any(getattr(b, "board", None) for b in boxes):
+        return None  # (no actuator at all: nothing to batch)
     from hil.robot import RobotEngine
 
     return RobotEngine(boxes, cfg, overlap=overlap)
