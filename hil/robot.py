@@ -50,10 +50,6 @@ from hil.fieldbus import pdo
 from plant import layout as L
 from plant.config import Config, ConfigError
 
-#: Actuators a worker takes at a time: the workers share the actuators dynamically, so a
-#: worker the OS has descheduled (the machine is shared) holds back at most this many.
-CHUNK = 4
-
 #: Offsets of the input record's fields, in 16-bit words (the kernel writes through a view).
 _IN_U16 = INPUT.itemsize // 2
 _IN_UP = INPUT.fields["up"][1] // 2
@@ -414,8 +410,6 @@ class RobotEngine:
             started.set()
         if self.workers is not None and self.workers != numba.get_num_threads():
             numba.set_num_threads(self.workers)  # per thread in numba
-        if numba.get_parallel_chunksize() != CHUNK:
-            numba.set_parallel_chunksize(CHUNK)
         advance_robot(ticks // self.period, self.period, self.tick, self._batched, self.ptrs,
                       self._no_rec, self._no_trace, *self.arrays, self.in16, self.in32,
                       self.out16, self.err)
