@@ -125,7 +125,8 @@ def f9_result(cfg: Config, freqs: tuple[float, ...], progress: Progress = None,
     notes = [f"calibrated on F9: rod-path damping {F9_ROD_DAMPING_NS_PER_M:g} N s/m "
              "(load.conrod_damping_ns_per_m for the hip's rods); K_p = "
              f"{JointGains().kp_nm_per_rad[axis]:g} Nm/rad from the thesis, "
-             f"K_d = {F9_KD_NMS_PER_RAD:g}",
+             f"K_d = {F9_KD_NMS_PER_RAD:g}, no inverse-dynamics feed-forward (it lowers "
+             "the position figure: docs/hip.md)",
              "stack: PC 1 kHz -> fieldbus (in-process) -> MCU 5 kHz -> FPGA 20 kHz -> two "
              "plants coupled by the thigh at 20 kHz; 0.25 deg sine about theta = 0 (hanging)",
              "a -3 dB figure of nan: the gain never fell below -3 dB over the frequencies run"]
