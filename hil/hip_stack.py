@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from firmware_model.pc.joint_loop import JointController, JointGains
+from firmware_model.pc.joint_loop import JointController, JointGains, reference_acceleration
 from hil.fieldbus.system import BusSystem
 from hil.fieldbus.topology import load_topology
 from plant.config import Config
@@ -58,9 +58,11 @@ def run_joint(cfg: Config, seconds: float, reference: Reference,
               gains: JointGains | None = None, reinforced: bool = True,
               progress: Callable[[int, int], None] | None = None,
               rod_damping_ns_per_m: float | None = None,
-              thigh: ThighParams | None = None) -> JointRecord:
+              thigh: ThighParams | None = None, feed_forward: bool = False) -> JointRecord:
     """Run the joint stack for ``seconds`` under the position loop (``thigh``: the load's
-    parameters, the box's default if None)."""
+    parameters, the box's default if None). ``feed_forward``: the PC adds the inverse
+    dynamics of its planned reference, I_hat theta_ref_ddot, with the acceleration by
+    central differences of the reference it generates (it plans one cycle ahead)."""
     cfg = hip_config(cfg, reinforced, rod_damping_ns_per_m)
     topo = load_topology("hip_one_box")
     cycles = int(round(seconds / 1e-3))
@@ -74,7 +76,11 @@ def run_joint(cfg: Config, seconds: float, reference: Reference,
         def pc(cycle: int, master) -> None:  # noqa: ANN001 (hil.fieldbus.master.Master)
             a, b = master.actuator_inputs(0), master.actuator_inputs(1)
             ctl.measure((a["x_piston"], b["x_piston"]), (a["f_strain"], b["f_strain"]))
-            f = ctl.command(reference(cycle * 1e-3))
+            t = cycle * 1e-3
+            ff = (0.0, 0.0)
+            if feed_forward:
+                ff = ctl.gravity.feed_forward(reference_acceleration(reference, t, 1e-3))
+            f = ctl.command(reference(t), ff)
             if cycle < START_CYCLES:  # no inputs yet: the boards boot, no force
                 f = np.zeros(2)
             for j in range(2):

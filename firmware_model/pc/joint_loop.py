@@ -22,6 +22,7 @@ by the time its force acts, and a derivative of it excites the thigh's mode on t
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -43,6 +44,14 @@ class JointGains:
     period_s: float = 1e-3           # 1 kHz (thesis 5.5)
 
 
+def reference_acceleration(reference: Callable[[float], tuple[float, float]], t: float,
+                           h: float) -> tuple[float, float]:
+    """theta_ref_ddot (rad/s^2) at ``t`` by central differences over one cycle ``h`` of
+    the reference the PC plans (it knows its trajectory one cycle ahead)."""
+    rm, r0, rp = reference(max(t - h, 0.0)), reference(t), reference(t + h)
+    return ((rp[0] - 2.0 * r0[0] + rm[0]) / (h * h), (rp[1] - 2.0 * r0[1] + rm[1]) / (h * h))
+
+
 @dataclass(frozen=True)
 class JointLimits:
     """Saturations: rated joint torques (thesis 6.2.2) and cylinder force."""
@@ -51,16 +60,31 @@ class JointLimits:
     force_n: float = CYLINDER_FORCE_N
 
 
+#: The PC's own figures for the thigh (thesis 6.2.2: 8.50 kg; COM 0.15 m below the joint
+#: and radius of gyration 0.10 m are the same assumptions the plant makes, docs/hip.md),
+#: kept here because firmware is built from its own values, not the plant's.
+THIGH_MASS_KG = 8.50
+THIGH_COM_M = 0.15
+THIGH_GYRATION_M = 0.10
+
+
 @dataclass(frozen=True)
 class GravityModel:
-    """The PC's model of the link below the joint: m g c (Nm), hanging at theta = 0."""
+    """The PC's model of the link below the joint: m g c (Nm), hanging at theta = 0, and
+    its inertia about the joint I_hat = m (c^2 + k^2) (kg m^2) for the inverse dynamics."""
 
-    mgc_nm: float = 8.50 * GRAVITY * 0.15
+    mgc_nm: float = THIGH_MASS_KG * GRAVITY * THIGH_COM_M
+    inertia_kgm2: float = THIGH_MASS_KG * (THIGH_COM_M ** 2 + THIGH_GYRATION_M ** 2)
 
     def torque(self, tp: float, tr: float) -> tuple[float, float]:
         """Gravity torque on theta (Nm), what the loop adds to hold the link."""
         return (-self.mgc_nm * math.sin(tp) * math.cos(tr),
                 -self.mgc_nm * math.cos(tp) * math.sin(tr))
+
+    def feed_forward(self, acc: tuple[float, float]) -> tuple[float, float]:
+        """Inverse dynamics of the reference: tau_ff = I_hat theta_ref_ddot (Nm) per axis
+        (diagonal inertia; the coupling terms are second order in F9's 0.25 deg)."""
+        return self.inertia_kgm2 * acc[0], self.inertia_kgm2 * acc[1]
 
 
 class JointController:

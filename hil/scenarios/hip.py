@@ -85,8 +85,8 @@ def responses(rec: JointRecord, plan: list[tuple[float, float, float]], axis: in
 
 def hip_bode(cfg: Config, freqs: tuple[float, ...], reinforced: bool,
              kd: float = F9_KD_NMS_PER_RAD, progress: Progress = None,
-             rod_damping_ns_per_m: float = F9_ROD_DAMPING_NS_PER_M, axis: int = 0
-             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+             rod_damping_ns_per_m: float = F9_ROD_DAMPING_NS_PER_M, axis: int = 0,
+             feed_forward: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(frequencies, angle response, torque response) of the hip pitch (axis 0) or roll
     (axis 1)."""
     plan = _plan(freqs)
@@ -94,7 +94,7 @@ def hip_bode(cfg: Config, freqs: tuple[float, ...], reinforced: bool,
     kds[axis] = kd
     gains = JointGains(kd_nms_per_rad=(kds[0], kds[1]))
     rec = run_joint(cfg, plan[-1][2] + 0.002, _reference(plan, axis), gains, reinforced,
-                    progress, rod_damping_ns_per_m)
+                    progress, rod_damping_ns_per_m, feed_forward=feed_forward)
     pos, tq = responses(rec, plan, axis)
     return np.array([p[0] for p in plan]), pos, tq
 
@@ -125,7 +125,8 @@ def f9_result(cfg: Config, freqs: tuple[float, ...], progress: Progress = None,
     notes = [f"calibrated on F9: rod-path damping {F9_ROD_DAMPING_NS_PER_M:g} N s/m "
              "(load.conrod_damping_ns_per_m for the hip's rods); K_p = "
              f"{JointGains().kp_nm_per_rad[axis]:g} Nm/rad from the thesis, "
-             f"K_d = {F9_KD_NMS_PER_RAD:g}",
+             f"K_d = {F9_KD_NMS_PER_RAD:g}, no inverse-dynamics feed-forward (it lowers "
+             "the position figure: docs/hip.md)",
              "stack: PC 1 kHz -> fieldbus (in-process) -> MCU 5 kHz -> FPGA 20 kHz -> two "
              "plants coupled by the thigh at 20 kHz; 0.25 deg sine about theta = 0 (hanging)",
              "a -3 dB figure of nan: the gain never fell below -3 dB over the frequencies run"]

@@ -10,7 +10,12 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from firmware_model.pc.geometry import hip_geometry
-from firmware_model.pc.joint_loop import GravityModel, JointController, JointLimits
+from firmware_model.pc.joint_loop import (
+    GravityModel,
+    JointController,
+    JointLimits,
+    reference_acceleration,
+)
 from firmware_model.pc.kinematics import UJointKinematics
 from firmware_model.pc.strain import rod_force
 
@@ -65,3 +70,31 @@ def test_holding_the_pose_commands_the_gravity_torque(pose):
     grad = ((v(tp + h, tr) - v(tp - h, tr)) / (2 * h), (v(tp, tr + h) - v(tp, tr - h)) / (2 * h))
     assert ctl.tau_cmd == pytest.approx([-grad[0], -grad[1]], abs=1e-6)
     assert ctl.kin.torque(*f) == pytest.approx(ctl.tau_cmd, abs=1e-6)
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.floats(1.0, 80.0), st.floats(0.002, 1.0), st.floats(0.005, 0.5))
+def test_reference_acceleration_of_a_sine(f_hz, t, amp_deg):
+    """The PC's second difference of its planned sine agrees with the analytic -A w^2
+    sin(w t), to the O(w^2 h^2) error of central differences."""
+    w, a = 2 * math.pi * f_hz, math.radians(amp_deg)
+
+    def ref(s: float) -> tuple[float, float]:
+        return a * math.sin(w * (s + 0.01)), -a * math.cos(w * (s + 0.01))
+
+    acc = reference_acceleration(ref, t, 1e-3)
+    exact = (-a * w * w * math.sin(w * (t + 0.01)), a * w * w * math.cos(w * (t + 0.01)))
+    tol = a * w * w * (w * 1e-3) ** 2 / 12 * 1.01 + 1e-9
+    assert acc == pytest.approx(exact, abs=tol)
+
+
+def test_feed_forward_is_the_thigh_inertia_the_plant_assumes():
+    """The PC's own I_hat (from its figures for the thigh) is the plant thigh's inertia
+    about the joint, so its inverse dynamics cancel the rigid thigh's I theta_ddot."""
+    from plant.hip.thigh import ThighParams
+
+    inertia = ThighParams().inertia()
+    assert GravityModel().feed_forward((2.0, -3.0)) == pytest.approx(
+        (2.0 * inertia, -3.0 * inertia), rel=1e-12)
+    assert GravityModel().mgc_nm == pytest.approx(
+        ThighParams().mass_kg * 9.80665 * ThighParams().com_m, rel=1e-12)
