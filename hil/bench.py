@@ -112,16 +112,12 @@ def bench_stack(cfg: Config, seconds: float = 2.0) -> PlantBench:
 
 
 @dataclass
-class RobotBench:
-    """Result of ``bench robot`` for one number of workers."""
+class TimedRun:
+    """Simulated, wall and CPU seconds of a benchmarked run, and its real-time factors."""
 
-    workers: int
-    actuators: int
     simulated_s: float
     wall_s: float
     cpu_s: float
-    tick_s: float
-    threading_layer: str
 
     @property
     def real_time_factor(self) -> float:
@@ -130,6 +126,16 @@ class RobotBench:
     @property
     def cpu_real_time_factor(self) -> float:
         return self.simulated_s / self.cpu_s
+
+
+@dataclass
+class RobotBench(TimedRun):
+    """Result of ``bench robot`` for one number of workers."""
+
+    workers: int = 1
+    actuators: int = 0
+    tick_s: float = 50e-6
+    threading_layer: str = ""
 
     @property
     def ns_per_actuator_tick(self) -> float:
@@ -160,5 +166,6 @@ def bench_robot(cfg: Config, seconds: float = 10.0, workers: int = 1,
         bs.run(cycles, pc, keep=0)
         wall, cpu = time.perf_counter() - t0, time.process_time() - c0
         bs.chain.engine.wait()
-    return RobotBench(workers, topo.n_actuators, cycles * 1e-3, wall, cpu,
-                      cfg.get("sim.tick_ns") * 1e-9, numba.threading_layer())
+    return RobotBench(cycles * 1e-3, wall, cpu, workers=workers, actuators=topo.n_actuators,
+                      tick_s=cfg.get("sim.tick_ns") * 1e-9,
+                      threading_layer=numba.threading_layer())

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from firmware_model.pc.joint_loop import JointController, JointGains, reference_acceleration
+from hil.bench import TimedRun
 from hil.fieldbus.system import BusSystem
 from hil.fieldbus.topology import load_topology
 from plant.config import Config
@@ -97,21 +98,8 @@ def run_joint(cfg: Config, seconds: float, reference: Reference,
     return rec
 
 
-@dataclass
-class JointBench:
+class JointBench(TimedRun):
     """Result of ``bench joint``: simulated, wall and CPU seconds."""
-
-    simulated_s: float
-    wall_s: float
-    cpu_s: float
-
-    @property
-    def real_time_factor(self) -> float:
-        return self.simulated_s / self.wall_s
-
-    @property
-    def cpu_real_time_factor(self) -> float:
-        return self.simulated_s / self.cpu_s
 
 
 def bench_joint(cfg: Config, seconds: float = 1.0) -> JointBench:
