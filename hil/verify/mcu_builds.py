@@ -27,7 +27,10 @@ IMAGE = ("target/startup.c", "target/main.c", "mcu_law.c")
 CONTRACTIONS = ("off", "fast")
 
 COMMON_FLAGS = ("-std=c99", "-O2", "-Wall", "-Wextra", "-Werror=double-promotion")
-HOST_FLAGS = (*COMMON_FLAGS, "-fPIC", "-shared")
+#: -Bsymbolic: the library's calls between its own functions bind to its own definitions.
+#: Without it, a build loaded after another one whose symbols are global (the robot
+#: engine's, which numba calls by name) would run the first one's functions inside.
+HOST_FLAGS = (*COMMON_FLAGS, "-fPIC", "-shared", "-Wl,-Bsymbolic")
 #: The host build with contraction: x86-64 needs -mfma for a fused multiply-add to exist.
 HOST_FMA_FLAGS = ("-mfma",)
 TARGET_FLAGS = (*COMMON_FLAGS, "-mcpu=cortex-m4", "-mthumb", "-mfpu=fpv4-sp-d16",

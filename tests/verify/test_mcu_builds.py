@@ -6,6 +6,8 @@ from __future__ import annotations
 import json
 import re
 import shutil
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -159,3 +161,22 @@ def test_a_broken_build_is_one_line(monkeypatch, tmp_path):
     with pytest.raises(mcu_builds.BuildError) as exc:
         mcu_builds.build_host()
     assert "\n" not in str(exc.value) and "error" in str(exc.value)
+
+
+@pytest.mark.slow  # a fresh process
+def test_a_build_keeps_its_own_functions_after_another_build_went_global():
+    """The robot engine loads the plain build with global symbols (numba calls it by name).
+    A contracted build loaded after it in the same process must still run its own
+    functions, not the plain build's: the comparison has to catch it there too."""
+    _need("host-c")
+    if not _cpu_has_fma():
+        pytest.skip("this CPU has no FMA: the contracted host build cannot run")
+    code = ("import llvmlite.binding as llvm\n"
+            "from hil.verify import mcu_builds\n"
+            "from hil.verify.mcu_verify import verify_mcu\n"
+            "llvm.load_library_permanently(str(mcu_builds.build_host('off')))\n"
+            "print(verify_mcu('host-c', steps=600, stack_seconds=0, contract='fast')"
+            ".mismatches)\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True, cwd=Path(__file__).resolve().parents[2])
+    assert int(out.stdout.split()[-1]) > 0
