@@ -17,3 +17,24 @@ def linear_cfg():
 def default_cfg():
     """The default preset, effects as shipped."""
     return load_config()
+
+
+@pytest.fixture(autouse=True)
+def _sigint_as_a_terminal_sends_it():
+    """Each test starts with Ctrl-C handled as in a terminal (Python's default handler),
+    and must leave it so (or as the command line installs it once per process,
+    :func:`hil.interrupts.install`). pytest-xdist's workers ignore SIGINT, and an ignored
+    SIGINT is inherited by child processes: the tests of interrupted runs would otherwise
+    pass or fail with the order the tests happen to run in."""
+    import signal
+
+    worker = signal.getsignal(signal.SIGINT)
+    if worker is signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+    before = signal.getsignal(signal.SIGINT)
+    yield
+    after = signal.getsignal(signal.SIGINT)
+    deferred = getattr(after, "__self__", None).__class__.__name__ == "DeferredInterrupt"
+    signal.signal(signal.SIGINT, worker)
+    if after is not before and not (before is signal.default_int_handler and deferred):
+        pytest.fail(f"the test left the SIGINT handler changed: {before!r} -> {after!r}")
