@@ -144,6 +144,30 @@ def _log_word(lk, base, addr, data, fate):
         lk[base] = k + 1
 
 
+@njit(cache=True, inline="always")
+def _clean_sweep(lk, ptr_index, log_base, src, n, size, dest, dest_words, mask):
+    """``n`` words sent round-robin from the ring row ``src`` with no word fault, each
+    logged WORD_OK and stored at its address in ``dest`` as ``data & mask`` (addresses
+    beyond ``dest_words`` are ignored, as :func:`receive_word` does); advances the
+    pointer."""
+    addr = lk[ptr_index]
+    k = 0
+    for _ in range(n):
+        data = lk[src + addr]
+        if k < MAX_WORDS_TICK:
+            q = log_base + 1 + 3 * k
+            lk[q] = addr
+            lk[q + 1] = data
+            lk[q + 2] = WORD_OK
+            k += 1
+        if addr < dest_words:
+            dest[addr] = data & mask
+        addr = addr + 1 if addr + 1 < size else 0
+    lk[log_base] = k
+    lk[ptr_index] = addr
+    return addr
+
+
 @njit(cache=True)
 def sweep_down(lk, master_down, st, down):
     """Downstream words of one tick: MCU memory -> driver endpoint (value level)."""
@@ -153,10 +177,19 @@ def sweep_down(lk, master_down, st, down):
     if lk[LK_DOWN_STOPPED] != 0:
         return
     size = master_down.shape[0]
+    if lk[LK_DOWN_DUP] <= 0 and lk[LK_DOWN_DROP] <= 0 and lk[LK_DOWN_CORRUPT] <= 0:
+        # No word faults (the usual case): the loop below without its fault bookkeeping,
+        # counters kept in locals (the tick's hottest loop; same words, same state).
+        _clean_sweep(lk, LK_DOWN_PTR, LK_DOWN_WORDLOG, src, n, size, down, B.DOWN_WORDS, 0xFFFF)
+        lk[LK_DOWN_WORDS] += n
+        if n > 0:
+            st[B.F_SINCE_VALID] = 0
+        return
     for _ in range(n):
         addr = lk[LK_DOWN_PTR]
         if not _corrupted(lk, LK_DOWN_DUP, LK_DOWN_DUP_PHASE):
-            lk[LK_DOWN_PTR] = (addr + 1) % size
+            # a compare, not a modulo: an integer division per word was most of the sweep's cost
+            lk[LK_DOWN_PTR] = addr + 1 if addr + 1 < size else 0
         lk[LK_DOWN_WORDS] += 1
         data = lk[src + addr]
         if _corrupted(lk, LK_DOWN_DROP, LK_DOWN_DROP_PHASE):
@@ -177,10 +210,16 @@ def sweep_up(lk, up, master_up):
     if lk[LK_UP_STOPPED] != 0:
         return
     size = up.shape[0]
+    if lk[LK_UP_DUP] <= 0 and lk[LK_UP_DROP] <= 0 and lk[LK_UP_CORRUPT] <= 0:
+        _clean_sweep(lk, LK_UP_PTR, LK_UP_WORDLOG, src, n, size, master_up,
+                     master_up.shape[0], -1)
+        lk[LK_UP_WORDS] += n
+        return
     for _ in range(n):
         addr = lk[LK_UP_PTR]
         if not _corrupted(lk, LK_UP_DUP, LK_UP_DUP_PHASE):
-            lk[LK_UP_PTR] = (addr + 1) % size
+            # a compare, not a modulo: an integer division per word was most of the sweep's cost
+            lk[LK_UP_PTR] = addr + 1 if addr + 1 < size else 0
         lk[LK_UP_WORDS] += 1
         data = lk[src + addr]
         if _corrupted(lk, LK_UP_DROP, LK_UP_DROP_PHASE):

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from firmware_model.fpga import layout as B
 from firmware_model.fpga.driver_board import DriverBoard, LinkMemory
@@ -167,3 +169,33 @@ def test_new_faults_refused_on_the_bit_level_link_and_bad_values(cfg):
         v.link_fault("down", delay_ticks=64)
     with pytest.raises(ValueError, match="drop_every"):
         v.link_fault("down", drop_every=-1)
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), ticks=st.integers(1, 300))
+def test_the_fault_free_sweep_is_the_general_sweep(seed, ticks):
+    """The sweeps take a short loop when no word fault is set; the general loop with a
+    fault armed that never fires in the run must leave the same memories, counters, word
+    logs and pointers (only the fault's own phase counter differs)."""
+    cfg = load_config(None, ["load.kind=fixed"])
+    rnd = np.random.default_rng(seed)
+    fast, slow = LK.link_state(cfg), LK.link_state(cfg)
+    never = 10**9
+    slow[LK.LK_DOWN_CORRUPT] = never
+    slow[LK.LK_UP_CORRUPT] = never
+    phases = (LK.LK_DOWN_PHASE, LK.LK_UP_PHASE)
+    ends = [(np.zeros(B.N_STATE, dtype=np.int64), np.zeros(B.DOWN_WORDS, dtype=np.int64),
+             np.zeros(B.UP_WORDS, dtype=np.int64)) for _ in range(2)]
+    for _ in range(ticks):
+        master_down = rnd.integers(0, 1 << 16, B.DOWN_WORDS)
+        up = rnd.integers(0, 1 << 16, B.UP_WORDS)
+        for lk, (state, down, master_up) in zip((fast, slow), ends, strict=True):
+            state[B.F_SINCE_VALID] += 1
+            LK.sweep_down(lk, master_down, state, down)
+            LK.sweep_up(lk, up, master_up)
+    (s1, d1, u1), (s2, d2, u2) = ends
+    assert np.array_equal(d1, d2) and np.array_equal(u1, u2) and np.array_equal(s1, s2)
+    keep = np.ones(LK.N_LINK_STATE, dtype=bool)
+    keep[[LK.LK_DOWN_CORRUPT, LK.LK_UP_CORRUPT, *phases]] = False
+    assert np.array_equal(fast[keep], slow[keep])
+    assert fast[LK.LK_DOWN_WORDS] > 0 and slow[phases[0]] > 0  # the general loop ran
