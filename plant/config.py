@@ -23,6 +23,13 @@ from firmware_model.fpga.layout import ANALOG_INPUTS
 
 DEFAULT_PRESET = "hydra_default"
 
+#: The newest of the plant kernel's arithmetic recipes (``sim.plant_numerics``, docs/plant.md).
+#: A recipe changes rounding and the noise realisation, never the model; a run keeps the
+#: recipe it was recorded with, so its log replays bit for bit.
+PLANT_NUMERICS = 2
+#: Values of keys that a configuration recorded before the key existed ran with.
+RECORDED_BEFORE: dict[str, Any] = {"sim.plant_numerics": 1}
+
 #: Keys that take one of a fixed set of strings.
 CHOICES: dict[str, tuple[str, ...]] = {
     "load.kind": ("fixed", "free", "conrod", "cart"),
@@ -100,6 +107,7 @@ RANGES: dict[str, Range] = {
     "sim.tick_ns": _span(1_000, 1_000_000),
     "sim.substeps": _span(0, 1000),
     "sim.seed": _span(0, 2**32 - 1),
+    "sim.plant_numerics": _span(1, PLANT_NUMERICS),
     # effects
     "effects.pulsation.order": _span(1, 64),
     "effects.pulsation.amplitude": _span(0.0, 1.0),
@@ -363,6 +371,16 @@ def _overlay(base: dict[str, Any], tree: Mapping[str, Any], where: str) -> None:
     for fw, plant in FIRMWARE_NOMINAL.items():
         if plant in given and fw not in given:
             _set_checked(base, fw, given[plant], where)
+
+
+def as_recorded(flat: Mapping[str, Any]) -> dict[str, Any]:
+    """Flat keys of a configuration read from a log, completed with what its run used for
+    the keys it predates: the nominal firmware (:func:`with_nominal_firmware`) and the
+    values of :data:`RECORDED_BEFORE`."""
+    out = with_nominal_firmware(flat)
+    for key, value in RECORDED_BEFORE.items():
+        out.setdefault(key, value)
+    return out
 
 
 def with_nominal_firmware(flat: Mapping[str, Any]) -> dict[str, Any]:

@@ -28,14 +28,12 @@ compiled with :data:`plant.blocks.TICK` (no reference counting: see there).
 
 from __future__ import annotations
 
-import math
-
 from numba import njit
 
 from plant.blocks import TICK
 from plant.blocks.hydraulics import pressure_force, series_stiffness
 from plant.blocks.load import end_stops, piston_and_load, rod_force
-from plant.blocks.motor_dq import TWO_PI_3, drive
+from plant.blocks.motor_dq import drive, phase_angles
 from plant.blocks.pump import pump, ripple_and_friction
 from plant.blocks.thermal import energy_and_heat, viscosity_ratio
 from plant.layout import (
@@ -63,6 +61,7 @@ from plant.layout import (
     P_LOAD_KIND,
     P_M_CART,
     P_N_SUB,
+    P_NUMERICS,
     P_POLE_PAIRS,
     P_PRECHARGE,
     P_T_REF,
@@ -211,8 +210,9 @@ def physical_outputs(x, p, u, y):
         tau_p = p[P_KT_EQ] * i_q
     theta_rotor = x[S_THP] * kc_kp
     th = p[P_POLE_PAIRS] * theta_rotor
-    i_a = i_d * math.cos(th) - i_q * math.sin(th)
-    i_b = i_d * math.cos(th - TWO_PI_3) - i_q * math.sin(th - TWO_PI_3)
+    c, s, c2, s2 = phase_angles(th, p[P_NUMERICS])
+    i_a = i_d * c - i_q * s
+    i_b = i_d * c2 - i_q * s2
 
     tq = x[S_TQ]
     vc = x[S_VC]

@@ -168,6 +168,7 @@ def build_params(cfg: Config, substeps: int | None = None) -> np.ndarray:
     n_sub = substeps or cfg.get("sim.substeps") or choose_substeps(p, tick_s)
     p[L.P_N_SUB] = n_sub
     p[L.P_H_SUB] = tick_s / n_sub
+    p[L.P_NUMERICS] = cfg.get("sim.plant_numerics")
     return p
 
 

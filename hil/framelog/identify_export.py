@@ -76,7 +76,7 @@ class IdentifyExport:
 def _config(path: str, info: LogInfo):  # noqa: ANN202 - plant.config.Config
     """The run's configuration from the log's metadata (replay record: JSON; the
     ``eha-hil`` record's ``config``: JSON or TOML), checked against the schema."""
-    from plant.config import Config, ConfigError, schema, with_nominal_firmware
+    from plant.config import Config, ConfigError, as_recorded, schema
 
     text = None
     for name in ("eha-hil.replay", "eha-hil"):
@@ -106,7 +106,7 @@ def _config(path: str, info: LogInfo):  # noqa: ANN202 - plant.config.Config
 
         walk(tree, "")
         # a log from before [firmware] was built with the plant's values
-        return Config(schema(), [f"log {path}"]).with_overrides(with_nominal_firmware(flat),
+        return Config(schema(), [f"log {path}"]).with_overrides(as_recorded(flat),
                                                                  f"log {path}")
     except (ValueError, tomllib.TOMLDecodeError, ConfigError) as exc:
         raise FrameLogError(f"{path}: run configuration in the metadata: {exc}") from None

@@ -36,8 +36,8 @@ from plant.config import (
     RUN_CHOICES,
     Config,
     ConfigError,
+    as_recorded,
     schema,
-    with_nominal_firmware,
 )
 
 DOWN_NAMES = [name for _addr, name, *_ in B.DOWN_REGISTERS]
@@ -130,7 +130,7 @@ def _metadata(path: str | Path, info: LogInfo) -> tuple[Config, Topology, dict[s
         data = json.loads(meta["config"])
         if not isinstance(data, dict):
             raise ValueError("not a JSON object")
-        logged = with_nominal_firmware(_flat(data))  # logs from before [firmware]
+        logged = as_recorded(_flat(data))  # logs from before [firmware], plant_numerics
         # A sensor's declared keys and the run choices missing from an older log keep their
         # defaults.
         missing = sorted(set(_flat(schema())) - set(logged) - set(DECLARED) - set(RUN_CHOICES))

@@ -22,6 +22,7 @@ from plant.layout import (
     P_FLUX,
     P_KT_EQ,
     P_L,
+    P_NUMERICS,
     P_POLE_PAIRS,
     P_R,
     S_ID,
@@ -31,6 +32,19 @@ from plant.layout import (
 
 TWO_PI_3 = 2.0 * math.pi / 3.0
 SQRT3 = math.sqrt(3.0)
+SQRT3_2 = 0.5 * SQRT3
+
+
+@njit(cache=True, inline="always")
+def phase_angles(th, numerics):
+    """(cos th, sin th, cos(th - 2 pi/3), sin(th - 2 pi/3)). Plant recipe 2
+    (``sim.plant_numerics``) turns phase a's pair by -120 deg (two libm calls instead of
+    four; equal to within a rounding), recipe 1 calls libm for each."""
+    c = math.cos(th)
+    s = math.sin(th)
+    if numerics >= 2.0:
+        return c, s, -0.5 * c + SQRT3_2 * s, -0.5 * s - SQRT3_2 * c
+    return c, s, math.cos(th - TWO_PI_3), math.sin(th - TWO_PI_3)
 
 
 @njit(cache=True, inline="always")
@@ -43,10 +57,7 @@ def drive(x, p, u, dx, mode, theta_rotor, vp, kc_kp):
         i_d = x[S_ID]
         i_q = x[S_IQ]
         th = p[P_POLE_PAIRS] * theta_rotor
-        c = math.cos(th)
-        s = math.sin(th)
-        c2 = math.cos(th - TWO_PI_3)
-        s2 = math.sin(th - TWO_PI_3)
+        c, s, c2, s2 = phase_angles(th, p[P_NUMERICS])
         i_a = i_d * c - i_q * s
         i_b = i_d * c2 - i_q * s2
         i_c = -i_a - i_b

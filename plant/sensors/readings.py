@@ -3,7 +3,12 @@ physics (:func:`plant.kernel.physical_outputs` gives the true values).
 
 ``effects.sensor_noise`` adds Gaussian noise to the five pressures, the strain force and the
 oil temperature (in that order, from the plant's own xorshift64* stream, so the same seed
-gives the same noise); ``effects.quantisation`` floors the encoders' angle and position to
+gives the same noise). How the standard normal samples are drawn is part of the plant's
+arithmetic recipe (``sim.plant_numerics``): recipe 2 takes them in pairs from Marsaglia's
+polar method (no trigonometric call; both samples of a pair used), recipe 1 one sample of
+each Box-Muller pair (the noise of logs recorded before; about three times the cost). Both
+are exact standard normal distributions; only the realisation differs.
+``effects.quantisation`` floors the encoders' angle and position to
 their counts and rounds the converters' values to their LSB.
 
 These are the plant's sensor outputs as the identification and the plant-only analyses see
@@ -26,6 +31,7 @@ from plant.layout import (
     P_NOISE_ON,
     P_NOISE_P,
     P_NOISE_T,
+    P_NUMERICS,
     P_Q_MOTOR,
     P_Q_PISTON,
     P_Q_PRESSURE,
@@ -65,6 +71,19 @@ def _gauss(rng):
 
 
 @njit(cache=True, inline="always")
+def _gauss_pair(rng):
+    """Two independent standard normal samples (Marsaglia's polar method: a uniform point
+    in the unit disc, accepted with probability pi/4, scaled by sqrt(-2 ln s / s))."""
+    while True:
+        a = 2.0 * _next_uniform(rng) - 1.0
+        b = 2.0 * _next_uniform(rng) - 1.0
+        s = a * a + b * b
+        if 0.0 < s < 1.0:
+            f = math.sqrt(-2.0 * math.log(s) / s)
+            return a * f, b * f
+
+
+@njit(cache=True, inline="always")
 def _quantise(v, lsb):
     return math.floor(v / lsb + 0.5) * lsb
 
@@ -72,7 +91,20 @@ def _quantise(v, lsb):
 @njit(cache=True, inline="always")
 def sense(p, rng, y):
     """Turn the physical values in the output row ``y`` into what the sensors read."""
-    if p[P_NOISE_ON] > 0.5:
+    if p[P_NOISE_ON] > 0.5 and p[P_NUMERICS] >= 2.0:
+        sp = p[P_NOISE_P]
+        g0, g1 = _gauss_pair(rng)
+        g2, g3 = _gauss_pair(rng)
+        g4, g5 = _gauss_pair(rng)
+        g6, _ = _gauss_pair(rng)
+        y[Y_P_ACC] += sp * g0
+        y[Y_P_PUMP_A] += sp * g1
+        y[Y_P_PUMP_B] += sp * g2
+        y[Y_P_CYL_A] += sp * g3
+        y[Y_P_CYL_B] += sp * g4
+        y[Y_F_STRAIN] += p[P_NOISE_F] * g5
+        y[Y_TEMP] += p[P_NOISE_T] * g6
+    elif p[P_NOISE_ON] > 0.5:
         sp = p[P_NOISE_P]
         y[Y_P_ACC] += sp * _gauss(rng)
         y[Y_P_PUMP_A] += sp * _gauss(rng)

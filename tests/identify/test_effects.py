@@ -13,12 +13,14 @@ pytestmark = pytest.mark.slow
 # effect -> (load case, {parameter: (truth key, relative tolerance)}, largest allowed
 # NRMSE ratio after/before on the channel the effect shows most on, excitation profile,
 # seconds). The viscosity effect is small (the oil warms ~2 degC in 6 s): it lowers the
-# motor-speed error by a few %. Seal friction is run with the "slide" profile (constant
-# piston speed, quick reversals): under the default multisine the Stribeck dip drives a
-# stick-slip limit cycle whose phase no output-error simulation can follow (docs).
+# motor-speed error by a few %, and in 6 s records it is found on most noise realisations,
+# not all (7 of 8 seeds); 8 s of warming make it stand out. Seal friction is run with the
+# "slide" profile (constant piston speed, quick reversals): under the default multisine
+# the Stribeck dip drives a stick-slip limit cycle whose phase no output-error simulation
+# can follow (docs).
 CASES = {
     "viscosity_temperature": ("fixed_piston", {"coeff_per_c": ("coeff_per_c", 0.20)}, 0.98,
-                              "multisine", 6.0),
+                              "multisine", 8.0),
     "seal_friction": ("free_piston", {"coulomb_n": ("coulomb_n", 0.10),
                                       "static_n": ("static_n", 0.10)}, 0.2, "slide", 4.0),
 }
