@@ -135,7 +135,6 @@ class RobotBench(TimedRun):
     workers: int = 1
     actuators: int = 0
     tick_s: float = 50e-6
-    threading_layer: str = ""
 
     @property
     def ns_per_actuator_tick(self) -> float:
@@ -149,14 +148,11 @@ def bench_robot(cfg: Config, seconds: float = 10.0, workers: int = 1,
     (plant, sensor chips, driver board, LVDS link) in the robot engine (:mod:`hil.robot`)
     with ``workers`` compute threads, the master and the PC loop (a force sine on every
     actuator) at 1 kHz in lockstep. CPU time is the process's, all threads."""
-    import numba
-
     from hil.bus_cli import demo_pc
     from hil.fieldbus.system import BusSystem
     from hil.fieldbus.topology import load_topology
 
     topo = load_topology(topology)
-    numba.set_num_threads(workers)
     cycles = int(round(seconds * 1000))
     pc = demo_pc()
     with BusSystem(topo, cfg, "inproc", model="robot") as bs:
@@ -167,5 +163,4 @@ def bench_robot(cfg: Config, seconds: float = 10.0, workers: int = 1,
         wall, cpu = time.perf_counter() - t0, time.process_time() - c0
         bs.chain.engine.wait()
     return RobotBench(cycles * 1e-3, wall, cpu, workers=workers, actuators=topo.n_actuators,
-                      tick_s=cfg.get("sim.tick_ns") * 1e-9,
-                      threading_layer=numba.threading_layer())
+                      tick_s=cfg.get("sim.tick_ns") * 1e-9)

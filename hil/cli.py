@@ -315,8 +315,7 @@ def cmd_bench_robot(args: argparse.Namespace) -> int:
         data.append({"workers": w, "simulated_s": r.simulated_s, "wall_s": r.wall_s,
                      "cpu_s": r.cpu_s, "real_time_factor": r.real_time_factor,
                      "cpu_real_time_factor": r.cpu_real_time_factor,
-                     "ns_per_actuator_tick": r.ns_per_actuator_tick,
-                     "threading_layer": r.threading_layer})
+                     "ns_per_actuator_tick": r.ns_per_actuator_tick})
     text = table(["workers", "simulated [s]", "wall [s]", "CPU [s]", "real-time (wall)",
                   "real-time (CPU)", "CPU ns/actuator/tick"], rows, fmt=".3g",
                  title=f"hydra_full, {r.actuators} actuators, full stack behind every box "

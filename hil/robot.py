@@ -3,15 +3,15 @@ driver board, LVDS link) and its MCU program advanced together, batched over act
 
 The per-actuator path (:class:`~hil.fieldbus.boxes.StackBox`) steps each box's Python MCU
 model and calls each actuator's compiled stack every MCU period: 47 actuators cost ~10 Python
-calls each per MCU period. Here one fieldbus cycle (20 ticks) is five rounds of
-
-* one C call for the MCU program of every actuator (the MCU law's host build,
-  ``firmware_model/mcu/c/``, ``mcu_law_step_many``; built with ``-ffp-contract=off`` and
-  checked bit for bit against the Python model, docs/mcu.md), then
-* one compiled call that copies each program's downstream words into its LVDS memory,
-  advances every stack by one MCU period (``prange`` over actuators: the workers share
-  the actuators, each actuator's arithmetic is the same whichever worker runs it), and
-  copies the upstream words back into the programs' input records,
+calls each per MCU period. Here one fieldbus cycle (20 ticks) is one compiled call
+(:func:`advance_robot`) per compute thread. Each thread claims actuators one at a time (an
+atomic counter) and runs each claimed actuator's five MCU periods: its MCU program steps
+(the MCU law's host build, ``firmware_model/mcu/c/``, ``mcu_law_step_many``, built with
+``-ffp-contract=off`` and checked bit for bit against the Python model, docs/mcu.md), its
+downstream words go into its LVDS memory, its stack advances one MCU period, its upstream
+words go back into the program's input record. Actuators share nothing within a cycle, so
+which thread runs which changes no result; claiming one by one balances the threads even
+when one core is busy with the master and the PC loop,
 
 and the process data of all boxes is decoded and packed with whole-array operations. The
 arrays of every :class:`~hil.actuator.FpgaStack` are rebound to rows of the engine's arrays,
@@ -31,7 +31,10 @@ from concurrent.futures import Future, ThreadPoolExecutor
 import llvmlite.binding as llvm
 import numba
 import numpy as np
-from numba import njit, prange, types
+from llvmlite import ir
+from numba import njit, types
+from numba.core import cgutils
+from numba.extending import intrinsic
 
 from firmware_model.fpga import layout as B
 from firmware_model.lvds import link as LK
@@ -90,18 +93,43 @@ _mcu_law_step_many = types.ExternalFunction(
     "mcu_law_step_many", types.void(types.intp, types.intp, types.uint32, types.intp))
 
 
-@njit(cache=True, parallel=True, nogil=True)
-def advance_robot(n_periods, period, tick0, batched, ptrs, no_rec, no_trace, x, p, u, y, rng,
-                  work, k, raw, c, st, down, up, mdown, mup, lk, in16, in32, out16, err):
-    """``n_periods`` MCU periods of ``period`` ticks from ``tick0`` for every actuator ``i``
-    with ``batched[i]``: its MCU program (state, input and output record at the addresses
-    ``ptrs[i]``) steps, its downstream words go into its LVDS memory, its stack advances
-    one period, its upstream words and the link's CRC count go into its input record.
-    ``err[i]``: the link error counts the program read at its last step. ``no_rec`` and
-    ``no_trace``: empty record and trace arrays (nothing recorded here)."""
-    for i in prange(x.shape[0]):
+@intrinsic
+def _claim(typingctx, counter):
+    """``counter[0] += 1`` as one atomic operation; returns the value before it: the index
+    the calling thread now owns (the threads of a cycle share the actuators this way)."""
+    if not (isinstance(counter, types.Array) and counter.dtype == types.int64):
+        return None
+
+    def codegen(context, builder, signature, args):
+        aryty = signature.args[0]
+        ary = context.make_array(aryty)(context, builder, args[0])
+        ptr = cgutils.get_item_pointer(context, builder, aryty, ary,
+                                       [context.get_constant(types.intp, 0)])
+        return builder.atomic_rmw("add", ptr, ir.Constant(ir.IntType(64), 1), "seq_cst")
+
+    return types.int64(counter), codegen
+
+
+@njit(cache=True, nogil=True)
+def advance_robot(counter, n_periods, period, tick0, batched, ptrs, no_rec, no_trace, x, p,
+                  u, y, rng, work, k, raw, c, st, down, up, mdown, mup, lk, in16, in32,
+                  out16, err):
+    """``n_periods`` MCU periods of ``period`` ticks from ``tick0`` for the actuators this
+    thread claims (``counter``: the next unclaimed index, shared by every thread of the
+    cycle), those with ``batched[i]``: its MCU program (state, input and output record at
+    the addresses ``ptrs[i]``) steps, its downstream words go into its LVDS memory, its
+    stack advances one period, its upstream words and the link's CRC count go into its
+    input record. ``err[i]``: the link error counts the program read at its last step.
+    ``no_rec`` and ``no_trace``: empty record and trace arrays (nothing recorded here).
+    Returns how many actuators this thread advanced."""
+    done = 0
+    while True:
+        i = _claim(counter)
+        if i >= x.shape[0]:
+            return done
         if not batched[i]:
             continue
+        done += 1
         for n in range(n_periods):
             t = tick0 + n * period
             in32[i, _IN_TICK] = t
@@ -213,7 +241,8 @@ _ARRAYS = (("plant", "x"), ("plant", "params"), ("plant", "u"), ("plant", "y"),
 
 class RobotEngine:
     """All StackBoxes of a chain advanced as one; ``workers`` threads share the actuators
-    (``None``: numba's default, one per core)."""
+    (``None``: one per core). The calling thread is one of them once its own work of the
+    cycle is done; with overlap and one worker, that worker is the background thread."""
 
     def __init__(self, boxes: list, cfg: Config, workers: int | None = None,
                  overlap: bool = True, cycle_ticks: int = 20) -> None:
@@ -283,9 +312,11 @@ class RobotEngine:
         #: outputs (:meth:`applied`), overlapping it with the master and the PC loop.
         self.overlap = overlap
         self.cycle_ticks = cycle_ticks
-        self._pool = ThreadPoolExecutor(1, thread_name_prefix="robot-engine")
-        self._job: Future | None = None
-        self._started = threading.Event()
+        self._counter = np.zeros(1, dtype=np.int64)  # the next actuator nobody has claimed
+        self._pool: ThreadPoolExecutor | None = None
+        self._pool_size = 0
+        self._jobs: list[Future] = []
+        self._started = threading.Semaphore(0)
         self._ready: list[int] | None = None  # prepared, with stacks under sensor faults
         self._pending: set[int] = set()
         self._used: dict[int, bytes] = {}
@@ -339,7 +370,7 @@ class RobotEngine:
         the next cycle's compute starts in the background (``overlap``): it needs nothing
         that arrives later, since the chain applies a cycle's outputs before the frame of
         the next cycle triggers :meth:`advance`, which then only waits for it."""
-        if self._job is not None or self._ready is not None:
+        if self._jobs or self._ready is not None:
             # A duplicate of a frame already applied: the reference path would apply the
             # same bytes again, which changes nothing; anything else cannot be undone.
             if box.pending != self._used.get(id(box)):
@@ -353,32 +384,31 @@ class RobotEngine:
             if external:  # Python per tick: no gain from a thread, run it at advance
                 self._ready = external
                 return
-            self._job = self._pool.submit(self._kernel, self.cycle_ticks, self._started)
-            # Hand the GIL over until the kernel has released it: else the thread could
-            # wait for the interpreter's switch interval (5 ms) before it starts.
-            self._started.wait()
-            self._started.clear()
+            self._start(self.cycle_ticks, max(1, self._workers() - 1))
 
     def advance(self, ticks: int) -> None:
         """``ticks`` ticks (whole MCU periods) of every actuator; then every box's inputs."""
         if ticks % self.period:
             raise ValueError(f"the robot engine advances whole MCU periods ({self.period} "
                              f"ticks), not {ticks}")
-        job, self._job = self._job, None
+        jobs, self._jobs = self._jobs, []
         ready, self._ready = self._ready, None
-        if job is not None:
-            job.result()
+        if jobs:
+            if self._workers() > 1:  # this thread joins the background ones
+                self._compute(self.cycle_ticks)
+            for job in jobs:
+                job.result()
         elif ready is not None:
-            self._kernel(self.cycle_ticks)
+            self._run_cycle(self.cycle_ticks)
             self._advance_external(ready, self.cycle_ticks)
-        if (job is not None or ready is not None) and ticks == self.cycle_ticks:
+        if (jobs or ready is not None) and ticks == self.cycle_ticks:
             self._finish(ticks)
             return
-        if job is not None or ready is not None:
+        if jobs or ready is not None:
             self._finish(self.cycle_ticks)
         self._take_outputs()
         external = self._prepare()
-        self._kernel(ticks)
+        self._run_cycle(ticks)
         if external:
             self._advance_external(external, ticks)
         self._finish(ticks)
@@ -386,8 +416,8 @@ class RobotEngine:
     def wait(self) -> None:
         """Let a compute started ahead finish (its results are kept for the next
         :meth:`advance`)."""
-        if self._job is not None:
-            self._job.result()
+        for job in self._jobs:
+            job.result()
 
     def _prepare(self) -> list[int]:
         """Which stacks the kernel advances (not those under a sensor fault, returned) and
@@ -403,16 +433,43 @@ class RobotEngine:
                 s._switch_lvds(self.tick // self.cycle_ticks)
         return external
 
-    def _kernel(self, ticks: int, started: threading.Event | None = None) -> None:
-        """The compiled work of one advance (in the background thread when overlapped:
-        nothing here but the call, which releases the GIL)."""
+    def _workers(self) -> int:
+        return self.workers or numba.config.NUMBA_NUM_THREADS
+
+    def _start(self, ticks: int, helpers: int) -> None:
+        """Open the cycle's actuators for claiming and start ``helpers`` background threads
+        on them; returns once each has entered the compiled call."""
+        self._counter[0] = 0
+        if helpers <= 0:
+            return
+        if self._pool_size < helpers:
+            if self._pool is not None:
+                self._pool.shutdown()
+            self._pool = ThreadPoolExecutor(helpers, thread_name_prefix="robot-engine")
+            self._pool_size = helpers
+        self._jobs = [self._pool.submit(self._compute, ticks, self._started)
+                      for _ in range(helpers)]
+        for _ in range(helpers):
+            # Hand the GIL over until the thread has released it in the compiled call: else
+            # it could wait for the interpreter's switch interval (5 ms) before it starts.
+            self._started.acquire()
+
+    def _run_cycle(self, ticks: int) -> None:
+        """A cycle's compute now: this thread and ``workers - 1`` helpers."""
+        self._start(ticks, self._workers() - 1)
+        jobs, self._jobs = self._jobs, []
+        self._compute(ticks)
+        for job in jobs:
+            job.result()
+
+    def _compute(self, ticks: int, started: threading.Semaphore | None = None) -> int:
+        """Claim and advance actuators until none is left (nothing here but the compiled
+        call, which releases the GIL)."""
         if started is not None:
-            started.set()
-        if self.workers is not None and self.workers != numba.get_num_threads():
-            numba.set_num_threads(self.workers)  # per thread in numba
-        advance_robot(ticks // self.period, self.period, self.tick, self._batched, self.ptrs,
-                      self._no_rec, self._no_trace, *self.arrays, self.in16, self.in32,
-                      self.out16, self.err)
+            started.release()
+        return advance_robot(self._counter, ticks // self.period, self.period, self.tick,
+                             self._batched, self.ptrs, self._no_rec, self._no_trace,
+                             *self.arrays, self.in16, self.in32, self.out16, self.err)
 
     def _finish(self, ticks: int) -> None:
         batched = self._batched
