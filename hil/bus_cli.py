@@ -38,9 +38,11 @@ def demo_pc(amplitude_n: float = 300.0, frequency_hz: float = 2.0):
 
     def pc(cycle: int, m: Master) -> None:
         t = cycle * 1e-3
-        for j in range(len(m.act_offsets)):
-            m.set_actuator(j, "force", amplitude_n * math.sin(
-                2.0 * math.pi * frequency_hz * t + 0.4 * j))
+        # math.sin, not numpy's: numpy may pick a SIMD sine by CPU, and the commands must
+        # be the same bits on every machine.
+        m.set_actuators("force", [amplitude_n * math.sin(2.0 * math.pi * frequency_hz * t
+                                                         + 0.4 * j)
+                                  for j in range(len(m.act_offsets))])
 
     return pc
 

@@ -62,6 +62,7 @@ class Master:
                     self.act_offsets.append((o, i))
                 o += so
                 i += si
+        self._out_index: np.ndarray | None = None  # image bytes of each output record
         #: Per frame of the plan: did its inputs arrive this cycle?
         self.fresh = [False] * len(self.plan.frames)
         self._answered = [False] * len(self.plan.frames)
@@ -88,6 +89,31 @@ class Master:
                        pdo.to_counts(value, lsb, "i4"),
                        pdo.to_counts(kp_position, 10.0, "u2") if kp_position else 0,
                        pdo.to_counts(kp_force, 1e-3, "u2") if kp_force else 0)
+
+    def set_actuators(self, mode: str, values: np.ndarray, enable: bool = True) -> None:
+        """Output records of every actuator at once, as :meth:`set_actuator` writes each
+        (``values[j]`` for actuator ``j``, same rounding and saturation; no gains sent):
+        one array operation instead of a Python call per actuator, for PC loops that
+        command the whole robot every cycle."""
+        if mode not in pdo.MODE_CODES:
+            raise ValueError(f"unknown mode {mode!r}")
+        values = np.asarray(values, dtype=np.float64)
+        n = len(self.act_offsets)
+        if values.shape != (n,):
+            raise ValueError(f"values: expected {n} actuator commands, got shape {values.shape}")
+        if not np.all(np.isfinite(values)):
+            raise ValueError("values: a command is not finite")
+        if self._out_index is None:
+            size = pdo.ACTUATOR_OUT_DTYPE.itemsize
+            starts = np.array([o for o, _ in self.act_offsets], dtype=np.intp)
+            self._out_index = starts[:, None] + np.arange(size)
+        lsb = pdo.POSITION_CMD_LSB if mode == "position" else pdo.FORCE_CMD_LSB
+        rec = np.zeros(n, dtype=pdo.ACTUATOR_OUT_DTYPE)
+        rec["mode"] = pdo.MODE_CODES[mode]
+        rec["flags"] = pdo.FLAG_ENABLE if enable else 0
+        rec["command"] = pdo.to_counts_array(values, lsb, "i4")
+        np.frombuffer(self.image, dtype=np.uint8)[self._out_index] = rec.view(np.uint8).reshape(
+            n, -1)
 
     # --- inputs ---------------------------------------------------------------------------
     def actuator_inputs(self, j: int) -> dict[str, float]:

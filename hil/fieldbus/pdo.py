@@ -110,6 +110,16 @@ def to_counts(value: float, lsb: float, dtype: str) -> int:
     return min(max(c, bounds[0]), bounds[1])
 
 
+def to_counts_array(values: np.ndarray, lsb: float, dtype: str) -> np.ndarray:
+    """:func:`to_counts` of every element (the same float64 steps), as int64."""
+    if dtype not in _BOUNDS:
+        to_counts(0.0, 1.0, dtype)
+    lo, hi = _BOUNDS[dtype]
+    c = np.asarray(values, dtype=np.float64) / lsb
+    r = np.where(c >= 0, np.trunc(c + 0.5), -np.trunc(-c + 0.5))
+    return np.clip(r, lo, hi).astype(np.int64)
+
+
 def markdown_table(fields: tuple[Field, ...]) -> str:
     """The record as a markdown table: offset, field, type, LSB, unit, meaning."""
     lines = ["| offset | field | type | LSB | unit | meaning |", "|---|---|---|---|---|---|"]
