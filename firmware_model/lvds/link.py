@@ -165,7 +165,6 @@ def _clean_sweep(lk, ptr_index, log_base, src, n, size, dest, dest_words, mask):
         addr = addr + 1 if addr + 1 < size else 0
     lk[log_base] = k
     lk[ptr_index] = addr
-    return addr
 
 
 @njit(cache=True)

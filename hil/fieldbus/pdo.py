@@ -99,12 +99,19 @@ def slot_sizes(kind: str) -> tuple[int, int]:
 _BOUNDS: dict[str, tuple[int, int]] = {}
 
 
-def to_counts(value: float, lsb: float, dtype: str) -> int:
-    """SI value -> integer count, rounded half away from zero and saturated to ``dtype``."""
+def _bounds(dtype: str) -> tuple[int, int]:
+    """(min, max) of an integer dtype, cached: np.iinfo is slow and the per-cycle path
+    needs them per field."""
     bounds = _BOUNDS.get(dtype)
-    if bounds is None:  # np.iinfo is slow; the per-cycle path calls this per field
+    if bounds is None:
         info = np.iinfo(np.dtype(dtype))
         bounds = _BOUNDS[dtype] = (int(info.min), int(info.max))
+    return bounds
+
+
+def to_counts(value: float, lsb: float, dtype: str) -> int:
+    """SI value -> integer count, rounded half away from zero and saturated to ``dtype``."""
+    bounds = _bounds(dtype)
     c = value / lsb
     c = int(c + 0.5) if c >= 0 else -int(-c + 0.5)
     return min(max(c, bounds[0]), bounds[1])
@@ -112,9 +119,7 @@ def to_counts(value: float, lsb: float, dtype: str) -> int:
 
 def to_counts_array(values: np.ndarray, lsb: float, dtype: str) -> np.ndarray:
     """:func:`to_counts` of every element (the same float64 steps), as int64."""
-    if dtype not in _BOUNDS:
-        to_counts(0.0, 1.0, dtype)
-    lo, hi = _BOUNDS[dtype]
+    lo, hi = _bounds(dtype)
     c = np.asarray(values, dtype=np.float64) / lsb
     r = np.where(c >= 0, np.trunc(c + 0.5), -np.trunc(-c + 0.5))
     return np.clip(r, lo, hi).astype(np.int64)
