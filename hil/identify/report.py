@@ -49,6 +49,8 @@ def summary(rep: IdentifyReport) -> dict:
         "residual_after": rep.residual_after.summary(),
         "unexplained": rep.unexplained,
         "unexplained_detail": rep.unexplained_detail,
+        "consistency": rep.consistency.as_dict() if rep.consistency is not None else None,
+        "differs_from_configuration": rep.differs,
         "intersample": {"mode": rep.intersample, "reason": rep.intersample_reason},
         "input_noise": rep.input_noise.as_dict() if rep.input_noise is not None else None,
         "refused": None,
@@ -118,6 +120,7 @@ def text(rep: IdentifyReport) -> str:
                    "(accounted for in the residual tests)")
     out.append(f"\nresidual white: before {rep.residual_before.white}, "
                f"after {rep.residual_after.white}")
+    out += _consistency_lines(rep)
     if rep.unexplained:
         out.append(f"verdict: unexplained - {rep.unexplained_detail}")
     elif rep.effects_added:
@@ -127,6 +130,33 @@ def text(rep: IdentifyReport) -> str:
     for n in rep.notes:
         out.append(f"note: {n}")
     return "\n".join(out)
+
+
+def _consistency_lines(rep: IdentifyReport) -> list[str]:
+    """The parameters refitted on parts of the record (the disagreeing ones, else how many
+    agree), and the ones that differ from the configuration."""
+    from hil.identify.consistency import MATERIAL_RATIO, MATERIAL_RATIO_CHANNELS
+    from hil.identify.pipeline import BASELINE_LABELS
+
+    out = []
+    c = rep.consistency
+    if c is not None and c.splits:
+        bad = c.inconsistent
+        if bad:
+            out.append("\nparameters that disagree between parts of the record:")
+            out += [f"  {s.split}: {s.describe(BASELINE_LABELS[s.name][0])}" for s in bad]
+        else:
+            splits = sorted({s.split for s in c.splits})
+            out.append(f"\nparameters agree across {', '.join(splits)} "
+                       f"({len(c.splits)} tests: none apart beyond the intervals by "
+                       f"{MATERIAL_RATIO - 1:.0%}, channel groups "
+                       f"{MATERIAL_RATIO_CHANNELS - 1:.0%})")
+    for sym, d in rep.differs.items():
+        lo, hi = d["ci95"]
+        out.append(f"differs from the configuration: {sym} {d['value']:.4g} [{lo:.4g}, "
+                   f"{hi:.4g}] {d['unit']}, {d['ratio']:.2f}x the configured "
+                   f"{d['configured']:.4g} (by itself no sign of a missing effect)")
+    return out
 
 
 def _write_csv(path: Path, header: list[str], rows: list[list]) -> None:
