@@ -150,6 +150,9 @@ class IdentifyReport:
     unexplained_detail: str
     notes: list[str] = field(default_factory=list)
     rejected: list[str] = field(default_factory=list)
+    #: candidates refitted together (no single one passing, structure left): the effects,
+    #: the relative change of the validation cost, the outcome ("added", "passes" or why not)
+    joint: list[dict] = field(default_factory=list)
     wall_s: float = 0.0
     # arrays for plots
     experiment: Experiment | None = None
@@ -468,21 +471,31 @@ def _identify(data: MeasuredData, cfg: Config, max_effects: int,
     rounds: list[list[CandidateTest]] = []
     fitter = OutputErrorFit(model)
     est_mask = fitter.fit_mask()
-    def refit_with(d: EffectDef, start: dict[str, float]) -> tuple[FitResult, dict[str, str]]:
-        """``current`` refitted with the effect ``d`` in, its parameters from ``start``."""
+    configured = model.start_vector()
+
+    def refit_with(d: EffectDef | list[EffectDef], start: dict[str, float],
+                   robust: bool = False) -> tuple[FitResult, dict[str, str]]:
+        """``current`` refitted with the effect ``d`` (or several at once) in, their
+        parameters from ``start``. ``robust``: the linear parameters that the fit without
+        them moved beyond :data:`DIFFERS_FACTOR` of their configured values start from those
+        (the effects may have been what moved them there)."""
+        ds_ = d if isinstance(d, list) else [d]
         theta0 = current.theta.copy()
+        if robust:
+            for p in far_from_configuration(current, exp):
+                theta0[IDX[p]] = configured[IDX[p]]
+        credible = theta0.copy()
         new_free = list(current.free)
-        for p in d.params:
-            if p in start:
-                theta0[IDX[p]] += start[p]
+        for e in ds_:
+            for p in e.params:
+                if p in start:
+                    theta0[IDX[p]] += start[p]
+                    new_free.append(p)
+            for p, begin in e.refit_extra:
+                theta0[IDX[p]] = credible[IDX[p]] = begin(exp)
                 new_free.append(p)
-        for p, begin in d.refit_extra:
-            theta0[IDX[p]] = begin(exp)
-            new_free.append(p)
-        credible = current.theta.copy()
-        for p, begin in d.refit_extra:
-            credible[IDX[p]] = begin(exp)
-        if d.name == "viscosity_temperature" and exp.temperature is not None:
+        names = {e.name for e in ds_}
+        if "viscosity_temperature" in names and exp.temperature is not None:
             # the fitted dampers hold at the record's temperature until the law is in; with
             # it they hold at the reference temperature (a held one already does: the preset's)
             t_mean = float(np.mean(exp.temperature[est_mask]))
@@ -491,16 +504,40 @@ def _identify(data: MeasuredData, cfg: Config, max_effects: int,
                 if p in current.free:
                     theta0[IDX[p]] *= factor
                     credible[IDX[p]] *= factor
-        if d.name == "input_delay" and "skew_s" in new_free:
+        if "input_delay" in names and "skew_s" in new_free:
             # the causal delay takes over the sub-sample skew: one timing parameter
             theta0[IDX["delay_s"]] = max(theta0[IDX["delay_s"]] + theta0[IDX["skew_s"]], 0.0)
             theta0[IDX["skew_s"]] = 0.0
             new_free.remove("skew_s")
-        scales = dict(zip(d.params, d.nominal, strict=True))
+        scales = {p: nom for e in ds_ for p, nom in zip(e.params, e.nominal, strict=True)}
         refitter = OutputErrorFit(model, {**NUISANCE_SCALES(exp.dt), **_all_scales(defs_all),
                                           **scales})
         return guarded_fit(refitter, theta0, new_free, credible, sigma=current.sigma,
-                           configured=model.start_vector())
+                           configured=configured)
+
+    def verdict_on(ds_: list[EffectDef], new: FitResult, held_now: dict[str, str]
+                   ) -> str:
+        """Why the refit ``new`` with the effects ``ds_`` in is not kept ("" if it is): a
+        parameter of theirs held (not credible), a validation cost lowered by less than
+        :data:`MIN_SHARE`, or one of them shrunk below :data:`MIN_MAGNITUDE` of a realistic
+        size (a score test is local: the refit can shrink an effect to nothing while other
+        terms take its place)."""
+        own = [p for p in held_now if any(p in e.params for e in ds_)]
+        if own:
+            return f"not credible after the refit ({own[0]}: {held_now[own[0]]})"
+        before = _val_cost(exp, current.outputs, sigma_ref)
+        after = _val_cost(exp, new.outputs, sigma_ref)
+        if not after < (1.0 - MIN_SHARE) * before:
+            return (f"refit lowered the validation cost by less than {MIN_SHARE:.1%} "
+                    f"({after:.6g} vs {before:.6g})")
+        for e in ds_:
+            sizes = {p: abs(new.value(p)) / abs(nom)
+                     for p, nom in zip(e.params, e.nominal, strict=True) if nom}
+            if sizes and max(sizes.values()) < MIN_MAGNITUDE:
+                p = max(sizes, key=sizes.get)
+                return (f"the refit shrank {e.label} to {new.value(p):.4g} "
+                        f"({sizes[p]:.1%} of a realistic size)")
+        return ""
 
     def weighted_ss(out: dict[str, np.ndarray], mask: np.ndarray) -> float:
         w = current.weights
@@ -552,32 +589,26 @@ def _identify(data: MeasuredData, cfg: Config, max_effects: int,
         else:
             say(f"round {rnd}: adding {best.label}; refit")
             new, held_now = refit_with(d, best.beta)
-        own = [p for p in held_now if p in d.params]
+        why = verdict_on([d], new, held_now)
+        if why and far_from_configuration(current, exp):
+            # forward from a robust baseline: the fit without the effect may have absorbed
+            # it into parameters far from their configured values (two frictions on a free
+            # piston: J_c 40x, d_c 4.5x), a start the refit does not come back from
+            say(f"round {rnd}: {best.label} {why}; refit from the configured values of "
+                + ", ".join(far_from_configuration(current, exp)))
+            new2, held2 = refit_with(d, best.beta, robust=True)
+            why2 = verdict_on([d], new2, held2)
+            if not why2:
+                new, held_now, why = new2, held2, ""
+            else:
+                why += f"; from the configured values too ({why2})"
+        if why:
+            excluded.add(best.label)
+            rejected.append(f"{best.label}: {why}")
+            continue
         for p, _ in d.refit_extra:
             if p in held_now:  # a shape the data cannot pin: the preset's, and say so
                 held[p] = f"after adding {best.label}: {held_now.pop(p)}"
-        before = _val_cost(exp, current.outputs, sigma_ref)
-        after = _val_cost(exp, new.outputs, sigma_ref)
-        if own:
-            excluded.add(best.label)
-            rejected.append(f"{best.label}: not credible after the refit "
-                            f"({own[0]}: {held_now[own[0]]})")
-            continue
-        if not after < (1.0 - MIN_SHARE) * before:
-            excluded.add(best.label)
-            rejected.append(f"{best.label}: refit lowered the validation cost by less than "
-                            f"{MIN_SHARE:.1%} ({after:.6g} vs {before:.6g})")
-            continue
-        sizes = {p: abs(new.value(p)) / abs(nom) for p, nom in zip(d.params, d.nominal,
-                                                                      strict=True) if nom}
-        if sizes and max(sizes.values()) < MIN_MAGNITUDE:
-            # the same size rule as the test's, on the refitted values: a score test is local,
-            # and the refit can shrink the effect to nothing while other terms take its place
-            p = max(sizes, key=sizes.get)
-            excluded.add(best.label)
-            rejected.append(f"{best.label}: the refit shrank it to {new.value(p):.4g} "
-                            f"({sizes[p]:.1%} of a realistic size)")
-            continue
         for p, why in held_now.items():
             held[p] = f"after adding {best.label}: {why}"
         current = new
@@ -616,6 +647,52 @@ def _identify(data: MeasuredData, cfg: Config, max_effects: int,
         rejected.append(f"{e.label}: shrank to {shrunk:.4g} "
                         f"({sizes[p_max]:.1%} of a realistic size) once the others were in; "
                         "dropped")
+    # Effects that come together: a residual with structure left and no candidate that passes
+    # alone, so the library's candidates are refitted in pairs (then as one triple), from
+    # the robust start, each judged on the validation part as a single one is.
+    joint: list[dict] = []
+    if len(added) + 2 <= max_effects and rounds:
+        residual_now = {c: exp.measured[c] - current.outputs[c] for c in exp.channels}
+        left = _verdict(analyse(exp, residual_now, exp.val, noise_part(current.theta)))[0]
+        if left or consistency(current, exp, est_mask).inconsistent:
+            pool = _joint_pool(rounds, defs_all, added_labels)
+            sets = [[a, b] for i, a in enumerate(pool) for b in pool[i + 1:]]
+            if len(pool) >= 3:
+                sets.append(pool[:3])
+            best_set: tuple[float, list[str], FitResult, dict[str, str]] | None = None
+            before = _val_cost(exp, current.outputs, sigma_ref)
+            for labels in sets:
+                if best_set is not None and len(labels) > 2:
+                    break  # a triple only where no pair passes
+                ds_ = [defs_all[lbl] for lbl in labels]
+                say(f"jointly: {' + '.join(labels)}")
+                start = {p: 0.25 * nom for e in ds_
+                         for p, nom in zip(e.params, e.nominal, strict=True)}
+                new, held_now = refit_with(ds_, start, robust=True)
+                why = verdict_on(ds_, new, held_now)
+                after = _val_cost(exp, new.outputs, sigma_ref)
+                joint.append({"effects": labels, "validation_cost_change": after / before - 1.0,
+                              "outcome": why or "passes"})
+                if not why and (best_set is None or after < best_set[0]):
+                    best_set = (after, labels, new, held_now)
+            if best_set is not None:
+                _, labels, new, held_now = best_set
+                for row in joint:
+                    if row["effects"] == labels:
+                        row["outcome"] = "added"
+                for lbl in labels:
+                    for p, _ in defs_all[lbl].refit_extra:
+                        if p in held_now:
+                            held[p] = f"after adding {lbl}: {held_now.pop(p)}"
+                for p, why in held_now.items():
+                    held[p] = f"after adding {' + '.join(labels)}: {why}"
+                current = new
+                last = {t.label: t for tests in rounds for t in tests}
+                for lbl in labels:
+                    added_labels.add(lbl)
+                    last[lbl].selected = True
+                    added.append(EffectAdded(defs_all[lbl].name, lbl, {}, len(rounds) - 1,
+                                             last[lbl].p_holm, last[lbl].share_val))
     # A baseline parameter held because an unmodelled effect blurred it may be credible now
     # that the effect is in: free the held ones once more (the guard holds them again if not).
     retry = [p for p in held if p in BASELINE_LABELS and p not in current.free]
@@ -656,11 +733,37 @@ def _identify(data: MeasuredData, cfg: Config, max_effects: int,
         held, added, rounds, channels, analysis0, analysis1, unexplained, detail,
         notes=list(data.notes) + list(exp.notes)
         + [f"ignored column {c}" for c in data.ignored],
-        rejected=rejected, wall_s=time.perf_counter() - t_start, experiment=exp,
+        rejected=rejected, joint=joint, wall_s=time.perf_counter() - t_start, experiment=exp,
         outputs_before=base.outputs, outputs_after=current.outputs,
         intersample=exp.intersample, intersample_reason=exp.intersample_reason,
         input_noise=noise, consistency=agree, differs=differs,
     )
+
+
+#: Candidates refitted together when none passes alone: the best few of the last round.
+JOINT_POOL = 3
+
+
+def _joint_pool(rounds: list[list[CandidateTest]], defs: dict[str, EffectDef],
+                added: set[str]) -> list[str]:
+    """The candidates tried together: of every round's score-tested ones not added (those
+    rejected alone included: they are the likeliest halves of a pair), not judged at their
+    own fit, the :data:`JOINT_POOL` best, significant ones first, then by the share of the
+    validation residual they would remove; one per library effect (pulsation orders compete
+    among themselves)."""
+    best: dict[str, CandidateTest] = {}
+    for tests in rounds:
+        for t in tests:
+            if t.status == "tested" and t.label not in added and not defs[t.label].judged_at_fit:
+                best[t.label] = t  # the latest round's test of it
+    ranked = sorted(best.values(), key=lambda t: (not t.significant, -t.share_val))
+    pool: list[str] = []
+    names: set[str] = set()
+    for t in ranked:
+        if t.name not in names:
+            pool.append(t.label)
+            names.add(t.name)
+    return pool[:JOINT_POOL]
 
 
 def _all_scales(defs: dict[str, EffectDef]) -> dict[str, float]:
@@ -681,20 +784,29 @@ MATERIAL_SHARE = 0.01
 DIFFERS_FACTOR = 1.5
 
 
+def far_from_configuration(fit: FitResult, exp: Experiment) -> list[str]:
+    """Free linear-model parameters beyond :data:`DIFFERS_FACTOR` of their configured
+    values."""
+    out = []
+    for name in CONSISTENCY_JUDGED:
+        start = exp.start.get(name)
+        if name in fit.free and start:
+            ratio = fit.value(name) / start
+            if not 1.0 / DIFFERS_FACTOR <= ratio <= DIFFERS_FACTOR:
+                out.append(name)
+    return out
+
+
 def differs_from_configuration(fit: FitResult, exp: Experiment,
                                estimates: dict[str, ParamEstimate]) -> dict[str, dict]:
-    """Free physical parameters beyond :data:`DIFFERS_FACTOR` of their configured values:
-    ``{symbol: {"value", "ci95", "configured", "ratio"}}``."""
+    """:func:`far_from_configuration` for the report: ``{symbol: {"value", "ci95", "unit",
+    "configured", "ratio"}}``."""
     out = {}
-    for name, (sym, unit, _) in BASELINE_LABELS.items():
-        start = exp.start.get(name)
-        if name not in fit.free or name not in CONSISTENCY_JUDGED or not start:
-            continue
-        ratio = fit.value(name) / start
-        if not 1.0 / DIFFERS_FACTOR <= ratio <= DIFFERS_FACTOR:
-            e = estimates[sym]
-            out[sym] = {"value": e.value, "ci95": [e.ci_low, e.ci_high], "unit": unit,
-                        "configured": start, "ratio": ratio}
+    for name in far_from_configuration(fit, exp):
+        sym, unit, _ = BASELINE_LABELS[name]
+        e = estimates[sym]
+        out[sym] = {"value": e.value, "ci95": [e.ci_low, e.ci_high], "unit": unit,
+                    "configured": exp.start[name], "ratio": fit.value(name) / exp.start[name]}
     return out
 
 

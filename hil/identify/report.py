@@ -55,6 +55,7 @@ def summary(rep: IdentifyReport) -> dict:
         "input_noise": rep.input_noise.as_dict() if rep.input_noise is not None else None,
         "refused": None,
         "rejected": rep.rejected,
+        "tried_together": rep.joint,
         "notes": rep.notes,
         "wall_s": rep.wall_s,
     }
@@ -105,6 +106,9 @@ def text(rep: IdentifyReport) -> str:
         out.append("\neffects added: none")
     for r in rep.rejected:
         out.append(f"  rejected: {r}")
+    for j in rep.joint:
+        out.append(f"  tried together: {' + '.join(j['effects'])}: validation cost "
+                   f"{j['validation_cost_change']:+.1%}, {j['outcome']}")
     rows = []
     b, a = rep.residual_before.channels, rep.residual_after.channels
     for c in rep.channels:

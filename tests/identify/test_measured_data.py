@@ -326,3 +326,24 @@ def test_cli_refuses_with_one_line_and_exit_2(tmp_path, capsys):
     assert code == 2
     assert out.err.strip().count("\n") == 0 and "refused" in out.err and "iq" in out.err
     assert '"refused"' in out.out
+
+
+@pytest.mark.slow
+def test_two_frictions_that_come_together_are_found_jointly(rig_identified):
+    """Pump Coulomb and rod-seal Stribeck friction on the free piston at once: the baseline
+    absorbs both (J_c 40x, d_c 4.5x the preset), the seal friction alone is not credible at
+    its refit, from that start or from the configured values. Refitted together, from the
+    configured values, both come out at their sizes; what was tried is reported."""
+    rig, rep = rig_identified("free_piston", ("pump_coulomb_friction", "seal_friction"),
+                              seconds=6.0)
+    found = {e.name: e for e in rep.effects_added}
+    assert set(found) == {"pump_coulomb_friction", "seal_friction"}, list(found)
+    truth = rig.truth["effects"]
+    assert found["pump_coulomb_friction"].params["force_n"].value == pytest.approx(
+        truth["pump_coulomb_friction"]["force_n"], rel=0.10)
+    assert found["seal_friction"].params["coulomb_n"].value == pytest.approx(
+        truth["seal_friction"]["coulomb_n"], rel=0.10)
+    added = [j for j in rep.joint if j["outcome"] == "added"]
+    assert [sorted(j["effects"]) for j in added] == [["pump_coulomb_friction",
+                                                       "seal_friction"]], rep.joint
+    assert len(rep.joint) > 1  # the other pairs tried are reported too
