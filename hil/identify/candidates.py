@@ -1,4 +1,5 @@
-"""The library of candidate effects and the test of each against the residual.
+"""The test of each candidate effect against the residual (the library itself, one class per
+effect, is :mod:`hil.identify.effects`).
 
 Each candidate is a set of parameters of the fast model (:mod:`hil.identify.model`) that are
 zero in the linear model. Its *signature* is the sensitivity of every output channel to those
@@ -44,7 +45,7 @@ import numpy as np
 
 from hil.identify import stats
 from hil.identify.experiment import Experiment
-from hil.identify.model import N_ORDERS, PRESSURE_CHANNELS, SAT_CHANNELS, SAT_PRESSURE, map_threads
+from hil.identify.model import map_threads
 
 ALPHA = 0.01
 #: Retained norm share below which a signature column is collinear with declared terms.
@@ -96,90 +97,6 @@ class FitJudgement:
     share_est: float = 0.0
     share_val: float = 0.0
     refused: str = ""
-
-
-def _needs_temperature(exp: Experiment) -> str | None:
-    if exp.temperature is None:
-        return "no temp_c column"
-    return None
-
-
-def _needs_strain(exp: Experiment) -> str | None:
-    return None if "f_strain" in exp.channels else "no f_strain column"
-
-
-def _needs_strain_and_temperature(exp: Experiment) -> str | None:
-    return _needs_strain(exp) or _needs_temperature(exp)
-
-
-def _needs_skew_at_bound(exp: Experiment) -> str | None:
-    if exp.skew_at_bound:
-        return None
-    return ("the fit's timing skew lies within half a sample: a sampling alignment, "
-            "no delay beyond it")
-
-
-def _needs_moving_piston(exp: Experiment) -> str | None:
-    return "piston fixed: the seal never slides" if exp.load == "fixed" else None
-
-
-def library(exp: Experiment) -> list[EffectDef]:
-    """Every candidate instance for this experiment (pulsation: one per order 1..8;
-    saturation: one per channel that shows a plateau)."""
-    out: list[EffectDef] = []
-    for n in range(1, N_ORDERS + 1):
-        out.append(EffectDef(
-            "pump_pulsation", f"pump_pulsation[order={n}]",
-            (f"puls{n}_flow_s", f"puls{n}_flow_c", f"puls{n}_torque_s", f"puls{n}_torque_c"),
-            (0.01, 0.01, 50.0, 50.0),
-            f"displacement ripple (flow and reaction torque) and meshing torque ripple at "
-            f"order {n} of the rotor angle",
-        ))
-    out += [
-        EffectDef("pump_coulomb_friction", "pump_coulomb_friction", ("pc_force_n",), (40.0,),
-                  "Coulomb friction of the pump shaft seal, F_c s(v_p/eps); eps and the sign "
-                  "law's shape (tanh .. atan) fitted",
-                  refit_extra=(("pc_eps_m_per_s", lambda exp: exp.const.eps_pump),
-                               ("pc_shape", lambda exp: FRICTION_SHAPE_START))),
-        EffectDef("seal_friction", "seal_friction", ("sf_coulomb_n", "sf_static_n"),
-                  (15.0, 15.0),
-                  "rod-seal Coulomb + Stribeck friction on the piston; v_s and the sign "
-                  "law's shape (tanh .. atan) fitted",
-                  _needs_moving_piston,
-                  refit_extra=(("sf_vs_m_per_s", lambda exp: exp.const.vs_seal),
-                               ("sf_shape", lambda exp: FRICTION_SHAPE_START))),
-        EffectDef("stiffness_vs_position", "stiffness_vs_position", ("ks_k1", "ks_k2"),
-                  (0.1, 0.1),
-                  "k_s(x) = k_s / (1 + c1 x/h + c2 (x/h)^2), h the half stroke: Eq. "
-                  "2.25-2.27 make the series compliance exactly quadratic in x"),
-        EffectDef("viscosity_temperature", "viscosity_temperature", ("visc_coeff_per_c",),
-                  (0.02,), "d_s, d_p, d_c scale with mu(T) = exp(-c (T - T_ref))",
-                  _needs_temperature, rescales_declared=True),
-        EffectDef("strain_thermal_drift", "strain_thermal_drift",
-                  ("drift_n_per_c",), (2.5,),
-                  "drift of the strain reading with the logged temperature, "
-                  "c (T - T_ref) N/degC (thesis 4.4: 2.5 N/degC after compensation)",
-                  _needs_strain_and_temperature),
-        EffectDef("input_delay", "input_delay", ("delay_s",), (100e-6,),
-                  "causal delay between the logged and the applied current (beyond the "
-                  "baseline's sub-sample timing skew, which it replaces when added)",
-                  _needs_skew_at_bound, judged_at_fit=True),
-    ]
-    sat = [c for c in SAT_CHANNELS if c in exp.plateaus and c in exp.channels]
-    if not sat:
-        out.append(EffectDef("sensor_saturation", "sensor_saturation", (), (),
-                             "a channel clipped at a level",
-                             lambda exp: "no channel sits on a plateau at its maximum"))
-    press = [c for c in sat if c in PRESSURE_CHANNELS]
-    if len(press) > 1:  # the pressure sensors clip as one effect
-        levels = ", ".join(f"{c} {exp.plateaus[c]:.6g}" for c in press)
-        out.append(EffectDef("sensor_saturation", "sensor_saturation[pressure]",
-                             (SAT_PRESSURE,), (1.0,), f"pressure sensors clipped at {levels}"))
-        sat = [c for c in sat if c not in press]
-    for c in sat:
-        out.append(EffectDef("sensor_saturation", f"sensor_saturation[{c}]", (f"sat_{c}",),
-                             (1.0,), f"{c} clipped at {exp.plateaus[c]:.6g}"))
-    return out
 
 
 @dataclass
@@ -417,5 +334,5 @@ def rank(tests: list[CandidateTest]) -> list[CandidateTest]:
     return sorted(sig, key=lambda t: (t.share_val, t.wald), reverse=True)
 
 
-__all__ = ["ALPHA", "CandidateTest", "EffectDef", "FitJudgement", "judge_deferred", "library",
-           "rank", "test_candidates"]
+__all__ = ["ALPHA", "CandidateTest", "EffectDef", "FitJudgement", "judge_deferred", "rank",
+           "test_candidates"]

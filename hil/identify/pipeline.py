@@ -20,7 +20,6 @@
 from __future__ import annotations
 
 import dataclasses
-import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -35,7 +34,6 @@ from hil.identify.candidates import (
     EffectDef,
     FitJudgement,
     judge_deferred,
-    library,
     rank,
     test_candidates,
 )
@@ -43,17 +41,17 @@ from hil.identify.checks import check_fit, check_record
 from hil.identify.consistency import JUDGED as CONSISTENCY_JUDGED
 from hil.identify.consistency import Consistency, consistency
 from hil.identify.csvdata import MeasuredData
+from hil.identify.effects import EFFECTS, ParamEstimate, library
 from hil.identify.experiment import Experiment, prepare, quantum
 from hil.identify.fit import (
     NUISANCE_SCALES,
-    Z95,
     FitResult,
     OutputErrorFit,
     baseline_free,
     fit_baseline,
     guarded_fit,
 )
-from hil.identify.model import IDX, PRESSURE_CHANNELS, FastModel
+from hil.identify.model import IDX, FastModel
 from hil.identify.noise import (
     InputNoise,
     estimate_input_noise,
@@ -80,20 +78,6 @@ BASELINE_LABELS = {
     "lag_pressure_s": ("tau_p_sensor", "s", "first-order lag of the pressure sensors (nuisance)"),
     "lag_strain_s": ("tau_strain", "s", "first-order lag of the strain measurement (nuisance)"),
 }
-
-
-@dataclass
-class ParamEstimate:
-    """A parameter with its 95 % confidence interval (HAC, delta method where derived)."""
-
-    name: str
-    value: float
-    ci_low: float
-    ci_high: float
-    unit: str = ""
-
-    def as_dict(self) -> dict:
-        return {"value": self.value, "ci95": [self.ci_low, self.ci_high], "unit": self.unit}
 
 
 @dataclass
@@ -213,120 +197,6 @@ def _estimates(fit: FitResult, names: list[str]) -> dict[str, ParamEstimate]:
             lo = hi = v
         out[sym] = ParamEstimate(sym, v, lo, hi, unit)
     return out
-
-
-def _delta(fit: FitResult, fn: Callable[[np.ndarray], float], params: list[str]
-           ) -> tuple[float, float]:
-    """Value of ``fn(theta)`` and its standard error by the delta method."""
-    theta = fit.theta
-    v = fn(theta)
-    idx = [fit.free.index(p) for p in params if p in fit.free]
-    if fit.cov is None or not idx:
-        return v, float("nan")
-    grad = np.zeros(len(idx))
-    for k, i in enumerate(idx):
-        p = fit.free[i]
-        step = max(abs(theta[IDX[p]]) * 1e-4, 1e-9)
-        th = theta.copy()
-        th[IDX[p]] += step
-        grad[k] = (fn(th) - v) / step
-    cov = fit.cov[np.ix_(idx, idx)]
-    return v, float(np.sqrt(max(grad @ cov @ grad, 0.0)))
-
-
-def _pe(name: str, fit: FitResult, fn: Callable[[np.ndarray], float], params: list[str],
-        unit: str) -> ParamEstimate:
-    v, se = _delta(fit, fn, params)
-    return ParamEstimate(name, v, v - Z95 * se, v + Z95 * se, unit)
-
-
-def describe_effect(d: EffectDef, fit: FitResult, exp: Experiment) -> dict[str, ParamEstimate]:
-    """Physical parameters of an added effect with 95 % confidence intervals."""
-    ps = list(d.params)
-    g = IDX
-    if d.name == "pump_pulsation":
-        fs_, fc_, ts_, tc_ = ps
-        order = int(d.label.split("=")[1].rstrip("]"))
-        return {
-            "order": ParamEstimate("order", order, order, order, ""),
-            "amplitude": _pe("amplitude", fit, lambda t: math.hypot(t[g[fs_]], t[g[fc_]]),
-                             [fs_, fc_], "1"),
-            "phase_rad": _pe("phase_rad", fit, lambda t: math.atan2(t[g[fc_]], t[g[fs_]]),
-                             [fs_, fc_], "rad"),
-            "torque_n": _pe("torque_n", fit, lambda t: math.hypot(t[g[ts_]], t[g[tc_]]),
-                            [ts_, tc_], "N"),
-            "torque_phase_rad": _pe("torque_phase_rad", fit,
-                                    lambda t: math.atan2(t[g[tc_]], t[g[ts_]]), [ts_, tc_],
-                                    "rad"),
-        }
-    if d.name == "pump_coulomb_friction":
-        out = {"force_n": _pe("force_n", fit, lambda t: t[g["pc_force_n"]], ps, "N")}
-        if "pc_eps_m_per_s" in fit.free:
-            out["eps_m_per_s"] = _pe("eps_m_per_s", fit, lambda t: t[g["pc_eps_m_per_s"]],
-                                     ["pc_eps_m_per_s"], "m/s")
-        if "pc_shape" in fit.free:
-            out["shape"] = _pe("shape", fit, lambda t: t[g["pc_shape"]], ["pc_shape"],
-                               "0 tanh .. 1 atan")
-        return out
-    if d.name == "seal_friction":
-        out = {"coulomb_n": _pe("coulomb_n", fit, lambda t: t[g["sf_coulomb_n"]], ps, "N"),
-               "static_n": _pe("static_n", fit, lambda t: t[g["sf_static_n"]], ps, "N")}
-        if "sf_vs_m_per_s" in fit.free:
-            out["stribeck_velocity_m_per_s"] = _pe(
-                "stribeck_velocity_m_per_s", fit, lambda t: t[g["sf_vs_m_per_s"]],
-                ["sf_vs_m_per_s"], "m/s")
-        if "sf_shape" in fit.free:
-            out["shape"] = _pe("shape", fit, lambda t: t[g["sf_shape"]], ["sf_shape"],
-                               "0 tanh .. 1 atan")
-        return out
-    if d.name == "stiffness_vs_position":
-        # k_s(x) = k_s / (1 + c1 x/h + c2 (x/h)^2): Eq. 2.25-2.27 make the compliance exactly
-        # quadratic, 1/k_s(x) = 1/k_s(0) - x^2 / (2 A kappa) with A = V_side + k_c h, so
-        # c2 = -h^2 k_s / (2 A kappa) gives the oil volume per side (dead volume + pipe).
-        x = exp.position if exp.position is not None else np.zeros(1)
-        c = exp.const
-        h = c.half_stroke
-        lo, hi = float(x.min()) / h, float(x.max()) / h
-        mid = 0.5 * (lo + hi)
-
-        def span(t: np.ndarray) -> float:
-            def k(xn: float) -> float:
-                return 1.0 / (1.0 + t[g["ks_k1"]] * xn + t[g["ks_k2"]] * xn * xn)
-
-            return 0.5 * (k(lo) + k(hi)) / k(mid) - 1.0
-
-        out = {"ks_c1": _pe("ks_c1", fit, lambda t: t[g["ks_k1"]], ps, "1"),
-               "ks_c2": _pe("ks_c2", fit, lambda t: t[g["ks_k2"]], ps, "1"),
-               "ks_relative_span": _pe("ks_relative_span", fit, span, ps, "1")}
-        if fit.value("ks_k2") < 0.0 and c.bulk_modulus > 0.0:
-            def side_volume(t: np.ndarray) -> float:
-                a = -h * h * t[g["ks"]] / (2.0 * c.bulk_modulus * t[g["ks_k2"]])
-                return a - c.kc * h
-
-            out["side_volume_m3"] = _pe("side_volume_m3", fit, side_volume,
-                                        [*ps, "ks"], "m^3")
-        return out
-    if d.name == "viscosity_temperature":
-        return {"coeff_per_c": _pe("coeff_per_c", fit, lambda t: t[g["visc_coeff_per_c"]],
-                                   ps, "1/degC"),
-                "t_ref_c": ParamEstimate("t_ref_c", exp.t_ref, exp.t_ref, exp.t_ref, "degC")}
-    if d.name == "strain_thermal_drift":
-        out = {"n_per_c": _pe("n_per_c", fit, lambda t: t[g["drift_n_per_c"]], ps, "N/degC")}
-        if exp.temperature is not None:
-            d_t = float(exp.temperature[-1] - exp.temperature[0])
-            out["drift_n"] = _pe("drift_n", fit, lambda t: t[g["drift_n_per_c"]] * d_t, ps,
-                                 "N")
-        return out
-    if d.name == "input_delay":
-        return {"delay_s": _pe("delay_s", fit, lambda t: t[g["delay_s"]], ps, "s")}
-    if d.name == "sensor_saturation":
-        ch = d.label.split("[")[1].rstrip("]")
-        # the pressure group: the highest plateau (the sensors' common range)
-        lvl = (max(exp.plateaus[c] for c in PRESSURE_CHANNELS if c in exp.plateaus)
-               if ch == "pressure" else exp.plateaus[ch])
-        return {"level": ParamEstimate("level", lvl, lvl, lvl, "Pa" if ch != "f_strain" else "N"),
-                "clip_fraction": _pe("clip_fraction", fit, lambda t: t[g[ps[0]]], ps, "1")}
-    return {p: _pe(p, fit, lambda t, p=p: t[g[p]], [p], "") for p in ps}
 
 
 #: Relative cost difference under which two intersample modes fit equally well.
@@ -494,21 +364,9 @@ def _identify(data: MeasuredData, cfg: Config, max_effects: int,
             for p, begin in e.refit_extra:
                 theta0[IDX[p]] = credible[IDX[p]] = begin(exp)
                 new_free.append(p)
-        names = {e.name for e in ds_}
-        if "viscosity_temperature" in names and exp.temperature is not None:
-            # the fitted dampers hold at the record's temperature until the law is in; with
-            # it they hold at the reference temperature (a held one already does: the preset's)
-            t_mean = float(np.mean(exp.temperature[est_mask]))
-            factor = math.exp(theta0[IDX["visc_coeff_per_c"]] * (t_mean - exp.t_ref))
-            for p in ("ds", "dp", "dc"):
-                if p in current.free:
-                    theta0[IDX[p]] *= factor
-                    credible[IDX[p]] *= factor
-        if "input_delay" in names and "skew_s" in new_free:
-            # the causal delay takes over the sub-sample skew: one timing parameter
-            theta0[IDX["delay_s"]] = max(theta0[IDX["delay_s"]] + theta0[IDX["skew_s"]], 0.0)
-            theta0[IDX["skew_s"]] = 0.0
-            new_free.remove("skew_s")
+        for e in ds_:
+            EFFECTS[e.name].prepare_refit(theta0, credible, new_free, exp, current.free,
+                                          est_mask)
         scales = {p: nom for e in ds_ for p, nom in zip(e.params, e.nominal, strict=True)}
         refitter = OutputErrorFit(model, {**NUISANCE_SCALES(exp.dt), **_all_scales(defs_all),
                                           **scales})
@@ -709,7 +567,8 @@ def _identify(data: MeasuredData, cfg: Config, max_effects: int,
             current = again
     # describe the added effects with the final fit's covariance
     for e in added:
-        e.params = describe_effect(defs_all[e.label], current, exp)
+        d = defs_all[e.label]
+        e.params = EFFECTS[d.name].describe(d, current, exp)
     residual1 = {c: exp.measured[c] - current.outputs[c] for c in exp.channels}
     analysis1 = analyse(exp, residual1, exp.val, noise_part(current.theta))
     channels = [ChannelError(c, nrmse(exp.measured[c][exp.val], base.outputs[c][exp.val]),

@@ -6,7 +6,7 @@ known truth; :func:`hil.identify.pipeline.identify` sees only the record. A case
 when
 
 * every true library effect is named, and nothing else is added;
-* each judged magnitude (:data:`MAGNITUDE_KEYS`) is within :data:`TOL_MAGNITUDE` of the truth
+* each judged magnitude (:func:`magnitude_keys`) is within :data:`TOL_MAGNITUDE` of the truth
   (amplitudes within :data:`TOL_AMPLITUDE`);
 * the verdict is honest: ``unexplained`` exactly when an effect outside the library is in
   the record.
@@ -23,19 +23,16 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-#: (truth key in the rig's ``truth["effects"][name]``, key in the report's effect params,
-#: tolerance kind) per library effect: the magnitudes a case is judged on.
-MAGNITUDE_KEYS: dict[str, tuple[tuple[str, str, str], ...]] = {
-    "pump_pulsation": (("amplitude", "amplitude", "amplitude"),
-                       ("torque_n", "torque_n", "amplitude")),
-    "pump_coulomb_friction": (("force_n", "force_n", "magnitude"),),
-    "seal_friction": (("coulomb_n", "coulomb_n", "magnitude"),),
-    "stiffness_vs_position": (("ks_relative_span", "ks_relative_span", "magnitude"),),
-    "viscosity_temperature": (("coeff_per_c", "coeff_per_c", "magnitude"),),
-    "strain_thermal_drift": (("n_per_c", "n_per_c", "magnitude"),),
-    "input_delay": (("delay_s", "delay_s", "magnitude"),),
-    "sensor_saturation": (("level_pa", "level", "magnitude"),),
-}
+
+def magnitude_keys() -> dict[str, tuple[tuple[str, str, str], ...]]:
+    """(truth key in the rig's ``truth["effects"][name]``, key in the report's effect params,
+    tolerance kind) per library effect: the magnitudes a case is judged on (each effect's
+    :attr:`~hil.identify.effects.Effect.judged`)."""
+    from hil.identify.effects import EFFECTS
+
+    return {name: e.judged for name, e in EFFECTS.items()}
+
+
 TOL_MAGNITUDE = 0.10
 TOL_AMPLITUDE = 0.20
 
@@ -182,6 +179,7 @@ def judge(case: Case, truth: dict[str, dict[str, float]], found: dict[str, dict[
     """Right or wrong, why, and the magnitudes compared (module docstring)."""
     from hil.identify.rig import LIBRARY_EFFECTS
 
+    keys = magnitude_keys()
     lib_truth = [e for e in case.effects if e in LIBRARY_EFFECTS]
     outside = [e for e in case.effects if e not in LIBRARY_EFFECTS]
     problems: list[str] = []
@@ -193,7 +191,7 @@ def judge(case: Case, truth: dict[str, dict[str, float]], found: dict[str, dict[
     if spurious:
         problems.append("added " + ", ".join(spurious))
     for eff in lib_truth:
-        for tkey, fkey, kind in MAGNITUDE_KEYS.get(eff, ()):
+        for tkey, fkey, kind in keys.get(eff, ()):
             want = truth.get(eff, {}).get(tkey)
             if want is None:
                 continue
