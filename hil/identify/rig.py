@@ -602,6 +602,184 @@ def _temperature_params(shape: str, seconds: float) -> np.ndarray:
     return np.array([sid, a, b, c, seconds], dtype=float)
 
 
+@dataclass
+class _Excitation:
+    """The experiment's input: multisine lines (Hz, A, rad), the free piston's position loop
+    (A/m; 0 for none) with its reference (m) and feed-forward (A) per sample, the sweep, and
+    a description."""
+
+    lines_hz: np.ndarray
+    amps_a: np.ndarray
+    phases: np.ndarray
+    kx: float
+    xref: np.ndarray
+    ff: np.ndarray
+    sweep_m: float
+    sweep_hz: float
+    description: str
+
+
+def _excitation(load: str, profile: str, cfg: Config, t: np.ndarray, rng_exc: np.random.Generator,
+                excitation_lines: tuple[Sequence[float], Sequence[float], Sequence[float]] | None,
+                position_loop_a_per_m: float | None) -> _Excitation:
+    """The profile's multisine (or the given lines) and, with the piston free, the position
+    loop that keeps it inside the stroke while sweeping it (see :func:`generate_rig`)."""
+    n = t.size
+    free = load == "free_piston"
+    if excitation_lines is not None:
+        lf, la, lph = (np.asarray(v, dtype=float).ravel() for v in excitation_lines)
+        if not lf.size == la.size == lph.size:
+            raise ValueError("excitation_lines: three sequences of the same length")
+        exc_desc = f"{lf.size} given lines"
+    elif profile == "slide":
+        lf, la, lph = rig_multisine(0.3, 300.0, 50, 0.5, rng_exc, t)
+        exc_desc = "0.5 A rms, 0.3-300 Hz, 50 lines"
+    elif profile == "resonance":
+        f1, a1, p1 = rig_multisine(0.3, 300.0, 50, 1.0, rng_exc, t)
+        f2, a2, p2 = rig_multisine(700.0, 2000.0, 60, 4.0, rng_exc, t)
+        lf, la, lph = np.r_[f1, f2], np.r_[a1, a2], np.r_[p1, p2]
+        exc_desc = "1 A rms 0.3-300 Hz (50 lines) + 4 A rms 700-2000 Hz (60 lines)"
+    elif free:
+        lf, la, lph = rig_multisine(0.3, 2000.0, 100, 2.5, rng_exc, t)
+        exc_desc = "2.5 A rms, 0.3-2000 Hz, 100 lines"
+    else:
+        lf, la, lph = rig_multisine(0.3, 300.0, 100, 5.0, rng_exc, t)
+        exc_desc = "5 A rms, 0.3-300 Hz, 100 lines"
+    kx = 0.0
+    xref = np.zeros(n)
+    ff = np.zeros(n)
+    sweep_m, sweep_hz = 0.0, 0.0
+    if free:
+        kx = (POSITION_LOOP_A_PER_M[profile] if position_loop_a_per_m is None
+              else position_loop_a_per_m)
+        sweep_m = {"resonance": 0.030, "slide": 0.018}.get(profile, 0.014)
+        sweep_hz = {"resonance": 0.5, "slide": 0.5}.get(profile, 0.125)
+        if profile == "slide":
+            # triangle at constant speed 4 A f; the current that holds that speed against
+            # the preset's (not the true) d_p + d_c is fed forward, as an experimenter would
+            phase = (sweep_hz * t + 0.25) % 1.0
+            xref = sweep_m * (4.0 * np.abs(phase - 0.5) - 1.0)
+            v_ref = 4.0 * sweep_m * sweep_hz * np.sign(phase - 0.5)
+            d_nom = cfg.get("hydraulics.dp_ns_per_m") + cfg.get("hydraulics.dc_ns_per_m")
+            k_nom = cfg.get("motor.force_at_rated_n") / cfg.get("motor.iq_rated_a")
+            ff = d_nom * v_ref / k_nom
+        else:
+            xref = sweep_m * np.sin(2.0 * math.pi * sweep_hz * t)
+        if kx == 0.0:
+            xref = np.zeros(n)
+    return _Excitation(lf, la, lph, float(kx), xref, ff, sweep_m, sweep_hz, exc_desc)
+
+
+def _effect_truth(mags: dict[str, dict[str, float]], zs: np.ndarray, temps: np.ndarray,
+                  p: np.ndarray, cols: dict[str, np.ndarray], kc: float, half: float,
+                  v_side: float, delay: float, p_lsb: float, hum_phase: float, cfg: Config
+                  ) -> dict[str, dict[str, float]]:
+    """Each effect's truth in the identification report's terms, from the magnitudes and
+    the simulated record (states ``zs``, true oil temperature ``temps``, logged ``cols``)."""
+    eff_truth: dict[str, dict[str, float]] = {}
+    press_names = ("p_pump_a", "p_pump_b", "p_cyl_a", "p_cyl_b", "p_acc")
+    t_ref = float(p[I_TREF])
+    for name, mag in mags.items():
+        if name == "pump_pulsation":
+            rows = _pulsation_orders(mag)
+            for i, (o, a, ph, tq, tph) in enumerate(rows):
+                d = {"order": o, "amplitude": a, "phase_rad": ph, "torque_n": tq,
+                     "torque_phase_rad": tph}
+                if i == 0:
+                    eff_truth["pump_pulsation"] = dict(d)
+                if len(rows) > 1:
+                    # several orders: each also under the report's label
+                    eff_truth[f"pump_pulsation[order={int(o)}]"] = d
+        elif name == "pump_coulomb_friction":
+            eff_truth[name] = {"force_n": mag["force_n"], "eps_m_per_s": mag["eps_m_per_s"]}
+        elif name == "seal_friction":
+            eff_truth[name] = dict(mag)
+        elif name == "stiffness_vs_position":
+            x = zs[:, Z_XC]
+            lo, hi = float(x.min()), float(x.max())
+            kfun = _ks_of_x(np.array([lo, 0.5 * (lo + hi), hi]), v_side, p[I_KAPPA], kc,
+                            half, p[I_KPIPE])
+            a_eq = (v_side + kc * half) * p[I_KAPPA] / cfg.get("hydraulics.bulk_modulus_pa")
+            eff_truth[name] = {
+                "ks_relative_span": float(0.5 * (kfun[0] + kfun[2]) / kfun[1] - 1.0),
+                "side_volume_m3": v_side,
+                # what the report's volume (computed with the preset's bulk modulus) sees
+                "side_volume_at_preset_kappa_m3": float(a_eq - kc * half),
+                "bulk_modulus_pa": float(p[I_KAPPA]),
+                "ks_pipe_n_per_m": float(p[I_KPIPE]),
+                "ks_mid_stroke_n_per_m": float(p[I_KS]),
+                "x_min_m": lo, "x_max_m": hi,
+            }
+        elif name == "viscosity_temperature":
+            eff_truth[name] = {"coeff_per_c": mag["coeff_per_c"], "reference_c": t_ref}
+        elif name == "strain_thermal_drift":
+            eff_truth[name] = {"n_per_c": mag["n_per_c"],
+                               "drift_n": float(mag["n_per_c"] * (temps[-1] - temps[0]))}
+        elif name == "input_delay":
+            eff_truth[name] = {"delay_s": delay}
+        elif name == "sensor_saturation":
+            level_code = math.floor(mag["level_pa"] / p_lsb + 0.5)
+            fracs = {c: float(np.mean(cols[c] >= level_code * p_lsb)) for c in press_names}
+            eff_truth[name] = {"level_pa": level_code * p_lsb, "level_set_pa": mag["level_pa"],
+                               **{f"clip_fraction_{c}": v for c, v in fracs.items()}}
+        elif name == "hose_viscoelastic":
+            eff_truth[name] = {"k_m_n_per_m": float(p[I_KM]),
+                               "c_m_ns_per_m": float(p[I_KM] / p[I_KM_RATE]),
+                               "corner_hz": mag["corner_hz"]}
+        elif name == "mains_hum":
+            eff_truth[name] = {**mag, "phase_rad": hum_phase}
+        else:
+            eff_truth[name] = dict(mag)
+    return eff_truth
+
+
+def _steps() -> tuple[float, float, float]:
+    """The converters' steps of :data:`SENSORS`: pressure (Pa), strain (N), encoder (rad)."""
+    return (SENSORS["pressure_full_scale_pa"] / 2 ** SENSORS["pressure_bits"],
+            2.0 * SENSORS["strain_full_scale_n"] / 2 ** SENSORS["strain_bits"],
+            2.0 * math.pi / SENSORS["encoder_counts_per_rev"])
+
+
+def _sensors(zs: np.ndarray, cur: np.ndarray, temps: np.ndarray, p: np.ndarray,
+             mags: dict[str, dict[str, float]], theta0: float, hum_phase: float, t: np.ndarray,
+             n_press: np.ndarray, n_strain: np.ndarray, n_temp: np.ndarray
+             ) -> tuple[dict[str, np.ndarray], np.ndarray, float]:
+    """The logged columns from the simulated states (:data:`SENSORS`: noise, converters,
+    encoders; the outside effects on the sensors), the true rotor angle, and the share of
+    pressure samples beyond the converter's rail."""
+    n = t.size
+    p_lsb, s_lsb, enc_q = _steps()
+    p_codes = 2 ** SENSORS["pressure_bits"] - 1
+    s_codes = 2 ** (SENSORS["strain_bits"] - 1)
+    sat_level = mags.get("sensor_saturation", {}).get("level_pa")
+    press_names = ("p_pump_a", "p_pump_b", "p_cyl_a", "p_cyl_b", "p_acc")
+    analog = [zs[:, Z_PPA], zs[:, Z_PPB], zs[:, Z_PCA], zs[:, Z_PCB],
+              np.full(n, p[I_P0])]
+    cols: dict[str, np.ndarray] = {"iq": cur[:, 2].copy()}
+    rotor = theta0 + zs[:, Z_THP] * p[I_KCKP]
+    disc = rotor
+    if "backlash" in mags:
+        disc = _backlash(rotor, mags["backlash"]["width_rad"])
+    cols["theta_m"] = np.floor(disc / enc_q) * enc_q
+    rail = 0.0
+    for j, name in enumerate(press_names):
+        v = analog[j] + n_press[j]
+        if name == "p_pump_a" and "mains_hum" in mags:
+            mh = mags["mains_hum"]
+            v = v + mh["amplitude_pa"] * np.sin(2.0 * math.pi * mh["freq_hz"] * t + hum_phase)
+        if sat_level is not None:
+            v = np.minimum(v, sat_level)
+        code = np.floor(v / p_lsb + 0.5)
+        rail = max(rail, float(np.mean(code > p_codes)))
+        cols[name] = np.clip(code, 0, p_codes) * p_lsb
+    cols["x_piston"] = np.floor(zs[:, Z_XC] / SENSORS["piston_lsb_m"]) * SENSORS["piston_lsb_m"]
+    code = np.floor((zs[:, Z_FS] + n_strain) / s_lsb + 0.5)
+    cols["f_strain"] = np.clip(code, -s_codes, s_codes - 1) * s_lsb
+    t_lsb = SENSORS["temperature_lsb_c"]
+    cols["temp_c"] = np.floor((temps + n_temp) / t_lsb + 0.5) * t_lsb
+    return cols, rotor, rail
+
+
 def generate_rig(
     load: str = "fixed_piston",
     effects: Mapping[str, Mapping[str, float]] | Sequence[str] = (),
@@ -745,48 +923,8 @@ def generate_rig(
         raise ValueError(f"input_delay: delay_s {delay} must be >= 0")
 
     # --- excitation -----------------------------------------------------------------------
-    free = load == "free_piston"
-    if excitation_lines is not None:
-        lf, la, lph = (np.asarray(v, dtype=float).ravel() for v in excitation_lines)
-        if not lf.size == la.size == lph.size:
-            raise ValueError("excitation_lines: three sequences of the same length")
-        exc_desc = f"{lf.size} given lines"
-    elif profile == "slide":
-        lf, la, lph = rig_multisine(0.3, 300.0, 50, 0.5, rng_exc, t)
-        exc_desc = "0.5 A rms, 0.3-300 Hz, 50 lines"
-    elif profile == "resonance":
-        f1, a1, p1 = rig_multisine(0.3, 300.0, 50, 1.0, rng_exc, t)
-        f2, a2, p2 = rig_multisine(700.0, 2000.0, 60, 4.0, rng_exc, t)
-        lf, la, lph = np.r_[f1, f2], np.r_[a1, a2], np.r_[p1, p2]
-        exc_desc = "1 A rms 0.3-300 Hz (50 lines) + 4 A rms 700-2000 Hz (60 lines)"
-    elif free:
-        lf, la, lph = rig_multisine(0.3, 2000.0, 100, 2.5, rng_exc, t)
-        exc_desc = "2.5 A rms, 0.3-2000 Hz, 100 lines"
-    else:
-        lf, la, lph = rig_multisine(0.3, 300.0, 100, 5.0, rng_exc, t)
-        exc_desc = "5 A rms, 0.3-300 Hz, 100 lines"
-    kx = 0.0
-    xref = np.zeros(n)
-    ff = np.zeros(n)
-    sweep_m, sweep_hz = 0.0, 0.0
-    if free:
-        kx = (POSITION_LOOP_A_PER_M[profile] if position_loop_a_per_m is None
-              else position_loop_a_per_m)
-        sweep_m = {"resonance": 0.030, "slide": 0.018}.get(profile, 0.014)
-        sweep_hz = {"resonance": 0.5, "slide": 0.5}.get(profile, 0.125)
-        if profile == "slide":
-            # triangle at constant speed 4 A f; the current that holds that speed against
-            # the preset's (not the true) d_p + d_c is fed forward, as an experimenter would
-            phase = (sweep_hz * t + 0.25) % 1.0
-            xref = sweep_m * (4.0 * np.abs(phase - 0.5) - 1.0)
-            v_ref = 4.0 * sweep_m * sweep_hz * np.sign(phase - 0.5)
-            d_nom = cfg.get("hydraulics.dp_ns_per_m") + cfg.get("hydraulics.dc_ns_per_m")
-            k_nom = cfg.get("motor.force_at_rated_n") / cfg.get("motor.iq_rated_a")
-            ff = d_nom * v_ref / k_nom
-        else:
-            xref = sweep_m * np.sin(2.0 * math.pi * sweep_hz * t)
-        if kx == 0.0:
-            xref = np.zeros(n)
+    exc = _excitation(load, profile, cfg, t, rng_exc, excitation_lines, position_loop_a_per_m)
+    lf, la, lph, kx, xref, ff = exc.lines_hz, exc.amps_a, exc.phases, exc.kx, exc.xref, exc.ff
 
     # --- noise, drawn in a fixed order whatever the options -------------------------------
     i_lsb = 2.0 * SENSORS["current_full_scale_a"] / 2 ** SENSORS["current_bits"]
@@ -823,37 +961,9 @@ def generate_rig(
               temps, cur)
 
     # --- sensors --------------------------------------------------------------------------
-    p_lsb = SENSORS["pressure_full_scale_pa"] / 2 ** SENSORS["pressure_bits"]
-    p_codes = 2 ** SENSORS["pressure_bits"] - 1
-    s_lsb = 2.0 * SENSORS["strain_full_scale_n"] / 2 ** SENSORS["strain_bits"]
-    s_codes = 2 ** (SENSORS["strain_bits"] - 1)
-    enc_q = 2.0 * math.pi / SENSORS["encoder_counts_per_rev"]
-    sat_level = mags.get("sensor_saturation", {}).get("level_pa")
-    press_names = ("p_pump_a", "p_pump_b", "p_cyl_a", "p_cyl_b", "p_acc")
-    analog = [zs[:, Z_PPA], zs[:, Z_PPB], zs[:, Z_PCA], zs[:, Z_PCB],
-              np.full(n, p[I_P0])]
-    cols: dict[str, np.ndarray] = {"iq": cur[:, 2].copy()}
-    rotor = theta0 + zs[:, Z_THP] * p[I_KCKP]
-    disc = rotor
-    if "backlash" in mags:
-        disc = _backlash(rotor, mags["backlash"]["width_rad"])
-    cols["theta_m"] = np.floor(disc / enc_q) * enc_q
-    rail = 0.0
-    for j, name in enumerate(press_names):
-        v = analog[j] + n_press[j]
-        if name == "p_pump_a" and "mains_hum" in mags:
-            mh = mags["mains_hum"]
-            v = v + mh["amplitude_pa"] * np.sin(2.0 * math.pi * mh["freq_hz"] * t + hum_phase)
-        if sat_level is not None:
-            v = np.minimum(v, sat_level)
-        code = np.floor(v / p_lsb + 0.5)
-        rail = max(rail, float(np.mean(code > p_codes)))
-        cols[name] = np.clip(code, 0, p_codes) * p_lsb
-    cols["x_piston"] = np.floor(zs[:, Z_XC] / SENSORS["piston_lsb_m"]) * SENSORS["piston_lsb_m"]
-    code = np.floor((zs[:, Z_FS] + n_strain) / s_lsb + 0.5)
-    cols["f_strain"] = np.clip(code, -s_codes, s_codes - 1) * s_lsb
-    t_lsb = SENSORS["temperature_lsb_c"]
-    cols["temp_c"] = np.floor((temps + n_temp) / t_lsb + 0.5) * t_lsb
+    cols, rotor, rail = _sensors(zs, cur, temps, p, mags, theta0, hum_phase, t, n_press,
+                                 n_strain, n_temp)
+    p_lsb, s_lsb, enc_q = _steps()
 
     header = {"source": f"eha-hil identify-synth --realism rig (seed {seed})"}
     if header_intersample:
@@ -872,58 +982,8 @@ def generate_rig(
                                     "k_rod", "c_rod", "precharge_pa")}
     params["ks"] = float(p[I_KS])
     params["reference_c"] = t_ref
-    eff_truth: dict[str, dict[str, float]] = {}
-    for name, mag in mags.items():
-        if name == "pump_pulsation":
-            rows = _pulsation_orders(mag)
-            for i, (o, a, ph, tq, tph) in enumerate(rows):
-                d = {"order": o, "amplitude": a, "phase_rad": ph, "torque_n": tq,
-                     "torque_phase_rad": tph}
-                if i == 0:
-                    eff_truth["pump_pulsation"] = dict(d)
-                if len(rows) > 1:
-                    # several orders: each also under the report's label
-                    eff_truth[f"pump_pulsation[order={int(o)}]"] = d
-        elif name == "pump_coulomb_friction":
-            eff_truth[name] = {"force_n": mag["force_n"], "eps_m_per_s": mag["eps_m_per_s"]}
-        elif name == "seal_friction":
-            eff_truth[name] = dict(mag)
-        elif name == "stiffness_vs_position":
-            x = zs[:, Z_XC]
-            lo, hi = float(x.min()), float(x.max())
-            kfun = _ks_of_x(np.array([lo, 0.5 * (lo + hi), hi]), v_side, p[I_KAPPA], kc,
-                            half, p[I_KPIPE])
-            a_eq = (v_side + kc * half) * p[I_KAPPA] / cfg.get("hydraulics.bulk_modulus_pa")
-            eff_truth[name] = {
-                "ks_relative_span": float(0.5 * (kfun[0] + kfun[2]) / kfun[1] - 1.0),
-                "side_volume_m3": v_side,
-                # what the report's volume (computed with the preset's bulk modulus) sees
-                "side_volume_at_preset_kappa_m3": float(a_eq - kc * half),
-                "bulk_modulus_pa": float(p[I_KAPPA]),
-                "ks_pipe_n_per_m": float(p[I_KPIPE]),
-                "ks_mid_stroke_n_per_m": float(p[I_KS]),
-                "x_min_m": lo, "x_max_m": hi,
-            }
-        elif name == "viscosity_temperature":
-            eff_truth[name] = {"coeff_per_c": mag["coeff_per_c"], "reference_c": t_ref}
-        elif name == "strain_thermal_drift":
-            eff_truth[name] = {"n_per_c": mag["n_per_c"],
-                               "drift_n": float(mag["n_per_c"] * (temps[-1] - temps[0]))}
-        elif name == "input_delay":
-            eff_truth[name] = {"delay_s": delay}
-        elif name == "sensor_saturation":
-            level_code = math.floor(mag["level_pa"] / p_lsb + 0.5)
-            fracs = {c: float(np.mean(cols[c] >= level_code * p_lsb)) for c in press_names}
-            eff_truth[name] = {"level_pa": level_code * p_lsb, "level_set_pa": mag["level_pa"],
-                               **{f"clip_fraction_{c}": v for c, v in fracs.items()}}
-        elif name == "hose_viscoelastic":
-            eff_truth[name] = {"k_m_n_per_m": float(p[I_KM]),
-                               "c_m_ns_per_m": float(p[I_KM] / p[I_KM_RATE]),
-                               "corner_hz": mag["corner_hz"]}
-        elif name == "mains_hum":
-            eff_truth[name] = {**mag, "phase_rad": hum_phase}
-        else:
-            eff_truth[name] = dict(mag)
+    eff_truth = _effect_truth(mags, zs, temps, p, cols, kc, half, v_side, delay, p_lsb,
+                              hum_phase, cfg)
     truth = {
         "parameters": params,
         "effects": eff_truth,
@@ -942,8 +1002,8 @@ def generate_rig(
         "current_noise_lsb": current_noise_lsb, "current_lsb_a": i_lsb,
         "current_error_rms_a": noise_rms if intersample == "continuous" else 0.0,
         "current_loop_hz": CURRENT_LOOP_HZ, "position_loop_a_per_m": kx,
-        "sweep_m": sweep_m, "sweep_hz": sweep_hz,
-        "excitation": exc_desc, "excitation_rms_a": float(math.sqrt(0.5 * np.sum(la * la))),
+        "sweep_m": exc.sweep_m, "sweep_hz": exc.sweep_hz,
+        "excitation": exc.description, "excitation_rms_a": float(math.sqrt(0.5 * np.sum(la * la))),
         "temperature": temperature, "temperature_law": TEMPERATURE_SHAPES[temperature],
         "sensors": dict(SENSORS), "pressure_lsb_pa": p_lsb, "strain_lsb_n": s_lsb,
         "encoder_lsb_rad": enc_q, "pressure_rail_fraction": rail,
