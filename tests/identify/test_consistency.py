@@ -5,7 +5,8 @@ independent rig (truth from the generator, never from the fit).
 It must flag a stiffness that depends on frequency (a Maxwell branch in the series
 elasticity) and a parameter that changes over the record (the dampers following the oil's
 temperature), both absorbed by the linear model that lacks them, and must not flag a
-consistent rig whose parameters lie 4x from the preset the fit starts from."""
+consistent rig whose parameters lie 4x from the preset the fit starts from. Each record is
+simulated and fitted (~5 s CPU): marked slow, out of ``make test-fast``."""
 
 from __future__ import annotations
 
@@ -39,6 +40,7 @@ def _flagged(c: Consistency) -> dict[str, set[str]]:
     return out
 
 
+@pytest.mark.slow
 def test_flags_a_frequency_dependent_stiffness():
     """A 30 Hz Maxwell branch (half the series stiffness) on the fixed piston: the linear
     fit whitens the residual with k_s 30 % and d_p 100 % above the truth; the stiffness the
@@ -51,6 +53,7 @@ def test_flags_a_frequency_dependent_stiffness():
     assert "k_s" in ks.describe("k_s") and " at " in ks.describe("k_s")
 
 
+@pytest.mark.slow
 def test_flags_a_time_varying_parameter():
     """The oil heats 15 -> 25 degC over the record and the dampers follow it
     (``viscosity_temperature`` at 0.03/degC: -26 % over the record), fitted by constant
@@ -63,6 +66,7 @@ def test_flags_a_time_varying_parameter():
     assert a.ci_high < b.ci_low and s.ratio > 1.03
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("load,overrides", [
     ("fixed_piston", {"hydraulics.ks_n_per_m": 4.0}),
     ("conrod_fixed", {"load.conrod_stiffness_n_per_m": 4.0}),
