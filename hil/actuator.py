@@ -253,6 +253,10 @@ class ActuatorStack:
             from hil.mcu_c import CMcu
 
             self.mcu = CMcu(cfg, [self.fpga.mcu_link])
+        elif cfg.get("mcu.impl") == "image":  # a firmware ELF on the emulator (docs/mcu.md)
+            from hil.image.stack import ImageMcu
+
+            self.mcu = ImageMcu(cfg, [self.fpga.mcu_link])
         else:
             self.mcu = Mcu(cfg, [self.fpga.mcu_link])
         self.command = command

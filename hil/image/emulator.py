@@ -1,0 +1,279 @@
+"""One firmware image on Unicorn's Cortex-M4: the memory map of the firmware interface,
+the boot from the reset vector, and one call of the 5 kHz entry per MCU cycle, with its
+instruction count and estimated cycles (hil/image/cost.py) and every way an image can
+break the interface turned into one :class:`ImageFault` line (step, address, PC, symbol).
+
+Per cycle the harness writes the process data in (RX) and the link's upstream words into
+the DPRAM, calls the entry with LR = a return address of its own on the stack main left
+(as the NVIC would, without stacking a frame main would need again: thread mode never
+resumes after boot), and reads the downstream words and process data out. The DPRAM and
+process-data pages are numpy arrays Unicorn maps directly, so no copies go through calls."""
+
+from __future__ import annotations
+
+import ctypes
+import struct
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import unicorn
+from unicorn import Uc, UcError
+from unicorn import arm_const as A
+from unicorn import unicorn_const as U
+
+from hil.image import build, cost
+from hil.image import memory_map as M
+from hil.image.elf import Image
+
+FAULT_READ, FAULT_WRITE, FAULT_BUDGET, FAULT_PENDING, FAULT_UNALIGNED = 1, 2, 3, 4, 5
+#: A step is stopped (the image "never returns") past this many periods of cycles.
+RUNAWAY_PERIODS = 10
+BOOT_INSTRUCTIONS = 5_000_000
+PENDING_CAP = 1 << 16
+WFI = b"\x30\xbf"
+_PERMS = {"r": U.UC_PROT_READ, "w": U.UC_PROT_WRITE, "x": U.UC_PROT_EXEC}
+
+
+class ImageFault(Exception):
+    """The image broke the firmware interface while running; ``str`` is one line."""
+
+
+class _Prof(ctypes.Structure):
+    """``eha_prof`` of hooks.c, field for field."""
+
+    _fields_ = [
+        ("emu_stop", ctypes.c_void_p), ("reg_read", ctypes.c_void_p), ("reg_pc", ctypes.c_int32),
+        ("code_base", ctypes.c_uint32), ("code_halfwords", ctypes.c_uint32),
+        ("instr_prefix", ctypes.c_void_p), ("cycle_prefix", ctypes.c_void_p),
+        ("boundary", ctypes.c_void_p), ("strict", ctypes.c_void_p),
+        ("branch_penalty", ctypes.c_uint32), ("budget_cycles", ctypes.c_uint64),
+        ("rules_base", ctypes.c_uint32 * 2), ("rules_bytes", ctypes.c_uint32 * 2),
+        ("rules", ctypes.c_void_p * 2),
+        ("fsmc_lo", ctypes.c_uint32), ("fsmc_hi", ctypes.c_uint32),
+        ("fsmc_extra_half", ctypes.c_uint32), ("fsmc_extra_word", ctypes.c_uint32),
+        ("pending", ctypes.c_void_p), ("pending_cap", ctypes.c_uint32),
+        ("instructions", ctypes.c_uint64), ("cycles", ctypes.c_uint64),
+        ("blocks", ctypes.c_uint32), ("taken", ctypes.c_uint32),
+        ("fsmc_accesses", ctypes.c_uint32), ("n_pending", ctypes.c_uint32),
+        ("prev_end", ctypes.c_uint32),
+        ("fault", ctypes.c_uint32), ("fault_addr", ctypes.c_uint32),
+        ("fault_size", ctypes.c_uint32), ("fault_pc", ctypes.c_uint32),
+    ]
+
+
+_STRICT = frozenset({"ldrd", "strd", "ldm", "ldmdb", "stm", "stmdb", "push", "pop", "vldr",
+                     "vstr", "vpush", "vpop", "vldmia", "vldmdb", "vstmia", "vstmdb", "ldrex",
+                     "strex", "ldrexh", "strexh"})
+
+
+@dataclass
+class CostTable:
+    """Per halfword of flash: prefix sums of instructions and cycles, instruction
+    boundaries and strict-alignment instructions, from a linear disassembly of every
+    function the ELF names."""
+
+    instr_prefix: np.ndarray
+    cycle_prefix: np.ndarray
+    boundary: np.ndarray
+    strict: np.ndarray
+
+    @classmethod
+    def of(cls, image: Image) -> CostTable:
+        n = M.FLASH_SIZE // 2
+        instr = np.zeros(n, dtype=np.uint32)
+        cycles = np.zeros(n, dtype=np.uint32)
+        boundary = np.zeros(n + 1, dtype=np.uint8)
+        strict = np.zeros(n, dtype=np.uint8)
+        md = cost._MD
+        for start, code in image.function_code():
+            for insn in md.disasm(code, start):
+                h = (insn.address - M.FLASH_BASE) >> 1
+                instr[h] = 1
+                cycles[h] = cost.instruction_cycles(insn)
+                boundary[h] = 1
+                boundary[h + insn.size // 2] = 1
+                strict[h] = insn.insn_name() in _STRICT
+        ip = np.zeros(n + 1, dtype=np.uint32)
+        cp = np.zeros(n + 1, dtype=np.uint32)
+        np.cumsum(instr, out=ip[1:])
+        np.cumsum(cycles, out=cp[1:])
+        return cls(ip, cp, boundary, strict)
+
+
+def _uclib() -> ctypes.CDLL:
+    lib = Path(unicorn.__file__).parent / "lib" / "libunicorn.so.2"
+    return ctypes.CDLL(str(lib))
+
+
+class ImageCore:
+    """The image ``image`` with calibration record ``cal`` (bytes) in the flash block."""
+
+    def __init__(self, image: Image, cal: bytes, boards: int = 1) -> None:
+        self.image = image
+        self.step_index = 0
+        uc = self.uc = Uc(U.UC_ARCH_ARM, U.UC_MODE_THUMB | U.UC_MODE_MCLASS)
+        uc.ctl_set_cpu_model(A.UC_CPU_ARM_CORTEX_M4)
+        # The FSMC pages are numpy memory Unicorn uses directly.
+        self._dpram_page = np.zeros(M.PAGE, dtype=np.uint8)
+        self._pd_page = np.zeros(M.PAGE, dtype=np.uint8)
+        for name, base, size, perms in M.REGIONS:
+            p = 0
+            for ch in perms:
+                p |= _PERMS[ch]
+            if base == M.DPRAM_BASE:
+                uc.mem_map_ptr(base, size, p, self._dpram_page.ctypes.data)
+            elif base == M.RX_BASE:
+                uc.mem_map_ptr(base, size, p, self._pd_page.ctypes.data)
+            else:
+                uc.mem_map(base, size, p)
+        for base, data in image.segments:
+            uc.mem_write(base, data)
+        uc.mem_write(M.CAL_BASE, struct.pack("<4I", M.CAL_MAGIC, M.CAL_VERSION, len(cal),
+                                             boards) + cal)
+        uc.mem_write(M.RETURN_ADDRESS, b"\x00\xbf" * 8)  # never executed: the stop address
+        # Views the harness reads and writes every cycle.
+        self.dpram = self._dpram_page[:2 * 0x140].view("<u2")
+        self.link_counters = self._dpram_page[0x400:0x414].view("<u4")
+        self.rx = self._pd_page[:M.RX_BYTES]
+        self.tx = self._pd_page[M.TX_BASE - M.RX_BASE:M.TX_BASE - M.RX_BASE + M.TX_BYTES]
+        self._install_hooks()
+        self._invalid: tuple[int, int, int] | None = None
+        uc.hook_add(U.UC_HOOK_MEM_INVALID, self._on_invalid)
+        self.boot_sp = self._boot()
+
+    # --- set-up --------------------------------------------------------------------------------
+    def _install_hooks(self) -> None:
+        self.costs = CostTable.of(self.image)
+        self._rules = (M.dpram_rules(), M.pd_rules())
+        self._pending = np.zeros(2 * PENDING_CAP, dtype=np.uint32)
+        lib = ctypes.CDLL(str(build.hooks_library()))
+        uclib = _uclib()
+        p = self.prof = _Prof()
+        p.emu_stop = ctypes.cast(uclib.uc_emu_stop, ctypes.c_void_p).value
+        p.reg_read = ctypes.cast(uclib.uc_reg_read, ctypes.c_void_p).value
+        p.reg_pc = A.UC_ARM_REG_PC
+        p.code_base, p.code_halfwords = M.FLASH_BASE, M.FLASH_SIZE // 2
+        c = self.costs
+        p.instr_prefix, p.cycle_prefix = c.instr_prefix.ctypes.data, c.cycle_prefix.ctypes.data
+        p.boundary, p.strict = c.boundary.ctypes.data, c.strict.ctypes.data
+        p.branch_penalty = cost.BRANCH_PENALTY
+        p.budget_cycles = 2**63
+        p.rules_base[0], p.rules_base[1] = M.DPRAM_BASE, M.RX_BASE
+        p.rules_bytes[0] = p.rules_bytes[1] = M.PAGE
+        p.rules[0], p.rules[1] = self._rules[0].ctypes.data, self._rules[1].ctypes.data
+        p.fsmc_lo, p.fsmc_hi = M.DPRAM_BASE, 0x6FFF_FFFF
+        p.fsmc_extra_half, p.fsmc_extra_word = cost.FSMC_HALF, cost.FSMC_WORD
+        p.pending, p.pending_cap = self._pending.ctypes.data, PENDING_CAP
+        lib.eha_install.restype = ctypes.c_int
+        err = lib.eha_install(ctypes.c_void_p(self.uc._uch.value),
+                              ctypes.c_void_p(ctypes.cast(uclib.uc_hook_add,
+                                                          ctypes.c_void_p).value),
+                              ctypes.byref(p), U.UC_HOOK_BLOCK, U.UC_HOOK_MEM_READ,
+                              U.UC_HOOK_MEM_WRITE)
+        if err:
+            raise RuntimeError(f"unicorn refused the image hooks (error {err})")
+        self._lib = lib  # keep the hooks' code loaded as long as the engine
+
+    def _on_invalid(self, uc: Uc, access: int, address: int, size: int, value: int,
+                    user: object) -> bool:
+        self._invalid = (access, address, size)
+        return False
+
+    def _clear(self) -> None:
+        p = self.prof
+        p.instructions = p.cycles = 0
+        p.blocks = p.taken = p.fsmc_accesses = p.n_pending = p.prev_end = 0
+        p.fault = p.fault_addr = p.fault_size = p.fault_pc = 0
+        self._invalid = None
+
+    def _boot(self) -> int:
+        """Run from the reset vector until the image waits for interrupts; its SP."""
+        uc = self.uc
+        uc.reg_write(A.UC_ARM_REG_SP, self.image.initial_sp)
+        uc.reg_write(A.UC_ARM_REG_LR, M.RETURN_ADDRESS | 1)
+        self._clear()
+        self._run(self.image.reset, BOOT_INSTRUCTIONS, "boot")
+        pc = uc.reg_read(A.UC_ARM_REG_PC)
+        if pc != M.RETURN_ADDRESS and bytes(uc.mem_read(pc - 2, 2)) != WFI:
+            raise ImageFault(f"boot: the reset handler neither reached WFI nor returned within "
+                             f"{BOOT_INSTRUCTIONS:,} instructions; PC {self.image.where(pc)}")
+        return uc.reg_read(A.UC_ARM_REG_SP) & ~7
+
+    # --- running -------------------------------------------------------------------------------
+    def _run(self, start: int, count: int, what: str) -> None:
+        try:
+            self.uc.emu_start(start, M.RETURN_ADDRESS, count=count)
+        except UcError as exc:
+            raise ImageFault(self._describe_error(exc, what)) from None
+        p = self.prof
+        if p.fault:
+            raise ImageFault(self._describe_fault(what))
+
+    def _describe_error(self, exc: UcError, what: str) -> str:
+        pc = self.uc.reg_read(A.UC_ARM_REG_PC)
+        where = self.image.where(pc)
+        inv = self._invalid
+        e = exc.errno
+        if inv is not None and e in (U.UC_ERR_READ_UNMAPPED, U.UC_ERR_WRITE_UNMAPPED,
+                                     U.UC_ERR_FETCH_UNMAPPED, U.UC_ERR_WRITE_PROT,
+                                     U.UC_ERR_READ_PROT, U.UC_ERR_FETCH_PROT):
+            access, address, size = inv
+            kind = {U.UC_MEM_READ_UNMAPPED: "read of", U.UC_MEM_WRITE_UNMAPPED: "write to",
+                    U.UC_MEM_FETCH_UNMAPPED: "instruction fetch from",
+                    U.UC_MEM_WRITE_PROT: "write to read-only", U.UC_MEM_READ_PROT:
+                    "read of unreadable", U.UC_MEM_FETCH_PROT:
+                    "instruction fetch from non-executable"}.get(access, "access to")
+            if e == U.UC_ERR_FETCH_UNMAPPED or e == U.UC_ERR_FETCH_PROT:
+                return (f"{what}: bus fault: {kind} 0x{address:08X} "
+                        f"({M.describe(address)}); last PC in the image "
+                        f"{self.image.where(self.uc.reg_read(A.UC_ARM_REG_LR) & ~1)} (LR)")
+            return (f"{what}: bus fault: {kind} 0x{address:08X} ({M.describe(address)}, "
+                    f"{size} bytes) at PC {where}")
+        if e == U.UC_ERR_INSN_INVALID:
+            return (f"{what}: hard fault: undefined instruction or invalid state (e.g. an "
+                    f"ARM-mode branch target) at PC {where}")
+        if e == U.UC_ERR_EXCEPTION:
+            return f"{what}: hard fault: unhandled CPU exception (SVC, BKPT, ...) at PC {where}"
+        return f"{what}: the emulator stopped: {exc} at PC {where}"
+
+    def _describe_fault(self, what: str) -> str:
+        p = self.prof
+        at = self.image.where(p.fault_pc)
+        if p.fault in (FAULT_READ, FAULT_WRITE):
+            verb = "read of" if p.fault == FAULT_READ else "write to"
+            return (f"{what}: bus fault: {verb} 0x{p.fault_addr:08X} "
+                    f"({M.describe(p.fault_addr)}, {p.fault_size} bytes), which the firmware "
+                    f"interface does not allow, at PC {at}")
+        if p.fault == FAULT_UNALIGNED:
+            return (f"{what}: usage fault: unaligned {p.fault_size}-byte access to "
+                    f"0x{p.fault_addr:08X} by an instruction that needs alignment, at PC {at}")
+        if p.fault == FAULT_BUDGET:
+            return (f"{what}: did not return within {RUNAWAY_PERIODS} periods "
+                    f"({p.budget_cycles:,} estimated cycles, {p.instructions:,} "
+                    f"instructions); PC {at}")
+        return f"{what}: more than {PENDING_CAP} blocks outside the cost table; PC {at}"
+
+    def step(self, label: str) -> tuple[int, int]:
+        """One call of the 5 kHz entry (the harness has written RX and the DPRAM); its
+        (instructions, estimated cycles)."""
+        uc = self.uc
+        self._clear()
+        p = self.prof
+        p.budget_cycles = RUNAWAY_PERIODS * cost.PERIOD_CYCLES
+        uc.reg_write(A.UC_ARM_REG_SP, self.boot_sp)
+        uc.reg_write(A.UC_ARM_REG_LR, M.RETURN_ADDRESS | 1)
+        self._run(self.image.entry, RUNAWAY_PERIODS * cost.PERIOD_CYCLES, label)
+        instructions, cycles = p.instructions, p.cycles
+        if p.n_pending:
+            instructions, cycles = self._price_pending(instructions, cycles)
+        return instructions, cycles + cost.BRANCH_PENALTY  # the call into the entry
+
+    def _price_pending(self, instructions: int, cycles: int) -> tuple[int, int]:
+        pend = self._pending[:2 * self.prof.n_pending].reshape(-1, 2)
+        blocks, counts = np.unique(pend, axis=0, return_counts=True)
+        for (addr, size), n in zip(blocks.tolist(), counts.tolist(), strict=True):
+            c = cost.block_cost(bytes(self.uc.mem_read(addr, size)), addr)
+            instructions += n * c.instructions
+            cycles += n * (c.cycles - size // 2)  # the hook's floor was size / 2
+        return instructions, cycles
