@@ -117,7 +117,7 @@ class ImageCore:
         # The FSMC pages are numpy memory Unicorn uses directly.
         self._dpram_page = np.zeros(M.PAGE, dtype=np.uint8)
         self._pd_page = np.zeros(M.PAGE, dtype=np.uint8)
-        for name, base, size, perms in M.REGIONS:
+        for _name, base, size, perms in M.REGIONS:
             p = 0
             for ch in perms:
                 p |= _PERMS[ch]

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from firmware_model.mcu.c_abi import INPUT, OUTPUT
+from firmware_model.mcu.c_abi import OUTPUT
 from hil.image import build, cost
 from hil.image import memory_map as M
 from hil.image.elf import Image, load
