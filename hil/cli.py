@@ -24,12 +24,14 @@ from hil.cli_args import (
     Parser,
     add_config_options,
     float_range,
+    image_sets,
     int_list,
     int_range,
     output_dir,
     output_file,
     positive_float,
 )
+from hil.image.errors import ImageFault
 from hil.scenarios.plant_figures import F2_BANDS, THESIS_F1, THESIS_F2, within_band
 from hil.tables import table
 from hil.verify import cli as verify_cli
@@ -339,6 +341,7 @@ def cmd_run_thesis(args: argparse.Namespace) -> int:
     rows = []
     results = []
     notes = []
+    profiles: list[dict] = []
     for name in names:
         t0 = time.perf_counter()
         if not args.json:
@@ -348,6 +351,9 @@ def cmd_run_thesis(args: argparse.Namespace) -> int:
         res = scenarios.get(name).run(cfg, None)
         wall = time.perf_counter() - t0
         results.append((res, wall))
+        prof = _image_profile(cfg, name.upper())
+        if prof:
+            profiles.append(prof)
         if res.plot:
             res.plot(res, out_dir / f"{name}.png")
             cli_progress.output("plot", out_dir / f"{name}.png", done=True)
@@ -362,14 +368,36 @@ def cmd_run_thesis(args: argparse.Namespace) -> int:
     if notes:
         text += "\n" + "\n".join(f"note: {n}" for n in notes)
     text += f"\nplots written to {out_dir}/ ({', '.join(n + '.png' for n in names)})"
+    text += _profile_text(profiles)
     ok = all(r.ok for r, _ in results)
     data = {"config": cfg.sources, "ok": ok, "scenarios": [
         {"scenario": r.name, "title": r.title, "wall_s": w, "ok": r.ok, "notes": r.notes,
          "metrics": [{"name": m.name, "value": m.value, "unit": m.unit, "thesis": m.thesis,
                       "requirement": m.requirement, "ok": m.ok} for m in r.metrics]}
         for r, w in results]}
+    if profiles:
+        data["mcu_image_profile"] = profiles
     _emit(args, text, data)
     return 0 if ok else 1
+
+
+def _image_profile(cfg, label: str) -> dict | None:  # noqa: ANN001 - Config
+    """The execution-time summary of the image steps since the last call (None: the MCU
+    is not an image)."""
+    if cfg.get("mcu.impl") != "image":
+        return None
+    from hil.image import profile
+
+    return profile.take(label)
+
+
+def _profile_text(profiles: list[dict]) -> str:
+    if not profiles:
+        return ""
+    from hil.image import profile
+
+    return "\nMCU image execution time (estimated, docs/mcu.md):\n" + "\n".join(
+        "  " + profile.line(p) for p in profiles)
 
 
 def _run_live(res, address: str) -> str:  # noqa: ANN001 - ScenarioResult
@@ -414,12 +442,14 @@ def cmd_run(args: argparse.Namespace) -> int:
     config_sets, knob_values = split_sets(args.set or ())
     cfg = load_config(args.config, config_sets)
     res = scenario.call(cfg, _progress(scenario.name, not args.json), knob_values)
+    prof = _image_profile(cfg, res.name)
     rows = [(m.name, m.value, m.unit, m.requirement,
              "" if m.ok is None else ("ok" if m.ok else "MISSED")) for m in res.metrics]
     text = table(["metric", "value", "unit", "requirement", ""], rows, fmt=".4g",
                  title=f"{res.name}: {res.title} ({cfg.sources[-1]})")
     if res.notes:
         text += "\n" + "\n".join(f"note: {n}" for n in res.notes)
+    text += _profile_text([prof] if prof else [])
     if args.plot and res.plot:
         res.plot(res, Path(args.plot))
         text += f"\nplot written to {args.plot}"
@@ -437,6 +467,8 @@ def cmd_run(args: argparse.Namespace) -> int:
             "metrics": [{"name": m.name, "value": m.value, "unit": m.unit,
                          "requirement": m.requirement, "ok": m.ok} for m in res.metrics],
             "notes": res.notes}
+    if prof:
+        data["mcu_image_profile"] = prof
     _emit(args, text, data)
     return 0 if res.ok else 1
 
@@ -727,11 +759,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         parser = build_parser()
         args = parser.parse_args(argv)
+        image_sets(args)
         cli_progress.start(_verb(args))
         return int(args.func(args))
     except (ConfigError, UsageError, verify_cli.ToolMissing) as exc:
         print(f"eha-hil: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
+    except ImageFault as exc:  # the firmware image broke the interface: the run failed
+        print(f"eha-hil: error: {exc}", file=sys.stderr)
+        return 1
     except BrokenPipeError:
         return 0
     except KeyboardInterrupt:

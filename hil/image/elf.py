@@ -13,12 +13,9 @@ from elftools.common.exceptions import ELFError
 from elftools.elf.elffile import ELFFile
 
 from hil.image import memory_map as M
+from hil.image.errors import ImageError
 
 EM_ARM = 40
-
-
-class ImageError(Exception):
-    """The image cannot run in the harness; ``str`` is one line naming file and reason."""
 
 
 @dataclass
@@ -74,16 +71,16 @@ def load(path: str | Path) -> Image:
     try:
         f = open(path, "rb")
     except OSError as exc:
-        raise ImageError(f"--mcu-image {path}: {exc.strerror}") from None
+        raise ImageError(f"{path}: {exc.strerror}") from None
     with f:
         try:
             elf = ELFFile(f)
             machine = elf["e_machine"]
             if elf.elfclass != 32 or not elf.little_endian or machine not in ("EM_ARM", EM_ARM):
-                raise ImageError(f"--mcu-image {path}: an ELF for {machine} "
+                raise ImageError(f"{path}: an ELF for {machine} "
                                  f"({elf.elfclass}-bit), not a 32-bit little-endian ARM image")
             if elf["e_type"] != "ET_EXEC":
-                raise ImageError(f"--mcu-image {path}: {elf['e_type']}, not a linked "
+                raise ImageError(f"{path}: {elf['e_type']}, not a linked "
                                  "executable (link it with eha_hil.ld)")
             segments = []
             for seg in elf.iter_segments():
@@ -91,10 +88,10 @@ def load(path: str | Path) -> Image:
                     continue
                 base, data = seg["p_paddr"], seg.data()
                 if not _inside(base, len(data)):
-                    raise ImageError(f"--mcu-image {path}: a segment at 0x{base:08X} "
+                    raise ImageError(f"{path}: a segment at 0x{base:08X} "
                                      f"({len(data)} bytes) lies outside flash and SRAM")
                 if base < M.CAL_BASE + M.PAGE * 32 and base + len(data) > M.CAL_BASE:
-                    raise ImageError(f"--mcu-image {path}: a segment at 0x{base:08X} overlaps "
+                    raise ImageError(f"{path}: a segment at 0x{base:08X} overlaps "
                                      f"the calibration block at 0x{M.CAL_BASE:08X}")
                 segments.append((base, data))
             functions = []
@@ -107,20 +104,20 @@ def load(path: str | Path) -> Image:
                         if s["st_info"]["bind"] == "STB_GLOBAL":
                             names[s.name] = s["st_value"]
         except ELFError as exc:
-            raise ImageError(f"--mcu-image {path}: not an ELF file ({exc})") from None
+            raise ImageError(f"{path}: not an ELF file ({exc})") from None
     functions.sort()
     img = Image(path, segments, 0, 0, 0, "", functions, [f[0] for f in functions])
     vectors = img.read(M.FLASH_BASE, 4 * (M.TIM2_VECTOR + 1))
     if len(vectors) < 8:
-        raise ImageError(f"--mcu-image {path}: no vector table at 0x{M.FLASH_BASE:08X} "
+        raise ImageError(f"{path}: no vector table at 0x{M.FLASH_BASE:08X} "
                          "(put .isr_vector first in flash, as eha_hil.ld does)")
     img.initial_sp, img.reset = struct.unpack_from("<2I", vectors)
     if not (M.SRAM_BASE < img.initial_sp <= M.SRAM_BASE + M.SRAM_SIZE
             or M.CCM_BASE < img.initial_sp <= M.CCM_BASE + M.CCM_SIZE):
-        raise ImageError(f"--mcu-image {path}: initial stack pointer 0x{img.initial_sp:08X} "
+        raise ImageError(f"{path}: initial stack pointer 0x{img.initial_sp:08X} "
                          "(vector 0) is not in SRAM or CCM RAM")
     if not img.reset & 1 or not _inside(img.reset & ~1, 2):
-        raise ImageError(f"--mcu-image {path}: reset vector 0x{img.reset:08X} is not a Thumb "
+        raise ImageError(f"{path}: reset vector 0x{img.reset:08X} is not a Thumb "
                          "address in flash or SRAM")
     if M.STEP_SYMBOL in names:
         img.entry, img.entry_name = names[M.STEP_SYMBOL] | 1, M.STEP_SYMBOL
@@ -128,7 +125,7 @@ def load(path: str | Path) -> Image:
         tim2 = struct.unpack_from("<I", vectors, 4 * M.TIM2_VECTOR)[0] \
             if len(vectors) >= 4 * (M.TIM2_VECTOR + 1) else 0
         if not tim2 & 1 or not _inside(tim2 & ~1, 2):
-            raise ImageError(f"--mcu-image {path}: no 5 kHz entry: no global function "
+            raise ImageError(f"{path}: no 5 kHz entry: no global function "
                              f"{M.STEP_SYMBOL}, and vector {M.TIM2_VECTOR} (TIM2) is "
                              f"0x{tim2:08X}, not a Thumb address in flash")
         img.entry, img.entry_name = tim2, img.symbol(tim2) or f"vector {M.TIM2_VECTOR} (TIM2)"

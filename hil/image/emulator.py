@@ -25,6 +25,7 @@ from unicorn import unicorn_const as U
 from hil.image import build, cost
 from hil.image import memory_map as M
 from hil.image.elf import Image
+from hil.image.errors import ImageFault
 
 FAULT_READ, FAULT_WRITE, FAULT_BUDGET, FAULT_PENDING, FAULT_UNALIGNED = 1, 2, 3, 4, 5
 #: A step is stopped (the image "never returns") past this many periods of cycles.
@@ -33,10 +34,6 @@ BOOT_INSTRUCTIONS = 5_000_000
 PENDING_CAP = 1 << 16
 WFI = b"\x30\xbf"
 _PERMS = {"r": U.UC_PROT_READ, "w": U.UC_PROT_WRITE, "x": U.UC_PROT_EXEC}
-
-
-class ImageFault(Exception):
-    """The image broke the firmware interface while running; ``str`` is one line."""
 
 
 class _Prof(ctypes.Structure):

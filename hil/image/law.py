@@ -12,7 +12,8 @@ from firmware_model.mcu.c_abi import OUTPUT
 from hil.image import build, cost
 from hil.image import memory_map as M
 from hil.image.elf import Image, load
-from hil.image.emulator import ImageCore, ImageFault
+from hil.image.emulator import ImageCore
+from hil.image.errors import ImageFault
 from hil.image.profile import Profile
 
 #: ``eha_rx`` of eha_hil.h.

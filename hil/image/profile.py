@@ -72,3 +72,10 @@ def session_summary(label: str) -> dict | None:
     total.worst_step = f"{worst.label} {worst.worst_step}".strip()
     total.max_cycles = worst.max_cycles
     return total.summary()
+
+
+def take(label: str) -> dict | None:
+    """:func:`session_summary`, then forget the session's steps (the next scenario's own)."""
+    out = session_summary(label)
+    SESSION.clear()
+    return out

@@ -10,8 +10,7 @@ import numpy as np
 from firmware_model.calibration import FirmwareCalibration
 from firmware_model.fpga.driver_board import LinkMemory
 from hil.image import profile
-from hil.image.elf import ImageError
-from hil.image.emulator import ImageFault
+from hil.image.errors import ImageError, ImageFault
 from hil.image.law import ImageLaw
 from hil.mcu_c import CMcu
 from hil.verify.mcu_builds import BuildError
