@@ -40,62 +40,79 @@ class _Prof(ctypes.Structure):
     """``eha_prof`` of hooks.c, field for field."""
 
     _fields_ = [
-        ("emu_stop", ctypes.c_void_p), ("reg_read", ctypes.c_void_p), ("reg_pc", ctypes.c_int32),
+        ("emu_stop", ctypes.c_void_p), ("reg_read", ctypes.c_void_p),
         ("code_base", ctypes.c_uint32), ("code_halfwords", ctypes.c_uint32),
-        ("instr_prefix", ctypes.c_void_p), ("cycle_prefix", ctypes.c_void_p),
-        ("boundary", ctypes.c_void_p), ("strict", ctypes.c_void_p),
+        ("cost", ctypes.c_void_p), ("strict_reg", ctypes.c_void_p),
+        ("strict_off", ctypes.c_void_p),
         ("branch_penalty", ctypes.c_uint32), ("budget_cycles", ctypes.c_uint64),
-        ("rules_base", ctypes.c_uint32 * 2), ("rules_bytes", ctypes.c_uint32 * 2),
-        ("rules", ctypes.c_void_p * 2),
-        ("fsmc_lo", ctypes.c_uint32), ("fsmc_hi", ctypes.c_uint32),
         ("fsmc_extra_half", ctypes.c_uint32), ("fsmc_extra_word", ctypes.c_uint32),
         ("pending", ctypes.c_void_p), ("pending_cap", ctypes.c_uint32),
         ("instructions", ctypes.c_uint64), ("cycles", ctypes.c_uint64),
-        ("blocks", ctypes.c_uint32), ("taken", ctypes.c_uint32),
-        ("fsmc_accesses", ctypes.c_uint32), ("n_pending", ctypes.c_uint32),
-        ("prev_end", ctypes.c_uint32),
+        ("taken", ctypes.c_uint32), ("fsmc_accesses", ctypes.c_uint32),
+        ("n_pending", ctypes.c_uint32), ("next_pc", ctypes.c_uint32),
+        ("last_pc", ctypes.c_uint32),
         ("fault", ctypes.c_uint32), ("fault_addr", ctypes.c_uint32),
         ("fault_size", ctypes.c_uint32), ("fault_pc", ctypes.c_uint32),
     ]
 
 
-_STRICT = frozenset({"ldrd", "strd", "ldm", "ldmdb", "stm", "stmdb", "push", "pop", "vldr",
-                     "vstr", "vpush", "vpop", "vldmia", "vldmdb", "vstmia", "vstmdb", "ldrex",
-                     "strex", "ldrexh", "strexh"})
+class _Window(ctypes.Structure):
+    """``eha_window`` of hooks.c: one MMIO page of the external bus."""
+
+    _fields_ = [("memory", ctypes.c_void_p), ("rules", ctypes.c_void_p),
+                ("base", ctypes.c_uint32), ("bytes", ctypes.c_uint32),
+                ("prof", ctypes.c_void_p)]
+
+
+#: Instructions whose data address must be word aligned on the Cortex-M4 (else an
+#: UNALIGNED UsageFault); PUSH/POP and VPUSH/VPOP use SP, which is always aligned.
+_STRICT = frozenset({"ldrd", "strd", "ldm", "ldmdb", "stm", "stmdb", "vldr", "vstr",
+                     "vldmia", "vldmdb", "vstmia", "vstmdb", "ldrex", "strex"})
+_UC_REG = {"sb": "r9", "sl": "r10", "fp": "r11", "ip": "r12"}
+
+
+def _uc_register(name: str) -> int:
+    return getattr(A, f"UC_ARM_REG_{_UC_REG.get(name, name).upper()}")
+
+
+def _alignment_rule(insn) -> tuple[int, int]:  # noqa: ANN001 - capstone.CsInsn
+    """(Unicorn register id of the base, offset) of an instruction that needs aligned
+    data; (0, 0) for the others and for PC-relative literals (aligned by construction)."""
+    if insn.insn_name() not in _STRICT:
+        return 0, 0
+    arm = cost.capstone.arm
+    for op in insn.operands:
+        if op.type == arm.ARM_OP_MEM:
+            if op.mem.base in (0, arm.ARM_REG_PC):
+                return 0, 0
+            post = insn.writeback and len([o for o in insn.operands if o.type == arm.ARM_OP_IMM])
+            return _uc_register(insn.reg_name(op.mem.base)), 0 if post else op.mem.disp
+    base = insn.operands[0]  # LDM/STM: the base register comes first
+    if base.type == arm.ARM_OP_REG and insn.reg_name(base.reg) != "sp":
+        return _uc_register(insn.reg_name(base.reg)), 0
+    return 0, 0
 
 
 @dataclass
 class CostTable:
-    """Per halfword of flash: prefix sums of instructions and cycles, instruction
-    boundaries and strict-alignment instructions, from a linear disassembly of every
-    function the ELF names."""
+    """Per halfword of flash: the cycles of the instruction starting there (0: none), and
+    its alignment rule, from a linear disassembly of every function the ELF names."""
 
-    instr_prefix: np.ndarray
-    cycle_prefix: np.ndarray
-    boundary: np.ndarray
-    strict: np.ndarray
+    cost: np.ndarray
+    strict_reg: np.ndarray
+    strict_off: np.ndarray
 
     @classmethod
     def of(cls, image: Image) -> CostTable:
         n = M.FLASH_SIZE // 2
-        instr = np.zeros(n, dtype=np.uint32)
-        cycles = np.zeros(n, dtype=np.uint32)
-        boundary = np.zeros(n + 1, dtype=np.uint8)
-        strict = np.zeros(n, dtype=np.uint8)
-        md = cost._MD
+        table = cls(np.zeros(n, dtype=np.uint16), np.zeros(n, dtype=np.int16),
+                    np.zeros(n, dtype=np.int16))
         for start, code in image.function_code():
-            for insn in md.disasm(code, start):
+            for insn in cost._MD.disasm(code, start):
                 h = (insn.address - M.FLASH_BASE) >> 1
-                instr[h] = 1
-                cycles[h] = cost.instruction_cycles(insn)
-                boundary[h] = 1
-                boundary[h + insn.size // 2] = 1
-                strict[h] = insn.insn_name() in _STRICT
-        ip = np.zeros(n + 1, dtype=np.uint32)
-        cp = np.zeros(n + 1, dtype=np.uint32)
-        np.cumsum(instr, out=ip[1:])
-        np.cumsum(cycles, out=cp[1:])
-        return cls(ip, cp, boundary, strict)
+                table.cost[h] = cost.instruction_cycles(insn)
+                table.strict_reg[h], table.strict_off[h] = _alignment_rule(insn)
+        return table
 
 
 def _uclib() -> ctypes.CDLL:
@@ -111,18 +128,14 @@ class ImageCore:
         self.step_index = 0
         uc = self.uc = Uc(U.UC_ARCH_ARM, U.UC_MODE_THUMB | U.UC_MODE_MCLASS)
         uc.ctl_set_cpu_model(A.UC_CPU_ARM_CORTEX_M4)
-        # The FSMC pages are numpy memory Unicorn uses directly.
+        # The FSMC pages: numpy memory behind the MMIO callbacks of hooks.c.
         self._dpram_page = np.zeros(M.PAGE, dtype=np.uint8)
         self._pd_page = np.zeros(M.PAGE, dtype=np.uint8)
         for _name, base, size, perms in M.REGIONS:
             p = 0
             for ch in perms:
                 p |= _PERMS[ch]
-            if base == M.DPRAM_BASE:
-                uc.mem_map_ptr(base, size, p, self._dpram_page.ctypes.data)
-            elif base == M.RX_BASE:
-                uc.mem_map_ptr(base, size, p, self._pd_page.ctypes.data)
-            else:
+            if base not in (M.DPRAM_BASE, M.RX_BASE):  # the FSMC pages are MMIO (hooks.c)
                 uc.mem_map(base, size, p)
         for base, data in image.segments:
             uc.mem_write(base, data)
@@ -146,28 +159,31 @@ class ImageCore:
         self._pending = np.zeros(2 * PENDING_CAP, dtype=np.uint32)
         lib = ctypes.CDLL(str(build.hooks_library()))
         uclib = _uclib()
+
+        def fn(name: str) -> int | None:
+            return ctypes.cast(getattr(uclib, name), ctypes.c_void_p).value
+
         p = self.prof = _Prof()
-        p.emu_stop = ctypes.cast(uclib.uc_emu_stop, ctypes.c_void_p).value
-        p.reg_read = ctypes.cast(uclib.uc_reg_read, ctypes.c_void_p).value
-        p.reg_pc = A.UC_ARM_REG_PC
+        p.emu_stop, p.reg_read = fn("uc_emu_stop"), fn("uc_reg_read")
         p.code_base, p.code_halfwords = M.FLASH_BASE, M.FLASH_SIZE // 2
         c = self.costs
-        p.instr_prefix, p.cycle_prefix = c.instr_prefix.ctypes.data, c.cycle_prefix.ctypes.data
-        p.boundary, p.strict = c.boundary.ctypes.data, c.strict.ctypes.data
+        p.cost, p.strict_reg = c.cost.ctypes.data, c.strict_reg.ctypes.data
+        p.strict_off = c.strict_off.ctypes.data
         p.branch_penalty = cost.BRANCH_PENALTY
         p.budget_cycles = 2**63
-        p.rules_base[0], p.rules_base[1] = M.DPRAM_BASE, M.RX_BASE
-        p.rules_bytes[0] = p.rules_bytes[1] = M.PAGE
-        p.rules[0], p.rules[1] = self._rules[0].ctypes.data, self._rules[1].ctypes.data
-        p.fsmc_lo, p.fsmc_hi = M.DPRAM_BASE, 0x6FFF_FFFF
         p.fsmc_extra_half, p.fsmc_extra_word = cost.FSMC_HALF, cost.FSMC_WORD
         p.pending, p.pending_cap = self._pending.ctypes.data, PENDING_CAP
+        w = self._windows = (_Window * 2)()
+        for k, (page, rules, base) in enumerate(((self._dpram_page, self._rules[0],
+                                                  M.DPRAM_BASE),
+                                                 (self._pd_page, self._rules[1], M.RX_BASE))):
+            w[k].memory, w[k].rules = page.ctypes.data, rules.ctypes.data
+            w[k].base, w[k].bytes = base, M.PAGE
         lib.eha_install.restype = ctypes.c_int
         err = lib.eha_install(ctypes.c_void_p(self.uc._uch.value),
-                              ctypes.c_void_p(ctypes.cast(uclib.uc_hook_add,
-                                                          ctypes.c_void_p).value),
-                              ctypes.byref(p), U.UC_HOOK_BLOCK, U.UC_HOOK_MEM_READ,
-                              U.UC_HOOK_MEM_WRITE)
+                              ctypes.c_void_p(fn("uc_hook_add")),
+                              ctypes.c_void_p(fn("uc_mmio_map")), ctypes.byref(p),
+                              U.UC_HOOK_CODE, w, 2)
         if err:
             raise RuntimeError(f"unicorn refused the image hooks (error {err})")
         self._lib = lib  # keep the hooks' code loaded as long as the engine
@@ -180,7 +196,7 @@ class ImageCore:
     def _clear(self) -> None:
         p = self.prof
         p.instructions = p.cycles = 0
-        p.blocks = p.taken = p.fsmc_accesses = p.n_pending = p.prev_end = 0
+        p.taken = p.fsmc_accesses = p.n_pending = p.next_pc = p.last_pc = 0
         p.fault = p.fault_addr = p.fault_size = p.fault_pc = 0
         self._invalid = None
 
@@ -208,7 +224,7 @@ class ImageCore:
             raise ImageFault(self._describe_fault(what))
 
     def _describe_error(self, exc: UcError, what: str) -> str:
-        pc = self.uc.reg_read(A.UC_ARM_REG_PC)
+        pc = self.prof.last_pc or self.uc.reg_read(A.UC_ARM_REG_PC)
         where = self.image.where(pc)
         inv = self._invalid
         e = exc.errno
@@ -223,8 +239,7 @@ class ImageCore:
                     "instruction fetch from non-executable"}.get(access, "access to")
             if e == U.UC_ERR_FETCH_UNMAPPED or e == U.UC_ERR_FETCH_PROT:
                 return (f"{what}: bus fault: {kind} 0x{address:08X} "
-                        f"({M.describe(address)}); last PC in the image "
-                        f"{self.image.where(self.uc.reg_read(A.UC_ARM_REG_LR) & ~1)} (LR)")
+                        f"({M.describe(address)}), branched to from {where}")
             return (f"{what}: bus fault: {kind} 0x{address:08X} ({M.describe(address)}, "
                     f"{size} bytes) at PC {where}")
         if e == U.UC_ERR_INSN_INVALID:
@@ -271,6 +286,5 @@ class ImageCore:
         blocks, counts = np.unique(pend, axis=0, return_counts=True)
         for (addr, size), n in zip(blocks.tolist(), counts.tolist(), strict=True):
             c = cost.block_cost(bytes(self.uc.mem_read(addr, size)), addr)
-            instructions += n * c.instructions
-            cycles += n * (c.cycles - size // 2)  # the hook's floor was size / 2
+            cycles += n * (c.cycles - 1)  # the hook counted the instruction, at 1 cycle
         return instructions, cycles

@@ -1,22 +1,30 @@
-/* Unicorn hooks for a firmware image in the loop, in C because they run on every basic
- * block and every access to the FSMC bank (a Python callback there costs ~2 us, which would
- * take the image below real time). Unicorn's own functions come in as pointers from the
+/* Unicorn callbacks for a firmware image in the loop, in C because they run on every
+ * instruction and every external-bus access (a Python callback costs ~2 us, which would
+ * take the image below real time). Unicorn's functions come in as pointers from the
  * Python binding's library, so this file needs no Unicorn headers.
  *
- * Per block: instructions and estimated cycles from per-halfword prefix sums of the image's
- * code (hil/image/cost.py), a taken-branch penalty when a block does not start where the
- * last one ended, and a stop when the step exceeds its cycle budget. A block whose ends
- * are not instruction boundaries of the table (code outside flash, or data the linear
- * disassembly misread) goes to a pending list that Python prices exactly after the step.
- * Per access: an unaligned address from an instruction that needs alignment stops the
- * run (the Cortex-M4's UNALIGNED UsageFault; Unicorn would carry on). Per FSMC access: the wait states of an external-bus transfer, and the dual-port RAM's
- * access rules (per byte: readable, writable); a violation stops the run with its address,
- * size and PC. */
+ * No UC_HOOK_MEM_* hooks: with them, Unicorn 2.1 leaves a Thumb IT block's condition
+ * state set after the block (an instruction after it is skipped; unicorn-engine/unicorn
+ * issue 2309). The external bus is MMIO instead, and alignment is checked per instruction.
+ *
+ * Per instruction (a code hook over all memory): the instruction and its estimated cycles
+ * from a per-halfword table of flash (hil/image/cost.py); a taken-branch penalty when it
+ * does not follow the previous one; the address of the last instruction, for fault
+ * reports; the Cortex-M4's UNALIGNED UsageFault for LDRD/STRD/LDM/STM/VLDR/VSTR, whose
+ * effective address is its base register plus an offset taken from the disassembly; a
+ * stop when the step exceeds its cycle budget. Code outside flash goes to a pending list
+ * that Python prices after the step.
+ * Per external-bus (FSMC) access: MMIO reads and writes of the DPRAM and process-data
+ * pages (numpy memory), checked against per-byte rules (read, write), plus the wait states
+ * of the transfer; a violation stops the run with address, size and instruction. */
 #include <stddef.h>
 #include <stdint.h>
+#include <string.h>
 
 typedef int (*hook_add_fn)(void *uc, size_t *hh, int type, void *cb, void *user,
                            uint64_t begin, uint64_t end, ...);
+typedef int (*mmio_map_fn)(void *uc, uint64_t address, size_t size, void *read_cb,
+                           void *user_read, void *write_cb, void *user_write);
 typedef int (*emu_stop_fn)(void *uc);
 typedef int (*reg_read_fn)(void *uc, int regid, void *value);
 
@@ -24,117 +32,119 @@ enum { FAULT_NONE = 0, FAULT_READ = 1, FAULT_WRITE = 2, FAULT_BUDGET = 3, FAULT_
        FAULT_UNALIGNED = 5 };
 
 typedef struct {
+    uint8_t *memory;     /* the page's bytes */
+    const uint8_t *rules; /* per byte: 1 readable, 2 writable */
+    uint32_t base, bytes;
+    void *prof;
+} eha_window;
+
+typedef struct {
     /* set once by Python */
     emu_stop_fn emu_stop;
     reg_read_fn reg_read;
-    int32_t reg_pc;
     uint32_t code_base, code_halfwords;
-    const uint32_t *instr_prefix; /* code_halfwords + 1 entries */
-    const uint32_t *cycle_prefix;
-    const uint8_t *boundary;      /* 1 where an instruction starts (and at the end) */
-    const uint8_t *strict;        /* 1 where an instruction needs aligned data (LDRD, LDM,
-                                     VLDR, ...: a UsageFault on the Cortex-M4) */
+    const uint16_t *cost;         /* per halfword of flash: cycles of the instruction there */
+    const int16_t *strict_reg;    /* Unicorn register id of the base, 0: no alignment rule */
+    const int16_t *strict_off;    /* offset added to it */
     uint32_t branch_penalty;
     uint64_t budget_cycles;
-    uint32_t rules_base[2], rules_bytes[2];
-    const uint8_t *rules[2];      /* per byte of each window: 1 readable, 2 writable */
-    uint32_t fsmc_lo, fsmc_hi, fsmc_extra_half, fsmc_extra_word;
+    uint32_t fsmc_extra_half, fsmc_extra_word;
     uint32_t *pending;            /* (address, size) pairs */
     uint32_t pending_cap;
     /* per step, cleared by Python */
     uint64_t instructions, cycles;
-    uint32_t blocks, taken, fsmc_accesses, n_pending;
-    uint32_t prev_end;
+    uint32_t taken, fsmc_accesses, n_pending;
+    uint32_t next_pc, last_pc;
     uint32_t fault, fault_addr, fault_size, fault_pc;
 } eha_prof;
 
 static void stop(void *uc, eha_prof *p, uint32_t kind, uint32_t addr, uint32_t size)
 {
     if (p->fault == FAULT_NONE) {
-        uint32_t pc = 0;
-        p->reg_read(uc, p->reg_pc, &pc);
         p->fault = kind;
         p->fault_addr = addr;
         p->fault_size = size;
-        p->fault_pc = pc;
+        p->fault_pc = p->last_pc;
     }
     p->emu_stop(uc);
 }
 
-static void on_block(void *uc, uint64_t address, uint32_t size, void *user)
+static void on_code(void *uc, uint64_t address, uint32_t size, void *user)
 {
     eha_prof *p = user;
     uint32_t a = (uint32_t)address;
-    p->blocks++;
-    if (p->blocks > 1 && a != p->prev_end) {
+    if (p->instructions && a != p->next_pc) {
         p->taken++;
         p->cycles += p->branch_penalty;
     }
-    p->prev_end = a + size;
-    uint32_t h0 = (a - p->code_base) >> 1, h1 = h0 + (size >> 1);
-    if (a >= p->code_base && h1 <= p->code_halfwords && p->boundary[h0] && p->boundary[h1]) {
-        p->instructions += p->instr_prefix[h1] - p->instr_prefix[h0];
-        p->cycles += p->cycle_prefix[h1] - p->cycle_prefix[h0];
+    p->instructions++;
+    p->last_pc = a;
+    p->next_pc = a + size;
+    uint32_t h = (a - p->code_base) >> 1;
+    if (a >= p->code_base && h < p->code_halfwords && p->cost[h]) {
+        p->cycles += p->cost[h];
+        int reg = p->strict_reg[h];
+        if (reg) {
+            uint32_t base = 0;
+            p->reg_read(uc, reg, &base);
+            uint32_t ea = base + (uint32_t)(int32_t)p->strict_off[h];
+            if (ea & 3u)
+                stop(uc, p, FAULT_UNALIGNED, ea, 4);
+        }
     } else if (p->n_pending < p->pending_cap) {
         p->pending[2 * p->n_pending] = a;
         p->pending[2 * p->n_pending + 1] = size;
         p->n_pending++;
-        p->cycles += size >> 1; /* a floor until Python prices it */
+        p->cycles += 1; /* a floor until Python prices it */
     } else {
         stop(uc, p, FAULT_PENDING, a, size);
-        return;
     }
     if (p->cycles > p->budget_cycles)
         stop(uc, p, FAULT_BUDGET, a, size);
 }
 
-static void on_access(void *uc, int type, uint64_t address, int size, int64_t value,
-                      void *user)
+static int allowed(void *uc, eha_window *w, uint64_t offset, unsigned size, uint8_t need)
 {
-    (void)value;
-    eha_prof *p = user;
-    uint32_t a = (uint32_t)address;
-    int write = type == 17; /* UC_MEM_WRITE; UC_MEM_READ is 16 */
-    if ((a & (uint32_t)(size - 1)) && size > 1) {
-        uint32_t pc = 0;
-        p->reg_read(uc, p->reg_pc, &pc);
-        uint32_t h = (pc - p->code_base) >> 1;
-        if (pc < p->code_base || h >= p->code_halfwords || p->strict[h]) {
-            stop(uc, p, FAULT_UNALIGNED, a, (uint32_t)size);
-            return;
-        }
-    }
-    if (a < p->fsmc_lo || a > p->fsmc_hi)
-        return;
+    eha_prof *p = w->prof;
     p->fsmc_accesses++;
     p->cycles += size > 2 ? p->fsmc_extra_word : p->fsmc_extra_half;
-    uint8_t need = write ? 2 : 1;
-    for (int w = 0; w < 2; w++) {
-        if (a < p->rules_base[w] || a - p->rules_base[w] + (uint32_t)size > p->rules_bytes[w])
-            continue; /* Unicorn's page permissions decide outside the windows */
-        const uint8_t *r = p->rules[w] + (a - p->rules_base[w]);
-        for (int k = 0; k < size; k++)
-            if (!(r[k] & need)) {
-                stop(uc, p, write ? FAULT_WRITE : FAULT_READ, a, (uint32_t)size);
-                return;
-            }
-    }
+    if (offset + size > w->bytes)
+        goto bad;
+    for (unsigned k = 0; k < size; k++)
+        if (!(w->rules[offset + k] & need))
+            goto bad;
+    return 1;
+bad:
+    stop(uc, p, need == 2 ? FAULT_WRITE : FAULT_READ, w->base + (uint32_t)offset, size);
+    return 0;
 }
 
-/* Install both hooks on `uc`; 0 or Unicorn's error code. */
-int eha_install(void *uc, hook_add_fn hook_add, eha_prof *p, int hook_block, int hook_read,
-                int hook_write)
+static uint64_t on_read(void *uc, uint64_t offset, unsigned size, void *user)
+{
+    eha_window *w = user;
+    uint64_t v = 0;
+    if (allowed(uc, w, offset, size, 1))
+        memcpy(&v, w->memory + offset, size); /* little-endian host and target */
+    return v;
+}
+
+static void on_write(void *uc, uint64_t offset, unsigned size, uint64_t value, void *user)
+{
+    eha_window *w = user;
+    if (allowed(uc, w, offset, size, 2))
+        memcpy(w->memory + offset, &value, size);
+}
+
+/* Install the code hook and map the two FSMC windows; 0 or Unicorn's error code. */
+int eha_install(void *uc, hook_add_fn hook_add, mmio_map_fn mmio_map, eha_prof *p,
+                int hook_code, eha_window *windows, int n_windows)
 {
     size_t hh;
-    int err = hook_add(uc, &hh, hook_block, (void *)on_block, p, (uint64_t)1, (uint64_t)0);
-    if (err)
-        return err;
-    /* every access: the alignment check needs them all, the FSMC rules only theirs */
-    return hook_add(uc, &hh, hook_read | hook_write, (void *)on_access, p, (uint64_t)1,
-                    (uint64_t)0);
-}
-
-uint32_t eha_prof_size(void)
-{
-    return (uint32_t)sizeof(eha_prof);
+    int err = hook_add(uc, &hh, hook_code, (void *)on_code, p, (uint64_t)1, (uint64_t)0);
+    for (int k = 0; !err && k < n_windows; k++) {
+        windows[k].prof = p;
+        err = mmio_map(uc, windows[k].base, windows[k].bytes, (void *)on_read, &windows[k],
+                       (void *)on_write, &windows[k]);
+    }
+    return err;
 }

@@ -52,6 +52,24 @@
 #define EHA_UP(k) (EHA_DPRAM + EHA_BOARD_STRIDE * (k) + EHA_UP_OFFSET)
 #define EHA_UP_CRC_ERRORS(k) (((volatile const uint32_t *)EHA_LINK_COUNTERS)[k])
 
+/* Driver-board registers (firmware_model/fpga/layout.py; docs/fpga.md has them all):
+ * word offsets inside a board's downstream and upstream blocks. */
+#define EHA_D_CONTROL 0x00      /* 1 enable, 2 clear fault, 0 off */
+#define EHA_D_MODE 0x01         /* 1 current control */
+#define EHA_D_IQ_REF 0x02       /* q-axis current reference, mA, signed */
+#define EHA_D_VQ_FF 0x04        /* q-axis voltage feed-forward, mV, signed */
+#define EHA_D_ANGLE_OFFSET 0x09 /* rotor angle offset, sent at enable */
+#define EHA_D_SEQUENCE 0x0C     /* counts the MCU's cycles */
+#define EHA_U_STATUS 0x00       /* board status bits */
+#define EHA_U_SPEED 0x04        /* motor speed, counts, signed */
+#define EHA_U_PISTON_LO 0x06    /* BiSS piston count, low and high half */
+#define EHA_U_PISTON_HI 0x07
+#define EHA_U_IQ 0x08           /* measured q-axis current, mA, signed */
+#define EHA_U_ERR_LINK_CRC 0x1A /* the board's downstream CRC error count */
+#define EHA_CTRL_ENABLE 1u
+#define EHA_CTRL_CLEAR_FAULT 2u
+#define EHA_BOARD_MODE_CURRENT 1u
+
 /* The calibration block's header; the record follows it at EHA_CAL_BASE + 16. */
 #define EHA_CAL_MAGIC 0x4C414345u /* "ECAL" */
 typedef struct {
