@@ -14,7 +14,9 @@ import numpy as np
 from firmware_model.calibration import FirmwareCalibration, calibration
 from firmware_model.fpga.driver_board import LinkMemory
 from firmware_model.mcu.c_abi import (
+    IN_CLEAR_FAULT,
     IN_COMMAND,
+    IN_DISABLE,
     IN_ENABLE,
     INPUT,
     MEASURED_FLOATS,
@@ -57,6 +59,7 @@ class CMcu:
         self.iq_ref = [F32(0.0)]
         self.vq_ff = [F32(0.0)]
         self.status = [0]
+        self.mode, self.value, self.last_cmd_tick = ["off"], [0.0], [0]  # the last command
 
     def _start(self, cal: FirmwareCalibration, config: np.ndarray) -> None:
         """Load the law and give it a fresh state built from ``config``."""
@@ -78,10 +81,17 @@ class CMcu:
             raise ValueError(f"unknown command mode {mode!r}")
         self._flags |= IN_COMMAND
         self._in["mode"], self._in["value"], self._cmd_tick = MODES.index(mode), value, tick
+        self.mode[0], self.value[0], self.last_cmd_tick[0] = mode, value, tick
 
     def enable(self, i: int, angle_offset: int) -> None:
         self._flags |= IN_ENABLE
         self._in["angle_offset"] = angle_offset
+
+    def disable(self, i: int) -> None:
+        self._flags |= IN_DISABLE
+
+    def clear_fault(self, i: int) -> None:
+        self._flags |= IN_CLEAR_FAULT
 
     def step(self, tick: int) -> None:
         link = self.links[0]
