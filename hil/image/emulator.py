@@ -246,8 +246,18 @@ class ImageCore:
             return (f"{what}: hard fault: undefined instruction or invalid state (e.g. an "
                     f"ARM-mode branch target) at PC {where}")
         if e == U.UC_ERR_EXCEPTION:
+            target = self.uc.reg_read(A.UC_ARM_REG_PC)
+            if not self._executable(target):
+                return (f"{what}: hard fault: instruction fetch from 0x{target:08X} "
+                        f"({M.describe(target)}), which is not executable, branched to from "
+                        f"{where}")
             return f"{what}: hard fault: unhandled CPU exception (SVC, BKPT, ...) at PC {where}"
         return f"{what}: the emulator stopped: {exc} at PC {where}"
+
+    @staticmethod
+    def _executable(address: int) -> bool:
+        return any(base <= address < base + size and "x" in perms
+                   for _, base, size, perms in M.REGIONS)
 
     def _describe_fault(self, what: str) -> str:
         p = self.prof

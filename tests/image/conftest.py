@@ -24,13 +24,14 @@ def need_tools() -> None:
 
 @pytest.fixture(scope="session")
 def make_image(tmp_path_factory):
-    """``make_image(source, suffix=".c")``: an image of the template's startup, linker
-    script and ``source`` (C or assembly); built once per source."""
+    """``make_image(source, suffix=".c", startup=True)``: an image of the template's
+    startup (unless ``startup`` is false), linker script and ``source`` (C or assembly);
+    built once per source."""
     need_tools()
     out_dir = tmp_path_factory.mktemp("images")
 
-    def make(source: str, suffix: str = ".c") -> Path:
-        digest = hashlib.sha256((suffix + source).encode()).hexdigest()[:12]
+    def make(source: str, suffix: str = ".c", startup: bool = True) -> Path:
+        digest = hashlib.sha256((f"{suffix}{startup}" + source).encode()).hexdigest()[:12]
         elf = out_dir / f"{digest}.elf"
         if elf.exists():
             return elf
@@ -38,8 +39,8 @@ def make_image(tmp_path_factory):
         src.write_text(source)
         t = build.TEMPLATE_DIR
         r = subprocess.run([mcu_builds.ARM_GCC, *build.IMAGE_FLAGS, "-I", str(t), "-T",
-                            str(t / "eha_hil.ld"), str(t / "startup.c"), str(src), "-o",
-                            str(elf)], capture_output=True, text=True)
+                            str(t / "eha_hil.ld"), *([str(t / "startup.c")] if startup else []),
+                            str(src), "-o", str(elf)], capture_output=True, text=True)
         assert r.returncode == 0, r.stderr
         return elf
 
