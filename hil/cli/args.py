@@ -219,8 +219,8 @@ def add_config_options(parser: argparse.ArgumentParser) -> None:
 def mcu_image(text: str) -> str:
     """A firmware ELF the harness can run (checked here once: architecture, vector table,
     5 kHz entry); the path."""
-    from hil.image.elf import load
-    from hil.image.errors import ImageError
+    from hil.sim.image.elf import load
+    from hil.sim.image.errors import ImageError
 
     try:
         load(text)

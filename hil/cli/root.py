@@ -33,9 +33,9 @@ from hil.cli.args import (
     output_file,
     positive_float,
 )
-from hil.image.errors import ImageFault
 from hil.output.tables import table
 from hil.scenarios.plant_figures import F2_BANDS, THESIS_F1, THESIS_F2, within_band
+from hil.sim.image.errors import ImageFault
 from plant.config import ConfigError, load_config, preset_names
 
 EXIT_USAGE = 2
@@ -361,6 +361,7 @@ def cmd_run_thesis(args: argparse.Namespace) -> int:
     results = []
     notes = []
     profiles: list[dict] = []
+    _image_profile(cfg, "")  # this command's steps only
     for name in names:
         t0 = time.perf_counter()
         if not args.json:
@@ -405,7 +406,7 @@ def _image_profile(cfg, label: str) -> dict | None:  # noqa: ANN001 - Config
     is not an image)."""
     if cfg.get("mcu.impl") != "image":
         return None
-    from hil.image import profile
+    from hil.sim.image import profile
 
     return profile.take(label)
 
@@ -413,7 +414,7 @@ def _image_profile(cfg, label: str) -> dict | None:  # noqa: ANN001 - Config
 def _profile_text(profiles: list[dict]) -> str:
     if not profiles:
         return ""
-    from hil.image import profile
+    from hil.sim.image import profile
 
     return "\nMCU image execution time (estimated, docs/mcu.md):\n" + "\n".join(
         "  " + profile.line(p) for p in profiles)
@@ -460,6 +461,7 @@ def cmd_run(args: argparse.Namespace) -> int:
 
     config_sets, knob_values = split_sets(args.set or ())
     cfg = load_config(args.config, config_sets)
+    _image_profile(cfg, "")  # this command's steps only
     res = scenario.call(cfg, _progress(scenario.name, not args.json), knob_values)
     prof = _image_profile(cfg, res.name)
     rows = [(m.name, m.value, m.unit, m.requirement,

@@ -254,7 +254,7 @@ class ActuatorStack:
 
             self.mcu = CMcu(cfg, [self.fpga.mcu_link])
         elif cfg.get("mcu.impl") == "image":  # a firmware ELF on the emulator (docs/mcu.md)
-            from hil.image.stack import ImageMcu
+            from hil.sim.image.stack import ImageMcu
 
             self.mcu = ImageMcu(cfg, [self.fpga.mcu_link])
         else:

@@ -12,8 +12,8 @@ import pytest
 
 pytest.importorskip("unicorn", reason="unicorn not installed (pip install eha-hil)")
 
-from hil.image import build  # noqa: E402
-from hil.verify import mcu_builds  # noqa: E402
+from hil.sim import mcu_builds  # noqa: E402
+from hil.sim.image import build  # noqa: E402
 
 
 def need_tools() -> None:

@@ -1,6 +1,6 @@
 """The execution-time model on code whose count is known by construction: a hand-written
 step whose instructions, taken branches, flash literals and external-bus accesses are
-counted here from the Cortex-M4 TRM's timings, not from hil/image/cost.py. (The literals
+counted here from the Cortex-M4 TRM's timings, not from hil/sim/image/cost.py. (The literals
 are addresses no MOV immediate can hold, so the assembler keeps them in flash.)"""
 
 from __future__ import annotations
@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from firmware_model.mcu.c_abi import INPUT, OUTPUT, config_record
-from hil.image.law import ImageLaw
+from hil.sim.image.law import ImageLaw
 from plant.config import load_config
 
 KNOWN = r"""
@@ -74,7 +74,7 @@ def test_a_known_step_costs_what_the_trm_says(make_image):
 def test_the_law_s_profile_is_within_the_period_and_varies_with_the_path(law_image):
     """The law's image over a few hundred steps of the F5 stack: every step counted, well
     inside 200 us, and not one constant (the paths differ: enable, limits, strain)."""
-    from hil.verify.mcu_steps import random_inputs
+    from hil.verify.mcu.steps import random_inputs
 
     law = ImageLaw(law_image, config_record(load_config(None, ())))
     law.run(random_inputs(300, 3))

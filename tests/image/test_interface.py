@@ -1,5 +1,5 @@
 """The firmware interface: the C header an engineer compiles against (eha_hil.h) says what
-the harness provides (hil/image/memory_map.py) and what the board's registers are
+the harness provides (hil/sim/image/memory_map.py) and what the board's registers are
 (firmware_model/fpga/layout.py, firmware_model/mcu/dpram.py)."""
 
 from __future__ import annotations
@@ -8,9 +8,9 @@ import re
 
 from firmware_model.fpga import layout as B
 from firmware_model.mcu import dpram
-from hil.image import build
-from hil.image import memory_map as M
-from hil.image.law import RX, TX
+from hil.sim.image import build
+from hil.sim.image import memory_map as M
+from hil.sim.image.law import RX, TX
 
 
 def _defines() -> dict[str, int]:
@@ -54,6 +54,7 @@ def test_dpram_rules_follow_the_dpram_map():
         want = {"down": M.READ | M.WRITE, "up": M.READ, "reserved": 0}[block]
         assert rules[2 * addr] == rules[2 * addr + 1] == want, hex(addr)
     assert not rules[2 * dpram.DPRAM_WORDS:M.LINK_COUNTERS - M.DPRAM_BASE].any()
+    assert M.LINK_COUNTERS_BYTES == 4 * dpram.MAX_BOARDS
 
 
 def test_process_data_records_fit_their_windows():

@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 
 from firmware_model.mcu.mcu import CMD_TIMEOUT, LINK_ERROR, SAFE_OFF
-from hil.actuator import ActuatorStack
-from hil.verify.mcu_stack_steps import stack_run
-from hil.verify.mcu_verify import verify_mcu
+from hil.sim.actuator import ActuatorStack
+from hil.verify.mcu.stack_steps import stack_run
+from hil.verify.mcu.verify import verify_mcu
 from plant.config import load_config
 
 from .conftest import need_tools

@@ -8,9 +8,9 @@ import math
 import numpy as np
 import pytest
 
-from hil.actuator import ActuatorStack
 from hil.cli import main
-from hil.image import build
+from hil.sim.actuator import ActuatorStack
+from hil.sim.image import build
 from plant.config import load_config
 
 from .conftest import need_tools

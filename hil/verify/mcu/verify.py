@@ -75,8 +75,8 @@ def verify_mcu(against: str, steps: int, seed: int = 1, stack_seconds: float = 0
         law = mcu_builds.HostLaw(path)
         run = law.run
     elif against == "image":
-        from hil.image import build
-        from hil.image.law import ImageLaw
+        from hil.sim.image import build
+        from hil.sim.image.law import ImageLaw
 
         if contract != "off":
             raise ValueError("--against image: the image is built with -ffp-contract=off")

@@ -12,8 +12,8 @@ from pathlib import Path
 from elftools.common.exceptions import ELFError
 from elftools.elf.elffile import ELFFile
 
-from hil.image import memory_map as M
-from hil.image.errors import ImageError
+from hil.sim.image import memory_map as M
+from hil.sim.image.errors import ImageError
 
 EM_ARM = 40
 

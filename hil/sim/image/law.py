@@ -1,6 +1,6 @@
 """The MCU law's records (``mcu_input`` in, ``mcu_output`` out) through a firmware image:
 what the harness writes into the process data and the DPRAM before a cycle and reads back
-after it. Used by the stack (hil/image/stack.py) and by ``verify mcu --against image``."""
+after it. Used by the stack (hil/sim/image/stack.py) and by ``verify mcu --against image``."""
 
 from __future__ import annotations
 
@@ -9,12 +9,12 @@ from pathlib import Path
 import numpy as np
 
 from firmware_model.mcu.c_abi import OUTPUT
-from hil.image import build, cost
-from hil.image import memory_map as M
-from hil.image.elf import Image, load
-from hil.image.emulator import ImageCore
-from hil.image.errors import ImageFault
-from hil.image.profile import Profile
+from hil.sim.image import build, cost
+from hil.sim.image import memory_map as M
+from hil.sim.image.elf import Image, load
+from hil.sim.image.emulator import ImageCore
+from hil.sim.image.errors import ImageFault
+from hil.sim.image.profile import Profile
 
 #: ``eha_rx`` of eha_hil.h.
 RX = np.dtype([("tick", "<i4"), ("flags", "<u4"), ("mode", "<u4"), ("value", "<f4"),

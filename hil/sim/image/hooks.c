@@ -8,7 +8,7 @@
  * issue 2309). The external bus is MMIO instead, and alignment is checked per instruction.
  *
  * Per instruction (a code hook over all memory): the instruction and its estimated cycles
- * from a per-halfword table of flash (hil/image/cost.py); a taken-branch penalty when it
+ * from a per-halfword table of flash (hil/sim/image/cost.py); a taken-branch penalty when it
  * does not follow the previous one; the address of the last instruction, for fault
  * reports; the Cortex-M4's UNALIGNED UsageFault for LDRD/STRD/LDM/STM/VLDR/VSTR, whose
  * effective address is its base register plus an offset taken from the disassembly; a

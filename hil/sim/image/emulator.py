@@ -1,6 +1,6 @@
 """One firmware image on Unicorn's Cortex-M4: the memory map of the firmware interface,
 the boot from the reset vector, and one call of the 5 kHz entry per MCU cycle, with its
-instruction count and estimated cycles (hil/image/cost.py) and every way an image can
+instruction count and estimated cycles (hil/sim/image/cost.py) and every way an image can
 break the interface turned into one :class:`ImageFault` line (step, address, PC, symbol).
 
 Per cycle the harness writes the process data in (RX) and the link's upstream words into
@@ -22,10 +22,11 @@ from unicorn import Uc, UcError
 from unicorn import arm_const as A
 from unicorn import unicorn_const as U
 
-from hil.image import build, cost
-from hil.image import memory_map as M
-from hil.image.elf import Image
-from hil.image.errors import ImageFault
+from firmware_model.mcu import dpram
+from hil.sim.image import build, cost
+from hil.sim.image import memory_map as M
+from hil.sim.image.elf import Image
+from hil.sim.image.errors import ImageFault
 
 FAULT_READ, FAULT_WRITE, FAULT_BUDGET, FAULT_PENDING, FAULT_UNALIGNED = 1, 2, 3, 4, 5
 #: A step is stopped (the image "never returns") past this many periods of cycles.
@@ -143,8 +144,9 @@ class ImageCore:
                                              boards) + cal)
         uc.mem_write(M.RETURN_ADDRESS, b"\x00\xbf" * 8)  # never executed: the stop address
         # Views the harness reads and writes every cycle.
-        self.dpram = self._dpram_page[:2 * 0x140].view("<u2")
-        self.link_counters = self._dpram_page[0x400:0x414].view("<u4")
+        self.dpram = self._dpram_page[:2 * dpram.DPRAM_WORDS].view("<u2")
+        off = M.LINK_COUNTERS - M.DPRAM_BASE
+        self.link_counters = self._dpram_page[off:off + M.LINK_COUNTERS_BYTES].view("<u4")
         self.rx = self._pd_page[:M.RX_BYTES]
         self.tx = self._pd_page[M.TX_BASE - M.RX_BASE:M.TX_BASE - M.RX_BASE + M.TX_BYTES]
         self._install_hooks()

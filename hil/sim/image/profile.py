@@ -1,5 +1,5 @@
 """Execution time of an image, as processor-in-the-loop tools report it: per 5 kHz step the
-instruction count and estimated cycles (hil/image/cost.py), their mean and max, the worst
+instruction count and estimated cycles (hil/sim/image/cost.py), their mean and max, the worst
 step, and the share of the 200 us period at 168 MHz. Every image MCU made while a command
 runs adds its steps to :data:`SESSION`, which ``run`` and ``verify`` print."""
 
@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from hil.image import cost
+from hil.sim.image import cost
 
 
 @dataclass

@@ -10,10 +10,10 @@ import shutil
 import subprocess
 from pathlib import Path
 
-from hil.verify.mcu_builds import ARM_GCC, COMMON_FLAGS, BuildError, _cache_dir, host_compiler
+from hil.sim.mcu_builds import ARM_GCC, COMMON_FLAGS, BuildError, _cache_dir, host_compiler
 
 HERE = Path(__file__).resolve().parent
-MCU_DIR = Path(__file__).resolve().parents[2] / "firmware_model" / "mcu"
+MCU_DIR = Path(__file__).resolve().parents[3] / "firmware_model" / "mcu"
 IMAGE_DIR = MCU_DIR / "image"
 TEMPLATE_DIR = IMAGE_DIR / "template"
 #: The image's flags: the law's contraction decision (mcu_builds) and the Cortex-M4F.

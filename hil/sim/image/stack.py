@@ -1,5 +1,5 @@
 """A firmware image as the stack's MCU (``--set mcu.impl=image``): the calls and probed
-values of :class:`hil.mcu_c.CMcu`, with each cycle run by the image on the emulator. The
+values of :class:`hil.sim.mcu_c.CMcu`, with each cycle run by the image on the emulator. The
 stack's link memory plays the DPRAM's board 0 (sync_up before the cycle, sync_down after
 it: no added latency, as with the Python MCU)."""
 
@@ -9,11 +9,11 @@ import numpy as np
 
 from firmware_model.calibration import FirmwareCalibration
 from firmware_model.fpga.driver_board import LinkMemory
-from hil.image import profile
-from hil.image.errors import ImageError, ImageFault
-from hil.image.law import ImageLaw
-from hil.mcu_c import CMcu
-from hil.verify.mcu_builds import BuildError
+from hil.sim.image import profile
+from hil.sim.image.errors import ImageError, ImageFault
+from hil.sim.image.law import ImageLaw
+from hil.sim.mcu_builds import BuildError
+from hil.sim.mcu_c import CMcu
 from plant.config import Config, ConfigError
 
 TICK_S = 1 / 20_000  # the harness's clock

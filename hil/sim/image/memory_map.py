@@ -22,6 +22,7 @@ RCC_PAGE = 0x4002_3000          # CRC, RCC, flash interface: accepted, no effect
 SCS_BASE = 0xE000_E000          # CPACR, NVIC, SysTick: accepted, no effect
 DPRAM_BASE = 0x6000_0000        # FSMC bank 1, NE1
 LINK_COUNTERS = 0x6000_0400
+LINK_COUNTERS_BYTES = 20        # one 32-bit count per board, boards 0..4 (dpram.MAX_BOARDS)
 RX_BASE = 0x6400_0000           # FSMC bank 1, NE2: the fieldbus controller's process data
 TX_BASE = 0x6400_0100
 RX_BYTES, TX_BYTES = 0x20, 0x100
@@ -55,7 +56,7 @@ def dpram_rules() -> np.ndarray:
         _, block, _ = dpram.decode(addr)
         rules[2 * addr:2 * addr + 2] = {"down": READ | WRITE, "up": READ}.get(block, 0)
     off = LINK_COUNTERS - DPRAM_BASE
-    rules[off:off + 4 * dpram.MAX_BOARDS] = READ
+    rules[off:off + LINK_COUNTERS_BYTES] = READ
     return rules
 
 
