@@ -43,7 +43,8 @@ class _Prof(ctypes.Structure):
     _fields_ = [
         ("emu_stop", ctypes.c_void_p), ("reg_read", ctypes.c_void_p),
         ("code_base", ctypes.c_uint32), ("code_halfwords", ctypes.c_uint32),
-        ("cost", ctypes.c_void_p), ("strict_reg", ctypes.c_void_p),
+        ("cost", ctypes.c_void_p), ("count", ctypes.c_void_p), ("span", ctypes.c_void_p),
+        ("strict_reg", ctypes.c_void_p),
         ("strict_off", ctypes.c_void_p),
         ("branch_penalty", ctypes.c_uint32), ("budget_cycles", ctypes.c_uint64),
         ("fsmc_extra_half", ctypes.c_uint32), ("fsmc_extra_word", ctypes.c_uint32),
@@ -96,24 +97,49 @@ def _alignment_rule(insn) -> tuple[int, int]:  # noqa: ANN001 - capstone.CsInsn
 
 @dataclass
 class CostTable:
-    """Per halfword of flash: the cycles of the instruction starting there (0: none), and
-    its alignment rule, from a linear disassembly of every function the ELF names."""
+    """Per halfword of flash, for the instruction starting there: its cycles, the
+    instructions and bytes it stands for (1 and its size; an IT instruction: itself and its
+    block, inside which Unicorn calls the code hook only now and then; an instruction inside
+    a block: 0 instructions), and its alignment rule (span 0: no instruction starts there);
+    from a linear disassembly of every function the ELF names."""
 
     cost: np.ndarray
+    count: np.ndarray
+    span: np.ndarray
     strict_reg: np.ndarray
     strict_off: np.ndarray
 
     @classmethod
     def of(cls, image: Image) -> CostTable:
         n = M.FLASH_SIZE // 2
-        table = cls(np.zeros(n, dtype=np.uint16), np.zeros(n, dtype=np.int16),
+        table = cls(np.zeros(n, dtype=np.uint16), np.zeros(n, dtype=np.uint8),
+                    np.zeros(n, dtype=np.uint8), np.zeros(n, dtype=np.int16),
                     np.zeros(n, dtype=np.int16))
         for start, code in image.function_code():
-            for insn in cost._MD.disasm(code, start):
+            insns = list(cost._MD.disasm(code, start))
+            members = 0  # instructions of the current IT block still to come
+            for k, insn in enumerate(insns):
                 h = (insn.address - M.FLASH_BASE) >> 1
-                table.cost[h] = cost.instruction_cycles(insn)
+                if members:
+                    members -= 1
+                    table.span[h] = insn.size  # an instruction, charged with its IT
+                    continue
+                members = _it_length(insn)
+                block = insns[k:k + 1 + members]
+                table.cost[h] = sum(cost.instruction_cycles(i) for i in block)
+                table.count[h] = len(block)
+                table.span[h] = block[-1].address + block[-1].size - insn.address
                 table.strict_reg[h], table.strict_off[h] = _alignment_rule(insn)
         return table
+
+
+def _it_length(insn) -> int:  # noqa: ANN001 - capstone.CsInsn
+    """How many instructions an IT instruction makes conditional (``itte``: 3); 0 for any
+    other instruction."""
+    name = insn.mnemonic.split(".")[0]
+    if insn.insn_name() != "it" or not name.startswith("it"):
+        return 0
+    return len(name) - 1  # "it" + one letter per further instruction
 
 
 def _uclib() -> ctypes.CDLL:
@@ -170,6 +196,7 @@ class ImageCore:
         p.code_base, p.code_halfwords = M.FLASH_BASE, M.FLASH_SIZE // 2
         c = self.costs
         p.cost, p.strict_reg = c.cost.ctypes.data, c.strict_reg.ctypes.data
+        p.count, p.span = c.count.ctypes.data, c.span.ctypes.data
         p.strict_off = c.strict_off.ctypes.data
         p.branch_penalty = cost.BRANCH_PENALTY
         p.budget_cycles = 2**63

@@ -9,7 +9,11 @@
  *
  * Per instruction (a code hook over all memory): the instruction and its estimated cycles
  * from a per-halfword table of flash (hil/sim/image/cost.py); a taken-branch penalty when it
- * does not follow the previous one; the address of the last instruction, for fault
+ * does not follow the previous one. Unicorn calls the code hook for some instructions inside
+ * a Thumb IT block and not for others (not for the last), so the table charges an IT
+ * instruction with its whole block (each instruction at its full cost, whether its
+ * condition passes or not: an upper bound), the next expected address is the block's end,
+ * and a hook call inside a block counts nothing; the address of the last instruction, for fault
  * reports; the Cortex-M4's UNALIGNED UsageFault for LDRD/STRD/LDM/STM/VLDR/VSTR, whose
  * effective address is its base register plus an offset taken from the disassembly; a
  * stop when the step exceeds its cycle budget. Code outside flash goes to a pending list
@@ -44,6 +48,10 @@ typedef struct {
     reg_read_fn reg_read;
     uint32_t code_base, code_halfwords;
     const uint16_t *cost;         /* per halfword of flash: cycles of the instruction there */
+    const uint8_t *count;         /* instructions it stands for (an IT: itself and its block;
+                                     an instruction inside a block: 0) */
+    const uint8_t *span;          /* bytes it stands for (an IT: up to the block's end);
+                                     0: no instruction starts here */
     const int16_t *strict_reg;    /* Unicorn register id of the base, 0: no alignment rule */
     const int16_t *strict_off;    /* offset added to it */
     uint32_t branch_penalty;
@@ -73,15 +81,18 @@ static void on_code(void *uc, uint64_t address, uint32_t size, void *user)
 {
     eha_prof *p = user;
     uint32_t a = (uint32_t)address;
+    uint32_t h = (a - p->code_base) >> 1;
+    int known = a >= p->code_base && h < p->code_halfwords && p->span[h];
+    p->last_pc = a;
+    if (known && !p->count[h])
+        return; /* inside an IT block: charged with its IT instruction */
     if (p->instructions && a != p->next_pc) {
         p->taken++;
         p->cycles += p->branch_penalty;
     }
-    p->instructions++;
-    p->last_pc = a;
-    p->next_pc = a + size;
-    uint32_t h = (a - p->code_base) >> 1;
-    if (a >= p->code_base && h < p->code_halfwords && p->cost[h]) {
+    if (known) {
+        p->instructions += p->count[h];
+        p->next_pc = a + p->span[h];
         p->cycles += p->cost[h];
         int reg = p->strict_reg[h];
         if (reg) {
@@ -92,11 +103,14 @@ static void on_code(void *uc, uint64_t address, uint32_t size, void *user)
                 stop(uc, p, FAULT_UNALIGNED, ea, 4);
         }
     } else if (p->n_pending < p->pending_cap) {
+        p->instructions++;
+        p->next_pc = a + size;
         p->pending[2 * p->n_pending] = a;
         p->pending[2 * p->n_pending + 1] = size;
         p->n_pending++;
         p->cycles += 1; /* a floor until Python prices it */
     } else {
+        p->instructions++;
         stop(uc, p, FAULT_PENDING, a, size);
     }
     if (p->cycles > p->budget_cycles)
