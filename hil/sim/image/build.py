@@ -81,11 +81,19 @@ def template_image(src: Path = TEMPLATE_DIR) -> Path:
     elf = work / "firmware.elf"
     if elf.exists():
         return elf
-    work.mkdir(parents=True, exist_ok=True)
+    # Built in a folder of this process's own, then renamed: two test workers may race.
+    tmp = work.with_name(f"{work.name}.tmp{os.getpid()}")
+    shutil.rmtree(tmp, ignore_errors=True)
+    tmp.mkdir(parents=True)
     for p in files:
-        shutil.copy2(p, work / p.name)
-    r = subprocess.run(["make", "-s"], cwd=work, capture_output=True, text=True)
-    if r.returncode or not elf.exists():
+        shutil.copy2(p, tmp / p.name)
+    r = subprocess.run(["make", "-s"], cwd=tmp, capture_output=True, text=True)
+    if r.returncode or not (tmp / "firmware.elf").exists():
         lines = (r.stderr or r.stdout).strip().splitlines() or ["no message"]
+        shutil.rmtree(tmp, ignore_errors=True)
         raise BuildError(f"template make failed: {lines[0]}")
+    try:
+        tmp.rename(work)
+    except OSError:  # another process finished first: use its build
+        shutil.rmtree(tmp, ignore_errors=True)
     return elf
