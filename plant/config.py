@@ -120,6 +120,7 @@ RANGES: dict[str, Range] = {
     "effects.seal_friction.static_n": _span(0.0, 1e5),
     "effects.seal_friction.stribeck_velocity_m_per_s": _pos(10.0),
     "effects.seal_friction.velocity_eps_m_per_s": _pos(10.0),
+    "effects.entrained_air.volume_fraction": _span(0.0, 0.2),
     "effects.oil_temperature.reference_c": _span(-40.0, 150.0),
     "effects.oil_temperature.initial_c": _span(-40.0, 150.0),
     "effects.oil_temperature.viscosity_coeff_per_c": _span(0.0, 0.1),

@@ -16,6 +16,7 @@ import numpy as np
 
 from plant import kernel
 from plant import layout as L
+from plant.blocks.hydraulics import P_ATM_PA
 from plant.config import Config
 
 # Stability margins for the RK4 sub-step h: h*omega for oscillatory modes and h*rate for
@@ -140,6 +141,9 @@ def build_params(cfg: Config, substeps: int | None = None) -> np.ndarray:
     p[L.P_SF_VS] = e["stribeck_velocity_m_per_s"]
     p[L.P_SF_EPS] = e["velocity_eps_m_per_s"]
     p[L.P_KSX_ON] = _flag(eff["ks_position"])
+    e = eff["entrained_air"]
+    p[L.P_AIR_ON] = _flag(e)
+    p[L.P_AIR_A] = e["volume_fraction"] * h["bulk_modulus_pa"] * P_ATM_PA
     e = eff["oil_temperature"]
     p[L.P_TEMP_ON] = _flag(e)
     p[L.P_T_REF] = e["reference_c"]

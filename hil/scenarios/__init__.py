@@ -137,6 +137,7 @@ def _load_all() -> None:
     from hil.scenarios import (  # noqa: F401
         bus_faults,
         current,
+        f1_measured,
         hip,
         identify_rig,
         plant_figures,
