@@ -186,10 +186,14 @@ class StudySummary:
             f"thigh alone (I = {self.inertia_thigh:.3f} kg m^2); 30 Hz needs I <= "
             f"{self.inertia_for_30hz:.3f} kg m^2 at this K_p, or K_p >= "
             f"{self.kp_for_30hz:.3g} Nm/rad with the leg",
-            f"study: the piston-measured angle passes -3 dB as late as "
-            f"{self.best_pistons_hz:.0f} Hz only where soft rods let the pistons move "
-            "without the load (its high-frequency gain K_p / (K_p + K_rod)), not where the "
-            "leg follows: the thesis's position figure is shown, not judged (docs/hip.md)",
+            (f"study: the piston-measured angle passes -3 dB as late as "
+             f"{self.best_pistons_hz:.0f} Hz only where soft rods let the pistons move "
+             "without the load (its high-frequency gain K_p / (K_p + K_rod)), not where the "
+             "leg follows: the thesis's position figure is shown, not judged (docs/hip.md)"
+             if self.best_pistons_hz >= 30.0 else
+             f"study: the piston-measured angle too stays below 30 Hz (at best "
+             f"{self.best_pistons_hz:.1f} Hz): the thesis's position figure is shown, not "
+             "judged (docs/hip.md)"),
         ]
 
 
