@@ -139,7 +139,8 @@ def f1_measured(cfg: Config, progress: Progress = None) -> ScenarioResult:
     def part(k: int) -> Progress:
         return (lambda i, _n: progress(k * n + i, 2 * n)) if progress else None
 
-    before = stepped_bode(cfg, freqs, progress=part(0))
+    without = cfg.with_overrides({"effects.entrained_air.enabled": False}, "without air")
+    before = stepped_bode(without, freqs, progress=part(0))
     after = stepped_bode(air_on(cfg), freqs, progress=part(1))
     pb, pa = peak_hz(freqs, before), peak_hz(freqs, after)
     alpha = cfg.get("effects.entrained_air.volume_fraction")
