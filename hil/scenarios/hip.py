@@ -6,7 +6,7 @@ the pistons) and command -> measured joint torque (G^T of the gauges' forces, Eq
 their -3 dB bandwidths beside the thesis's 30-40 Hz, for the reinforced and the
 unreinforced rod path (thesis 5.4). The stack: PC joint loop -> fieldbus process image ->
 MCU 5 kHz -> driver boards 20 kHz -> two EHA plants coupled by the thigh
-(:mod:`hil.hip_stack`).
+(:mod:`hil.sim.hip_stack`).
 
 The load is the thigh with the leg below it (thesis 6.4.1: the robot on a crane, one leg
 servo-on; Table 6.1's masses, :class:`plant.hip.thigh.LegBelow`). Two parameters are
@@ -31,9 +31,9 @@ from pathlib import Path
 import numpy as np
 
 from firmware_model.pc.joint_loop import JointGains
-from hil.hip_stack import JointRecord, run_joint
 from hil.scenarios import Metric, Progress, ScenarioResult, register
 from hil.scenarios.current import bandwidth_3db
+from hil.sim.hip_stack import JointRecord, run_joint
 from plant.config import Config
 from plant.hip.thigh import LegBelow, ThighParams
 
@@ -218,7 +218,7 @@ def f9_roll(cfg: Config, progress: Progress = None) -> ScenarioResult:
 
 
 def _plot(res: ScenarioResult, path: Path) -> None:
-    from hil.plots import _pyplot, mark_thesis
+    from hil.output.plots import _pyplot, mark_thesis
 
     plt = _pyplot()
     fig, (ag, ap) = plt.subplots(2, 1, figsize=(7, 6), sharex=True)
