@@ -85,6 +85,7 @@ def test_the_leg_below_swings_with_the_thigh():
     gp = kin.G[:, 0]
     mc = thigh.mass_kg * thigh.com_m + leg.shank_kg * (leg.knee_m + leg.shank_com_m) \
         + leg.foot_kg * (leg.knee_m + leg.ankle_m + leg.foot_com_m)
+    assert thigh.as_array()[H_MGC] == pytest.approx(mc * 9.80665, rel=1e-12)
     stiff = K_ROD * float(gp @ gp) + mc * 9.80665
     f_lin = math.sqrt(stiff / thigh.inertia()) / (2 * math.pi)
     swing = _held_pistons_swing(0.0, math.radians(0.05), int(4.0 / f_lin / DT), leg)
