@@ -28,7 +28,12 @@ DEFAULT_PRESET = "hydra_default"
 #: recipe it was recorded with, so its log replays bit for bit.
 PLANT_NUMERICS = 2
 #: Values of keys that a configuration recorded before the key existed ran with.
-RECORDED_BEFORE: dict[str, Any] = {"sim.plant_numerics": 1}
+RECORDED_BEFORE: dict[str, Any] = {
+    "sim.plant_numerics": 1,
+    # Runs recorded before entrained air existed had none (the fraction is then unused).
+    "effects.entrained_air.enabled": False,
+    "effects.entrained_air.volume_fraction": 0.01,
+}
 
 #: Keys that take one of a fixed set of strings.
 CHOICES: dict[str, tuple[str, ...]] = {
