@@ -110,8 +110,7 @@ def calibrate_air_fraction(cfg: Config, target_hz: float,
     air, lower peak: bisection); a bound when the target lies beyond it."""
 
     def peak(alpha: float) -> float:
-        c = air_on(cfg, alpha) if alpha > 0 else cfg
-        p = peak_hz(freqs, stepped_bode(c, freqs))
+        p = peak_hz(freqs, stepped_bode(air_on(cfg, alpha), freqs))
         if log:
             log(f"alpha {alpha:.5f}: peak {p:.2f} Hz")
         return p
