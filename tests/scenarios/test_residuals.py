@@ -22,7 +22,7 @@ def thesis_air():
 @pytest.mark.slow
 @pytest.mark.parametrize("name", ["f2", "f3", "f4", "f7", "f8"])
 def test_figures_stay_within_tolerance_with_air_on(thesis_air, name):
-    res = get(name).run(thesis_air, None)
+    res = get(name).call(thesis_air)
     judged = [m for m in res.metrics if m.ok is not None]
     assert judged and all(m.ok for m in judged), [(m.name, m.value) for m in judged]
 
@@ -31,7 +31,7 @@ def test_figures_stay_within_tolerance_with_air_on(thesis_air, name):
 def test_f1_as_measured_with_air():
     """The calibrated air moves the stepped-sine peak from the model's side (~55 Hz) to the
     measured figure's; without air the peak stays above 45 Hz."""
-    res = get("f1-measured").run(load_config("hydra_thesis"), None)
+    res = get("f1-measured").call(load_config("hydra_thesis"))
     before = res.metric("peak, without air").value
     after = res.metric("peak, entrained air").value
     assert before > 45.0
