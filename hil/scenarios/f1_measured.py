@@ -8,13 +8,13 @@ zone's gain at its frequency; :func:`stepped_bode` does the same on the plant al
 is not); :data:`F1_MEASURED_AMPLITUDE_N` is an assumption, and docs/plant.md shows how the
 peak moves with it (air makes the resonance amplitude-dependent, the linear model does not).
 
-Why air and not the alternatives (docs/plant.md, "F1's measured 25 Hz"): a softer line of
-constant stiffness (hose wall, casing) that puts the open-loop peak at 25 Hz also softens
-the closed-loop figures F3 and F5, which the bench measured at the model's speed; a larger
-pump inertia cannot make a 25 Hz peak at all (the leakage damper d_s overdamps it first);
-the pump's Coulomb friction damps the peak and does not move it. Air is softest near the
-accumulator's precharge, where the open-loop sine about zero force keeps the circuit, and
-stiffens with the pressure the closed-loop experiments build.
+Why air (docs/residuals.md): a larger pump inertia cannot make a 25 Hz peak at all (the
+leakage damper d_s overdamps it first); the pump's Coulomb friction damps the peak and does
+not move it; a softer series elasticity does, and of the two physical candidates the hose
+wall would have to be thirty times softer than the thesis's own FEM of it, while the air
+needs an ordinary 1 %. Air is softest near the accumulator's precharge, where the
+open-loop sine about zero force keeps the circuit, and stiffens with pressure. Neither
+candidate spares F5 (docs/residuals.md), so the effect is off outside this scenario.
 
 The one parameter, the air's volume fraction alpha at atmospheric pressure, is found by
 :func:`calibrate_air_fraction` (bisection on the simulated peak) and held to
