@@ -14,6 +14,7 @@ anew and an unchanged one loads in milliseconds. Cache: ``$XDG_CACHE_HOME/eha-hi
 from __future__ import annotations
 
 import ctypes
+import functools
 import hashlib
 import os
 import re
@@ -165,7 +166,9 @@ def wrapper_source() -> str:
     return text
 
 
+@functools.cache
 def _version() -> str:
+    """Verilator's version line (asked once per process: the script starts in ~0.1 s)."""
     r = subprocess.run([VERILATOR, "--version"], capture_output=True, text=True)
     return r.stdout.strip()
 
