@@ -26,6 +26,7 @@ class PlantBench:
     mode: str
     tick_s: float
     cpu_s: float = math.nan  # CPU seconds of the process over the run, where measured
+    loop: str = ""           # the board's current loop, where there is a choice
 
     @property
     def real_time_factor(self) -> float:
@@ -96,9 +97,9 @@ def bench_fpga(cfg: Config, seconds: float = 2.0, bit_level: bool = False) -> Pl
     t0, c0 = time.perf_counter(), time.process_time()
     sched.run(n)
     wall, cpu = time.perf_counter() - t0, time.process_time() - c0
-    loop = "RTL (Verilator)" if stack.rtl is not None else "board model"
     return PlantBench(n * tick_s, wall, stack.plant.substeps,
-                      f"{'bit' if bit_level else 'value'}-level, {loop}", tick_s, cpu)
+                      "bit-level" if bit_level else "value-level", tick_s, cpu,
+                      "board model" if stack.rtl is None else "RTL (Verilator)")
 
 
 def bench_stack(cfg: Config, seconds: float = 2.0) -> PlantBench:

@@ -254,7 +254,7 @@ def cmd_bench_plant(args: argparse.Namespace) -> int:
                   "substeps"], rows, fmt=".3g",
                  title=f"plant alone, {cfg.sources[-1]}, 50 us tick (target >= 10x real time)")
     data = {"config": cfg.sources, "results": [
-        {"path": r.mode, "simulated_s": r.simulated_s, "wall_s": r.wall_s,
+        {"path": r.mode, "current_loop": r.loop, "simulated_s": r.simulated_s, "wall_s": r.wall_s,
          "real_time_factor": r.real_time_factor, "ticks_per_s": r.ticks_per_s,
          "substeps": r.substeps} for r in results]}
     _emit(args, text, data)
@@ -276,16 +276,17 @@ def cmd_bench_fpga(args: argparse.Namespace) -> int:
         print("value level done; bit level ...", file=sys.stderr)
     results.append(bench_fpga(cfg, args.bit_seconds, bit_level=True))
     load = os.getloadavg()
-    rows = [(r.mode, r.simulated_s, r.wall_s, r.cpu_s, r.real_time_factor,
+    rows = [(r.mode, r.loop, r.simulated_s, r.wall_s, r.cpu_s, r.real_time_factor,
              r.cpu_real_time_factor, r.ticks_per_s) for r in results]
-    text = table(["sensor and link path, current loop", "simulated [s]", "wall [s]", "CPU [s]",
-                  "real-time factor", "CPU real-time factor", "ticks/s"], rows, fmt=".3g",
+    text = table(["sensor and link path", "current loop", "simulated [s]", "wall [s]",
+                  "CPU [s]", "real-time factor", "CPU real-time factor", "ticks/s"], rows,
+                 fmt=".3g",
                  title=f"plant + driver board + LVDS link, {cfg.sources[-1]}, 20 kHz, MCU-rate "
                  "task writing iq_ref (target >= 5x real time, value level)")
     text += f"\nload average {load[0]:.2f} {load[1]:.2f} {load[2]:.2f} ({os.cpu_count()} cores)"
     data = {"config": cfg.sources, "load_average": list(load), "results": [
-        {"path": r.mode, "simulated_s": r.simulated_s, "wall_s": r.wall_s, "cpu_s": r.cpu_s,
-         "real_time_factor": r.real_time_factor,
+        {"path": r.mode, "current_loop": r.loop, "simulated_s": r.simulated_s,
+         "wall_s": r.wall_s, "cpu_s": r.cpu_s, "real_time_factor": r.real_time_factor,
          "cpu_real_time_factor": r.cpu_real_time_factor, "ticks_per_s": r.ticks_per_s}
         for r in results]}
     _emit(args, text, data)

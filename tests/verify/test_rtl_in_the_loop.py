@@ -238,3 +238,16 @@ def test_rtl_runs_in_the_single_actuator_stack_only(default_cfg):
     with pytest.raises(ConfigError, match="single-actuator stack only"):
         StackBox.__init__(object.__new__(StackBox), None,
                           default_cfg.with_overrides({"fpga.impl": "rtl"}))
+
+
+def test_bench_fpga_puts_the_board_models_figure_beside_the_rtls(rtl_lib, capsys):
+    import json
+
+    assert main(["bench", "fpga", "--set", "fpga.impl=rtl", "--seconds", "0.05",
+                 "--bit-seconds", "0.002", "--json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert [(r["path"], r["current_loop"]) for r in data["results"]] == [
+        ("value-level", "board model"), ("value-level", "RTL (Verilator)"),
+        ("bit-level", "RTL (Verilator)")]
+    assert all(r["cpu_s"] > 0 and r["wall_s"] > 0 for r in data["results"])
+    assert len(data["load_average"]) == 3
