@@ -132,12 +132,10 @@ def _same_result(name: str, cfg) -> None:
     assert V.take_divergences() == []
 
 
-@pytest.mark.slow
 def test_current_bode_on_the_rtl_is_bit_for_bit(default_cfg, rtl_lib):
     _same_result("current-bode", default_cfg)
 
 
-@pytest.mark.slow
 def test_f3_on_the_rtl_is_bit_for_bit(rtl_lib):
     from plant.config import load_config
 
