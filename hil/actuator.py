@@ -128,7 +128,7 @@ class FpgaStack:
         if cfg.get("fpga.impl") == "rtl":
             from hil.verify.rtl_verilator import load
 
-            self.rtl = load(cfg, self.board.params)
+            self.rtl = self.board.rtl = load(cfg, self.board.params)
         self.mcu_link = LinkMemory(cfg)
         self.link = LK.link_state(cfg)
         self.chips = chip_params(cfg)
