@@ -44,9 +44,9 @@ from firmware_model.fpga.rtl_abi import (
     IO_OUT,
     IO_WORDS,
 )
-from hil.verify.rtl_run import RTL_DIR, RtlError, rtl_sources
 from plant.config import Config, ConfigError
 
+RTL_DIR = Path(__file__).resolve().parents[2] / "firmware_model" / "fpga" / "rtl"
 TOP = "current_loop"
 WRAPPER = Path(__file__).resolve().parent / "rtl_tick.cpp"
 #: Bumped when the C ABI of the wrapper changes (the library reports it; a mismatch rebuilds).
@@ -60,6 +60,18 @@ CONTROL_PORTS = {"clk": 1, "rst": 1}
 #: The top's parameters and the board constants (``layout.C_*``) they are set from.
 PARAMETERS = {"TOP": B.C_PWM_TOP, "V_LIMIT": B.C_V_LIMIT, "MA_TO_I": B.C_MA_TO_I,
               "MV_TO_V": B.C_MV_TO_V, "KP_SHIFT": B.C_KP_SHIFT, "KI_SHIFT": B.C_KI_SHIFT}
+
+
+class RtlError(RuntimeError):
+    """The RTL did not build or the simulation failed; the message says why."""
+
+
+def rtl_sources(rtl_dir: Path = RTL_DIR) -> list[Path]:
+    """The Verilog files of ``rtl_dir`` (its ``*.v``; ``*.vh`` are included from there)."""
+    sources = sorted(Path(rtl_dir).glob("*.v"))
+    if not sources:
+        raise RtlError(f"{rtl_dir}: no Verilog (*.v) files")
+    return sources
 
 
 def missing_tools() -> list[str]:
@@ -337,5 +349,6 @@ def load(cfg: Config, c: np.ndarray) -> RtlLoop:
     return loop
 
 
-__all__ = ["Divergence", "RtlLoop", "build", "cache_dir", "check_ports", "declared_ports",
-           "load", "missing_tools", "take_divergences", "top_file"]
+__all__ = ["RTL_DIR", "Divergence", "RtlError", "RtlLoop", "build", "cache_dir",
+           "check_ports", "declared_ports", "load", "missing_tools", "take_divergences",
+           "top_file"]
