@@ -11,6 +11,12 @@ import math
 import time
 from dataclasses import dataclass
 
+from numba import njit
+
+from firmware_model.fpga import layout as B
+from firmware_model.fpga.current_loop import loop_outputs
+from firmware_model.fpga.params import board_params
+from firmware_model.fpga.rtl_abi import IO_EDGE, IO_IN, IO_OUT, call_tick, io_load, io_store
 from hil.scheduler import Scheduler
 from plant.config import Config
 from plant.model import Plant
@@ -172,3 +178,75 @@ def bench_robot(cfg: Config, seconds: float = 10.0, workers: int = 1,
         bs.chain.engine.wait()
     return RobotBench(cycles * 1e-3, wall, cpu, workers=workers, actuators=topo.n_actuators,
                       tick_s=cfg.get("sim.tick_ns") * 1e-9)
+
+
+# --- one tick's call of the current loop: RTL under Verilator against the board model ------
+#: Input words of the benchmark's ticks: board gains, an 18 A limit, a 5 A reference.
+_WORDS = (1, 2048, 2040, 0, 5000, 0, 0, 18000, 1287, 6433)
+
+
+@njit(cache=True)
+def _ticks_rtl(c, n):
+    io = c[B.C_RTL_IO]
+    acc = 0
+    for k in range(n):
+        for j in range(len(_WORDS)):
+            io_store(io, IO_IN + j, _WORDS[j])
+        io_store(io, IO_IN + 1, 2048 + (k & 63))
+        io_store(io, IO_IN + 3, (k * 700) & 0xFFFF)
+        io_store(io, IO_EDGE, 1)
+        call_tick(c[B.C_RTL_TICK], c[B.C_RTL_HANDLE])
+        for j in range(16):
+            acc += io_load(io, IO_OUT + j)
+    return acc
+
+
+@njit(cache=True)
+def _ticks_model(c, n):
+    acc = 0
+    integ_d = 0
+    integ_q = 0
+    w = _WORDS
+    for k in range(n):
+        r = loop_outputs(c, w[0], 2048 + (k & 63), w[2], (k * 700) & 0xFFFF, w[4], w[5], w[6],
+                         w[7], w[8], w[9], integ_d, integ_q)
+        integ_d = r[14]
+        integ_q = r[15]
+        for j in range(16):
+            acc += r[j]
+    return acc
+
+
+@dataclass
+class CallCost:
+    """CPU and wall nanoseconds per tick of each way of running the loop."""
+
+    ticks: int
+    rows: list[tuple[str, float, float]]  # (way, wall ns, CPU ns)
+
+
+def bench_loop_call(cfg: Config, ticks: int = 1_000_000) -> CallCost:
+    from hil.verify.rtl_verilator import load
+
+    c = board_params(cfg)
+    loop = load(cfg.with_overrides({"fpga.impl": "rtl"}), c)
+    _ticks_rtl(c, 10)
+    _ticks_model(c, 10)
+    rows = []
+    for way, fn in (("RTL (Verilator), compiled call", _ticks_rtl),
+                    ("board model's loop, compiled", _ticks_model)):
+        t0, c0 = time.perf_counter(), time.process_time()
+        fn(c, ticks)
+        rows.append((way, (time.perf_counter() - t0) / ticks * 1e9,
+                     (time.process_time() - c0) / ticks * 1e9))
+    tick = loop.tick_function()
+    for j, w in enumerate(_WORDS):
+        loop.io[IO_IN + j] = w
+    loop.io[IO_EDGE] = 1
+    n = max(ticks // 10, 1)
+    t0, c0 = time.perf_counter(), time.process_time()
+    for _ in range(n):
+        tick(loop.handle)
+    rows.append(("RTL (Verilator), ctypes call from Python", (time.perf_counter() - t0) / n * 1e9,
+                 (time.process_time() - c0) / n * 1e9))
+    return CallCost(ticks, rows)

@@ -275,7 +275,6 @@ def cmd_bench_fpga(args: argparse.Namespace) -> int:
     if not args.json:
         print("value level done; bit level ...", file=sys.stderr)
     results.append(bench_fpga(cfg, args.bit_seconds, bit_level=True))
-    load = os.getloadavg()
     rows = [(r.mode, r.loop, r.simulated_s, r.wall_s, r.cpu_s, r.real_time_factor,
              r.cpu_real_time_factor, r.ticks_per_s) for r in results]
     text = table(["sensor and link path", "current loop", "simulated [s]", "wall [s]",
@@ -283,12 +282,24 @@ def cmd_bench_fpga(args: argparse.Namespace) -> int:
                  fmt=".3g",
                  title=f"plant + driver board + LVDS link, {cfg.sources[-1]}, 20 kHz, MCU-rate "
                  "task writing iq_ref (target >= 5x real time, value level)")
+    calls = None
+    if cfg.get("fpga.impl") == "rtl":  # what the per-tick call of the loop itself costs
+        from hil.bench import bench_loop_call
+
+        calls = bench_loop_call(cfg)
+        text += "\n\n" + table(["one tick of the current loop", "wall [ns]", "CPU [ns]"],
+                                calls.rows, fmt=".3g",
+                                title=f"per tick, {calls.ticks} ticks in one loop")
+    load = os.getloadavg()
     text += f"\nload average {load[0]:.2f} {load[1]:.2f} {load[2]:.2f} ({os.cpu_count()} cores)"
     data = {"config": cfg.sources, "load_average": list(load), "results": [
         {"path": r.mode, "current_loop": r.loop, "simulated_s": r.simulated_s,
          "wall_s": r.wall_s, "cpu_s": r.cpu_s, "real_time_factor": r.real_time_factor,
          "cpu_real_time_factor": r.cpu_real_time_factor, "ticks_per_s": r.ticks_per_s}
         for r in results]}
+    if calls is not None:
+        data["loop_call_ns"] = [{"way": w, "wall_ns": wall, "cpu_ns": cpu}
+                                for w, wall, cpu in calls.rows]
     _emit(args, text, data)
     return verify_cli.rtl_verdict(0)
 

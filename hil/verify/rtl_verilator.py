@@ -275,6 +275,13 @@ class RtlLoop:
         c[B.C_RTL_HANDLE] = self.handle
         c[B.C_RTL_IO] = self.io.ctypes.data
 
+    def tick_function(self) -> ctypes._CFuncPtr:
+        """The library's per-tick function for a call from Python (``fn(loop.handle)``)."""
+        fn = self._lib.eha_rtl_tick
+        fn.argtypes = [ctypes.c_void_p]
+        fn.restype = None
+        return fn
+
     def run(self, inputs: np.ndarray) -> np.ndarray:
         """One tick (clock edge) per row of ``inputs`` (n x len(INPUT_PORTS) int64); the
         output ports of each (n x len(OUTPUT_PORTS) int64), continuing from the model's

@@ -249,3 +249,6 @@ def test_bench_fpga_puts_the_board_models_figure_beside_the_rtls(rtl_lib, capsys
         ("bit-level", "RTL (Verilator)")]
     assert all(r["cpu_s"] > 0 and r["wall_s"] > 0 for r in data["results"])
     assert len(data["load_average"]) == 3
+    assert [c["way"] for c in data["loop_call_ns"]] == [
+        "RTL (Verilator), compiled call", "board model's loop, compiled",
+        "RTL (Verilator), ctypes call from Python"]
