@@ -1,5 +1,5 @@
 """The board's side of a compiled current-loop RTL (a Verilated ``current_loop`` in a shared
-library, built by :mod:`hil.verify.rtl_verilator`): where its words sit in the exchange
+library, built by :mod:`hil.sim.verilator`): where its words sit in the exchange
 buffer, and the compiled calls that reach it from the per-tick path.
 
 The library owns the model; the board owns a buffer of :data:`IO_WORDS` int64 words whose
@@ -130,6 +130,47 @@ def rtl_loop_tick(c, st, down, ia_code, ib_code, theta_e, enable, edge):
             io_load(io, IO_OUT + O_COUNT_A + 2))
 
 
+# --- loops of ticks for timing the call (``bench fpga --set fpga.impl=rtl``) ----------------
+#: Input words of the timing ticks: board gains, an 18 A limit, a 5 A reference.
+_WORDS = (1, 2048, 2040, 0, 5000, 0, 0, 18000, 1287, 6433)
+_N_OUT = len(OUTPUT_PORTS)
+
+
+@njit(cache=True)
+def timing_ticks_rtl(c, n):
+    """``n`` ticks of the RTL through its address on the timing words (a turning angle,
+    a wandering current code); a sum of the outputs, so that nothing is optimised away."""
+    io = c[B.C_RTL_IO]
+    acc = 0
+    for k in range(n):
+        for j in range(len(_WORDS)):
+            io_store(io, IO_IN + j, _WORDS[j])
+        io_store(io, IO_IN + 1, 2048 + (k & 63))
+        io_store(io, IO_IN + 3, (k * 700) & 0xFFFF)
+        io_store(io, IO_EDGE, 1)
+        call_tick(c[B.C_RTL_TICK], c[B.C_RTL_HANDLE])
+        for j in range(_N_OUT):
+            acc += io_load(io, IO_OUT + j)
+    return acc
+
+
+@njit(cache=True)
+def timing_ticks_model(c, n):
+    """The same ticks through the board model's loop."""
+    acc = 0
+    integ_d = 0
+    integ_q = 0
+    w = _WORDS
+    for k in range(n):
+        r = loop_outputs(c, w[0], 2048 + (k & 63), w[2], (k * 700) & 0xFFFF, w[4], w[5], w[6],
+                         w[7], w[8], w[9], integ_d, integ_q)
+        integ_d = r[O_INTEG_D]
+        integ_q = r[O_INTEG_Q]
+        for j in range(len(r)):
+            acc += r[j]
+    return acc
+
+
 __all__ = ["IO_EDGE", "IO_FIRST_MODEL", "IO_FIRST_RTL", "IO_FIRST_SIGNAL", "IO_FIRST_TICK",
            "IO_IN", "IO_MISMATCHES", "IO_OUT", "IO_WORDS", "call_tick", "io_load", "io_store",
-           "rtl_loop_tick"]
+           "rtl_loop_tick", "timing_ticks_model", "timing_ticks_rtl"]

@@ -15,12 +15,12 @@ from firmware_model.fpga import layout as B
 from firmware_model.fpga.current_loop import INPUT_WIDTHS, OUTPUT_PORTS, OUTPUT_WIDTHS
 from firmware_model.fpga.driver_board import DriverBoard
 from firmware_model.fpga.rtl_abi import IO_MISMATCHES
-from hil.actuator import TRACE_WIDTH, FpgaStack
 from hil.cli import main
 from hil.scenarios import get
-from hil.verify import rtl_verilator as V
-from hil.verify.loop_verify import verify_current_loop
-from hil.verify.rtl_run import RTL_DIR, RtlError
+from hil.sim import verilator as V
+from hil.sim.actuator import TRACE_WIDTH, FpgaStack
+from hil.sim.verilator import RTL_DIR, RtlError
+from hil.verify.current_loop.verify import verify_current_loop
 from plant import layout as L
 
 
