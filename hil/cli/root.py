@@ -255,7 +255,7 @@ def cmd_bench_plant(args: argparse.Namespace) -> int:
                   "substeps"], rows, fmt=".3g",
                  title=f"plant alone, {cfg.sources[-1]}, 50 us tick (target >= 10x real time)")
     data = {"config": cfg.sources, "results": [
-        {"path": r.mode, "current_loop": r.loop, "simulated_s": r.simulated_s, "wall_s": r.wall_s,
+        {"path": r.mode, "simulated_s": r.simulated_s, "wall_s": r.wall_s,
          "real_time_factor": r.real_time_factor, "ticks_per_s": r.ticks_per_s,
          "substeps": r.substeps} for r in results]}
     _emit(args, text, data)
