@@ -221,6 +221,15 @@ def build(rtl_dir: Path, c: np.ndarray) -> Path:
     lib = cache_dir() / digest.hexdigest()[:16] / f"lib{TOP}.so"
     if lib.exists():
         return lib
+    try:
+        _compile(rtl_dir, top, params, version, wrapper, lib)
+    except OSError as exc:  # the cache cannot be written (permissions, a full disk)
+        raise RtlError(f"cannot build into {lib.parent}: {exc}") from None
+    return lib
+
+
+def _compile(rtl_dir: Path, top: Path, params: dict[str, int], version: str, wrapper: str,
+             lib: Path) -> None:
     root = Path(subprocess.run([VERILATOR, "--getenv", "VERILATOR_ROOT"], capture_output=True,
                                text=True).stdout.strip())
     lib.parent.mkdir(parents=True, exist_ok=True)
@@ -239,7 +248,6 @@ def build(rtl_dir: Path, c: np.ndarray) -> Path:
               *map(str, _runtime(root, version)), "-o", str(out), "-pthread",
               "-Wl,-Bsymbolic"], work, f"{cxx()} on the Verilated {rtl_dir}")
         out.replace(lib)
-    return lib
 
 
 def _signal(index: int) -> str:
