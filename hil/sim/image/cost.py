@@ -33,7 +33,6 @@ BRANCH_PENALTY = BRANCH_REFILL + FLASH_WAIT_STATES
 FSMC_HALF = 4
 FSMC_WORD = 10
 
-ONE = frozenset({"mul", "muls"})
 _FIXED = {"mla": 2, "mls": 2, "sdiv": 12, "udiv": 12, "ldrd": 3, "strd": 3,
           "vmla": 3, "vmls": 3, "vnmla": 3, "vnmls": 3, "vfma": 3, "vfms": 3, "vfnma": 3,
           "vfnms": 3, "vdiv": 14, "vsqrt": 14, "vldr": 2, "vstr": 2}
@@ -92,9 +91,3 @@ def block_cost(code: bytes, address: int) -> Cost:
         n += 1
         c += instruction_cycles(insn)
     return Cost(n, c)
-
-
-def sweep(code: bytes, address: int) -> list[tuple[int, int, int]]:
-    """(address, size, cycles) of each instruction of a linear disassembly of ``code``
-    (a function's bytes); stops at the first bytes that do not decode."""
-    return [(i.address, i.size, instruction_cycles(i)) for i in _MD.disasm(code, address)]
