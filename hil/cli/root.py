@@ -26,6 +26,7 @@ from hil.cli.args import (
     Parser,
     add_config_options,
     float_range,
+    image_sets,
     int_list,
     int_range,
     output_dir,
@@ -34,6 +35,7 @@ from hil.cli.args import (
 )
 from hil.output.tables import table
 from hil.scenarios.plant_figures import F2_BANDS, THESIS_F1, THESIS_F2, within_band
+from hil.sim.image.errors import ImageFault
 from plant.config import ConfigError, load_config, preset_names
 
 EXIT_USAGE = 2
@@ -79,7 +81,7 @@ def _json_default(obj: object) -> object:
 
 
 def _config(args: argparse.Namespace):
-    return load_config(args.config, args.set or ())
+    return load_config(args.config, [*(args.set or ()), *verify_cli.rtl_sets(args)])
 
 
 # --- plant bode ------------------------------------------------------------------------------
@@ -263,40 +265,79 @@ def cmd_bench_plant(args: argparse.Namespace) -> int:
 
 
 def cmd_bench_fpga(args: argparse.Namespace) -> int:
+    import os
+
     from hil.bench.engines import bench_fpga
 
     cfg = _config(args)
-    results = [bench_fpga(cfg, args.seconds, bit_level=False)]
+    results = []
+    if cfg.get("fpga.impl") == "rtl":  # the board model's figure beside the RTL's
+        results.append(bench_fpga(cfg.with_overrides({"fpga.impl": "python"}, "bench"),
+                                  args.seconds, bit_level=False))
+    results.append(bench_fpga(cfg, args.seconds, bit_level=False))
     if not args.json:
         print("value level done; bit level ...", file=sys.stderr)
     results.append(bench_fpga(cfg, args.bit_seconds, bit_level=True))
-    rows = [(r.mode, r.simulated_s, r.wall_s, r.real_time_factor, r.ticks_per_s)
-            for r in results]
-    text = table(["sensor and link path", "simulated [s]", "wall [s]", "real-time factor",
-                  "ticks/s"], rows, fmt=".3g",
+    rows = [(r.mode, r.loop, r.simulated_s, r.wall_s, r.cpu_s, r.real_time_factor,
+             r.cpu_real_time_factor, r.ticks_per_s) for r in results]
+    text = table(["sensor and link path", "current loop", "simulated [s]", "wall [s]",
+                  "CPU [s]", "real-time factor", "CPU real-time factor", "ticks/s"], rows,
+                 fmt=".3g",
                  title=f"plant + driver board + LVDS link, {cfg.sources[-1]}, 20 kHz, MCU-rate "
                  "task writing iq_ref (target >= 5x real time, value level)")
-    data = {"config": cfg.sources, "results": [
-        {"path": r.mode, "simulated_s": r.simulated_s, "wall_s": r.wall_s,
-         "real_time_factor": r.real_time_factor, "ticks_per_s": r.ticks_per_s}
+    calls = None
+    if cfg.get("fpga.impl") == "rtl":  # what the per-tick call of the loop itself costs
+        from hil.bench.engines import bench_loop_call
+
+        calls = bench_loop_call(cfg)
+        text += "\n\n" + table(["one tick of the current loop", "wall [ns]", "CPU [ns]"],
+                                calls.rows, fmt=".3g",
+                                title=f"per tick, {calls.ticks} ticks in one loop")
+    load = os.getloadavg()
+    text += f"\nload average {load[0]:.2f} {load[1]:.2f} {load[2]:.2f} ({os.cpu_count()} cores)"
+    data = {"config": cfg.sources, "load_average": list(load), "results": [
+        {"path": r.mode, "current_loop": r.loop, "simulated_s": r.simulated_s,
+         "wall_s": r.wall_s, "cpu_s": r.cpu_s, "real_time_factor": r.real_time_factor,
+         "cpu_real_time_factor": r.cpu_real_time_factor, "ticks_per_s": r.ticks_per_s}
         for r in results]}
+    if calls is not None:
+        data["loop_call_ns"] = [{"way": w, "wall_ns": wall, "cpu_ns": cpu}
+                                for w, wall, cpu in calls.rows]
     _emit(args, text, data)
-    return 0
+    return verify_cli.rtl_verdict(0)
 
 
 def cmd_bench_stack(args: argparse.Namespace) -> int:
     from hil.bench.engines import bench_stack
 
     cfg = _config(args)
-    if not args.json:
-        print(f"bench stack: simulating {args.seconds:g} s ...", file=sys.stderr, flush=True)
-    r = bench_stack(cfg, args.seconds)
-    text = table(["path", "simulated [s]", "wall [s]", "real-time factor", "ticks/s"],
-                 [(r.mode, r.simulated_s, r.wall_s, r.real_time_factor, r.ticks_per_s)],
+    load = os.getloadavg()[0]
+    # A firmware image is timed beside the Python model and the host C build of the law.
+    impls = ("python", "c", "image") if cfg.get("mcu.impl") == "image" else (None,)
+    rows, data = [], []
+    for impl in impls:
+        c = cfg if impl in (None, cfg.get("mcu.impl")) else cfg.with_overrides(
+            {"mcu.impl": impl}, f"bench {impl}")
+        if not args.json:
+            print(f"bench stack: simulating {args.seconds:g} s (MCU {c.get('mcu.impl')}) ...",
+                  file=sys.stderr, flush=True)
+        r = bench_stack(c, args.seconds)
+        rows.append((r.mode, r.simulated_s, r.wall_s, r.cpu_s, r.real_time_factor,
+                     r.cpu_real_time_factor, r.ticks_per_s))
+        data.append({"mcu_impl": c.get("mcu.impl"), "simulated_s": r.simulated_s,
+                     "wall_s": r.wall_s, "cpu_s": r.cpu_s,
+                     "real_time_factor": r.real_time_factor,
+                     "cpu_real_time_factor": r.cpu_real_time_factor})
+    text = table(["path", "simulated [s]", "wall [s]", "CPU [s]", "real-time (wall)",
+                  "real-time (CPU)", "ticks/s"], rows,
                  fmt=".3g", title=f"plant + driver board + LVDS + MCU (5 kHz, float32) + 1 kHz "
-                 f"PC task, value-level sensors, {cfg.sources[-1]} (target >= 2x real time)")
-    _emit(args, text, {"config": cfg.sources, "simulated_s": r.simulated_s,
-                       "wall_s": r.wall_s, "real_time_factor": r.real_time_factor})
+                 f"PC task, value-level sensors, {cfg.sources[-1]}; load average {load:.2f} "
+                 f"on {os.cpu_count()} cores at the start (target >= 2x real time; an MCU "
+                 "image >= 1x)")
+    first = data[0]
+    _emit(args, text, {"config": cfg.sources, "load_average": load,
+                       "simulated_s": first["simulated_s"], "wall_s": first["wall_s"],
+                       "real_time_factor": first["real_time_factor"], "runs": data})
     return 0
 
 
@@ -340,6 +381,8 @@ def cmd_run_thesis(args: argparse.Namespace) -> int:
     rows = []
     results = []
     notes = []
+    profiles: list[dict] = []
+    _image_profile(cfg, "")  # this command's steps only
     for name in names:
         t0 = time.perf_counter()
         if not args.json:
@@ -349,6 +392,9 @@ def cmd_run_thesis(args: argparse.Namespace) -> int:
         res = scenarios.get(name).run(cfg, None)
         wall = time.perf_counter() - t0
         results.append((res, wall))
+        prof = _image_profile(cfg, name.upper())
+        if prof:
+            profiles.append(prof)
         if res.plot:
             res.plot(res, out_dir / f"{name}.png")
             cli_progress.output("plot", out_dir / f"{name}.png", done=True)
@@ -363,14 +409,36 @@ def cmd_run_thesis(args: argparse.Namespace) -> int:
     if notes:
         text += "\n" + "\n".join(f"note: {n}" for n in notes)
     text += f"\nplots written to {out_dir}/ ({', '.join(n + '.png' for n in names)})"
+    text += _profile_text(profiles)
     ok = all(r.ok for r, _ in results)
     data = {"config": cfg.sources, "ok": ok, "scenarios": [
         {"scenario": r.name, "title": r.title, "wall_s": w, "ok": r.ok, "notes": r.notes,
          "metrics": [{"name": m.name, "value": m.value, "unit": m.unit, "thesis": m.thesis,
                       "requirement": m.requirement, "ok": m.ok} for m in r.metrics]}
         for r, w in results]}
+    if profiles:
+        data["mcu_image_profile"] = profiles
     _emit(args, text, data)
-    return 0 if ok else 1
+    return verify_cli.rtl_verdict(0 if ok else 1)
+
+
+def _image_profile(cfg, label: str) -> dict | None:  # noqa: ANN001 - Config
+    """The execution-time summary of the image steps since the last call (None: the MCU
+    is not an image)."""
+    if cfg.get("mcu.impl") != "image":
+        return None
+    from hil.sim.image import profile
+
+    return profile.take(label)
+
+
+def _profile_text(profiles: list[dict]) -> str:
+    if not profiles:
+        return ""
+    from hil.sim.image import profile
+
+    return "\nMCU image execution time (estimated, docs/mcu.md):\n" + "\n".join(
+        "  " + profile.line(p) for p in profiles)
 
 
 def _run_live(res, address: str) -> str:  # noqa: ANN001 - ScenarioResult
@@ -400,7 +468,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         for opt in ("series", "foxglove"):
             if getattr(args, opt, None) is not None:
                 raise UsageError(f"--{opt}: 'thesis' runs several scenarios; give one "
-                                 "(f3 ... f8)")
+                                 "(f1-measured, f3 ... f9-roll)")
         return cmd_run_thesis(args)
     try:
         scenario = scenarios.get(args.scenario)
@@ -413,14 +481,17 @@ def cmd_run(args: argparse.Namespace) -> int:
     from hil.scenarios.knobs import split_sets
 
     config_sets, knob_values = split_sets(args.set or ())
-    cfg = load_config(args.config, config_sets)
+    cfg = load_config(args.config, [*config_sets, *verify_cli.rtl_sets(args)])
+    _image_profile(cfg, "")  # this command's steps only
     res = scenario.call(cfg, _progress(scenario.name, not args.json), knob_values)
+    prof = _image_profile(cfg, res.name)
     rows = [(m.name, m.value, m.unit, m.requirement,
              "" if m.ok is None else ("ok" if m.ok else "MISSED")) for m in res.metrics]
     text = table(["metric", "value", "unit", "requirement", ""], rows, fmt=".4g",
                  title=f"{res.name}: {res.title} ({cfg.sources[-1]})")
     if res.notes:
         text += "\n" + "\n".join(f"note: {n}" for n in res.notes)
+    text += _profile_text([prof] if prof else [])
     if args.plot and res.plot:
         res.plot(res, Path(args.plot))
         text += f"\nplot written to {args.plot}"
@@ -438,8 +509,10 @@ def cmd_run(args: argparse.Namespace) -> int:
             "metrics": [{"name": m.name, "value": m.value, "unit": m.unit,
                          "requirement": m.requirement, "ok": m.ok} for m in res.metrics],
             "notes": res.notes}
+    if prof:
+        data["mcu_image_profile"] = prof
     _emit(args, text, data)
-    return 0 if res.ok else 1
+    return verify_cli.rtl_verdict(0 if res.ok else 1)
 
 
 def cmd_bench_codecs(args: argparse.Namespace) -> int:
@@ -635,6 +708,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="simulated seconds, value-level path, in (0, 600]")
     p.add_argument("--bit-seconds", type=positive_float(60, "s"), default=0.05,
                    help="simulated seconds, bit-level path, in (0, 60]")
+    verify_cli.add_rtl_option(p)
     p.set_defaults(func=cmd_bench_fpga)
     p = bsub.add_parser("stack", parents=[_common(plot=False)],
                         help="real-time factor of the full actuator stack (plant to MCU)")
@@ -679,14 +753,15 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("run", parents=[_common()],
                        help="run a scenario on the simulated stack (thesis, "
                        + ", ".join(scen) + "; exit 1 if a requirement is missed)",
-                       epilog="Scenarios: thesis: all thesis experiments (F3-F8); " + "; ".join(
+                       epilog="Scenarios: thesis: the thesis experiments (F1m, F3-F9); "
+                       + "; ".join(
                            f"{n}: {SCENARIOS[n].summary}" for n in scen)
                        + ". Scenario settings (--set scenario.NAME=VALUE; sweepable): "
                        + "; ".join(f"{n}: " + ", ".join(k.name for k in SCENARIOS[n].knobs)
                                    for n in scen if SCENARIOS[n].knobs)
                        + " (docs/scenarios.md).")
     p.add_argument("scenario", metavar="SCENARIO",
-                   help="scenario name, or 'thesis' for all thesis experiments (F3-F8); "
+                   help="scenario name, or 'thesis' for the thesis experiments (F1m, F3-F9); "
                    "these default to -c hydra_thesis")
     p.add_argument("--plot-dir", default=None, type=output_dir,
                    help="directory for one plot per scenario, NAME.png (with 'thesis' "
@@ -697,6 +772,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--series", metavar="FILE", type=output_file((".csv", ".parquet", ".mcap")),
                    help="write the time series behind the metrics to FILE (.csv, .parquet "
                    "or .mcap; README, Scenarios)")
+    verify_cli.add_rtl_option(p)
     p.set_defaults(func=cmd_run)
 
     verify_cli.add_parsers(sub, _common)
@@ -728,11 +804,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         parser = build_parser()
         args = parser.parse_args(argv)
+        image_sets(args)
         cli_progress.start(_verb(args))
         return int(args.func(args))
     except (ConfigError, UsageError, verify_cli.ToolMissing) as exc:
         print(f"eha-hil: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
+    except ImageFault as exc:  # the firmware image broke the interface: the run failed
+        print(f"eha-hil: error: {exc}", file=sys.stderr)
+        return 1
     except BrokenPipeError:
         return 0
     except KeyboardInterrupt:

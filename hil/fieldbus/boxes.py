@@ -117,8 +117,9 @@ class McuBox(_BoxBase):
     def __init__(self, box: Box, cfg: Config, links: list, offsets: list[int]) -> None:
         super().__init__(box, cfg)
         if cfg.get("mcu.impl") != "python":
-            raise ConfigError("mcu.impl = 'c' runs in the single-actuator stack only; the "
-                              "fieldbus boxes run the Python MCU (mcu.impl = 'python')")
+            raise ConfigError(f"mcu.impl = {cfg.get('mcu.impl')!r} runs in the "
+                              "single-actuator stack only; the fieldbus boxes run the Python "
+                              "MCU (mcu.impl = 'python')")
         self.board = McuBoard(cfg, links, offsets) if links else None
         self.mcu = self.board.mcu if self.board else None
         self.period = cfg.get("mcu.period_ticks")
@@ -149,6 +150,9 @@ class StackBox(McuBox):
     def __init__(self, box: Box, cfg: Config) -> None:
         from hil.sim.actuator import FpgaStack
 
+        if cfg.get("fpga.impl") != "python":
+            raise ConfigError("fpga.impl = 'rtl' runs in the single-actuator stack only; the "
+                              "fieldbus boxes run the board's own loop (fpga.impl = 'python')")
         self.stacks = [FpgaStack(cfg) for _ in box.actuators]
         super().__init__(box, cfg, [s.mcu_link for s in self.stacks],
                          [s.board.calibrated_offset for s in self.stacks])
