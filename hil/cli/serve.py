@@ -440,8 +440,8 @@ def cmd_serve(args: argparse.Namespace, cfg) -> Outcome:
 def cmd_serve_ethercat(args: argparse.Namespace, cfg, topo) -> Outcome:
     """``--transport ethercat``: the ESC chain (:mod:`hil.fieldbus.esc.chain`) on a raw
     Ethernet interface for a real master (docs/ethercat-slaves.md)."""
+    from hil.fieldbus.esc.serve import latency_summary, serve, warm_up
     from hil.fieldbus.esc.chain import EscChain
-    from hil.fieldbus.esc.serve import serve
     from hil.transports.rawether import RawEthernet
 
     if not args.interface:
@@ -456,21 +456,25 @@ def cmd_serve_ethercat(args: argparse.Namespace, cfg, topo) -> Outcome:
         raise _usage(f"--stack-box {bad[0]}: {topo.name} has boxes 0..{len(topo.boxes) - 1}")
     model = args.model or "echo"
     chain = EscChain(topo, cfg, model, tuple(args.stack_boxes))
+    warm_up(chain)
     try:
         link = RawEthernet(args.interface)
     except TransportError as exc:
         raise _usage(str(exc)) from None
     if args.realtime:
         _realtime_priority()
-    print(f"eha-hil serve: ready on {args.interface} (EtherType 0x88a4); {topo.name}, "
-          f"{len(topo.boxes)} slaves, {model} model"
-          + (f", full stack behind box(es) {args.stack_boxes}" if args.stack_boxes else ""),
-          file=sys.stderr, flush=True)
+
+    def ready() -> None:
+        print(f"eha-hil serve: ready on {args.interface} (EtherType 0x88a4); {topo.name}, "
+              f"{len(topo.boxes)} slaves, {model} model"
+              + (f", full stack behind box(es) {args.stack_boxes}" if args.stack_boxes
+                 else ""), file=sys.stderr, flush=True)
+
     stopping = []
     old = {s: signal.signal(s, lambda signum, frame: stopping.append(signum))
            for s in (signal.SIGINT, signal.SIGTERM)}
     try:
-        st = serve(chain, link, args.seconds, stop=lambda: bool(stopping))
+        st = serve(chain, link, args.seconds, stop=lambda: bool(stopping), ready=ready)
     finally:
         for s, h in old.items():
             signal.signal(s, h)
@@ -478,6 +482,7 @@ def cmd_serve_ethercat(args: argparse.Namespace, cfg, topo) -> Outcome:
     failures = [] if st.frames_answered else ["no EtherCAT frame arrived from a master"]
     data = {"transport": "ethercat", "interface": args.interface, "topology": topo.name,
             "model": model, "stack_boxes": list(args.stack_boxes), **st.as_dict(),
+            "reply_us": latency_summary(st.reply_us),
             "chain": chain.stats.__dict__.copy(), "slaves": chain.watchdog_report(),
             "ok": not failures, "failures": failures}
     text = (f"serve {args.interface}: {st.cycles} cycles in {st.wall_s:.1f} s, "

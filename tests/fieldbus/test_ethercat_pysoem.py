@@ -119,6 +119,10 @@ def test_soem_force_command_reaches_the_full_stack(netns, full, cfg):
         res = run_master(netns, "force", "0", "0", str(FORCE_N), "1500")
     finally:
         stop_serve(serve)
+    # Bring-up first: a slave left behind (SII misread, SAFEOP refused) shows later only as
+    # a short working counter on every cycle.
+    assert (res["found"], res["image_bytes"], res["safeop"], res["op"]) == (16, 1552, 4, 8)
+    assert set(res["states"]) == {8}
     assert res["bad_wkc"] == 0, res["bad_wkc_values"]
     # The same box model in this process, given the same output record, predicts the
     # pressure force the inputs carry once it has settled.

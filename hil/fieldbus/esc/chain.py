@@ -97,14 +97,39 @@ class EscChain:
 
     # --- time -------------------------------------------------------------------------------
     def cycle(self) -> None:
-        """One 1 ms bus cycle of every slave and box."""
+        """One 1 ms bus cycle of every slave and box (lockstep: the slaves' clocks are the
+        boxes' simulated time)."""
         for esc in self.escs:
             esc.tick(CYCLE_NS)
         self._hand_outputs()
-        for esc, box in zip(self.escs, self.boxes, strict=True):
+        self.advance_boxes()
+        self.publish_inputs()
+
+    def advance_boxes(self) -> None:
+        """The boxes' side of one cycle: every box one cycle on (no ESC touched)."""
+        for box in self.boxes:
             box.advance(CYCLE_TICKS)
-            esc.set_inputs(box.inputs())
         self.stats.cycles += 1
+
+    def take_outputs(self) -> list[bytes | None]:
+        """Each ESC's outputs for its box since the last call (None: nothing new)."""
+        return [esc.pending_outputs() for esc in self.escs]
+
+    def apply_outputs(self, outs: list[bytes | None]) -> None:
+        for out, box in zip(outs, self.boxes, strict=True):
+            if out is not None:
+                box.apply(out)
+
+    def publish_inputs(self) -> None:
+        """Every box's input record into its ESC's input buffer."""
+        for esc, box in zip(self.escs, self.boxes, strict=True):
+            esc.set_inputs(box.inputs())
+
+    def run_clock(self, now_ns: int) -> None:
+        """The slaves' own clock (their watchdogs) to ``now_ns`` (monotonic, never back)."""
+        for esc in self.escs:
+            if now_ns > esc.now_ns:
+                esc.tick(now_ns - esc.now_ns)
 
     def watchdog_report(self) -> list[dict]:
         """Per slave: watchdog time, trips and the delay of the last trip [ms]."""

@@ -19,9 +19,9 @@ import time
 
 import pysoem
 
-RECV_TIMEOUT_US = 100_000  # a late reply is waited for, not counted as a wrong WKC
-#: How long a state change may take: the first cycles of a full-stack box can be slow on a
-#: busy machine (the test suite runs on every core).
+#: SOEM's stock timeouts: EC_TIMEOUTRET (a reply later than this is a lost frame: the
+#: cycle's working counter comes short) and EC_TIMEOUTSTATE (a state change).
+RECV_TIMEOUT_US = 2_000
 STATE_TIMEOUT_US = 2_000_000
 
 
