@@ -440,8 +440,8 @@ def cmd_serve(args: argparse.Namespace, cfg) -> Outcome:
 def cmd_serve_ethercat(args: argparse.Namespace, cfg, topo) -> Outcome:
     """``--transport ethercat``: the ESC chain (:mod:`hil.fieldbus.esc.chain`) on a raw
     Ethernet interface for a real master (docs/ethercat-slaves.md)."""
-    from hil.fieldbus.esc.serve import latency_summary, serve, warm_up
     from hil.fieldbus.esc.chain import EscChain
+    from hil.fieldbus.esc.serve import latency_summary, serve, warm_up
     from hil.transports.rawether import RawEthernet
 
     if not args.interface:

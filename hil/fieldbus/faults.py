@@ -55,6 +55,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from hil.sim.interfaces import BoardStack, members
 from hil.transports.base import Transport, deadline_of, remaining
 
 if TYPE_CHECKING:
@@ -458,11 +459,10 @@ class FaultyStack:
     sensor chips read them (the plant recomputes its outputs from its state every tick, so
     nothing else sees the override).
 
-    It holds the stack (:attr:`stack`) and offers what a box, the recorder and the
-    scheduler use of one, by name: the scheduler's plant-like interface (``advance``,
-    ``y``, ``tick``, ``tick_ns``, ``tick_s``, ``time_s``) and the parts (``plant``,
-    ``board``, ``mcu_link``, ``link``, ``chips``, ``config``, ``link_fault``). Anything
-    else is reached through :attr:`stack`."""
+    It holds the stack (:attr:`stack`) and is a :class:`~hil.sim.interfaces.BoardStack`
+    itself: ``advance`` is its own; every other member the interface declares reads the
+    wrapped stack's (made below from the declaration, so none is forwarded by hand or
+    forgotten). Anything else is reached through :attr:`stack`."""
 
     def __init__(self, stack: FpgaStack, faults: tuple[Fault, ...]) -> None:
         from plant import layout as L
@@ -484,55 +484,6 @@ class FaultyStack:
                           else -1 for f in self.sensors]
         self._lvds_on = [False] * len(self.lvds)
         self.sensor_ticks = 0  # ticks run with a sensor fault applied
-
-    # --- the wrapped stack's interface, explicitly ---------------------------------------------
-    @property
-    def config(self) -> Any:
-        return self.stack.config
-
-    @property
-    def plant(self) -> Any:
-        return self.stack.plant
-
-    @property
-    def board(self) -> Any:
-        return self.stack.board
-
-    @property
-    def mcu_link(self) -> Any:
-        return self.stack.mcu_link
-
-    @property
-    def link(self) -> np.ndarray:
-        return self.stack.link
-
-    @property
-    def chips(self) -> np.ndarray:
-        return self.stack.chips
-
-    @property
-    def y(self) -> np.ndarray:
-        return self.stack.y
-
-    @property
-    def tick(self) -> int:
-        return self.stack.tick
-
-    @property
-    def tick_ns(self) -> int:
-        return self.stack.tick_ns
-
-    @property
-    def tick_s(self) -> float:
-        return self.stack.tick_s
-
-    @property
-    def time_s(self) -> float:
-        return self.stack.time_s
-
-    def link_fault(self, *args: Any, **kw: Any) -> None:
-        """:meth:`FpgaStack.link_fault` of the wrapped stack."""
-        self.stack.link_fault(*args, **kw)
 
     def _switch_lvds(self, cycle: int) -> None:
         for i, f in enumerate(self.lvds):
@@ -586,6 +537,16 @@ class FaultyStack:
             row = st.advance(1, **one)
             self.sensor_ticks += 1
         return row
+
+
+def _forward(name: str) -> property:
+    return property(lambda self: getattr(self.stack, name),
+                    doc=f"The wrapped stack's ``{name}``.")
+
+
+for _name in members(BoardStack):
+    if _name not in vars(FaultyStack):
+        setattr(FaultyStack, _name, _forward(_name))
 
 
 def install_box_faults(chain: Any, plan: FaultPlan) -> list[FaultyStack]:
