@@ -4,7 +4,7 @@ one by having its members, as :func:`isinstance` checks at run time).
 * :class:`Ticked`: what advances on the integer clock, tick by tick, and shows its outputs:
   the plant (:class:`plant.model.Plant`), one actuator below the MCU
   (:class:`~hil.sim.actuator.FpgaStack`) and the same with faults injected
-  (:class:`~hil.fieldbus.faults.FaultyStack`). The scheduler runs any of them.
+  (:class:`~hil.fieldbus.stack_faults.FaultyStack`). The scheduler runs any of them.
 * :class:`BoardStack`: a :class:`Ticked` that is one actuator below the MCU, with its
   parts by name (what a box, the recorder and the robot engine use of it).
 * :class:`McuProgram`: the MCU law a box runs on its links, as Python

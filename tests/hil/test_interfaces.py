@@ -7,7 +7,8 @@ from __future__ import annotations
 import pytest
 
 from firmware_model.mcu.mcu import Mcu
-from hil.fieldbus.faults import FaultyStack, parse_faults
+from hil.fieldbus.faults import parse_faults
+from hil.fieldbus.stack_faults import FaultyStack
 from hil.sim.actuator import FpgaStack
 from hil.sim.interfaces import BoardStack, McuProgram, Ticked, members
 from plant.model import Plant
