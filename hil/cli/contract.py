@@ -127,9 +127,11 @@ class Context:
             print(message, file=sys.stderr, flush=True)
 
 
-def command(parser: argparse.ArgumentParser, run: Run) -> argparse.ArgumentParser:
-    """Register ``run`` as the command of ``parser`` (a leaf of the registry)."""
-    parser.set_defaults(run=run)
+def command(parser: argparse.ArgumentParser, run: Run, verb: str | None = None
+            ) -> argparse.ArgumentParser:
+    """Register ``run`` as the command of ``parser`` (a leaf of the registry); ``verb``: how
+    its lines name it, when not the words typed (the log verbs: ``eha-hil log``)."""
+    parser.set_defaults(run=run, verb=verb)
     return parser
 
 

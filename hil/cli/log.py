@@ -34,7 +34,7 @@ def configure_log(parser: argparse.ArgumentParser) -> None:
     p.add_argument("log", metavar="LOG", help="MCAP frame log, or a capture (.pcapng, "
                    ".pcap) or CAN log (.blf, .asc, .log) of the fieldbus")
     p.add_argument("--json", action="store_true", help="print JSON instead of text")
-    command(p, run_log)
+    command(p, run_log, verb="eha-hil log")
     p = sub.add_parser("export", help="decode frames to CSV (t_s, topic, decoded fields), "
                        "or one board's measurements as an identification CSV")
     p.add_argument("log", metavar="LOG", help="MCAP frame log")
@@ -52,7 +52,7 @@ def configure_log(parser: argparse.ArgumentParser) -> None:
     p.add_argument("--board", metavar="B",
                    help="--format identify: the board, e.g. 0.0 (needed when the log has "
                    "several)")
-    command(p, run_log)
+    command(p, run_log, verb="eha-hil log")
 
 
 def _truncated(info: LogInfo, text: str | None, data: object = None) -> Outcome:

@@ -66,6 +66,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _verb(args: argparse.Namespace) -> str:
     """``eha-hil bus run``, ``eha-hil run thesis``: the command as the user typed it."""
+    if getattr(args, "verb", None):  # declared by the command (hil.cli.contract.command)
+        return args.verb
     words = ["eha-hil", args.command]
     action = getattr(args, f"{args.command}_command", None)
     if action:
