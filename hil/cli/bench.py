@@ -9,6 +9,7 @@ from dataclasses import asdict
 
 from hil.cli.args import common, float_range, int_list, int_range, positive_float
 from hil.cli.contract import Context, Outcome, command
+from hil.cli.verify import add_rtl_option, rtl_verdict
 from hil.output.tables import table
 
 
@@ -34,20 +35,39 @@ def cmd_bench_fpga(args: argparse.Namespace, ctx: Context) -> Outcome:
     from hil.bench.engines import bench_fpga
 
     cfg = ctx.config()
-    results = [bench_fpga(cfg, args.seconds, bit_level=False)]
+    results = []
+    if cfg.get("fpga.impl") == "rtl":  # the board model's figure beside the RTL's
+        results.append(bench_fpga(cfg.with_overrides({"fpga.impl": "python"}, "bench"),
+                                  args.seconds, bit_level=False))
+    results.append(bench_fpga(cfg, args.seconds, bit_level=False))
     ctx.say("value level done; bit level ...")
     results.append(bench_fpga(cfg, args.bit_seconds, bit_level=True))
-    rows = [(r.mode, r.simulated_s, r.wall_s, r.real_time_factor, r.ticks_per_s)
-            for r in results]
-    text = table(["sensor and link path", "simulated [s]", "wall [s]", "real-time factor",
-                  "ticks/s"], rows, fmt=".3g",
+    rows = [(r.mode, r.loop, r.simulated_s, r.wall_s, r.cpu_s, r.real_time_factor,
+             r.cpu_real_time_factor, r.ticks_per_s) for r in results]
+    text = table(["sensor and link path", "current loop", "simulated [s]", "wall [s]",
+                  "CPU [s]", "real-time factor", "CPU real-time factor", "ticks/s"], rows,
+                 fmt=".3g",
                  title=f"plant + driver board + LVDS link, {cfg.sources[-1]}, 20 kHz, MCU-rate "
                  "task writing iq_ref (target >= 5x real time, value level)")
-    data = {"config": cfg.sources, "results": [
-        {"path": r.mode, "simulated_s": r.simulated_s, "wall_s": r.wall_s,
-         "real_time_factor": r.real_time_factor, "ticks_per_s": r.ticks_per_s}
+    calls = None
+    if cfg.get("fpga.impl") == "rtl":  # what the per-tick call of the loop itself costs
+        from hil.bench.engines import bench_loop_call
+
+        calls = bench_loop_call(cfg)
+        text += "\n\n" + table(["one tick of the current loop", "wall [ns]", "CPU [ns]"],
+                                calls.rows, fmt=".3g",
+                                title=f"per tick, {calls.ticks} ticks in one loop")
+    load = os.getloadavg()
+    text += f"\nload average {load[0]:.2f} {load[1]:.2f} {load[2]:.2f} ({os.cpu_count()} cores)"
+    data = {"config": cfg.sources, "load_average": list(load), "results": [
+        {"path": r.mode, "current_loop": r.loop, "simulated_s": r.simulated_s,
+         "wall_s": r.wall_s, "cpu_s": r.cpu_s, "real_time_factor": r.real_time_factor,
+         "cpu_real_time_factor": r.cpu_real_time_factor, "ticks_per_s": r.ticks_per_s}
         for r in results]}
-    return Outcome(text, data)
+    if calls is not None:
+        data["loop_call_ns"] = [{"way": w, "wall_ns": wall, "cpu_ns": cpu}
+                                for w, wall, cpu in calls.rows]
+    return rtl_verdict(Outcome(text, data), ctx)
 
 
 def cmd_bench_stack(args: argparse.Namespace, ctx: Context) -> Outcome:
@@ -132,6 +152,7 @@ def add_parsers(bsub) -> None:  # noqa: ANN001 - argparse's sub-parsers of ``ben
                    help="simulated seconds, value-level path, in (0, 600]")
     p.add_argument("--bit-seconds", type=positive_float(60, "s"), default=0.05,
                    help="simulated seconds, bit-level path, in (0, 60]")
+    add_rtl_option(p)
     command(p, cmd_bench_fpga)
     p = bsub.add_parser("stack", parents=[common(plot=False)],
                         help="real-time factor of the full actuator stack (plant to MCU)")

@@ -102,10 +102,11 @@ class Context:
 
     def config(self, args: argparse.Namespace | None = None):  # noqa: ANN201 - plant Config
         """The configuration of ``-c``/``--set``."""
+        from hil.cli.verify import rtl_sets  # --rtl DIR: the board's loop as that RTL
         from plant.config import load_config
 
         a = args or self.args
-        return load_config(a.config, a.set or ())
+        return load_config(a.config, [*(a.set or ()), *rtl_sets(a)])
 
     def config_if_given(self):  # noqa: ANN201
         """The configuration of ``-c``/``--set`` if either is given, else None (replay and

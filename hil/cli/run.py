@@ -9,6 +9,7 @@ from pathlib import Path
 from hil.cli import progress as cli_progress
 from hil.cli.args import common, output_dir, output_file, plot_dir
 from hil.cli.contract import EXIT_FAILED, EXIT_OK, Context, Outcome, UsageError, command
+from hil.cli.verify import add_rtl_option, rtl_sets, rtl_verdict
 from hil.output.tables import table
 from plant.config import load_config
 
@@ -58,7 +59,7 @@ def cmd_run_thesis(args: argparse.Namespace, ctx: Context) -> Outcome:
          "metrics": [{"name": m.name, "value": m.value, "unit": m.unit, "thesis": m.thesis,
                       "requirement": m.requirement, "ok": m.ok} for m in r.metrics]}
         for r, w in results]}
-    return Outcome(text, data, EXIT_OK if ok else EXIT_FAILED)
+    return rtl_verdict(Outcome(text, data, EXIT_OK if ok else EXIT_FAILED), ctx)
 
 
 def _run_live(res, address: str) -> str:  # noqa: ANN001 - ScenarioResult
@@ -88,7 +89,7 @@ def cmd_run(args: argparse.Namespace, ctx: Context) -> Outcome:
         for opt in ("series", "foxglove"):
             if vars(args)[opt] is not None:
                 raise UsageError(f"--{opt}: 'thesis' runs several scenarios; give one "
-                                 "(f3 ... f8)")
+                                 "(f1-measured, f3 ... f9-roll)")
         return cmd_run_thesis(args, ctx)
     try:
         scenario = scenarios.get(args.scenario)
@@ -101,7 +102,7 @@ def cmd_run(args: argparse.Namespace, ctx: Context) -> Outcome:
     from hil.scenarios.knobs import split_sets
 
     config_sets, knob_values = split_sets(args.set or ())
-    cfg = load_config(args.config, config_sets)
+    cfg = load_config(args.config, [*config_sets, *rtl_sets(args)])
     res = scenario.call(cfg, ctx.progress(scenario.name), knob_values)
     rows = [(m.name, m.value, m.unit, m.requirement,
              "" if m.ok is None else ("ok" if m.ok else "MISSED")) for m in res.metrics]
@@ -126,7 +127,7 @@ def cmd_run(args: argparse.Namespace, ctx: Context) -> Outcome:
             "metrics": [{"name": m.name, "value": m.value, "unit": m.unit,
                          "requirement": m.requirement, "ok": m.ok} for m in res.metrics],
             "notes": res.notes}
-    return Outcome(text, data, EXIT_OK if res.ok else EXIT_FAILED)
+    return rtl_verdict(Outcome(text, data, EXIT_OK if res.ok else EXIT_FAILED), ctx)
 
 
 def add_parser(sub) -> None:  # noqa: ANN001 - argparse's sub-parsers
@@ -137,14 +138,15 @@ def add_parser(sub) -> None:  # noqa: ANN001 - argparse's sub-parsers
     p = sub.add_parser("run", parents=[common()],
                        help="run a scenario on the simulated stack (thesis, "
                        + ", ".join(scen) + "; exit 1 if a requirement is missed)",
-                       epilog="Scenarios: thesis: all thesis experiments (F3-F8); " + "; ".join(
+                       epilog="Scenarios: thesis: the thesis experiments (F1m, F3-F9); "
+                       + "; ".join(
                            f"{n}: {SCENARIOS[n].summary}" for n in scen)
                        + ". Scenario settings (--set scenario.NAME=VALUE; sweepable): "
                        + "; ".join(f"{n}: " + ", ".join(k.name for k in SCENARIOS[n].knobs)
                                    for n in scen if SCENARIOS[n].knobs)
                        + " (docs/scenarios.md).")
     p.add_argument("scenario", metavar="SCENARIO",
-                   help="scenario name, or 'thesis' for all thesis experiments (F3-F8); "
+                   help="scenario name, or 'thesis' for the thesis experiments (F1m, F3-F9); "
                    "these default to -c hydra_thesis")
     p.add_argument("--plot-dir", default=None, type=output_dir,
                    help="directory for one plot per scenario, NAME.png (with 'thesis' "
@@ -155,4 +157,5 @@ def add_parser(sub) -> None:  # noqa: ANN001 - argparse's sub-parsers
     p.add_argument("--series", metavar="FILE", type=output_file((".csv", ".parquet", ".mcap")),
                    help="write the time series behind the metrics to FILE (.csv, .parquet "
                    "or .mcap; README, Scenarios)")
+    add_rtl_option(p)
     command(p, cmd_run)
