@@ -198,13 +198,16 @@ def execute(run: Run, args: argparse.Namespace, verb: str) -> int:
     """Run one parsed command through the contract and return its exit code: its outcome
     printed (:func:`emit`), a mistake, a failing stdout or a signal as one line on stderr."""
     from hil.cli import progress
+    from hil.cli.args import image_sets
     from hil.cli.signals import signal_of
+    from hil.sim.image.errors import ImageFault
     from plant.config import ConfigError
 
     stdout = sys.stdout
     sys.stdout = GuardedStdout(stdout)
     try:
         progress.start(verb)
+        image_sets(args)  # --mcu-image FILE: the --set entries it stands for
         ctx = Context(args, verb)
         outcome = run(args, ctx)
         if not isinstance(outcome, Outcome):
@@ -216,6 +219,9 @@ def execute(run: Run, args: argparse.Namespace, verb: str) -> int:
     except (ConfigError, UsageError) as exc:
         print(error_line(verb, str(exc)), file=sys.stderr, flush=True)
         return EXIT_USAGE
+    except ImageFault as exc:  # the firmware image broke the interface: the run failed
+        print(error_line(verb, str(exc)), file=sys.stderr, flush=True)
+        return EXIT_FAILED
     except (StdoutError, BrokenPipeError) as exc:
         _quiet_stdout()
         if isinstance(exc, BrokenPipeError) or exc.errno == 32:

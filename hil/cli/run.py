@@ -31,6 +31,8 @@ def cmd_run_thesis(args: argparse.Namespace, ctx: Context) -> Outcome:
     rows = []
     results = []
     notes = []
+    profiles: list[dict] = []
+    _image_profile(cfg, "")  # this command's steps only
     for name in names:
         t0 = time.perf_counter()
         ctx.say(f"{name} ...")
@@ -39,6 +41,9 @@ def cmd_run_thesis(args: argparse.Namespace, ctx: Context) -> Outcome:
         res = scenarios.get(name).run(cfg, None)
         wall = time.perf_counter() - t0
         results.append((res, wall))
+        prof = _image_profile(cfg, name.upper())
+        if prof:
+            profiles.append(prof)
         if res.plot:
             res.plot(res, out_dir / f"{name}.png")
             cli_progress.output("plot", out_dir / f"{name}.png", done=True)
@@ -53,13 +58,35 @@ def cmd_run_thesis(args: argparse.Namespace, ctx: Context) -> Outcome:
     if notes:
         text += "\n" + "\n".join(f"note: {n}" for n in notes)
     text += f"\nplots written to {out_dir}/ ({', '.join(n + '.png' for n in names)})"
+    text += _profile_text(profiles)
     ok = all(r.ok for r, _ in results)
     data = {"config": cfg.sources, "ok": ok, "scenarios": [
         {"scenario": r.name, "title": r.title, "wall_s": w, "ok": r.ok, "notes": r.notes,
          "metrics": [{"name": m.name, "value": m.value, "unit": m.unit, "thesis": m.thesis,
                       "requirement": m.requirement, "ok": m.ok} for m in r.metrics]}
         for r, w in results]}
+    if profiles:
+        data["mcu_image_profile"] = profiles
     return rtl_verdict(Outcome(text, data, EXIT_OK if ok else EXIT_FAILED), ctx)
+
+
+def _image_profile(cfg, label: str) -> dict | None:  # noqa: ANN001 - Config
+    """The execution-time summary of the image steps since the last call (None: the MCU
+    is not an image)."""
+    if cfg.get("mcu.impl") != "image":
+        return None
+    from hil.sim.image import profile
+
+    return profile.take(label)
+
+
+def _profile_text(profiles: list[dict]) -> str:
+    if not profiles:
+        return ""
+    from hil.sim.image import profile
+
+    return "\nMCU image execution time (estimated, docs/mcu.md):\n" + "\n".join(
+        "  " + profile.line(p) for p in profiles)
 
 
 def _run_live(res, address: str) -> str:  # noqa: ANN001 - ScenarioResult
@@ -103,13 +130,16 @@ def cmd_run(args: argparse.Namespace, ctx: Context) -> Outcome:
 
     config_sets, knob_values = split_sets(args.set or ())
     cfg = load_config(args.config, [*config_sets, *rtl_sets(args)])
+    _image_profile(cfg, "")  # this command's steps only
     res = scenario.call(cfg, ctx.progress(scenario.name), knob_values)
+    prof = _image_profile(cfg, res.name)
     rows = [(m.name, m.value, m.unit, m.requirement,
              "" if m.ok is None else ("ok" if m.ok else "MISSED")) for m in res.metrics]
     text = table(["metric", "value", "unit", "requirement", ""], rows, fmt=".4g",
                  title=f"{res.name}: {res.title} ({cfg.sources[-1]})")
     if res.notes:
         text += "\n" + "\n".join(f"note: {n}" for n in res.notes)
+    text += _profile_text([prof] if prof else [])
     if args.plot and res.plot:
         res.plot(res, Path(args.plot))
         text += f"\nplot written to {args.plot}"
@@ -127,6 +157,8 @@ def cmd_run(args: argparse.Namespace, ctx: Context) -> Outcome:
             "metrics": [{"name": m.name, "value": m.value, "unit": m.unit,
                          "requirement": m.requirement, "ok": m.ok} for m in res.metrics],
             "notes": res.notes}
+    if prof:
+        data["mcu_image_profile"] = prof
     return rtl_verdict(Outcome(text, data, EXIT_OK if res.ok else EXIT_FAILED), ctx)
 
 
