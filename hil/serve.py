@@ -48,6 +48,10 @@ WARMUP_CYCLES = 3
 SESSION_GAP_S = 0.2
 #: Default allowance of overrunning cycles [% of cycles] before the run counts as failed.
 DEFAULT_MAX_OVERRUN_PERCENT = 1.0
+#: Default allowance of late replies [% of frames] (ethercat) before the run fails.
+DEFAULT_MAX_LATE_PERCENT = 0.1
+#: Default allowance of simulated time behind wall time [ms] (the slaves' watchdog time).
+DEFAULT_MAX_LAG_MS = 100.0
 
 
 @dataclass
@@ -437,10 +441,12 @@ def cmd_serve(args: argparse.Namespace, cfg) -> int:
 
 
 def cmd_serve_ethercat(args: argparse.Namespace, cfg, topo) -> int:
-    """``--transport ethercat``: the ESC chain (:mod:`hil.fieldbus.esc_chain`) on a raw
+    """``--transport ethercat``: the ESC slaves (:mod:`hil.fieldbus.ecat_serve`) on a raw
     Ethernet interface for a real master (docs/ethercat-slaves.md)."""
-    from hil.fieldbus.ecat_serve import latency_summary, serve, warm_up
-    from hil.fieldbus.esc_chain import EscChain
+    import threading
+
+    from hil.fieldbus.ecat_serve import ServedChain, histogram_rows, latency_summary, serve
+    from hil.realtime import RealtimePlan
     from hil.transports.rawether import RawEthernet
 
     if not args.interface:
@@ -453,45 +459,121 @@ def cmd_serve_ethercat(args: argparse.Namespace, cfg, topo) -> int:
     bad = [b for b in args.stack_boxes if not 0 <= b < len(topo.boxes)]
     if bad:
         raise _usage(f"--stack-box {bad[0]}: {topo.name} has boxes 0..{len(topo.boxes) - 1}")
-    model = args.model or "echo"
-    chain = EscChain(topo, cfg, model, tuple(args.stack_boxes))
-    warm_up(chain)
     try:
         link = RawEthernet(args.interface)
     except TransportError as exc:
         raise _usage(str(exc)) from None
-    if args.realtime:
-        _realtime_priority()
-
-    def ready() -> None:
-        print(f"eha-hil serve: ready on {args.interface} (EtherType 0x88a4); {topo.name}, "
-              f"{len(topo.boxes)} slaves, {model} model"
-              + (f", full stack behind box(es) {args.stack_boxes}" if args.stack_boxes
-                 else ""), file=sys.stderr, flush=True)
-
-    stopping = []
-    old = {s: signal.signal(s, lambda signum, frame: stopping.append(signum))
-           for s in (signal.SIGINT, signal.SIGTERM)}
+    model = args.model or "echo"
+    rt = RealtimePlan(args.realtime)
     try:
-        st = serve(chain, link, args.seconds, stop=lambda: bool(stopping), ready=ready)
+        chain = ServedChain(topo, cfg, model, tuple(args.stack_boxes))
+        if chain.engine is not None and rt.compute_cpus is not None:
+            chain.engine.workers = min(len(rt.compute_cpus), chain.engine._workers())
+        rt.process()
+
+        def ready() -> None:
+            print(f"eha-hil serve: ready on {args.interface} (EtherType 0x88a4); {topo.name}, "
+                  f"{len(topo.boxes)} slaves, {model} model"
+                  + (f", full stack behind box(es) {args.stack_boxes}" if args.stack_boxes
+                     else "") + ("; real time: " + ", ".join(rt.applied) if rt.applied
+                                 else ""), file=sys.stderr, flush=True)
+            for w in rt.warnings:
+                print(f"eha-hil serve: warning: --realtime: {w}; running without it",
+                      file=sys.stderr, flush=True)
+
+        stopping = []
+        wake = threading.Event()
+
+        def on_signal(signum, frame) -> None:
+            stopping.append(signum)
+            wake.set()
+
+        old = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+        try:
+            st, hist = serve(chain, link, args.seconds, stop=lambda: bool(stopping),
+                             wake=wake, ready=ready, late_us=args.late_us,
+                             frame_setup=rt.frame_thread, box_setup=rt.box_thread,
+                             box_behind=rt.box_behind)
+        finally:
+            for s, h in old.items():
+                signal.signal(s, h)
     finally:
-        for s, h in old.items():
-            signal.signal(s, h)
         link.close()
-    failures = [] if st.frames_answered else ["no EtherCAT frame arrived from a master"]
+    reply = latency_summary(hist, st.reply_max_us)
+    failures = ethercat_failures(st, args)
     data = {"transport": "ethercat", "interface": args.interface, "topology": topo.name,
             "model": model, "stack_boxes": list(args.stack_boxes), **st.as_dict(),
-            "reply_us": latency_summary(st.reply_us),
-            "chain": chain.stats.__dict__.copy(), "slaves": chain.watchdog_report(),
-            "ok": not failures, "failures": failures}
+            "simulated_s": st.cycles * PERIOD_S,
+            "overrun_percent": 100 * st.overruns / st.cycles if st.cycles else 0.0,
+            "late_percent": (100 * st.frames_late / st.frames_answered
+                             if st.frames_answered else 0.0),
+            "reply_us": reply,
+            "reply_histogram_us": {k: v for k, v in histogram_rows(hist)},
+            "realtime": {"applied": rt.applied, "refused": rt.warnings,
+                         "box_thread_demotions": rt.demotions},
+            "thresholds": {"max_overrun_percent": args.max_overrun_percent,
+                           "max_late_percent": args.max_late_percent,
+                           "max_lag_ms": args.max_lag_ms, "late_us": args.late_us},
+            "slaves": chain.watchdog_report(), "ok": not failures, "failures": failures}
     if args.json:
         print(json.dumps(data, indent=2))
     else:
-        print(f"serve {args.interface}: {st.cycles} cycles in {st.wall_s:.1f} s, "
-              f"{st.frames_answered} frames answered, {chain.stats.dropped_frames} dropped, "
-              f"{st.overruns} overruns")
+        print(ethercat_table(data))
         print("ok" if not failures else "FAILED: " + "; ".join(failures))
     return 0 if not failures else 1
+
+
+def ethercat_failures(st, args: argparse.Namespace) -> list[str]:
+    """What exceeded a documented threshold (docs/ethercat-slaves.md, 'Timing')."""
+    out = []
+    if not st.frames_answered:
+        out.append("no EtherCAT frame arrived from a master")
+    if st.cycles and 100 * st.overruns / st.cycles > args.max_overrun_percent:
+        out.append(f"{st.overruns} of {st.cycles} box cycles overran "
+                   f"(> {args.max_overrun_percent:g}%)")
+    if st.frames_answered and 100 * st.frames_late / st.frames_answered > \
+            args.max_late_percent:
+        out.append(f"{st.frames_late} of {st.frames_answered} replies later than "
+                   f"{args.late_us:g} us (> {args.max_late_percent:g}%)")
+    if st.lag_max_ms > args.max_lag_ms:
+        out.append(f"simulated time fell {st.lag_max_ms:.1f} ms behind wall time "
+                   f"(> {args.max_lag_ms:g} ms)")
+    if st.dropped_frames:
+        out.append(f"{st.dropped_frames} EtherCAT frames did not decode (dropped)")
+    if st.send_errors:
+        out.append(f"{st.send_errors} replies could not be sent")
+    return out
+
+
+def ethercat_table(d: dict) -> str:
+    from hil.tables import table
+
+    r = d["reply_us"]
+
+    def us(v: float | None) -> str:
+        return "-" if v is None else f"{v:.0f}"
+
+    rows = [
+        ["wall time / simulated time", f"{d['wall_s']:.2f} s / {d['simulated_s']:.3f} s"],
+        ["box cycles (1 ms each)", d["cycles"]],
+        ["box cycle compute worst", f"{d['worst_cycle_ms']:.2f} ms"],
+        ["overruns", f"{d['overruns']} ({d['overrun_percent']:.2f}%, allowed "
+         f"{d['thresholds']['max_overrun_percent']:g}%)"],
+        ["slipped cycles", d["slipped_cycles"]],
+        ["lag of simulated behind wall time, max",
+         f"{d['lag_max_ms']:.2f} ms (allowed {d['thresholds']['max_lag_ms']:g} ms)"],
+        ["frames received / answered", f"{d['frames_received']} / {d['frames_answered']}"],
+        ["reply p50 / p99 / p99.9 / max", f"{us(r['p50'])} / {us(r['p99'])} / "
+         f"{us(r['p99_9'])} / {us(r['max'])} us"],
+        [f"replies later than {d['late_us']:g} us", f"{d['frames_late']} "
+         f"({d['late_percent']:.3f}%, allowed {d['thresholds']['max_late_percent']:g}%)"],
+        ["frames dropped (bad) / not EtherCAT", f"{d['dropped_frames']} / "
+         f"{d['other_frames']}"],
+        ["real time", ", ".join(d["realtime"]["applied"]) or "off"],
+    ]
+    hist = ", ".join(f"{k}: {v}" for k, v in d["reply_histogram_us"].items() if v)
+    return (f"serve {d['interface']}: {d['topology']}, {d['model']} model\n"
+            + table(["", "value"], rows) + f"\nreply times: {hist or 'none'}")
 
 
 def add_parser(sub, common, config_fn, wrap) -> None:
@@ -520,7 +602,7 @@ def add_parser(sub, common, config_fn, wrap) -> None:
                    help="serial line speed, 50..100000000 (ignored by ptys)")
     p.add_argument("--topology", default="bench_one_box",
                    help="shipped topology name or TOML file")
-    p.add_argument("--model", choices=("stack", "echo"),
+    p.add_argument("--model", choices=("stack", "robot", "echo"),
                    help="box model; default stack for <= 5 actuators, echo otherwise")
     p.add_argument("--seconds", type=float_range(1e-3, 1e7, unit="s"),
                    help="wall seconds to serve, in [0.001, 1e7] (default: until Ctrl-C / "
@@ -529,6 +611,17 @@ def add_parser(sub, common, config_fn, wrap) -> None:
                    default=DEFAULT_MAX_OVERRUN_PERCENT, metavar="P",
                    help="exit 1 if more than P%% of the cycles overran their deadline, "
                    "P in [0, 100]")
+    p.add_argument("--max-late-percent", type=float_range(0.0, 100.0, unit="%"),
+                   default=DEFAULT_MAX_LATE_PERCENT, metavar="P",
+                   help="ethercat: exit 1 if more than P%% of the replies left later than "
+                   "--late-us after their frame arrived")
+    p.add_argument("--late-us", type=float_range(1.0, 1e6, unit="us"), default=1000.0,
+                   metavar="US", help="ethercat: a reply later than this is late "
+                   "(default 1000 us, one cycle)")
+    p.add_argument("--max-lag-ms", type=float_range(0.0, 1e7, unit="ms"),
+                   default=DEFAULT_MAX_LAG_MS, metavar="MS",
+                   help="exit 1 if the boxes' simulated time fell more than MS behind "
+                   "the wall clock")
     p.add_argument("--realtime", action="store_true",
                    help="run with SCHED_FIFO priority 50 (like chrt -f 50; needs root or "
                    "CAP_SYS_NICE): far fewer overruns on a busy machine")
