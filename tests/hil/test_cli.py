@@ -239,8 +239,8 @@ def test_help_lists_run_thesis_and_exit_codes(capsys):
 def test_every_option_has_help_and_shows_its_default(capsys):
     import argparse
 
-    from hil.cli import build_parser
-    from hil.cli_args import walk
+    from hil.cli.args import walk
+    from hil.cli.root import build_parser
 
     missing = [f"{p.prog} {a.option_strings or a.dest}" for p in walk(build_parser())
                for a in p._actions
@@ -251,7 +251,7 @@ def test_every_option_has_help_and_shows_its_default(capsys):
 
 
 def test_identify_takes_c_and_set_and_still_the_old_preset(tmp_path):
-    from hil.cli import build_parser
+    from hil.cli.root import build_parser
 
     data = tmp_path / "d.csv"
     data.write_text("t\n0\n")
