@@ -32,8 +32,9 @@ from collections.abc import Callable
 from dataclasses import asdict, dataclass
 
 from hil.cli.args import float_range, int_range
-from hil.fieldbus import wire
+from hil.fieldbus import reply_times, wire
 from hil.fieldbus.chain import Chain
+from hil.fieldbus.reply_times import ReplyTimes
 from hil.transports import TransportError
 from protocols import ethercat as ec
 
@@ -75,6 +76,7 @@ class ServeStats:
     incomplete_cycles: int = 0  # master cycles whose frames did not cover every box
     sessions: int = 0           # runs of frames separated by more than SESSION_GAP_S
     send_errors: int = 0        # replies the transport refused
+    lag_max_s: float = 0.0      # largest lag of simulated time behind wall time
 
     def as_dict(self) -> dict:
         d = asdict(self)
@@ -87,6 +89,7 @@ class ServeStats:
         d["worst_advance_ms"] = self.worst_advance_s * 1e3
         d["worst_late_ms"] = self.worst_late_s * 1e3
         d["overrun_fraction"] = self.overruns / self.cycles if self.cycles else 0.0
+        d["lag_max_ms"] = self.lag_max_s * 1e3
         return d
 
 
@@ -96,7 +99,8 @@ class PacedServer:
 
     def __init__(self, chain: Chain, end, period_s: float = PERIOD_S,
                  clock: Callable[[], float] = time.perf_counter,
-                 capture: Callable[[int, str, bytes], None] | None = None) -> None:
+                 capture: Callable[[int, str, bytes], None] | None = None,
+                 late_us: float = 1000.0) -> None:
         if not chain.paced:
             raise ValueError("PacedServer needs Chain(..., paced=True)")
         self.chain = chain
@@ -106,6 +110,9 @@ class PacedServer:
         #: capture(wall time ns, "tx"/"rx", frame): every frame received and reply sent.
         self.capture = capture
         self.stats = ServeStats()
+        #: Per answered frame: from its arrival (the transport's recv returning) to the
+        #: reply's send returning.
+        self.replies = ReplyTimes(late_us)
         self.error: str | None = None  # a transport failure that ended the run
         self._windows = [(w.lad, w.end) for w in chain.plan.windows]
         self._all = (1 << len(self._windows)) - 1
@@ -130,6 +137,7 @@ class PacedServer:
             try:
                 self.end.send(reply)
                 st.frames_served += 1
+                self.replies.add((self.clock() - t) * 1e6)
                 if self.capture is not None:
                     self.capture(time.time_ns(), "rx", reply)
             except TransportError as exc:
@@ -182,13 +190,13 @@ class PacedServer:
             chain.advance()
         gc.collect()
         gc.freeze()  # long-lived objects out of the collector's way: shorter pauses
-        limit = None if seconds is None else int(round(seconds / period))
         t0 = start = clock()
+        end = None if seconds is None else start + seconds  # wall seconds, whatever the lag
         next_report = start + progress_every_s
         k = 0  # cycles run on the clock
         was_late = False
         try:
-            while not stop() and (limit is None or k < limit) and self.error is None:
+            while not stop() and (end is None or clock() < end) and self.error is None:
                 now = clock()
                 release = t0 + k * period
                 if now >= release:
@@ -210,9 +218,11 @@ class PacedServer:
                             t0 += behind * period
                             st.slipped_cycles += behind
                     was_late = late > 0
+                    st.lag_max_s = max(st.lag_max_s, done - start - k * period)
                     self._drain()
                 else:
-                    frame = self.end.recv(timeout=release - now)
+                    wait = release - now if end is None else min(release, end) - now
+                    frame = self.end.recv(timeout=max(wait, 0.0))
                     if frame is not None:
                         self._serve(frame)
                 if progress is not None and now >= next_report:
@@ -335,7 +345,8 @@ def cmd_serve(args: argparse.Namespace, cfg) -> int:
             if release is not None:
                 release()
             raise _usage(str(exc)) from None
-    server = PacedServer(chain, end, capture=None if cap is None else cap.write)
+    server = PacedServer(chain, end, capture=None if cap is None else cap.write,
+                         late_us=args.late_us)
     frames = [{"lad": lad, "length": n, "wkc": wkc} for lad, n, wkc in chain.plan.frames]
     plan = ", ".join(f"LRW lad {f['lad']} len {f['length']} WKC {f['wkc']}" for f in frames)
     print(f"eha-hil serve: ready on {where}; {topo.name}, {model} model, "
@@ -396,6 +407,8 @@ def cmd_serve(args: argparse.Namespace, cfg) -> int:
     if st.overruns > allowed:
         failures.append(f"{st.overruns} overruns > {args.max_overrun_percent:g}% of "
                         f"{st.cycles} cycles")
+    failures += _timing_failures(server.replies.late, st.frames_served, st.lag_max_s * 1e3,
+                                 args)
     data = {"transport": args.transport, "where": where, "topology": topo.name,
             "crc_trailer": trailer, "capture": args.capture,
             "captured_frames": None if cap is None else cap.frames,
@@ -404,6 +417,10 @@ def cmd_serve(args: argparse.Namespace, cfg) -> int:
             "max_overrun_percent": args.max_overrun_percent,
             "overrun_limit_exceeded": st.overruns > allowed,
             **st.as_dict(), "transport_stats": transport,
+            "frames_late": server.replies.late, "late_us": args.late_us,
+            "reply_us": reply_times.summary(server.replies.hist, server.replies.max_us),
+            "reply_histogram_us": reply_times.decades(server.replies.hist),
+            "max_late_percent": args.max_late_percent, "max_lag_ms": args.max_lag_ms,
             "chain": {k: v for k, v in chain.stats.__dict__.items() if k != "extra"},
             "ok": not failures, "failures": failures}
     if args.json:
@@ -424,7 +441,12 @@ def cmd_serve(args: argparse.Namespace, cfg) -> int:
              f"allowed {args.max_overrun_percent:g}%) in {st.stalls} stalls"],
             ["worst lateness", f"{d['worst_late_ms']:.3f} ms"],
             ["slipped cycles", st.slipped_cycles],
+            ["lag of simulated behind wall time, max", f"{d['lag_max_ms']:.2f} ms "
+             f"(allowed {args.max_lag_ms:g} ms)"],
             ["frames received / served", f"{st.frames_received} / {st.frames_served}"],
+            ["reply p50 / p99 / p99.9 / max", reply_times.line(data["reply_us"])],
+            [f"replies later than {args.late_us:g} us", f"{server.replies.late} "
+             f"(allowed {args.max_late_percent:g}%)"],
             ["bad / stale frames", f"{st.bad_frames} / {st.stale_frames}"],
             ["transport CRC / framing / oversize", f"{transport['crc_errors']} / "
              f"{transport['framing_errors']} / {transport['oversize']}"],
@@ -445,7 +467,7 @@ def cmd_serve_ethercat(args: argparse.Namespace, cfg, topo) -> int:
     Ethernet interface for a real master (docs/ethercat-slaves.md)."""
     import threading
 
-    from hil.fieldbus.esc.serve import ServedChain, histogram_rows, latency_summary, serve
+    from hil.fieldbus.esc.serve import ServedChain, serve
     from hil.sim.realtime import RealtimePlan
     from hil.transports.rawether import RawEthernet
 
@@ -499,7 +521,7 @@ def cmd_serve_ethercat(args: argparse.Namespace, cfg, topo) -> int:
                 signal.signal(s, h)
     finally:
         link.close()
-    reply = latency_summary(hist, st.reply_max_us)
+    reply = reply_times.summary(hist, st.reply_max_us)
     failures = ethercat_failures(st, args)
     data = {"transport": "ethercat", "interface": args.interface, "topology": topo.name,
             "model": model, "stack_boxes": list(args.stack_boxes), **st.as_dict(),
@@ -508,7 +530,7 @@ def cmd_serve_ethercat(args: argparse.Namespace, cfg, topo) -> int:
             "late_percent": (100 * st.frames_late / st.frames_answered
                              if st.frames_answered else 0.0),
             "reply_us": reply,
-            "reply_histogram_us": {k: v for k, v in histogram_rows(hist)},
+            "reply_histogram_us": reply_times.decades(hist),
             "realtime": {"applied": rt.applied, "refused": rt.warnings,
                          "box_thread_demotions": rt.demotions},
             "thresholds": {"max_overrun_percent": args.max_overrun_percent,
@@ -523,6 +545,19 @@ def cmd_serve_ethercat(args: argparse.Namespace, cfg, topo) -> int:
     return 0 if not failures else 1
 
 
+def _timing_failures(late: int, answered: int, lag_max_ms: float,
+                     args: argparse.Namespace) -> list[str]:
+    """Late replies and lag past their documented thresholds (every transport)."""
+    out = []
+    if answered and 100 * late / answered > args.max_late_percent:
+        out.append(f"{late} of {answered} replies later than {args.late_us:g} us "
+                   f"(> {args.max_late_percent:g}%)")
+    if lag_max_ms > args.max_lag_ms:
+        out.append(f"simulated time fell {lag_max_ms:.1f} ms behind wall time "
+                   f"(> {args.max_lag_ms:g} ms)")
+    return out
+
+
 def ethercat_failures(st, args: argparse.Namespace) -> list[str]:
     """What exceeded a documented threshold (docs/ethercat-slaves.md, 'Timing')."""
     out = []
@@ -531,13 +566,7 @@ def ethercat_failures(st, args: argparse.Namespace) -> list[str]:
     if st.cycles and 100 * st.overruns / st.cycles > args.max_overrun_percent:
         out.append(f"{st.overruns} of {st.cycles} box cycles overran "
                    f"(> {args.max_overrun_percent:g}%)")
-    if st.frames_answered and 100 * st.frames_late / st.frames_answered > \
-            args.max_late_percent:
-        out.append(f"{st.frames_late} of {st.frames_answered} replies later than "
-                   f"{args.late_us:g} us (> {args.max_late_percent:g}%)")
-    if st.lag_max_ms > args.max_lag_ms:
-        out.append(f"simulated time fell {st.lag_max_ms:.1f} ms behind wall time "
-                   f"(> {args.max_lag_ms:g} ms)")
+    out += _timing_failures(st.frames_late, st.frames_answered, st.lag_max_ms, args)
     if st.dropped_frames:
         out.append(f"{st.dropped_frames} EtherCAT frames did not decode (dropped)")
     if st.send_errors:
@@ -547,11 +576,6 @@ def ethercat_failures(st, args: argparse.Namespace) -> list[str]:
 
 def ethercat_table(d: dict) -> str:
     from hil.output.tables import table
-
-    r = d["reply_us"]
-
-    def us(v: float | None) -> str:
-        return "-" if v is None else f"{v:.0f}"
 
     rows = [
         ["wall time / simulated time", f"{d['wall_s']:.2f} s / {d['simulated_s']:.3f} s"],
@@ -563,8 +587,7 @@ def ethercat_table(d: dict) -> str:
         ["lag of simulated behind wall time, max",
          f"{d['lag_max_ms']:.2f} ms (allowed {d['thresholds']['max_lag_ms']:g} ms)"],
         ["frames received / answered", f"{d['frames_received']} / {d['frames_answered']}"],
-        ["reply p50 / p99 / p99.9 / max", f"{us(r['p50'])} / {us(r['p99'])} / "
-         f"{us(r['p99_9'])} / {us(r['max'])} us"],
+        ["reply p50 / p99 / p99.9 / max", reply_times.line(d["reply_us"])],
         [f"replies later than {d['late_us']:g} us", f"{d['frames_late']} "
          f"({d['late_percent']:.3f}%, allowed {d['thresholds']['max_late_percent']:g}%)"],
         ["frames dropped (bad) / not EtherCAT", f"{d['dropped_frames']} / "
@@ -613,10 +636,10 @@ def add_parser(sub, common, config_fn, wrap) -> None:
                    "P in [0, 100]")
     p.add_argument("--max-late-percent", type=float_range(0.0, 100.0, unit="%"),
                    default=DEFAULT_MAX_LATE_PERCENT, metavar="P",
-                   help="ethercat: exit 1 if more than P%% of the replies left later than "
-                   "--late-us after their frame arrived")
+                   help="exit 1 if more than P%% of the replies left later than --late-us "
+                   "after their frame arrived")
     p.add_argument("--late-us", type=float_range(1.0, 1e6, unit="us"), default=1000.0,
-                   metavar="US", help="ethercat: a reply later than this is late "
+                   metavar="US", help="a reply later than this is late "
                    "(default 1000 us, one cycle)")
     p.add_argument("--max-lag-ms", type=float_range(0.0, 1e7, unit="ms"),
                    default=DEFAULT_MAX_LAG_MS, metavar="MS",

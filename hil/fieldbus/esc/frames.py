@@ -21,10 +21,9 @@ import numpy as np
 from numba import njit, types
 
 from firmware_model.esc.compiled import DROPPED, NOT_ETHERCAT, EscArrays, handle_frame, tick
+from hil.fieldbus.reply_times import HIST_US
 
 POLL_MS = 1
-#: Histogram of reply times: 1 us bins; the last bin holds everything from HIST_US on.
-HIST_US = 20_000
 SIOCGSTAMPNS = 0x8907
 SOL_PACKET, PACKET_IGNORE_OUTGOING = 263, 23
 CLOCK_REALTIME, CLOCK_MONOTONIC = 0, 1

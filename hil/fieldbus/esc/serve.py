@@ -288,27 +288,3 @@ def serve(chain: ServedChain, link: RawEthernet, seconds: float | None = None,
                         send_errors=int(f[esc_frames.F_SEND_ERRORS]), late_us=late_us,
                         reply_max_us=int(f[esc_frames.F_MAX_NS]) / 1e3)
     return st, frames.hist.copy()
-
-
-def latency_summary(hist: np.ndarray, max_us: float) -> dict:
-    """p50/p99/p99.9/max [us] of a 1 us reply-time histogram (None if it is empty); the
-    percentiles are the upper edges of their bins."""
-    total = int(hist.sum())
-    if not total:
-        return {"p50": None, "p99": None, "p99_9": None, "max": None}
-    cum = np.cumsum(hist)
-    out = {}
-    for key, q in (("p50", 0.5), ("p99", 0.99), ("p99_9", 0.999)):
-        out[key] = float(np.searchsorted(cum, q * total) + 1)
-    out["max"] = max_us
-    return out
-
-
-def histogram_rows(hist: np.ndarray) -> list[tuple[str, int]]:
-    """The reply-time histogram in decades: (range, frames)."""
-    edges = [0, 10, 20, 50, 100, 200, 500, 1000, 2000, 5000, len(hist) - 1]
-    rows = []
-    for lo, hi in zip(edges[:-1], edges[1:], strict=True):
-        rows.append((f"{lo}-{hi} us", int(hist[lo:hi].sum())))
-    rows.append((f">= {len(hist) - 1} us", int(hist[-1])))
-    return rows

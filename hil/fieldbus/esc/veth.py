@@ -77,11 +77,13 @@ def start_serve(ns: str, *extra: str) -> subprocess.Popen:
                                "hydra_full", "--realtime", "--json", *extra),
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                          env=_env())
-    line = p.stderr.readline()
-    if "ready on" not in line:
-        p.kill()
-        raise RuntimeError(f"serve did not start: {line.strip()} {p.stderr.read().strip()}")
-    return p
+    seen = []
+    for line in p.stderr:  # (warnings may come first)
+        if "ready on" in line:
+            return p
+        seen.append(line.strip())
+    p.kill()
+    raise RuntimeError(f"serve did not start: {' | '.join(seen)[-800:]}")
 
 
 def stop_serve(p: subprocess.Popen) -> dict:
