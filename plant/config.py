@@ -28,7 +28,12 @@ DEFAULT_PRESET = "hydra_default"
 #: recipe it was recorded with, so its log replays bit for bit.
 PLANT_NUMERICS = 2
 #: Values of keys that a configuration recorded before the key existed ran with.
-RECORDED_BEFORE: dict[str, Any] = {"sim.plant_numerics": 1}
+RECORDED_BEFORE: dict[str, Any] = {
+    "sim.plant_numerics": 1,
+    # Runs recorded before entrained air existed had none (the fraction is then unused).
+    "effects.entrained_air.enabled": False,
+    "effects.entrained_air.volume_fraction": 0.01,
+}
 
 #: Keys that take one of a fixed set of strings.
 CHOICES: dict[str, tuple[str, ...]] = {
@@ -36,6 +41,7 @@ CHOICES: dict[str, tuple[str, ...]] = {
     "mcu.controller": ("current", "velocity"),
     "mcu.force_feedback": ("pressure", "strain", "complementary"),
     "mcu.impl": ("python", "c"),
+    "fpga.impl": ("python", "rtl"),
 }
 
 
@@ -120,6 +126,7 @@ RANGES: dict[str, Range] = {
     "effects.seal_friction.static_n": _span(0.0, 1e5),
     "effects.seal_friction.stribeck_velocity_m_per_s": _pos(10.0),
     "effects.seal_friction.velocity_eps_m_per_s": _pos(10.0),
+    "effects.entrained_air.volume_fraction": _span(0.0, 0.2),
     "effects.oil_temperature.reference_c": _span(-40.0, 150.0),
     "effects.oil_temperature.initial_c": _span(-40.0, 150.0),
     "effects.oil_temperature.viscosity_coeff_per_c": _span(0.0, 0.1),
@@ -214,8 +221,9 @@ for _a in ANALOG_INPUTS:
         DECLARED[f"sensors.{_a.fitted_key}"] = False
 RANGES.update({fw: RANGES[plant] for fw, plant in FIRMWARE_NOMINAL.items()})
 #: Keys that choose how a model is run, not what it computes (``mcu.impl``: the Python MCU
-#: or its bit-identical C build): a log written before one existed replays with its default.
-RUN_CHOICES = ("mcu.impl",)
+#: or its bit-identical C build; ``fpga.impl``: the board's current loop or its RTL): a log
+#: written before one existed replays with its default.
+RUN_CHOICES = ("mcu.impl", "fpga.impl", "fpga.rtl_dir")
 
 class ConfigError(Exception):
     """A configuration mistake; ``str(err)`` is one line naming the key and the file."""
