@@ -78,7 +78,8 @@ def test_seconds_are_wall_seconds_and_no_master_fails(netns):
 
 
 def test_a_threshold_exceeded_exits_1_and_says_which(netns):
-    loose = ("--max-lag-ms", "1e6", "--max-overrun-percent", "100")
+    loose = ("--max-lag-ms", "1e6", "--max-overrun-percent", "100", "--max-late-percent",
+             "100")
     code, rep, _ = _serve(netns, "--seconds", "3", *loose, master_s=1.0)
     assert rep["frames_answered"] > 100, rep
     assert code == 0 and rep["ok"] and rep["failures"] == []
