@@ -2,7 +2,7 @@
 
 Each factory returns an argparse ``type=`` function. A bad value raises
 :class:`argparse.ArgumentTypeError`, which the parser (:class:`Parser`) turns into one line
-``eha-hil VERB: error: argument --opt: why`` and exit code 2, before any work starts. A
+``eha-hil VERB: argument --opt: why`` and exit code 2, before any work starts. A
 verb never re-checks a value it got through one of these types.
 
 Numbers are checked for being finite first (``nan`` and ``inf`` parse as floats), then
@@ -17,7 +17,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import NoReturn
 
-EXIT_USAGE = 2
+from hil.cli.contract import EXIT_USAGE
 
 
 class Parser(argparse.ArgumentParser):
@@ -31,7 +31,7 @@ class Parser(argparse.ArgumentParser):
     def error(self, message: str) -> NoReturn:
         # argparse prints the whole usage block first; one line says the same and keeps
         # stderr readable for scripts (``--help`` has the usage).
-        self.exit(EXIT_USAGE, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+        self.exit(EXIT_USAGE, f"{self.prog}: {message} (see {self.prog} --help)\n")
 
 
 class HelpFormatter(argparse.HelpFormatter):
@@ -211,6 +211,57 @@ def add_config_options(parser: argparse.ArgumentParser) -> None:
                         help="actuator preset name or TOML file (default: hydra_default)")
     parser.add_argument("--set", action="append", metavar="SECTION.KEY=VALUE",
                         help="override one configuration value (repeatable)")
+    parser.add_argument("--mcu-image", metavar="FILE.elf", type=mcu_image,
+                        help="run this Cortex-M4F firmware ELF as the MCU (sets mcu.impl="
+                        "image and mcu.image; the interface: docs/mcu.md)")
+
+
+def mcu_image(text: str) -> str:
+    """A firmware ELF the harness can run (checked here once: architecture, vector table,
+    5 kHz entry); the path."""
+    from hil.sim.image.elf import load
+    from hil.sim.image.errors import ImageError
+
+    try:
+        load(text)
+    except ImageError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return text
+
+
+mcu_image.kind = "input"  # type: ignore[attr-defined]
+
+
+def image_sets(args: argparse.Namespace) -> None:
+    """``--mcu-image FILE`` as the two ``--set`` entries it stands for."""
+    path = getattr(args, "mcu_image", None)
+    if path:
+        args.set = [*(args.set or ()), "mcu.impl=image", f"mcu.image={path}"]
+
+
+#: --plot: a figure file whose directory exists.
+PLOT_FILE = output_file((".png", ".svg", ".pdf"))
+
+
+def common(json_plot: bool = True, plot: bool = True,
+           config: bool = True) -> argparse.ArgumentParser:
+    """The options verbs share: ``-c``/``--set`` (``config``), ``--json`` and ``--plot``."""
+    parent = Parser(add_help=False)
+    if config:
+        add_config_options(parent)
+    if json_plot:
+        parent.add_argument("--json", action="store_true", help="print JSON instead of tables")
+    if plot:
+        parent.add_argument("--plot", metavar="FILE.png", type=PLOT_FILE,
+                            help="also write a figure (.png, .svg or .pdf)")
+    return parent
+
+
+def plot_dir(path: str) -> Path:
+    """The --plot-dir directory (checked by its argument type), created if missing."""
+    out_dir = Path(path)
+    out_dir.mkdir(exist_ok=True)
+    return out_dir
 
 
 def walk(parser: argparse.ArgumentParser) -> list[argparse.ArgumentParser]:

@@ -4,14 +4,20 @@
 from __future__ import annotations
 
 import argparse
-import json
+
+from hil.cli.args import common, float_range, int_range
+from hil.cli.contract import Context, Outcome, UsageError, command
 
 
-def add_parsers(sub, bsub, common, config_fn, wrap) -> None:
-    from hil.cli.args import float_range, int_range
-    from hil.fieldbus.esc import esi
-
-    esi.add_parser(sub)
+def add_parsers(sub, bsub) -> None:  # noqa: ANN001 - argparse's sub-parsers
+    """Register ``esi`` and ``bench ethercat``."""
+    p = sub.add_parser("esi", help="write the EtherCAT slave information (ESI XML) of the "
+                       "boxes of a topology to stdout",
+                       epilog="Example: eha-hil esi --topology hydra_full > Hydra.xml "
+                       "(docs/ethercat-slaves.md)")
+    p.add_argument("--topology", default="hydra_full",
+                   help="shipped topology name or TOML file")
+    command(p, _cmd_esi)
     p = bsub.add_parser("ethercat", parents=[common(plot=False)],
                         help="round trip and box-cycle time per bus cycle of the ESC chain "
                         "(hydra_full; echo boxes, and the full stack behind one box)")
@@ -28,27 +34,35 @@ def add_parsers(sub, bsub, common, config_fn, wrap) -> None:
                    help="--wire: wall seconds of 1 kHz cycles (default 60)")
     p.add_argument("--bring-ups", type=int_range(0, 1000), default=25,
                    help="--wire: bring-ups to OP counted first (default 25)")
-    p.set_defaults(func=wrap(_cmd_bench, config_fn))
+    command(p, _cmd_bench)
 
 
-def _cmd_bench(args: argparse.Namespace, cfg) -> int:
+def _cmd_esi(args: argparse.Namespace, ctx: Context) -> Outcome:
+    from hil.fieldbus.esc.esi import esi_xml
+    from hil.fieldbus.topology import TopologyError, load_topology
+
+    try:
+        topo = load_topology(args.topology)
+    except TopologyError as exc:
+        raise UsageError(str(exc)) from None
+    return Outcome(esi_xml(topo), end="")  # the XML ends with its own newline
+
+
+def _cmd_bench(args: argparse.Namespace, ctx: Context) -> Outcome:
     from hil.bench.ethercat import bench_ethercat, format_table
 
     if args.wire:
         from hil.bench.ethercat import bench_wire, format_wire
-        from hil.cli.bus import BusUsageError
         from hil.fieldbus.esc.veth import NamespaceError
 
         try:
             import pysoem  # noqa: F401
         except ImportError:
-            raise BusUsageError("--wire: needs pysoem (pip install pysoem)") from None
+            raise UsageError("--wire: needs pysoem (pip install pysoem)") from None
         try:
             res = bench_wire(args.model, args.seconds, args.bring_ups)
         except NamespaceError as exc:
-            raise BusUsageError(f"--wire: {exc}") from None
-        print(json.dumps(res, indent=2) if args.json else format_wire(res))
-        return 0
-    rows = bench_ethercat(cfg, args.cycles)
-    print(json.dumps(rows, indent=2) if args.json else format_table(rows))
-    return 0
+            raise UsageError(f"--wire: {exc}") from None
+        return Outcome(format_wire(res), res)
+    rows = bench_ethercat(ctx.config(), args.cycles)
+    return Outcome(format_table(rows), rows)

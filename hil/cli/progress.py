@@ -2,10 +2,11 @@
 prints.
 
 A command notes where it is (:func:`at`) and the files it writes (:func:`output`); the
-progress reporters of :func:`reporter` do the first on every update. When SIGINT arrives,
-``hil.cli.main`` catches the KeyboardInterrupt once, after every ``with`` block on the way
-out has closed its file, and prints :func:`interrupted_line`: the verb, the position, and
-for each output whether it is complete, e.g.
+progress reporters of :func:`reporter` do the first on every update. When SIGINT (or
+SIGTERM, SIGHUP) arrives, the root (:mod:`hil.cli.root`) catches the KeyboardInterrupt once,
+after every ``with`` block on the way out has closed its file, and prints
+:func:`interrupted_line`: the verb, the position, and for each output whether it is
+complete, e.g.
 ``eha-hil bus run: interrupted at t=1.230 s; log run.mcap closed and readable``.
 """
 
@@ -81,42 +82,47 @@ def reporter(label: str, enabled: bool, unit: str = "", note: bool = True
 
 @contextmanager
 def interrupt_between_steps() -> Iterator[Callable[[], None]]:
-    """Ctrl-C lands between two steps of a loop instead of anywhere.
+    """Ctrl-C (and SIGTERM, SIGHUP) lands between two steps of a loop instead of anywhere.
 
-    Inside the block SIGINT only sets a flag; the loop calls the yielded ``check()`` where
+    Inside the block the signal only sets a flag; the loop calls the yielded ``check()`` where
     stopping leaves every file consistent (e.g. between two fieldbus cycles, never inside
     a frame-log write), and ``check()`` raises KeyboardInterrupt. A second Ctrl-C raises at
     once; a flag still set when the block ends raises there."""
+    from hil.cli.signals import SIGNALS, Interrupted
+
     pending: list[int] = []
 
-    def on_sigint(signum: int, frame: object) -> None:
+    def on_signal(signum: int, frame: object) -> None:
         if pending:
-            raise KeyboardInterrupt
+            raise Interrupted(signum)
         pending.append(signum)
 
     def check() -> None:
         if pending:
-            raise KeyboardInterrupt
+            raise Interrupted(pending[0])
 
+    old = {}
     try:
-        old = signal.getsignal(signal.SIGINT)
-        # An ignored SIGINT (a background job of a script, nohup) stays ignored, as
-        # Python leaves it; off the main thread signals cannot be handled at all.
-        if old is signal.SIG_IGN:
-            raise ValueError("SIGINT ignored")
-        signal.signal(signal.SIGINT, on_sigint)
+        for signum in SIGNALS:
+            # An ignored signal (SIGINT in a background job of a script, SIGHUP under
+            # nohup) stays ignored, as Python leaves it; off the main thread signals
+            # cannot be handled at all (ValueError).
+            if signal.getsignal(signum) is not signal.SIG_IGN:
+                old[signum] = signal.signal(signum, on_signal)
     except ValueError:
         yield lambda: None
         return
     try:
         yield check
     finally:
-        signal.signal(signal.SIGINT, old)
+        for signum, handler in old.items():
+            signal.signal(signum, handler)
     check()
 
 
-def interrupted_line() -> str:
-    """The one line for an interrupted command (starting on a fresh line of stderr)."""
+def interrupted_line(signum: int = signal.SIGINT) -> str:
+    """The one line for an interrupted command (starting on a fresh line of stderr); a
+    signal other than Ctrl-C's is named ("interrupted by SIGTERM at ...")."""
     st = _state
     where = st.position or f"after {time.perf_counter() - st.started:.1f} s"
     parts = []
@@ -139,7 +145,8 @@ def interrupted_line() -> str:
                      else f"{out.label} {out.path} is incomplete ({problem})")
     saved = "; ".join(parts) if parts else "nothing written"
     lead = "\n" if st.line_open else ""
-    return f"{lead}{st.verb}: interrupted {where}; {saved}"
+    by = "" if signum == signal.SIGINT else f"by {signal.Signals(signum).name} "
+    return f"{lead}{st.verb}: interrupted {by}{where}; {saved}"
 
 
 def readable_log(path: Path) -> str:

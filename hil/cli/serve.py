@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import argparse
 import gc
-import json
 import os
 import signal
 import sys
@@ -31,7 +30,8 @@ import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
 
-from hil.cli.args import float_range, int_range
+from hil.cli.args import common, float_range, int_range
+from hil.cli.contract import EXIT_FAILED, EXIT_OK, Context, Outcome, UsageError, command
 from hil.fieldbus import reply_times, wire
 from hil.fieldbus.chain import Chain
 from hil.fieldbus.reply_times import ReplyTimes
@@ -244,9 +244,7 @@ class PacedServer:
 
 # --- command line ------------------------------------------------------------------------------
 def _usage(msg: str) -> Exception:
-    from hil.cli.bus import BusUsageError
-
-    return BusUsageError(msg)
+    return UsageError(msg)
 
 
 def serve_backends() -> list[str]:
@@ -296,7 +294,7 @@ def _status_line(st: ServeStats, errors: int) -> str:
 
 def _live_view(args: argparse.Namespace, chain: Chain, cfg):  # noqa: ANN202
     """``--foxglove``: (live view, boxes sending to it), or (None, [])."""
-    if getattr(args, "foxglove", None) is None:
+    if args.foxglove is None:
         return None, []
     from hil.framelog.live import FoxgloveLive, LiveError, parse_address
     from hil.replay.record import signal_boxes
@@ -311,7 +309,13 @@ def _live_view(args: argparse.Namespace, chain: Chain, cfg):  # noqa: ANN202
     return live, boxes
 
 
-def cmd_serve(args: argparse.Namespace, cfg) -> int:
+def run_serve(args: argparse.Namespace, ctx: Context) -> Outcome:
+    """``eha-hil serve``: its report once the serving ends (a signal here ends the serving,
+    not the command: the report is the point)."""
+    return cmd_serve(args, ctx.config())
+
+
+def cmd_serve(args: argparse.Namespace, cfg) -> Outcome:
     from hil.fieldbus.topology import TopologyError, load_topology
 
     try:
@@ -423,46 +427,43 @@ def cmd_serve(args: argparse.Namespace, cfg) -> int:
             "max_late_percent": args.max_late_percent, "max_lag_ms": args.max_lag_ms,
             "chain": {k: v for k, v in chain.stats.__dict__.items() if k != "extra"},
             "ok": not failures, "failures": failures}
-    if args.json:
-        print(json.dumps(data, indent=2))
-    else:
-        from hil.output.tables import table
+    # the report for people (the root prints ``data`` instead under --json)
+    from hil.output.tables import table
 
-        d = st.as_dict()
-        rows = [
-            ["cycles (1 ms each)", st.cycles],
-            ["wall time", f"{st.wall_s:.3f} s"],
-            ["real-time factor (simulated / wall)", f"{d['real_time_factor']:.4f}"],
-            ["compute speed (x real time)", f"{d['compute_speed_factor']:.1f}"],
-            ["load (busy / wall)", f"{100 * d['load']:.1f}%"],
-            ["cycle compute mean / worst", f"{d['mean_advance_ms']:.3f} / "
-             f"{d['worst_advance_ms']:.3f} ms"],
-            ["deadline overruns", f"{st.overruns} ({100 * d['overrun_fraction']:.2f}%, "
-             f"allowed {args.max_overrun_percent:g}%) in {st.stalls} stalls"],
-            ["worst lateness", f"{d['worst_late_ms']:.3f} ms"],
-            ["slipped cycles", st.slipped_cycles],
-            ["lag of simulated behind wall time, max", f"{d['lag_max_ms']:.2f} ms "
-             f"(allowed {args.max_lag_ms:g} ms)"],
-            ["frames received / served", f"{st.frames_received} / {st.frames_served}"],
-            ["reply p50 / p99 / p99.9 / max", reply_times.line(data["reply_us"])],
-            [f"replies later than {args.late_us:g} us", f"{server.replies.late} "
-             f"(allowed {args.max_late_percent:g}%)"],
-            ["bad / stale frames", f"{st.bad_frames} / {st.stale_frames}"],
-            ["transport CRC / framing / oversize", f"{transport['crc_errors']} / "
-             f"{transport['framing_errors']} / {transport['oversize']}"],
-            ["master cycles missed / incomplete", f"{st.missed_cycles} / "
-             f"{st.incomplete_cycles}"],
-            ["master sessions", st.sessions],
-        ]
-        print(f"serve {where}: {topo.name}, {model} model")
-        print(table(["", "value"], rows))
-        if cap is not None:
-            print(f"capture: {args.capture}, {cap.frames} frames")
-        print("ok" if not failures else "FAILED: " + "; ".join(failures))
-    return 0 if not failures else 1
+    d = st.as_dict()
+    rows = [
+        ["cycles (1 ms each)", st.cycles],
+        ["wall time", f"{st.wall_s:.3f} s"],
+        ["real-time factor (simulated / wall)", f"{d['real_time_factor']:.4f}"],
+        ["compute speed (x real time)", f"{d['compute_speed_factor']:.1f}"],
+        ["load (busy / wall)", f"{100 * d['load']:.1f}%"],
+        ["cycle compute mean / worst", f"{d['mean_advance_ms']:.3f} / "
+         f"{d['worst_advance_ms']:.3f} ms"],
+        ["deadline overruns", f"{st.overruns} ({100 * d['overrun_fraction']:.2f}%, "
+         f"allowed {args.max_overrun_percent:g}%) in {st.stalls} stalls"],
+        ["worst lateness", f"{d['worst_late_ms']:.3f} ms"],
+        ["slipped cycles", st.slipped_cycles],
+        ["lag of simulated behind wall time, max", f"{d['lag_max_ms']:.2f} ms "
+         f"(allowed {args.max_lag_ms:g} ms)"],
+        ["frames received / served", f"{st.frames_received} / {st.frames_served}"],
+        ["reply p50 / p99 / p99.9 / max", reply_times.line(data["reply_us"])],
+        [f"replies later than {args.late_us:g} us", f"{server.replies.late} "
+         f"(allowed {args.max_late_percent:g}%)"],
+        ["bad / stale frames", f"{st.bad_frames} / {st.stale_frames}"],
+        ["transport CRC / framing / oversize", f"{transport['crc_errors']} / "
+         f"{transport['framing_errors']} / {transport['oversize']}"],
+        ["master cycles missed / incomplete", f"{st.missed_cycles} / "
+         f"{st.incomplete_cycles}"],
+        ["master sessions", st.sessions],
+    ]
+    lines = [f"serve {where}: {topo.name}, {model} model", table(["", "value"], rows)]
+    if cap is not None:
+        lines.append(f"capture: {args.capture}, {cap.frames} frames")
+    lines.append("ok" if not failures else "FAILED: " + "; ".join(failures))
+    return Outcome("\n".join(lines), data, EXIT_OK if not failures else EXIT_FAILED)
 
 
-def cmd_serve_ethercat(args: argparse.Namespace, cfg, topo) -> int:
+def cmd_serve_ethercat(args: argparse.Namespace, cfg, topo) -> Outcome:
     """``--transport ethercat``: the ESC slaves (:mod:`hil.fieldbus.esc.serve`) on a raw
     Ethernet interface for a real master (docs/ethercat-slaves.md)."""
     import threading
@@ -476,7 +477,7 @@ def cmd_serve_ethercat(args: argparse.Namespace, cfg, topo) -> int:
     for opt, hint in (("capture", "capture the interface with tshark"),
                       ("foxglove", "not offered for the ESC chain"),
                       ("port", "the interface is --interface")):
-        if getattr(args, opt, None) is not None:
+        if vars(args)[opt] is not None:
             raise _usage(f"--{opt}: not with --transport ethercat ({hint})")
     bad = [b for b in args.stack_boxes if not 0 <= b < len(topo.boxes)]
     if bad:
@@ -537,12 +538,9 @@ def cmd_serve_ethercat(args: argparse.Namespace, cfg, topo) -> int:
                            "max_late_percent": args.max_late_percent,
                            "max_lag_ms": args.max_lag_ms, "late_us": args.late_us},
             "slaves": chain.watchdog_report(), "ok": not failures, "failures": failures}
-    if args.json:
-        print(json.dumps(data, indent=2))
-    else:
-        print(ethercat_table(data))
-        print("ok" if not failures else "FAILED: " + "; ".join(failures))
-    return 0 if not failures else 1
+    text = ethercat_table(data) + "\n" + ("ok" if not failures else
+                                           "FAILED: " + "; ".join(failures))
+    return Outcome(text, data, EXIT_OK if not failures else EXIT_FAILED)
 
 
 def _timing_failures(late: int, answered: int, lag_max_ms: float,
@@ -599,9 +597,8 @@ def ethercat_table(d: dict) -> str:
             + table(["", "value"], rows) + f"\nreply times: {hist or 'none'}")
 
 
-def add_parser(sub, common, config_fn, wrap) -> None:
-    """Register ``eha-hil serve`` (``common``: the -c/--set/--json parent; ``wrap`` adapts
-    the command to the config and to one-line usage errors, as for ``bus``)."""
+def add_parser(sub) -> None:  # noqa: ANN001 - argparse's sub-parsers
+    """Register ``eha-hil serve``."""
     p = sub.add_parser(
         "serve", parents=[common(plot=False)],
         help="serve the simulated robot (chain of boxes) on a serial port or UDP, paced to "
@@ -656,4 +653,4 @@ def add_parser(sub, common, config_fn, wrap) -> None:
     p.add_argument("--foxglove", nargs="?", const="", metavar="HOST:PORT",
                    help="stream the boxes' decoded signals to Foxglove Studio (WebSocket; "
                    "default 127.0.0.1:8765, loopback)")
-    p.set_defaults(func=wrap(cmd_serve, config_fn))
+    command(p, run_serve)

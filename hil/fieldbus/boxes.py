@@ -21,6 +21,7 @@ import numpy as np
 from firmware_model.mcu.board import McuBoard
 from hil.fieldbus import pdo
 from hil.fieldbus.topology import Box
+from hil.sim.interfaces import BoardStack
 from hil.sim.scheduler import Scheduler
 from plant.config import Config, ConfigError
 from plant.echo_actuator import EchoActuators
@@ -117,8 +118,9 @@ class McuBox(_BoxBase):
     def __init__(self, box: Box, cfg: Config, links: list, offsets: list[int]) -> None:
         super().__init__(box, cfg)
         if cfg.get("mcu.impl") != "python":
-            raise ConfigError("mcu.impl = 'c' runs in the single-actuator stack only; the "
-                              "fieldbus boxes run the Python MCU (mcu.impl = 'python')")
+            raise ConfigError(f"mcu.impl = {cfg.get('mcu.impl')!r} runs in the "
+                              "single-actuator stack only; the fieldbus boxes run the Python "
+                              "MCU (mcu.impl = 'python')")
         self.board = McuBoard(cfg, links, offsets) if links else None
         self.mcu = self.board.mcu if self.board else None
         self.period = cfg.get("mcu.period_ticks")
@@ -152,7 +154,7 @@ class StackBox(McuBox):
         if cfg.get("fpga.impl") != "python":
             raise ConfigError("fpga.impl = 'rtl' runs in the single-actuator stack only; the "
                               "fieldbus boxes run the board's own loop (fpga.impl = 'python')")
-        self.stacks = [FpgaStack(cfg) for _ in box.actuators]
+        self.stacks: list[BoardStack] = [FpgaStack(cfg) for _ in box.actuators]
         super().__init__(box, cfg, [s.mcu_link for s in self.stacks],
                          [s.board.calibrated_offset for s in self.stacks])
         #: The whole-robot engine that advances this box with all others (hil.sim.robot), and
