@@ -47,9 +47,60 @@ def demo_pc(amplitude_n: float = 300.0, frequency_hz: float = 2.0):
     return pc
 
 
+#: The files ``bus run`` streams to while it runs: (option dest, label in messages).
+STREAMS = (("log", "log"), ("capture", "capture"), ("can_log", "CAN log"))
+
+
 def _run_bus(args: argparse.Namespace, cfg, topo, cycles: int, model: str, pc):
     """(record, wall seconds) of the run, logged to ``args.log``, captured to
-    ``args.capture`` and its CAN traffic logged to ``args.can_log`` if given."""
+    ``args.capture`` and its CAN traffic logged to ``args.can_log`` if given.
+
+    Each file is written under a temporary name in its directory and renamed when its
+    writer has closed it, also after an interruption (what ran is a readable log of what
+    ran); a write that fails mid-run removes it and ends the run (exit 1, one line)."""
+    import contextlib
+
+    from hil import outputs
+
+    real = {dest: getattr(args, dest, None) for dest, _ in STREAMS}
+    with contextlib.ExitStack() as stack:
+        tmp = argparse.Namespace(**vars(args))
+        for dest, label in STREAMS:
+            if real[dest]:
+                cli_progress.output(label, real[dest], _READABLE[dest])
+                setattr(tmp, dest, str(stack.enter_context(
+                    outputs.replacing(real[dest], keep_on_interrupt=True))))
+        try:
+            return _run_bus_to(tmp, cfg, topo, cycles, model, pc)
+        except OSError as exc:
+            where = cli_progress.position() or "at the start"
+            for dest, label in STREAMS:
+                if real[dest]:
+                    outputs.failed(label, real[dest], f"{exc.strerror or exc} (the run "
+                                   f"stopped {where})")
+            raise _StreamFailed from None
+
+
+class _StreamFailed(Exception):
+    """A file of the run could not be written: the run stopped (the root says which)."""
+
+
+def _readable_traffic(path) -> str:  # noqa: ANN001 - a Path
+    """"" if a capture or CAN log reads back whole, else why not."""
+    from hil.fieldbus.traffic import TrafficError, read_traffic
+
+    try:
+        notes = [n for n in read_traffic(path).notes if n.startswith("damaged")]
+    except TrafficError as exc:
+        return str(exc)
+    return notes[0] if notes else ""
+
+
+_READABLE = {"log": cli_progress.readable_log, "capture": _readable_traffic,
+             "can_log": _readable_traffic}
+
+
+def _run_bus_to(args: argparse.Namespace, cfg, topo, cycles: int, model: str, pc):
     from hil.fieldbus.capture import CaptureError, CaptureWriter
     from hil.fieldbus.faults import FaultError
     from hil.fieldbus.system import BusSystem
@@ -80,8 +131,6 @@ def _run_bus(args: argparse.Namespace, cfg, topo, cycles: int, model: str, pc):
                                 "run keeps the in-process default, with the trailer)")
         from hil.replay.record import run_logged
 
-        if args.log:
-            cli_progress.output("log", args.log, cli_progress.readable_log)
         try:
             cap = (CaptureWriter(args.capture, crc_trailer=True, metadata=meta)
                    if args.capture else None)
@@ -177,7 +226,10 @@ def cmd_bus_run(args: argparse.Namespace, cfg) -> int:
             cli_progress.at(f"at t={cycle * 1e-3:.3f} s")
             sine(cycle, m)
 
-        rec, wall, cap, recorder = _run_bus(args, cfg, topo, cycles, model, pc)
+        try:
+            rec, wall, cap, recorder = _run_bus(args, cfg, topo, cycles, model, pc)
+        except _StreamFailed:
+            return 1  # hil.outputs.finish prints the line naming the file
     data = {"topology": topo.name, "boxes": len(topo.boxes), "actuators": topo.n_actuators,
             "transport": args.transport, "model": model, "cycles": cycles,
             "wall_s": wall, "real_time_factor": args.seconds / wall,

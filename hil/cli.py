@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hil import cli_progress, interrupts
+from hil import cli_progress, interrupts, outputs
 from hil.cli_args import (
     Parser,
     add_config_options,
@@ -56,7 +56,9 @@ PLOT_FILE = output_file((".png", ".svg", ".pdf"))
 
 
 def _plot_dir(path: str) -> Path:
-    """The --plot-dir directory (checked by its argument type), created if missing."""
+    """The --plot-dir directory, created if missing (checked again: 'thesis' has a default
+    that no argument type saw)."""
+    outputs.check_dir_writable(path)
     out_dir = Path(path)
     out_dir.mkdir(exist_ok=True)
     return out_dir
@@ -119,8 +121,8 @@ def cmd_plant_bode(args: argparse.Namespace) -> int:
     if args.plot:
         from hil.plots import plot_bode
 
-        plot_bode(results, args.plot)
-        parts.append(f"plot written to {args.plot}")
+        if outputs.write("plot", args.plot, lambda tmp: plot_bode(results, tmp)):
+            parts.append(f"plot written to {args.plot}")
     _emit(args, "\n".join(parts), data)
     return 0
 
@@ -147,8 +149,8 @@ def cmd_plant_tn(args: argparse.Namespace) -> int:
     if args.plot:
         from hil.plots import plot_tn_curve
 
-        plot_tn_curve(curve, args.plot)
-        text += f"\nplot written to {args.plot}"
+        if outputs.write("plot", args.plot, lambda tmp: plot_tn_curve(curve, tmp)):
+            text += f"\nplot written to {args.plot}"
     _emit(args, text, {"config": cfg.sources, **curve.as_dict()})
     return 0
 
@@ -339,6 +341,7 @@ def cmd_run_thesis(args: argparse.Namespace) -> int:
     rows = []
     results = []
     notes = []
+    plotted: list[str] = []
     for name in names:
         t0 = time.perf_counter()
         if not args.json:
@@ -348,9 +351,9 @@ def cmd_run_thesis(args: argparse.Namespace) -> int:
         res = scenarios.get(name).run(cfg, None)
         wall = time.perf_counter() - t0
         results.append((res, wall))
-        if res.plot:
-            res.plot(res, out_dir / f"{name}.png")
-            cli_progress.output("plot", out_dir / f"{name}.png", done=True)
+        if res.plot and outputs.write("plot", out_dir / f"{name}.png",
+                                      lambda tmp, res=res: res.plot(res, tmp)):
+            plotted.append(f"{name}.png")
         for m in res.metrics:
             diff = "" if m.thesis is None else f"{(m.value - m.thesis) / m.thesis * 100:+.0f} %"
             mark = "" if m.ok is None else ("ok" if m.ok else "MISSED")
@@ -361,7 +364,8 @@ def cmd_run_thesis(args: argparse.Namespace) -> int:
                  fmt=".3g", title=f"thesis experiments on the full stack ({cfg.sources[-1]})")
     if notes:
         text += "\n" + "\n".join(f"note: {n}" for n in notes)
-    text += f"\nplots written to {out_dir}/ ({', '.join(n + '.png' for n in names)})"
+    if plotted:
+        text += f"\nplots written to {out_dir}/ ({', '.join(plotted)})"
     ok = all(r.ok for r, _ in results)
     data = {"config": cfg.sources, "ok": ok, "scenarios": [
         {"scenario": r.name, "title": r.title, "wall_s": w, "ok": r.ok, "notes": r.notes,
@@ -420,19 +424,21 @@ def cmd_run(args: argparse.Namespace) -> int:
                  title=f"{res.name}: {res.title} ({cfg.sources[-1]})")
     if res.notes:
         text += "\n" + "\n".join(f"note: {n}" for n in res.notes)
-    if args.plot and res.plot:
-        res.plot(res, Path(args.plot))
+    if args.plot and res.plot and outputs.write("plot", args.plot,
+                                                 lambda tmp: res.plot(res, tmp)):
         text += f"\nplot written to {args.plot}"
     if getattr(args, "foxglove", None) is not None:
         text += _run_live(res, args.foxglove)
     if getattr(args, "series", None):
         from hil.series_export import write_series
 
+        rows: list[int] = []
         try:
-            rows = write_series(res, args.series)
+            if outputs.write("series", args.series,
+                             lambda tmp: rows.append(write_series(res, tmp))):
+                text += f"\nseries written to {args.series} ({rows[0]} rows)"
         except ValueError as exc:
             raise UsageError(str(exc)) from None
-        text += f"\nseries written to {args.series} ({rows} rows)"
     data = {"scenario": res.name, "title": res.title, "config": cfg.sources, "ok": res.ok,
             "metrics": [{"name": m.name, "value": m.value, "unit": m.unit,
                          "requirement": m.requirement, "ok": m.ok} for m in res.metrics],
@@ -728,8 +734,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser = build_parser()
         args = parser.parse_args(argv)
         cli_progress.start(_verb(args))
-        return int(args.func(args))
-    except (ConfigError, UsageError, verify_cli.ToolMissing) as exc:
+        outputs.reset()
+        outputs.check_args(vars(args))  # an output that is also an input
+        return outputs.finish(_verb(args), int(args.func(args)))
+    except (ConfigError, UsageError, verify_cli.ToolMissing, outputs.OutputError) as exc:
         print(f"eha-hil: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
     except BrokenPipeError:
@@ -738,7 +746,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         # The one place Ctrl-C ends up. By now every `with` on the way out has run, so a
         # log being written is closed; the line says whether it reads back.
         print(cli_progress.interrupted_line(), file=sys.stderr, flush=True)
-        return cli_progress.EXIT_INTERRUPTED
+        return cli_progress.exit_code()
 
 
 if __name__ == "__main__":

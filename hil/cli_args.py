@@ -17,6 +17,8 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import NoReturn
 
+from hil import outputs
+
 EXIT_USAGE = 2
 
 
@@ -157,12 +159,14 @@ def _looks_like_text(p: Path) -> bool:
     return True
 
 
-def output_file(suffixes: Sequence[str], text: bool = False,
+def output_file(suffixes: Sequence[str] | None, text: bool = False,
                 stdout: bool = False) -> Callable[[str], str]:
-    """A file to write: one of ``suffixes`` (case-insensitive), its directory exists, not a
-    directory. ``text``: an existing file is overwritten only if it holds text, so a
-    mistyped name never replaces an image or a log. ``stdout``: ``-`` means stdout."""
-    names = ", ".join(suffixes)
+    """A file to write: one of ``suffixes`` (case-insensitive; None: any), its directory
+    exists and takes a new file (:func:`hil.outputs.check_writable`), not a directory.
+    ``text``: an existing file is overwritten only if it holds text, so a mistyped name
+    never replaces an image or a log. ``stdout``: ``-`` means stdout. The value comes back
+    as a :class:`hil.outputs.OutputPath` (the root refuses one that is also an input)."""
+    names = ", ".join(suffixes or ("any name",))
 
     def parse(value: str) -> str:
         if stdout and value == "-":
@@ -171,34 +175,38 @@ def output_file(suffixes: Sequence[str], text: bool = False,
         if p.is_dir():
             raise argparse.ArgumentTypeError(f"{value}: is a directory; give a file name "
                                              f"({names})")
-        if p.suffix.lower() not in suffixes:
+        if suffixes is not None and p.suffix.lower() not in suffixes:
             raise argparse.ArgumentTypeError(f"{value}: use a file name ending {names}")
         parent = p.parent if str(p.parent) else Path(".")
         if not parent.is_dir():
             raise argparse.ArgumentTypeError(f"{value}: directory {parent} does not exist")
-        if p.exists():
+        # a character device (/dev/null, /dev/full, also behind a link) is written in place
+        if p.exists() and not outputs.is_device(p):
             if not p.is_file():
                 raise argparse.ArgumentTypeError(f"{value}: exists and is not a regular file")
             if text and not _looks_like_text(p):
                 raise argparse.ArgumentTypeError(f"{value}: exists and is not a text file; "
                                                  "not overwriting it")
-        return value
+        try:
+            outputs.check_writable(p)  # before any work: a read-only or full directory
+        except outputs.OutputError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
+        return outputs.OutputPath(value)
 
     parse.__name__ = "file name"
     parse.kind = "output"  # type: ignore[attr-defined]
-    parse.suffixes = tuple(suffixes)  # type: ignore[attr-defined]
+    parse.suffixes = tuple(suffixes or (".csv",))  # type: ignore[attr-defined]
     return parse
 
 
 def output_dir(value: str) -> str:
-    """A directory to write into: an existing directory, or a new one whose parent exists."""
-    p = Path(value)
-    if p.exists() and not p.is_dir():
-        raise argparse.ArgumentTypeError(f"{value}: exists and is not a directory")
-    parent = p.parent if str(p.parent) else Path(".")
-    if not p.exists() and not parent.is_dir():
-        raise argparse.ArgumentTypeError(f"{value}: parent directory {parent} does not exist")
-    return value
+    """A directory to write into: an existing directory, or a new one whose parent exists;
+    either must take new files (:func:`hil.outputs.check_dir_writable`)."""
+    try:
+        outputs.check_dir_writable(value)
+    except outputs.OutputError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return outputs.OutputPath(value)
 
 
 output_dir.kind = "dir"  # type: ignore[attr-defined]

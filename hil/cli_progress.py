@@ -38,6 +38,7 @@ class _State:
     started: float = field(default_factory=time.perf_counter)
     outputs: list[_Output] = field(default_factory=list)
     line_open: bool = False            # a "\r" progress line still waits for its newline
+    signum: int = 0                    # the stop signal that ended the command, if any
 
 
 _state = _State()
@@ -52,6 +53,11 @@ def start(verb: str) -> None:
 def at(position: str) -> None:
     """Where the command is, as the interrupt line should say it ("at t=1.2 s")."""
     _state.position = position
+
+
+def position() -> str:
+    """The position last noted with :func:`at` ("" if none)."""
+    return _state.position
 
 
 def output(label: str, path: str | Path, check: Callable[[Path], str] | None = None,
@@ -79,17 +85,24 @@ def reporter(label: str, enabled: bool, unit: str = "", note: bool = True
     return report
 
 
+#: The signals a command ends on as on Ctrl-C: the terminal's, a service manager's stop
+#: (systemd, docker, kill) and a closed terminal.
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+
+
 @contextmanager
 def interrupt_between_steps() -> Iterator[Callable[[], None]]:
-    """Ctrl-C lands between two steps of a loop instead of anywhere.
+    """Ctrl-C (and SIGTERM, SIGHUP) lands between two steps of a loop instead of anywhere.
 
-    Inside the block SIGINT only sets a flag; the loop calls the yielded ``check()`` where
-    stopping leaves every file consistent (e.g. between two fieldbus cycles, never inside
-    a frame-log write), and ``check()`` raises KeyboardInterrupt. A second Ctrl-C raises at
-    once; a flag still set when the block ends raises there."""
+    Inside the block those signals only set a flag; the loop calls the yielded ``check()``
+    where stopping leaves every file consistent (e.g. between two fieldbus cycles, never
+    inside a frame-log write), and ``check()`` raises KeyboardInterrupt. A second signal
+    raises at once; a flag still set when the block ends raises there. The signal is
+    noted (:func:`exit_code`)."""
     pending: list[int] = []
 
-    def on_sigint(signum: int, frame: object) -> None:
+    def on_signal(signum: int, frame: object) -> None:
+        noted(signum)
         if pending:
             raise KeyboardInterrupt
         pending.append(signum)
@@ -98,21 +111,36 @@ def interrupt_between_steps() -> Iterator[Callable[[], None]]:
         if pending:
             raise KeyboardInterrupt
 
+    old: dict[int, object] = {}
     try:
-        old = signal.getsignal(signal.SIGINT)
-        # An ignored SIGINT (a background job of a script, nohup) stays ignored, as
-        # Python leaves it; off the main thread signals cannot be handled at all.
-        if old is signal.SIG_IGN:
-            raise ValueError("SIGINT ignored")
-        signal.signal(signal.SIGINT, on_sigint)
+        for sig in STOP_SIGNALS:
+            prev = signal.getsignal(sig)
+            # An ignored signal (SIGINT of a background job of a script, nohup's SIGHUP)
+            # stays ignored, as Python leaves it; off the main thread signals cannot be
+            # handled at all (ValueError).
+            if prev is signal.SIG_IGN:
+                continue
+            signal.signal(sig, on_signal)
+            old[sig] = prev
     except ValueError:
         yield lambda: None
         return
     try:
         yield check
     finally:
-        signal.signal(signal.SIGINT, old)
+        for sig, prev in old.items():
+            signal.signal(sig, prev)
     check()
+
+
+def noted(signum: int) -> None:
+    """Remember the signal that ends the command (its exit code is 128 + its number)."""
+    _state.signum = signum
+
+
+def exit_code() -> int:
+    """130 for Ctrl-C, 143 for SIGTERM, 129 for SIGHUP: what a shell reports for each."""
+    return 128 + (_state.signum or signal.SIGINT)
 
 
 def interrupted_line() -> str:

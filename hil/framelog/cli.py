@@ -33,8 +33,11 @@ def configure_log(parser: argparse.ArgumentParser) -> None:
     p = sub.add_parser("export", help="decode frames to CSV (t_s, topic, decoded fields), "
                        "or one board's measurements as an identification CSV")
     p.add_argument("log", metavar="LOG", help="MCAP frame log")
-    p.add_argument("out", metavar="OUT", help="file to write: .parquet for Parquet, else CSV "
-                   "('-': stdout)")
+    from hil.cli_args import output_file
+
+    p.add_argument("out", metavar="OUT", type=output_file(None, stdout=True),
+                   help="file to write: .parquet for Parquet, else CSV ('-': stdout); never "
+                   "the LOG itself")
     p.add_argument("--format", choices=("frames", "identify"), default="frames",
                    help="frames (default): one row per frame with its decoded fields; "
                    "identify: what the MCU read from one board, in SI units, as the input of "
@@ -93,13 +96,7 @@ def _info(args: argparse.Namespace) -> int:
 
 
 def _export(args: argparse.Namespace) -> int:
-    out = Path(args.out)
-    if args.out != "-":
-        parent = out.parent if str(out.parent) else Path(".")
-        if not parent.is_dir():
-            raise FrameLogError(f"{args.out}: directory {parent} does not exist")
-        if out.is_dir():
-            raise FrameLogError(f"{args.out}: is a directory; give a .csv file name")
+    out = Path(args.out)  # checked by its argument type (directory, writable, not the LOG)
     fmt = getattr(args, "format", "frames")
     if fmt == "identify":
         for opt in ("topic", "field"):
@@ -112,7 +109,11 @@ def _export(args: argparse.Namespace) -> int:
     if fmt == "identify":
         from hil.framelog.identify_export import export_identify
 
-        res = export_identify(args.log, args.out, board=args.board, info=info)
+        got = []
+        if not _written(args.out, lambda out: got.append(export_identify(
+                args.log, out, board=args.board, info=info))):
+            return _truncated(info)
+        res = got[0]
         if args.out != "-":
             print(f"wrote {res.rows} samples of board {res.board} ({res.load}, "
                   f"{res.sample_rate_hz:g} Hz; {res.skipped} leading frame(s) from before the "
@@ -121,12 +122,26 @@ def _export(args: argparse.Namespace) -> int:
     if out.suffix.lower() == ".parquet":
         if args.out == "-":
             raise FrameLogError("Parquet cannot go to stdout: give a .parquet file name")
-        n = export_parquet(args.log, args.out, topics=args.topic, fields=args.field, info=info)
+        export = export_parquet
     else:
-        n = export_csv(args.log, args.out, topics=args.topic, fields=args.field, info=info)
-    if args.out != "-":
-        print(f"wrote {n} rows to {args.out}")
+        export = export_csv
+    rows = []
+    if _written(args.out, lambda out: rows.append(export(
+            args.log, out, topics=args.topic, fields=args.field, info=info))) \
+            and args.out != "-":
+        print(f"wrote {rows[0]} rows to {args.out}")
     return _truncated(info)
+
+
+def _written(out: str, fn) -> bool:  # noqa: ANN001 - fn(path) writes the export
+    """Write the export to ``out`` whole or not at all (:func:`hil.outputs.write`; stdout
+    as it comes). False: it failed, and the root's line says so."""
+    from hil import outputs
+
+    if out == "-":
+        fn(out)
+        return True
+    return outputs.write("export", out, fn)
 
 
 def run_log(args: argparse.Namespace) -> int:

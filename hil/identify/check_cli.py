@@ -58,8 +58,12 @@ def run_check(args: argparse.Namespace) -> int:
     results = run_matrix(cases, args.seeds, jobs=args.jobs, progress=progress)
     table = markdown(results)
     if args.markdown:
-        with open(args.markdown, "w", encoding="utf-8") as fh:
-            fh.write(table + "\n")
+        from pathlib import Path
+
+        from hil import outputs
+
+        outputs.write("table", args.markdown,
+                      lambda tmp: Path(tmp).write_text(table + "\n", encoding="utf-8"))
     if args.json:
         print(json.dumps([r.as_dict() for r in results], indent=2))
     else:

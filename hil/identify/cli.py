@@ -106,11 +106,13 @@ def run_identify(args: argparse.Namespace) -> int:
     except ValueError as exc:
         return _err("identify", f"{args.data}: {exc}")
     rep.notes[:0] = [n for n in data.notes if n not in rep.notes]
-    if args.report:
-        try:
-            report.write_report(rep, args.report)
-        except OSError as exc:
-            return _err("identify", f"--report {args.report}: {exc}")
+    from hil import outputs
+
+    # the report goes to a temporary directory whose files are moved in when all are
+    # written: a failed report leaves nothing half-written; the result is printed anyway
+    if args.report and outputs.write_dir("report", args.report,
+                                         lambda tmp: report.write_report(rep, tmp)):
+        progress(f"report written to {args.report}/")
     print(report.to_json(rep) if args.json else report.text(rep))
     return EXIT_OK
 
@@ -221,8 +223,13 @@ def run_synth(args: argparse.Namespace) -> int:
     except (ConfigError, ValueError) as exc:
         return _err("identify-synth", str(exc))
     truth = "; ".join(f"{k} {v}" for k, v in res.truth.items()) or "none"
-    write_measured(out, res.data, {"effects": truth})
-    print(f"wrote {out}: {args.load}, {res.data.n} samples at {res.data.sample_rate_hz:g} Hz, "
+    from hil import outputs
+
+    wrote = outputs.write("record", out, lambda tmp: write_measured(tmp, res.data,
+                                                                     {"effects": truth}))
+    said = "wrote" if wrote else "made (NOT written)"
+    print(f"{said} {out}: {args.load}, {res.data.n} samples at "
+          f"{res.data.sample_rate_hz:g} Hz, "
           f"effects: {truth}")
     return EXIT_OK
 
@@ -253,9 +260,13 @@ def _run_rig_synth(args: argparse.Namespace) -> int:
     except (ConfigError, ValueError) as exc:
         return _err("identify-synth", str(exc))
     # the truth is printed, not written: the file holds only what a rig's log would
-    write_measured(out, res.data, dict(res.data.header))
+    from hil import outputs
+
+    wrote = outputs.write("record", out, lambda tmp: write_measured(tmp, res.data,
+                                                                     dict(res.data.header)))
     par = res.truth["parameters"]
-    print(f"wrote {out}: rig, {args.load}, {res.data.n} samples at "
+    said = "wrote" if wrote else "made (NOT written)"
+    print(f"{said} {out}: rig, {args.load}, {res.data.n} samples at "
           f"{res.data.sample_rate_hz:g} Hz, intersample {res.config['intersample']}, "
           f"temperature {res.config['temperature']}")
     print("  true parameters: " + ", ".join(f"{k} {v:.6g}" for k, v in par.items()))

@@ -148,18 +148,22 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         lines.append(f"point {row['point']} failed: {row['error']}")
     if len(errors) > 5:
         lines.append(f"... and {len(errors) - 5} more (column 'error' of the table)")
-    if args.out:
-        table.write(df, args.out)
-        cli_progress.output("table", args.out, done=True)
+    from hil import outputs
+
+    table_ok = bool(args.out) and outputs.write("table", args.out,
+                                                lambda tmp: table.write(df, tmp))
+    if table_ok:
         lines.append(f"table written to {args.out} ({len(df)} rows; journal "
                      f"{journal_path(args.out).name})")
     plot_paths: list[Path] = []
     if args.plot_dir:
         out_dir = Path(args.plot_dir)
-        out_dir.mkdir(exist_ok=True)
-        plot_paths = plots.plot_sweep(df, plan, records, out_dir, title)
-        lines.append(f"plots written to {out_dir}/ ("
-                     f"{', '.join(p.name for p in plot_paths)})")
+        made: list[Path] = []
+        if outputs.write_dir("plots", out_dir, lambda tmp: made.extend(
+                plots.plot_sweep(df, plan, records, tmp, title))):
+            plot_paths = [out_dir / p.name for p in made]
+            lines.append(f"plots written to {out_dir}/ ("
+                         f"{', '.join(p.name for p in plot_paths)})")
     lines.append(f"{outcome.computed} points computed, {outcome.resumed} from the journal, "
                  f"{_duration(outcome.wall_s)} on {outcome.backend}")
     low = []
@@ -171,7 +175,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     data = {"scenario": scenario, "config": base.sources, "kind": plan.kind,
             "parameters": plan.parameters, "computed": outcome.computed,
             "resumed": outcome.resumed, "backend": outcome.backend,
-            "out": args.out, "plots": [str(p) for p in plot_paths],
+            "out": args.out if table_ok else None, "plots": [str(p) for p in plot_paths],
             "summary": summ.as_dict(), "below_min_yield": low,
             "errors": [{"point": int(r["point"]), "error": r["error"]}
                        for _, r in errors.iterrows()]}
