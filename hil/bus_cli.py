@@ -112,7 +112,7 @@ def _run_bus_to(args: argparse.Namespace, cfg, topo, cycles: int, model: str, pc
                                                  "can_channel": args.can_channel})
     except TransportError as exc:
         raise BusUsageError(str(exc)) from None
-    faults = _faults(getattr(args, "faults", None), topo, model)
+    faults = _faults(getattr(args, "faults", None), topo, model, cycles / 1000)
     tick_ns = cfg.get("sim.tick_ns")
     meta = {"topology": args.topology, "model": model, "mode": "lockstep (bus run)",
             "config": json.dumps(cfg.data)}
@@ -169,19 +169,28 @@ def _run_bus_to(args: argparse.Namespace, cfg, topo, cycles: int, model: str, pc
     return rec, time.perf_counter() - t0, cap, recorder
 
 
-def _faults(path: str | None, topo, model: str) -> dict | None:
+def _faults(path: str | None, topo, model: str, seconds: float) -> dict | None:
     """The ``[[fault]]`` declaration of ``--faults FILE.toml``, checked against the
-    topology and the box model (one line naming the file, the entry and the key)."""
+    topology, the box model and the run's length (one line naming the file, the entry and
+    the key; an unknown table such as ``[[faults]]`` is refused, not ignored)."""
     if path is None:
         return None
     import tomllib
 
-    from hil.fieldbus.faults import FaultError, check_topology, parse_faults
+    from hil.fieldbus.faults import (
+        FaultError,
+        check_file,
+        check_topology,
+        check_window,
+        parse_faults,
+    )
 
     try:
         data = tomllib.loads(Path(path).read_text(encoding="utf-8"))
+        check_file(data, path)
         plan = parse_faults(data, path)
         check_topology(plan, topo)
+        check_window(plan, seconds)
     except OSError as exc:
         raise BusUsageError(f"--faults {path}: cannot read: {exc.strerror}") from None
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:

@@ -30,10 +30,55 @@ class Parser(argparse.ArgumentParser):
         kwargs.setdefault("formatter_class", HelpFormatter)
         super().__init__(*args, **kwargs)
 
+    def parse_known_args(self, args=None, namespace=None):  # noqa: ANN001, ANN201 - argparse's
+        ns, extras = super().parse_known_args(args, namespace)
+        if args is not None:  # a sub-parser always gets its own list
+            self._check_scopes([str(a) for a in args], ns)
+        return ns, extras
+
+    def _check_scopes(self, argv: list[str], ns: argparse.Namespace) -> None:
+        """The one place an option meant for another choice is refused (see
+        :func:`only_with`): ``serve --transport udp --baudrate 9600`` would else be
+        silently ignored."""
+        for action in self._actions:
+            scope = getattr(action, "only_with", None)
+            if scope is None or not _given(action, argv):
+                continue
+            dest, allowed = scope
+            chosen = getattr(ns, dest, None)
+            if chosen not in allowed:
+                self.error(f"argument {'/'.join(action.option_strings)}: only with "
+                           f"--{dest.replace('_', '-')} {' or '.join(allowed)} "
+                           f"(not {chosen}): it would be ignored")
+
     def error(self, message: str) -> NoReturn:
         # argparse prints the whole usage block first; one line says the same and keeps
         # stderr readable for scripts (``--help`` has the usage).
         self.exit(EXIT_USAGE, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+def _given(action: argparse.Action, argv: list[str]) -> bool:
+    """Whether the command line names ``action``'s option (also as ``--opt=V`` or an
+    abbreviation argparse accepts); values after ``--`` are not options."""
+    for token in argv:
+        if token == "--":
+            return False
+        if not token.startswith("-"):
+            continue
+        name = token.split("=", 1)[0]
+        for opt in action.option_strings:
+            if name == opt or (opt.startswith("--") and len(name) > 2
+                               and name.startswith("--") and opt.startswith(name)):
+                return True
+    return False
+
+
+def only_with(action: argparse.Action, dest: str, *allowed: str) -> argparse.Action:
+    """Mark an option as meaningful only when option ``dest`` is one of ``allowed`` (e.g.
+    ``--baudrate`` only with ``--transport serial``); :class:`Parser` refuses it otherwise
+    with one line, before any work."""
+    action.only_with = (dest, tuple(allowed))  # type: ignore[attr-defined]
+    return action
 
 
 class HelpFormatter(argparse.HelpFormatter):
@@ -178,6 +223,8 @@ def output_file(suffixes: Sequence[str] | None, text: bool = False,
         if suffixes is not None and p.suffix.lower() not in suffixes:
             raise argparse.ArgumentTypeError(f"{value}: use a file name ending {names}")
         parent = p.parent if str(p.parent) else Path(".")
+        if parent.exists() and not parent.is_dir():
+            raise argparse.ArgumentTypeError(f"{value}: {parent} is not a directory")
         if not parent.is_dir():
             raise argparse.ArgumentTypeError(f"{value}: directory {parent} does not exist")
         # a character device (/dev/null, /dev/full, also behind a link) is written in place

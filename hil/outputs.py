@@ -70,6 +70,8 @@ def check_writable(path: str | os.PathLike[str]) -> None:
             raise OutputError(f"{path}: cannot write: {_why(exc)}") from None
         return
     parent = p.parent if str(p.parent) else Path(".")
+    if parent.exists() and not parent.is_dir():
+        raise OutputError(f"{path}: {parent} is not a directory")
     if not parent.is_dir():
         raise OutputError(f"{path}: directory {parent} does not exist")
     _probe(parent, path)
@@ -84,6 +86,8 @@ def check_dir_writable(path: str | os.PathLike[str]) -> None:
         _probe(p, path)
         return
     parent = p.parent if str(p.parent) else Path(".")
+    if parent.exists() and not parent.is_dir():
+        raise OutputError(f"{path}: {parent} is not a directory")
     if not parent.is_dir():
         raise OutputError(f"{path}: parent directory {parent} does not exist")
     _probe(parent, path)

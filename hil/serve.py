@@ -535,4 +535,18 @@ def add_parser(sub, common, config_fn, wrap) -> None:
     p.add_argument("--foxglove", nargs="?", const="", metavar="HOST:PORT",
                    help="stream the boxes' decoded signals to Foxglove Studio (WebSocket; "
                    "default 127.0.0.1:8765, loopback)")
+    _scope_options(p)
     p.set_defaults(func=wrap(cmd_serve, config_fn))
+
+
+def _scope_options(p: argparse.ArgumentParser) -> None:
+    """Each transport's own options, refused with another (hil.cli_args.only_with)."""
+    from hil.cli_args import only_with
+
+    stream = tuple(serve_backends())
+    scopes = {"baudrate": ("serial",), "host": ("udp",), "port": stream,
+              "interface": ("ethercat",), "stack_boxes": ("ethercat",), "capture": stream,
+              "foxglove": stream}
+    for action in p._actions:
+        if action.dest in scopes:
+            only_with(action, "transport", *scopes[action.dest])
