@@ -90,10 +90,9 @@ def _readable_traffic(path) -> str:  # noqa: ANN001 - a Path
     from hil.fieldbus.traffic import TrafficError, read_traffic
 
     try:
-        notes = [n for n in read_traffic(path).notes if n.startswith("damaged")]
+        return read_traffic(path).cut or ""
     except TrafficError as exc:
         return str(exc)
-    return notes[0] if notes else ""
 
 
 _READABLE = {"log": cli_progress.readable_log, "capture": _readable_traffic,
@@ -281,7 +280,7 @@ def cmd_replay_traffic(args: argparse.Namespace, cfg) -> int:
     """Replay a capture or CAN log of a bus run through a fresh chain (exit 0: every logged
     reply matches; 1: a divergence; 2: the file cannot be read or holds no exchange)."""
     from hil.fieldbus.traffic import TrafficError, read_traffic
-    from hil.fieldbus.traffic_replay import replay_traffic
+    from hil.fieldbus.traffic_replay import TopologyMismatch, replay_traffic
     from plant.config import Config, load_config
 
     try:
@@ -296,16 +295,23 @@ def cmd_replay_traffic(args: argparse.Namespace, cfg) -> int:
     topo = _topology(args.topology or meta.get("topology", "bench_one_box"))
     model = args.model or meta.get("model") or ("stack" if topo.n_actuators <= 5 else "echo")
     t0 = time.perf_counter()
-    res = replay_traffic(traffic, topo, cfg, model)
+    try:
+        res = replay_traffic(traffic, topo, cfg, model)
+    except TopologyMismatch as exc:
+        _replay_note(str(exc))
+        return EXIT_USAGE
     wall = time.perf_counter() - t0
     data = {"ok": res.ok, "format": traffic.kind, "topology": topo.name, "model": model,
             **{k: v for k, v in res.__dict__.items()}, "wall_s": wall}
+    cut = (f"TRUNCATED file ({traffic.cut}), replayed up to t = {traffic.read_until_s or 0:.3f}"
+           " s: " if traffic.cut else "")
+    data.update(truncated=traffic.cut is not None, stop_reason=traffic.cut)
     if args.json:
         print(json.dumps(data, indent=2))
     elif res.divergence is not None:
-        print(f"replay {args.log}: first divergence at {res.divergence}")
+        print(f"replay {args.log}: {cut}first divergence at {res.divergence}")
     elif res.ok:
-        print(f"replay {args.log}: {res.compared} replies of {topo.name} ({model} model) "
+        print(f"replay {args.log}: {cut}{res.compared} replies of {topo.name} ({model} model) "
               f"match bit for bit ({res.requests} requests, {res.unanswered} without a logged "
               f"reply, {res.skipped} frames skipped; {wall:.2f} s)")
     else:
@@ -313,6 +319,12 @@ def cmd_replay_traffic(args: argparse.Namespace, cfg) -> int:
                      f"fieldbus frames: {res.requests} requests, {res.unmatched} unmatched "
                      f"replies, {res.skipped} skipped)")
         return EXIT_USAGE
+    if traffic.cut:
+        # a cut file that matches is not a whole run that matches: say where it ends
+        from hil import cutfiles
+
+        return cutfiles.report("replay", args.log, traffic.cut, traffic.read_until_s,
+                               "replayed")
     return 0 if res.ok else 1
 
 
@@ -358,8 +370,9 @@ def cmd_replay(args: argparse.Namespace, cfg) -> int:
         print(f"replay {args.log}: {cut}first divergence at {res.divergence}")
     if res.truncated:
         # A cut log that matches is not a whole run that matches: say where it ends, exit 1.
-        _replay_note(f"{args.log}: truncated: {res.stop_reason}; replayed up to "
-                     f"t = {res.simulated_s:.6f} s")
+        from hil import cutfiles
+
+        cutfiles.report("replay", args.log, res.stop_reason, res.simulated_s, "replayed")
     return 0 if res.ok and not res.truncated else 1
 
 

@@ -30,11 +30,31 @@ class Parser(argparse.ArgumentParser):
         kwargs.setdefault("formatter_class", HelpFormatter)
         super().__init__(*args, **kwargs)
 
+    #: The deepest parser the last command line reached (``eha-hil log info``), so that an
+    #: unknown option is named with the command it is not an option of.
+    _leaf: Parser | None = None
+
     def parse_known_args(self, args=None, namespace=None):  # noqa: ANN001, ANN201 - argparse's
         ns, extras = super().parse_known_args(args, namespace)
         if args is not None:  # a sub-parser always gets its own list
             self._check_scopes([str(a) for a in args], ns)
+        if Parser._leaf is None or len(self.prog) > len(Parser._leaf.prog):
+            Parser._leaf = self
         return ns, extras
+
+    def parse_args(self, args=None, namespace=None):  # noqa: ANN001, ANN201 - argparse's
+        Parser._leaf = None
+        ns, extras = self.parse_known_args(args, namespace)
+        if extras:
+            leaf = Parser._leaf or self
+            # argparse lists every leftover, and an unknown option's value may have been
+            # taken for a positional: name the option, the real mistake
+            opts = [e for e in extras if e.startswith("-") and e not in ("-", "--")]
+            if opts:
+                leaf.error(f"argument {opts[0].split('=', 1)[0]}: not an option of "
+                           f"{leaf.prog}")
+            leaf.error(f"unrecognized arguments: {' '.join(extras)}")
+        return ns
 
     def _check_scopes(self, argv: list[str], ns: argparse.Namespace) -> None:
         """The one place an option meant for another choice is refused (see

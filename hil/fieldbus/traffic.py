@@ -79,6 +79,18 @@ class Traffic:
     notes: list[str] = field(default_factory=list)
     metadata: dict[str, str] = field(default_factory=dict)  # from a pcapng comment
     can_errors: dict[str, int] = field(default_factory=dict)
+    #: why the file ends early (cut by a killed writer, a full disk, a copy), None if whole;
+    #: reported by :func:`hil.cutfiles.line` with how far it was read
+    cut: str | None = None
+
+    @property
+    def read_until_s(self) -> float | None:
+        """Time of the last frame read from the first (for a cut file: how far it reads),
+        s: captures of ``bus run`` count from the run's start, CAN logs in wall time."""
+        if not self.frames:
+            return None
+        times = [f.ts_ns for f in self.frames]
+        return (max(times) - min(times)) / 1e9
 
 
 def _pdu(payload: bytes, exact: bool) -> tuple[bytes, list[ec.Datagram], int]:
@@ -184,8 +196,10 @@ def read_capture(path: str | os.PathLike[str]) -> Traffic:
                 if frame is not None:
                     out.frames.append(frame)
         except (dpkt.dpkt.Error, ValueError, EOFError, IndexError) as exc:
-            out.notes.append(f"damaged or cut after packet {out.packets}: "
-                             f"{type(exc).__name__} {exc}".strip())
+            size = os.path.getsize(path)
+            why = "the file ends inside a block" if isinstance(
+                exc, dpkt.dpkt.NeedData) else f"{type(exc).__name__} {exc}".strip()
+            out.cut = f"{why} after packet {out.packets} ({size} bytes)"
     if kind == "pcapng":
         out.metadata = _pcapng_comment(path)
     _udp_directions(out, udp_frames)
@@ -259,7 +273,10 @@ def read_can_traffic(path: str | os.PathLike[str], base_id: int = 0x100) -> Traf
         messages = read_can_log(path)
     except CanLogError as exc:
         raise TrafficError(str(exc)) from None
-    out = Traffic(path, Path(path).suffix.lower().lstrip("."), packets=len(messages))
+    from hil.transports.canlog import cut_reason
+
+    out = Traffic(path, Path(path).suffix.lower().lstrip("."), packets=len(messages),
+                  cut=cut_reason(path, len(messages)))
     ids = (base_id, base_id + 1)
     out.other_packets = sum(1 for m in messages if m.arbitration_id not in ids)
     stats: dict = {}
@@ -320,6 +337,8 @@ def summary(t: Traffic) -> dict:
         "metadata": {k: (v if len(v) <= 80 else f"<{len(v)} bytes>")
                      for k, v in t.metadata.items()},
         "notes": t.notes,
+        "truncated": t.cut is not None, "stop_reason": t.cut,
+        "read_until_s": t.read_until_s,
     }
 
 

@@ -59,11 +59,11 @@ def _truncated(info: LogInfo) -> int:
     script must not take it for a whole one, hence the exit code."""
     if info.complete:
         return 0
-    upto = "nothing" if info.readable_until_ns is None else \
-        f"t = {info.readable_until_ns / 1e9:.6f} s"
-    print(f"eha-hil log: {info.path}: truncated: {info.stop_reason}; readable up to {upto}",
-          file=sys.stderr)
-    return EXIT_TRUNCATED
+    from hil import cutfiles
+
+    return cutfiles.report("log", info.path, info.stop_reason,
+                           None if info.readable_until_ns is None
+                           else info.readable_until_ns / 1e9)
 
 
 def _traffic_info(args: argparse.Namespace) -> int:
@@ -71,15 +71,16 @@ def _traffic_info(args: argparse.Namespace) -> int:
     from hil.fieldbus.traffic import TrafficError, read_traffic, summary, summary_text
 
     try:
-        s = summary(read_traffic(args.log))
+        traffic = read_traffic(args.log)
     except TrafficError as exc:
         raise FrameLogError(str(exc)) from None
+    s = summary(traffic)
     print(json.dumps(s, indent=2) if args.json else summary_text(s))
-    for note in s["notes"]:
-        if note.startswith("damaged"):
-            print(f"eha-hil log: {args.log}: {note}", file=sys.stderr)
-            return EXIT_TRUNCATED
-    return 0
+    if traffic.cut is None:
+        return 0
+    from hil import cutfiles
+
+    return cutfiles.report("log", args.log, traffic.cut, traffic.read_until_s)
 
 
 def _info(args: argparse.Namespace) -> int:

@@ -111,6 +111,39 @@ def read_can_log(path: str | os.PathLike[str]) -> list[can.Message]:
                           f"{' '.join(str(exc).split())}") from None
 
 
+def cut_reason(path: str | os.PathLike[str], messages: int) -> str | None:
+    """Why a CAN log read back with ``messages`` messages ends early, or None if whole.
+
+    python-can's readers stop quietly at a cut; each format says it another way: a BLF
+    header declares the file size and the object count (both 0 when the writer was never
+    closed), an ASC file ends with ``End TriggerBlock``, a candump line with a newline."""
+    p = Path(path)
+    size = p.stat().st_size
+    suffix = p.suffix.lower()
+    if suffix == ".blf":
+        try:
+            reader = can.BLFReader(str(p))
+            declared_size, declared = reader.file_size, reader.object_count
+            reader.stop()
+        except Exception:  # noqa: BLE001 - read_can_log has reported a broken header
+            return None
+        if declared_size == 0 and declared == 0:
+            return f"not finalised (the writer was not closed; {size} bytes)"
+        if size < declared_size:
+            return f"the file ends at byte {size} of {declared_size}"
+        if messages < declared:
+            return f"{messages} of the {declared} objects its header declares"
+        return None
+    with open(p, "rb") as fh:
+        fh.seek(max(0, size - 4096))
+        tail = fh.read()
+    if suffix == ".asc" and b"End TriggerBlock" not in tail:
+        return f"no 'End TriggerBlock' line (the file ends at byte {size})"
+    if tail and not tail.endswith(b"\n"):
+        return f"the last line is cut (the file ends at byte {size})"
+    return None
+
+
 @dataclass(frozen=True)
 class LoggedFrame:
     """One frame rebuilt from a CAN log: when its last segment was logged, its CAN ID."""
