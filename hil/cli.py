@@ -415,6 +415,13 @@ def cmd_run(args: argparse.Namespace) -> int:
         args.plot = str(_plot_dir(args.plot_dir) / f"{scenario.name}.png")
     from hil.scenarios.knobs import split_sets
 
+    if getattr(args, "foxglove", None) is not None:  # a bad address: before the run
+        from hil.live import parse_address
+
+        try:
+            parse_address(args.foxglove)
+        except ValueError as exc:
+            raise UsageError(str(exc)) from None
     config_sets, knob_values = split_sets(args.set or ())
     cfg = load_config(args.config, config_sets)
     res = scenario.call(cfg, _progress(scenario.name, not args.json), knob_values)
@@ -427,8 +434,6 @@ def cmd_run(args: argparse.Namespace) -> int:
     if args.plot and res.plot and outputs.write("plot", args.plot,
                                                  lambda tmp: res.plot(res, tmp)):
         text += f"\nplot written to {args.plot}"
-    if getattr(args, "foxglove", None) is not None:
-        text += _run_live(res, args.foxglove)
     if getattr(args, "series", None):
         from hil.series_export import write_series
 
@@ -443,7 +448,14 @@ def cmd_run(args: argparse.Namespace) -> int:
             "metrics": [{"name": m.name, "value": m.value, "unit": m.unit,
                          "requirement": m.requirement, "ok": m.ok} for m in res.metrics],
             "notes": res.notes}
+    # the result is printed before the wait for a Foxglove client: a Ctrl-C there (the
+    # usual way to give up waiting) must not lose the table of a finished run
     _emit(args, text, data)
+    if getattr(args, "foxglove", None) is not None:
+        sys.stdout.flush()
+        cli_progress.at("after the run, waiting for a Foxglove client (the result is "
+                        "printed above)")
+        print(_run_live(res, args.foxglove).strip(), file=sys.stderr)
     return 0 if res.ok else 1
 
 

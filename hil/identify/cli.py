@@ -32,6 +32,12 @@ from hil.cli_args import (
 
 EXIT_OK = 0
 EXIT_USAGE = 2
+#: Rows identified by default: ~40 s at 5 kHz, about 1.5 GB at the peak (docs/identify.md).
+DEFAULT_MAX_ROWS = 200_000
+#: Peak memory of an identification: a base plus this per row used (measured with
+#: /usr/bin/time -v, docs/identify.md), for the size check before any reading.
+BASE_BYTES = 400e6
+BYTES_PER_ROW = 7_000
 #: CPU seconds (all threads) a 16 s, 5 kHz record may take to identify on the 2-core machine.
 CPU_BUDGET_S = 20.0
 
@@ -54,6 +60,10 @@ def configure_identify(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--max-effects", type=int_range(0, 20), default=6,
                         help="stop after adding this many effects, 0..20")
     parser.add_argument("--quiet", action="store_true", help="no progress on stderr")
+    parser.add_argument("--max-rows", type=int_range(1000, 5_000_000), default=DEFAULT_MAX_ROWS,
+                        metavar="N", help="use at most the first N data rows (a longer file "
+                        "is not read past them; the size check says how many it holds and "
+                        "the memory it would need), 1000..5000000")
     parser.add_argument("--load", choices=("fixed_piston", "free_piston", "conrod_fixed"),
                         default=None, help="load case, for a file without a '# load:' line "
                         "(a header line that says otherwise is an error)")
@@ -80,17 +90,22 @@ def run_identify(args: argparse.Namespace) -> int:
         cfg = load_config(args.config, getattr(args, "set", None) or ())
     except ConfigError as exc:
         return _err("identify", str(exc))  # names the preset or file and the key
+    def progress(msg: str) -> None:
+        if not args.quiet:
+            print(f"identify: {msg}", file=sys.stderr, flush=True)
+
+    max_rows = getattr(args, "max_rows", DEFAULT_MAX_ROWS)
+    too_big = _size_check(args.data, max_rows, progress)
+    if too_big:
+        return _err("identify", too_big)
     try:
         data = read_measured(args.data, load=getattr(args, "load", None),
-                             sample_rate_hz=getattr(args, "sample_rate", None))
+                             sample_rate_hz=getattr(args, "sample_rate", None),
+                             max_rows=max_rows, progress=progress)
     except CsvError as exc:
         return _err("identify", str(exc))
     from hil.identify import report
     from hil.identify.pipeline import identify
-
-    def progress(msg: str) -> None:
-        if not args.quiet:
-            print(f"identify: {msg}", file=sys.stderr, flush=True)
 
     for note in data.notes:  # what reading did to the file (also in the report's notes)
         progress(f"{args.data}: {note}")
@@ -114,7 +129,36 @@ def run_identify(args: argparse.Namespace) -> int:
                                          lambda tmp: report.write_report(rep, tmp)):
         progress(f"report written to {args.report}/")
     print(report.to_json(rep) if args.json else report.text(rep))
+    if data.cut:
+        from hil import cutfiles
+
+        return cutfiles.report("identify", args.data, data.cut, float(data.t[-1] - data.t[0]))
     return EXIT_OK
+
+
+def _size_check(path: str, max_rows: int, progress) -> str:  # noqa: ANN001
+    """Before reading: how many rows the file holds (by its size), how many will be used,
+    the memory that takes; the refusal (one line) if it cannot fit in this machine."""
+    import os
+
+    from hil.identify.csvdata import estimate_rows
+
+    rows = estimate_rows(path)
+    used = min(rows, max_rows)
+    need = BASE_BYTES + BYTES_PER_ROW * used
+    try:
+        avail = os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (ValueError, OSError, AttributeError):  # pragma: no cover - not Linux
+        avail = None
+    size = os.path.getsize(path)
+    if avail is not None and need > avail:
+        return (f"{path}: identifying {used:,} rows needs about {need / 1e9:.1f} GB, "
+                f"{avail / 1e9:.1f} GB is free: give a smaller --max-rows")
+    if rows > max_rows or size > 50e6:
+        progress(f"{path}: {size / 1e6:,.0f} MB, about {rows:,} rows by its size; using "
+                 f"{'the first ' if rows > max_rows else ''}{used:,} (--max-rows {max_rows:,})"
+                 f", about {need / 1e9:.1f} GB")
+    return ""
 
 
 def configure_synth(parser: argparse.ArgumentParser) -> None:
