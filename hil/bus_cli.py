@@ -58,31 +58,13 @@ def _run_bus(args: argparse.Namespace, cfg, topo, cycles: int, model: str, pc):
     Each file is written under a temporary name in its directory and renamed when its
     writer has closed it, also after an interruption (what ran is a readable log of what
     ran); a write that fails mid-run removes it and ends the run (exit 1, one line)."""
-    import contextlib
-
     from hil import outputs
 
-    real = {dest: getattr(args, dest, None) for dest, _ in STREAMS}
-    with contextlib.ExitStack() as stack:
-        tmp = argparse.Namespace(**vars(args))
-        for dest, label in STREAMS:
-            if real[dest]:
-                cli_progress.output(label, real[dest], _READABLE[dest])
-                setattr(tmp, dest, str(stack.enter_context(
-                    outputs.replacing(real[dest], keep_on_interrupt=True))))
-        try:
-            return _run_bus_to(tmp, cfg, topo, cycles, model, pc)
-        except OSError as exc:
-            where = cli_progress.position() or "at the start"
-            for dest, label in STREAMS:
-                if real[dest]:
-                    outputs.failed(label, real[dest], f"{exc.strerror or exc} (the run "
-                                   f"stopped {where})")
-            raise _StreamFailed from None
-
-
-class _StreamFailed(Exception):
-    """A file of the run could not be written: the run stopped (the root says which)."""
+    labels = dict(STREAMS)
+    with outputs.streaming({d: getattr(args, d, None) for d in labels}, labels,
+                           _READABLE) as tmp:
+        return _run_bus_to(argparse.Namespace(**{**vars(args), **tmp}), cfg, topo, cycles,
+                           model, pc)
 
 
 def _readable_traffic(path) -> str:  # noqa: ANN001 - a Path
@@ -234,10 +216,7 @@ def cmd_bus_run(args: argparse.Namespace, cfg) -> int:
             cli_progress.at(f"at t={cycle * 1e-3:.3f} s")
             sine(cycle, m)
 
-        try:
-            rec, wall, cap, recorder = _run_bus(args, cfg, topo, cycles, model, pc)
-        except _StreamFailed:
-            return 1  # hil.outputs.finish prints the line naming the file
+        rec, wall, cap, recorder = _run_bus(args, cfg, topo, cycles, model, pc)
     data = {"topology": topo.name, "boxes": len(topo.boxes), "actuators": topo.n_actuators,
             "transport": args.transport, "model": model, "cycles": cycles,
             "wall_s": wall, "real_time_factor": args.seconds / wall,

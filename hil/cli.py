@@ -752,6 +752,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (ConfigError, UsageError, verify_cli.ToolMissing, outputs.OutputError) as exc:
         print(f"eha-hil: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
+    except outputs.StreamFailed:  # a log or capture of the run failed: the line says which
+        return outputs.finish(_verb(args), outputs.EXIT_WRITE_FAILED)
     except BrokenPipeError:
         return 0
     except KeyboardInterrupt:

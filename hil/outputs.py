@@ -203,6 +203,37 @@ def replacing_dir(path: str | os.PathLike[str]) -> Iterator[Path]:
         _discard(tmp)
 
 
+class StreamFailed(Exception):
+    """A file written while the command ran (a log, a capture) failed: the command stopped
+    there; :func:`finish` prints which file and why (exit 1)."""
+
+
+@contextlib.contextmanager
+def streaming(paths: dict[str, str | None], labels: dict[str, str],
+              checks: dict[str, Callable[[Path], str]] | None = None
+              ) -> Iterator[dict[str, str]]:
+    """Files a command writes while it runs (``bus run --log``, ``--capture``...): yields
+    ``{key: temporary path}`` for each given path, renamed to its name when the block
+    ends, also on an interruption (the writers have closed them by then: what ran is
+    kept, complete). An OSError (a full disk) removes them all, notes each as not written
+    and raises StreamFailed. ``checks``: how the interrupt line tells a readable file."""
+    from hil import cli_progress
+
+    given = {k: v for k, v in paths.items() if v}
+    with contextlib.ExitStack() as stack:
+        tmp: dict[str, str] = {}
+        for key, path in given.items():
+            cli_progress.output(labels[key], path, (checks or {}).get(key))
+            tmp[key] = str(stack.enter_context(replacing(path, keep_on_interrupt=True)))
+        try:
+            yield tmp
+        except OSError as exc:
+            where = cli_progress.position() or "at the start"
+            for key, path in given.items():
+                failed(labels[key], path, f"{_why(exc)} (stopped {where})")
+            raise StreamFailed from None
+
+
 # --- failures after the work -------------------------------------------------------------------
 @dataclass
 class Failure:
@@ -273,6 +304,6 @@ def finish(verb: str, code: int) -> int:
     return code if code else EXIT_WRITE_FAILED
 
 
-__all__ = ["EXIT_WRITE_FAILED", "OutputError", "OutputPath", "check_args", "check_dir_writable",
-           "check_not_inputs", "check_writable", "failed", "failures", "finish", "replacing",
-           "replacing_dir", "reset", "write", "write_dir"]
+__all__ = ["EXIT_WRITE_FAILED", "OutputError", "OutputPath", "StreamFailed", "check_args",
+           "check_dir_writable", "check_not_inputs", "check_writable", "failed", "failures",
+           "finish", "replacing", "replacing_dir", "reset", "streaming", "write", "write_dir"]

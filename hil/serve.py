@@ -306,6 +306,14 @@ def cmd_serve(args: argparse.Namespace, cfg) -> int:
         raise _usage(str(exc)) from None
     if args.transport == "ethercat":
         return cmd_serve_ethercat(args, cfg, topo)
+    from hil import outputs
+
+    # the capture is written under a temporary name, renamed when closed (hil.outputs)
+    with outputs.streaming({"capture": args.capture}, {"capture": "capture"}) as tmp:
+        return _serve(args, cfg, topo, tmp.get("capture"))
+
+
+def _serve(args: argparse.Namespace, cfg, topo, capture: str | None) -> int:
     from hil.fieldbus.capture import CaptureError, CaptureWriter
     from hil.transports import backend
 
@@ -325,7 +333,7 @@ def cmd_serve(args: argparse.Namespace, cfg) -> int:
             return None if ends is None else (ends[1], ends[0])
 
         try:
-            cap = CaptureWriter(args.capture, trailer, endpoints)
+            cap = CaptureWriter(capture, trailer, endpoints)
         except CaptureError as exc:
             end.close()
             if release is not None:

@@ -621,6 +621,8 @@ class _DataRows:
             blocks.append(vals)
             line_blocks.append(lines)
             n += len(vals)
+            if max_rows is not None and n >= max_rows and not more:
+                more = any(x.strip() and not x.lstrip().startswith("#") for x in fh)
             if progress is not None and (more or n >= CHUNK_ROWS):
                 progress(f"reading {path.name}: {n:,} rows ({read_bytes / size:.0%} of "
                          f"{size / 1e6:,.0f} MB)" if not more else
