@@ -20,6 +20,9 @@ class BusUsageError(Exception):
     """A user mistake on the bus commands; one line."""
 
 
+#: Cycles between two progress updates of ``bus run`` (a tenth of a simulated second).
+PROGRESS_CYCLES = 100
+
 #: Input images ``bus run`` keeps (the last second).
 KEEP_CYCLES = 1000
 
@@ -207,6 +210,9 @@ def cmd_bus_run(args: argparse.Namespace, cfg) -> int:
     cycles = int(round(args.seconds * 1000))
     model = args.model or ("stack" if topo.n_actuators <= 5 else "echo")
     sine = demo_pc(args.amplitude, args.frequency)
+    # the logged run reports its own progress; the others report it from the PC loop
+    logged = bool(args.log) or getattr(args, "foxglove", None) is not None
+    report = None if logged else _progress("bus run", not args.json)
     with cli_progress.interrupt_between_steps() as check:
 
         def pc(cycle: int, m: Master) -> None:
@@ -214,9 +220,13 @@ def cmd_bus_run(args: argparse.Namespace, cfg) -> int:
             # log write), and the simulated time is what the interrupt line reports.
             check()
             cli_progress.at(f"at t={cycle * 1e-3:.3f} s")
+            if report is not None and cycle and cycle % PROGRESS_CYCLES == 0:
+                report(cycle, cycles)
             sine(cycle, m)
 
         rec, wall, cap, recorder = _run_bus(args, cfg, topo, cycles, model, pc)
+        if report is not None:
+            report(cycles, cycles)
     data = {"topology": topo.name, "boxes": len(topo.boxes), "actuators": topo.n_actuators,
             "transport": args.transport, "model": model, "cycles": cycles,
             "wall_s": wall, "real_time_factor": args.seconds / wall,

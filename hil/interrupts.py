@@ -45,6 +45,9 @@ class DeferredInterrupt(event.Listener):
             raise KeyboardInterrupt
 
     def handler(self, signum: int, frame: FrameType | None) -> None:
+        from hil import cli_progress
+
+        cli_progress.noted(signum)  # the exit code says which signal (130, 143, 129)
         if self.depth > 0:
             self.pending = True  # raised when numba releases its lock
             return
@@ -55,16 +58,21 @@ _INSTALLED: DeferredInterrupt | None = None
 
 
 def install() -> None:
-    """Defer Ctrl-C out of numba's compiler lock for this process (idempotent; a process
-    that ignores SIGINT, e.g. started in the background, keeps ignoring it)."""
+    """Defer Ctrl-C out of numba's compiler lock for this process, and take SIGTERM and
+    SIGHUP as Ctrl-C (idempotent; a process that ignores one of them, e.g. started in the
+    background or under nohup, keeps ignoring it)."""
     global _INSTALLED
     if _INSTALLED is not None or not DeferredInterrupt._main():
         return
-    if signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
-        return
     _INSTALLED = DeferredInterrupt()
     event.register("numba:compiler_lock", _INSTALLED)
-    signal.signal(signal.SIGINT, _INSTALLED.handler)
+    if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+        signal.signal(signal.SIGINT, _INSTALLED.handler)
+    # SIGTERM (kill, a service manager's stop) and SIGHUP (the terminal closed) end the
+    # command as Ctrl-C does: files closed, one line; an ignored one (nohup) stays ignored
+    for sig in (signal.SIGTERM, signal.SIGHUP):
+        if signal.getsignal(sig) is signal.SIG_DFL:
+            signal.signal(sig, _INSTALLED.handler)
 
 
 __all__ = ["DeferredInterrupt", "install"]
