@@ -100,6 +100,12 @@ def bounded_substeps(p: np.ndarray, tick_s: float, cfg: Config) -> int:
         f"value, or set sim.substeps (1..{MAX_SUBSTEPS}) to accept a coarser integration")
 
 
+def check_config(cfg: Config) -> None:
+    """ConfigError (one line) if ``cfg`` cannot be simulated in bounded work (see
+    :func:`bounded_substeps`): for commands that build their plants later, in workers."""
+    build_params(cfg)
+
+
 def build_params(cfg: Config, substeps: int | None = None) -> np.ndarray:
     """Flatten a configuration into the kernel's parameter array (done once, not per tick)."""
     h = cfg.section("hydraulics")
@@ -304,4 +310,5 @@ class Plant:
         return float(self.y[L.OUTPUT_NAMES.index(name)])
 
 
-__all__ = ["Plant", "build_params", "choose_substeps", "motor_torque_constant"]
+__all__ = ["MAX_SUBSTEPS", "Plant", "bounded_substeps", "build_params", "check_config",
+           "choose_substeps", "motor_torque_constant"]

@@ -102,6 +102,9 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     scen = scenarios.get(scenario)
     config_sets, fixed_knobs = split_sets(args.set or ())
     base = load_config(args.config, config_sets)
+    from plant.model import check_config
+
+    check_config(base)  # a base the points cannot simulate (work unbounded): one line now
     scen.settings(fixed_knobs, "--set")  # one line naming the setting, before anything runs
     plan = space.build_plan(base, args.param or [], args.tolerance or [], args.samples or 0,
                             args.seeds or (), args.distribution, args.draw_seed,
@@ -194,6 +197,9 @@ def cmd_bench_sweep(args: argparse.Namespace) -> int:
     args.scenario = args.scenario_name
     scenario = _resolve_scenario(args)
     base = load_config(args.config, args.set or ())
+    from plant.model import check_config
+
+    check_config(base)
     say = (lambda m: None) if args.json else (
         lambda m: print(m, file=sys.stderr, flush=True))
     r = bench_sweep(scenario, base, args.points, args.workers, say)

@@ -102,6 +102,15 @@ def read_can_log(path: str | os.PathLike[str]) -> list[can.Message]:
     """Every message of a BLF, ASC or candump file, through ``can.LogReader``."""
     p = check_log_name(path) if Path(path).suffix else Path(path)
     try:
+        if p.suffix.lower() in (".asc", ".log") and _last_line_cut(p):
+            # a cut text log: its readers stop at the partial line with an error; read the
+            # complete lines (cut_reason reports the cut)
+            import io
+
+            text = p.read_text(errors="replace")
+            text = text[: text.rfind("\n") + 1]
+            reader = can.ASCReader if p.suffix.lower() == ".asc" else can.CanutilsLogReader
+            return list(reader(io.StringIO(text)))
         return list(can.LogReader(str(p)))
     except (OSError, ValueError, EOFError, IndexError, KeyError, can.CanError) as exc:
         raise CanLogError(f"{path}: not a readable CAN log: "
@@ -109,6 +118,15 @@ def read_can_log(path: str | os.PathLike[str]) -> list[can.Message]:
     except Exception as exc:  # a reader's own parse failure (struct.error, zlib.error...)
         raise CanLogError(f"{path}: not a readable CAN log: {type(exc).__name__}: "
                           f"{' '.join(str(exc).split())}") from None
+
+
+def _last_line_cut(p: Path) -> bool:
+    size = p.stat().st_size
+    if not size:
+        return False
+    with open(p, "rb") as fh:
+        fh.seek(size - 1)
+        return fh.read(1) != b"\n"
 
 
 def cut_reason(path: str | os.PathLike[str], messages: int) -> str | None:
