@@ -38,7 +38,7 @@ def _one_line(err: str) -> str:
     return lines[0]
 
 
-# --- settings that control work ------------------------------------------------------------------
+# --- settings that control work --------------------------------------------------------------
 #: Verbs that take -c/--set but never step the plant with it (the firmware alone, the fit's
 #: start values, a replay of logged inputs, the echo boxes of the bus benchmark, a listing).
 NO_PLANT = {"eha-hil config show", "eha-hil replay", "eha-hil verify mcu",
@@ -110,7 +110,7 @@ def test_advance_in_chunks_is_bit_identical(monkeypatch):
             assert np.array_equal(a.view(np.int64), b.view(np.int64))
 
 
-# --- configuration files: unknown tables and keys ---------------------------------------------------
+# --- configuration files: unknown tables and keys --------------------------------------------
 @pytest.mark.parametrize(("text", "match"), [
     ("[[faults]]\nlink = 'fieldbus.down'\nkind = 'drop'\n", r"unknown table \[\[faults\]\]"),
     ("seed = 3\n", r"no \[\[fault\]\] table"),
@@ -169,7 +169,7 @@ def test_topology_file_unknown_keys(text, match, tmp_path):
     assert code == 2 and str(f) in line and re.search(match, line), line
 
 
-# --- options of another transport ----------------------------------------------------------------
+# --- options of another transport ------------------------------------------------------------
 def _scoped() -> list[tuple[str, str, str, tuple[str, ...]]]:
     out = []
     for p in walk(build_parser()):
@@ -209,7 +209,7 @@ def test_unknown_option_is_named_not_its_value(tmp_path):
     assert code == 2 and "argument -c:" in line and "run.mcap" not in line, line
 
 
-# --- cut inputs: every reader the same way ---------------------------------------------------------
+# --- cut inputs: every reader the same way ---------------------------------------------------
 CUT = re.compile(r"^eha-hil (log|replay|identify): (\S+): truncated: (.+); "
                  r"(read|replayed) up to (t = \d+\.\d{6} s|nothing)$")
 
@@ -256,7 +256,7 @@ def test_cut_csv_reported_the_same_way(tmp_path):
     assert read_measured(f).cut is None
 
 
-# --- wrong diagnoses --------------------------------------------------------------------------------
+# --- wrong diagnoses -------------------------------------------------------------------------
 @pytest.mark.parametrize("suffix", [".pcapng", ".blf"])
 def test_replay_against_another_topology_names_the_mismatch(suffix, logs):
     code, out, err = _run(["replay", str(logs[suffix]), "--topology", "hydra_full"])
@@ -267,7 +267,7 @@ def test_replay_against_another_topology_names_the_mismatch(suffix, logs):
         assert "--topology bench_one_box" in line
 
 
-# --- big inputs ------------------------------------------------------------------------------------
+# --- big inputs ------------------------------------------------------------------------------
 def test_chunked_csv_reader_equals_the_line_by_line_one(tmp_path, monkeypatch):
     """The fast path (pandas per chunk) and the careful one give the same bits, also across
     chunk boundaries, blank lines, comments, empty and NA cells."""
