@@ -18,16 +18,16 @@ $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 
-# After each install the numba kernels are compiled into their cache once (hil/warmup.py),
+# After each install the numba kernels are compiled into their cache once (hil/sim/warmup.py),
 # so that the first run does not spend half a minute compiling.
 $(STAMP): $(BIN)/python pyproject.toml
 	$(BIN)/python -m pip install --quiet -e .
-	$(BIN)/python -m hil.warmup
+	$(BIN)/python -m hil.sim.warmup
 	touch $@
 
 $(TSTAMP): $(BIN)/python pyproject.toml
 	$(BIN)/python -m pip install --quiet -e '.[test]'
-	$(BIN)/python -m hil.warmup
+	$(BIN)/python -m hil.sim.warmup
 	touch $@ $(STAMP)
 
 run: $(STAMP)

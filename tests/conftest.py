@@ -23,7 +23,7 @@ def default_cfg():
 def _sigint_as_a_terminal_sends_it():
     """Each test starts with Ctrl-C handled as in a terminal (Python's default handler),
     and must leave it so (or as the command line installs it once per process,
-    :func:`hil.interrupts.install`). pytest-xdist's workers ignore SIGINT, and an ignored
+    :func:`hil.cli.interrupts.install`). pytest-xdist's workers ignore SIGINT, and an ignored
     SIGINT is inherited by child processes: the tests of interrupted runs would otherwise
     pass or fail with the order the tests happen to run in."""
     import signal

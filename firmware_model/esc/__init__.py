@@ -5,5 +5,5 @@
 * :mod:`~firmware_model.esc.esc`: one ESC (register space, datagram processing with the
   working-counter rules, AL state machine, FMMUs, sync managers, process-data watchdog).
 
-No sockets, no files: the chain (:mod:`hil.fieldbus.esc_chain`) passes frames through.
+No sockets, no files: the chain (:mod:`hil.fieldbus.esc.chain`) passes frames through.
 """

@@ -1,7 +1,7 @@
 """One EtherCAT slave controller: register space, datagram processing, AL state machine,
 FMMUs, sync managers, SII EEPROM interface and process-data watchdog.
 
-The chain (:mod:`hil.fieldbus.esc_chain`) hands every datagram of a frame to the slaves in
+The chain (:mod:`hil.fieldbus.esc.chain`) hands every datagram of a frame to the slaves in
 line order (:meth:`Esc.process`); each slave updates the datagram in place as the frame
 passes, as an ESC does on the fly:
 

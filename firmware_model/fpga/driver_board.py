@@ -2,7 +2,7 @@
 
 The per-tick work is :func:`firmware_model.fpga.tick.control_tick` (compiled); this class
 owns the arrays and gives people and tests names and units. It never touches the plant or
-a link: the harness (:mod:`hil.actuator`) wires raw sensor words in, duty counts out,
+a link: the harness (:mod:`hil.sim.actuator`) wires raw sensor words in, duty counts out,
 and the LVDS words in both directions.
 """
 

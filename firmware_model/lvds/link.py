@@ -7,7 +7,7 @@ takes 4.5 us: 11.1 words per 50 us tick, so a sweep of the 16-word downstream me
 72 us and of the 32-word upstream memory 144 us. Bits are accounted exactly with an integer
 accumulator; a word counts as received in the tick in which its last bit arrives.
 
-Order inside a tick (``hil.actuator``): downstream words of the tick reach the driver's
+Order inside a tick (``hil.sim.actuator``): downstream words of the tick reach the driver's
 memory, the driver computes, then the upstream words of the tick carry its fresh values.
 
 Value level: words travel as (address, data) with a CRC verdict decided by the fault

@@ -7,6 +7,6 @@ joint driver boxes (slaves), over any transport of :mod:`hil.transports`.
 * :mod:`~hil.fieldbus.master`: the master (frames, WKC check, image);
 * :mod:`~hil.fieldbus.boxes`: what runs behind a slave (full stack or a behavioural echo);
 * :mod:`~hil.fieldbus.system`: master + transport + chain in lockstep at 1 kHz;
-* :mod:`~hil.fieldbus.esc_chain`: the boxes as EtherCAT slaves (one ESC model each) for a
+* :mod:`~hil.fieldbus.esc.chain`: the boxes as EtherCAT slaves (one ESC model each) for a
   real master on raw Ethernet (docs/ethercat-slaves.md).
 """

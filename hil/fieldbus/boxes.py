@@ -21,7 +21,7 @@ import numpy as np
 from firmware_model.mcu.board import McuBoard
 from hil.fieldbus import pdo
 from hil.fieldbus.topology import Box
-from hil.scheduler import Scheduler
+from hil.sim.scheduler import Scheduler
 from plant.config import Config, ConfigError
 from plant.echo_actuator import EchoActuators
 
@@ -142,17 +142,17 @@ class McuBox(_BoxBase):
 
 
 class StackBox(McuBox):
-    """The MCU board over one value-level stack (:class:`~hil.actuator.FpgaStack`) per
+    """The MCU board over one value-level stack (:class:`~hil.sim.actuator.FpgaStack`) per
     actuator slot, on the scheduler: the MCU every ``mcu.period_ticks``, the stacks
     between."""
 
     def __init__(self, box: Box, cfg: Config) -> None:
-        from hil.actuator import FpgaStack
+        from hil.sim.actuator import FpgaStack
 
         self.stacks = [FpgaStack(cfg) for _ in box.actuators]
         super().__init__(box, cfg, [s.mcu_link for s in self.stacks],
                          [s.board.calibrated_offset for s in self.stacks])
-        #: The whole-robot engine that advances this box with all others (hil.robot), and
+        #: The whole-robot engine that advances this box with all others (hil.sim.robot), and
         #: the process data it has yet to decode; None on the per-actuator path.
         self.engine = None
         self.pending: bytes | None = None
@@ -214,7 +214,7 @@ class EchoBox(_BoxBase):
                                 0, 0)
 
 
-#: "robot": the stack boxes advanced together by one compiled engine (:mod:`hil.robot`).
+#: "robot": the stack boxes advanced together by one compiled engine (:mod:`hil.sim.robot`).
 BOX_MODELS = {"stack": StackBox, "robot": StackBox, "echo": EchoBox}
 
 
@@ -224,7 +224,7 @@ def box_engine(model: str, boxes: list, cfg: Config, overlap: bool = True) -> ob
     a chain paced by the wall clock, where a box may take new outputs twice a cycle)."""
     if model != "robot" or not any(getattr(b, "board", None) for b in boxes):
         return None  # (no actuator at all: nothing to batch)
-    from hil.robot import RobotEngine
+    from hil.sim.robot import RobotEngine
 
     return RobotEngine(boxes, cfg, overlap=overlap)
 

@@ -12,7 +12,7 @@ the same results whether the chain runs in the master's process or in another on
 lost cycle still advances time. A frame from an older cycle (delayed or duplicated) is
 discarded and counted.
 
-Paced mode (``Chain(..., paced=True)``, used by ``eha-hil serve``, :mod:`hil.serve`): the
+Paced mode (``Chain(..., paced=True)``, used by ``eha-hil serve``, :mod:`hil.cli.serve`): the
 owner advances the boxes by calling :meth:`Chain.advance` once per millisecond of wall time,
 and frames never move time; ``idx`` only serves to discard a frame older than the newest
 one seen (mod 256, as above). A frame is answered with the inputs as they stand.

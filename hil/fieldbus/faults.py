@@ -20,7 +20,7 @@ Where each link is hit:
   frame of each cycle. The frame check sequence (:mod:`hil.fieldbus.wire`) catches the
   flips: such frames are discarded and counted, never applied.
 * ``lvds.down`` / ``lvds.up``: the LVDS link of one actuator (``box``, ``slot``) of a
-  :class:`~hil.fieldbus.boxes.StackBox`, through :meth:`hil.actuator.FpgaStack.link_fault`:
+  :class:`~hil.fieldbus.boxes.StackBox`, through :meth:`hil.sim.actuator.FpgaStack.link_fault`:
   ``dead`` stops the direction (no word passes), ``bitflip`` corrupts every N-th word with
   N = round(1 / rate) (deterministic: the link's own counter, ``seed`` is not used; the
   receiver discards and counts it), ``drop`` loses every N-th word (no start bit: nothing
@@ -58,7 +58,7 @@ import numpy as np
 from hil.transports.base import Transport, deadline_of, remaining
 
 if TYPE_CHECKING:
-    from hil.actuator import FpgaStack
+    from hil.sim.actuator import FpgaStack
 
 CYCLE_S = 1e-3
 CYCLE_TICKS = 20
@@ -481,7 +481,7 @@ def _dead_value(signal: str, k: np.ndarray) -> float:
 
 
 class FaultyStack:
-    """Stands in for one :class:`~hil.actuator.FpgaStack` of a StackBox: the LVDS faults
+    """Stands in for one :class:`~hil.sim.actuator.FpgaStack` of a StackBox: the LVDS faults
     are switched at cycle boundaries; while a sensor fault is active the stack advances
     tick by tick and the faulted plant outputs are overwritten just before each tick's
     sensor chips read them (the plant recomputes its outputs from its state every tick, so

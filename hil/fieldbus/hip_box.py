@@ -19,9 +19,9 @@ from numba import njit
 
 from firmware_model.lvds import link as LK
 from firmware_model.pc.geometry import hip_geometry
-from hil.actuator import advance_stack
 from hil.fieldbus.boxes import StackBox
 from hil.fieldbus.topology import Box
+from hil.sim.actuator import advance_stack
 from plant.config import Config, ConfigError
 from plant.hip.thigh import (
     N_J,

@@ -80,7 +80,7 @@ class Traffic:
     metadata: dict[str, str] = field(default_factory=dict)  # from a pcapng comment
     can_errors: dict[str, int] = field(default_factory=dict)
     #: why the file ends early (cut by a killed writer, a full disk, a copy), None if whole;
-    #: reported by :func:`hil.cutfiles.line` with how far it was read
+    #: reported by :func:`hil.cli.cutfiles.line` with how far it was read
     cut: str | None = None
 
     @property

@@ -2,7 +2,7 @@
 
 See ``docs/framelog.md``. Writing: :class:`FrameLogWriter`; reading: :class:`FrameLogReader`
 (``info``, ``frames``, ``blocks``); decoding: :mod:`hil.framelog.decoders`; the CLI verbs
-``eha-hil log info|export``: :mod:`hil.framelog.cli`.
+``eha-hil log info|export``: :mod:`hil.cli.log`.
 """
 
 from hil.framelog.formats import LEVELS, level_includes, lvds_topic, sensor_topic, signal_topic

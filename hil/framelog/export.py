@@ -22,7 +22,7 @@ from dataclasses import dataclass
 from hil.framelog.channel_decode import channel_decoder
 from hil.framelog.decoders import DecodeError
 from hil.framelog.reader import FrameLogError, FrameLogReader, LogInfo
-from hil.tables import table
+from hil.output.tables import table
 
 _MAX_META_SHOWN = 60
 

@@ -7,6 +7,6 @@ Modules, one job each: :mod:`~hil.identify.csvdata` (reader, one-line errors),
 HAC confidence intervals), :mod:`~hil.identify.stats`, :mod:`~hil.identify.residuals`,
 :mod:`~hil.identify.candidates` (effect library and tests), :mod:`~hil.identify.pipeline`
 (the loop), :mod:`~hil.identify.report`, :mod:`~hil.identify.synth` (datasets from the
-plant), :mod:`~hil.identify.thesis` (the thesis 2.4.3 residual), :mod:`~hil.identify.cli`.
+plant), :mod:`~hil.identify.thesis` (the thesis 2.4.3 residual), :mod:`~hil.cli.identify`.
 See docs/identify.md.
 """

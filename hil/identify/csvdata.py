@@ -140,7 +140,7 @@ class MeasuredData:
     header: dict[str, str] = field(default_factory=dict)
     ignored: list[str] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
-    #: why the file ends early (its last line cut), None if whole (hil.cutfiles)
+    #: why the file ends early (its last line cut), None if whole (hil.cli.cutfiles)
     cut: str | None = None
 
     @property

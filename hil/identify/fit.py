@@ -493,6 +493,76 @@ def guarded_fit(fitter: OutputErrorFit, theta0: np.ndarray, free: list[str],
     return result, held
 
 
+#: Factor from a parameter's configured value beyond which the baseline checks that the
+#: data, not the optimiser's path, put it there (:func:`hold_unsupported`).
+PROFILE_FACTOR = 1.5
+#: 95 % point of chi^2 with one degree of freedom: the likelihood-ratio test of one
+#: parameter held at a value.
+CHI2_1_95 = Z95 * Z95
+
+
+def lr_threshold(result: FitResult, name: str) -> float:
+    """The cost rise that holding ``name`` must cause to be significant (5 %): chi^2_1 scaled
+    by how much the residual's autocorrelation widens that parameter's variance (its HAC
+    variance over the white-noise one, at least 1), the same inflation the confidence
+    intervals carry."""
+    if result.jac is None or result.cov is None or name not in result.free:
+        return CHI2_1_95
+    i = result.free.index(name)
+    try:
+        naive = float(np.linalg.inv(result.jac.T @ result.jac)[i, i])
+    except np.linalg.LinAlgError:
+        return CHI2_1_95
+    d = float(result.theta[IDX[name]]) if name in LOG_PARAMS else 1.0
+    hac = float(result.cov[i, i]) / (d * d) if d else 0.0
+    ratio = hac / naive if naive > 0 and np.isfinite(hac) else 1.0
+    return CHI2_1_95 * max(1.0, ratio)
+
+
+def hold_unsupported(fitter: OutputErrorFit, result: FitResult, configured: np.ndarray,
+                     factor: float = PROFILE_FACTOR) -> tuple[FitResult, dict[str, str]]:
+    """Hold at its configured value every free physical parameter that the fit moved beyond
+    ``factor`` of it without the data asking for it: refitted with the parameter at the
+    configured value, the cost rises by less than the likelihood-ratio threshold
+    (:func:`lr_threshold`), or falls (the fit had settled in a worse local minimum).
+
+    A weakly pinned parameter (k_s with its resonance above Nyquist) wanders along a flat
+    valley, and where the optimiser stops on it depends on its path, down to the last bits of
+    the arithmetic (another CPU's kernels). The cost comparison does not: the far value is
+    kept only where the data support it over the configured one, and then it is a finding
+    about the rig, not an accident of the search.
+    Worst (furthest) first, one at a time. Returns the fit and ``{parameter: why held}``.
+    """
+    held: dict[str, str] = {}
+    tried: set[str] = set()
+    while True:
+        far = []
+        for n in result.free:
+            ref = configured[IDX[n]]
+            if n in LOG_PARAMS and n not in tried and ref > 0:
+                ratio = result.value(n) / ref
+                if not 1.0 / factor <= ratio <= factor:
+                    far.append((abs(np.log(ratio)), n, ratio))
+        if not far or len(result.free) < 2:
+            return result, held
+        _, name, ratio = max(far)
+        tried.add(name)
+        theta = result.theta.copy()
+        theta[IDX[name]] = configured[IDX[name]]
+        rest = [n for n in result.free if n != name]
+        alt = fitter.fit(theta, rest, sigma=result.sigma, passes=1, max_nfev=9)
+        cost_free = fitter.cost(result.theta, result.sigma)
+        cost_held = fitter.cost(alt.theta, result.sigma)
+        rise = cost_held - cost_free
+        limit = lr_threshold(result, name)
+        if rise < limit:
+            held[name] = (f"the fit moved it to {ratio:.2f}x the configured value, but held "
+                          f"there the cost changes by {rise:+.3g} (significant above "
+                          f"{limit:.3g}); held at {configured[IDX[name]]:.4g}")
+            alt.held = {**result.held, name: held[name]}
+            result = alt
+
+
 def baseline_free(exp: Experiment) -> list[str]:
     """The baseline's fitted parameters for this record: the linear model of the load kind,
     J_p where the motor encoder pins the rotor's inertia, J_c where the piston encoder pins
@@ -528,10 +598,12 @@ def fit_baseline(model: FastModel, theta0: np.ndarray | None = None,
     scales = {**NUISANCE_SCALES(exp.dt), **(scales or {})}
     fitter = OutputErrorFit(model, scales)
     result, held = guarded_fit(fitter, theta, free, model.start_vector())
+    result, profiled = hold_unsupported(fitter, result, model.start_vector())
+    held.update(profiled)
     result.held = {n: f"not identifiable from this record: {why}" for n, why in held.items()}
     result.n_sims = fitter.n_sims
     return result
 
 
 __all__ = ["BASELINE_FREE", "CREDIBLE", "FitResult", "OutputErrorFit", "baseline_free",
-           "bounds_of", "fit_baseline", "guarded_fit"]
+           "bounds_of", "fit_baseline", "guarded_fit", "hold_unsupported", "lr_threshold"]

@@ -373,6 +373,14 @@ def choose_intersample(data: MeasuredData, cfg: Config, given: str | None,
     exp = prepare(data, cfg, best)
     exp.intersample_reason = f"estimated: {why} (relative cost with its best skew: {detail})"
     theta = prov.theta.copy()
+    # The provisional fit is short and unguarded: a parameter the data barely pin (k_s with
+    # its resonance above Nyquist) may still be running away when it stops, at a place set
+    # by the last bits of the arithmetic. The baseline would start there, and on another
+    # CPU's kernels it settled in another local minimum; a value the data did not pin is no
+    # start, the configured one is.
+    start = model.start_vector()
+    for name, _, _ in fitter.offenders(prov):
+        theta[IDX[name]] = start[IDX[name]]
     theta[IDX["skew_s"]] = float(np.clip(results[best][1], -0.5 * exp.dt, 0.5 * exp.dt))
     return exp, theta
 

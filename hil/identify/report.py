@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from hil.identify.pipeline import IdentifyReport
-from hil.tables import table
+from hil.output.tables import table
 
 
 def _f(x: float) -> float | None:

@@ -207,7 +207,7 @@ def run_matrix(cases: Sequence[Case], seeds: Sequence[int], jobs: int = 1,
         return results  # type: ignore[return-value]
     from concurrent.futures import as_completed
 
-    from hil.pools import process_pool
+    from hil.workers.pools import process_pool
 
     _warm()  # compile the kernels into numba's cache once, not in every worker at once
     # workers leave Ctrl-C to this process and end with it (no orphans, no wait)

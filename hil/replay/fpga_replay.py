@@ -3,7 +3,7 @@
 A trace (``/fpga/b.k/trace``, logged at level "full" by :mod:`hil.replay.record`) holds per
 tick what the board took in (raw sensor words; the downstream memory, link-watchdog count
 and CRC-error count the LVDS receive endpoint left) and what it gave out (upstream memory,
-PWM on, compare counts); columns in :data:`hil.actuator.TRACE_WIDTH`. The replay runs
+PWM on, compare counts); columns in :data:`hil.sim.actuator.TRACE_WIDTH`. The replay runs
 the current board model (``control_tick``, compiled) from its boot state over the logged
 inputs and stops at the first tick whose outputs differ. Not replayed: the LVDS receive
 endpoint itself (which words arrived, their CRC check); its result is an input here, and
@@ -18,7 +18,7 @@ from numba import njit
 from firmware_model.fpga import layout as B
 from firmware_model.fpga.driver_board import DriverBoard
 from firmware_model.fpga.tick import control_tick
-from hil.actuator import (
+from hil.sim.actuator import (
     TRACE_DOWN,
     TRACE_DUTY,
     TRACE_LINK,

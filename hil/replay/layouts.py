@@ -3,7 +3,7 @@
 One function per frame encoding of :mod:`hil.replay.record`; each returns a
 :class:`hil.framelog.layout.Layout` built from the declarations the frames come from
 (the register maps of ``firmware_model/fpga/layout.py``, the process records of
-:mod:`hil.fieldbus.pdo`, the trace columns of :mod:`hil.actuator`), so schema and frames
+:mod:`hil.fieldbus.pdo`, the trace columns of :mod:`hil.sim.actuator`), so schema and frames
 cannot drift apart.
 """
 
@@ -11,7 +11,10 @@ from __future__ import annotations
 
 from firmware_model.fpga import layout as B
 from firmware_model.lvds import link as LK
-from hil.actuator import (
+from hil.fieldbus import pdo
+from hil.fieldbus.topology import Box
+from hil.framelog.layout import Layout, LayoutField, words
+from hil.sim.actuator import (
     TRACE_DOWN,
     TRACE_LINK,
     TRACE_ON,
@@ -20,9 +23,6 @@ from hil.actuator import (
     TRACE_WIDTH,
     TRACE_WORDS,
 )
-from hil.fieldbus import pdo
-from hil.fieldbus.topology import Box
-from hil.framelog.layout import Layout, LayoutField, words
 
 ENC_MCU_UP = "eha-hil/mcu-up"        # 31 upstream words + CRC-error count, uint32
 ENC_MCU_DOWN = "eha-hil/lvds-down-registers"  # 13 downstream registers, uint16

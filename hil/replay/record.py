@@ -42,7 +42,6 @@ from firmware_model.calibration import calibration
 from firmware_model.fpga import layout as B
 from firmware_model.lvds import link as LK
 from firmware_model.mcu import dpram
-from hil.actuator import TRACE_WIDTH, TRACE_WORDS
 from hil.fieldbus.boxes import StackBox
 from hil.fieldbus.chain import CYCLE_TICKS
 from hil.fieldbus.master import Master
@@ -54,6 +53,7 @@ from hil.framelog.layout import Layout
 from hil.replay import layouts as LY
 from hil.replay import signals as SG
 from hil.replay.signal_out import SignalOut
+from hil.sim.actuator import TRACE_WIDTH, TRACE_WORDS
 from plant.config import Config
 
 UP_WIDTH = B.UP_WORDS + 1

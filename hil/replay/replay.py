@@ -23,7 +23,6 @@ import numpy as np
 
 from firmware_model.fpga import layout as B
 from firmware_model.fpga.driver_board import LinkMemory
-from hil.actuator import TRACE_WIDTH
 from hil.fieldbus.boxes import McuBox
 from hil.fieldbus.chain import CYCLE_TICKS
 from hil.fieldbus.topology import Topology, TopologyError, load_topology
@@ -31,6 +30,7 @@ from hil.framelog import FrameLogError, FrameLogReader
 from hil.framelog.reader import LogInfo
 from hil.replay.fpga_replay import column_name, current_trace, replay_board_detail
 from hil.replay.record import UP_WIDTH, topics
+from hil.sim.actuator import TRACE_WIDTH
 from plant.config import (
     DECLARED,
     RUN_CHOICES,

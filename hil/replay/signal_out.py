@@ -11,7 +11,7 @@ from hil.framelog.protobuf import MessageType
 class SignalOut:
     """Where the decoded signals go: the log's protobuf channels and/or a live view (an
     object with ``add(topic, message)`` -> handle and ``log(handle, t_ns, payloads)``, e.g.
-    :class:`hil.live.FoxgloveLive`). Each block of samples is encoded once for both."""
+    :class:`hil.framelog.live.FoxgloveLive`). Each block of samples is encoded once for both."""
 
     def __init__(self, log: FrameLogWriter | None, live: object = None) -> None:
         self.log = log

@@ -112,10 +112,10 @@ def check_settings(v: dict[str, Any]) -> None:
           "trips, safe-offs, lost frames, stale inputs, force error", knobs=KNOBS,
           validate=check_settings)
 def bus_faults(cfg: Config, progress: Progress, v: dict[str, Any]) -> ScenarioResult:
-    from hil.bus_cli import demo_pc
     from hil.fieldbus.faults import FaultError, check_topology, parse_faults
     from hil.fieldbus.system import BusSystem
     from hil.fieldbus.topology import TopologyError, load_topology
+    from hil.sim.pc import demo_pc
 
     try:
         topo = load_topology(v["topology"])
@@ -220,7 +220,7 @@ def bus_faults(cfg: Config, progress: Progress, v: dict[str, Any]) -> ScenarioRe
 
 
 def _plot(res: ScenarioResult, path: Path) -> None:
-    from hil.plots import _pyplot
+    from hil.output.plots import _pyplot
 
     plt = _pyplot()
     s = res.series

@@ -17,8 +17,8 @@ from pathlib import Path
 import numpy as np
 
 from firmware_model.fpga import layout as B
-from hil.actuator import FpgaStack
 from hil.scenarios import Metric, Progress, ScenarioResult, register
+from hil.sim.actuator import FpgaStack
 from plant import layout as L
 from plant.config import Config
 
@@ -94,7 +94,7 @@ def current_step(cfg: Config, progress: Progress = None) -> ScenarioResult:
 
 
 def _plot_step(res: ScenarioResult, path: Path) -> None:
-    from hil.plots import _pyplot
+    from hil.output.plots import _pyplot
 
     plt = _pyplot()
     s = res.series
@@ -200,7 +200,7 @@ def current_bode(cfg: Config, progress: Progress = None) -> ScenarioResult:
 
 
 def _plot_bode(res: ScenarioResult, path: Path) -> None:
-    from hil.plots import _pyplot
+    from hil.output.plots import _pyplot
 
     plt = _pyplot()
     s = res.series

@@ -6,7 +6,7 @@ the pistons) and command -> measured joint torque (G^T of the gauges' forces, Eq
 their -3 dB bandwidths beside the thesis's 30-40 Hz, for the reinforced and the
 unreinforced rod path (thesis 5.4). The stack: PC joint loop -> fieldbus process image ->
 MCU 5 kHz -> driver boards 20 kHz -> two EHA plants coupled by the thigh
-(:mod:`hil.hip_stack`).
+(:mod:`hil.sim.hip_stack`).
 
 One figure is calibrated on F9: the damping of the rod path between piston and thigh
 (rod-end bearings, beam, slider; :data:`F9_ROD_DAMPING_NS_PER_M`), on the torque
@@ -23,9 +23,9 @@ from pathlib import Path
 import numpy as np
 
 from firmware_model.pc.joint_loop import JointGains
-from hil.hip_stack import JointRecord, run_joint
 from hil.scenarios import Metric, Progress, ScenarioResult, register
 from hil.scenarios.current import bandwidth_3db
+from hil.sim.hip_stack import JointRecord, run_joint
 from plant.config import Config
 
 AMPLITUDE_RAD = math.radians(0.25)   # thesis 6.4.1
@@ -152,7 +152,7 @@ def f9_roll(cfg: Config, progress: Progress = None) -> ScenarioResult:
 
 
 def _plot(res: ScenarioResult, path: Path) -> None:
-    from hil.plots import _pyplot, mark_thesis
+    from hil.output.plots import _pyplot, mark_thesis
 
     plt = _pyplot()
     fig, (ag, ap) = plt.subplots(2, 1, figsize=(7, 6), sharex=True)

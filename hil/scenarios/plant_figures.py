@@ -64,7 +64,7 @@ def f1(cfg: Config, progress: Progress = None) -> ScenarioResult:
 
 
 def _plot_f1(res: ScenarioResult, path: Path) -> None:
-    from hil.plots import plot_bode
+    from hil.output.plots import plot_bode
 
     plot_bode([res.series["bode"]], path, thesis_hz=[
         (THESIS_F1["model_peak_hz"], f"model peak {THESIS_F1['model_peak_hz']:g} Hz"),
@@ -93,7 +93,7 @@ def f2(cfg: Config, progress: Progress = None) -> ScenarioResult:
 
 
 def _plot_f2(res: ScenarioResult, path: Path) -> None:
-    from hil.plots import plot_tn_curve
+    from hil.output.plots import plot_tn_curve
 
     plot_tn_curve(res.series["curve"], path, thesis=THESIS_F2)
 

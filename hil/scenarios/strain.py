@@ -24,9 +24,9 @@ from pathlib import Path
 
 import numpy as np
 
-from hil.actuator import PC_PERIOD_TICKS, ActuatorStack
 from hil.scenarios import Metric, Progress, ScenarioResult, register
-from hil.scheduler import Record
+from hil.sim.actuator import PC_PERIOD_TICKS, ActuatorStack
+from hil.sim.scheduler import Record
 from plant import layout as L
 from plant.config import Config
 
@@ -223,7 +223,7 @@ def f7(cfg: Config, progress: Progress = None) -> ScenarioResult:
 
 
 def _plot_f7(res: ScenarioResult, path: Path) -> None:
-    from hil.plots import _pyplot
+    from hil.output.plots import _pyplot
 
     plt = _pyplot()
     s = res.series
@@ -377,7 +377,7 @@ def f8(cfg: Config, progress: Progress = None) -> ScenarioResult:
 
 
 def _plot_f8(res: ScenarioResult, path: Path) -> None:
-    from hil.plots import _pyplot
+    from hil.output.plots import _pyplot
 
     plt = _pyplot()
     s = res.series

@@ -20,9 +20,9 @@ from pathlib import Path
 
 import numpy as np
 
-from hil.actuator import ActuatorStack
 from hil.scenarios import Metric, Progress, ScenarioResult, register
 from hil.scenarios.current import bandwidth_3db, step_metrics
+from hil.sim.actuator import ActuatorStack
 from plant.config import Config
 
 STEP_N = 550.0
@@ -72,7 +72,7 @@ def _mark_metrics(ax, res: ScenarioResult, unit: str, axis: str,  # noqa: ANN001
                   label: bool = True) -> None:
     """Mark every metric of ``res`` in ``unit`` that has a thesis figure, as a line across
     the ``axis`` ("x": vertical)."""
-    from hil.plots import mark_thesis
+    from hil.output.plots import mark_thesis
 
     for m in res.metrics:
         if m.unit == unit and m.thesis is not None:
@@ -84,7 +84,7 @@ def _mark_metrics(ax, res: ScenarioResult, unit: str, axis: str,  # noqa: ANN001
 
 
 def _plot_f3(res: ScenarioResult, path: Path) -> None:
-    from hil.plots import _pyplot
+    from hil.output.plots import _pyplot
 
     plt = _pyplot()
     s = res.series
@@ -155,7 +155,7 @@ def f4(cfg: Config, progress: Progress = None) -> ScenarioResult:
 
 
 def _plot_f4(res: ScenarioResult, path: Path) -> None:
-    from hil.plots import _pyplot, mark_thesis
+    from hil.output.plots import _pyplot, mark_thesis
 
     plt = _pyplot()
     s = res.series
@@ -258,7 +258,7 @@ def f6(cfg: Config, progress: Progress = None) -> ScenarioResult:
 
 
 def _plot_bodes(res: ScenarioResult, path: Path) -> None:
-    from hil.plots import _pyplot
+    from hil.output.plots import _pyplot
 
     plt = _pyplot()
     fig, (ag, ap) = plt.subplots(2, 1, figsize=(7, 6), sharex=True)

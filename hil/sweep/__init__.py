@@ -13,6 +13,6 @@ does not depend on the backend, the number of workers or the order points finish
 * :mod:`hil.sweep.engine` — runs a plan on a backend, journal and progress;
 * :mod:`hil.sweep.requirements` — ``--require``: the user's bound on a metric;
 * :mod:`hil.sweep.table`, :mod:`hil.sweep.summary`, :mod:`hil.sweep.plots` — the results;
-* :mod:`hil.sweep.bench` — the local pool against a serial sweep (``bench sweep``);
-* :mod:`hil.sweep.cli` — the ``sweep`` and ``bench sweep`` verbs.
+* :mod:`hil.bench.sweep` — the local pool against a serial sweep (``bench sweep``);
+* :mod:`hil.cli.sweep` — the ``sweep`` and ``bench sweep`` verbs.
 """

@@ -63,7 +63,7 @@ class Serial:
 
 
 def _worker_init() -> None:
-    # (hil.pools: Ctrl-C reaches the whole process group; the parent decides what happens)
+    # (hil.workers.pools: Ctrl-C reaches the whole process group; the parent decides what happens)
     from hil import scenarios
     from hil.sweep.point import single_threaded_blas
 
@@ -83,7 +83,7 @@ class LocalPool:
         from concurrent.futures import as_completed
         from concurrent.futures.process import BrokenProcessPool
 
-        from hil.pools import process_pool
+        from hil.workers.pools import process_pool
 
         if not tasks:
             return

@@ -96,7 +96,7 @@ def _monte_carlo(fig, df: pd.DataFrame, plan: Plan, ycol: str, pcol: str | None)
 def plot_sweep(df: pd.DataFrame, plan: Plan, records: list[dict], out_dir: str | Path,
                title: str) -> list[Path]:
     """One figure per metric in ``out_dir``; the paths written."""
-    from hil.plots import _pyplot
+    from hil.output.plots import _pyplot
 
     plt = _pyplot()
     out_dir = Path(out_dir)

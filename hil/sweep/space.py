@@ -33,7 +33,6 @@ from typing import Any
 
 import numpy as np
 
-from hil.cli_args import finite_float
 from hil.scenarios.knobs import Knob, is_knob_key, resolve, split_overrides
 from plant.config import Config, ConfigError
 
@@ -137,10 +136,15 @@ def _literal(raw: str) -> Any:
 
 
 def _number(raw: str, text: str) -> float:
+    # The messages of the command line's own number type (hil.cli.args.finite_float),
+    # which this layer may not import.
     try:
-        return finite_float(raw)
-    except argparse.ArgumentTypeError as exc:
-        raise argparse.ArgumentTypeError(f"{text!r}: {exc}") from None
+        value = float(raw)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: {raw!r} is not a number") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"{text!r}: {raw!r}: need a finite number")
+    return value
 
 
 def parse_param(text: str) -> GridParam:

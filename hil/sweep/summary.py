@@ -139,7 +139,7 @@ def _cells(df: pd.DataFrame, records: list[dict[str, Any]], keys: list[str]
 
 def text(summary: Summary, title: str) -> str:
     """The summary as a terminal table."""
-    from hil.tables import table
+    from hil.output.tables import table
 
     def pct(x: float | None) -> str:
         return "" if x is None else f"{100 * x:.1f} %"

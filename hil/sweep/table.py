@@ -65,7 +65,7 @@ def frame(plan: Plan, records: list[dict[str, Any]]) -> pd.DataFrame:
 
 def write(df: pd.DataFrame, path: str | Path) -> None:
     """``.parquet`` (pyarrow) or ``.csv`` (the command writes it through
-    :func:`hil.outputs.write`: a temporary name, renamed when complete)."""
+    :func:`hil.cli.outputs.write`: a temporary name, renamed when complete)."""
     path = Path(path)
     if path.suffix.lower() == ".parquet":
         df.to_parquet(path, index=False)

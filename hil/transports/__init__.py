@@ -38,7 +38,7 @@ from hil.transports.base import (
     prefixed_options,
     transport_pair,
 )
-from hil.transports.bench import round_trip_rate
+from hil.transports.echo import round_trip_rate
 
 if TYPE_CHECKING:
     from hil.transports.serialport import PtyPair

@@ -17,7 +17,7 @@ import sys
 from typing import Any
 
 from hil.transports.base import BACKENDS, TransportError, open_transport
-from hil.transports.bench import TRANSFORMS, bench_all, echo
+from hil.transports.echo import TRANSFORMS, bench_all, echo
 
 
 def _connect_options(transport: Any) -> dict[str, Any]:

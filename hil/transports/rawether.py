@@ -3,7 +3,7 @@
 Real EtherCAT masters (SOEM, IgH, TwinCAT) send Ethernet frames, not UDP: this end receives
 every frame of that EtherType arriving on the interface and sends whole frames back. It is
 not one of the :data:`hil.transports.BACKENDS` (those carry bare PDUs between the project's
-own master and chain); :mod:`hil.fieldbus.ecat_serve` uses it. Opening needs CAP_NET_RAW
+own master and chain); :mod:`hil.fieldbus.esc.serve` uses it. Opening needs CAP_NET_RAW
 (root); errors are :class:`~hil.transports.TransportError` with one line naming the
 interface.
 """

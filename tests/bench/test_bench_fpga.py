@@ -11,7 +11,7 @@ import numpy as np
 from firmware_model.fpga import layout as B
 from firmware_model.fpga.driver_board import DriverBoard
 from firmware_model.fpga.tick import control_tick
-from hil.actuator import FpgaStack
+from hil.sim.actuator import FpgaStack
 
 
 def test_fpga_stack_one_second(benchmark, default_cfg):

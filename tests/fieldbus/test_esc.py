@@ -13,9 +13,9 @@ from hypothesis import strategies as st
 from firmware_model.esc import registers as r
 from firmware_model.esc import sii
 from firmware_model.mcu.mcu import CommandMode
-from hil.fieldbus.esc_chain import EscChain
-from hil.fieldbus.esc_master import EscMaster
-from hil.fieldbus.esi import esi_xml
+from hil.fieldbus.esc.chain import EscChain
+from hil.fieldbus.esc.esi import esi_xml
+from hil.fieldbus.esc.master import EscMaster
 from hil.fieldbus.topology import parse_topology
 from protocols import ethercat as ec
 

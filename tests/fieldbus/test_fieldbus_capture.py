@@ -74,7 +74,7 @@ def test_tshark_reads_working_counters(capture, tmp_path):
 
 
 def test_bench_smoke():
-    from hil.fieldbus.bench import bench_bus, format_table
+    from hil.bench.bus import bench_bus, format_table
 
     res = bench_bus(("inproc",), cycles=20, stack_cycles=20)
     assert set(res) == {"inproc", "stack_rtf"} and all(v > 0 for v in res.values())

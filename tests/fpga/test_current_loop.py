@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hil.actuator import FpgaStack
 from hil.scenarios import current
 from hil.scenarios import get as scenario
+from hil.sim.actuator import FpgaStack
 from plant import layout as L
 from plant.config import load_config
 

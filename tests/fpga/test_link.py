@@ -11,7 +11,7 @@ from firmware_model.fpga import layout as B
 from firmware_model.fpga.driver_board import DriverBoard, LinkMemory
 from firmware_model.fpga.tick import control_tick
 from firmware_model.lvds import link as LK
-from hil.actuator import FpgaStack
+from hil.sim.actuator import FpgaStack
 from plant.config import load_config
 from plant.model import Plant
 from plant.sensors.chips import chip_params
@@ -108,7 +108,7 @@ def test_register_access_checks_ranges(cfg):
 
 # --- word-level faults of the value-level link: drop, duplicate, delay -----------------------
 def _booted(cfg):
-    from hil.actuator import FpgaStack
+    from hil.sim.actuator import FpgaStack
 
     s = FpgaStack(cfg)
     s.boot()
@@ -159,7 +159,7 @@ def test_delay_adds_latency_to_the_tick_register(cfg, delay):
 
 
 def test_new_faults_refused_on_the_bit_level_link_and_bad_values(cfg):
-    from hil.actuator import FpgaStack
+    from hil.sim.actuator import FpgaStack
 
     s = FpgaStack(cfg, bit_level=True)
     with pytest.raises(ValueError, match="bit-level"):

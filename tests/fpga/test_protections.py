@@ -9,7 +9,7 @@ import pytest
 from firmware_model.fpga import layout as B
 from firmware_model.fpga.params import board_params, down_defaults
 from firmware_model.fpga.tick import control_tick
-from hil.actuator import FpgaStack
+from hil.sim.actuator import FpgaStack
 from plant import layout as L
 from plant.config import load_config
 

@@ -50,7 +50,7 @@ def test_same_bytes_as_add_message(sizes: str, chunk_size: int) -> None:
 
 def test_bench_log_reports_both_encodings() -> None:
     """``eha-hil bench log``'s encoding comparison: sizes from the files it wrote."""
-    from hil.replay.log_bench import bench_encodings, format_report
+    from hil.bench.log import bench_encodings, format_report
     from hil.replay.signals import ACTUATOR
 
     enc = {e.encoding: e for e in bench_encodings(50)}

@@ -255,10 +255,10 @@ def test_parquet_export_loads_with_pandas(exported):
 
 def test_two_boards_each_decoded_from_its_own_words(tmp_path) -> None:  # noqa: ANN001
     """A box with two actuators: each actuator channel holds its own board's values."""
-    from hil.bus_cli import demo_pc
     from hil.fieldbus.topology import load_topology
     from hil.framelog import FrameLogReader
     from hil.replay.record import run_logged
+    from hil.sim.pc import demo_pc
 
     topo_file = tmp_path / "two.toml"
     topo_file.write_text('[[box]]\nid = 0\nslots = ["a", "b"]\n')

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from firmware_model.fpga.layout import D_IQ_REF, UP_REGISTERS
+from hil.cli.log import configure_log, run_log
 from hil.framelog import decoders as D
-from hil.framelog.cli import configure_log, run_log
 from hil.framelog.export import export_csv, summary_text
 from hil.framelog.formats import ENC_ETHERCAT, ENC_LVDS_DOWN, ENC_LVDS_UP
 from hil.framelog.reader import FrameLogError, FrameLogReader

@@ -19,8 +19,8 @@ import pytest
 from firmware_model.fpga import layout as B
 from firmware_model.mcu.measure import Measurements
 from hil.cli import main
-from hil.cli_args import Parser
-from hil.framelog.cli import configure_log, run_log
+from hil.cli.args import Parser
+from hil.cli.log import configure_log, run_log
 from hil.framelog.formats import ENC_LVDS_UP
 from hil.framelog.reader import FrameLogReader
 from hil.framelog.writer import FrameLogWriter

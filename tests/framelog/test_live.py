@@ -16,10 +16,10 @@ from mcap.reader import make_reader
 from mcap.records import Schema
 from mcap_protobuf.decoder import DecoderFactory
 
-from hil.bus_cli import demo_pc
 from hil.fieldbus.topology import load_topology
-from hil.live import FoxgloveLive, parse_address
+from hil.framelog.live import FoxgloveLive, parse_address
 from hil.replay.record import run_logged
+from hil.sim.pc import demo_pc
 from plant.config import load_config
 
 #: The SDK's server speaks foxglove.sdk.v1 (the protocol's current name); offer both.

@@ -137,8 +137,8 @@ def test_config_show_and_presets(capsys):
         (["bus", "run", "--log", "/nonexistent/x.mcap"], "/nonexistent does not exist"),
         (["main", "-c", "/tmp"], "/tmp: is a directory"),
         # Options a verb does not use are not offered.
-        (["config", "presets", "-c", "hydra_linear"], "unrecognized arguments: -c"),
-        (["bench", "codecs", "--set", "sim.seed=2"], "unrecognized arguments: --set"),
+        (["config", "presets", "-c", "hydra_linear"], "argument -c: not an option of eha-hil config presets"),
+        (["bench", "codecs", "--set", "sim.seed=2"], "argument --set: not an option of eha-hil bench codecs"),
     ],
 )
 def test_user_mistakes_give_one_line_and_exit_2(capsys, argv, fragment):
@@ -239,8 +239,8 @@ def test_help_lists_run_thesis_and_exit_codes(capsys):
 def test_every_option_has_help_and_shows_its_default(capsys):
     import argparse
 
-    from hil.cli import build_parser
-    from hil.cli_args import walk
+    from hil.cli.args import walk
+    from hil.cli.root import build_parser
 
     missing = [f"{p.prog} {a.option_strings or a.dest}" for p in walk(build_parser())
                for a in p._actions
@@ -251,7 +251,7 @@ def test_every_option_has_help_and_shows_its_default(capsys):
 
 
 def test_identify_takes_c_and_set_and_still_the_old_preset(tmp_path):
-    from hil.cli import build_parser
+    from hil.cli.root import build_parser
 
     data = tmp_path / "d.csv"
     data.write_text("t\n0\n")

@@ -24,18 +24,18 @@ from pathlib import Path
 
 import pytest
 
-from hil.cli import build_parser, main
-from hil.cli_args import walk
+from hil.cli.args import walk
+from hil.cli.root import build_parser, main
 
 NUMBERS = ["nan", "inf", "-inf", "0", "-3", "1e30", "99999999999"]
 PNG = b"\x89PNG\r\n\x1a\n" + bytes(range(256)) * 4
 
-#: Options that take a path but no type of hil.cli_args (their module reads the file).
+#: Options that take a path but no type of hil.cli.args (their module reads the file).
 UNTYPED_PATHS = {"config": "config", "preset": "config", "topology": "input",
                  "port": "device", "log": "input", "out": "output"}
 #: Options that take a value which is neither a number nor a path.
 TEXT = {"set", "effect", "magnitude", "host", "scenario", "topic", "field", "board", "case",
-        "can_channel", "foxglove",  # foxglove: HOST:PORT, checked by hil.live.parse_address
+        "can_channel", "foxglove",  # HOST:PORT, hil.framelog.live.parse_address
         "param", "tolerance", "seeds", "dask", "scenario_name", "require",
         "interface"}  # interface: a network interface name, checked by hil.transports.rawether
 
@@ -317,7 +317,7 @@ def test_ctrl_c_identify(tmp_path):
                    capture_output=True, timeout=300)
     run = _Running(["identify", str(data), "--report", str(tmp_path / "rep")], tmp_path)
     # early, while numba loads the model's machine code from its cache: a SIGINT there would
-    # land in an LLVM callback, where Python can only print it and go on (hil/interrupts.py)
+    # land in an LLVM callback, where Python can only print it and go on (hil/cli/interrupts.py)
     run.wait_for(r"identify: ")
     code, lines = run.interrupt()
     last = _one_interrupt_line(code, lines, "identify", r"identify: .*")

@@ -16,8 +16,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hil.cli import build_parser, main
-from hil.cli_args import walk
+from hil.cli.args import walk
+from hil.cli.root import build_parser, main
 
 
 def _run(argv: list[str]) -> tuple[int, str, str]:
@@ -325,7 +325,7 @@ def test_long_csv_uses_the_first_rows_and_says_so(tmp_path):
 def test_identify_refuses_up_front_what_cannot_fit(tmp_path, monkeypatch):
     """The size check: rows by the file's size, memory by the measured cost per row; too
     much for this machine is one line before the file is read."""
-    import hil.identify.cli as icli
+    import hil.cli.identify as icli
 
     f = tmp_path / "d.csv"
     assert main(["identify-synth", str(f), "--seconds", "2"]) == 0

@@ -7,7 +7,7 @@ import threading
 import pytest
 from numba.core import event
 
-from hil.interrupts import DeferredInterrupt
+from hil.cli.interrupts import DeferredInterrupt
 
 
 def test_outside_the_lock_ctrl_c_raises_at_once():

@@ -20,5 +20,5 @@ def test_the_hash_covers_the_tables_kernels_read_and_the_harness_kernels_only():
     files = {str(p.relative_to(ROOT)) for p in jit_cache._sources()}
     # a table the compiled board tick reads, and a kernel that calls other files' kernels
     assert {"firmware_model/fpga/layout.py", "plant/sensors/harness.py",
-            "hil/actuator.py", "hil/replay/fpga_replay.py"} <= files
-    assert "hil/cli.py" not in files and "hil/scenarios/strain.py" not in files
+            "hil/sim/actuator.py", "hil/replay/fpga_replay.py"} <= files
+    assert "hil/cli/root.py" not in files and "hil/scenarios/strain.py" not in files

@@ -1,12 +1,15 @@
 """Rules of the layout, checked on the source: only hil/transports/ knows a transport by
 name; the firmware models do not import the plant or the harness; the plant does not import
-the harness; the harness holds no model arithmetic of a hardware part."""
+the harness; inside the harness, each room (folder of hil/) has one rule naming the rooms it
+may import, nothing outside the command line imports it and the engines import nothing of
+the verification; the harness holds no model arithmetic of a hardware part."""
 
 from __future__ import annotations
 
 import ast
 import importlib
 import re
+import shutil
 from pathlib import Path
 
 from hil.transports import BACKENDS
@@ -75,6 +78,129 @@ def test_layers_import_only_downwards():
     assert not bad
 
 
+# --- the rooms of hil/ -------------------------------------------------------------------------
+#: One rule per room (folder) of hil/: the other rooms its modules may import. Read from the
+#: bottom: transports and analysis stand alone; the engines (sim) and the fieldbus they run on
+#: are one layer; logs, replay, identification, scenarios, sweeps, verification and benchmarks
+#: sit on them; the command line (cli) sits on everything and nothing imports it.
+ROOMS: dict[str, set[str]] = {
+    "transports": set(),
+    "workers": set(),
+    "analysis": set(),
+    "output": {"analysis"},
+    "framelog": {"output"},
+    "sim": {"fieldbus"},
+    "fieldbus": {"sim", "transports"},
+    "replay": {"fieldbus", "framelog", "sim"},
+    "identify": {"analysis", "output", "workers"},
+    "scenarios": {"analysis", "fieldbus", "identify", "output", "sim"},
+    "sweep": {"output", "scenarios", "workers"},
+    "verify": {"sim"},
+    "bench": {"fieldbus", "framelog", "replay", "sim", "sweep", "transports"},
+    "cli": {"analysis", "bench", "fieldbus", "framelog", "identify", "output", "replay",
+            "scenarios", "sim", "sweep", "transports", "verify"},
+}
+#: Modules that may import more than their room's rule, each with its reason.
+ROOM_EXCEPTIONS = {
+    ("hil/sim/warmup.py", "replay"): "compiles every kernel once: the FPGA replay's",
+    ("hil/sim/warmup.py", "identify"): "compiles every kernel once: the fitted model's",
+}
+
+
+def _room(module: str) -> str | None:
+    """The room of a dotted module of hil (``hil.sim.robot`` -> ``sim``), None outside."""
+    parts = module.split(".")
+    return parts[1] if parts[0] == "hil" and len(parts) > 1 else None
+
+
+def hil_imports(root: Path) -> dict[str, set[str]]:
+    """Every module of ``root/hil`` (path relative to ``root``) -> the hil modules it
+    imports, at any depth of the file (deferred imports inside functions count too)."""
+    graph = {}
+    for path in sorted((root / "hil").rglob("*.py")):
+        names = set()
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Import):
+                names.update(a.name for a in node.names)
+            elif isinstance(node, ast.ImportFrom) and node.module == "hil":
+                names.update(f"hil.{a.name}" for a in node.names)  # from hil import sim
+            elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+                names.add(node.module)
+        graph[path.relative_to(root).as_posix()] = {n for n in names if n.startswith("hil.")}
+    return graph
+
+
+def room_violations(graph: dict[str, set[str]], rooms: dict[str, set[str]] = ROOMS,
+                    exceptions: dict = ROOM_EXCEPTIONS) -> list[str]:
+    """What breaks the rooms' rules in an import graph (path -> dotted hil modules)."""
+    bad = []
+    for path, names in sorted(graph.items()):
+        parts = path.split("/")
+        if len(parts) == 2:
+            if parts[1] != "__init__.py":
+                bad.append(f"{path}: a loose module at the top of hil/ (put it in a room)")
+            continue
+        mine = parts[1]
+        if mine not in rooms:
+            bad.append(f"{path}: room hil/{mine}/ has no rule in ROOMS")
+            continue
+        for name in sorted(names):
+            other = _room(name)
+            if other is None or other == mine:
+                continue
+            if other == "cli":
+                bad.append(f"{path} imports {name}: nothing outside hil/cli/ imports it")
+            elif other not in rooms[mine] and (path, other) not in exceptions:
+                bad.append(f"{path} imports {name}: hil/{mine}/ may import only "
+                           f"{sorted(rooms[mine])}")
+    return bad
+
+
+def test_every_room_keeps_its_rule():
+    assert room_violations(hil_imports(ROOT)) == []
+
+
+def test_every_rule_and_exception_is_needed():
+    graph = hil_imports(ROOT)
+    used = {(p, _room(n)) for p, names in graph.items() for n in names}
+    rooms_used = {(p.split("/")[1], r) for p, r in used}
+    unused = {(room, other) for room, others in ROOMS.items() for other in others
+              if (room, other) not in rooms_used}
+    assert not unused, f"rules allowing what nobody imports: {sorted(unused)}"
+    assert set(ROOM_EXCEPTIONS) <= used, set(ROOM_EXCEPTIONS) - used
+
+
+def test_the_engines_import_nothing_of_the_verification():
+    assert "verify" not in ROOMS["sim"] and "verify" not in ROOMS["fieldbus"]
+    graph = {"hil/sim/robot.py": {"hil.verify.mcu.model"}}
+    assert room_violations(graph) == [
+        "hil/sim/robot.py imports hil.verify.mcu.model: hil/sim/ may import only "
+        "['fieldbus']"]
+
+
+def test_the_rules_catch_violations_planted_in_a_copy(tmp_path):
+    """A copy of hil/ with three planted mistakes: an engine importing the verification,
+    a room importing the command line, a loose module at the top; each is reported."""
+    shutil.copytree(ROOT / "hil", tmp_path / "hil",
+                    ignore=shutil.ignore_patterns("__pycache__", "*.v", "*.toml"))
+    assert room_violations(hil_imports(tmp_path)) == []
+    sched = tmp_path / "hil" / "sim" / "scheduler.py"
+    sched.write_text(sched.read_text() + "\nfrom hil.verify.compare import compare\n")
+    sweep = tmp_path / "hil" / "sweep" / "engine.py"
+    sweep.write_text(sweep.read_text() + "\ndef f():\n    from hil.cli import args\n")
+    (tmp_path / "hil" / "helpers.py").write_text("X = 1\n")
+    (tmp_path / "hil" / "newroom").mkdir()
+    (tmp_path / "hil" / "newroom" / "a.py").write_text("import hil.sim.robot\n")
+    bad = room_violations(hil_imports(tmp_path))
+    assert bad == [
+        "hil/helpers.py: a loose module at the top of hil/ (put it in a room)",
+        "hil/newroom/a.py: room hil/newroom/ has no rule in ROOMS",
+        "hil/sim/scheduler.py imports hil.verify.compare: hil/sim/ may import only "
+        "['fieldbus']",
+        "hil/sweep/engine.py imports hil.cli: nothing outside hil/cli/ imports it",
+    ]
+
+
 # --- the harness holds no model of a hardware part --------------------------------------------
 #: The packages that hold the hardware parts' models and codecs.
 PARTS = ("protocols", "firmware_model", "plant")
@@ -88,9 +214,9 @@ _KERNEL_DECORATORS = {"njit", "jit", "vectorize", "guvectorize", "cfunc", "stenc
 
 #: hil/ modules that may do what the rule forbids, each with its reason.
 ALLOWED = {
-    ("hil/actuator.py", "kernel"):
+    ("hil/sim/actuator.py", "kernel"):
         "the stack's compiled wiring loop: calls the parts' kernels tick by tick",
-    ("hil/robot.py", "kernel"):
+    ("hil/sim/robot.py", "kernel"):
         "the whole robot's compiled wiring loop: calls the stack's and the MCU law's compiled "
         "steps per actuator, and copies process-data bytes",
     ("hil/fieldbus/hip_box.py", "kernel"):

@@ -18,9 +18,9 @@ from pathlib import Path
 
 import pytest
 
-from hil import outputs
-from hil.cli import build_parser, main
-from hil.cli_args import walk
+from hil.cli import outputs
+from hil.cli.args import walk
+from hil.cli.root import build_parser, main
 
 #: Inputs of kind "dir" (read, not written): not outputs.
 NOT_OUTPUTS = {("eha-hil verify current-loop", "--rtl")}

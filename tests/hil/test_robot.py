@@ -1,4 +1,4 @@
-"""The robot engine (hil.robot) against the per-actuator boxes it replaces: the same bytes on
+"""The robot engine (hil.sim.robot) against the per-actuator boxes it replaces: the same bytes on
 the fieldbus, the same MCU output words and plant outputs, whatever the number of workers,
 with faults on the fieldbus, the LVDS links and the sensors."""
 
@@ -12,9 +12,9 @@ from firmware_model.fpga import layout as B
 from firmware_model.fpga.driver_board import LinkMemory
 from firmware_model.mcu.c_abi import IN_COMMAND, IN_ENABLE, INPUT, OUTPUT, config_record
 from firmware_model.mcu.mcu import Mcu
-from hil.bus_cli import demo_pc
 from hil.fieldbus.system import BusSystem
 from hil.fieldbus.topology import load_topology
+from hil.sim.pc import demo_pc
 from plant.config import load_config
 
 FAULTS = [
@@ -110,7 +110,7 @@ _WORD = st.integers(0, 0xFFFF)
 def test_the_batched_mcu_law_steps_as_the_python_model(ups, forces, steps):
     """``mcu_law_step_many`` (what the engine calls, one program per actuator) against the
     Python MCU over random upstream memories and force commands."""
-    from hil.verify.mcu_builds import HostLaw, build_host
+    from hil.sim.mcu_builds import HostLaw, build_host
 
     cfg = load_config("hydra_default")
     law = HostLaw(build_host())
@@ -159,7 +159,7 @@ def test_the_law_the_engine_links_has_no_fused_multiply_add():
     import shutil
     import subprocess
 
-    from hil.verify.mcu_builds import build_host
+    from hil.sim.mcu_builds import build_host
 
     if shutil.which("objdump") is None:
         pytest.skip("objdump not installed")

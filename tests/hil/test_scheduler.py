@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from hil.scheduler import Scheduler
+from hil.sim.scheduler import Scheduler
 from plant.model import Plant
 
 

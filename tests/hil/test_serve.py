@@ -22,9 +22,9 @@ import time
 import pytest
 
 from firmware_model.mcu.mcu import BOARD_ENABLED, SAFE_OFF
+from hil.cli.serve import PERIOD_S
 from hil.fieldbus.master import Master
 from hil.fieldbus.topology import load_topology
-from hil.serve import PERIOD_S
 
 SECONDS = 3.0
 STEP_AT = 1000          # cycle of the force step 0 -> FORCE_N
@@ -154,7 +154,7 @@ def test_serve_closes_the_loop_over_a_pty(pty):
         assert summary[key] == 0, (key, summary)
     ts = summary["transport_stats"]
     assert (ts["crc_errors"], ts["framing_errors"], ts["oversize"]) == (0, 0, 0)
-    # A pause of more than hil.serve.SESSION_GAP_S between two frames (a stalled process)
+    # A pause of more than hil.cli.serve.SESSION_GAP_S between two frames (a stalled process)
     # starts a new session; the counts above show that no frame was lost across it.
     assert summary["sessions"] >= 1
 

@@ -7,7 +7,7 @@ import json
 
 import pytest
 
-from hil.identify import cli
+from hil.cli import identify as cli
 
 
 def _parser() -> argparse.ArgumentParser:

@@ -14,8 +14,8 @@ import math
 import numpy as np
 import pytest
 
-from hil.cli_args import Parser
-from hil.identify import cli
+from hil.cli import identify as cli
+from hil.cli.args import Parser
 from hil.identify.csvdata import CsvError, read_measured
 
 FS = 5000.0

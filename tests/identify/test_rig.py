@@ -10,7 +10,7 @@ import math
 import numpy as np
 import pytest
 
-from hil.identify import cli
+from hil.cli import identify as cli
 from hil.identify.csvdata import read_measured
 from hil.identify.rig import (
     RIG_EFFECTS,

@@ -24,7 +24,7 @@ from firmware_model.mcu.mcu import (
     Mcu,
 )
 from firmware_model.mcu.measure import Measurements
-from hil.actuator import FpgaStack
+from hil.sim.actuator import FpgaStack
 from plant import layout as L
 from plant.config import Config, load_config
 from protocols.pressure_adc import DEFAULT as PRESSURE_ADC

@@ -9,7 +9,7 @@ import pytest
 
 from hil.fieldbus.hip_box import HipBox
 from hil.fieldbus.topology import load_topology
-from hil.hip_stack import hip_config
+from hil.sim.hip_stack import hip_config
 from plant.config import load_config
 from plant.hip.thigh import couple_tick
 

@@ -9,7 +9,7 @@ import pytest
 from firmware_model.calibration import calibration
 from firmware_model.fpga import layout as B
 from firmware_model.mcu.measure import Measurements
-from hil.actuator import FpgaStack
+from hil.sim.actuator import FpgaStack
 from plant import layout as L
 from plant.config import load_config
 from protocols.pressure_adc import DEFAULT as ADC

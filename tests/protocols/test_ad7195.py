@@ -340,7 +340,7 @@ def test_batch_rejects_out_of_range_words() -> None:
 
 def test_bus_bench_cases_run() -> None:
     # Smoke test only (no timing): every bus benchmark case processes what it is asked to.
-    from hil.codec_bench import buses
+    from hil.bench.codecs import buses
 
     names = {c.name for c in buses.CASES}
     assert {"AD7195 data read", "AD7195 batch decode"} <= names

@@ -20,10 +20,10 @@ from pathlib import Path
 
 import pytest
 
-from hil.bus_cli import demo_pc
 from hil.fieldbus.topology import load_topology
 from hil.framelog.reader import MAGIC
 from hil.replay.record import run_logged
+from hil.sim.pc import demo_pc
 from plant.config import load_config
 
 #: One console-script process per damaged log and command: ~20 s, so not in make test-fast.

@@ -176,8 +176,8 @@ def test_tampered_sensor_word_changes_the_board_outputs(logged_full):
     """Flip a bit of the SSI word of one tick while the loop runs: the board's outputs
     diverge at that very tick, so the logged sensor words really drive the replay."""
     from firmware_model.fpga import layout as B
-    from hil.actuator import TRACE_RAW
     from hil.replay.fpga_replay import replay_board
+    from hil.sim.actuator import TRACE_RAW
 
     cfg, path = logged_full
     trace = FrameLogReader(path).blocks(topics(0, 0)["trace"]).frames.copy()

@@ -13,8 +13,8 @@ import pytest
 from mcap.reader import make_reader
 from mcap_protobuf.decoder import DecoderFactory
 
+from hil.framelog.series_export import tables, unit_of, write_series
 from hil.scenarios import Metric, ScenarioResult
-from hil.series_export import tables, unit_of, write_series
 
 
 @dataclass
@@ -115,8 +115,8 @@ def test_series_live_to_a_websocket_client() -> None:
     import websockets
     from mcap.records import Schema
 
-    from hil.live import FoxgloveLive
-    from hil.series_export import publish_live
+    from hil.framelog.live import FoxgloveLive
+    from hil.framelog.series_export import publish_live
 
     res = _result()
     got: list = []

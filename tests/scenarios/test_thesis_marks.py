@@ -49,7 +49,7 @@ def test_bandwidth_plots_mark_the_thesis_bandwidths(saved, tmp_path: Path) -> No
 
 def test_tn_curve_marks_stall_no_load_and_efficiency(saved, tmp_path: Path) -> None:
     from hil.analysis.tn_curve import TNCurve, TNPoint
-    from hil.plots import plot_tn_curve
+    from hil.output.plots import plot_tn_curve
     from hil.scenarios.plant_figures import THESIS_F2
 
     zero = {f.name: 0.0 for f in dataclasses.fields(TNPoint)}

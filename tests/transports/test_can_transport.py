@@ -12,13 +12,13 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from hil.transports import TransportError, TransportStats, open_transport, transport_pair
-from hil.transports.bench import image_frame, invert, round_trip_rate
 from hil.transports.canbus import (
     FD_LENGTHS,
     Reassembler,
     max_message_frame,
     segment,
 )
+from hil.transports.echo import image_frame, invert, round_trip_rate
 from hil.transports.framing import crc32
 
 # -- segment layout ---------------------------------------------------------------------

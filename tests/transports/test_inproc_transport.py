@@ -7,7 +7,7 @@ import threading
 import pytest
 
 from hil.transports import TransportError, open_transport, transport_pair
-from hil.transports.bench import echo, image_frame, invert, round_trip_rate
+from hil.transports.echo import echo, image_frame, invert, round_trip_rate
 
 
 def test_default_backend_is_inproc() -> None:

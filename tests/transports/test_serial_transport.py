@@ -8,7 +8,7 @@ import pytest
 import serial
 
 from hil.transports import TransportError, open_transport, pty_pair, transport_pair
-from hil.transports.bench import image_frame, invert, remote_echo, round_trip_rate
+from hil.transports.echo import image_frame, invert, remote_echo, round_trip_rate
 from hil.transports.framing import encode_frame
 from hil.transports.serialport import SerialTransport
 

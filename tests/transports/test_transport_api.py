@@ -14,7 +14,7 @@ from hil.transports import (
     round_trip_rate,
     transport_pair,
 )
-from hil.transports.bench import IMAGE_BYTES, echo, image_frame, invert
+from hil.transports.echo import IMAGE_BYTES, echo, image_frame, invert
 
 
 def one_line(exc: pytest.ExceptionInfo[TransportError]) -> str:

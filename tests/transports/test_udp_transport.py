@@ -7,7 +7,7 @@ import socket
 import pytest
 
 from hil.transports import TransportError, open_transport, transport_pair
-from hil.transports.bench import image_frame, invert, remote_echo
+from hil.transports.echo import image_frame, invert, remote_echo
 from hil.transports.udp import ETHERCAT_UDP_PORT, UdpTransport
 
 

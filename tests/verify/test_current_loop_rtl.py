@@ -22,11 +22,11 @@ from firmware_model.fpga.current_loop import (
 )
 from firmware_model.fpga.driver_board import DriverBoard
 from hil.cli import main
-from hil.verify import rtl_run
 from hil.verify.compare import compare
-from hil.verify.loop_records import pack_inputs, unpack_outputs
-from hil.verify.loop_vectors import loop_sets, random_inputs
-from hil.verify.loop_verify import verify_current_loop
+from hil.verify.current_loop import rtl as rtl_run
+from hil.verify.current_loop.records import pack_inputs, unpack_outputs
+from hil.verify.current_loop.vectors import loop_sets, random_inputs
+from hil.verify.current_loop.verify import verify_current_loop
 
 
 def _need_rtl() -> None:

@@ -16,11 +16,11 @@ import pytest
 from firmware_model.fpga import layout as B
 from firmware_model.mcu.c_abi import OUTPUT, config_record
 from hil.cli import main
-from hil.verify import mcu_builds
+from hil.sim import mcu_builds
 from hil.verify.compare import compare
-from hil.verify.mcu_model import run_model
-from hil.verify.mcu_steps import random_inputs
-from hil.verify.mcu_verify import FIELD_NAMES, verify_mcu
+from hil.verify.mcu.model import run_model
+from hil.verify.mcu.steps import random_inputs
+from hil.verify.mcu.verify import FIELD_NAMES, verify_mcu
 from plant.config import load_config
 
 
@@ -172,8 +172,8 @@ def test_a_build_keeps_its_own_functions_after_another_build_went_global():
     if not _cpu_has_fma():
         pytest.skip("this CPU has no FMA: the contracted host build cannot run")
     code = ("import llvmlite.binding as llvm\n"
-            "from hil.verify import mcu_builds\n"
-            "from hil.verify.mcu_verify import verify_mcu\n"
+            "from hil.sim import mcu_builds\n"
+            "from hil.verify.mcu.verify import verify_mcu\n"
             "llvm.load_library_permanently(str(mcu_builds.build_host('off')))\n"
             "print(verify_mcu('host-c', steps=600, stack_seconds=0, contract='fast')"
             ".mismatches)\n")

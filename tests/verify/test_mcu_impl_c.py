@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hil.actuator import ActuatorStack
-from hil.verify import mcu_builds
+from hil.sim import mcu_builds
+from hil.sim.actuator import ActuatorStack
 from plant.config import ConfigError, load_config
 
 

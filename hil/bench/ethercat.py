@@ -1,0 +1,116 @@
+"""``eha-hil bench ethercat``: time per bus cycle of the ESC chain (hydra_full), in this
+process, after the in-process master (:mod:`hil.fieldbus.esc.master`) brought every slave
+to OP.
+
+Per cycle two figures (median and 99th percentile, wall ``time.perf_counter``):
+
+* round trip: the cycle's LRW frames through the chain and back (encode, every ESC, decode)
+  — what a master waits for on top of the wire;
+* box cycle: one 1 ms step of the slaves' watchdogs and the boxes behind them.
+
+Every actuator is enabled with a force command of its own. Rows: every box an echo model;
+the same with the full stack (plant, driver boards, LVDS, MCU)
+behind box 0. CPU time over wall time of the timed loop is given beside.
+
+``--wire`` (root, pysoem): the same two rows with SOEM over a veth pair
+(:func:`bench_wire`), the chain served in its own process at 1 kHz.
+"""
+
+from __future__ import annotations
+
+import struct
+import time
+
+import numpy as np
+
+from hil.fieldbus.esc.chain import EscChain
+from hil.fieldbus.esc.master import EscMaster
+from hil.fieldbus.pdo import slot_sizes
+from hil.fieldbus.topology import load_topology
+from plant.config import Config
+
+WARMUP = 20
+
+
+def bench_row(cfg: Config, stack_boxes: tuple[int, ...], cycles: int) -> dict:
+    chain = EscChain(load_topology("hydra_full"), cfg, "echo", stack_boxes)
+    master = EscMaster(chain)
+    master.bring_up()
+    # Every actuator enabled with its own force command (as the bus benchmark's PC loop).
+    j = 0
+    for box, s in zip(chain.topology.boxes, master.slaves, strict=True):
+        o = s.out_lad
+        for slot in box.slots:
+            if slot.kind == "actuator":
+                j += 1
+                struct.pack_into("<BBi", master.image, o, 1, 1, 1000 * j)  # 10 N * j
+            o += slot_sizes(slot.kind)[0]
+    rt = np.empty(cycles)
+    box = np.empty(cycles)
+    bad = 0
+    for _ in range(WARMUP):
+        master.cycle()
+        chain.cycle()
+    clock = time.perf_counter
+    cpu0, wall0 = time.process_time(), clock()
+    for k in range(cycles):
+        t0 = clock()
+        wkc = master.cycle()
+        t1 = clock()
+        chain.cycle()
+        t2 = clock()
+        rt[k], box[k] = t1 - t0, t2 - t1
+        bad += wkc != master.expected_wkc
+    wall = clock() - wall0
+    cpu = time.process_time() - cpu0
+    return {"boxes": "echo" if not stack_boxes else f"echo + full stack behind box "
+            f"{', '.join(map(str, stack_boxes))}", "cycles": cycles,
+            "frames_per_cycle": len(master.pieces), "image_bytes": len(master.image),
+            "rt_median_us": float(np.median(rt) * 1e6),
+            "rt_p99_us": float(np.percentile(rt, 99) * 1e6),
+            "box_median_us": float(np.median(box) * 1e6),
+            "box_p99_us": float(np.percentile(box, 99) * 1e6),
+            "cpu_over_wall": cpu / wall, "wkc_errors": bad}
+
+
+def bench_ethercat(cfg: Config, cycles: int = 2000) -> list[dict]:
+    return [bench_row(cfg, (), cycles), bench_row(cfg, (0,), max(cycles // 4, 50))]
+
+
+def bench_wire(cycles: int = 2000) -> list[dict]:
+    """The same two rows over a veth pair: ``serve --transport ethercat`` in its own process
+    on one end, SOEM (pysoem) on the other; round trip = SOEM's send + receive of a cycle's
+    frames (wall, in the master's process), 1 kHz, every actuator commanded. Root only."""
+    from hil.fieldbus.esc.veth import run_master, start_serve, stop_serve, veth_namespace
+
+    rows = []
+    for extra, what in (((), "echo"), (("--stack-box", "0"),
+                                       "echo + full stack behind box 0")):
+        with veth_namespace() as ns:
+            serve = start_serve(ns, *extra)
+            try:
+                res = run_master(ns, "rtt", str(cycles))
+            finally:
+                report = stop_serve(serve)
+        rtt = np.array(res["rtt_us"][WARMUP:])
+        rows.append({"boxes": what + ", over veth (SOEM)", "cycles": len(rtt),
+                     "frames_per_cycle": 2, "image_bytes": res["image_bytes"],
+                     "rt_median_us": float(np.median(rtt)),
+                     "rt_p99_us": float(np.percentile(rtt, 99)),
+                     "box_median_us": float("nan"), "box_p99_us": float("nan"),
+                     "cpu_over_wall": float("nan"), "wkc_errors": res["bad_wkc"],
+                     "serve_overruns": report["overruns"], "serve_cycles": report["cycles"]})
+    return rows
+
+
+def format_table(rows: list[dict]) -> str:
+    lines = ["| hydra_full, 16 ESC slaves | round trip median / p99 [us] | box cycle median / "
+             "p99 [us] | CPU / wall | WKC errors |", "|---|---:|---:|---:|---:|"]
+    for r in rows:
+        box = ("-" if r["box_median_us"] != r["box_median_us"]  # NaN: not measured
+               else f"{r['box_median_us']:.0f} / {r['box_p99_us']:.0f}")
+        cpu = "-" if r["cpu_over_wall"] != r["cpu_over_wall"] else f"{r['cpu_over_wall']:.2f}"
+        lines.append(f"| {r['boxes']} ({r['cycles']} cycles, {r['frames_per_cycle']} frames) "
+                     f"| {r['rt_median_us']:.0f} / {r['rt_p99_us']:.0f} | {box} | {cpu} | "
+                     f"{r['wkc_errors']} |")
+    return "\n".join(lines)

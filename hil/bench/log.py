@@ -1,0 +1,164 @@
+"""What logging costs a ``bus run``, and what the decoded-signal encoding costs.
+
+``eha-hil bench log``:
+
+* **Overhead**: the same run (topology, cycles, force sine) without a log and with
+  ``--log`` at a level, in pairs (the order alternating), in this process after a warm-up
+  of both (numba's compiled code loaded). Per pair the ratio logged / bare of CPU time
+  (``time.process_time``: what this process used, the figure that holds on a shared
+  machine) and of wall time; the median of the pairs is reported, and the ratio of the
+  fastest runs' CPU times (other processes can only make a run slower, so the minima are
+  the least disturbed). The target: at most 1.20 at the default level.
+* **Encoding**: one actuator's decoded signals (:data:`hil.replay.signals.ACTUATOR`,
+  ``n`` samples of random values, so compression is a worst case) encoded as protobuf
+  (our block encoder) and as JSON (one ``json.dumps`` per sample, as a JSON channel
+  needs), each written to an MCAP file (zstd): bytes per message, file size, CPU time per
+  message for encoding and for encoding + writing.
+"""
+
+from __future__ import annotations
+
+import statistics
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from hil.framelog.writer import FrameLogWriter
+from hil.replay.signals import ACTUATOR
+
+
+@dataclass(frozen=True)
+class Overhead:
+    level: str
+    topology: str
+    seconds: float
+    pairs: int
+    cpu_ratio: float        # median over pairs of logged / bare CPU time
+    wall_ratio: float
+    cpu_ratio_min: float    # fastest logged / fastest bare: what contention inflates least
+    bare_cpu_s: float       # medians of the single runs
+    bare_wall_s: float
+    logged_cpu_s: float
+    logged_wall_s: float
+    log_bytes: int
+
+
+@dataclass(frozen=True)
+class EncodingCost:
+    encoding: str
+    messages: int
+    message_bytes: float    # mean
+    file_bytes: int
+    encode_us: float        # CPU per message
+    encode_write_us: float  # CPU per message, encoding and writing to MCAP
+
+
+def _timed(fn) -> tuple[float, float]:  # noqa: ANN001
+    c0, w0 = time.process_time(), time.perf_counter()
+    fn()
+    return time.process_time() - c0, time.perf_counter() - w0
+
+
+def bench_overhead(cfg, seconds: float = 1.0, level: str = "mcu", pairs: int = 3,  # noqa: ANN001
+                   topology: str = "bench_one_box") -> Overhead:
+    """Paired bare and logged runs of ``seconds`` simulated seconds (see the module doc)."""
+    from hil.fieldbus.system import BusSystem
+    from hil.fieldbus.topology import load_topology
+    from hil.replay.record import run_logged
+    from hil.sim.pc import demo_pc
+
+    topo = load_topology(topology)
+    cycles = max(int(round(seconds * 1000)), 1)
+    with tempfile.TemporaryDirectory() as d:
+        path = Path(d) / "bench.mcap"
+
+        def bare(n: int = cycles) -> None:
+            with BusSystem(topo, cfg, "inproc", model="stack") as bs:
+                bs.run(n, demo_pc())
+
+        def logged(n: int = cycles) -> None:
+            run_logged(topo, cfg, n, demo_pc(), path, level=level)
+
+        bare(50)
+        logged(50)  # warm-up: compiled code loaded, imports done
+        runs: list[tuple[tuple[float, float], tuple[float, float]]] = []
+        for i in range(pairs):
+            if i % 2:
+                lg = _timed(logged)
+                b = _timed(bare)
+            else:
+                b = _timed(bare)
+                lg = _timed(logged)
+            runs.append((b, lg))
+        size = path.stat().st_size
+    med = statistics.median
+    return Overhead(level, topology, cycles / 1000, pairs,
+                    med(lg[0] / b[0] for b, lg in runs), med(lg[1] / b[1] for b, lg in runs),
+                    min(lg[0] for _, lg in runs) / min(b[0] for b, _ in runs),
+                    med(b[0] for b, _ in runs), med(b[1] for b, _ in runs),
+                    med(lg[0] for _, lg in runs), med(lg[1] for _, lg in runs), size)
+
+
+def _columns(n: int, seed: int = 1) -> dict[str, np.ndarray]:
+    rng = np.random.default_rng(seed)
+    cols = {}
+    for f in ACTUATOR.fields:
+        if f.kind == "double":
+            cols[f.name] = rng.normal(0.0, 1e5 if f.unit == "Pa" else 10.0, n)
+        elif f.kind == "bool":
+            cols[f.name] = rng.integers(0, 2, n)
+        else:
+            cols[f.name] = rng.integers(0, 8, n)
+    return cols
+
+
+def bench_encodings(n: int = 5000) -> list[EncodingCost]:
+    """Protobuf against JSON for ``n`` samples of :data:`ACTUATOR`."""
+    cols = _columns(n)
+    t = np.arange(n, dtype=np.int64) * 200_000
+    out = []
+    with tempfile.TemporaryDirectory() as d:
+        for enc in ("protobuf", "json"):
+            path = Path(d) / f"{enc}.mcap"
+            encode = ACTUATOR.encode if enc == "protobuf" else ACTUATOR.encode_json
+            c_enc, _ = _timed(lambda encode=encode: encode(cols, n))
+            msgs = encode(cols, n)
+
+            def write(enc: str = enc, path: Path = path, encode=encode) -> None:  # noqa: ANN001
+                with FrameLogWriter(path, level="bus") as w:
+                    if enc == "protobuf":
+                        ch = w.add_protobuf_channel("/a", ACTUATOR)
+                    else:
+                        ch = w.add_channel("/a", "json", schema_name=ACTUATOR.full_name,
+                                           schema_encoding="jsonschema",
+                                           schema_data=ACTUATOR.json_schema)
+                    w.write_messages(ch, t, encode(cols, n))
+
+            c_all, _ = _timed(write)
+            out.append(EncodingCost(enc, n, sum(map(len, msgs)) / n, path.stat().st_size,
+                                    c_enc / n * 1e6, c_all / n * 1e6))
+    return out
+
+
+def format_report(ov: Overhead | None, enc: list[EncodingCost]) -> str:
+    lines = []
+    if ov is not None:
+        lines += [
+            f"bus run --log at level {ov.level} ({ov.topology}, {ov.seconds:g} s simulated, "
+            f"{ov.pairs} pairs, medians):",
+            f"  bare:   CPU {ov.bare_cpu_s:.3f} s, wall {ov.bare_wall_s:.3f} s",
+            f"  logged: CPU {ov.logged_cpu_s:.3f} s, wall {ov.logged_wall_s:.3f} s, "
+            f"log {ov.log_bytes / 1e3:.0f} kB",
+            f"  logged / bare: CPU {ov.cpu_ratio:.3f}, wall {ov.wall_ratio:.3f} "
+            f"(target <= 1.20); fastest logged / fastest bare, CPU {ov.cpu_ratio_min:.3f}",
+        ]
+    lines.append(f"decoded signals of one actuator ({enc[0].messages} samples, "
+                 f"{len(ACTUATOR.fields)} fields, random values), CPU per message:")
+    for e in enc:
+        lines.append(f"  {e.encoding:8s}: {e.message_bytes:6.1f} B/message, MCAP (zstd) "
+                     f"{e.file_bytes / 1e3:7.1f} kB, encode {e.encode_us:6.2f} us, "
+                     f"encode + write {e.encode_write_us:6.2f} us")
+    return "\n".join(lines)

@@ -1,0 +1,388 @@
+"""Command-line verbs of the identification tool (wired into ``hil.cli`` by the project).
+
+* ``eha-hil identify DATA.csv [-c PRESET|FILE] [--set K=V] [--report DIR] [--json]
+  [--max-effects N] [--load CASE] [--sample-rate HZ]``
+* ``eha-hil bench identify [--seconds 16] [--effect NAME] [--realism rig|plant]`` — wall and
+  CPU time of a whole run on a synthetic 5 kHz record against the 20 s CPU budget;
+* ``eha-hil identify-synth OUT.csv --load fixed_piston --effect pump_coulomb_friction`` — an
+  example dataset from the project's plant, to try the tool on; ``--realism rig`` takes it
+  from the independent rig simulator (:mod:`hil.identify.rig`) instead.
+
+A user mistake (malformed CSV, unknown preset, unusable report directory) prints one line
+starting ``eha-hil identify: `` (or ``identify-synth``) on stderr and returns 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+import time
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+
+from hil.cli.args import (
+    add_config_options,
+    float_range,
+    input_file,
+    int_range,
+    output_dir,
+    output_file,
+)
+
+EXIT_OK = 0
+EXIT_USAGE = 2
+#: Rows identified by default: ~40 s at 5 kHz, about 1.5 GB at the peak (docs/identify.md).
+DEFAULT_MAX_ROWS = 200_000
+#: Peak memory of an identification: a base plus this per row used (measured with
+#: /usr/bin/time -v, docs/identify.md), for the size check before any reading.
+BASE_BYTES = 400e6
+BYTES_PER_ROW = 7_000
+#: CPU seconds (all threads) a 16 s, 5 kHz record may take to identify on the 2-core machine.
+CPU_BUDGET_S = 20.0
+
+
+def _err(verb: str, msg: str) -> int:
+    print(f"eha-hil {verb}: {msg}", file=sys.stderr)
+    return EXIT_USAGE
+
+
+def configure_identify(parser: argparse.ArgumentParser) -> None:
+    """Arguments of ``eha-hil identify``."""
+    parser.add_argument("data", metavar="DATA.csv", type=input_file("measured-data CSV"),
+                        help="measured-data CSV (docs/identify.md)")
+    # -c/--set: the constants and start values, as on every other verb
+    add_config_options(parser)
+    parser.add_argument("--preset", dest="config", help=argparse.SUPPRESS)  # old name of -c
+    parser.add_argument("--report", metavar="DIR", type=output_dir,
+                        help="write tables and plots into DIR")
+    parser.add_argument("--json", action="store_true", help="print the JSON summary")
+    parser.add_argument("--max-effects", type=int_range(0, 20), default=6,
+                        help="stop after adding this many effects, 0..20")
+    parser.add_argument("--quiet", action="store_true", help="no progress on stderr")
+    parser.add_argument("--max-rows", type=int_range(1000, 5_000_000), default=DEFAULT_MAX_ROWS,
+                        metavar="N", help="use at most the first N data rows (a longer file "
+                        "is not read past them; the size check says how many it holds and "
+                        "the memory it would need), 1000..5000000")
+    parser.add_argument("--load", choices=("fixed_piston", "free_piston", "conrod_fixed"),
+                        default=None, help="load case, for a file without a '# load:' line "
+                        "(a header line that says otherwise is an error)")
+    parser.add_argument("--sample-rate", type=float_range(0.0, 1e9, open_lo=True, unit="Hz"),
+                        default=None, metavar="HZ",
+                        help="sample rate, Hz, for a file without a '# sample_rate_hz:' line "
+                        "(a header line that says otherwise is an error); without either it "
+                        "is inferred from the median time step")
+    parser.add_argument("--intersample", choices=("zoh", "foh", "bl"), default=None,
+                        help="how the logged current behaved between samples: zoh (held), "
+                        "foh (linear), bl (band-limited); default: the '# intersample:' "
+                        "header line, else estimated from the data (the report says why)")
+
+
+def run_identify(args: argparse.Namespace) -> int:
+    """Run ``eha-hil identify``; 0 on success, 2 on a user error (one line on stderr)."""
+    import json
+
+    from hil.identify.checks import RefusedData
+    from hil.identify.csvdata import CsvError, read_measured
+    from plant.config import ConfigError, load_config
+
+    try:
+        cfg = load_config(args.config, getattr(args, "set", None) or ())
+    except ConfigError as exc:
+        return _err("identify", str(exc))  # names the preset or file and the key
+    def progress(msg: str) -> None:
+        if not args.quiet:
+            print(f"identify: {msg}", file=sys.stderr, flush=True)
+
+    max_rows = getattr(args, "max_rows", DEFAULT_MAX_ROWS)
+    too_big = _size_check(args.data, max_rows, progress)
+    if too_big:
+        return _err("identify", too_big)
+    try:
+        data = read_measured(args.data, load=getattr(args, "load", None),
+                             sample_rate_hz=getattr(args, "sample_rate", None),
+                             max_rows=max_rows, progress=progress)
+    except CsvError as exc:
+        return _err("identify", str(exc))
+    from hil.identify import report
+    from hil.identify.pipeline import identify
+
+    for note in data.notes:  # what reading did to the file (also in the report's notes)
+        progress(f"{args.data}: {note}")
+
+    try:
+        rep = identify(data, cfg, max_effects=args.max_effects, progress=progress,
+                       intersample=args.intersample)
+    except RefusedData as exc:
+        # a record that cannot be identified: say why, never a verdict
+        if args.json:
+            print(json.dumps({"file": str(args.data), "refused": str(exc)}))
+        return _err("identify", f"{args.data}: refused: {exc}")
+    except ValueError as exc:
+        return _err("identify", f"{args.data}: {exc}")
+    rep.notes[:0] = [n for n in data.notes if n not in rep.notes]
+    from hil.cli import outputs
+
+    # the report goes to a temporary directory whose files are moved in when all are
+    # written: a failed report leaves nothing half-written; the result is printed anyway
+    if args.report and outputs.write_dir("report", args.report,
+                                         lambda tmp: report.write_report(rep, tmp)):
+        progress(f"report written to {args.report}/")
+    print(report.to_json(rep) if args.json else report.text(rep))
+    if data.cut:
+        from hil.cli import cutfiles
+
+        return cutfiles.report("identify", args.data, data.cut, float(data.t[-1] - data.t[0]))
+    return EXIT_OK
+
+
+def _size_check(path: str, max_rows: int, progress) -> str:  # noqa: ANN001
+    """Before reading: how many rows the file holds (by its size), how many will be used,
+    the memory that takes; the refusal (one line) if it cannot fit in this machine."""
+    import os
+
+    from hil.identify.csvdata import estimate_rows
+
+    rows = estimate_rows(path)
+    used = min(rows, max_rows)
+    need = BASE_BYTES + BYTES_PER_ROW * used
+    try:
+        avail = os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (ValueError, OSError, AttributeError):  # pragma: no cover - not Linux
+        avail = None
+    size = os.path.getsize(path)
+    if avail is not None and need > avail:
+        return (f"{path}: identifying {used:,} rows needs about {need / 1e9:.1f} GB, "
+                f"{avail / 1e9:.1f} GB is free: give a smaller --max-rows")
+    if rows > max_rows or size > 50e6:
+        progress(f"{path}: {size / 1e6:,.0f} MB, about {rows:,} rows by its size; using "
+                 f"{'the first ' if rows > max_rows else ''}{used:,} (--max-rows {max_rows:,})"
+                 f", about {need / 1e9:.1f} GB")
+    return ""
+
+
+def configure_synth(parser: argparse.ArgumentParser) -> None:
+    """Arguments of ``eha-hil identify-synth``."""
+    from hil.identify.rig import INTERSAMPLE, RIG_EFFECTS, TEMPERATURE_SHAPES
+    from hil.identify.synth import ALL_SYNTH_EFFECTS, PROFILES
+
+    parser.add_argument("out", metavar="OUT.csv", type=output_file((".csv",), text=True),
+                        help="CSV file to write (an existing file only if it is text)")
+    parser.add_argument("--load", default="fixed_piston",
+                        choices=("fixed_piston", "free_piston", "conrod_fixed"),
+                        help="load case of the record")
+    parser.add_argument("--realism", default="plant", choices=("plant", "rig"),
+                        help="plant: the project's plant (default); rig: the independent "
+                        "rig simulator (drawn parameters, continuous current, sensor chains)")
+    # validated in run_synth: the two generators know different effects
+    parser.add_argument("--effect", action="append", default=[], metavar="NAME",
+                        help="effect to switch on (repeatable); none gives the null dataset. "
+                        f"plant: {', '.join(ALL_SYNTH_EFFECTS)}; rig: {', '.join(RIG_EFFECTS)}")
+    parser.add_argument("--magnitude", action="append", default=[], metavar="EFFECT.KEY=V",
+                        help="override a magnitude, e.g. pump_coulomb_friction.force_n=60")
+    parser.add_argument("--seconds", type=float_range(1.0, 600.0, open_lo=True, unit="s"),
+                        default=8.0, help="record length, s, in (1, 600]")
+    parser.add_argument("--seed", type=int_range(0, 2**32 - 1), default=1,
+                        help="noise seed: the same seed gives the same record")
+    parser.add_argument("--preset", dest="config", help=argparse.SUPPRESS)  # old name of -c
+    parser.add_argument("-c", "--config", dest="config", default=None,
+                        metavar="PRESET|FILE",
+                        help="actuator preset or TOML file the record is made from (default: "
+                        "hydra_linear for the plant, hydra_default for the rig's nominal "
+                        "parameters)")
+    parser.add_argument("--set", action="append", metavar="SECTION.KEY=VALUE",
+                        help="override one configuration value (repeatable)")
+    parser.add_argument("--profile", default="multisine", choices=PROFILES,
+                        help="excitation: multisine (default); resonance (piston free: "
+                        "strong 0.7-2 kHz band over a 0.5 Hz position sweep, makes k_s(x) "
+                        "identifiable); slide (piston free: triangle sweep at constant "
+                        "speed, quick reversals, avoids the seal's stick-slip)")
+    parser.add_argument("--temperature", default=None, choices=tuple(TEMPERATURE_SHAPES),
+                        help="rig: oil temperature shape (default constant, or ramp_level "
+                        "when an effect needs a moving temperature)")
+    parser.add_argument("--current-noise-lsb", type=float_range(0.0, 100.0, unit="LSB"),
+                        default=None, metavar="X",
+                        help="rig: noise of the logged current, LSB of the 12-bit +-40 A "
+                        "converter (default 1)")
+    parser.add_argument("--intersample", default=None, choices=INTERSAMPLE,
+                        help="rig: continuous current (default) or the logged value held")
+    parser.add_argument("--header-intersample", action="store_true",
+                        help="rig: write '# intersample: ...' into the CSV header")
+    parser.add_argument("--spread", type=float_range(0.0, 0.5), default=None,
+                        help="rig: relative spread of the drawn parameters, 0..0.5 "
+                        "(default 0.15)")
+
+
+def _synth_effects(args: argparse.Namespace, known: Sequence[str],
+                   magnitudes: Mapping[str, Mapping[str, float]], realism: str
+                   ) -> dict[str, dict[str, float]] | str:
+    """``--effect`` and ``--magnitude`` as {effect: {key: value}}, or the one-line mistake.
+    A pulsation's further orders (``amplitude_2``, ...) are keys of the rig only."""
+    for e in args.effect:
+        if e not in known:
+            return (f"--effect {e}: unknown effect for --realism {realism} "
+                    f"(known: {', '.join(known)})")
+    effects: dict[str, dict[str, float]] = {e: {} for e in args.effect}
+    for item in args.magnitude:
+        try:
+            key, value = item.split("=", 1)
+            name, field = key.split(".", 1)
+            val = float(value)
+        except ValueError:
+            return f"--magnitude {item}: expected EFFECT.KEY=NUMBER"
+        if name not in effects:
+            return f"--magnitude {item}: effect {name} not switched on"
+        extra_order = (realism == "rig" and name == "pump_pulsation"
+                       and field.rsplit("_", 1)[-1].isdigit())
+        if field not in magnitudes[name] and not extra_order:
+            return (f"--magnitude {item}: unknown key "
+                    f"(known: {', '.join(magnitudes[name]) or 'none'})")
+        effects[name][field] = val
+    return effects
+
+
+def run_synth(args: argparse.Namespace) -> int:
+    """Write an example dataset; prints what was put into it."""
+    from hil.identify.csvdata import write_measured
+    from hil.identify.synth import ALL_SYNTH_EFFECTS, DEFAULT_MAGNITUDES, generate
+    from plant.config import ConfigError, load_config
+
+    if args.realism == "rig":
+        return _run_rig_synth(args)
+    rig_only = [f"--{k.replace('_', '-')}" for k in ("temperature", "current_noise_lsb",
+                                                      "intersample", "spread")
+                if getattr(args, k, None) is not None]
+    if getattr(args, "header_intersample", False):
+        rig_only.append("--header-intersample")
+    if rig_only:
+        return _err("identify-synth", f"{rig_only[0]}: only with --realism rig")
+    effects = _synth_effects(args, ALL_SYNTH_EFFECTS, DEFAULT_MAGNITUDES, "plant")
+    if isinstance(effects, str):
+        return _err("identify-synth", effects)
+    out = Path(args.out)
+    try:
+        cfg = load_config(args.config or "hydra_linear", args.set or ())
+        res = generate(args.load, effects, seconds=args.seconds, seed=args.seed,
+                       preset=cfg, profile=args.profile)
+    except (ConfigError, ValueError) as exc:
+        return _err("identify-synth", str(exc))
+    truth = "; ".join(f"{k} {v}" for k, v in res.truth.items()) or "none"
+    from hil.cli import outputs
+
+    wrote = outputs.write("record", out, lambda tmp: write_measured(tmp, res.data,
+                                                                     {"effects": truth}))
+    said = "wrote" if wrote else "made (NOT written)"
+    print(f"{said} {out}: {args.load}, {res.data.n} samples at "
+          f"{res.data.sample_rate_hz:g} Hz, "
+          f"effects: {truth}")
+    return EXIT_OK
+
+
+def _run_rig_synth(args: argparse.Namespace) -> int:
+    """``identify-synth --realism rig``: a record from the independent rig simulator."""
+    from hil.identify.csvdata import write_measured
+    from hil.identify.rig import RIG_DEFAULT_MAGNITUDES, RIG_EFFECTS, generate_rig
+    from plant.config import ConfigError, load_config
+
+    effects = _synth_effects(args, RIG_EFFECTS, RIG_DEFAULT_MAGNITUDES, "rig")
+    if isinstance(effects, str):
+        return _err("identify-synth", effects)
+    if args.seconds <= 1.0:
+        return _err("identify-synth", f"--seconds {args.seconds}: need more than 1 s")
+    out = Path(args.out)
+    if not out.parent.exists() and str(out.parent):
+        return _err("identify-synth", f"{args.out}: directory {out.parent} does not exist")
+    try:
+        res = generate_rig(
+            args.load, effects, seconds=args.seconds, seed=args.seed, profile=args.profile,
+            temperature=args.temperature,
+            current_noise_lsb=1.0 if args.current_noise_lsb is None else args.current_noise_lsb,
+            intersample=args.intersample or "continuous",
+            spread=0.15 if args.spread is None else args.spread,
+            preset=load_config(args.config or "hydra_default", args.set or ()),
+            header_intersample=args.header_intersample)
+    except (ConfigError, ValueError) as exc:
+        return _err("identify-synth", str(exc))
+    # the truth is printed, not written: the file holds only what a rig's log would
+    from hil.cli import outputs
+
+    wrote = outputs.write("record", out, lambda tmp: write_measured(tmp, res.data,
+                                                                     dict(res.data.header)))
+    par = res.truth["parameters"]
+    said = "wrote" if wrote else "made (NOT written)"
+    print(f"{said} {out}: rig, {args.load}, {res.data.n} samples at "
+          f"{res.data.sample_rate_hz:g} Hz, intersample {res.config['intersample']}, "
+          f"temperature {res.config['temperature']}")
+    print("  true parameters: " + ", ".join(f"{k} {v:.6g}" for k, v in par.items()))
+    for name, vals in res.truth["effects"].items():
+        print(f"  {name}: " + ", ".join(f"{k} {v:.6g}" for k, v in vals.items()))
+    return EXIT_OK
+
+
+def configure_bench(parser: argparse.ArgumentParser) -> None:
+    """Arguments of ``eha-hil bench identify``."""
+    parser.add_argument("--seconds", type=float_range(1.0, 600.0, open_lo=True, unit="s"),
+                        default=16.0, help="record length, s, in (1, 600]")
+    parser.add_argument("--load", default="fixed_piston",
+                        choices=("fixed_piston", "free_piston", "conrod_fixed"),
+                        help="load case of the synthetic record")
+    add_config_options(parser)  # the fitted model's configuration, as for identify
+    parser.add_argument("--effect", action="append", default=None,
+                        help="effects in the record (default: pump_pulsation and "
+                             "pump_coulomb_friction)")
+    parser.add_argument("--realism", default="rig", choices=("rig", "plant"),
+                        help="where the record comes from: rig (the independent rig "
+                        "simulator, default) or plant (the project's plant)")
+    parser.add_argument("--json", action="store_true", help="print JSON")
+
+
+def run_bench(args: argparse.Namespace) -> int:
+    """Time a whole identification (CSV read to report) of a synthetic 5 kHz record: wall
+    and CPU seconds (all threads of this process), against the CPU budget."""
+    import json
+
+    from hil.identify.csvdata import read_measured, write_measured
+    from hil.identify.pipeline import identify
+    from plant.config import load_config
+
+    effects = args.effect or ["pump_pulsation", "pump_coulomb_friction"]
+    cfg = load_config(args.config, args.set or ())
+    if args.realism == "rig":
+        from hil.identify.rig import RIG_EFFECTS
+        from hil.identify.rig import generate_rig as make
+        known = RIG_EFFECTS
+    else:
+        from hil.identify.synth import ALL_SYNTH_EFFECTS as known
+        from hil.identify.synth import generate as make
+    for e in effects:
+        if e not in known:
+            return _err("bench identify", f"--effect {e}: unknown for --realism "
+                        f"{args.realism} (known: {', '.join(known)})")
+    warm = make(args.load, effects, seconds=2.0, seed=7)
+    identify(warm.data, cfg, max_effects=1)  # compile the kernels outside the timing
+    res = make(args.load, effects, seconds=args.seconds, seed=3)
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "bench.csv"
+        write_measured(path, res.data)
+        t0, c0 = time.perf_counter(), time.process_time()
+        data = read_measured(path)
+        rep = identify(data, cfg)
+        wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+    out = {"seconds": args.seconds, "samples": data.n, "sample_rate_hz": data.sample_rate_hz,
+           "load": args.load, "realism": args.realism, "effects_in_data": effects,
+           "effects_added": [e.label for e in rep.effects_added],
+           "wall_s": wall, "cpu_s": cpu, "cpu_budget_s": CPU_BUDGET_S,
+           "cpu_ratio_to_budget": cpu / CPU_BUDGET_S, "cpu_per_wall": cpu / wall}
+    if args.json:
+        print(json.dumps(out, indent=2))
+    else:
+        print(f"bench identify: {args.seconds:g} s at {data.sample_rate_hz:g} Hz "
+              f"({data.n} samples, {args.load}, {args.realism}, effects {', '.join(effects)})")
+        print(f"  CPU {cpu:.1f} s = {cpu / CPU_BUDGET_S:.2f} x the {CPU_BUDGET_S:.0f} s budget; "
+              f"wall {wall:.1f} s (CPU/wall {cpu / wall:.2f}); "
+              f"added: {', '.join(out['effects_added']) or 'none'}")
+    return EXIT_OK
+
+
+__all__ = ["configure_bench", "configure_identify", "configure_synth", "run_bench",
+           "run_identify", "run_synth"]

@@ -1,0 +1,74 @@
+"""``eha-hil identify-check``: the identification judged on the independent rig's matrix.
+
+::
+
+    eha-hil identify-check [--seeds 1 2] [--load L] [--case TEXT] [--jobs N]
+                           [--markdown FILE] [--json]
+
+Runs :func:`hil.identify.rigcheck.run_matrix` (a line of progress per case on stderr), prints
+the markdown table (or JSON) and exits 0 when every case is right, 1 otherwise.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+
+from hil.cli.args import int_range, output_file
+
+
+def configure_check(parser: argparse.ArgumentParser) -> None:
+    """Arguments of ``eha-hil identify-check``."""
+    from hil.identify.rigcheck import LOADS
+
+    parser.add_argument("--seeds", type=int_range(0, 2**31 - 1), nargs="+", default=[1, 2],
+                        help="rig seeds (parameters, phases, noise); default 1 2")
+    parser.add_argument("--load", choices=LOADS, action="append", default=None,
+                        help="only cases of this load (repeatable)")
+    parser.add_argument("--case", action="append", default=None, metavar="TEXT",
+                        help="only cases whose label contains TEXT (repeatable), e.g. "
+                             "'null' or 'seal_friction'")
+    parser.add_argument("--jobs", type=int_range(1, 64), default=min(2, os.cpu_count() or 1),
+                        help="worker processes (default: up to 2)")
+    parser.add_argument("--markdown", type=output_file((".md",), text=True), default=None,
+                        metavar="FILE.md", help="also write the table to this file")
+    parser.add_argument("--json", action="store_true", help="print JSON instead of the table")
+
+
+def run_check(args: argparse.Namespace) -> int:
+    """Run the matrix; 0 when every case is right, 1 when one is not, 2 for no case."""
+    from hil.identify.rigcheck import CaseResult, default_cases, markdown, run_matrix
+
+    cases = default_cases()
+    if args.load:
+        cases = [c for c in cases if c.load in args.load]
+    if args.case:
+        cases = [c for c in cases if any(s in c.label for s in args.case)]
+    if not cases:
+        print("eha-hil identify-check: no case matches --load/--case", file=sys.stderr)
+        return 2
+
+    def progress(r: CaseResult, i: int, n: int) -> None:
+        mark = "ok " if r.right else "NO "
+        print(f"[{i}/{n}] {mark} seed {r.seed} {r.case.label}: {r.why} "
+              f"({r.wall_s:.0f} s wall, {r.cpu_s:.0f} s CPU)", file=sys.stderr, flush=True)
+
+    results = run_matrix(cases, args.seeds, jobs=args.jobs, progress=progress)
+    table = markdown(results)
+    if args.markdown:
+        from pathlib import Path
+
+        from hil.cli import outputs
+
+        outputs.write("table", args.markdown,
+                      lambda tmp: Path(tmp).write_text(table + "\n", encoding="utf-8"))
+    if args.json:
+        print(json.dumps([r.as_dict() for r in results], indent=2))
+    else:
+        print(table)
+    return 0 if all(r.right for r in results) else 1
+
+
+__all__ = ["configure_check", "run_check"]

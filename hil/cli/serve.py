@@ -1,0 +1,565 @@
+"""``eha-hil serve``: the simulated robot's side of the fieldbus, paced to the wall clock.
+
+The chain of joint driver boxes (:class:`~hil.fieldbus.chain.Chain`, plant + driver boards
++ MCU per actuator with the ``stack`` model) answers EtherCAT frames (the PDU, with a CRC-32
+trailer on serial and without on udp by default: :mod:`hil.fieldbus.wire`) on a serial port
+(COBS + CRC-32 framing) or a UDP socket, so that a real master (an MCU board, the PC's
+EtherCAT code, or another program such as :class:`hil.fieldbus.master.Master` in another
+process) closes the loop in real time.
+
+Pacing (:class:`PacedServer`): cycle ``k`` of the boxes (20 ticks, 1 ms of simulated time)
+is released at ``t0 + k * 1 ms`` of ``time.perf_counter`` and must be finished by
+``t0 + (k + 1) * 1 ms``; the schedule is computed from ``t0``, never from the previous
+wake-up, so no drift accumulates. Between releases the loop waits on the transport and
+answers every frame at once with the inputs as they stand (the chain runs in paced mode:
+frames never move time; their ``idx`` only discards a frame older than the newest one).
+A cycle finished after its deadline is an *overrun* (counted, worst lateness kept); a late
+loop catches up by running cycles back to back, serving frames between them, and if it
+falls more than :data:`MAX_LAG_CYCLES` behind, the schedule is moved forward and the
+skipped cycles are counted as *slipped* (simulated time then lags the wall clock).
+"""
+
+from __future__ import annotations
+
+import argparse
+import gc
+import json
+import os
+import signal
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass
+
+from hil.cli.args import float_range, int_range
+from hil.fieldbus import wire
+from hil.fieldbus.chain import Chain
+from hil.transports import TransportError
+from protocols import ethercat as ec
+
+#: One fieldbus cycle of wall time [s].
+PERIOD_S = 1e-3
+#: A loop more than this many cycles behind moves its schedule forward (slipped cycles).
+MAX_LAG_CYCLES = 50
+#: Cycles run before the clock starts (first-call set-up of the models takes ~10 ms).
+WARMUP_CYCLES = 3
+#: A pause longer than this [s] between two frames starts a new master session: the
+#: cycle numbers before and after it are not compared (no missed cycles counted).
+SESSION_GAP_S = 0.2
+#: Default allowance of overrunning cycles [% of cycles] before the run counts as failed.
+DEFAULT_MAX_OVERRUN_PERCENT = 1.0
+
+
+@dataclass
+class ServeStats:
+    """What a paced run did; ``as_dict`` adds the derived figures."""
+
+    cycles: int = 0             # cycles of the boxes run on the clock (1 ms simulated each)
+    wall_s: float = 0.0         # wall time from the clock's start to the end
+    overruns: int = 0           # cycles finished after their deadline
+    stalls: int = 0             # runs of consecutive overruns (one stall: several cycles)
+    worst_late_s: float = 0.0   # largest lateness past a deadline
+    slipped_cycles: int = 0     # cycles skipped when the loop fell MAX_LAG_CYCLES behind
+    advance_s: float = 0.0      # wall time spent simulating the boxes
+    worst_advance_s: float = 0.0
+    handle_s: float = 0.0       # wall time spent answering frames
+    frames_received: int = 0    # frames the transport delivered
+    frames_served: int = 0      # frames answered
+    bad_frames: int = 0         # CRC trailer / PDU failed: not answered (chain)
+    stale_frames: int = 0       # older than the newest frame seen: not answered (chain)
+    missed_cycles: int = 0      # master cycle numbers skipped within a session
+    incomplete_cycles: int = 0  # master cycles whose frames did not cover every box
+    sessions: int = 0           # runs of frames separated by more than SESSION_GAP_S
+    send_errors: int = 0        # replies the transport refused
+
+    def as_dict(self) -> dict:
+        d = asdict(self)
+        sim = self.cycles * PERIOD_S
+        d["simulated_s"] = sim
+        d["real_time_factor"] = sim / self.wall_s if self.wall_s > 0 else 0.0
+        d["compute_speed_factor"] = sim / self.advance_s if self.advance_s > 0 else 0.0
+        d["load"] = (self.advance_s + self.handle_s) / self.wall_s if self.wall_s > 0 else 0.0
+        d["mean_advance_ms"] = self.advance_s / self.cycles * 1e3 if self.cycles else 0.0
+        d["worst_advance_ms"] = self.worst_advance_s * 1e3
+        d["worst_late_ms"] = self.worst_late_s * 1e3
+        d["overrun_fraction"] = self.overruns / self.cycles if self.cycles else 0.0
+        return d
+
+
+class PacedServer:
+    """A paced chain on one transport end. :meth:`run` serves until ``seconds`` of wall
+    time pass (``None``: until ``stop()`` returns True) or the transport fails."""
+
+    def __init__(self, chain: Chain, end, period_s: float = PERIOD_S,
+                 clock: Callable[[], float] = time.perf_counter,
+                 capture: Callable[[int, str, bytes], None] | None = None) -> None:
+        if not chain.paced:
+            raise ValueError("PacedServer needs Chain(..., paced=True)")
+        self.chain = chain
+        self.end = end
+        self.period = period_s
+        self.clock = clock
+        #: capture(wall time ns, "tx"/"rx", frame): every frame received and reply sent.
+        self.capture = capture
+        self.stats = ServeStats()
+        self.error: str | None = None  # a transport failure that ended the run
+        self._windows = [(w.lad, w.end) for w in chain.plan.windows]
+        self._all = (1 << len(self._windows)) - 1
+        self._idx: int | None = None
+        self._covered = 0
+        self._last_frame_t = -1e9
+
+    # --- frames ---------------------------------------------------------------------------
+    def _serve(self, frame: bytes) -> None:
+        st = self.stats
+        t = self.clock()
+        st.frames_received += 1
+        if self.capture is not None:
+            self.capture(time.time_ns(), "tx", frame)
+        if t - self._last_frame_t > SESSION_GAP_S:
+            # A new master session (restarted, cycle numbers from anywhere): do not judge
+            # its first frame stale against the previous session's numbers.
+            self.chain.started = False
+        before = self.chain.stats.bad_frames, self.chain.stats.stale_frames
+        reply = self.chain.handle(frame)
+        if reply is not None:
+            try:
+                self.end.send(reply)
+                st.frames_served += 1
+                if self.capture is not None:
+                    self.capture(time.time_ns(), "rx", reply)
+            except TransportError as exc:
+                st.send_errors += 1
+                self.error = f"send: {exc}"
+            self._audit(frame, t)
+        done = self.clock()
+        st.handle_s += done - t
+        st.bad_frames += self.chain.stats.bad_frames - before[0]
+        st.stale_frames += self.chain.stats.stale_frames - before[1]
+
+    def _audit(self, frame: bytes, t: float) -> None:
+        """Track the master's cycle numbers: skipped ones and cycles not covering every box
+        (the last cycle of a session is not judged: it may be cut short)."""
+        dgs = wire.open_frame(frame, self.chain.crc_trailer)
+        if not dgs:
+            return
+        covered = 0
+        for d in dgs:
+            if d.cmd != ec.Command.LRW:
+                continue
+            lo, hi = d.lad, d.lad + len(d.data)
+            for k, (a, b) in enumerate(self._windows):
+                if lo <= a and b <= hi:
+                    covered |= 1 << k
+        idx = dgs[0].idx
+        st = self.stats
+        if self._idx is None or t - self._last_frame_t > SESSION_GAP_S:
+            st.sessions += 1
+            self._idx, self._covered = idx, covered
+        elif idx == self._idx:
+            self._covered |= covered
+        else:
+            if self._covered != self._all:
+                st.incomplete_cycles += 1
+            st.missed_cycles += ((idx - self._idx) & 0xFF) - 1
+            self._idx, self._covered = idx, covered
+        self._last_frame_t = t
+
+    def _drain(self) -> None:
+        while (frame := self.end.recv(timeout=0)) is not None:
+            self._serve(frame)
+
+    # --- the loop -------------------------------------------------------------------------
+    def run(self, seconds: float | None = None, stop: Callable[[], bool] = lambda: False,
+            progress: Callable[[ServeStats], None] | None = None,
+            progress_every_s: float = 1.0) -> ServeStats:
+        chain, st, period, clock = self.chain, self.stats, self.period, self.clock
+        for _ in range(WARMUP_CYCLES):
+            chain.advance()
+        gc.collect()
+        gc.freeze()  # long-lived objects out of the collector's way: shorter pauses
+        limit = None if seconds is None else int(round(seconds / period))
+        t0 = start = clock()
+        next_report = start + progress_every_s
+        k = 0  # cycles run on the clock
+        was_late = False
+        try:
+            while not stop() and (limit is None or k < limit) and self.error is None:
+                now = clock()
+                release = t0 + k * period
+                if now >= release:
+                    chain.advance()
+                    done = clock()
+                    k += 1
+                    st.cycles = k
+                    spent = done - now
+                    st.advance_s += spent
+                    st.worst_advance_s = max(st.worst_advance_s, spent)
+                    late = done - (t0 + k * period)
+                    if late > 0:
+                        if not was_late:
+                            st.stalls += 1
+                        st.overruns += 1
+                        st.worst_late_s = max(st.worst_late_s, late)
+                        behind = int(late / period)
+                        if behind > MAX_LAG_CYCLES:
+                            t0 += behind * period
+                            st.slipped_cycles += behind
+                    was_late = late > 0
+                    self._drain()
+                else:
+                    frame = self.end.recv(timeout=release - now)
+                    if frame is not None:
+                        self._serve(frame)
+                if progress is not None and now >= next_report:
+                    st.wall_s = now - start
+                    progress(st)
+                    next_report += progress_every_s
+        except TransportError as exc:
+            self.error = str(exc)
+        finally:
+            gc.unfreeze()
+            st.wall_s = clock() - start
+        return st
+
+    def transport_errors(self) -> int:
+        """Frames the transport dropped as damaged (CRC, framing, oversize)."""
+        s = self.end.stats
+        return s.crc_errors + s.framing_errors + s.oversize
+
+
+# --- command line ------------------------------------------------------------------------------
+def _usage(msg: str) -> Exception:
+    from hil.cli.bus import BusUsageError
+
+    return BusUsageError(msg)
+
+
+def serve_backends() -> list[str]:
+    """The transports ``eha-hil serve`` offers (each backend says whether it can)."""
+    from hil.transports import BACKENDS, backend
+
+    return [b for b in BACKENDS if backend(b).serves_remote_masters]
+
+
+def _open_end(args: argparse.Namespace):
+    """(transport end, where it listens, release callable or None). The backend's listen
+    takes the options of ours it declares (``host``, ``baudrate``)."""
+    import inspect
+
+    from hil.transports import backend
+
+    kind = backend(args.transport)
+    declared = inspect.signature(kind.listen).parameters
+    opts = {k: v for k, v in (("host", args.host), ("baudrate", args.baudrate))
+            if k in declared}
+    port = args.port if args.port is not None else kind.default_listen_address
+    if port is None:
+        raise _usage(f"--port: required with --transport {args.transport}")
+    try:
+        listening = kind.listen(port, **opts)
+    except TransportError as exc:
+        raise _usage(str(exc)) from None
+    return listening.end, listening.where, listening.close
+
+
+def _realtime_priority(priority: int = 50) -> None:
+    """SCHED_FIFO for this process (like ``chrt -f 50``); a warning if not permitted. The
+    loop sleeps between cycles, and the kernel's RT throttling keeps 5% for the rest."""
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+    except (AttributeError, OSError) as exc:
+        print(f"eha-hil serve: warning: no real-time priority ({exc}); running as is",
+              file=sys.stderr)
+
+
+def _status_line(st: ServeStats, errors: int) -> str:
+    load = 100 * (st.advance_s + st.handle_s) / max(st.wall_s, 1e-9)
+    return (f"serve: {st.wall_s:6.1f} s  {st.cycles} cycles  overruns {st.overruns} "
+            f"(worst {st.worst_late_s * 1e3:.2f} ms)  frames {st.frames_served} served  "
+            f"errors {errors}  load {load:.0f}%")
+
+
+def _live_view(args: argparse.Namespace, chain: Chain, cfg):  # noqa: ANN202
+    """``--foxglove``: (live view, boxes sending to it), or (None, [])."""
+    if getattr(args, "foxglove", None) is None:
+        return None, []
+    from hil.framelog.live import FoxgloveLive, LiveError, parse_address
+    from hil.replay.record import signal_boxes
+
+    try:
+        live = FoxgloveLive(*parse_address(args.foxglove))
+    except (ValueError, LiveError) as exc:
+        raise _usage(str(exc)) from None
+    boxes = signal_boxes(chain, cfg, live)
+    print(f"eha-hil serve: foxglove live view at {live.url} ({len(boxes)} box(es) with "
+          "decoded signals, sent every 100 ms)", file=sys.stderr, flush=True)
+    return live, boxes
+
+
+def cmd_serve(args: argparse.Namespace, cfg) -> int:
+    from hil.fieldbus.topology import TopologyError, load_topology
+
+    try:
+        topo = load_topology(args.topology)
+    except TopologyError as exc:
+        raise _usage(str(exc)) from None
+    if args.transport == "ethercat":
+        return cmd_serve_ethercat(args, cfg, topo)
+    from hil.cli import outputs
+
+    # the capture is written under a temporary name, renamed when closed (hil.cli.outputs)
+    with outputs.streaming({"capture": args.capture}, {"capture": "capture"}) as tmp:
+        return _serve(args, cfg, topo, tmp.get("capture"))
+
+
+def _serve(args: argparse.Namespace, cfg, topo, capture: str | None) -> int:
+    from hil.fieldbus.capture import CaptureError, CaptureWriter
+    from hil.transports import backend
+
+    model = args.model or ("stack" if topo.n_actuators <= 5 else "echo")
+    trailer = (backend(args.transport).crc_trailer_by_default if args.crc_trailer is None
+               else args.crc_trailer)
+    chain = Chain(topo, cfg, model, paced=True, crc_trailer=trailer)
+    live, live_boxes = _live_view(args, chain, cfg)
+    if args.realtime:
+        _realtime_priority()
+    end, where, release = _open_end(args)
+    cap = None
+    if args.capture:
+
+        def endpoints():
+            ends = end.capture_endpoints()  # (ours: the chain's, the master's)
+            return None if ends is None else (ends[1], ends[0])
+
+        try:
+            cap = CaptureWriter(capture, trailer, endpoints)
+        except CaptureError as exc:
+            end.close()
+            if release is not None:
+                release()
+            raise _usage(str(exc)) from None
+    server = PacedServer(chain, end, capture=None if cap is None else cap.write)
+    frames = [{"lad": lad, "length": n, "wkc": wkc} for lad, n, wkc in chain.plan.frames]
+    plan = ", ".join(f"LRW lad {f['lad']} len {f['length']} WKC {f['wkc']}" for f in frames)
+    print(f"eha-hil serve: ready on {where}; {topo.name}, {model} model, "
+          f"{len(frames)} frame(s) per 1 ms cycle: {plan}; "
+          f"{'with' if trailer else 'without'} CRC-32 trailer", file=sys.stderr, flush=True)
+
+    tty = sys.stderr.isatty()
+
+    def progress(st: ServeStats) -> None:
+        line = _status_line(st, st.bad_frames + server.transport_errors())
+        print(("\r" + line) if tty else line, end="" if tty else "\n", file=sys.stderr,
+              flush=True)
+
+    stopping = []
+
+    def on_signal(signum, frame) -> None:
+        stopping.append(signum)
+
+    old = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        st = server.run(args.seconds, stop=lambda: bool(stopping),
+                        progress=None if args.quiet else progress)
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)
+        transport = end.stats.as_dict()
+        terrors = server.transport_errors()
+        end.close()
+        if release is not None:
+            release()
+        if cap is not None:
+            cap.close()
+        if live is not None:
+            for b in live_boxes:
+                b.flush()
+            live.close()
+    if tty and not args.quiet:
+        print(file=sys.stderr)
+
+    allowed = args.max_overrun_percent / 100.0 * st.cycles
+    failures = []
+    if server.error:
+        failures.append(f"transport failed: {server.error}")
+    if st.frames_served == 0:
+        failures.append("no frame was served (nothing arrived from a master)")
+    for key, what in (("bad_frames", "bad frames"), ("stale_frames", "stale frames"),
+                      ("missed_cycles", "master cycles missed"),
+                      ("incomplete_cycles", "incomplete master cycles"),
+                      ("send_errors", "replies not sent")):
+        if getattr(st, key):
+            failures.append(f"{getattr(st, key)} {what}")
+    if terrors:
+        failures.append(f"{terrors} frames damaged on the transport")
+    if st.bad_frames and not st.frames_served:
+        failures.append("(no frame decoded: does the master add a CRC-32 trailer? then "
+                        "--crc-trailer)" if not trailer else "(no frame decoded: does the "
+                        "master send bare EtherCAT frames? then --no-crc-trailer)")
+    if st.overruns > allowed:
+        failures.append(f"{st.overruns} overruns > {args.max_overrun_percent:g}% of "
+                        f"{st.cycles} cycles")
+    data = {"transport": args.transport, "where": where, "topology": topo.name,
+            "crc_trailer": trailer, "capture": args.capture,
+            "captured_frames": None if cap is None else cap.frames,
+            "boxes": len(topo.boxes), "actuators": topo.n_actuators, "model": model,
+            "period_ms": PERIOD_S * 1e3, "frames_per_cycle": frames,
+            "max_overrun_percent": args.max_overrun_percent,
+            "overrun_limit_exceeded": st.overruns > allowed,
+            **st.as_dict(), "transport_stats": transport,
+            "chain": {k: v for k, v in chain.stats.__dict__.items() if k != "extra"},
+            "ok": not failures, "failures": failures}
+    if args.json:
+        print(json.dumps(data, indent=2))
+    else:
+        from hil.output.tables import table
+
+        d = st.as_dict()
+        rows = [
+            ["cycles (1 ms each)", st.cycles],
+            ["wall time", f"{st.wall_s:.3f} s"],
+            ["real-time factor (simulated / wall)", f"{d['real_time_factor']:.4f}"],
+            ["compute speed (x real time)", f"{d['compute_speed_factor']:.1f}"],
+            ["load (busy / wall)", f"{100 * d['load']:.1f}%"],
+            ["cycle compute mean / worst", f"{d['mean_advance_ms']:.3f} / "
+             f"{d['worst_advance_ms']:.3f} ms"],
+            ["deadline overruns", f"{st.overruns} ({100 * d['overrun_fraction']:.2f}%, "
+             f"allowed {args.max_overrun_percent:g}%) in {st.stalls} stalls"],
+            ["worst lateness", f"{d['worst_late_ms']:.3f} ms"],
+            ["slipped cycles", st.slipped_cycles],
+            ["frames received / served", f"{st.frames_received} / {st.frames_served}"],
+            ["bad / stale frames", f"{st.bad_frames} / {st.stale_frames}"],
+            ["transport CRC / framing / oversize", f"{transport['crc_errors']} / "
+             f"{transport['framing_errors']} / {transport['oversize']}"],
+            ["master cycles missed / incomplete", f"{st.missed_cycles} / "
+             f"{st.incomplete_cycles}"],
+            ["master sessions", st.sessions],
+        ]
+        print(f"serve {where}: {topo.name}, {model} model")
+        print(table(["", "value"], rows))
+        if cap is not None:
+            print(f"capture: {args.capture}, {cap.frames} frames")
+        print("ok" if not failures else "FAILED: " + "; ".join(failures))
+    return 0 if not failures else 1
+
+
+def cmd_serve_ethercat(args: argparse.Namespace, cfg, topo) -> int:
+    """``--transport ethercat``: the ESC chain (:mod:`hil.fieldbus.esc.chain`) on a raw
+    Ethernet interface for a real master (docs/ethercat-slaves.md)."""
+    from hil.fieldbus.esc.chain import EscChain
+    from hil.fieldbus.esc.serve import latency_summary, serve, warm_up
+    from hil.transports.rawether import RawEthernet
+
+    if not args.interface:
+        raise _usage("--interface: required with --transport ethercat")
+    for opt, hint in (("capture", "capture the interface with tshark"),
+                      ("foxglove", "not offered for the ESC chain"),
+                      ("port", "the interface is --interface")):
+        if getattr(args, opt, None) is not None:
+            raise _usage(f"--{opt}: not with --transport ethercat ({hint})")
+    bad = [b for b in args.stack_boxes if not 0 <= b < len(topo.boxes)]
+    if bad:
+        raise _usage(f"--stack-box {bad[0]}: {topo.name} has boxes 0..{len(topo.boxes) - 1}")
+    model = args.model or "echo"
+    chain = EscChain(topo, cfg, model, tuple(args.stack_boxes))
+    warm_up(chain)
+    try:
+        link = RawEthernet(args.interface)
+    except TransportError as exc:
+        raise _usage(str(exc)) from None
+    if args.realtime:
+        _realtime_priority()
+
+    def ready() -> None:
+        print(f"eha-hil serve: ready on {args.interface} (EtherType 0x88a4); {topo.name}, "
+              f"{len(topo.boxes)} slaves, {model} model"
+              + (f", full stack behind box(es) {args.stack_boxes}" if args.stack_boxes
+                 else ""), file=sys.stderr, flush=True)
+
+    stopping = []
+    old = {s: signal.signal(s, lambda signum, frame: stopping.append(signum))
+           for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        st = serve(chain, link, args.seconds, stop=lambda: bool(stopping), ready=ready)
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)
+        link.close()
+    failures = [] if st.frames_answered else ["no EtherCAT frame arrived from a master"]
+    data = {"transport": "ethercat", "interface": args.interface, "topology": topo.name,
+            "model": model, "stack_boxes": list(args.stack_boxes), **st.as_dict(),
+            "reply_us": latency_summary(st.reply_us),
+            "chain": chain.stats.__dict__.copy(), "slaves": chain.watchdog_report(),
+            "ok": not failures, "failures": failures}
+    if args.json:
+        print(json.dumps(data, indent=2))
+    else:
+        print(f"serve {args.interface}: {st.cycles} cycles in {st.wall_s:.1f} s, "
+              f"{st.frames_answered} frames answered, {chain.stats.dropped_frames} dropped, "
+              f"{st.overruns} overruns")
+        print("ok" if not failures else "FAILED: " + "; ".join(failures))
+    return 0 if not failures else 1
+
+
+def add_parser(sub, common, config_fn, wrap) -> None:
+    """Register ``eha-hil serve`` (``common``: the -c/--set/--json parent; ``wrap`` adapts
+    the command to the config and to one-line usage errors, as for ``bus``)."""
+    p = sub.add_parser(
+        "serve", parents=[common(plot=False)],
+        help="serve the simulated robot (chain of boxes) on a serial port or UDP, paced to "
+        "the wall clock, for a real master to close the loop",
+        epilog="Example: eha-hil serve --transport serial --port pty --seconds 10 "
+        "(docs/fieldbus.md, 'Serving the simulated robot to real hardware').")
+    p.add_argument("--transport", default="serial", choices=[*serve_backends(), "ethercat"],
+                   help="serial (COBS + CRC-32 frames), udp, or ethercat (raw Ethernet "
+                   "frames, EtherType 0x88A4, ESC slaves for a real master: --interface)")
+    p.add_argument("--interface", help="ethercat: network interface (e.g. eth1, veth0)")
+    p.add_argument("--stack-box", dest="stack_boxes", type=int_range(0, 255), action="append",
+                   default=[], metavar="N",
+                   help="ethercat: box N runs the full stack (repeatable; others: --model)")
+    p.add_argument("--port",
+                   help="serial (required): device path or pyserial URL, or 'pty' for a new "
+                   "pseudo-terminal whose path is printed; udp: local port number (default "
+                   "34980, EtherCAT's; 0: any)")
+    p.add_argument("--host", default="127.0.0.1",
+                   help="udp: local address to bind (0.0.0.0 for all)")
+    p.add_argument("--baudrate", type=int_range(50, 100_000_000), default=3_000_000,
+                   help="serial line speed, 50..100000000 (ignored by ptys)")
+    p.add_argument("--topology", default="bench_one_box",
+                   help="shipped topology name or TOML file")
+    p.add_argument("--model", choices=("stack", "echo"),
+                   help="box model; default stack for <= 5 actuators, echo otherwise")
+    p.add_argument("--seconds", type=float_range(1e-3, 1e7, unit="s"),
+                   help="wall seconds to serve, in [0.001, 1e7] (default: until Ctrl-C / "
+                   "SIGTERM)")
+    p.add_argument("--max-overrun-percent", type=float_range(0.0, 100.0, unit="%"),
+                   default=DEFAULT_MAX_OVERRUN_PERCENT, metavar="P",
+                   help="exit 1 if more than P%% of the cycles overran their deadline, "
+                   "P in [0, 100]")
+    p.add_argument("--realtime", action="store_true",
+                   help="run with SCHED_FIFO priority 50 (like chrt -f 50; needs root or "
+                   "CAP_SYS_NICE): far fewer overruns on a busy machine")
+    p.add_argument("-q", "--quiet", action="store_true",
+                   help="no status line on stderr (the ready line is still printed)")
+    from hil.cli.bus import add_wire_options
+
+    add_wire_options(p)
+    p.add_argument("--foxglove", nargs="?", const="", metavar="HOST:PORT",
+                   help="stream the boxes' decoded signals to Foxglove Studio (WebSocket; "
+                   "default 127.0.0.1:8765, loopback)")
+    _scope_options(p)
+    p.set_defaults(func=wrap(cmd_serve, config_fn))
+
+
+def _scope_options(p: argparse.ArgumentParser) -> None:
+    """Each transport's own options, refused with another (hil.cli.args.only_with)."""
+    from hil.cli.args import only_with
+
+    stream = tuple(serve_backends())
+    scopes = {"baudrate": ("serial",), "host": ("udp",), "port": stream,
+              "interface": ("ethercat",), "stack_boxes": ("ethercat",), "capture": stream,
+              "foxglove": stream}
+    for action in p._actions:
+        if action.dest in scopes:
+            only_with(action, "transport", *scopes[action.dest])

@@ -1,0 +1,129 @@
+"""The ``eha-hil verify`` verbs: the firmware models against independent builds."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Callable
+from pathlib import Path
+
+from hil.cli.args import float_range, int_range
+from hil.output.tables import table
+
+EXIT_MISMATCH = 1
+
+
+class ToolMissing(Exception):
+    """The check cannot run: a system tool it needs is not installed, or the command line
+    asks for nothing (one line, exit 2)."""
+
+
+def _rtl_dir(text: str) -> str:
+    """A directory holding Verilog (``*.v``)."""
+    p = Path(text)
+    if not p.is_dir():
+        raise argparse.ArgumentTypeError(f"{text}: not a directory")
+    if not any(p.glob("*.v")):
+        raise argparse.ArgumentTypeError(f"{text}: no Verilog (*.v) files in it")
+    return text
+
+
+_rtl_dir.kind = "dir"  # type: ignore[attr-defined]
+COUNT = int_range(0, 100_000_000)
+SEED = int_range(0, 2**32 - 1)
+
+
+def add_parsers(sub: argparse._SubParsersAction,
+                common: Callable[..., argparse.ArgumentParser]) -> None:
+    verify = sub.add_parser("verify", help="check the firmware models bit for bit against "
+                            "independent builds (C on the host or a Cortex-M4 under QEMU; "
+                            "RTL under Icarus/cocotb); exit 1 on any mismatch")
+    vsub = verify.add_subparsers(dest="verify_command", metavar="CHECK", required=True)
+    p = vsub.add_parser("mcu", parents=[common(plot=False)],
+                        help="the MCU law: Python model against the C build")
+    p.add_argument("--against", required=True, choices=("host-c", "qemu"),
+                   help="host-c: the C as a host shared library; qemu: the Cortex-M4F image "
+                   "on QEMU's netduinoplus2")
+    p.add_argument("--steps", type=COUNT, default=10_000,
+                   help="random input steps, split over the six controller variants "
+                   "(default 10000)")
+    p.add_argument("--stack-seconds", type=float_range(0.0, 60.0, unit="s"), default=0.4,
+                   help="seconds of whole-stack run with faults recorded per variant "
+                   "(default 0.4 s = 2000 steps; 0: none)")
+    p.add_argument("--seed", type=SEED, default=1, help="random steps' seed (default 1)")
+    p.add_argument("--contract", choices=("off", "fast"), default="off",
+                   help="the build's -ffp-contract (default off, as the firmware is built; "
+                   "fast shows what fused multiply-adds change)")
+    p.set_defaults(func=cmd_verify_mcu)
+
+    p = vsub.add_parser("current-loop", parents=[common(plot=False)],
+                        help="the driver board's current loop: Python board model against "
+                        "the RTL under Icarus Verilog and cocotb")
+    p.add_argument("--against", required=True, choices=("rtl",),
+                   help="rtl: the Verilog of firmware_model/fpga/rtl (or --rtl DIR)")
+    p.add_argument("--vectors", type=COUNT, default=10_000,
+                   help="vectors in all: the golden and edge sets, then random (default "
+                   "10000)")
+    p.add_argument("--rtl", metavar="DIR", default=None, type=_rtl_dir,
+                   help="a directory of Verilog with the same ports (default: the project's)")
+    p.add_argument("--seed", type=SEED, default=1, help="random vectors' seed (default 1)")
+    p.set_defaults(func=cmd_verify_current_loop)
+
+
+def cmd_verify_mcu(args: argparse.Namespace) -> int:
+    from hil.sim import mcu_builds
+    from hil.verify.mcu.verify import verify_mcu
+
+    if args.steps == 0 and args.stack_seconds == 0:
+        raise ToolMissing("verify mcu: --steps 0 and --stack-seconds 0 leave nothing to compare")
+    target = "host-c" if args.against == "host-c" else "qemu"
+    missing = mcu_builds.missing_tools(target)
+    if missing:
+        raise ToolMissing(f"verify mcu --against {args.against}: {', '.join(missing)} not "
+                          "installed (make system-deps installs them)")
+    try:
+        rep = verify_mcu(args.against, args.steps, args.seed, args.stack_seconds,
+                         args.contract, args.config, args.set or ())
+    except mcu_builds.BuildError as exc:
+        print(f"eha-hil: error: {exc}", file=sys.stderr)
+        return EXIT_MISMATCH
+    _print_report(args, rep, f"MCU law: Python model vs {args.against} "
+                  f"(-ffp-contract={args.contract}, {rep.build})")
+    return EXIT_MISMATCH if rep.mismatches else 0
+
+
+def _print_report(args: argparse.Namespace, rep, title: str) -> None:
+    if args.json:
+        print(json.dumps(rep.as_dict(), indent=2))
+        return
+    rows = [(c.source, c.vectors, c.mismatches) for c in rep.sets]
+    print(table(["set", "vectors", "mismatches"], rows, title=title))
+    print(f"{rep.vectors} vectors compared, {rep.mismatches} mismatches ({rep.seconds:.1f} s)")
+    first = rep.first
+    if first is not None:
+        m = first.first
+        print(f"first mismatch: {first.source}, step {m.step}, field {m.field}: "
+              f"model {m.model}, build {m.build}")
+
+
+def cmd_verify_current_loop(args: argparse.Namespace) -> int:
+    from hil.verify.current_loop import rtl as rtl_run
+    from hil.verify.current_loop.verify import verify_current_loop
+    from plant.config import load_config
+
+    missing = rtl_run.missing_tools()
+    if missing:
+        raise ToolMissing(f"verify current-loop: {', '.join(missing)} not installed "
+                          "(make system-deps; pip install 'eha-hil[test]')")
+    rtl_dir = Path(args.rtl) if args.rtl else rtl_run.RTL_DIR
+    cfg = load_config(args.config, args.set or ())
+    try:
+        rtl_run.rtl_sources(rtl_dir)
+        rep = verify_current_loop(cfg, args.vectors, args.seed, rtl_dir)
+    except rtl_run.RtlError as exc:
+        print(f"eha-hil: error: {exc}", file=sys.stderr)
+        return EXIT_MISMATCH
+    _print_report(args, rep, f"current loop: Python board model vs RTL ({rtl_dir}, Icarus "
+                  "Verilog + cocotb)")
+    return EXIT_MISMATCH if rep.mismatches else 0

@@ -1,0 +1,76 @@
+"""What each joint driver box says about itself as an EtherCAT slave: identity, PDOs and
+sync managers (:class:`~firmware_model.esc.sii.SlaveDescription`), from the topology and
+the process-data declaration (:mod:`hil.fieldbus.pdo`). The SII image and the ESI file
+(:mod:`hil.fieldbus.esc.esi`) are both made from these descriptions.
+
+Box types: boxes with the same slots kinds (e.g. three actuators) are one product; the
+product code is ``0x48590000 | actuators << 8 | foot sensors << 4 | IMUs``; the serial
+number is the box's position in the chain + 1.
+
+Objects: slot ``k`` of a box has RxPDO ``0x1600 + k`` (entries ``0x7000 + 0x10 k``) and
+TxPDO ``0x1A00 + k`` (entries ``0x6000 + 0x10 k``), subindex = field number + 1; RxPDOs are
+assigned to SM0 (outputs, at 0x1000), TxPDOs to SM1 (inputs, at 0x1100).
+"""
+
+from __future__ import annotations
+
+from firmware_model.esc.sii import Pdo, PdoEntry, SlaveDescription, SyncManager, build_image
+from hil.fieldbus import pdo
+from hil.fieldbus.topology import Box, Topology
+
+#: Vendor id of the Hydra boxes. Not an ETG-assigned id: a placeholder a real deployment
+#: replaces with its own.
+VENDOR_ID = 0x00000E4A
+REVISION = 0x00010000
+SM_OUT_START = 0x1000
+SM_IN_START = 0x1100
+SM_OUT_CONTROL = 0x64   # buffered, ECAT writes, PDI IRQ, watchdog trigger
+SM_IN_CONTROL = 0x20    # buffered, ECAT reads, PDI IRQ
+
+
+def box_kind_counts(box: Box) -> tuple[int, int, int]:
+    """(actuators, foot sensors, IMUs) of a box."""
+    kinds = [s.kind for s in box.slots]
+    return kinds.count("actuator"), kinds.count("foot_sensor"), kinds.count("imu")
+
+
+def product_code(box: Box) -> int:
+    a, f, i = box_kind_counts(box)
+    return 0x48590000 | a << 8 | f << 4 | i
+
+
+def product_name(box: Box) -> str:
+    a, f, i = box_kind_counts(box)
+    parts = [f"{a} EHA"] if a else []
+    parts += ["foot sensor"] * f + ["IMU"] * i
+    return "Hydra box " + " + ".join(parts)
+
+
+def _pdos(box: Box, direction: int) -> tuple[Pdo, ...]:
+    out = []
+    for k, s in enumerate(box.slots):
+        fields = pdo.SLOT_FIELDS[s.kind][direction]
+        if not fields:
+            continue
+        base = (0x7000 if direction == 0 else 0x6000) + 0x10 * k
+        entries = tuple(PdoEntry(base, j + 1, f.name, f.dtype) for j, f in enumerate(fields))
+        index = (0x1600 if direction == 0 else 0x1A00) + k
+        out.append(Pdo(index, f"slot {k} {s.kind}", direction, entries))
+    return tuple(out)
+
+
+def describe(box: Box) -> SlaveDescription:
+    """The slave description of one box."""
+    rx, tx = _pdos(box, 0), _pdos(box, 1)
+    out_b, in_b = box.out_bytes, box.in_bytes
+    if out_b > SM_IN_START - SM_OUT_START:
+        raise ValueError(f"box {box.id}: {out_b} output bytes overlap the input buffer")
+    sms = (SyncManager(SM_OUT_START, out_b, SM_OUT_CONTROL, out_b > 0),
+           SyncManager(SM_IN_START, in_b, SM_IN_CONTROL, in_b > 0))
+    return SlaveDescription(VENDOR_ID, product_code(box), REVISION, box.id + 1,
+                            product_name(box), "Hydra joint boxes", rx, tx, sms)
+
+
+def describe_all(topo: Topology) -> list[tuple[SlaveDescription, bytes]]:
+    """(description, SII image) of every box, in chain order."""
+    return [(d, build_image(d)) for d in map(describe, topo.boxes)]

@@ -1,0 +1,117 @@
+"""SOEM (through pysoem) as the master of the ESC chain, run as its own process inside a
+network namespace (``python -m hil.fieldbus.esc.soem_master IF MODE ...``) by the pysoem test
+and ``eha-hil bench ethercat --wire``; prints one JSON object. pysoem is a test extra.
+
+MODE ``cycles N``: config_init, config_map, SAFEOP, OP, N process-data cycles at 1 kHz
+(outputs all zero), then stops sending, waits WAIT s and reads every slave's AL state.
+MODE ``force BOX SLOT NEWTONS N``: as far as OP, then N cycles commanding a force on that
+actuator (mode 1, enable), and reports that actuator's f_pressure input over the cycles.
+MODE ``rtt N``: as far as OP, every actuator enabled with a force command, N cycles at
+1 kHz; the wall time of each cycle's send + receive (the frames' round trip) in us.
+"""
+
+from __future__ import annotations
+
+import json
+import struct
+import sys
+import time
+
+import pysoem
+
+#: SOEM's stock timeouts: EC_TIMEOUTRET (a reply later than this is a lost frame: the
+#: cycle's working counter comes short) and EC_TIMEOUTSTATE (a state change).
+RECV_TIMEOUT_US = 2_000
+STATE_TIMEOUT_US = 2_000_000
+
+
+def bring_up(ifname: str) -> tuple[pysoem.Master, dict]:
+    m = pysoem.Master()
+    m.open(ifname)
+    n = m.config_init()
+    info = {"found": n, "slaves": [{"name": s.name, "man": s.man, "id": s.id, "rev": s.rev}
+                                    for s in m.slaves]}
+    info["image_bytes"] = m.config_map()
+    info["safeop"] = m.state_check(pysoem.SAFEOP_STATE, STATE_TIMEOUT_US)
+    info["expected_wkc"] = m.expected_wkc
+    m.state = pysoem.OP_STATE
+    m.send_processdata()
+    m.receive_processdata(RECV_TIMEOUT_US)
+    m.write_state()
+    info["op"] = m.state_check(pysoem.OP_STATE, STATE_TIMEOUT_US)
+    m.read_state()
+    info["states"] = [s.state for s in m.slaves]
+    return m, info
+
+
+def paced(m: pysoem.Master, n: int, each=None, rtt: list | None = None
+          ) -> tuple[int, list[int]]:
+    """n cycles at 1 kHz; (cycles with a WKC other than expected, the first few WKCs).
+    ``rtt``: its last element (the start time ``each`` appended) becomes the cycle's
+    send + receive time in us."""
+    bad, seen = 0, []
+    t_next = time.perf_counter()
+    for k in range(n):
+        if each is not None:
+            each(k)
+        m.send_processdata()
+        wkc = m.receive_processdata(RECV_TIMEOUT_US)
+        if rtt is not None:
+            rtt[-1] = (time.perf_counter() - rtt[-1]) * 1e6
+        if wkc != m.expected_wkc:
+            bad += 1
+            if len(seen) < 10:
+                seen.append(wkc)
+        t_next += 1e-3
+        pause = t_next - time.perf_counter()
+        if pause > 0:
+            time.sleep(pause)
+    return bad, seen
+
+
+def main(argv: list[str]) -> None:
+    ifname, mode = argv[0], argv[1]
+    m, info = bring_up(ifname)
+    if mode == "cycles":
+        n, wait = int(argv[2]), float(argv[3])
+        info["cycles"] = n
+        info["bad_wkc"], info["bad_wkc_values"] = paced(m, n)
+        time.sleep(wait)  # nothing sent: the slaves' watchdogs run out
+        m.read_state()
+        info["after_stop"] = [{"state": s.state, "al_status": s.al_status} for s in m.slaves]
+    elif mode == "rtt":
+        n = int(argv[2])
+        for s in m.slaves:  # every actuator slot: force command, enabled
+            out = bytearray(s.output)
+            for k in range(len(out) // 10):
+                struct.pack_into("<BBi", out, 10 * k, 1, 1, 10_000)
+            s.output = bytes(out)
+        rtt: list[float] = []
+        clock = time.perf_counter
+
+        def timed(_k: int) -> None:
+            rtt.append(clock())
+
+        info["bad_wkc"], info["bad_wkc_values"] = paced(m, n, timed, rtt)
+        info["rtt_us"] = rtt
+    elif mode == "force":
+        box, slot, newtons, n = int(argv[2]), int(argv[3]), float(argv[4]), int(argv[5])
+        s = m.slaves[box]
+        out = bytearray(s.output)
+        struct.pack_into("<BBi", out, 10 * slot, 1, 1, round(newtons / 0.01))
+        s.output = bytes(out)
+        f = []
+
+        def sample(_k: int) -> None:
+            f.append(struct.unpack_from("<h", s.input, 22 * slot + 6)[0] * 0.1)
+
+        info["bad_wkc"], info["bad_wkc_values"] = paced(m, n, sample)
+        info["f_pressure"] = f
+    m.state = pysoem.INIT_STATE
+    m.write_state()
+    m.close()
+    print(json.dumps(info))
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])

@@ -1,0 +1,103 @@
+"""A private network namespace with a veth pair, the ESC chain served on one end and SOEM
+(:mod:`hil.fieldbus.esc.soem_master`) on the other: what the pysoem test and
+``eha-hil bench ethercat --wire`` run. Needs root and ``ip`` (iproute2).
+
+The namespace is created on entry and deleted on exit (with it the pair). IPv6 is off
+inside it, so that only EtherCAT frames cross the wire.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import uuid
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+MASTER_IF, SLAVE_IF = "ecm", "ecs"
+_ROOT = str(Path(__file__).resolve().parents[3])
+
+
+class NamespaceError(Exception):
+    """No namespace possible here; the message says why, in one line."""
+
+
+def why_not() -> str | None:
+    """Why a namespace with a veth pair cannot be made here, or None."""
+    if not hasattr(os, "geteuid") or os.geteuid() != 0:
+        return "needs root (network namespace, veth pair, raw sockets)"
+    if shutil.which("ip") is None:
+        return "needs `ip` (iproute2; make system-deps)"
+    return None
+
+
+def _env() -> dict[str, str]:
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join(p for p in (_ROOT, env.get("PYTHONPATH")) if p)
+    return env
+
+
+def in_ns(ns: str, *cmd: str) -> list[str]:
+    return ["ip", "netns", "exec", ns, *cmd]
+
+
+@contextmanager
+def veth_namespace() -> Iterator[str]:
+    """The name of a fresh namespace holding the pair ``ecm`` (master) / ``ecs``."""
+    why = why_not()
+    if why:
+        raise NamespaceError(why)
+    name = f"ehaec{uuid.uuid4().hex[:8]}"
+    r = subprocess.run(["ip", "netns", "add", name], capture_output=True, text=True)
+    if r.returncode:
+        raise NamespaceError(f"cannot create a network namespace: {r.stderr.strip()}")
+    try:
+        for key in ("all", "default"):
+            subprocess.run(in_ns(name, "sh", "-c",
+                                 f"echo 1 > /proc/sys/net/ipv6/conf/{key}/disable_ipv6"),
+                           check=True, capture_output=True)
+        for cmd in (["link", "add", MASTER_IF, "type", "veth", "peer", "name", SLAVE_IF],
+                    ["link", "set", MASTER_IF, "up"], ["link", "set", SLAVE_IF, "up"]):
+            subprocess.run(["ip", "-n", name, *cmd], check=True, capture_output=True)
+        yield name
+    finally:
+        subprocess.run(["ip", "netns", "del", name], capture_output=True)
+
+
+def start_serve(ns: str, *extra: str) -> subprocess.Popen:
+    """``eha-hil serve --transport ethercat`` on ``ecs`` (hydra_full, real-time priority,
+    --json), returned once it is ready."""
+    p = subprocess.Popen(in_ns(ns, sys.executable, "-m", "hil.cli", "serve", "--transport",
+                               "ethercat", "--interface", SLAVE_IF, "--topology",
+                               "hydra_full", "--realtime", "--json", *extra),
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                         env=_env())
+    line = p.stderr.readline()
+    if "ready on" not in line:
+        p.kill()
+        raise RuntimeError(f"serve did not start: {line.strip()} {p.stderr.read().strip()}")
+    return p
+
+
+def stop_serve(p: subprocess.Popen) -> dict:
+    """Stop it (SIGTERM) and return its JSON report."""
+    p.send_signal(signal.SIGTERM)
+    out, err = p.communicate(timeout=30)
+    if p.returncode:
+        raise RuntimeError(f"serve failed ({p.returncode}): {err.strip()}")
+    return json.loads(out)
+
+
+def run_master(ns: str, *args: str) -> dict:
+    """:mod:`hil.fieldbus.esc.soem_master` on ``ecm`` at real-time priority; its JSON."""
+    r = subprocess.run(in_ns(ns, "chrt", "-f", "40", sys.executable, "-m",
+                             "hil.fieldbus.esc.soem_master", MASTER_IF, *args),
+                       capture_output=True, text=True, timeout=300, env=_env())
+    if r.returncode:
+        raise RuntimeError(f"SOEM master failed: {r.stderr.strip()[-500:]}")
+    return json.loads(r.stdout)

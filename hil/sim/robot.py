@@ -1,0 +1,536 @@
+"""The whole robot in one engine: every actuator's stack below the MCU (plant, sensor chips,
+driver board, LVDS link) and its MCU program advanced together, batched over actuators.
+
+The per-actuator path (:class:`~hil.fieldbus.boxes.StackBox`) steps each box's Python MCU
+model and calls each actuator's compiled stack every MCU period: 47 actuators cost ~10 Python
+calls each per MCU period. Here one fieldbus cycle (20 ticks) is one compiled call
+(:func:`advance_robot`) per compute thread. Each thread claims actuators one at a time (an
+atomic counter) and runs each claimed actuator's five MCU periods: its MCU program steps
+(the MCU law's host build, ``firmware_model/mcu/c/``, ``mcu_law_step_many``, built with
+``-ffp-contract=off`` and checked bit for bit against the Python model, docs/mcu.md), its
+downstream words go into its LVDS memory, its stack advances one MCU period, its upstream
+words go back into the program's input record. Actuators share nothing within a cycle, so
+which thread runs which changes no result; claiming one by one balances the threads even
+when one core is busy with the master and the PC loop,
+
+and the process data of all boxes is decoded and packed with whole-array operations. The
+arrays of every :class:`~hil.sim.actuator.FpgaStack` are rebound to rows of the engine's arrays,
+so faults and tools that hold a stack see the same memory. A stack with a sensor fault
+(:class:`~hil.fieldbus.faults.FaultyStack` overriding plant outputs tick by tick) is left
+out of the compiled call and advanced by its own wrapper between the same two copies.
+
+Same results as the per-actuator path, bit for bit (``tests/hil/test_robot.py``).
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from concurrent.futures import Future, ThreadPoolExecutor
+
+import llvmlite.binding as llvm
+import numba
+import numpy as np
+from llvmlite import ir
+from numba import njit, types
+from numba.core import cgutils
+from numba.extending import intrinsic
+
+from firmware_model.fpga import layout as B
+from firmware_model.lvds import link as LK
+from firmware_model.mcu.c_abi import (
+    IN_CLEAR_FAULT,
+    IN_COMMAND,
+    IN_DISABLE,
+    IN_ENABLE,
+    IN_GAINS,
+    INPUT,
+    OUTPUT,
+    config_record,
+)
+from hil.fieldbus import pdo
+from hil.sim.actuator import advance_stack
+from plant import layout as L
+from plant.config import Config, ConfigError
+
+#: Offsets of the input record's fields, in 16-bit words (the kernel writes through a view).
+_IN_U16 = INPUT.itemsize // 2
+_IN_UP = INPUT.fields["up"][1] // 2
+_IN_CRC = INPUT.fields["up_crc_errors"][1] // 4
+_IN_TICK = INPUT.fields["tick"][1] // 4
+_IN_FLAGS = INPUT.fields["flags"][1] // 4
+_OUT_U16 = OUTPUT.itemsize // 2
+_OUT_DOWN = OUTPUT.fields["down"][1] // 2
+_T_ANALOG = [a.name for a in B.ANALOG_INPUTS].index("temperature")
+_IN_MODE = INPUT.fields["mode"][1] // 4
+_IN_VALUE = INPUT.fields["value"][1] // 4
+_IN_KPOS = INPUT.fields["kp_position"][1] // 4
+_IN_KPF = INPUT.fields["kp_force"][1] // 4
+_OUT_STATUS = OUTPUT.fields["status"][1] // 4
+_OUT_X = OUTPUT.fields["x_piston"][1] // 4
+_OUT_F_STRAIN_RAW = OUTPUT.fields["f_strain_raw"][1] // 4
+_OUT_F_PRES = OUTPUT.fields["f_pres"][1] // 4
+_OUT_F_FIL = OUTPUT.fields["f_fil"][1] // 4
+_OUT_IQ = OUTPUT.fields["iq"][1] // 4
+_OUT_TEMP = OUTPUT.fields["m_analog"][1] // 4 + _T_ANALOG
+#: Byte offsets in an actuator's output record, and the sizes of its input record's fields.
+_O_MODE, _O_FLAGS, _O_COMMAND, _O_KPOS, _O_KPF = (
+    pdo.ACTUATOR_OUT_DTYPE.fields[f.name][1] for f in pdo.ACTUATOR_OUT)
+_IN_SIZES = tuple(np.dtype(f.dtype).itemsize for f in pdo.ACTUATOR_IN)
+_FLAG_ENABLE = pdo.FLAG_ENABLE
+_FLAG_CLEAR = pdo.FLAG_CLEAR_FAULT
+assert [f.name for f in pdo.ACTUATOR_IN] == [
+    "x_piston", "v_piston", "f_pressure", "f_strain", "f_filtered", "iq", "temperature",
+    "status", "err_link_down", "err_link_up"]
+assert [f.name for f in pdo.ACTUATOR_OUT] == ["mode", "flags", "command", "kp_position",
+                                              "kp_force"]
+assert all(OUTPUT.fields[n][1] % 4 == 0 for n in OUTPUT.names)
+
+
+#: The MCU law's host build, linked by name (the library is loaded by :class:`RobotEngine`
+#: before the first call): ``mcu_law_step_many(states, inputs, n, outputs)``, addresses.
+_mcu_law_step_many = types.ExternalFunction(
+    "mcu_law_step_many", types.void(types.intp, types.intp, types.uint32, types.intp))
+
+
+@intrinsic
+def _claim(typingctx, counter):
+    """``counter[0] += 1`` as one atomic operation; returns the value before it: the index
+    the calling thread now owns (the threads of a cycle share the actuators this way)."""
+    if not (isinstance(counter, types.Array) and counter.dtype == types.int64):
+        return None
+
+    def codegen(context, builder, signature, args):
+        aryty = signature.args[0]
+        ary = context.make_array(aryty)(context, builder, args[0])
+        ptr = cgutils.get_item_pointer(context, builder, aryty, ary,
+                                       [context.get_constant(types.intp, 0)])
+        return builder.atomic_rmw("add", ptr, ir.Constant(ir.IntType(64), 1), "seq_cst")
+
+    return types.int64(counter), codegen
+
+
+# No reference counting (``_nrt=False``, as the parts' tick functions): every row view
+# below would otherwise increment and decrement the parent array's count, an atomic on a
+# cache line all compute threads share (~200 ns per actuator tick with one thread, more
+# with two).
+@njit(cache=True, nogil=True, _nrt=False)
+def advance_robot(counter, n_periods, period, tick0, batched, ptrs, no_rec, no_trace, x, p,
+                  u, y, rng, work, k, raw, c, st, down, up, mdown, mup, lk, in16, in32,
+                  out16, err):
+    """``n_periods`` MCU periods of ``period`` ticks from ``tick0`` for the actuators this
+    thread claims (``counter``: the next unclaimed index, shared by every thread of the
+    cycle), those with ``batched[i]``: its MCU program (state, input and output record at
+    the addresses ``ptrs[i]``) steps, its downstream words go into its LVDS memory, its
+    stack advances one period, its upstream words and the link's CRC count go into its
+    input record. ``err[i]``: the link error counts the program read at its last step.
+    ``no_rec`` and ``no_trace``: empty record and trace arrays (nothing recorded here).
+    Returns how many actuators this thread advanced."""
+    done = 0
+    while True:
+        i = _claim(counter)
+        if i >= x.shape[0]:
+            return done
+        if not batched[i]:
+            continue
+        done += 1
+        for n in range(n_periods):
+            t = tick0 + n * period
+            in32[i, _IN_TICK] = t
+            _mcu_law_step_many(ptrs[i, 0], ptrs[i, 1], 1, ptrs[i, 2])
+            in32[i, _IN_FLAGS] = 0
+            if n == n_periods - 1:
+                err[i, 0] = in16[i, _IN_UP + B.U_ERR_LINK_CRC]
+                err[i, 1] = in32[i, _IN_CRC]
+            for w in range(mdown.shape[1]):
+                mdown[i, w] = out16[i, _OUT_DOWN + w]
+            advance_stack(period, x[i], p[i], u[i], y[i], no_rec, 0, 1, t, rng[i], work[i],
+                          k[i], raw[i], c[i], st[i], down[i], up[i], mdown[i], mup[i], lk[i],
+                          no_trace)
+            for w in range(mup.shape[1]):
+                in16[i, _IN_UP + w] = mup[i, w] & 0xFFFF
+            in32[i, _IN_CRC] = lk[i, LK.LK_MASTER_CRC]
+
+
+@njit(cache=True)
+def _le(image, at, n_bytes, signed):
+    """The little-endian integer of ``n_bytes`` at ``image[at]``."""
+    v = 0
+    for b in range(n_bytes):
+        v |= np.int64(image[at + b]) << (8 * b)
+    if signed and v >= np.int64(1) << (8 * n_bytes - 1):
+        v -= np.int64(1) << (8 * n_bytes)
+    return v
+
+
+@njit(cache=True)
+def _put(image, at, n_bytes, v):
+    for b in range(n_bytes):
+        image[at + b] = (v >> (8 * b)) & 0xFF
+
+
+@njit(cache=True)
+def _counts(value, lsb, lo, hi):
+    """:func:`hil.fieldbus.pdo.to_counts` (the same float64 steps): rounded half away from
+    zero, saturated to [lo, hi]."""
+    c = value / lsb
+    r = math.trunc(c + 0.5) if c >= 0 else -math.trunc(-c + 0.5)
+    return np.int64(min(max(r, lo), hi))
+
+
+@njit(cache=True)
+def take_outputs(image, at, got, enabled, clear, in32, inf32, cmd_lsb, gain_lsb):
+    """What :meth:`McuBoard.apply` does with each actuator's output record (at byte
+    ``at[i]`` of ``image``) for the actuators ``got[i]``: the program's input flags (a fresh
+    command and gains; enable, disable and clear-fault edges against ``enabled``/``clear``),
+    mode, command value (``cmd_lsb[mode]`` per count) and gains (``gain_lsb`` per count)."""
+    for i in range(at.shape[0]):
+        if not got[i]:
+            in32[i, _IN_FLAGS] = 0
+            continue
+        o = at[i]
+        mode = _le(image, o + _O_MODE, 1, False)
+        if mode >= cmd_lsb.shape[0]:
+            mode = 0  # an unknown code is "off"
+        flags = _le(image, o + _O_FLAGS, 1, False)
+        on = (flags & _FLAG_ENABLE) != 0
+        cl = (flags & _FLAG_CLEAR) != 0
+        f = IN_COMMAND | IN_GAINS
+        if cl and not clear[i]:
+            f |= IN_CLEAR_FAULT
+        if on and not enabled[i]:
+            f |= IN_ENABLE
+        elif enabled[i] and not on:
+            f |= IN_DISABLE
+        enabled[i], clear[i] = on, cl
+        in32[i, _IN_FLAGS] = f
+        in32[i, _IN_MODE] = mode
+        inf32[i, _IN_VALUE] = np.float32(_le(image, o + _O_COMMAND, 4, True) * cmd_lsb[mode])
+        inf32[i, _IN_KPOS] = np.float32(_le(image, o + _O_KPOS, 2, False) * gain_lsb[0])
+        inf32[i, _IN_KPF] = np.float32(_le(image, o + _O_KPF, 2, False) * gain_lsb[1])
+
+
+@njit(cache=True)
+def give_inputs(image, at, out32, outf32, x_prev, dt, cos_alpha, err, lsb, bounds):
+    """:meth:`McuBoard.report` packed into each actuator's input record (at byte ``at[i]``
+    of ``image``) from its program's last output record: piston position and its change
+    over ``dt`` s (0: no speed), the forces, current, temperature, status and link error
+    counts (``err``); ``lsb``/``bounds``: the fields' scales and ranges in record order."""
+    for i in range(at.shape[0]):
+        o = at[i]
+        x = np.float64(outf32[i, _OUT_X])
+        v = (x - x_prev[i]) / dt if dt > 0 else 0.0
+        x_prev[i] = x
+        f_strain = np.float64(cos_alpha * outf32[i, _OUT_F_STRAIN_RAW])
+        values = (x, v, np.float64(outf32[i, _OUT_F_PRES]), f_strain,
+                  np.float64(outf32[i, _OUT_F_FIL]), np.float64(outf32[i, _OUT_IQ]),
+                  np.float64(outf32[i, _OUT_TEMP]))
+        pos = o
+        for f in range(7):
+            n_bytes = _IN_SIZES[f]
+            _put(image, pos, n_bytes, _counts(values[f], lsb[f], bounds[f, 0], bounds[f, 1]))
+            pos += n_bytes
+        _put(image, pos, 2, out32[i, _OUT_STATUS] & 0xFFFF)
+        _put(image, pos + 2, 2, min(err[i, 0], 0xFFFF))
+        _put(image, pos + 4, 2, min(err[i, 1], 0xFFFF))
+
+
+#: (object path, attribute) of every array the stack's compiled tick works on, in the order
+#: of :func:`advance_robot`'s arguments from ``x`` to ``lk``.
+_ARRAYS = (("plant", "x"), ("plant", "params"), ("plant", "u"), ("plant", "y"),
+           ("plant", "rng"), ("plant", "_work"), ("", "chips"), ("", "raw"),
+           ("board", "params"), ("board", "state"), ("board", "down"), ("board", "up"),
+           ("mcu_link", "down"), ("mcu_link", "up"), ("", "link"))
+
+
+class RobotEngine:
+    """All StackBoxes of a chain advanced as one; ``workers`` threads share the actuators
+    (``None``: one per core). The calling thread is one of them once its own work of the
+    cycle is done; with overlap and one worker, that worker is the background thread."""
+
+    def __init__(self, boxes: list, cfg: Config, workers: int | None = None,
+                 overlap: bool = True, cycle_ticks: int = 20) -> None:
+        from hil.sim.mcu_builds import BuildError, HostLaw, build_host
+
+        self.all_boxes = boxes
+        self.boxes = [b for b in boxes if getattr(b, "board", None) is not None]
+        if workers is not None and not 1 <= workers <= numba.config.NUMBA_NUM_THREADS:
+            raise ConfigError(f"workers = {workers}: expected 1..{numba.config.NUMBA_NUM_THREADS}")
+        self.workers = workers
+        self.period = cfg.get("mcu.period_ticks")
+        self.tick_s = cfg.get("sim.tick_ns") * 1e-9
+        #: (box, slot index in the box) of each actuator, in chain order.
+        self.slots = [(b, i) for b in self.boxes for i in range(len(b.stacks))]
+        n = self.n = len(self.slots)
+        try:
+            library = build_host()
+        except BuildError as exc:
+            raise ConfigError(f"the robot engine runs the MCU law's C build: {exc}") from None
+        self.law = HostLaw(library)
+        llvm.load_library_permanently(str(library))  # for advance_robot's call by name
+        self._bind_arrays()
+        config = config_record(cfg)
+        size = self.law.state_size
+        self.states = np.zeros(n * size, dtype=np.uint8)
+        for j in range(n):
+            self.law.init_at(self.states.ctypes.data + j * size, config)
+        self.inp = np.zeros(n, dtype=INPUT)
+        self.out = np.zeros(n, dtype=OUTPUT)
+        self.in16 = self.inp.view(np.uint16).reshape(n, _IN_U16)
+        self.in32 = self.inp.view(np.uint32).reshape(n, _IN_U16 // 2)
+        self.out16 = self.out.view(np.uint16).reshape(n, _OUT_U16)
+        self.out["down"] = self.out_down_init = config["down_init"]
+        self.inp["angle_offset"] = [b.stacks[i].board.calibrated_offset for b, i in self.slots]
+        self.cos_alpha = np.float32(config["cos_alpha"])
+        self._refresh_inputs(np.ones(n, dtype=bool))
+        # Process data as the boxes last decoded it (edges are taken against these).
+        self.enabled = np.zeros(n, dtype=bool)
+        self.clear = np.zeros(n, dtype=bool)
+        self.x_prev = np.zeros(n)
+        self.inf32 = self.inp.view(np.float32).reshape(n, _IN_U16 // 2)
+        self.out32 = self.out.view(np.uint32).reshape(n, OUTPUT.itemsize // 4)
+        self.outf32 = self.out.view(np.float32).reshape(n, OUTPUT.itemsize // 4)
+        self._cmd_lsb = np.zeros(len(pdo.MODE_NAMES))
+        for code in pdo.MODE_NAMES:
+            self._cmd_lsb[code] = (pdo.POSITION_CMD_LSB if code == pdo.MODE_CODES["position"]
+                                   else pdo.FORCE_CMD_LSB)
+        self._gain_lsb = np.array([f.lsb for f in pdo.ACTUATOR_OUT[3:5]])
+        fields = pdo.ACTUATOR_IN[:7]
+        self._in_lsb = np.array([f.lsb for f in fields])
+        self._in_bounds = np.array([(np.iinfo(f.dtype).min, np.iinfo(f.dtype).max)
+                                    for f in fields], dtype=np.int64)
+        self.tick = self.boxes[0].tick if self.boxes else 0
+        self._images()
+        self._no_rec = np.zeros((0, L.N_OUTPUTS))
+        self._no_trace = np.zeros((0, 1), dtype=np.int64)
+        self.err = np.zeros((n, 2), dtype=np.int64)
+        self._batched = np.ones(n, dtype=bool)
+        self.ptrs = np.array([[self.states.ctypes.data + j * size,
+                               self.inp.ctypes.data + j * INPUT.itemsize,
+                               self.out.ctypes.data + j * OUTPUT.itemsize] for j in range(n)],
+                             dtype=np.int64).reshape(n, 3)
+        for b in self.boxes:
+            b.pending = None
+            b.engine = self
+        #: Start a cycle's compute in a background thread as soon as every box has its
+        #: outputs (:meth:`applied`), overlapping it with the master and the PC loop.
+        self.overlap = overlap
+        self.cycle_ticks = cycle_ticks
+        self._counter = np.zeros(1, dtype=np.int64)  # the next actuator nobody has claimed
+        self._pool: ThreadPoolExecutor | None = None
+        self._pool_size = 0
+        self._jobs: list[Future] = []
+        self._started = threading.Semaphore(0)
+        self._ready: list[int] | None = None  # prepared, with stacks under sensor faults
+        self._pending: set[int] = set()
+        self._used: dict[int, bytes] = {}
+
+    # --- set-up --------------------------------------------------------------------------
+    def _images(self) -> None:
+        """One byte image of every box's outputs and one of its inputs (each box's input
+        buffer becomes its slice), and each actuator's record offset in them."""
+        out_at, in_at, out_lo, in_lo = [], [], [0], [0]
+        for b in self.boxes:
+            out_at += [out_lo[-1] + b._out_off[b.act[i]] for i in range(len(b.stacks))]
+            in_at += [in_lo[-1] + b._in_off[b.act[i]] for i in range(len(b.stacks))]
+            out_lo.append(out_lo[-1] + b.out_dtype.itemsize)
+            in_lo.append(in_lo[-1] + b.in_dtype.itemsize)
+        self.out_image = np.zeros(out_lo[-1], dtype=np.uint8)
+        self.in_image = np.zeros(in_lo[-1], dtype=np.uint8)
+        self._out_span = list(zip(out_lo[:-1], out_lo[1:], strict=True))
+        for b, (lo, hi) in zip(self.boxes, zip(in_lo[:-1], in_lo[1:], strict=True),
+                               strict=True):
+            self.in_image[lo:hi] = np.frombuffer(bytes(b._in_buf), dtype=np.uint8)
+            b._in_buf = self.in_image[lo:hi]
+        self._out_at = np.array(out_at, dtype=np.int64)
+        self._in_at = np.array(in_at, dtype=np.int64)
+        self._got = np.zeros(self.n, dtype=bool)
+        self._first = np.cumsum([0] + [len(b.stacks) for b in self.boxes])
+
+    def _bind_arrays(self) -> None:
+        """Stack the stacks' arrays and rebind every stack to its row."""
+        self.arrays = []
+        stacks = [self._inner(b.stacks[i]) for b, i in self.slots]
+        for owner, name in _ARRAYS:
+            parts = [getattr(s, owner) if owner else s for s in stacks]
+            whole = np.ascontiguousarray(np.stack([getattr(o, name) for o in parts]))
+            for j, o in enumerate(parts):
+                setattr(o, name, whole[j])
+            self.arrays.append(whole)
+
+    @staticmethod
+    def _inner(stack: object) -> object:
+        return getattr(stack, "stack", stack)  # a FaultyStack holds the FpgaStack
+
+    def _refresh_inputs(self, which: np.ndarray) -> None:
+        """Upstream words and CRC counts of the stacks ``which`` into the input records."""
+        mup, lk = self.arrays[13], self.arrays[14]
+        self.inp["up"][which] = mup[which] & 0xFFFF
+        self.inp["up_crc_errors"][which] = lk[which, LK.LK_MASTER_CRC]
+
+    # --- one fieldbus cycle ----------------------------------------------------------------
+    def applied(self, box: object) -> None:
+        """``box`` has taken this cycle's outputs (``box.pending``). Once every box has,
+        the next cycle's compute starts in the background (``overlap``): it needs nothing
+        that arrives later, since the chain applies a cycle's outputs before the frame of
+        the next cycle triggers :meth:`advance`, which then only waits for it."""
+        if self._jobs or self._ready is not None:
+            # A duplicate of a frame already applied: the reference path would apply the
+            # same bytes again, which changes nothing; anything else cannot be undone.
+            if box.pending != self._used.get(id(box)):
+                raise RuntimeError("box outputs changed after the cycle's compute started")
+            box.pending = None
+            return
+        self._pending.add(id(box))
+        if self.overlap and len(self._pending) == len(self.boxes):
+            self._take_outputs()
+            external = self._prepare()
+            if external:  # Python per tick: no gain from a thread, run it at advance
+                self._ready = external
+                return
+            self._start(self.cycle_ticks, max(1, self._workers() - 1))
+
+    def advance(self, ticks: int) -> None:
+        """``ticks`` ticks (whole MCU periods) of every actuator; then every box's inputs."""
+        if ticks % self.period:
+            raise ValueError(f"the robot engine advances whole MCU periods ({self.period} "
+                             f"ticks), not {ticks}")
+        jobs, self._jobs = self._jobs, []
+        ready, self._ready = self._ready, None
+        if jobs:
+            if self._workers() > 1:  # this thread joins the background ones
+                self._compute(self.cycle_ticks)
+            for job in jobs:
+                job.result()
+        elif ready is not None:
+            self._run_cycle(self.cycle_ticks)
+            self._advance_external(ready, self.cycle_ticks)
+        if (jobs or ready is not None) and ticks == self.cycle_ticks:
+            self._finish(ticks)
+            return
+        if jobs or ready is not None:
+            self._finish(self.cycle_ticks)
+        self._take_outputs()
+        external = self._prepare()
+        self._run_cycle(ticks)
+        if external:
+            self._advance_external(external, ticks)
+        self._finish(ticks)
+
+    def wait(self) -> None:
+        """Let a compute started ahead finish (its results are kept for the next
+        :meth:`advance`)."""
+        for job in self._jobs:
+            job.result()
+
+    def _prepare(self) -> list[int]:
+        """Which stacks the kernel advances (not those under a sensor fault, returned) and
+        the LVDS faults of this cycle switched."""
+        wrapped = [(j, s) for j, (b, i) in enumerate(self.slots)
+                   if hasattr(s := b.stacks[i], "sensors")]
+        external = [j for j, s in wrapped if s.sensors]
+        batched = self._batched
+        batched[:] = True
+        batched[external] = False
+        for _, s in wrapped:  # LVDS faults switch at cycle boundaries (FaultyStack)
+            if not s.sensors:
+                s._switch_lvds(self.tick // self.cycle_ticks)
+        return external
+
+    def _workers(self) -> int:
+        return self.workers or numba.config.NUMBA_NUM_THREADS
+
+    def _start(self, ticks: int, helpers: int) -> None:
+        """Open the cycle's actuators for claiming and start ``helpers`` background threads
+        on them; returns once each has entered the compiled call."""
+        self._counter[0] = 0
+        if helpers <= 0:
+            return
+        if self._pool_size < helpers:
+            if self._pool is not None:
+                self._pool.shutdown()
+            self._pool = ThreadPoolExecutor(helpers, thread_name_prefix="robot-engine")
+            self._pool_size = helpers
+        self._jobs = [self._pool.submit(self._compute, ticks, self._started)
+                      for _ in range(helpers)]
+        for _ in range(helpers):
+            # Hand the GIL over until the thread has released it in the compiled call: else
+            # it could wait for the interpreter's switch interval (5 ms) before it starts.
+            self._started.acquire()
+
+    def _run_cycle(self, ticks: int) -> None:
+        """A cycle's compute now: this thread and ``workers - 1`` helpers."""
+        self._start(ticks, self._workers() - 1)
+        jobs, self._jobs = self._jobs, []
+        self._compute(ticks)
+        for job in jobs:
+            job.result()
+
+    def _compute(self, ticks: int, started: threading.Semaphore | None = None) -> int:
+        """Claim and advance actuators until none is left (nothing here but the compiled
+        call, which releases the GIL)."""
+        if started is not None:
+            started.release()
+        return advance_robot(self._counter, ticks // self.period, self.period, self.tick,
+                             self._batched, self.ptrs, self._no_rec, self._no_trace,
+                             *self.arrays, self.in16, self.in32, self.out16, self.err)
+
+    def _finish(self, ticks: int) -> None:
+        batched = self._batched
+        for j, (b, i) in enumerate(self.slots):
+            if batched[j]:
+                self._inner(b.stacks[i]).plant.tick += ticks
+        self.tick += ticks
+        for b in self.all_boxes:
+            b.tick = self.tick
+        self._give_inputs(ticks)
+
+    def _advance_external(self, external: list[int], ticks: int) -> None:
+        """The stacks under a sensor fault: their own wrapper advances them tick by tick,
+        between the same steps of their programs as :func:`advance_robot` makes."""
+        size = self.law.state_size
+        for t in range(self.tick, self.tick + ticks, self.period):
+            for j in external:
+                b, i = self.slots[j]
+                self.inp["tick"][j] = t
+                self.law.step_many(self.states[j * size:(j + 1) * size], self.inp[j:j + 1],
+                                   self.out[j:j + 1])
+                self.inp["flags"][j] = 0
+                if t + self.period >= self.tick + ticks:
+                    self.err[j] = (self.in16[j, _IN_UP + B.U_ERR_LINK_CRC],
+                                   self.in32[j, _IN_CRC])
+                self.arrays[12][j] = self.out["down"][j]
+                b.stacks[i].advance(self.period)
+            which = np.zeros(self.n, dtype=bool)
+            which[external] = True
+            self._refresh_inputs(which)
+
+    def _take_outputs(self) -> None:
+        """The process data the boxes received since the last cycle, as program inputs."""
+        got = self._got
+        got[:] = False
+        for n_box, b in enumerate(self.boxes):
+            if b.pending is None:
+                continue
+            lo, hi = self._out_span[n_box]
+            self.out_image[lo:hi] = np.frombuffer(b.pending, dtype=np.uint8)
+            got[self._first[n_box]:self._first[n_box + 1]] = True
+            self._used[id(b)] = b.pending
+            b.pending = None
+        self._pending.clear()
+        take_outputs(self.out_image, self._out_at, got, self.enabled, self.clear, self.in32,
+                     self.inf32, self._cmd_lsb, self._gain_lsb)
+
+    def _give_inputs(self, ticks: int) -> None:
+        """Every box's input record from the programs' last outputs (as McuBoard.report)."""
+        give_inputs(self.in_image, self._in_at, self.out32, self.outf32, self.x_prev,
+                    ticks * self.tick_s, self.cos_alpha, self.err, self._in_lsb,
+                    self._in_bounds)
+
+
+def plant_records(engine: RobotEngine) -> np.ndarray:
+    """The plant outputs of every actuator now, (actuators, outputs), chain order."""
+    return engine.arrays[3].copy()
+
+
+__all__ = ["RobotEngine", "advance_robot", "plant_records", "L"]

@@ -1,0 +1,134 @@
+"""``python -m hil.sim.warmup``: compile the numba kernels once, right after installing.
+
+numba compiles a ``cache=True`` function on its first call and keeps the machine code in
+the cache folder of this version of the kernels' sources (:mod:`firmware_model.jit_cache`).
+Without this step the compiling happens in the user's first ``eha-hil main`` /
+``eha-hil run thesis`` (tens of seconds on the project's 2-core machine), which then looks
+hung; ``make`` runs this module right after each install instead.
+
+Each step is the smallest call that reaches a group of kernels with the argument types the
+commands and the tests use (numba keys its cache on the types, not the values). A failing
+step is reported and skipped: warming is a convenience, the commands compile whatever is
+missing on their first call anyway.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from collections.abc import Callable
+
+import numpy as np
+
+
+def _plant(cfg) -> None:
+    from plant.model import Plant, stiffness_range
+
+    stiffness_range(cfg)  # k_s(x) called from Python (eha-hil main prints its range)
+    plant = Plant(cfg)
+    plant.set_current(1.0)
+    plant.advance(2)
+    plant.advance(2, np.zeros((2, plant.y.size)), 0, 1)
+
+
+def _fpga_value_level(cfg) -> None:
+    """Plant + sensor chips + driver board + LVDS link in one compiled call, with and
+    without the board trace (the replay logs)."""
+    from hil.sim.actuator import TRACE_WIDTH, FpgaStack
+
+    stack = FpgaStack(cfg)
+    stack.boot()
+    stack.advance(2, np.zeros((2, stack.y.size)), 0, 1,
+                  trace=np.zeros((2, TRACE_WIDTH), dtype=np.int64))
+
+
+def _fpga_bit_level(cfg) -> None:
+    """The bit-level path calls the board's tick and the sensor kernels from Python."""
+    from hil.sim.actuator import FpgaStack
+
+    FpgaStack(cfg, bit_level=True).advance(2)
+
+
+def _replay(cfg) -> None:
+    from hil.replay.fpga_replay import warm_up
+
+    warm_up(cfg)
+
+
+def _fixed_point(cfg) -> None:
+    """The FOC blocks and the integer helpers on their own: compiled into the board's tick,
+    but also called one by one (``fpga golden``, the reference tests), and the blocks' pure
+    Python versions call the helpers as compiled functions."""
+    from firmware_model.fpga import fixed, foc
+
+    for f, args in ((foc.sin_cos, (0,)), (foc.clarke, (0, 0)), (foc.park, (0, 0, 0, 0)),
+                    (foc.inv_park, (0, 0, 0, 0)), (foc.svpwm, (0, 0, 1)),
+                    (foc.pi_step, (0, 0, 1, 0, 1, 0, 0, 1)), (foc.q_limit, (0, 1))):
+        f(*args)
+        f.py_func(*args)
+    for f in (fixed.wrap_s, fixed.wrap_u, fixed.sat_s, fixed.sat_u, fixed.shr_floor,
+              fixed.shr_round):
+        f(0, 16)
+    fixed.mul_shift(0, 1, 1)
+    fixed.clamp(0, -1, 1)
+    fixed.isqrt(0)
+
+
+def _identify_model(cfg) -> None:
+    """The identification model's simulation (``eha-hil identify``), on a short synthetic
+    record."""
+    from hil.identify.experiment import prepare
+    from hil.identify.model import FastModel
+    from hil.identify.synth import generate
+
+    model = FastModel(prepare(generate(seconds=0.2, noise=False).data, cfg))
+    model.outputs(model.start_vector())
+
+
+def _robot(cfg) -> None:
+    # The robot engine's kernels on one box (needs the MCU law's C build: a C compiler).
+    from hil.fieldbus.system import BusSystem
+    from hil.fieldbus.topology import load_topology
+    from hil.sim.pc import demo_pc
+
+    with BusSystem(load_topology("bench_one_box"), cfg, "inproc", model="robot") as bs:
+        bs.run(2, demo_pc())
+        bs.chain.engine.wait()
+
+
+STEPS: list[tuple[str, Callable]] = [
+    ("plant", _plant),
+    ("driver board + link", _fpga_value_level),
+    ("bit-level sensors and link", _fpga_bit_level),
+    ("board replay", _replay),
+    ("fixed-point blocks", _fixed_point),
+    ("identification model", _identify_model),
+    ("robot engine", _robot),
+]
+
+
+def warm(out=sys.stderr) -> int:
+    """Run every step; the number that failed (each is reported on one line)."""
+    t_all = time.perf_counter()
+    failed = 0
+    try:
+        from plant.config import load_config
+
+        cfg = load_config(None)
+    except Exception as exc:  # nothing to warm without a configuration
+        print(f"eha-hil warmup: skipped ({type(exc).__name__}: {exc})", file=out)
+        return len(STEPS)
+    print("eha-hil warmup: compiling the numba kernels once (15-30 s on a fresh "
+          "install, a second when they are cached) ...", file=out, flush=True)
+    for name, step in STEPS:
+        try:
+            step(cfg)
+        except Exception as exc:  # a convenience step: report it, go on
+            failed += 1
+            print(f"eha-hil warmup: {name}: skipped ({type(exc).__name__}: {exc})", file=out)
+    print(f"eha-hil warmup: done in {time.perf_counter() - t_all:.1f} s", file=out)
+    return failed
+
+
+if __name__ == "__main__":
+    warm()  # exit 0 even if a step failed: an install must not fail on a convenience step
