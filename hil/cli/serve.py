@@ -556,10 +556,10 @@ def _scope_options(p: argparse.ArgumentParser) -> None:
     """Each transport's own options, refused with another (hil.cli.args.only_with)."""
     from hil.cli.args import only_with
 
+    # (--capture and --foxglove with ethercat are refused by cmd_serve_ethercat, with hints)
     stream = tuple(serve_backends())
     scopes = {"baudrate": ("serial",), "host": ("udp",), "port": stream,
-              "interface": ("ethercat",), "stack_boxes": ("ethercat",), "capture": stream,
-              "foxglove": stream}
+              "interface": ("ethercat",), "stack_boxes": ("ethercat",)}
     for action in p._actions:
         if action.dest in scopes:
             only_with(action, "transport", *scopes[action.dest])
