@@ -9,6 +9,7 @@ configuration; 130 interrupted (the journal keeps every finished point: ``--resu
 from __future__ import annotations
 
 import argparse
+import errno
 import json
 import sys
 from collections.abc import Callable
@@ -28,6 +29,10 @@ def _duration(seconds: float | None) -> str:
     s = int(round(seconds))
     return f"{s // 3600}h{s // 60 % 60:02d}m" if s >= 3600 else (
         f"{s // 60}m{s % 60:02d}s" if s >= 60 else f"{s}s")
+
+
+#: errno values of a write that the disk refused (full, quota, read-only, I/O error).
+_DISK_ERRORS = (errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EIO, errno.EFBIG)
 
 
 class SweepUsageError(Exception):
@@ -133,6 +138,16 @@ def cmd_sweep(args: argparse.Namespace) -> int:
                             on_point=_reporter(scenario, show))
     except JournalError as exc:
         raise _usage(str(exc)) from None
+    except OSError as exc:
+        if journal is None or exc.errno not in _DISK_ERRORS:
+            raise
+        # the journal could not be written (a full disk): the sweep stops, the line says
+        # which file and where (hil.cli.outputs.finish), exit 1
+        from hil.cli import outputs
+
+        outputs.failed("journal", journal.path, f"{exc.strerror} (stopped "
+                       f"{cli_progress.position() or 'at the start'})")
+        raise outputs.StreamFailed from None
     finally:
         backend.close()
     try:

@@ -237,3 +237,23 @@ def test_interrupted_stream_is_kept_under_its_name(tmp_path):
         raise KeyboardInterrupt
     assert p.read_text() == "what ran\n"
     assert sorted(x.name for x in tmp_path.iterdir()) == ["run.log"]
+
+
+@pytest.mark.parametrize("opt", [pytest.param(o, id=_ids(o)) for o in OPTIONS
+                                 if o[2] == "output" and (o[0], o[1]) not in SLOW])
+def test_full_file_system_names_the_file_and_leaves_nothing(opt, inputs, tmp_path,
+                                                            monkeypatch):
+    """The same on a real full file system (a filled tmpfs): also the files written beside
+    an output (a sweep's journal) are named, and nothing is left behind."""
+    verb, name, kind, suffixes = opt
+    monkeypatch.chdir(tmp_path)
+    with _mount("rw", fill=True) as d:
+        target = d / _name(kind, suffixes)
+        before = sorted(p.name for p in d.iterdir())
+        code, out, err = _run(_argv(verb, name, str(target), inputs))
+        after = sorted(p.name for p in d.iterdir())
+    assert code == 1, (code, err[-2000:])
+    assert "Traceback" not in err
+    failed = [ln for ln in err.splitlines() if "not written" in ln]
+    assert len(failed) == 1 and str(d) in failed[0] and "No space left" in failed[0], err
+    assert after == before  # no half file, no temporary
