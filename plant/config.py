@@ -28,7 +28,12 @@ DEFAULT_PRESET = "hydra_default"
 #: recipe it was recorded with, so its log replays bit for bit.
 PLANT_NUMERICS = 2
 #: Values of keys that a configuration recorded before the key existed ran with.
-RECORDED_BEFORE: dict[str, Any] = {"sim.plant_numerics": 1}
+RECORDED_BEFORE: dict[str, Any] = {
+    "sim.plant_numerics": 1,
+    # Runs recorded before entrained air existed had none (the fraction is then unused).
+    "effects.entrained_air.enabled": False,
+    "effects.entrained_air.volume_fraction": 0.01,
+}
 
 #: Keys that take one of a fixed set of strings.
 CHOICES: dict[str, tuple[str, ...]] = {
@@ -120,6 +125,7 @@ RANGES: dict[str, Range] = {
     "effects.seal_friction.static_n": _span(0.0, 1e5),
     "effects.seal_friction.stribeck_velocity_m_per_s": _pos(10.0),
     "effects.seal_friction.velocity_eps_m_per_s": _pos(10.0),
+    "effects.entrained_air.volume_fraction": _span(0.0, 0.2),
     "effects.oil_temperature.reference_c": _span(-40.0, 150.0),
     "effects.oil_temperature.initial_c": _span(-40.0, 150.0),
     "effects.oil_temperature.viscosity_coeff_per_c": _span(0.0, 0.1),

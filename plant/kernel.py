@@ -31,7 +31,9 @@ from __future__ import annotations
 from numba import njit
 
 from plant.blocks import TICK
-from plant.blocks.hydraulics import pressure_force, series_stiffness
+
+# series_stiffness: read as kernel.series_stiffness by plant.model and hil.identify.
+from plant.blocks.hydraulics import line_stiffness, pressure_force, series_stiffness  # noqa: F401
 from plant.blocks.load import end_stops, piston_and_load, rod_force
 from plant.blocks.motor_dq import drive, phase_angles
 from plant.blocks.pump import pump, ripple_and_friction
@@ -169,7 +171,7 @@ def rk4_tick(x, p, u, work):
 def stored_energy(x, p, u):
     """Kinetic + elastic + magnetic energy held by the plant, J."""
     e = 0.5 * p[P_JP] * x[S_VP] ** 2 + 0.5 * p[P_JC] * x[S_VC] ** 2
-    e += x[S_TQ] ** 2 / (2.0 * series_stiffness(p, x[S_THC]))
+    e += x[S_TQ] ** 2 / (2.0 * line_stiffness(p, x[S_THC], x[S_TQ]))
     kind = p[P_LOAD_KIND]
     if kind == LOAD_CONROD:
         e += 0.5 * p[P_K_ROD] * (x[S_THC] - p[P_X_ANCHOR]) ** 2

@@ -25,6 +25,7 @@ PARAM_NAMES = (
     "noise_on", "noise_p", "noise_f", "noise_t",
     "quant_on", "q_motor", "q_piston", "q_pressure", "q_strain", "q_temp",
     "h_sub", "n_sub", "numerics",
+    "air_on", "air_a",
 )
 (P_JP, P_JC, P_DP, P_DC, P_DS, P_KS_AVG, P_KS_FLUID_GAIN, P_SIDE_V0, P_KC,
  P_KS_PIPE, P_HALF_STROKE, P_KC_OVER_KP, P_PRECHARGE,
@@ -39,7 +40,8 @@ PARAM_NAMES = (
  P_DRIFT_ON, P_DRIFT_K, P_ROD_TAU,
  P_NOISE_ON, P_NOISE_P, P_NOISE_F, P_NOISE_T,
  P_QUANT_ON, P_Q_MOTOR, P_Q_PISTON, P_Q_PRESSURE, P_Q_STRAIN, P_Q_TEMP,
- P_H_SUB, P_N_SUB, P_NUMERICS) = range(len(PARAM_NAMES))
+ P_H_SUB, P_N_SUB, P_NUMERICS,
+ P_AIR_ON, P_AIR_A) = range(len(PARAM_NAMES))
 N_PARAMS = len(PARAM_NAMES)
 
 # Load kinds, as stored in P_LOAD_KIND.

@@ -404,7 +404,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         for opt in ("series", "foxglove"):
             if getattr(args, opt, None) is not None:
                 raise UsageError(f"--{opt}: 'thesis' runs several scenarios; give one "
-                                 "(f3 ... f8)")
+                                 "(f1-measured, f3 ... f9-roll)")
         return cmd_run_thesis(args)
     try:
         scenario = scenarios.get(args.scenario)
@@ -697,14 +697,15 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("run", parents=[_common()],
                        help="run a scenario on the simulated stack (thesis, "
                        + ", ".join(scen) + "; exit 1 if a requirement is missed)",
-                       epilog="Scenarios: thesis: all thesis experiments (F3-F8); " + "; ".join(
+                       epilog="Scenarios: thesis: the thesis experiments (F1m, F3-F9); "
+                       + "; ".join(
                            f"{n}: {SCENARIOS[n].summary}" for n in scen)
                        + ". Scenario settings (--set scenario.NAME=VALUE; sweepable): "
                        + "; ".join(f"{n}: " + ", ".join(k.name for k in SCENARIOS[n].knobs)
                                    for n in scen if SCENARIOS[n].knobs)
                        + " (docs/scenarios.md).")
     p.add_argument("scenario", metavar="SCENARIO",
-                   help="scenario name, or 'thesis' for all thesis experiments (F3-F8); "
+                   help="scenario name, or 'thesis' for the thesis experiments (F1m, F3-F9); "
                    "these default to -c hydra_thesis")
     p.add_argument("--plot-dir", default=None, type=output_dir,
                    help="directory for one plot per scenario, NAME.png (with 'thesis' "

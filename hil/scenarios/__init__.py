@@ -122,12 +122,13 @@ def names() -> list[str]:
     return sorted(SCENARIOS)
 
 
-#: The thesis experiments ``eha-hil run thesis`` runs, in order, on the full stack.
-THESIS = ("f3", "f4", "f5", "f6", "f7", "f8")
+#: The thesis experiments ``eha-hil run thesis`` runs, in order: F1 as measured (the plant
+#: alone, with and without entrained air), F3-F8 on the full stack, and the hip's F9
+#: (pitch, and roll as Fig. 6.22) through the whole joint stack.
+THESIS = ("f1-measured", "f3", "f4", "f5", "f6", "f7", "f8", "f9", "f9-roll")
 #: Scenarios that run on the thesis's preset (``-c hydra_thesis``) unless ``-c`` says
-#: otherwise: the thesis experiments, and the hip's F9 (pitch, and roll as Fig. 6.22),
-#: which ``run thesis`` leaves out while its position bandwidth misses (docs/hip.md).
-ON_THESIS_PRESET = (*THESIS, "f9", "f9-roll")
+#: otherwise: the thesis experiments.
+ON_THESIS_PRESET = THESIS
 #: The main job's figures (plant alone), which ``eha-hil main`` runs and prints.
 MAIN = ("f1", "f2")
 
@@ -137,6 +138,7 @@ def _load_all() -> None:
     from hil.scenarios import (  # noqa: F401
         bus_faults,
         current,
+        f1_measured,
         hip,
         identify_rig,
         plant_figures,

@@ -39,14 +39,20 @@ class JointRecord:
     theta_true: np.ndarray  # (n, 2) rad, the thigh's angle in the plant (truth)
 
 
-def hip_config(cfg: Config, reinforced: bool, rod_damping_ns_per_m: float | None = None
-               ) -> Config:
-    """The configuration for the hip's cylinders: their rod path's stiffness is the
-    testbed beam's (thesis 5.4; calibrated on F6), reinforced or not; its damping the
-    configuration's unless given."""
-    k = cfg.get("load.beam_axial_stiffness_n_per_m")
-    if reinforced:
-        k *= cfg.get("load.beam_reinforcement_ratio")
+def hip_config(cfg: Config, reinforced: bool, rod_damping_ns_per_m: float | None = None,
+               rod_stiffness_n_per_m: float | None = None) -> Config:
+    """The configuration for the hip's cylinders: their rod path's stiffness is
+    ``rod_stiffness_n_per_m`` for the reinforced structure (divided by
+    ``load.beam_reinforcement_ratio`` without it) or, when None, the testbed beam's
+    (thesis 5.4; calibrated on F6), reinforced or not; its damping the configuration's
+    unless given."""
+    ratio = cfg.get("load.beam_reinforcement_ratio")
+    if rod_stiffness_n_per_m is not None:
+        k = rod_stiffness_n_per_m if reinforced else rod_stiffness_n_per_m / ratio
+    else:
+        k = cfg.get("load.beam_axial_stiffness_n_per_m")
+        if reinforced:
+            k *= ratio
     over = {"load.kind": "conrod", "load.conrod_stiffness_n_per_m": k, "mcu.impl": "python"}
     if rod_damping_ns_per_m is not None:
         over["load.conrod_damping_ns_per_m"] = rod_damping_ns_per_m
@@ -58,12 +64,13 @@ def run_joint(cfg: Config, seconds: float, reference: Reference,
               gains: JointGains | None = None, reinforced: bool = True,
               progress: Callable[[int, int], None] | None = None,
               rod_damping_ns_per_m: float | None = None,
-              thigh: ThighParams | None = None, feed_forward: bool = False) -> JointRecord:
+              thigh: ThighParams | None = None, feed_forward: bool = False,
+              rod_stiffness_n_per_m: float | None = None) -> JointRecord:
     """Run the joint stack for ``seconds`` under the position loop (``thigh``: the load's
     parameters, the box's default if None). ``feed_forward``: the PC adds the inverse
     dynamics of its planned reference, I_hat theta_ref_ddot, with the acceleration by
     central differences of the reference it generates (it plans one cycle ahead)."""
-    cfg = hip_config(cfg, reinforced, rod_damping_ns_per_m)
+    cfg = hip_config(cfg, reinforced, rod_damping_ns_per_m, rod_stiffness_n_per_m)
     topo = load_topology("hip_one_box")
     cycles = int(round(seconds / 1e-3))
     rec = JointRecord(np.arange(cycles) * 1e-3, *(np.zeros((cycles, 2)) for _ in range(5)))

@@ -46,6 +46,38 @@ N_J = 18
 
 
 @dataclass(frozen=True)
+class LegBelow:
+    """The leg below the thigh, held to it by its own servo-on joints (thesis 6.4.1: the
+    robot on a crane, one leg servo-on): a rigid part of the hip's load. Masses from
+    Table 6.1 (the link after the knee 4.67 kg, the foot 2.11 kg); the lengths are
+    assumptions for a 180 cm robot (docs/hip.md): hip to knee 0.40 m, knee to ankle
+    0.40 m, the shank's COM 0.15 m below the knee (its EHAs sit near the knee), the foot's
+    0.05 m below the ankle. The knee and ankle loops' own compliance is not modelled: the
+    leg moves with the thigh."""
+
+    shank_kg: float = 4.67
+    foot_kg: float = 2.11
+    knee_m: float = 0.40                 # hip to knee; assumption
+    shank_com_m: float = 0.15            # below the knee; assumption
+    shank_gyration_m: float = 0.10       # about the shank's COM; assumption
+    ankle_m: float = 0.40                # knee to ankle; assumption
+    foot_com_m: float = 0.05             # below the ankle; assumption
+    foot_gyration_m: float = 0.06        # about the foot's COM; assumption
+
+    def inertia(self) -> float:
+        """Inertia about the hip's axes (parallel axes), kg m^2."""
+        c_s = self.knee_m + self.shank_com_m
+        c_f = self.knee_m + self.ankle_m + self.foot_com_m
+        return (self.shank_kg * (c_s ** 2 + self.shank_gyration_m ** 2)
+                + self.foot_kg * (c_f ** 2 + self.foot_gyration_m ** 2))
+
+    def mass_moment(self) -> float:
+        """m c of the leg below the hip (kg m): its gravity torque is m c g sin(theta)."""
+        return (self.shank_kg * (self.knee_m + self.shank_com_m)
+                + self.foot_kg * (self.knee_m + self.ankle_m + self.foot_com_m))
+
+
+@dataclass(frozen=True)
 class ThighParams:
     """The thigh as the hip's load (SI). Thesis 6.2.2: 8.50 kg with its four EHAs; the
     1.59 kg intermediate link sits above the pitch axis on the hip-yaw output (held still
@@ -56,15 +88,22 @@ class ThighParams:
     com_m: float = 0.15                  # COM below the joint; assumption
     gyration_m: float = 0.10             # radius of gyration about the COM; assumption
     damping_nms_per_rad: float = 0.5     # joint bearings; assumption
+    #: The leg below, when the experiment had it on the thigh (None: the thigh alone).
+    leg: LegBelow | None = None
 
     def inertia(self) -> float:
-        """Inertia about the joint axes (parallel axes), kg m^2."""
-        return self.mass_kg * (self.com_m ** 2 + self.gyration_m ** 2)
+        """Inertia about the joint axes (parallel axes), kg m^2, the leg's included."""
+        inertia = self.mass_kg * (self.com_m ** 2 + self.gyration_m ** 2)
+        if self.leg is not None:
+            inertia += self.leg.inertia()
+        return inertia
 
     def as_array(self) -> np.ndarray:
         h = np.zeros(N_H)
         h[H_I_PITCH] = h[H_I_ROLL] = self.inertia()
         h[H_MGC] = self.mass_kg * GRAVITY * self.com_m
+        if self.leg is not None:
+            h[H_MGC] += self.leg.mass_moment() * GRAVITY
         h[H_B_PITCH] = h[H_B_ROLL] = self.damping_nms_per_rad
         return h
 

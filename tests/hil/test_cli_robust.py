@@ -291,11 +291,11 @@ def test_ctrl_c_bus_run_closes_the_log(tmp_path):
 @pytest.mark.slow
 def test_ctrl_c_run_thesis_names_the_scenario_and_the_plots(tmp_path):
     run = _Running(["run", "thesis", "--plot-dir", str(tmp_path / "plots")], tmp_path)
-    run.wait_for(r"f4 \.\.\.")  # f3 is done and its plot written
+    run.wait_for(r"f4 \.\.\.")  # f1-measured and f3 are done and their plots written
     code, lines = run.interrupt()
-    last = _one_interrupt_line(code, lines, "run thesis", r"f\d \.\.\.")
-    assert re.search(r"interrupted in f\d \(f3(, f\d)* done\); plots? f3.png(, f\d.png)* "
-                     r"written to \S+/plots/$", last), last
+    last = _one_interrupt_line(code, lines, "run thesis", r"f[\w-]+ \.\.\.")
+    assert re.search(r"interrupted in f[\w-]+ \(f1-measured(, f[\w-]+)* done\); plots? "
+                     r"f1-measured.png(, f[\w-]+.png)* written to \S+/plots/$", last), last
     assert (tmp_path / "plots" / "f3.png").stat().st_size > 10_000
 
 

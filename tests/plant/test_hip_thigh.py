@@ -12,10 +12,14 @@ from firmware_model.pc.geometry import hip_geometry
 from firmware_model.pc.kinematics import UJointKinematics
 from plant import layout as L
 from plant.hip.thigh import (
+    GRAVITY,
+    H_I_PITCH,
+    H_MGC,
     J_CA1,
     J_CA2,
     J_TP,
     N_J,
+    LegBelow,
     ThighParams,
     couple_tick,
     place_anchors,
@@ -26,10 +30,11 @@ K_ROD = 2.0e6
 DT = 50e-6
 
 
-def _held_pistons_swing(theta0: float, kick: float, ticks: int) -> np.ndarray:
+def _held_pistons_swing(theta0: float, kick: float, ticks: int,
+                        leg: LegBelow | None = None) -> np.ndarray:
     geom = hip_geometry()
     g = geom.as_array()
-    thigh = ThighParams(damping_nms_per_rad=0.0)
+    thigh = ThighParams(damping_nms_per_rad=0.0, leg=leg)
     h = thigh.as_array()
     kin = UJointKinematics(geom)
     x_c = kin.inverse(theta0, 0.0)             # pistons held where the rods end at theta0
@@ -68,3 +73,31 @@ def test_thigh_swings_at_the_linearised_frequency(theta0_deg):
     up = np.nonzero((s[:-1] < 0) & (s[1:] >= 0))[0]
     f_sim = (len(up) - 1) / ((up[-1] - up[0]) * DT)
     assert f_sim == pytest.approx(f_lin, rel=0.01)
+
+
+def test_the_leg_below_swings_with_the_thigh():
+    """With the servo-on leg (rigid below the thigh), the held-piston swing is at
+    sqrt((k G^T G + (m c)_total g) / I_total), the leg's share from Table 6.1's masses."""
+    leg = LegBelow()
+    thigh = ThighParams(leg=leg)
+    kin = UJointKinematics(hip_geometry())
+    kin.inverse(0.0, 0.0)
+    gp = kin.G[:, 0]
+    mc = thigh.mass_kg * thigh.com_m + leg.shank_kg * (leg.knee_m + leg.shank_com_m) \
+        + leg.foot_kg * (leg.knee_m + leg.ankle_m + leg.foot_com_m)
+    assert thigh.as_array()[H_MGC] == pytest.approx(mc * 9.80665, rel=1e-12)
+    stiff = K_ROD * float(gp @ gp) + mc * 9.80665
+    f_lin = math.sqrt(stiff / thigh.inertia()) / (2 * math.pi)
+    swing = _held_pistons_swing(0.0, math.radians(0.05), int(4.0 / f_lin / DT), leg)
+    s = swing - swing.mean()
+    up = np.nonzero((s[:-1] < 0) & (s[1:] >= 0))[0]
+    f_sim = (len(up) - 1) / ((up[-1] - up[0]) * DT)
+    assert f_sim == pytest.approx(f_lin, rel=0.01)
+    assert thigh.inertia() > 10 * ThighParams().inertia()  # the leg dominates the load
+
+
+def test_without_the_leg_the_load_is_the_old_arithmetic():
+    t = ThighParams()
+    h = t.as_array()
+    assert h[H_I_PITCH] == t.mass_kg * (t.com_m ** 2 + t.gyration_m ** 2)
+    assert h[H_MGC] == t.mass_kg * GRAVITY * t.com_m
