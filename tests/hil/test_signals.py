@@ -220,7 +220,8 @@ def test_run_thesis_keeps_the_finished_plots(sig, tmp_path):
     run.wait_for(r"f4 \.\.\.")  # f3 is done and its plot written
     code, lines = run.stop(sig)
     last = _ended(code, lines, sig, "run thesis")
-    assert re.search(r"plots? ([\w-]+\.png, )*f3\.png(, [\w-]+\.png)* written to plots/$", last), last
+    done = r"plots? ([\w-]+\.png, )*f3\.png(, [\w-]+\.png)* written to plots/$"
+    assert re.search(done, last), last
     from PIL import Image
 
     with Image.open(tmp_path / "plots" / "f3.png") as im:  # a whole PNG: it decodes
