@@ -123,12 +123,17 @@ def run_identify(args: argparse.Namespace) -> int:
     rep.notes[:0] = [n for n in data.notes if n not in rep.notes]
     from hil.cli import outputs
 
-    # the report goes to a temporary directory whose files are moved in when all are
-    # written: a failed report leaves nothing half-written; the result is printed anyway
-    if args.report and outputs.write_dir("report", args.report,
-                                         lambda tmp: report.write_report(rep, tmp)):
-        progress(f"report written to {args.report}/")
-    print(report.to_json(rep) if args.json else report.text(rep))
+    # the result first (an interruption while the report is written keeps it); the report
+    # goes to a temporary directory whose files are moved in when all are written: a
+    # failed report leaves nothing half-written
+    print(report.to_json(rep) if args.json else report.text(rep), flush=True)
+    if args.report:
+        from hil.cli import progress as cli_progress
+
+        cli_progress.at(f"while writing the report {args.report}/ (the result is printed "
+                        "above)")
+        if outputs.write_dir("report", args.report, lambda tmp: report.write_report(rep, tmp)):
+            progress(f"report written to {args.report}/")
     if data.cut:
         from hil.cli import cutfiles
 

@@ -57,17 +57,17 @@ def run_check(args: argparse.Namespace) -> int:
 
     results = run_matrix(cases, args.seeds, jobs=args.jobs, progress=progress)
     table = markdown(results)
-    if args.markdown:
+    if args.json:
+        print(json.dumps([r.as_dict() for r in results], indent=2), flush=True)
+    else:
+        print(table, flush=True)
+    if args.markdown:  # after the result: an interruption here keeps it
         from pathlib import Path
 
         from hil.cli import outputs
 
         outputs.write("table", args.markdown,
                       lambda tmp: Path(tmp).write_text(table + "\n", encoding="utf-8"))
-    if args.json:
-        print(json.dumps([r.as_dict() for r in results], indent=2))
-    else:
-        print(table)
     return 0 if all(r.right for r in results) else 1
 
 

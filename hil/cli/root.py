@@ -72,6 +72,17 @@ def _emit(args: argparse.Namespace, text: str, data: dict) -> None:
         print(text)
 
 
+def _write_after(args: argparse.Namespace, label: str, path: str,
+                 fn: Callable[[Path], object], more: Callable[[], str] = lambda: "") -> None:
+    """Write a file after the result is printed (:func:`hil.cli.outputs.write`) and say so
+    on a line of its own: an interruption while it is written keeps the printed result,
+    a failure is the root's one line (exit 1)."""
+    sys.stdout.flush()
+    cli_progress.at(f"while writing {label} {path} (the result is printed above)")
+    if outputs.write(label, path, fn) and not args.json:
+        print(f"{label} written to {path}{more()}", flush=True)
+
+
 def _json_default(obj: object) -> object:
     if isinstance(obj, np.generic):
         return obj.item()
@@ -119,12 +130,11 @@ def cmd_plant_bode(args: argparse.Namespace) -> int:
                      f"simulated peak at {r.peak_hz():g} Hz\n")
         data["responses"].append({"load": r.load, "output": r.output, "points": r.rows(),
                                   "max_gain_error_db": ge, "max_phase_error_deg": pe})
+    _emit(args, "\n".join(parts), data)
     if args.plot:
         from hil.output.plots import plot_bode
 
-        if outputs.write("plot", args.plot, lambda tmp: plot_bode(results, tmp)):
-            parts.append(f"plot written to {args.plot}")
-    _emit(args, "\n".join(parts), data)
+        _write_after(args, "plot", args.plot, lambda tmp: plot_bode(results, tmp))
     return 0
 
 
@@ -147,12 +157,11 @@ def cmd_plant_tn(args: argparse.Namespace) -> int:
     text += (f"\nstall force {curve.stall_force_n:.0f} N, no-load velocity "
              f"{curve.no_load_velocity_m_s * 1e3:.1f} mm/s, peak efficiency "
              f"{100 * pk.efficiency:.1f} % at {pk.force_n:.0f} N")
+    _emit(args, text, {"config": cfg.sources, **curve.as_dict()})
     if args.plot:
         from hil.output.plots import plot_tn_curve
 
-        if outputs.write("plot", args.plot, lambda tmp: plot_tn_curve(curve, tmp)):
-            text += f"\nplot written to {args.plot}"
-    _emit(args, text, {"config": cfg.sources, **curve.as_dict()})
+        _write_after(args, "plot", args.plot, lambda tmp: plot_tn_curve(curve, tmp))
     return 0
 
 
@@ -432,26 +441,25 @@ def cmd_run(args: argparse.Namespace) -> int:
                  title=f"{res.name}: {res.title} ({cfg.sources[-1]})")
     if res.notes:
         text += "\n" + "\n".join(f"note: {n}" for n in res.notes)
-    if args.plot and res.plot and outputs.write("plot", args.plot,
-                                                 lambda tmp: res.plot(res, tmp)):
-        text += f"\nplot written to {args.plot}"
+    data = {"scenario": res.name, "title": res.title, "config": cfg.sources, "ok": res.ok,
+            "metrics": [{"name": m.name, "value": m.value, "unit": m.unit,
+                         "requirement": m.requirement, "ok": m.ok} for m in res.metrics],
+            "notes": res.notes}
+    # the result is printed first: a Ctrl-C while the files are written, or during the
+    # wait for a Foxglove client, does not lose the table of a finished run
+    _emit(args, text, data)
+    if args.plot and res.plot:
+        _write_after(args, "plot", args.plot, lambda tmp: res.plot(res, tmp))
     if getattr(args, "series", None):
         from hil.framelog.series_export import write_series
 
         rows: list[int] = []
         try:
-            if outputs.write("series", args.series,
-                             lambda tmp: rows.append(write_series(res, tmp))):
-                text += f"\nseries written to {args.series} ({rows[0]} rows)"
+            _write_after(args, "series", args.series,
+                         lambda tmp: rows.append(write_series(res, tmp)),
+                         lambda: f" ({rows[0]} rows)")
         except ValueError as exc:
             raise UsageError(str(exc)) from None
-    data = {"scenario": res.name, "title": res.title, "config": cfg.sources, "ok": res.ok,
-            "metrics": [{"name": m.name, "value": m.value, "unit": m.unit,
-                         "requirement": m.requirement, "ok": m.ok} for m in res.metrics],
-            "notes": res.notes}
-    # the result is printed before the wait for a Foxglove client: a Ctrl-C there (the
-    # usual way to give up waiting) must not lose the table of a finished run
-    _emit(args, text, data)
     if getattr(args, "foxglove", None) is not None:
         sys.stdout.flush()
         cli_progress.at("after the run, waiting for a Foxglove client (the result is "
