@@ -5,7 +5,8 @@
 #   make system-deps - (root, apt) the system tools some tests use, else they skip:
 #                  tshark + dumpcap (capture tests), iproute2 (ip netns: UDP capture, the
 #                  pysoem EtherCAT master on a veth pair; gcc builds pysoem), the Arm cross
-#                  compiler + newlib and QEMU (MCU law on a Cortex-M4), Icarus Verilog (RTL)
+#                  compiler + newlib and QEMU (MCU law on a Cortex-M4), Icarus Verilog and
+#                  Verilator with g++ (the current loop's RTL: checked, and in the loop)
 PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
@@ -53,7 +54,7 @@ system-deps:
 	echo "wireshark-common wireshark-common/install-setuid boolean false" | debconf-set-selections
 	DEBIAN_FRONTEND=noninteractive apt-get update -qq
 	DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends tshark iproute2 gcc \
-		gcc-arm-none-eabi libnewlib-arm-none-eabi qemu-system-arm iverilog
+		gcc-arm-none-eabi libnewlib-arm-none-eabi qemu-system-arm iverilog verilator g++
 
 lint: $(TSTAMP)
 	$(BIN)/ruff check .

@@ -41,6 +41,7 @@ CHOICES: dict[str, tuple[str, ...]] = {
     "mcu.controller": ("current", "velocity"),
     "mcu.force_feedback": ("pressure", "strain", "complementary"),
     "mcu.impl": ("python", "c"),
+    "fpga.impl": ("python", "rtl"),
 }
 
 
@@ -220,8 +221,9 @@ for _a in ANALOG_INPUTS:
         DECLARED[f"sensors.{_a.fitted_key}"] = False
 RANGES.update({fw: RANGES[plant] for fw, plant in FIRMWARE_NOMINAL.items()})
 #: Keys that choose how a model is run, not what it computes (``mcu.impl``: the Python MCU
-#: or its bit-identical C build): a log written before one existed replays with its default.
-RUN_CHOICES = ("mcu.impl",)
+#: or its bit-identical C build; ``fpga.impl``: the board's current loop or its RTL): a log
+#: written before one existed replays with its default.
+RUN_CHOICES = ("mcu.impl", "fpga.impl", "fpga.rtl_dir")
 
 class ConfigError(Exception):
     """A configuration mistake; ``str(err)`` is one line naming the key and the file."""

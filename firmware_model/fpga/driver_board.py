@@ -46,6 +46,9 @@ class DriverBoard:
         self.up = np.zeros(B.UP_WORDS, dtype=np.int64)
         self.pwm_top = int(self.params[B.C_PWM_TOP])
         self.calibrated_offset = calibrated_offset(cal)
+        #: What ``params[C_RTL_*]`` point at (the harness's compiled RTL of the current loop,
+        #: ``fpga.impl = "rtl"``), held here so that it lives as long as the board.
+        self.rtl = None
 
     def tick(self, raw: np.ndarray) -> int:
         """One 50 us tick with the raw sensor words ``raw``; returns 1 while PWM is on."""

@@ -224,10 +224,14 @@ PARAM_NAMES = (
     "mv_to_v", "v_to_mv",             # mV <-> s16 voltage: multiply, shift 15
     "wd_ticks",                       # watchdog time in ticks
     "speed_window",                   # ABI speed window, ticks (power of two, <= 256)
+    # The current loop as compiled RTL (``fpga.impl = "rtl"``, firmware_model/fpga/rtl_abi.py):
+    # the library's tick function, its model and the exchange buffer, as addresses valid in
+    # this process only; 0: the board's own loop.
+    "rtl_tick", "rtl_handle", "rtl_io",
 )
 (C_POLE_PAIRS, C_SSI_SHIFT, C_ADC_MID, C_ADC_SHIFT, C_PWM_TOP, C_V_LIMIT, C_KP_SHIFT,
- C_KI_SHIFT, C_MA_TO_I, C_I_TO_MA, C_MV_TO_V, C_V_TO_MV, C_WD_TICKS, C_SPEED_WINDOW) = range(
-    len(PARAM_NAMES))
+ C_KI_SHIFT, C_MA_TO_I, C_I_TO_MA, C_MV_TO_V, C_V_TO_MV, C_WD_TICKS, C_SPEED_WINDOW,
+ C_RTL_TICK, C_RTL_HANDLE, C_RTL_IO) = range(len(PARAM_NAMES))
 N_PARAMS = len(PARAM_NAMES)
 
 # --- internal state (F_*) -------------------------------------------------------------------

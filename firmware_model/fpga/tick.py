@@ -39,6 +39,7 @@ from firmware_model.fpga.layout import (
     C_MV_TO_V,
     C_POLE_PAIRS,
     C_PWM_TOP,
+    C_RTL_TICK,
     C_SPEED_WINDOW,
     C_SSI_SHIFT,
     C_V_LIMIT,
@@ -122,6 +123,7 @@ from firmware_model.fpga.layout import (
     BoardMode,
 )
 from firmware_model.fpga.protections import count, protections
+from firmware_model.fpga.rtl_abi import rtl_loop_tick
 
 
 @njit(cache=True, inline="always")
@@ -178,8 +180,25 @@ def control_tick(c, st, down, up, raw):
     # --- current loop and modulation ------------------------------------------------------
     top = c[C_PWM_TOP]
     v_lim = c[C_V_LIMIT]
-    if state == STATE_ENABLED:
-        if mode == BoardMode.CURRENT:
+    enabled = state == STATE_ENABLED
+    on_rtl = c[C_RTL_TICK] != 0
+    if on_rtl:
+        # The loop's RTL: it runs (enable high) in current mode only, and holds its
+        # integrators (no clock edge) while the board drives voltages.
+        current = enabled and mode == BoardMode.CURRENT
+        i_d, i_q, v_d, v_q, d_a, d_b, d_c = rtl_loop_tick(
+            c, st, down, raw[R_IA], raw[R_IB], theta_e, 1 if current else 0,
+            0 if enabled and not current else 1)
+        st[F_ID] = i_d
+        st[F_IQ] = i_q
+    if enabled:
+        if mode != BoardMode.CURRENT:
+            v_d = clamp(mul_shift(wrap_s(down[D_VD_REF], 16), c[C_MV_TO_V], 15), -v_lim, v_lim)
+            q_lim = q_limit(v_d, v_lim)
+            v_q = clamp(mul_shift(wrap_s(down[D_VQ_REF], 16), c[C_MV_TO_V], 15), -q_lim, q_lim)
+            v_alpha, v_beta = inv_park(v_d, v_q, s, co)
+            d_a, d_b, d_c = svpwm(v_alpha, v_beta, top)
+        elif not on_rtl:
             i_lim = min(mul_shift(down[D_CURRENT_LIMIT], c[C_MA_TO_I], 15), 32767)
             iq_ref = clamp(mul_shift(wrap_s(down[D_IQ_REF], 16), c[C_MA_TO_I], 15), -i_lim, i_lim)
             id_ref = clamp(mul_shift(wrap_s(down[D_ID_REF], 16), c[C_MA_TO_I], 15), -i_lim, i_lim)
@@ -192,17 +211,14 @@ def control_tick(c, st, down, up, raw):
             v_q, integ = pi_step(iq_ref - i_q, st[F_INTEG_Q], kp, c[C_KP_SHIFT], ki,
                                  c[C_KI_SHIFT], ff, q_limit(v_d, v_lim))
             st[F_INTEG_Q] = integ
-        else:
-            v_d = clamp(mul_shift(wrap_s(down[D_VD_REF], 16), c[C_MV_TO_V], 15), -v_lim, v_lim)
-            q_lim = q_limit(v_d, v_lim)
-            v_q = clamp(mul_shift(wrap_s(down[D_VQ_REF], 16), c[C_MV_TO_V], 15), -q_lim, q_lim)
-        v_alpha, v_beta = inv_park(v_d, v_q, s, co)
-        d_a, d_b, d_c = svpwm(v_alpha, v_beta, top)
+            v_alpha, v_beta = inv_park(v_d, v_q, s, co)
+            d_a, d_b, d_c = svpwm(v_alpha, v_beta, top)
         pwm_on = 1
     else:
-        v_d = 0
-        v_q = 0
-        d_a = d_b = d_c = top >> 1
+        if not on_rtl:  # (the RTL, enable low, gives the same: nothing applied, legs at top/2)
+            v_d = 0
+            v_q = 0
+            d_a = d_b = d_c = top >> 1
         pwm_on = 0
         st[F_INTEG_D] = 0
         st[F_INTEG_Q] = 0

@@ -11,6 +11,8 @@ import math
 import time
 from dataclasses import dataclass
 
+from firmware_model.fpga.params import board_params
+from firmware_model.fpga.rtl_abi import timing_ticks_model, timing_ticks_rtl
 from hil.sim.scheduler import Scheduler
 from plant.config import Config
 from plant.model import Plant
@@ -25,10 +27,16 @@ class PlantBench:
     substeps: int
     mode: str
     tick_s: float
+    cpu_s: float = math.nan  # CPU seconds of the process over the run, where measured
+    loop: str = ""           # the board's current loop, where there is a choice
 
     @property
     def real_time_factor(self) -> float:
         return self.simulated_s / self.wall_s
+
+    @property
+    def cpu_real_time_factor(self) -> float:
+        return self.simulated_s / self.cpu_s
 
     @property
     def ticks_per_s(self) -> float:
@@ -73,6 +81,7 @@ def bench_fpga(cfg: Config, seconds: float = 2.0, bit_level: bool = False) -> Pl
     A 5 kHz task (the MCU's rate) writes a sinusoidal iq reference into the MCU-side link
     memory; plant outputs are recorded every tick. ``bit_level`` runs the sensor links and
     LVDS words as real bits (Python per tick) instead of the compiled value-level path.
+    The current loop is the board model's or, with ``fpga.impl = "rtl"``, its Verilated RTL.
     """
     from hil.sim.actuator import FpgaStack
 
@@ -87,11 +96,12 @@ def bench_fpga(cfg: Config, seconds: float = 2.0, bit_level: bool = False) -> Pl
 
     sched.every(4, mcu_task, "mcu_current_reference")
     n = sched.ticks(seconds)
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     sched.run(n)
-    wall = time.perf_counter() - t0
+    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
     return PlantBench(n * tick_s, wall, stack.plant.substeps,
-                      "bit-level" if bit_level else "value-level", tick_s)
+                      "bit-level" if bit_level else "value-level", tick_s, cpu,
+                      "board model" if stack.rtl is None else "RTL (Verilator)")
 
 
 def bench_stack(cfg: Config, seconds: float = 2.0) -> PlantBench:
@@ -164,3 +174,36 @@ def bench_robot(cfg: Config, seconds: float = 10.0, workers: int = 1,
         bs.chain.engine.wait()
     return RobotBench(cycles * 1e-3, wall, cpu, workers=workers, actuators=topo.n_actuators,
                       tick_s=cfg.get("sim.tick_ns") * 1e-9)
+
+
+# --- one tick's call of the current loop: RTL under Verilator against the board model ------
+@dataclass
+class CallCost:
+    """CPU and wall nanoseconds per tick of each way of running the loop."""
+
+    ticks: int
+    rows: list[tuple[str, float, float]]  # (way, wall ns, CPU ns)
+
+
+def bench_loop_call(cfg: Config, ticks: int = 1_000_000) -> CallCost:
+    from hil.sim.verilator import load
+
+    c = board_params(cfg)
+    loop = load(cfg.with_overrides({"fpga.impl": "rtl"}), c)
+    timing_ticks_rtl(c, 10)  # compile outside the timing; leaves the inputs in the buffer
+    timing_ticks_model(c, 10)
+    rows = []
+    for way, fn in (("RTL (Verilator), compiled call", timing_ticks_rtl),
+                    ("board model's loop, compiled", timing_ticks_model)):
+        t0, c0 = time.perf_counter(), time.process_time()
+        fn(c, ticks)
+        rows.append((way, (time.perf_counter() - t0) / ticks * 1e9,
+                     (time.process_time() - c0) / ticks * 1e9))
+    tick = loop.tick_function()
+    n = max(ticks // 10, 1)
+    t0, c0 = time.perf_counter(), time.process_time()
+    for _ in range(n):
+        tick(loop.handle)
+    rows.append(("RTL (Verilator), ctypes call from Python", (time.perf_counter() - t0) / n * 1e9,
+                 (time.process_time() - c0) / n * 1e9))
+    return CallCost(ticks, rows)

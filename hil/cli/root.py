@@ -92,7 +92,7 @@ def _json_default(obj: object) -> object:
 
 
 def _config(args: argparse.Namespace):
-    return load_config(args.config, args.set or ())
+    return load_config(args.config, [*(args.set or ()), *verify_cli.rtl_sets(args)])
 
 
 # --- plant bode ------------------------------------------------------------------------------
@@ -274,25 +274,46 @@ def cmd_bench_plant(args: argparse.Namespace) -> int:
 
 
 def cmd_bench_fpga(args: argparse.Namespace) -> int:
+    import os
+
     from hil.bench.engines import bench_fpga
 
     cfg = _config(args)
-    results = [bench_fpga(cfg, args.seconds, bit_level=False)]
+    results = []
+    if cfg.get("fpga.impl") == "rtl":  # the board model's figure beside the RTL's
+        results.append(bench_fpga(cfg.with_overrides({"fpga.impl": "python"}, "bench"),
+                                  args.seconds, bit_level=False))
+    results.append(bench_fpga(cfg, args.seconds, bit_level=False))
     if not args.json:
         print("value level done; bit level ...", file=sys.stderr)
     results.append(bench_fpga(cfg, args.bit_seconds, bit_level=True))
-    rows = [(r.mode, r.simulated_s, r.wall_s, r.real_time_factor, r.ticks_per_s)
-            for r in results]
-    text = table(["sensor and link path", "simulated [s]", "wall [s]", "real-time factor",
-                  "ticks/s"], rows, fmt=".3g",
+    rows = [(r.mode, r.loop, r.simulated_s, r.wall_s, r.cpu_s, r.real_time_factor,
+             r.cpu_real_time_factor, r.ticks_per_s) for r in results]
+    text = table(["sensor and link path", "current loop", "simulated [s]", "wall [s]",
+                  "CPU [s]", "real-time factor", "CPU real-time factor", "ticks/s"], rows,
+                 fmt=".3g",
                  title=f"plant + driver board + LVDS link, {cfg.sources[-1]}, 20 kHz, MCU-rate "
                  "task writing iq_ref (target >= 5x real time, value level)")
-    data = {"config": cfg.sources, "results": [
-        {"path": r.mode, "simulated_s": r.simulated_s, "wall_s": r.wall_s,
-         "real_time_factor": r.real_time_factor, "ticks_per_s": r.ticks_per_s}
+    calls = None
+    if cfg.get("fpga.impl") == "rtl":  # what the per-tick call of the loop itself costs
+        from hil.bench.engines import bench_loop_call
+
+        calls = bench_loop_call(cfg)
+        text += "\n\n" + table(["one tick of the current loop", "wall [ns]", "CPU [ns]"],
+                                calls.rows, fmt=".3g",
+                                title=f"per tick, {calls.ticks} ticks in one loop")
+    load = os.getloadavg()
+    text += f"\nload average {load[0]:.2f} {load[1]:.2f} {load[2]:.2f} ({os.cpu_count()} cores)"
+    data = {"config": cfg.sources, "load_average": list(load), "results": [
+        {"path": r.mode, "current_loop": r.loop, "simulated_s": r.simulated_s,
+         "wall_s": r.wall_s, "cpu_s": r.cpu_s, "real_time_factor": r.real_time_factor,
+         "cpu_real_time_factor": r.cpu_real_time_factor, "ticks_per_s": r.ticks_per_s}
         for r in results]}
+    if calls is not None:
+        data["loop_call_ns"] = [{"way": w, "wall_ns": wall, "cpu_ns": cpu}
+                                for w, wall, cpu in calls.rows]
     _emit(args, text, data)
-    return 0
+    return verify_cli.rtl_verdict(0)
 
 
 def cmd_bench_stack(args: argparse.Namespace) -> int:
@@ -383,7 +404,7 @@ def cmd_run_thesis(args: argparse.Namespace) -> int:
                       "requirement": m.requirement, "ok": m.ok} for m in r.metrics]}
         for r, w in results]}
     _emit(args, text, data)
-    return 0 if ok else 1
+    return verify_cli.rtl_verdict(0 if ok else 1)
 
 
 def _run_live(res, address: str) -> str:  # noqa: ANN001 - ScenarioResult
@@ -433,7 +454,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         except ValueError as exc:
             raise UsageError(str(exc)) from None
     config_sets, knob_values = split_sets(args.set or ())
-    cfg = load_config(args.config, config_sets)
+    cfg = load_config(args.config, [*config_sets, *verify_cli.rtl_sets(args)])
     res = scenario.call(cfg, _progress(scenario.name, not args.json), knob_values)
     rows = [(m.name, m.value, m.unit, m.requirement,
              "" if m.ok is None else ("ok" if m.ok else "MISSED")) for m in res.metrics]
@@ -465,7 +486,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         cli_progress.at("after the run, waiting for a Foxglove client (the result is "
                         "printed above)")
         print(_run_live(res, args.foxglove).strip(), file=sys.stderr)
-    return 0 if res.ok else 1
+    return verify_cli.rtl_verdict(0 if res.ok else 1)
 
 
 def cmd_bench_codecs(args: argparse.Namespace) -> int:
@@ -661,6 +682,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="simulated seconds, value-level path, in (0, 600]")
     p.add_argument("--bit-seconds", type=positive_float(60, "s"), default=0.05,
                    help="simulated seconds, bit-level path, in (0, 60]")
+    verify_cli.add_rtl_option(p)
     p.set_defaults(func=cmd_bench_fpga)
     p = bsub.add_parser("stack", parents=[_common(plot=False)],
                         help="real-time factor of the full actuator stack (plant to MCU)")
@@ -724,6 +746,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--series", metavar="FILE", type=output_file((".csv", ".parquet", ".mcap")),
                    help="write the time series behind the metrics to FILE (.csv, .parquet "
                    "or .mcap; README, Scenarios)")
+    verify_cli.add_rtl_option(p)
     p.set_defaults(func=cmd_run)
 
     verify_cli.add_parsers(sub, _common)

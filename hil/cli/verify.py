@@ -30,6 +30,32 @@ def _rtl_dir(text: str) -> str:
 
 
 _rtl_dir.kind = "dir"  # type: ignore[attr-defined]
+
+
+def add_rtl_option(parser: argparse.ArgumentParser) -> None:
+    """``--rtl DIR`` on a verb that simulates the board: the current loop's RTL from DIR
+    runs in place of the board's own loop (``fpga.impl = "rtl"``, ``fpga.rtl_dir``)."""
+    parser.add_argument("--rtl", metavar="DIR", default=None, type=_rtl_dir,
+                        help="run the board's current loop as this directory's Verilog "
+                        "under Verilator (same as --set fpga.impl=rtl --set "
+                        "fpga.rtl_dir=DIR; docs/fpga.md)")
+
+
+def rtl_sets(args: argparse.Namespace) -> list[str]:
+    """The ``--set`` strings ``--rtl DIR`` stands for (none without it)."""
+    rtl = getattr(args, "rtl", None)
+    return [] if rtl is None else ["fpga.impl=rtl", f"fpga.rtl_dir={rtl}"]
+
+
+def rtl_verdict(code: int) -> int:
+    """After a run: each RTL in the loop that differed from the board model, as one line on
+    stderr naming the first tick and signal; exit 1 then, else ``code``."""
+    from hil.sim.verilator import take_divergences
+
+    found = take_divergences()
+    for d in found:
+        print(f"eha-hil: {d.line()}", file=sys.stderr)
+    return EXIT_MISMATCH if found else code
 COUNT = int_range(0, 100_000_000)
 SEED = int_range(0, 2**32 - 1)
 
@@ -59,7 +85,7 @@ def add_parsers(sub: argparse._SubParsersAction,
 
     p = vsub.add_parser("current-loop", parents=[common(plot=False)],
                         help="the driver board's current loop: Python board model against "
-                        "the RTL under Icarus Verilog and cocotb")
+                        "the RTL under Verilator or Icarus Verilog and cocotb")
     p.add_argument("--against", required=True, choices=("rtl",),
                    help="rtl: the Verilog of firmware_model/fpga/rtl (or --rtl DIR)")
     p.add_argument("--vectors", type=COUNT, default=10_000,
@@ -67,6 +93,10 @@ def add_parsers(sub: argparse._SubParsersAction,
                    "10000)")
     p.add_argument("--rtl", metavar="DIR", default=None, type=_rtl_dir,
                    help="a directory of Verilog with the same ports (default: the project's)")
+    p.add_argument("--simulator", choices=("verilator", "icarus"), default="verilator",
+                   help="verilator: the RTL compiled into the library the stack runs "
+                   "(--set fpga.impl=rtl), all vectors in one call; icarus: Icarus Verilog "
+                   "under cocotb, one vector per cocotb cycle (default verilator)")
     p.add_argument("--seed", type=SEED, default=1, help="random vectors' seed (default 1)")
     p.set_defaults(func=cmd_verify_current_loop)
 
@@ -108,22 +138,26 @@ def _print_report(args: argparse.Namespace, rep, title: str) -> None:
 
 
 def cmd_verify_current_loop(args: argparse.Namespace) -> int:
+    from hil.sim import verilator as rtl_verilator
     from hil.verify.current_loop import rtl as rtl_run
     from hil.verify.current_loop.verify import verify_current_loop
     from plant.config import load_config
 
-    missing = rtl_run.missing_tools()
+    tools = rtl_verilator if args.simulator == "verilator" else rtl_run
+    missing = tools.missing_tools()
     if missing:
-        raise ToolMissing(f"verify current-loop: {', '.join(missing)} not installed "
-                          "(make system-deps; pip install 'eha-hil[test]')")
+        raise ToolMissing(f"verify current-loop --simulator {args.simulator}: "
+                          f"{', '.join(missing)} not installed (make system-deps; pip install "
+                          "'eha-hil[test]')")
     rtl_dir = Path(args.rtl) if args.rtl else rtl_run.RTL_DIR
     cfg = load_config(args.config, args.set or ())
     try:
+        if args.simulator == "verilator":
+            rtl_verilator.top_file(rtl_dir)
         rtl_run.rtl_sources(rtl_dir)
-        rep = verify_current_loop(cfg, args.vectors, args.seed, rtl_dir)
-    except rtl_run.RtlError as exc:
-        print(f"eha-hil: error: {exc}", file=sys.stderr)
-        return EXIT_MISMATCH
-    _print_report(args, rep, f"current loop: Python board model vs RTL ({rtl_dir}, Icarus "
-                  "Verilog + cocotb)")
+        rep = verify_current_loop(cfg, args.vectors, args.seed, rtl_dir, args.simulator)
+    except rtl_run.RtlError as exc:  # the RTL is not a loop that builds: the input's fault
+        raise ToolMissing(str(exc)) from None
+    sim = "Verilator" if args.simulator == "verilator" else "Icarus Verilog + cocotb"
+    _print_report(args, rep, f"current loop: Python board model vs RTL ({rtl_dir}, {sim})")
     return EXIT_MISMATCH if rep.mismatches else 0

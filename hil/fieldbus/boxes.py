@@ -149,6 +149,9 @@ class StackBox(McuBox):
     def __init__(self, box: Box, cfg: Config) -> None:
         from hil.sim.actuator import FpgaStack
 
+        if cfg.get("fpga.impl") != "python":
+            raise ConfigError("fpga.impl = 'rtl' runs in the single-actuator stack only; the "
+                              "fieldbus boxes run the board's own loop (fpga.impl = 'python')")
         self.stacks = [FpgaStack(cfg) for _ in box.actuators]
         super().__init__(box, cfg, [s.mcu_link for s in self.stacks],
                          [s.board.calibrated_offset for s in self.stacks])

@@ -123,6 +123,12 @@ class FpgaStack:
         self.plant = Plant(cfg, substeps)
         self.plant.set_gates_off()
         self.board = DriverBoard(cfg)
+        #: The current loop's Verilated RTL in place of the board's own (``fpga.impl``).
+        self.rtl = None
+        if cfg.get("fpga.impl") == "rtl":
+            from hil.sim.verilator import load
+
+            self.rtl = self.board.rtl = load(cfg, self.board.params)
         self.mcu_link = LinkMemory(cfg)
         self.link = LK.link_state(cfg)
         self.chips = chip_params(cfg)

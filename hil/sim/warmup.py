@@ -74,6 +74,21 @@ def _fixed_point(cfg) -> None:
     fixed.isqrt(0)
 
 
+def _rtl(cfg) -> None:
+    """The current loop's RTL built with Verilator into its cache (where Verilator is
+    installed; ~25 s the first time) and one stack tick on it, and the loop model the
+    verification compares it with."""
+    from firmware_model.fpga.current_loop import LOOP_INPUT, run_model
+    from hil.sim import verilator as rtl_verilator
+
+    run_model(cfg, np.zeros(1, dtype=LOOP_INPUT))
+    if rtl_verilator.missing_tools():
+        return
+    from hil.sim.actuator import FpgaStack
+
+    FpgaStack(cfg.with_overrides({"fpga.impl": "rtl"}, "warmup")).advance(2)
+
+
 def _identify_model(cfg) -> None:
     """The identification model's simulation (``eha-hil identify``), on a short synthetic
     record."""
@@ -102,6 +117,7 @@ STEPS: list[tuple[str, Callable]] = [
     ("bit-level sensors and link", _fpga_bit_level),
     ("board replay", _replay),
     ("fixed-point blocks", _fixed_point),
+    ("current loop RTL (Verilator)", _rtl),
     ("identification model", _identify_model),
     ("robot engine", _robot),
 ]

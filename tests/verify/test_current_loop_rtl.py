@@ -121,16 +121,17 @@ def test_vector_sets_cover_the_edges():
 
 @pytest.mark.slow
 def test_rtl_is_bit_identical_to_the_board_model(default_cfg):
-    """At least 10^4 cycles: golden, edges and random, every output port."""
+    """At least 10^4 cycles under Icarus: golden, edges and random, every output port."""
     _need_rtl()
-    rep = verify_current_loop(default_cfg, 10_000, seed=5)
+    rep = verify_current_loop(default_cfg, 10_000, seed=5, simulator="icarus")
     assert rep.vectors >= 10_000
     assert rep.mismatches == 0, rep.as_dict()["first_mismatch"]
 
 
 @pytest.mark.slow
 def test_a_flipped_rounding_in_the_rtl_is_caught(tmp_path, capsys):
-    """A copy of the RTL whose proportional term floors instead of rounding half up."""
+    """A copy of the RTL whose proportional term floors instead of rounding half up (under
+    Icarus; Verilator: tests/verify/test_rtl_in_the_loop.py)."""
     _need_rtl()
     rtl = tmp_path / "rtl"
     shutil.copytree(rtl_run.RTL_DIR, rtl)
@@ -141,7 +142,7 @@ def test_a_flipped_rounding_in_the_rtl_is_caught(tmp_path, capsys):
     assert changed != text
     pi.write_text(changed)
     assert main(["verify", "current-loop", "--against", "rtl", "--vectors", "1500",
-                 "--rtl", str(rtl), "--json"]) == 1
+                 "--rtl", str(rtl), "--simulator", "icarus", "--json"]) == 1
     data = json.loads(capsys.readouterr().out)
     assert data["mismatches"] > 0 and data["first_mismatch"]["field"] in (
         "v_d", "v_q", "integ_d_next", "integ_q_next")

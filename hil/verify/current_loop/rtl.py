@@ -12,15 +12,13 @@ from pathlib import Path
 import numpy as np
 
 from firmware_model.fpga.current_loop import LOOP_INPUT, LOOP_OUTPUT
+from hil.sim.verilator import RTL_DIR, RtlError, rtl_sources
 
-RTL_DIR = Path(__file__).resolve().parents[3] / "firmware_model" / "fpga" / "rtl"
+__all__ = ["RTL_DIR", "RtlError", "missing_tools", "rtl_sources", "run_rtl"]
+
 TOPLEVEL = "tb_current_loop"
 TESTBENCH = Path(__file__).resolve().parent / "tb_current_loop.v"
 ROOT = Path(__file__).resolve().parents[3]
-
-
-class RtlError(RuntimeError):
-    """The RTL did not build or the simulation failed; the message says why."""
 
 
 def missing_tools() -> list[str]:
@@ -31,14 +29,6 @@ def missing_tools() -> list[str]:
     except ImportError:
         missing.append("cocotb (pip install 'eha-hil[test]')")
     return missing
-
-
-def rtl_sources(rtl_dir: Path = RTL_DIR) -> list[Path]:
-    """The Verilog files of ``rtl_dir`` (its ``*.v``; ``*.vh`` are included from there)."""
-    sources = sorted(Path(rtl_dir).glob("*.v"))
-    if not sources:
-        raise RtlError(f"{rtl_dir}: no Verilog (*.v) files")
-    return sources
 
 
 def run_rtl(inputs: np.ndarray, rtl_dir: Path = RTL_DIR) -> np.ndarray:
