@@ -200,10 +200,50 @@ def read_capture(path: str | os.PathLike[str]) -> Traffic:
             why = "the file ends inside a block" if isinstance(
                 exc, dpkt.dpkt.NeedData) else f"{type(exc).__name__} {exc}".strip()
             out.cut = f"{why} after packet {out.packets} ({size} bytes)"
+        else:
+            # dpkt stops quietly at a cut block header and skips a cut block of a kind it
+            # does not read: the file's own framing says whether it is whole
+            end = _framing_end(path, kind)
+            size = os.path.getsize(path)
+            if end < size:
+                out.cut = (f"the file ends inside a block at byte {end} of {size} (after "
+                           f"packet {out.packets})")
     if kind == "pcapng":
         out.metadata = _pcapng_comment(path)
     _udp_directions(out, udp_frames)
     return out
+
+
+def _framing_end(path: str, kind: str) -> int:
+    """Where the last whole block (pcapng: length at +4, repeated at its end) or record
+    (pcap: 16-byte header with the captured length at +8) of a capture ends."""
+    size = os.path.getsize(path)
+    with open(path, "rb") as fh:
+        head = fh.read(24)
+        little = head[:4] in (b"\xd4\xc3\xb2\xa1", b"\x4d\x3c\xb2\xa1") or (
+            kind == "pcapng" and head[8:12] == b"\x4d\x3c\x2b\x1a")
+        order = "little" if little else "big"
+        pos = 0 if kind == "pcapng" else 24
+        while pos < size:
+            fh.seek(pos)
+            hdr = fh.read(16 if kind == "pcap" else 8)
+            if kind == "pcap":
+                if len(hdr) < 16:
+                    return pos
+                step = 16 + int.from_bytes(hdr[8:12], order)
+            else:
+                if len(hdr) < 8:
+                    return pos
+                step = int.from_bytes(hdr[4:8], order)
+                if step < 12 or pos + step > size:
+                    return pos
+                fh.seek(pos + step - 4)
+                if int.from_bytes(fh.read(4), order) != step:
+                    return pos
+            if pos + step > size:
+                return pos
+            pos += step
+    return pos
 
 
 def _read_packet(buf: bytes, ts_ns: int, out: Traffic,

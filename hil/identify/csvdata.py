@@ -602,7 +602,8 @@ class _DataRows:
         read_bytes = 0
         more = False
         while True:
-            chunk = list(itertools.islice(fh, CHUNK_ROWS))
+            want = CHUNK_ROWS if max_rows is None else min(CHUNK_ROWS, max_rows - n + 1)
+            chunk = list(itertools.islice(fh, want))
             if not chunk:
                 break
             if chunk[-1] and not chunk[-1].endswith("\n"):
