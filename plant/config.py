@@ -40,7 +40,7 @@ CHOICES: dict[str, tuple[str, ...]] = {
     "load.kind": ("fixed", "free", "conrod", "cart"),
     "mcu.controller": ("current", "velocity"),
     "mcu.force_feedback": ("pressure", "strain", "complementary"),
-    "mcu.impl": ("python", "c"),
+    "mcu.impl": ("python", "c", "image"),
     "fpga.impl": ("python", "rtl"),
 }
 
@@ -220,10 +220,11 @@ for _a in ANALOG_INPUTS:
     if _a.fitted_key is not None:
         DECLARED[f"sensors.{_a.fitted_key}"] = False
 RANGES.update({fw: RANGES[plant] for fw, plant in FIRMWARE_NOMINAL.items()})
-#: Keys that choose how a model is run, not what it computes (``mcu.impl``: the Python MCU
-#: or its bit-identical C build; ``fpga.impl``: the board's current loop or its RTL): a log
-#: written before one existed replays with its default.
-RUN_CHOICES = ("mcu.impl", "fpga.impl", "fpga.rtl_dir")
+#: Keys that choose how a model is run, not what it computes (``mcu.impl``: the Python MCU,
+#: its bit-identical C build or a firmware image; ``mcu.image``: which image; ``fpga.impl``:
+#: the board's current loop or its RTL): a log written before one existed replays with its
+#: default.
+RUN_CHOICES = ("mcu.impl", "mcu.image", "fpga.impl", "fpga.rtl_dir")
 
 class ConfigError(Exception):
     """A configuration mistake; ``str(err)`` is one line naming the key and the file."""

@@ -118,6 +118,14 @@ class Mcu:
         link.write("control", B.CTRL_ENABLE)
         self.ctrl[i].reset()
 
+    def disable(self, i: int) -> None:
+        """Switch actuator ``i``'s board off (control = 0)."""
+        self.links[i].write("control", 0)
+
+    def clear_fault(self, i: int) -> None:
+        """Ask actuator ``i``'s board to clear its latched fault."""
+        self.links[i].write("control", B.CTRL_CLEAR_FAULT)
+
     def step(self, tick: int) -> None:
         """One 5 kHz cycle for every actuator."""
         self._seq = (self._seq + 1) & 0xFFFF

@@ -286,6 +286,32 @@ def add_config_options(parser: argparse.ArgumentParser) -> None:
                         help="actuator preset name or TOML file (default: hydra_default)")
     parser.add_argument("--set", action="append", metavar="SECTION.KEY=VALUE",
                         help="override one configuration value (repeatable)")
+    parser.add_argument("--mcu-image", metavar="FILE.elf", type=mcu_image,
+                        help="run this Cortex-M4F firmware ELF as the MCU (sets mcu.impl="
+                        "image and mcu.image; the interface: docs/mcu.md)")
+
+
+def mcu_image(text: str) -> str:
+    """A firmware ELF the harness can run (checked here once: architecture, vector table,
+    5 kHz entry); the path."""
+    from hil.sim.image.elf import load
+    from hil.sim.image.errors import ImageError
+
+    try:
+        load(text)
+    except ImageError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return text
+
+
+mcu_image.kind = "input"  # type: ignore[attr-defined]
+
+
+def image_sets(args: argparse.Namespace) -> None:
+    """``--mcu-image FILE`` as the two ``--set`` entries it stands for."""
+    path = getattr(args, "mcu_image", None)
+    if path:
+        args.set = [*(args.set or ()), "mcu.impl=image", f"mcu.image={path}"]
 
 
 def walk(parser: argparse.ArgumentParser) -> list[argparse.ArgumentParser]:

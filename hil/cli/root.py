@@ -26,6 +26,7 @@ from hil.cli.args import (
     Parser,
     add_config_options,
     float_range,
+    image_sets,
     int_list,
     int_range,
     output_dir,
@@ -34,6 +35,7 @@ from hil.cli.args import (
 )
 from hil.output.tables import table
 from hil.scenarios.plant_figures import F2_BANDS, THESIS_F1, THESIS_F2, within_band
+from hil.sim.image.errors import ImageFault
 from plant.config import ConfigError, load_config, preset_names
 
 EXIT_USAGE = 2
@@ -320,15 +322,33 @@ def cmd_bench_stack(args: argparse.Namespace) -> int:
     from hil.bench.engines import bench_stack
 
     cfg = _config(args)
-    if not args.json:
-        print(f"bench stack: simulating {args.seconds:g} s ...", file=sys.stderr, flush=True)
-    r = bench_stack(cfg, args.seconds)
-    text = table(["path", "simulated [s]", "wall [s]", "real-time factor", "ticks/s"],
-                 [(r.mode, r.simulated_s, r.wall_s, r.real_time_factor, r.ticks_per_s)],
+    load = os.getloadavg()[0]
+    # A firmware image is timed beside the Python model and the host C build of the law.
+    impls = ("python", "c", "image") if cfg.get("mcu.impl") == "image" else (None,)
+    rows, data = [], []
+    for impl in impls:
+        c = cfg if impl in (None, cfg.get("mcu.impl")) else cfg.with_overrides(
+            {"mcu.impl": impl}, f"bench {impl}")
+        if not args.json:
+            print(f"bench stack: simulating {args.seconds:g} s (MCU {c.get('mcu.impl')}) ...",
+                  file=sys.stderr, flush=True)
+        r = bench_stack(c, args.seconds)
+        rows.append((r.mode, r.simulated_s, r.wall_s, r.cpu_s, r.real_time_factor,
+                     r.cpu_real_time_factor, r.ticks_per_s))
+        data.append({"mcu_impl": c.get("mcu.impl"), "simulated_s": r.simulated_s,
+                     "wall_s": r.wall_s, "cpu_s": r.cpu_s,
+                     "real_time_factor": r.real_time_factor,
+                     "cpu_real_time_factor": r.cpu_real_time_factor})
+    text = table(["path", "simulated [s]", "wall [s]", "CPU [s]", "real-time (wall)",
+                  "real-time (CPU)", "ticks/s"], rows,
                  fmt=".3g", title=f"plant + driver board + LVDS + MCU (5 kHz, float32) + 1 kHz "
-                 f"PC task, value-level sensors, {cfg.sources[-1]} (target >= 2x real time)")
-    _emit(args, text, {"config": cfg.sources, "simulated_s": r.simulated_s,
-                       "wall_s": r.wall_s, "real_time_factor": r.real_time_factor})
+                 f"PC task, value-level sensors, {cfg.sources[-1]}; load average {load:.2f} "
+                 f"on {os.cpu_count()} cores at the start (target >= 2x real time; an MCU "
+                 "image >= 1x)")
+    first = data[0]
+    _emit(args, text, {"config": cfg.sources, "load_average": load,
+                       "simulated_s": first["simulated_s"], "wall_s": first["wall_s"],
+                       "real_time_factor": first["real_time_factor"], "runs": data})
     return 0
 
 
@@ -373,6 +393,8 @@ def cmd_run_thesis(args: argparse.Namespace) -> int:
     results = []
     notes = []
     plotted: list[str] = []
+    profiles: list[dict] = []
+    _image_profile(cfg, "")  # this command's steps only
     for name in names:
         t0 = time.perf_counter()
         if not args.json:
@@ -382,6 +404,9 @@ def cmd_run_thesis(args: argparse.Namespace) -> int:
         res = scenarios.get(name).run(cfg, None)
         wall = time.perf_counter() - t0
         results.append((res, wall))
+        prof = _image_profile(cfg, name.upper())
+        if prof:
+            profiles.append(prof)
         if res.plot and outputs.write("plot", out_dir / f"{name}.png",
                                       lambda tmp, res=res: res.plot(res, tmp)):
             plotted.append(f"{name}.png")
@@ -397,14 +422,36 @@ def cmd_run_thesis(args: argparse.Namespace) -> int:
         text += "\n" + "\n".join(f"note: {n}" for n in notes)
     if plotted:
         text += f"\nplots written to {out_dir}/ ({', '.join(plotted)})"
+    text += _profile_text(profiles)
     ok = all(r.ok for r, _ in results)
     data = {"config": cfg.sources, "ok": ok, "scenarios": [
         {"scenario": r.name, "title": r.title, "wall_s": w, "ok": r.ok, "notes": r.notes,
          "metrics": [{"name": m.name, "value": m.value, "unit": m.unit, "thesis": m.thesis,
                       "requirement": m.requirement, "ok": m.ok} for m in r.metrics]}
         for r, w in results]}
+    if profiles:
+        data["mcu_image_profile"] = profiles
     _emit(args, text, data)
     return verify_cli.rtl_verdict(0 if ok else 1)
+
+
+def _image_profile(cfg, label: str) -> dict | None:  # noqa: ANN001 - Config
+    """The execution-time summary of the image steps since the last call (None: the MCU
+    is not an image)."""
+    if cfg.get("mcu.impl") != "image":
+        return None
+    from hil.sim.image import profile
+
+    return profile.take(label)
+
+
+def _profile_text(profiles: list[dict]) -> str:
+    if not profiles:
+        return ""
+    from hil.sim.image import profile
+
+    return "\nMCU image execution time (estimated, docs/mcu.md):\n" + "\n".join(
+        "  " + profile.line(p) for p in profiles)
 
 
 def _run_live(res, address: str) -> str:  # noqa: ANN001 - ScenarioResult
@@ -455,17 +502,22 @@ def cmd_run(args: argparse.Namespace) -> int:
             raise UsageError(str(exc)) from None
     config_sets, knob_values = split_sets(args.set or ())
     cfg = load_config(args.config, [*config_sets, *verify_cli.rtl_sets(args)])
+    _image_profile(cfg, "")  # this command's steps only
     res = scenario.call(cfg, _progress(scenario.name, not args.json), knob_values)
+    prof = _image_profile(cfg, res.name)
     rows = [(m.name, m.value, m.unit, m.requirement,
              "" if m.ok is None else ("ok" if m.ok else "MISSED")) for m in res.metrics]
     text = table(["metric", "value", "unit", "requirement", ""], rows, fmt=".4g",
                  title=f"{res.name}: {res.title} ({cfg.sources[-1]})")
     if res.notes:
         text += "\n" + "\n".join(f"note: {n}" for n in res.notes)
+    text += _profile_text([prof] if prof else [])
     data = {"scenario": res.name, "title": res.title, "config": cfg.sources, "ok": res.ok,
             "metrics": [{"name": m.name, "value": m.value, "unit": m.unit,
                          "requirement": m.requirement, "ok": m.ok} for m in res.metrics],
             "notes": res.notes}
+    if prof:
+        data["mcu_image_profile"] = prof
     # the result is printed first: a Ctrl-C while the files are written, or during the
     # wait for a Foxglove client, does not lose the table of a finished run
     _emit(args, text, data)
@@ -474,11 +526,11 @@ def cmd_run(args: argparse.Namespace) -> int:
     if getattr(args, "series", None):
         from hil.framelog.series_export import write_series
 
-        rows: list[int] = []
+        n_rows: list[int] = []
         try:
             _write_after(args, "series", args.series,
-                         lambda tmp: rows.append(write_series(res, tmp)),
-                         lambda: f" ({rows[0]} rows)")
+                         lambda tmp: n_rows.append(write_series(res, tmp)),
+                         lambda: f" ({n_rows[0]} rows)")
         except ValueError as exc:
             raise UsageError(str(exc)) from None
     if getattr(args, "foxglove", None) is not None:
@@ -778,6 +830,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         parser = build_parser()
         args = parser.parse_args(argv)
+        image_sets(args)
         cli_progress.start(_verb(args))
         outputs.reset()
         outputs.check_args(vars(args))  # an output that is also an input
@@ -787,6 +840,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_USAGE
     except outputs.StreamFailed:  # a log or capture of the run failed: the line says which
         return outputs.finish(_verb(args), outputs.EXIT_WRITE_FAILED)
+    except ImageFault as exc:  # the firmware image broke the interface: the run failed
+        print(f"eha-hil: error: {exc}", file=sys.stderr)
+        return 1
     except BrokenPipeError:
         return 0
     except KeyboardInterrupt:

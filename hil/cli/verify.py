@@ -68,9 +68,10 @@ def add_parsers(sub: argparse._SubParsersAction,
     vsub = verify.add_subparsers(dest="verify_command", metavar="CHECK", required=True)
     p = vsub.add_parser("mcu", parents=[common(plot=False)],
                         help="the MCU law: Python model against the C build")
-    p.add_argument("--against", required=True, choices=("host-c", "qemu"),
+    p.add_argument("--against", required=True, choices=("host-c", "qemu", "image"),
                    help="host-c: the C as a host shared library; qemu: the Cortex-M4F image "
-                   "on QEMU's netduinoplus2")
+                   "on QEMU's netduinoplus2; image: the law's firmware image on the "
+                   "harness's emulator (Unicorn), with its execution time per set")
     p.add_argument("--steps", type=COUNT, default=10_000,
                    help="random input steps, split over the six controller variants "
                    "(default 10000)")
@@ -107,11 +108,14 @@ def cmd_verify_mcu(args: argparse.Namespace) -> int:
 
     if args.steps == 0 and args.stack_seconds == 0:
         raise ToolMissing("verify mcu: --steps 0 and --stack-seconds 0 leave nothing to compare")
-    target = "host-c" if args.against == "host-c" else "qemu"
+    target = args.against
     missing = mcu_builds.missing_tools(target)
     if missing:
         raise ToolMissing(f"verify mcu --against {args.against}: {', '.join(missing)} not "
                           "installed (make system-deps installs them)")
+    if args.against == "image" and args.contract != "off":
+        raise ToolMissing("verify mcu --against image: the image is built with "
+                          "-ffp-contract=off only")
     try:
         rep = verify_mcu(args.against, args.steps, args.seed, args.stack_seconds,
                          args.contract, args.config, args.set or ())
@@ -120,7 +124,21 @@ def cmd_verify_mcu(args: argparse.Namespace) -> int:
         return EXIT_MISMATCH
     _print_report(args, rep, f"MCU law: Python model vs {args.against} "
                   f"(-ffp-contract={args.contract}, {rep.build})")
-    return EXIT_MISMATCH if rep.mismatches else 0
+    if rep.profiles and not args.json:
+        print(_profile_table(rep.profiles))
+    overrun = any(p.get("period_share_max", 0) > 1 for p in rep.profiles)
+    return EXIT_MISMATCH if rep.mismatches or overrun else 0
+
+
+def _profile_table(profiles: list[dict]) -> str:
+    """The image's execution time per set, as processor-in-the-loop tools print it."""
+    rows = [(p["label"], p["steps"], p["instructions_mean"], p["instructions_max"],
+             p["cycles_mean"], p["cycles_max"], p["us_max"], 100 * p["period_share_max"],
+             p["margin_us"]) for p in profiles if p.get("steps")]
+    return table(["set", "steps", "instr mean", "instr max", "cycles mean", "cycles max",
+                  "max [us]", "max [% of 200 us]", "margin [us]"], rows, fmt=".4g",
+                 title="execution time on a Cortex-M4F at 168 MHz (estimated cycles, "
+                 "docs/mcu.md)")
 
 
 def _print_report(args: argparse.Namespace, rep, title: str) -> None:

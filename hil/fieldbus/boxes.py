@@ -117,8 +117,9 @@ class McuBox(_BoxBase):
     def __init__(self, box: Box, cfg: Config, links: list, offsets: list[int]) -> None:
         super().__init__(box, cfg)
         if cfg.get("mcu.impl") != "python":
-            raise ConfigError("mcu.impl = 'c' runs in the single-actuator stack only; the "
-                              "fieldbus boxes run the Python MCU (mcu.impl = 'python')")
+            raise ConfigError(f"mcu.impl = {cfg.get('mcu.impl')!r} runs in the "
+                              "single-actuator stack only; the fieldbus boxes run the Python "
+                              "MCU (mcu.impl = 'python')")
         self.board = McuBoard(cfg, links, offsets) if links else None
         self.mcu = self.board.mcu if self.board else None
         self.period = cfg.get("mcu.period_ticks")

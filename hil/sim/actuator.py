@@ -259,6 +259,10 @@ class ActuatorStack:
             from hil.sim.mcu_c import CMcu
 
             self.mcu = CMcu(cfg, [self.fpga.mcu_link])
+        elif cfg.get("mcu.impl") == "image":  # a firmware ELF on the emulator (docs/mcu.md)
+            from hil.sim.image.stack import ImageMcu
+
+            self.mcu = ImageMcu(cfg, [self.fpga.mcu_link])
         else:
             self.mcu = Mcu(cfg, [self.fpga.mcu_link])
         self.command = command

@@ -51,9 +51,11 @@ class BuildError(RuntimeError):
 
 
 def missing_tools(target: str) -> list[str]:
-    """The system tools ``target`` ("host-c" or "qemu") needs that are not installed."""
+    """The system tools ``target`` ("host-c", "qemu" or "image") needs that are not
+    installed."""
     tools = {"host-c": (host_compiler() or "cc",),
-             "qemu": (ARM_GCC, ARM_OBJDUMP, QEMU)}[target]
+             "qemu": (ARM_GCC, ARM_OBJDUMP, QEMU),
+             "image": (ARM_GCC, host_compiler() or "cc")}[target]
     return [t for t in tools if shutil.which(t) is None]
 
 

@@ -14,7 +14,9 @@ import numpy as np
 from firmware_model.calibration import FirmwareCalibration, calibration
 from firmware_model.fpga.driver_board import LinkMemory
 from firmware_model.mcu.c_abi import (
+    IN_CLEAR_FAULT,
     IN_COMMAND,
+    IN_DISABLE,
     IN_ENABLE,
     INPUT,
     MEASURED_FLOATS,
@@ -36,19 +38,17 @@ class _Controller(SimpleNamespace):
 class CMcu:
     """One actuator's MCU program run by the host C build."""
 
+    impl = "c"
+
     def __init__(self, cal: FirmwareCalibration, links: list[LinkMemory]) -> None:
         if len(links) != 1:
-            raise ValueError(f"mcu.impl = 'c' runs one actuator, got {len(links)} links")
+            raise ValueError(f"mcu.impl = '{self.impl}' runs one actuator, got {len(links)} "
+                             "links")
         cal = calibration(cal)
         self.links = links
         self.period = cal.mcu["period_ticks"]
-        try:
-            self._law = HostLaw(build_host())
-        except BuildError as exc:
-            raise ConfigError(f"mcu.impl = 'c': {exc}") from None
-        self._state = ctypes.create_string_buffer(self._law.state_size)
         config = config_record(cal)
-        self._law.init(self._state, config)
+        self._start(cal, config)
         self._in = np.zeros((), dtype=INPUT)
         self._out = np.zeros((), dtype=OUTPUT)
         self._flags = 0
@@ -59,16 +59,39 @@ class CMcu:
         self.iq_ref = [F32(0.0)]
         self.vq_ff = [F32(0.0)]
         self.status = [0]
+        self.mode, self.value, self.last_cmd_tick = ["off"], [0.0], [0]  # the last command
+
+    def _start(self, cal: FirmwareCalibration, config: np.ndarray) -> None:
+        """Load the law and give it a fresh state built from ``config``."""
+        try:
+            self._law = HostLaw(build_host())
+        except BuildError as exc:
+            raise ConfigError(f"mcu.impl = 'c': {exc}") from None
+        self._state = ctypes.create_string_buffer(self._law.state_size)
+        self._law.init(self._state, config)
+
+    def _law_step(self, rec: np.ndarray, out: np.ndarray, link: LinkMemory) -> None:
+        """One cycle of the law: ``rec`` (an ``mcu_input``) in, ``out`` (``mcu_output``)
+        filled; the downstream words go to ``link``."""
+        self._law.step(self._state, rec, out)
+        link.down[:] = out["down"]
 
     def command(self, i: int, mode: str, value: float, tick: int) -> None:
         if mode not in MODES:
             raise ValueError(f"unknown command mode {mode!r}")
         self._flags |= IN_COMMAND
         self._in["mode"], self._in["value"], self._cmd_tick = MODES.index(mode), value, tick
+        self.mode[0], self.value[0], self.last_cmd_tick[0] = mode, value, tick
 
     def enable(self, i: int, angle_offset: int) -> None:
         self._flags |= IN_ENABLE
         self._in["angle_offset"] = angle_offset
+
+    def disable(self, i: int) -> None:
+        self._flags |= IN_DISABLE
+
+    def clear_fault(self, i: int) -> None:
+        self._flags |= IN_CLEAR_FAULT
 
     def step(self, tick: int) -> None:
         link = self.links[0]
@@ -78,10 +101,9 @@ class CMcu:
         rec["tick"], rec["flags"] = tick, self._flags
         rec["up"] = link.up
         rec["up_crc_errors"] = link.up_crc_errors
-        self._law.step(self._state, rec, self._out)
+        self._law_step(rec, self._out, link)
         self._flags = 0
         out = self._out
-        link.down[:] = out["down"]
         m = self.meas[0]
         for name in MEASURED_FLOATS:
             setattr(m, name, F32(out[name]))

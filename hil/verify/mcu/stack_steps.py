@@ -8,8 +8,14 @@ import math
 
 import numpy as np
 
-from firmware_model.fpga import layout as B
-from firmware_model.mcu.c_abi import IN_COMMAND, IN_ENABLE, INPUT, MODES
+from firmware_model.mcu.c_abi import (
+    IN_CLEAR_FAULT,
+    IN_COMMAND,
+    IN_DISABLE,
+    IN_ENABLE,
+    INPUT,
+    MODES,
+)
 from hil.sim.actuator import ActuatorStack
 from plant.config import Config
 
@@ -36,10 +42,11 @@ class _Recorder:
         mcu = self.mcu = stack.mcu
         self.link = stack.fpga.mcu_link
         self.rows: list[np.ndarray] = []
+        self.status: list[int] = []  # the MCU's status word after each step
         self.flags = IN_COMMAND | IN_ENABLE  # what the stack's constructor did
-        self.offset = int(self.link.down[B.D_ANGLE_OFFSET])
+        self.offset = int(stack.fpga.board.calibrated_offset)  # the constructor's enable
         self.cmd = (mcu.mode[0], float(mcu.value[0]), mcu.last_cmd_tick[0])
-        command, enable = mcu.command, mcu.enable
+        command, enable, disable, clear = mcu.command, mcu.enable, mcu.disable, mcu.clear_fault
 
         def on_command(i: int, mode: str, value: float, tick: int) -> None:
             command(i, mode, value, tick)
@@ -51,7 +58,16 @@ class _Recorder:
             self.flags |= IN_ENABLE
             self.offset = angle_offset
 
+        def on_disable(i: int) -> None:
+            disable(i)
+            self.flags |= IN_DISABLE
+
+        def on_clear_fault(i: int) -> None:
+            clear(i)
+            self.flags |= IN_CLEAR_FAULT
+
         mcu.command, mcu.enable = on_command, on_enable
+        mcu.disable, mcu.clear_fault = on_disable, on_clear_fault
         for k, task in enumerate(stack.sched.tasks):
             if task.name == "mcu":
                 stack.sched.tasks[k] = dataclasses.replace(task, fn=self.step)
@@ -70,11 +86,18 @@ class _Recorder:
         self.rows.append(rec)
         self.flags = 0
         self.mcu.step(tick)
+        self.status.append(int(self.mcu.status[0]))
 
 
 def stack_inputs(cfg: Config, seconds: float) -> np.ndarray:
     """Run the whole stack on ``cfg`` for ``seconds`` with the faults above; the MCU's
     input at each of its steps."""
+    return stack_run(cfg, seconds)[0]
+
+
+def stack_run(cfg: Config, seconds: float) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`stack_inputs`, and the MCU's status word after each step (CMD_TIMEOUT,
+    SAFE_OFF, LINK_ERROR, ...: the watchdog's and the link check's answers)."""
     stack = ActuatorStack(cfg, _command)
     rec = _Recorder(stack)
     silent = False
@@ -96,9 +119,9 @@ def stack_inputs(cfg: Config, seconds: float) -> np.ndarray:
             fpga.link_fault("down", stopped=True)
         elif t == DOWN_STOPPED[1]:
             fpga.link_fault("down", stopped=False)
-            rec.link.write("control", 0)          # the PC's clear-fault sequence
+            stack.mcu.disable(0)                  # the PC's clear-fault sequence
             stack.run(0.001)
-            rec.link.write("control", B.CTRL_CLEAR_FAULT)
+            stack.mcu.clear_fault(0)
             stack.run(0.001)
             stack.mcu.enable(0, fpga.board.calibrated_offset)
         elif t == PC_SILENT[0]:
@@ -106,4 +129,4 @@ def stack_inputs(cfg: Config, seconds: float) -> np.ndarray:
         elif t == PC_SILENT[1]:
             silent = False
             stack.mcu.enable(0, fpga.board.calibrated_offset)
-    return np.array(rec.rows, dtype=INPUT)
+    return np.array(rec.rows, dtype=INPUT), np.array(rec.status, dtype=np.uint32)
