@@ -2,7 +2,7 @@
 
 Each factory returns an argparse ``type=`` function. A bad value raises
 :class:`argparse.ArgumentTypeError`, which the parser (:class:`Parser`) turns into one line
-``eha-hil VERB: error: argument --opt: why`` and exit code 2, before any work starts. A
+``eha-hil VERB: argument --opt: why`` and exit code 2, before any work starts. A
 verb never re-checks a value it got through one of these types.
 
 Numbers are checked for being finite first (``nan`` and ``inf`` parse as floats), then
@@ -18,8 +18,7 @@ from pathlib import Path
 from typing import NoReturn
 
 from hil.cli import outputs
-
-EXIT_USAGE = 2
+from hil.cli.contract import EXIT_USAGE
 
 
 class Parser(argparse.ArgumentParser):
@@ -74,7 +73,7 @@ class Parser(argparse.ArgumentParser):
     def error(self, message: str) -> NoReturn:
         # argparse prints the whole usage block first; one line says the same and keeps
         # stderr readable for scripts (``--help`` has the usage).
-        self.exit(EXIT_USAGE, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+        self.exit(EXIT_USAGE, f"{self.prog}: {message} (see {self.prog} --help)\n")
 
 
 def _given(action: argparse.Action, argv: list[str]) -> bool:
@@ -312,6 +311,33 @@ def image_sets(args: argparse.Namespace) -> None:
     path = getattr(args, "mcu_image", None)
     if path:
         args.set = [*(args.set or ()), "mcu.impl=image", f"mcu.image={path}"]
+
+
+#: --plot: a figure file whose directory exists.
+PLOT_FILE = output_file((".png", ".svg", ".pdf"))
+
+
+def common(json_plot: bool = True, plot: bool = True,
+           config: bool = True) -> argparse.ArgumentParser:
+    """The options verbs share: ``-c``/``--set`` (``config``), ``--json`` and ``--plot``."""
+    parent = Parser(add_help=False)
+    if config:
+        add_config_options(parent)
+    if json_plot:
+        parent.add_argument("--json", action="store_true", help="print JSON instead of tables")
+    if plot:
+        parent.add_argument("--plot", metavar="FILE.png", type=PLOT_FILE,
+                            help="also write a figure (.png, .svg or .pdf)")
+    return parent
+
+
+def plot_dir(path: str) -> Path:
+    """The --plot-dir directory, created if missing (checked again: 'thesis' has a default
+    that no argument type saw)."""
+    outputs.check_dir_writable(path)
+    out_dir = Path(path)
+    out_dir.mkdir(exist_ok=True)
+    return out_dir
 
 
 def walk(parser: argparse.ArgumentParser) -> list[argparse.ArgumentParser]:

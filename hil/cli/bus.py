@@ -8,17 +8,19 @@ import time
 from pathlib import Path
 
 from hil.cli import progress as cli_progress
-from hil.cli.args import float_range, input_file, int_range, output_file
+from hil.cli.args import common, float_range, input_file, int_range, output_file
+from hil.cli.contract import (
+    EXIT_FAILED,
+    EXIT_OK,
+    EXIT_USAGE,
+    Context,
+    Outcome,
+    UsageError,
+    command,
+)
 from hil.fieldbus.master import Master
 from hil.output.tables import table
 from hil.sim.pc import demo_pc
-
-EXIT_USAGE = 2
-
-
-class BusUsageError(Exception):
-    """A user mistake on the bus commands; one line."""
-
 
 #: Cycles between two progress updates of ``bus run`` (a tenth of a simulated second).
 PROGRESS_CYCLES = 100
@@ -33,14 +35,14 @@ def _topology(name: str):
     try:
         return load_topology(name)
     except TopologyError as exc:
-        raise BusUsageError(str(exc)) from None
+        raise UsageError(str(exc)) from None
 
 
 #: The files ``bus run`` streams to while it runs: (option dest, label in messages).
 STREAMS = (("log", "log"), ("capture", "capture"), ("can_log", "CAN log"))
 
 
-def _run_bus(args: argparse.Namespace, cfg, topo, cycles: int, model: str, pc):
+def _run_bus(args: argparse.Namespace, cfg, topo, cycles: int, model: str, pc, progress):
     """(record, wall seconds) of the run, logged to ``args.log``, captured to
     ``args.capture`` and its CAN traffic logged to ``args.can_log`` if given.
 
@@ -53,7 +55,7 @@ def _run_bus(args: argparse.Namespace, cfg, topo, cycles: int, model: str, pc):
     with outputs.streaming({d: getattr(args, d, None) for d in labels}, labels,
                            _READABLE) as tmp:
         return _run_bus_to(argparse.Namespace(**{**vars(args), **tmp}), cfg, topo, cycles,
-                           model, pc)
+                           model, pc, progress)
 
 
 def _readable_traffic(path) -> str:  # noqa: ANN001 - a Path
@@ -70,7 +72,7 @@ _READABLE = {"log": cli_progress.readable_log, "capture": _readable_traffic,
              "can_log": _readable_traffic}
 
 
-def _run_bus_to(args: argparse.Namespace, cfg, topo, cycles: int, model: str, pc):
+def _run_bus_to(args: argparse.Namespace, cfg, topo, cycles: int, model: str, pc, progress):
     from hil.fieldbus.capture import CaptureError, CaptureWriter
     from hil.fieldbus.faults import FaultError
     from hil.fieldbus.system import BusSystem
@@ -81,23 +83,23 @@ def _run_bus_to(args: argparse.Namespace, cfg, topo, cycles: int, model: str, pc
                                                  "can_interface": args.can_interface,
                                                  "can_channel": args.can_channel})
     except TransportError as exc:
-        raise BusUsageError(str(exc)) from None
-    faults = _faults(getattr(args, "faults", None), topo, model, cycles / 1000)
+        raise UsageError(str(exc)) from None
+    faults = _faults(args.faults, topo, model, cycles / 1000)
     tick_ns = cfg.get("sim.tick_ns")
     meta = {"topology": args.topology, "model": model, "mode": "lockstep (bus run)",
             "config": json.dumps(cfg.data)}
     t0 = time.perf_counter()
-    live_addr = getattr(args, "foxglove", None)
+    live_addr = args.foxglove
     if args.log or live_addr is not None:
         from hil.transports import backend
 
         what = "--log" if args.log else "--foxglove"
         if not backend(args.transport).in_memory:
-            raise BusUsageError(f"{what} records the in-process run; use --transport inproc")
+            raise UsageError(f"{what} records the in-process run; use --transport inproc")
         if model != "stack":
-            raise BusUsageError(f"{what} records the MCU model: use --model stack")
+            raise UsageError(f"{what} records the MCU model: use --model stack")
         if args.crc_trailer is not None:
-            raise BusUsageError(f"--crc-trailer/--no-crc-trailer: not with {what} (the logged "
+            raise UsageError(f"--crc-trailer/--no-crc-trailer: not with {what} (the logged "
                                 "run keeps the in-process default, with the trailer)")
         from hil.replay.record import run_logged
 
@@ -105,11 +107,11 @@ def _run_bus_to(args: argparse.Namespace, cfg, topo, cycles: int, model: str, pc
             cap = (CaptureWriter(args.capture, crc_trailer=True, metadata=meta)
                    if args.capture else None)
         except CaptureError as exc:
-            raise BusUsageError(str(exc)) from None
+            raise UsageError(str(exc)) from None
         try:
             with _live_view(live_addr) as live:
                 rec = run_logged(topo, cfg, cycles, pc, args.log, level=args.level,
-                                 progress=_progress("bus run", not args.json), faults=faults,
+                                 progress=progress, faults=faults,
                                  capture=None if cap is None else cap.tap(tick_ns), live=live)
         finally:
             if cap is not None:
@@ -135,7 +137,7 @@ def _run_bus_to(args: argparse.Namespace, cfg, topo, cycles: int, model: str, pc
                     if what is not None:
                         what.close()
     except (TransportError, CaptureError, FaultError) as exc:
-        raise BusUsageError(str(exc)) from None
+        raise UsageError(str(exc)) from None
     return rec, time.perf_counter() - t0, cap, recorder
 
 
@@ -162,13 +164,13 @@ def _faults(path: str | None, topo, model: str, seconds: float) -> dict | None:
         check_topology(plan, topo)
         check_window(plan, seconds)
     except OSError as exc:
-        raise BusUsageError(f"--faults {path}: cannot read: {exc.strerror}") from None
+        raise UsageError(f"--faults {path}: cannot read: {exc.strerror}") from None
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise BusUsageError(f"--faults {path}: not valid TOML: {exc}") from None
+        raise UsageError(f"--faults {path}: not valid TOML: {exc}") from None
     except FaultError as exc:
-        raise BusUsageError(f"--faults {exc}") from None
+        raise UsageError(f"--faults {exc}") from None
     if plan.box_faults and model != "stack":
-        raise BusUsageError(f"--faults {path}: {plan.box_faults[0].name}: LVDS and sensor "
+        raise UsageError(f"--faults {path}: {plan.box_faults[0].name}: LVDS and sensor "
                             "faults need --model stack")
     return data
 
@@ -185,20 +187,22 @@ def _live_view(address: str | None):
     try:
         live = FoxgloveLive(*parse_address(address))
     except (ValueError, LiveError) as exc:
-        raise BusUsageError(str(exc)) from None
+        raise UsageError(str(exc)) from None
     print(f"foxglove: live view at {live.url} (Foxglove Studio: Open connection > Foxglove "
           "WebSocket)", file=sys.stderr)
     return live
 
 
-def cmd_bus_run(args: argparse.Namespace, cfg) -> int:
+def cmd_bus_run(args: argparse.Namespace, ctx: Context) -> Outcome:
+    cfg = ctx.config()
     topo = _topology(args.topology)
     cycles = int(round(args.seconds * 1000))
     model = args.model or ("stack" if topo.n_actuators <= 5 else "echo")
     sine = demo_pc(args.amplitude, args.frequency)
     # the logged run reports its own progress; the others report it from the PC loop
     logged = bool(args.log) or getattr(args, "foxglove", None) is not None
-    report = None if logged else _progress("bus run", not args.json)
+    progress = ctx.progress("bus run", "cycles", note=False)
+    report = None if logged else progress
     with cli_progress.interrupt_between_steps() as check:
 
         def pc(cycle: int, m: Master) -> None:
@@ -210,7 +214,8 @@ def cmd_bus_run(args: argparse.Namespace, cfg) -> int:
                 report(cycle, cycles)
             sine(cycle, m)
 
-        rec, wall, cap, recorder = _run_bus(args, cfg, topo, cycles, model, pc)
+        # The position is noted by the PC loop (simulated time), not by these counts.
+        rec, wall, cap, recorder = _run_bus(args, cfg, topo, cycles, model, pc, progress)
         if report is not None:
             report(cycles, cycles)
     data = {"topology": topo.name, "boxes": len(topo.boxes), "actuators": topo.n_actuators,
@@ -221,37 +226,29 @@ def cmd_bus_run(args: argparse.Namespace, cfg) -> int:
             "can_log": args.can_log,
             "can_messages": None if recorder is None else recorder.messages,
             "faults": args.faults, "fault_counts": rec.faults}
-    if args.json:
-        print(json.dumps(data, indent=2))
-    else:
-        rows = [[k, v] for k, v in rec.master.items()]
-        print(f"{topo.name}: {len(topo.boxes)} boxes, {topo.n_actuators} actuators, "
-              f"model {model}, transport {args.transport}: {cycles} cycles in {wall:.2f} s "
-              f"({args.seconds / wall:.1f}x real time)")
-        print(table(["master counter", "value"], rows))
-        if rec.faults:
-            print(table(["fieldbus fault counter", "value"], [[k, v] for k, v in
-                                                              rec.faults.items() if v]
-                        or [["(none hit)", 0]]))
-        if args.log:
-            print(f"log: {args.log} (eha-hil log info {args.log}; eha-hil replay {args.log})")
-        if cap is not None:
-            print(f"capture: {args.capture}, {cap.frames} frames (wireshark {args.capture}; "
-                  f"eha-hil log info {args.capture})")
-        if recorder is not None:
-            print(f"CAN log: {args.can_log}, {recorder.messages} CAN messages (eha-hil log "
-                  f"info {args.can_log}; eha-hil replay {args.can_log})")
+    rows = [[k, v] for k, v in rec.master.items()]
+    lines = [f"{topo.name}: {len(topo.boxes)} boxes, {topo.n_actuators} actuators, "
+             f"model {model}, transport {args.transport}: {cycles} cycles in {wall:.2f} s "
+             f"({args.seconds / wall:.1f}x real time)",
+             table(["master counter", "value"], rows)]
+    if rec.faults:
+        lines.append(table(["fieldbus fault counter", "value"], [[k, v] for k, v in
+                                                                 rec.faults.items() if v]
+                           or [["(none hit)", 0]]))
+    if args.log:
+        lines.append(f"log: {args.log} (eha-hil log info {args.log}; eha-hil replay {args.log})")
+    if cap is not None:
+        lines.append(f"capture: {args.capture}, {cap.frames} frames (wireshark {args.capture}; "
+                     f"eha-hil log info {args.capture})")
+    if recorder is not None:
+        lines.append(f"CAN log: {args.can_log}, {recorder.messages} CAN messages (eha-hil log "
+                     f"info {args.can_log}; eha-hil replay {args.can_log})")
     # Lost or corrupted frames fail a clean run; with --faults they are what was asked for.
     bad = rec.master["wkc_errors"] + rec.master["lost_frames"] + rec.master["bad_frames"]
-    return 1 if bad and not args.faults else 0
+    return Outcome("\n".join(lines), data, EXIT_FAILED if bad and not args.faults else EXIT_OK)
 
 
-def _progress(label: str, enabled: bool):
-    # The position is noted by the PC loop (simulated time), not by these counts.
-    return cli_progress.reporter(label, enabled, "cycles", note=False)
-
-
-def cmd_replay_traffic(args: argparse.Namespace, cfg) -> int:
+def cmd_replay_traffic(args: argparse.Namespace, cfg) -> Outcome:
     """Replay a capture or CAN log of a bus run through a fresh chain (exit 0: every logged
     reply matches; 1: a divergence; 2: the file cannot be read or holds no exchange)."""
     from hil.fieldbus.traffic import TrafficError, read_traffic
@@ -261,8 +258,7 @@ def cmd_replay_traffic(args: argparse.Namespace, cfg) -> int:
     try:
         traffic = read_traffic(args.log)
     except TrafficError as exc:
-        _replay_note(str(exc))
-        return EXIT_USAGE
+        raise UsageError(str(exc)) from None
     meta = traffic.metadata
     if cfg is None:
         cfg = (Config(json.loads(meta["config"]), [f"{args.log} (capture metadata)"])
@@ -273,47 +269,46 @@ def cmd_replay_traffic(args: argparse.Namespace, cfg) -> int:
     try:
         res = replay_traffic(traffic, topo, cfg, model)
     except TopologyMismatch as exc:
-        _replay_note(str(exc))
-        return EXIT_USAGE
+        raise UsageError(str(exc)) from None
     wall = time.perf_counter() - t0
     data = {"ok": res.ok, "format": traffic.kind, "topology": topo.name, "model": model,
             **{k: v for k, v in res.__dict__.items()}, "wall_s": wall}
-    cut = (f"TRUNCATED file ({traffic.cut}), replayed up to t = {traffic.read_until_s or 0:.3f}"
-           " s: " if traffic.cut else "")
+    cut = (f"TRUNCATED file ({traffic.cut}), replayed up to t = "
+           f"{traffic.read_until_s or 0:.3f} s: " if traffic.cut else "")
     data.update(truncated=traffic.cut is not None, stop_reason=traffic.cut)
-    if args.json:
-        print(json.dumps(data, indent=2))
-    elif res.divergence is not None:
-        print(f"replay {args.log}: {cut}first divergence at {res.divergence}")
+    if res.divergence is not None:
+        text = f"replay {args.log}: {cut}first divergence at {res.divergence}"
     elif res.ok:
-        print(f"replay {args.log}: {cut}{res.compared} replies of {topo.name} ({model} model) "
-              f"match bit for bit ({res.requests} requests, {res.unanswered} without a logged "
-              f"reply, {res.skipped} frames skipped; {wall:.2f} s)")
+        text = (f"replay {args.log}: {cut}{res.compared} replies of {topo.name} ({model} "
+                f"model) match bit for bit ({res.requests} requests, {res.unanswered} without "
+                f"a logged reply, {res.skipped} frames skipped; {wall:.2f} s)")
     else:
-        _replay_note(f"{args.log}: no request/reply pair to replay ({len(traffic.frames)} "
-                     f"fieldbus frames: {res.requests} requests, {res.unmatched} unmatched "
-                     f"replies, {res.skipped} skipped)")
-        return EXIT_USAGE
+        # Nothing to compare: a mistake of the input, but --json still gets its reading.
+        return Outcome(None, data, EXIT_USAGE,
+                       error=f"{args.log}: no request/reply pair to replay "
+                       f"({len(traffic.frames)} fieldbus frames: {res.requests} requests, "
+                       f"{res.unmatched} unmatched replies, {res.skipped} skipped)")
     if traffic.cut:
         # a cut file that matches is not a whole run that matches: say where it ends
         from hil.cli import cutfiles
 
-        return cutfiles.report("replay", args.log, traffic.cut, traffic.read_until_s,
-                               "replayed")
-    return 0 if res.ok else 1
+        return Outcome(text, data, EXIT_FAILED, error=cutfiles.message(
+            args.log, traffic.cut, traffic.read_until_s, "replayed"))
+    return Outcome(text, data, EXIT_OK if res.ok else EXIT_FAILED)
 
 
-def cmd_replay(args: argparse.Namespace, cfg) -> int:
+def cmd_replay(args: argparse.Namespace, ctx: Context) -> Outcome:
     """Exit 0: the whole log matches; 1: a divergence, or a truncated log replayed up to
     its readable end (one line on stderr says where it ends); 2: nothing could be replayed
     (foreign or damaged file, bad metadata, no MCU data), one line ``eha-hil replay: FILE:
     what`` on stderr. Captures and CAN logs go to :func:`cmd_replay_traffic`."""
     from hil.fieldbus.traffic import is_traffic_file
 
+    cfg = ctx.config_if_given()  # else the configuration the log carries
     if is_traffic_file(args.log):
         return cmd_replay_traffic(args, cfg)
     if args.topology or args.model:
-        raise BusUsageError("--topology/--model: only for a capture or CAN log (an MCAP log "
+        raise UsageError("--topology/--model: only for a capture or CAN log (an MCAP log "
                             "names its own)")
     from hil.replay.fpga_replay import warm_up
     from hil.replay.replay import ReplayError, replay_mcu
@@ -324,8 +319,7 @@ def cmd_replay(args: argparse.Namespace, cfg) -> int:
     try:
         res = replay_mcu(args.log, cfg)
     except ReplayError as exc:
-        _replay_note(str(exc))
-        return EXIT_USAGE
+        raise UsageError(str(exc)) from None
     wall = time.perf_counter() - t0
     rtf = res.simulated_s / wall if wall > 0 else float("inf")
     data = {"ok": res.ok, "boxes": res.boxes, "cycles": res.cycles, "mcu_steps": res.mcu_steps,
@@ -335,36 +329,31 @@ def cmd_replay(args: argparse.Namespace, cfg) -> int:
             "truncated": res.truncated, "stop_reason": res.stop_reason}
     cut = (f"TRUNCATED log ({res.stop_reason}), replayed up to t = {res.simulated_s:.3f} s: "
            if res.truncated else "")
-    if args.json:
-        print(json.dumps(data, indent=2))
-    elif res.ok:
+    if res.ok:
         board = (f" and {res.fpga_ticks} driver-board ticks" if res.fpga_ticks else "")
-        print(f"replay {args.log}: {cut}{res.mcu_steps} MCU steps{board} over "
-              f"{res.simulated_s:.3f} s match bit for bit ({wall:.2f} s, {rtf:.0f}x real time)")
+        text = (f"replay {args.log}: {cut}{res.mcu_steps} MCU steps{board} over "
+                f"{res.simulated_s:.3f} s match bit for bit ({wall:.2f} s, {rtf:.0f}x real "
+                "time)")
     else:
-        print(f"replay {args.log}: {cut}first divergence at {res.divergence}")
-    if res.truncated:
-        # A cut log that matches is not a whole run that matches: say where it ends, exit 1.
-        from hil.cli import cutfiles
+        text = f"replay {args.log}: {cut}first divergence at {res.divergence}"
+    # A cut log that matches is not a whole run that matches: say where it ends, exit 1.
+    from hil.cli import cutfiles
 
-        cutfiles.report("replay", args.log, res.stop_reason, res.simulated_s, "replayed")
-    return 0 if res.ok and not res.truncated else 1
-
-
-def _replay_note(message: str) -> None:
-    """The one stderr line of ``eha-hil replay``: ``eha-hil replay: FILE: what``."""
-    import sys
-
-    print(f"eha-hil replay: {message}", file=sys.stderr)
+    note = cutfiles.message(args.log, res.stop_reason, res.simulated_s,
+                            "replayed") if res.truncated else None
+    return Outcome(text, data, EXIT_OK if res.ok and not res.truncated else EXIT_FAILED,
+                   error=note)
 
 
-def cmd_bench_bus(args: argparse.Namespace, cfg) -> int:
+def cmd_bench_bus(args: argparse.Namespace, ctx: Context) -> Outcome:
     from hil.bench.bus import bench_bus, format_table
     from hil.fieldbus.topology import load_topology
 
-    print(f"full robot (hydra_full, echo boxes), {args.cycles} cycles per backend; "
-          "bench_one_box with the full stack on inproc")
-    print(format_table(bench_bus(args.backends, args.cycles, 1000)))
+    cfg = ctx.config()
+    rates = bench_bus(args.backends, args.cycles, 1000)
+    lines = [f"full robot (hydra_full, echo boxes), {args.cycles} cycles per backend; "
+             "bench_one_box with the full stack on inproc", format_table(rates)]
+    data = {"cycles": args.cycles, "rates": rates, "replay": None}
     if args.replay:
         import tempfile
 
@@ -377,9 +366,12 @@ def cmd_bench_bus(args: argparse.Namespace, cfg) -> int:
             t0 = time.perf_counter()
             res = replay_mcu(log)
             wall = time.perf_counter() - t0
-        print(f"replay of a 2 s one-box log: {res.simulated_s / wall:.1f}x real time "
-              f"(target >= 20x; {res.mcu_steps} MCU steps in {wall:.3f} s)")
-    return 0
+        lines.append(f"replay of a 2 s one-box log: {res.simulated_s / wall:.1f}x real time "
+                     f"(target >= 20x; {res.mcu_steps} MCU steps in {wall:.3f} s)")
+        data["replay"] = {"simulated_s": res.simulated_s, "wall_s": wall,
+                          "real_time_factor": res.simulated_s / wall,
+                          "mcu_steps": res.mcu_steps}
+    return Outcome("\n".join(lines), data)
 
 
 def add_wire_options(p: argparse.ArgumentParser) -> None:
@@ -394,7 +386,7 @@ def add_wire_options(p: argparse.ArgumentParser) -> None:
                    "none (docs/fieldbus.md)")
 
 
-def add_parsers(sub, bsub, common, config_fn, wrap) -> None:
+def add_parsers(sub, bsub) -> None:  # noqa: ANN001 - argparse's sub-parsers
     """Register ``bus run``, ``replay`` and ``bench bus`` on the eha-hil parser."""
     from hil.transports import BACKENDS
 
@@ -443,7 +435,7 @@ def add_parsers(sub, bsub, common, config_fn, wrap) -> None:
     p.add_argument("--foxglove", nargs="?", const="", metavar="HOST:PORT",
                    help="stream the decoded signals to Foxglove Studio (WebSocket; default "
                    "127.0.0.1:8765, loopback)")
-    p.set_defaults(func=wrap(cmd_bus_run, config_fn))
+    command(p, cmd_bus_run)
 
     p = sub.add_parser("replay", parents=[common(plot=False)],
                        help="feed a log's MCU inputs to the current MCU model; compare outputs "
@@ -456,7 +448,7 @@ def add_parsers(sub, bsub, common, config_fn, wrap) -> None:
     p.add_argument("--model", choices=("stack", "robot", "echo"),
                    help="capture/CAN log: the run's box model (default: from the metadata, "
                    "else as bus run chooses)")
-    p.set_defaults(func=wrap(cmd_replay, config_fn, use_log_config=True))
+    command(p, cmd_replay)
 
     p = bsub.add_parser("bus", parents=[common(plot=False)],
                         help="full-robot process-image cycles per second per transport")
@@ -466,8 +458,4 @@ def add_parsers(sub, bsub, common, config_fn, wrap) -> None:
                    help="cycles per backend, 1..1000000")
     p.add_argument("--no-replay", dest="replay", action="store_false",
                    help="skip the replay real-time factor")
-    p.set_defaults(func=wrap(cmd_bench_bus, config_fn))
-
-    from hil.cli.bench import add_log_parser
-
-    add_log_parser(bsub, common, config_fn, wrap)
+    command(p, cmd_bench_bus)

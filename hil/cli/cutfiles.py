@@ -15,11 +15,17 @@ import sys
 EXIT_TRUNCATED = 1
 
 
+def message(path: object, why: str, until_s: float | None, what: str = "read") -> str:
+    """``FILE: truncated: WHY; read up to t = X s`` (or ``nothing``): a command's
+    ``Outcome.error``, which the root prints after the verb."""
+    upto = "nothing" if until_s is None else f"t = {until_s:.6f} s"
+    return f"{path}: truncated: {why}; {what} up to {upto}"
+
+
 def line(verb: str, path: object, why: str, until_s: float | None, what: str = "read"
          ) -> str:
     """``eha-hil VERB: FILE: truncated: WHY; read up to t = X s`` (or ``nothing``)."""
-    upto = "nothing" if until_s is None else f"t = {until_s:.6f} s"
-    return f"eha-hil {verb}: {path}: truncated: {why}; {what} up to {upto}"
+    return f"eha-hil {verb}: {message(path, why, until_s, what)}"
 
 
 def report(verb: str, path: object, why: str, until_s: float | None, what: str = "read"
@@ -29,4 +35,4 @@ def report(verb: str, path: object, why: str, until_s: float | None, what: str =
     return EXIT_TRUNCATED
 
 
-__all__ = ["EXIT_TRUNCATED", "line", "report"]
+__all__ = ["EXIT_TRUNCATED", "line", "message", "report"]

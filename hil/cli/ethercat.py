@@ -4,14 +4,20 @@
 from __future__ import annotations
 
 import argparse
-import json
+
+from hil.cli.args import common, int_range
+from hil.cli.contract import Context, Outcome, UsageError, command
 
 
-def add_parsers(sub, bsub, common, config_fn, wrap) -> None:
-    from hil.cli.args import int_range
-    from hil.fieldbus.esc import esi
-
-    esi.add_parser(sub)
+def add_parsers(sub, bsub) -> None:  # noqa: ANN001 - argparse's sub-parsers
+    """Register ``esi`` and ``bench ethercat``."""
+    p = sub.add_parser("esi", help="write the EtherCAT slave information (ESI XML) of the "
+                       "boxes of a topology to stdout",
+                       epilog="Example: eha-hil esi --topology hydra_full > Hydra.xml "
+                       "(docs/ethercat-slaves.md)")
+    p.add_argument("--topology", default="hydra_full",
+                   help="shipped topology name or TOML file")
+    command(p, _cmd_esi)
     p = bsub.add_parser("ethercat", parents=[common(plot=False)],
                         help="round trip and box-cycle time per bus cycle of the ESC chain "
                         "(hydra_full; echo boxes, and the full stack behind one box)")
@@ -20,25 +26,34 @@ def add_parsers(sub, bsub, common, config_fn, wrap) -> None:
     p.add_argument("--wire", action="store_true",
                    help="also over a veth pair with SOEM (pysoem) as the master (root; "
                    "makes and removes its own network namespace)")
-    p.set_defaults(func=wrap(_cmd_bench, config_fn))
+    command(p, _cmd_bench)
 
 
-def _cmd_bench(args: argparse.Namespace, cfg) -> int:
+def _cmd_esi(args: argparse.Namespace, ctx: Context) -> Outcome:
+    from hil.fieldbus.esc.esi import esi_xml
+    from hil.fieldbus.topology import TopologyError, load_topology
+
+    try:
+        topo = load_topology(args.topology)
+    except TopologyError as exc:
+        raise UsageError(str(exc)) from None
+    return Outcome(esi_xml(topo), end="")  # the XML ends with its own newline
+
+
+def _cmd_bench(args: argparse.Namespace, ctx: Context) -> Outcome:
     from hil.bench.ethercat import bench_ethercat, format_table
 
-    rows = bench_ethercat(cfg, args.cycles)
+    rows = bench_ethercat(ctx.config(), args.cycles)
     if args.wire:
         from hil.bench.ethercat import bench_wire
-        from hil.cli.bus import BusUsageError
         from hil.fieldbus.esc.veth import NamespaceError
 
         try:
             import pysoem  # noqa: F401
         except ImportError:
-            raise BusUsageError("--wire: needs pysoem (pip install pysoem)") from None
+            raise UsageError("--wire: needs pysoem (pip install pysoem)") from None
         try:
             rows += bench_wire(args.cycles)
         except NamespaceError as exc:
-            raise BusUsageError(f"--wire: {exc}") from None
-    print(json.dumps(rows, indent=2) if args.json else format_table(rows))
-    return 0
+            raise UsageError(f"--wire: {exc}") from None
+    return Outcome(format_table(rows), rows)

@@ -8,13 +8,14 @@
   example dataset from the project's plant, to try the tool on; ``--realism rig`` takes it
   from the independent rig simulator (:mod:`hil.identify.rig`) instead.
 
-A user mistake (malformed CSV, unknown preset, unusable report directory) prints one line
-starting ``eha-hil identify: `` (or ``identify-synth``) on stderr and returns 2.
+A user mistake (malformed CSV, unknown preset, unusable report directory) is one line
+``eha-hil identify: ...`` (or ``identify-synth``) on stderr, exit 2.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 import tempfile
 import time
@@ -29,9 +30,16 @@ from hil.cli.args import (
     output_dir,
     output_file,
 )
+from hil.cli.contract import (
+    EXIT_FAILED,
+    EXIT_OK,
+    EXIT_USAGE,
+    Context,
+    Outcome,
+    UsageError,
+    standalone,
+)
 
-EXIT_OK = 0
-EXIT_USAGE = 2
 #: Rows identified by default: ~40 s at 5 kHz, about 1.5 GB at the peak (docs/identify.md).
 DEFAULT_MAX_ROWS = 200_000
 #: Peak memory of an identification: a base plus this per row used (measured with
@@ -40,11 +48,6 @@ BASE_BYTES = 400e6
 BYTES_PER_ROW = 7_000
 #: CPU seconds (all threads) a 16 s, 5 kHz record may take to identify on the 2-core machine.
 CPU_BUDGET_S = 20.0
-
-
-def _err(verb: str, msg: str) -> int:
-    print(f"eha-hil {verb}: {msg}", file=sys.stderr)
-    return EXIT_USAGE
 
 
 def configure_identify(parser: argparse.ArgumentParser) -> None:
@@ -78,32 +81,27 @@ def configure_identify(parser: argparse.ArgumentParser) -> None:
                         "header line, else estimated from the data (the report says why)")
 
 
-def run_identify(args: argparse.Namespace) -> int:
-    """Run ``eha-hil identify``; 0 on success, 2 on a user error (one line on stderr)."""
-    import json
-
+@standalone("eha-hil identify")
+def run_identify(args: argparse.Namespace, ctx: Context) -> Outcome:
+    """Run ``eha-hil identify``: exit 0 on success, 2 on a user error (one line on stderr)."""
     from hil.identify.checks import RefusedData
     from hil.identify.csvdata import CsvError, read_measured
-    from plant.config import ConfigError, load_config
+    from plant.config import load_config
 
-    try:
-        cfg = load_config(args.config, getattr(args, "set", None) or ())
-    except ConfigError as exc:
-        return _err("identify", str(exc))  # names the preset or file and the key
+    cfg = load_config(args.config, args.set or ())  # a ConfigError names the preset and key
+
     def progress(msg: str) -> None:
         if not args.quiet:
             print(f"identify: {msg}", file=sys.stderr, flush=True)
 
-    max_rows = getattr(args, "max_rows", DEFAULT_MAX_ROWS)
-    too_big = _size_check(args.data, max_rows, progress)
+    too_big = _size_check(args.data, args.max_rows, progress)
     if too_big:
-        return _err("identify", too_big)
+        raise UsageError(too_big)
     try:
-        data = read_measured(args.data, load=getattr(args, "load", None),
-                             sample_rate_hz=getattr(args, "sample_rate", None),
-                             max_rows=max_rows, progress=progress)
+        data = read_measured(args.data, load=args.load, sample_rate_hz=args.sample_rate,
+                             max_rows=args.max_rows, progress=progress)
     except CsvError as exc:
-        return _err("identify", str(exc))
+        raise UsageError(str(exc)) from None
     from hil.identify import report
     from hil.identify.pipeline import identify
 
@@ -115,30 +113,28 @@ def run_identify(args: argparse.Namespace) -> int:
                        intersample=args.intersample)
     except RefusedData as exc:
         # a record that cannot be identified: say why, never a verdict
-        if args.json:
-            print(json.dumps({"file": str(args.data), "refused": str(exc)}))
-        return _err("identify", f"{args.data}: refused: {exc}")
+        return Outcome(None, {"file": str(args.data), "refused": str(exc)}, EXIT_USAGE,
+                       error=f"{args.data}: refused: {exc}")
     except ValueError as exc:
-        return _err("identify", f"{args.data}: {exc}")
+        raise UsageError(f"{args.data}: {exc}") from None
     rep.notes[:0] = [n for n in data.notes if n not in rep.notes]
-    from hil.cli import outputs
-
-    # the result first (an interruption while the report is written keeps it); the report
-    # goes to a temporary directory whose files are moved in when all are written: a
-    # failed report leaves nothing half-written
-    print(report.to_json(rep) if args.json else report.text(rep), flush=True)
+    files = ()
     if args.report:
-        from hil.cli import progress as cli_progress
+        # the report goes to a temporary directory whose files are moved in when all are
+        # written, after the result is printed: a failed report leaves nothing
+        # half-written, an interruption while it is written keeps the result
+        from hil.cli.outputs import Later
 
-        cli_progress.at(f"while writing the report {args.report}/ (the result is printed "
-                        "above)")
-        if outputs.write_dir("report", args.report, lambda tmp: report.write_report(rep, tmp)):
-            progress(f"report written to {args.report}/")
-    if data.cut:
+        files = (Later("report", args.report, lambda tmp: report.write_report(rep, tmp),
+                       directory=True),)
+    code, error = EXIT_OK, None
+    if data.cut:  # a cut file: identified up to its last whole line, and said so (exit 1)
         from hil.cli import cutfiles
 
-        return cutfiles.report("identify", args.data, data.cut, float(data.t[-1] - data.t[0]))
-    return EXIT_OK
+        code, error = EXIT_FAILED, cutfiles.message(args.data, data.cut,
+                                                    float(data.t[-1] - data.t[0]))
+    return Outcome(report.text(rep), json.loads(report.to_json(rep)), code, error=error,
+                   files=files)
 
 
 def _size_check(path: str, max_rows: int, progress) -> str:  # noqa: ANN001
@@ -246,7 +242,8 @@ def _synth_effects(args: argparse.Namespace, known: Sequence[str],
     return effects
 
 
-def run_synth(args: argparse.Namespace) -> int:
+@standalone("eha-hil identify-synth")
+def run_synth(args: argparse.Namespace, ctx: Context) -> Outcome:
     """Write an example dataset; prints what was put into it."""
     from hil.identify.csvdata import write_measured
     from hil.identify.synth import ALL_SYNTH_EFFECTS, DEFAULT_MAGNITUDES, generate
@@ -256,34 +253,31 @@ def run_synth(args: argparse.Namespace) -> int:
         return _run_rig_synth(args)
     rig_only = [f"--{k.replace('_', '-')}" for k in ("temperature", "current_noise_lsb",
                                                       "intersample", "spread")
-                if getattr(args, k, None) is not None]
-    if getattr(args, "header_intersample", False):
+                if vars(args)[k] is not None]
+    if args.header_intersample:
         rig_only.append("--header-intersample")
     if rig_only:
-        return _err("identify-synth", f"{rig_only[0]}: only with --realism rig")
+        raise UsageError(f"{rig_only[0]}: only with --realism rig")
     effects = _synth_effects(args, ALL_SYNTH_EFFECTS, DEFAULT_MAGNITUDES, "plant")
     if isinstance(effects, str):
-        return _err("identify-synth", effects)
+        raise UsageError(effects)
     out = Path(args.out)
     try:
         cfg = load_config(args.config or "hydra_linear", args.set or ())
         res = generate(args.load, effects, seconds=args.seconds, seed=args.seed,
                        preset=cfg, profile=args.profile)
     except (ConfigError, ValueError) as exc:
-        return _err("identify-synth", str(exc))
+        raise UsageError(str(exc)) from None
     truth = "; ".join(f"{k} {v}" for k, v in res.truth.items()) or "none"
     from hil.cli import outputs
 
     wrote = outputs.write("record", out, lambda tmp: write_measured(tmp, res.data,
                                                                      {"effects": truth}))
-    said = "wrote" if wrote else "made (NOT written)"
-    print(f"{said} {out}: {args.load}, {res.data.n} samples at "
-          f"{res.data.sample_rate_hz:g} Hz, "
-          f"effects: {truth}")
-    return EXIT_OK
+    return Outcome(f"{'wrote' if wrote else 'made (NOT written)'} {out}: {args.load}, "
+                   f"{res.data.n} samples at {res.data.sample_rate_hz:g} Hz, effects: {truth}")
 
 
-def _run_rig_synth(args: argparse.Namespace) -> int:
+def _run_rig_synth(args: argparse.Namespace) -> Outcome:
     """``identify-synth --realism rig``: a record from the independent rig simulator."""
     from hil.identify.csvdata import write_measured
     from hil.identify.rig import RIG_DEFAULT_MAGNITUDES, RIG_EFFECTS, generate_rig
@@ -291,12 +285,12 @@ def _run_rig_synth(args: argparse.Namespace) -> int:
 
     effects = _synth_effects(args, RIG_EFFECTS, RIG_DEFAULT_MAGNITUDES, "rig")
     if isinstance(effects, str):
-        return _err("identify-synth", effects)
+        raise UsageError(effects)
     if args.seconds <= 1.0:
-        return _err("identify-synth", f"--seconds {args.seconds}: need more than 1 s")
+        raise UsageError(f"--seconds {args.seconds}: need more than 1 s")
     out = Path(args.out)
     if not out.parent.exists() and str(out.parent):
-        return _err("identify-synth", f"{args.out}: directory {out.parent} does not exist")
+        raise UsageError(f"{args.out}: directory {out.parent} does not exist")
     try:
         res = generate_rig(
             args.load, effects, seconds=args.seconds, seed=args.seed, profile=args.profile,
@@ -307,21 +301,20 @@ def _run_rig_synth(args: argparse.Namespace) -> int:
             preset=load_config(args.config or "hydra_default", args.set or ()),
             header_intersample=args.header_intersample)
     except (ConfigError, ValueError) as exc:
-        return _err("identify-synth", str(exc))
+        raise UsageError(str(exc)) from None
     # the truth is printed, not written: the file holds only what a rig's log would
     from hil.cli import outputs
 
     wrote = outputs.write("record", out, lambda tmp: write_measured(tmp, res.data,
                                                                      dict(res.data.header)))
     par = res.truth["parameters"]
-    said = "wrote" if wrote else "made (NOT written)"
-    print(f"{said} {out}: rig, {args.load}, {res.data.n} samples at "
-          f"{res.data.sample_rate_hz:g} Hz, intersample {res.config['intersample']}, "
-          f"temperature {res.config['temperature']}")
-    print("  true parameters: " + ", ".join(f"{k} {v:.6g}" for k, v in par.items()))
+    lines = [f"{'wrote' if wrote else 'made (NOT written)'} {out}: rig, {args.load}, "
+             f"{res.data.n} samples at {res.data.sample_rate_hz:g} Hz, intersample "
+             f"{res.config['intersample']}, temperature {res.config['temperature']}",
+             "  true parameters: " + ", ".join(f"{k} {v:.6g}" for k, v in par.items())]
     for name, vals in res.truth["effects"].items():
-        print(f"  {name}: " + ", ".join(f"{k} {v:.6g}" for k, v in vals.items()))
-    return EXIT_OK
+        lines.append(f"  {name}: " + ", ".join(f"{k} {v:.6g}" for k, v in vals.items()))
+    return Outcome("\n".join(lines))
 
 
 def configure_bench(parser: argparse.ArgumentParser) -> None:
@@ -341,11 +334,10 @@ def configure_bench(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true", help="print JSON")
 
 
-def run_bench(args: argparse.Namespace) -> int:
+@standalone("eha-hil bench identify")
+def run_bench(args: argparse.Namespace, ctx: Context) -> Outcome:
     """Time a whole identification (CSV read to report) of a synthetic 5 kHz record: wall
     and CPU seconds (all threads of this process), against the CPU budget."""
-    import json
-
     from hil.identify.csvdata import read_measured, write_measured
     from hil.identify.pipeline import identify
     from plant.config import load_config
@@ -361,7 +353,7 @@ def run_bench(args: argparse.Namespace) -> int:
         from hil.identify.synth import generate as make
     for e in effects:
         if e not in known:
-            return _err("bench identify", f"--effect {e}: unknown for --realism "
+            raise UsageError(f"--effect {e}: unknown for --realism "
                         f"{args.realism} (known: {', '.join(known)})")
     warm = make(args.load, effects, seconds=2.0, seed=7)
     identify(warm.data, cfg, max_effects=1)  # compile the kernels outside the timing
@@ -378,16 +370,37 @@ def run_bench(args: argparse.Namespace) -> int:
            "effects_added": [e.label for e in rep.effects_added],
            "wall_s": wall, "cpu_s": cpu, "cpu_budget_s": CPU_BUDGET_S,
            "cpu_ratio_to_budget": cpu / CPU_BUDGET_S, "cpu_per_wall": cpu / wall}
-    if args.json:
-        print(json.dumps(out, indent=2))
-    else:
-        print(f"bench identify: {args.seconds:g} s at {data.sample_rate_hz:g} Hz "
-              f"({data.n} samples, {args.load}, {args.realism}, effects {', '.join(effects)})")
-        print(f"  CPU {cpu:.1f} s = {cpu / CPU_BUDGET_S:.2f} x the {CPU_BUDGET_S:.0f} s budget; "
-              f"wall {wall:.1f} s (CPU/wall {cpu / wall:.2f}); "
-              f"added: {', '.join(out['effects_added']) or 'none'}")
-    return EXIT_OK
+    text = (f"bench identify: {args.seconds:g} s at {data.sample_rate_hz:g} Hz "
+            f"({data.n} samples, {args.load}, {args.realism}, effects {', '.join(effects)})\n"
+            f"  CPU {cpu:.1f} s = {cpu / CPU_BUDGET_S:.2f} x the {CPU_BUDGET_S:.0f} s budget; "
+            f"wall {wall:.1f} s (CPU/wall {cpu / wall:.2f}); "
+            f"added: {', '.join(out['effects_added']) or 'none'}")
+    return Outcome(text, out)
 
 
-__all__ = ["configure_bench", "configure_identify", "configure_synth", "run_bench",
-           "run_identify", "run_synth"]
+
+def add_parsers(sub, bsub) -> None:  # noqa: ANN001 - argparse's sub-parsers
+    """Register ``identify``, ``identify-synth``, ``identify-check`` and ``bench identify``."""
+    from hil.cli import identify_check as check_cli
+    from hil.cli.contract import command
+
+    p = sub.add_parser("identify", help="fit the model to measured data, find the residual's "
+                       "missing effect, report the error before and after")
+    configure_identify(p)
+    command(p, run_identify)
+    p = sub.add_parser("identify-synth", help="write a synthetic measured-data CSV from the "
+                       "plant, with an effect the fitted model does not declare")
+    configure_synth(p)
+    command(p, run_synth)
+    p = sub.add_parser("identify-check", help="judge the identification on the independent "
+                       "rig: every effect, load and seed, as a table")
+    check_cli.configure_check(p)
+    command(p, check_cli.run_check)
+    p = bsub.add_parser("identify", help="wall and CPU time to identify a 16 s, 5 kHz "
+                        "dataset (budget 20 s CPU)")
+    configure_bench(p)
+    command(p, run_bench)
+
+
+__all__ = ["add_parsers", "configure_bench", "configure_identify", "configure_synth",
+           "run_bench", "run_identify", "run_synth"]

@@ -12,11 +12,11 @@ the markdown table (or JSON) and exits 0 when every case is right, 1 otherwise.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import sys
 
 from hil.cli.args import int_range, output_file
+from hil.cli.contract import EXIT_FAILED, EXIT_OK, Context, Outcome, UsageError, standalone
 
 
 def configure_check(parser: argparse.ArgumentParser) -> None:
@@ -37,7 +37,8 @@ def configure_check(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true", help="print JSON instead of the table")
 
 
-def run_check(args: argparse.Namespace) -> int:
+@standalone("eha-hil identify-check")
+def run_check(args: argparse.Namespace, ctx: Context) -> Outcome:
     """Run the matrix; 0 when every case is right, 1 when one is not, 2 for no case."""
     from hil.identify.rigcheck import CaseResult, default_cases, markdown, run_matrix
 
@@ -47,8 +48,7 @@ def run_check(args: argparse.Namespace) -> int:
     if args.case:
         cases = [c for c in cases if any(s in c.label for s in args.case)]
     if not cases:
-        print("eha-hil identify-check: no case matches --load/--case", file=sys.stderr)
-        return 2
+        raise UsageError("no case matches --load/--case")
 
     def progress(r: CaseResult, i: int, n: int) -> None:
         mark = "ok " if r.right else "NO "
@@ -57,18 +57,16 @@ def run_check(args: argparse.Namespace) -> int:
 
     results = run_matrix(cases, args.seeds, jobs=args.jobs, progress=progress)
     table = markdown(results)
-    if args.json:
-        print(json.dumps([r.as_dict() for r in results], indent=2), flush=True)
-    else:
-        print(table, flush=True)
-    if args.markdown:  # after the result: an interruption here keeps it
+    files = ()
+    if args.markdown:  # written after the result is printed: an interruption keeps it
         from pathlib import Path
 
-        from hil.cli import outputs
+        from hil.cli.outputs import Later
 
-        outputs.write("table", args.markdown,
-                      lambda tmp: Path(tmp).write_text(table + "\n", encoding="utf-8"))
-    return 0 if all(r.right for r in results) else 1
+        files = (Later("table", args.markdown,
+                       lambda tmp: Path(tmp).write_text(table + "\n", encoding="utf-8")),)
+    return Outcome(table, [r.as_dict() for r in results],
+                   EXIT_OK if all(r.right for r in results) else EXIT_FAILED, files=files)
 
 
 __all__ = ["configure_check", "run_check"]

@@ -10,6 +10,11 @@ main thread holds numba's compiler lock (which covers compiling and loading) and
 when the lock is released, in ordinary Python code, where the command's one-line
 interruption message takes over. numba announces the lock through its event API
 (``numba.core.event``, kind ``numba:compiler_lock``).
+
+SIGTERM and SIGHUP (a service manager stopping the command, a closed terminal) are handled
+as Ctrl-C: they raise :class:`Interrupted`, a ``KeyboardInterrupt`` that remembers its signal,
+so every ``with`` on the way out closes its file as for Ctrl-C, and the command exits with
+128 + the signal's number (143, 129) after the same one line.
 """
 
 from __future__ import annotations
@@ -20,13 +25,15 @@ from types import FrameType
 
 from numba.core import event
 
+from hil.cli.signals import SIGNALS, Interrupted, default_handler, raise_interrupted
+
 
 class DeferredInterrupt(event.Listener):
-    """SIGINT handler and compiler-lock listener: raise now, or at the lock's release."""
+    """Signal handler and compiler-lock listener: raise now, or at the lock's release."""
 
     def __init__(self) -> None:
         self.depth = 0  # the main thread's nesting in the (re-entrant) compiler lock
-        self.pending = False
+        self.pending: int | None = None  # the signal waiting for the lock's release
 
     @staticmethod
     def _main() -> bool:
@@ -40,39 +47,32 @@ class DeferredInterrupt(event.Listener):
         if not self._main():
             return
         self.depth = max(self.depth - 1, 0)
-        if self.depth == 0 and self.pending:
-            self.pending = False
-            raise KeyboardInterrupt
+        if self.depth == 0 and self.pending is not None:
+            signum, self.pending = self.pending, None
+            raise Interrupted(signum)
 
     def handler(self, signum: int, frame: FrameType | None) -> None:
-        from hil.cli import progress as cli_progress
-
-        cli_progress.noted(signum)  # the exit code says which signal (130, 143, 129)
         if self.depth > 0:
-            self.pending = True  # raised when numba releases its lock
+            self.pending = signum  # raised when numba releases its lock
             return
-        raise KeyboardInterrupt
+        raise Interrupted(signum)
 
 
 _INSTALLED: DeferredInterrupt | None = None
 
 
 def install() -> None:
-    """Defer Ctrl-C out of numba's compiler lock for this process, and take SIGTERM and
-    SIGHUP as Ctrl-C (idempotent; a process that ignores one of them, e.g. started in the
-    background or under nohup, keeps ignoring it)."""
+    """Handle SIGINT, SIGTERM and SIGHUP as Ctrl-C, deferred out of numba's compiler lock,
+    for this process (idempotent; a signal the process ignores, e.g. SIGINT in a background
+    job or SIGHUP under nohup, stays ignored; one somebody else handles is left to them)."""
     global _INSTALLED
     if _INSTALLED is not None or not DeferredInterrupt._main():
         return
     _INSTALLED = DeferredInterrupt()
     event.register("numba:compiler_lock", _INSTALLED)
-    if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
-        signal.signal(signal.SIGINT, _INSTALLED.handler)
-    # SIGTERM (kill, a service manager's stop) and SIGHUP (the terminal closed) end the
-    # command as Ctrl-C does: files closed, one line; an ignored one (nohup) stays ignored
-    for sig in (signal.SIGTERM, signal.SIGHUP):
-        if signal.getsignal(sig) is signal.SIG_DFL:
-            signal.signal(sig, _INSTALLED.handler)
+    for signum in SIGNALS:
+        if signal.getsignal(signum) in (default_handler(signum), raise_interrupted):
+            signal.signal(signum, _INSTALLED.handler)
 
 
 __all__ = ["DeferredInterrupt", "install"]

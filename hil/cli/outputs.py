@@ -34,12 +34,14 @@ from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
+from hil.cli.contract import EXIT_FAILED, UsageError
+
 #: Exit code of a command whose result was printed but one of whose files failed.
-EXIT_WRITE_FAILED = 1
+EXIT_WRITE_FAILED = EXIT_FAILED
 
 
-class OutputError(Exception):
-    """An output that cannot be written, found before the work starts (one line)."""
+class OutputError(UsageError):
+    """An output that cannot be written, found before the work starts (one line, exit 2)."""
 
 
 class OutputPath(str):
@@ -293,6 +295,41 @@ def write_dir(label: str, path: str | os.PathLike[str], fn: Callable[[Path], obj
     return True
 
 
+@dataclass(frozen=True)
+class Later:
+    """A file a command writes after its result is printed (``Outcome.files``): ``fn(tmp)``
+    writes it; ``said()`` is what follows "LABEL written to PATH" (e.g. " (120 rows)")."""
+
+    label: str
+    path: str
+    fn: Callable[[Path], object]
+    said: Callable[[], str] = lambda: ""
+    directory: bool = False  # a directory of files (:func:`write_dir`)
+    #: not a file: ``fn(None)`` runs after the result is printed and ``said()`` goes to
+    #: stderr (e.g. serving a run's series to Foxglove until a client took them)
+    action: bool = False
+
+
+def write_later(files: Iterable[Later], json_mode: bool, say: Callable[[str], None]
+                ) -> None:
+    """Write each file of ``files`` (:func:`write`) after the result was printed; ``say``
+    (the contract's stdout) gets "LABEL written to PATH" for people as each is in place
+    (not under ``--json``, whose output is one object)."""
+    from hil.cli import progress as cli_progress
+
+    for f in files:
+        sys.stdout.flush()
+        if f.action:
+            cli_progress.at(f"after the run, {f.label} (the result is printed above)")
+            f.fn(None)  # type: ignore[arg-type]
+            print(f.said(), file=sys.stderr, flush=True)
+            continue
+        cli_progress.at(f"while writing {f.label} {f.path} (the result is printed above)")
+        done = (write_dir if f.directory else write)(f.label, f.path, f.fn)
+        if done and not json_mode:
+            say(f"{f.label} written to {f.path}{'/' if f.directory else ''}{f.said()}")
+
+
 def finish(verb: str, code: int) -> int:
     """The command's exit code after its result is printed: one stderr line per file that
     failed, and at least EXIT_WRITE_FAILED when one did."""
@@ -304,6 +341,7 @@ def finish(verb: str, code: int) -> int:
     return code if code else EXIT_WRITE_FAILED
 
 
-__all__ = ["EXIT_WRITE_FAILED", "OutputError", "OutputPath", "StreamFailed", "check_args",
+__all__ = ["EXIT_WRITE_FAILED", "Later", "OutputError", "OutputPath", "StreamFailed", "check_args",
            "check_dir_writable", "check_not_inputs", "check_writable", "failed", "failures",
-           "finish", "replacing", "replacing_dir", "reset", "streaming", "write", "write_dir"]
+           "finish", "replacing", "replacing_dir", "reset", "streaming", "write", "write_dir",
+           "write_later"]

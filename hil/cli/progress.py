@@ -2,10 +2,11 @@
 prints.
 
 A command notes where it is (:func:`at`) and the files it writes (:func:`output`); the
-progress reporters of :func:`reporter` do the first on every update. When SIGINT arrives,
-``hil.cli.main`` catches the KeyboardInterrupt once, after every ``with`` block on the way
-out has closed its file, and prints :func:`interrupted_line`: the verb, the position, and
-for each output whether it is complete, e.g.
+progress reporters of :func:`reporter` do the first on every update. When SIGINT (or
+SIGTERM, SIGHUP) arrives, the root (:mod:`hil.cli.root`) catches the KeyboardInterrupt once,
+after every ``with`` block on the way out has closed its file, and prints
+:func:`interrupted_line`: the verb, the position, and for each output whether it is
+complete, e.g.
 ``eha-hil bus run: interrupted at t=1.230 s; log run.mcap closed and readable``.
 """
 
@@ -38,7 +39,6 @@ class _State:
     started: float = field(default_factory=time.perf_counter)
     outputs: list[_Output] = field(default_factory=list)
     line_open: bool = False            # a "\r" progress line still waits for its newline
-    signum: int = 0                    # the stop signal that ended the command, if any
 
 
 _state = _State()
@@ -85,66 +85,49 @@ def reporter(label: str, enabled: bool, unit: str = "", note: bool = True
     return report
 
 
-#: The signals a command ends on as on Ctrl-C: the terminal's, a service manager's stop
-#: (systemd, docker, kill) and a closed terminal.
-STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
-
-
 @contextmanager
 def interrupt_between_steps() -> Iterator[Callable[[], None]]:
     """Ctrl-C (and SIGTERM, SIGHUP) lands between two steps of a loop instead of anywhere.
 
-    Inside the block those signals only set a flag; the loop calls the yielded ``check()``
-    where stopping leaves every file consistent (e.g. between two fieldbus cycles, never
-    inside a frame-log write), and ``check()`` raises KeyboardInterrupt. A second signal
-    raises at once; a flag still set when the block ends raises there. The signal is
-    noted (:func:`exit_code`)."""
+    Inside the block the signal only sets a flag; the loop calls the yielded ``check()`` where
+    stopping leaves every file consistent (e.g. between two fieldbus cycles, never inside
+    a frame-log write), and ``check()`` raises KeyboardInterrupt. A second Ctrl-C raises at
+    once; a flag still set when the block ends raises there."""
+    from hil.cli.signals import SIGNALS, Interrupted
+
     pending: list[int] = []
 
     def on_signal(signum: int, frame: object) -> None:
-        noted(signum)
         if pending:
-            raise KeyboardInterrupt
+            raise Interrupted(signum)
         pending.append(signum)
 
     def check() -> None:
         if pending:
-            raise KeyboardInterrupt
+            raise Interrupted(pending[0])
 
-    old: dict[int, object] = {}
+    old = {}
     try:
-        for sig in STOP_SIGNALS:
-            prev = signal.getsignal(sig)
-            # An ignored signal (SIGINT of a background job of a script, nohup's SIGHUP)
-            # stays ignored, as Python leaves it; off the main thread signals cannot be
-            # handled at all (ValueError).
-            if prev is signal.SIG_IGN:
-                continue
-            signal.signal(sig, on_signal)
-            old[sig] = prev
+        for signum in SIGNALS:
+            # An ignored signal (SIGINT in a background job of a script, SIGHUP under
+            # nohup) stays ignored, as Python leaves it; off the main thread signals
+            # cannot be handled at all (ValueError).
+            if signal.getsignal(signum) is not signal.SIG_IGN:
+                old[signum] = signal.signal(signum, on_signal)
     except ValueError:
         yield lambda: None
         return
     try:
         yield check
     finally:
-        for sig, prev in old.items():
-            signal.signal(sig, prev)
+        for signum, handler in old.items():
+            signal.signal(signum, handler)
     check()
 
 
-def noted(signum: int) -> None:
-    """Remember the signal that ends the command (its exit code is 128 + its number)."""
-    _state.signum = signum
-
-
-def exit_code() -> int:
-    """130 for Ctrl-C, 143 for SIGTERM, 129 for SIGHUP: what a shell reports for each."""
-    return 128 + (_state.signum or signal.SIGINT)
-
-
-def interrupted_line() -> str:
-    """The one line for an interrupted command (starting on a fresh line of stderr)."""
+def interrupted_line(signum: int = signal.SIGINT) -> str:
+    """The one line for an interrupted command (starting on a fresh line of stderr); a
+    signal other than Ctrl-C's is named ("interrupted by SIGTERM at ...")."""
     st = _state
     where = st.position or f"after {time.perf_counter() - st.started:.1f} s"
     parts = []
@@ -167,7 +150,8 @@ def interrupted_line() -> str:
                      else f"{out.label} {out.path} is incomplete ({problem})")
     saved = "; ".join(parts) if parts else "nothing written"
     lead = "\n" if st.line_open else ""
-    return f"{lead}{st.verb}: interrupted {where}; {saved}"
+    by = "" if signum == signal.SIGINT else f"by {signal.Signals(signum).name} "
+    return f"{lead}{st.verb}: interrupted {by}{where}; {saved}"
 
 
 def readable_log(path: Path) -> str:

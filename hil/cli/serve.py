@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import argparse
 import gc
-import json
 import os
 import signal
 import sys
@@ -31,7 +30,8 @@ import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
 
-from hil.cli.args import float_range, int_range
+from hil.cli.args import common, float_range, int_range
+from hil.cli.contract import EXIT_FAILED, EXIT_OK, Context, Outcome, UsageError, command
 from hil.fieldbus import wire
 from hil.fieldbus.chain import Chain
 from hil.transports import TransportError
@@ -230,9 +230,7 @@ class PacedServer:
 
 # --- command line ------------------------------------------------------------------------------
 def _usage(msg: str) -> Exception:
-    from hil.cli.bus import BusUsageError
-
-    return BusUsageError(msg)
+    return UsageError(msg)
 
 
 def serve_backends() -> list[str]:
@@ -282,7 +280,7 @@ def _status_line(st: ServeStats, errors: int) -> str:
 
 def _live_view(args: argparse.Namespace, chain: Chain, cfg):  # noqa: ANN202
     """``--foxglove``: (live view, boxes sending to it), or (None, [])."""
-    if getattr(args, "foxglove", None) is None:
+    if args.foxglove is None:
         return None, []
     from hil.framelog.live import FoxgloveLive, LiveError, parse_address
     from hil.replay.record import signal_boxes
@@ -297,7 +295,13 @@ def _live_view(args: argparse.Namespace, chain: Chain, cfg):  # noqa: ANN202
     return live, boxes
 
 
-def cmd_serve(args: argparse.Namespace, cfg) -> int:
+def run_serve(args: argparse.Namespace, ctx: Context) -> Outcome:
+    """``eha-hil serve``: its report once the serving ends (a signal here ends the serving,
+    not the command: the report is the point)."""
+    return cmd_serve(args, ctx.config())
+
+
+def cmd_serve(args: argparse.Namespace, cfg) -> Outcome:
     from hil.fieldbus.topology import TopologyError, load_topology
 
     try:
@@ -313,7 +317,7 @@ def cmd_serve(args: argparse.Namespace, cfg) -> int:
         return _serve(args, cfg, topo, tmp.get("capture"))
 
 
-def _serve(args: argparse.Namespace, cfg, topo, capture: str | None) -> int:
+def _serve(args: argparse.Namespace, cfg, topo, capture: str | None) -> Outcome:
     from hil.fieldbus.capture import CaptureError, CaptureWriter
     from hil.transports import backend
 
@@ -410,41 +414,38 @@ def _serve(args: argparse.Namespace, cfg, topo, capture: str | None) -> int:
             **st.as_dict(), "transport_stats": transport,
             "chain": {k: v for k, v in chain.stats.__dict__.items() if k != "extra"},
             "ok": not failures, "failures": failures}
-    if args.json:
-        print(json.dumps(data, indent=2))
-    else:
-        from hil.output.tables import table
+    # the report for people (the root prints ``data`` instead under --json)
+    from hil.output.tables import table
 
-        d = st.as_dict()
-        rows = [
-            ["cycles (1 ms each)", st.cycles],
-            ["wall time", f"{st.wall_s:.3f} s"],
-            ["real-time factor (simulated / wall)", f"{d['real_time_factor']:.4f}"],
-            ["compute speed (x real time)", f"{d['compute_speed_factor']:.1f}"],
-            ["load (busy / wall)", f"{100 * d['load']:.1f}%"],
-            ["cycle compute mean / worst", f"{d['mean_advance_ms']:.3f} / "
-             f"{d['worst_advance_ms']:.3f} ms"],
-            ["deadline overruns", f"{st.overruns} ({100 * d['overrun_fraction']:.2f}%, "
-             f"allowed {args.max_overrun_percent:g}%) in {st.stalls} stalls"],
-            ["worst lateness", f"{d['worst_late_ms']:.3f} ms"],
-            ["slipped cycles", st.slipped_cycles],
-            ["frames received / served", f"{st.frames_received} / {st.frames_served}"],
-            ["bad / stale frames", f"{st.bad_frames} / {st.stale_frames}"],
-            ["transport CRC / framing / oversize", f"{transport['crc_errors']} / "
-             f"{transport['framing_errors']} / {transport['oversize']}"],
-            ["master cycles missed / incomplete", f"{st.missed_cycles} / "
-             f"{st.incomplete_cycles}"],
-            ["master sessions", st.sessions],
-        ]
-        print(f"serve {where}: {topo.name}, {model} model")
-        print(table(["", "value"], rows))
-        if cap is not None:
-            print(f"capture: {args.capture}, {cap.frames} frames")
-        print("ok" if not failures else "FAILED: " + "; ".join(failures))
-    return 0 if not failures else 1
+    d = st.as_dict()
+    rows = [
+        ["cycles (1 ms each)", st.cycles],
+        ["wall time", f"{st.wall_s:.3f} s"],
+        ["real-time factor (simulated / wall)", f"{d['real_time_factor']:.4f}"],
+        ["compute speed (x real time)", f"{d['compute_speed_factor']:.1f}"],
+        ["load (busy / wall)", f"{100 * d['load']:.1f}%"],
+        ["cycle compute mean / worst", f"{d['mean_advance_ms']:.3f} / "
+         f"{d['worst_advance_ms']:.3f} ms"],
+        ["deadline overruns", f"{st.overruns} ({100 * d['overrun_fraction']:.2f}%, "
+         f"allowed {args.max_overrun_percent:g}%) in {st.stalls} stalls"],
+        ["worst lateness", f"{d['worst_late_ms']:.3f} ms"],
+        ["slipped cycles", st.slipped_cycles],
+        ["frames received / served", f"{st.frames_received} / {st.frames_served}"],
+        ["bad / stale frames", f"{st.bad_frames} / {st.stale_frames}"],
+        ["transport CRC / framing / oversize", f"{transport['crc_errors']} / "
+         f"{transport['framing_errors']} / {transport['oversize']}"],
+        ["master cycles missed / incomplete", f"{st.missed_cycles} / "
+         f"{st.incomplete_cycles}"],
+        ["master sessions", st.sessions],
+    ]
+    lines = [f"serve {where}: {topo.name}, {model} model", table(["", "value"], rows)]
+    if cap is not None:
+        lines.append(f"capture: {args.capture}, {cap.frames} frames")
+    lines.append("ok" if not failures else "FAILED: " + "; ".join(failures))
+    return Outcome("\n".join(lines), data, EXIT_OK if not failures else EXIT_FAILED)
 
 
-def cmd_serve_ethercat(args: argparse.Namespace, cfg, topo) -> int:
+def cmd_serve_ethercat(args: argparse.Namespace, cfg, topo) -> Outcome:
     """``--transport ethercat``: the ESC chain (:mod:`hil.fieldbus.esc.chain`) on a raw
     Ethernet interface for a real master (docs/ethercat-slaves.md)."""
     from hil.fieldbus.esc.chain import EscChain
@@ -456,7 +457,7 @@ def cmd_serve_ethercat(args: argparse.Namespace, cfg, topo) -> int:
     for opt, hint in (("capture", "capture the interface with tshark"),
                       ("foxglove", "not offered for the ESC chain"),
                       ("port", "the interface is --interface")):
-        if getattr(args, opt, None) is not None:
+        if vars(args)[opt] is not None:
             raise _usage(f"--{opt}: not with --transport ethercat ({hint})")
     bad = [b for b in args.stack_boxes if not 0 <= b < len(topo.boxes)]
     if bad:
@@ -492,19 +493,15 @@ def cmd_serve_ethercat(args: argparse.Namespace, cfg, topo) -> int:
             "reply_us": latency_summary(st.reply_us),
             "chain": chain.stats.__dict__.copy(), "slaves": chain.watchdog_report(),
             "ok": not failures, "failures": failures}
-    if args.json:
-        print(json.dumps(data, indent=2))
-    else:
-        print(f"serve {args.interface}: {st.cycles} cycles in {st.wall_s:.1f} s, "
-              f"{st.frames_answered} frames answered, {chain.stats.dropped_frames} dropped, "
-              f"{st.overruns} overruns")
-        print("ok" if not failures else "FAILED: " + "; ".join(failures))
-    return 0 if not failures else 1
+    text = (f"serve {args.interface}: {st.cycles} cycles in {st.wall_s:.1f} s, "
+            f"{st.frames_answered} frames answered, {chain.stats.dropped_frames} dropped, "
+            f"{st.overruns} overruns\n" + ("ok" if not failures else
+                                           "FAILED: " + "; ".join(failures)))
+    return Outcome(text, data, EXIT_OK if not failures else EXIT_FAILED)
 
 
-def add_parser(sub, common, config_fn, wrap) -> None:
-    """Register ``eha-hil serve`` (``common``: the -c/--set/--json parent; ``wrap`` adapts
-    the command to the config and to one-line usage errors, as for ``bus``)."""
+def add_parser(sub) -> None:  # noqa: ANN001 - argparse's sub-parsers
+    """Register ``eha-hil serve``."""
     p = sub.add_parser(
         "serve", parents=[common(plot=False)],
         help="serve the simulated robot (chain of boxes) on a serial port or UDP, paced to "
@@ -549,7 +546,7 @@ def add_parser(sub, common, config_fn, wrap) -> None:
                    help="stream the boxes' decoded signals to Foxglove Studio (WebSocket; "
                    "default 127.0.0.1:8765, loopback)")
     _scope_options(p)
-    p.set_defaults(func=wrap(cmd_serve, config_fn))
+    command(p, run_serve)
 
 
 def _scope_options(p: argparse.ArgumentParser) -> None:

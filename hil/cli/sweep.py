@@ -10,14 +10,14 @@ from __future__ import annotations
 
 import argparse
 import errno
-import json
 import sys
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 from hil.cli import progress as cli_progress
-from hil.cli.args import EXIT_USAGE, float_range, int_range, output_dir, output_file
+from hil.cli.args import common, float_range, int_range, output_dir, output_file
+from hil.cli.contract import EXIT_FAILED, EXIT_OK, Context, Outcome, UsageError, command
 from hil.sweep import requirements, space
 
 OUT_FILE = output_file((".parquet", ".csv"))
@@ -35,35 +35,16 @@ def _duration(seconds: float | None) -> str:
 _DISK_ERRORS = (errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EIO, errno.EFBIG)
 
 
-class SweepUsageError(Exception):
-    """A mistake on the command line that the argument types cannot see: one line, exit 2."""
-
-
 def _usage(message: str) -> Exception:
-    return SweepUsageError(message)
-
-
-def _one_line_errors(cmd: Callable[[argparse.Namespace], int]
-                     ) -> Callable[[argparse.Namespace], int]:
-    """A verb whose SweepUsageError is printed as ``hil.cli.main`` prints its own, exit 2
-    (its own class: ``python -m hil.cli`` loads hil.cli twice, as __main__ and by name)."""
-
-    def run(args: argparse.Namespace) -> int:
-        try:
-            return cmd(args)
-        except SweepUsageError as exc:
-            print(f"eha-hil: error: {exc}", file=sys.stderr)
-            return EXIT_USAGE
-
-    return run
+    return UsageError(message)
 
 
 def _resolve_scenario(args: argparse.Namespace) -> str:
     from hil import scenarios
-    from hil.cli.root import THESIS_PRESET
+    from hil.cli.run import THESIS_PRESET
 
     if args.scenario == "thesis":
-        raise _usage("sweep: one scenario at a time (f3 .. f8, not 'thesis')")
+        raise _usage("one scenario at a time (f3 .. f8, not 'thesis')")
     try:
         scenarios.get(args.scenario)
     except KeyError as exc:
@@ -87,7 +68,7 @@ def _reporter(scenario: str, enabled: bool) -> Callable[[dict | None, Any], None
     return report
 
 
-def cmd_sweep(args: argparse.Namespace) -> int:
+def cmd_sweep(args: argparse.Namespace, ctx: Context) -> Outcome:
     from hil.sweep import plots, requirements, summary, table
     from hil.sweep.backends import BackendError, make_backend
     from hil.sweep.engine import run_sweep
@@ -100,7 +81,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     if args.dask and args.dask != "local" and args.workers:
         raise _usage(f"--workers: the cluster at {args.dask} has its own workers")
     if not (args.param or args.tolerance or args.seeds):
-        raise _usage("sweep: nothing to vary; give --param, --tolerance or --seeds")
+        raise _usage("nothing to vary; give --param, --tolerance or --seeds")
     from hil import scenarios
     from hil.scenarios.knobs import split_sets
 
@@ -116,7 +97,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
                             knobs=scen.knobs, scenario=scenario,
                             settings=scen.settings if scen.knobs else None,
                             fixed=fixed_knobs)
-    show = not args.json
+    show = not ctx.json
     journal = None
     if args.out:
         jpath = journal_path(args.out)
@@ -197,14 +178,10 @@ def cmd_sweep(args: argparse.Namespace) -> int:
             "summary": summ.as_dict(), "below_min_yield": low,
             "errors": [{"point": int(r["point"]), "error": r["error"]}
                        for _, r in errors.iterrows()]}
-    if args.json:
-        print(json.dumps(data, indent=2, default=float))
-    else:
-        print("\n".join(lines))
-    return 1 if (summ.errors or low) else 0
+    return Outcome("\n".join(lines), data, EXIT_FAILED if (summ.errors or low) else EXIT_OK)
 
 
-def cmd_bench_sweep(args: argparse.Namespace) -> int:
+def cmd_bench_sweep(args: argparse.Namespace, ctx: Context) -> Outcome:
     from hil.bench.sweep import bench_sweep
     from hil.output.tables import table
     from plant.config import load_config
@@ -215,9 +192,7 @@ def cmd_bench_sweep(args: argparse.Namespace) -> int:
     from plant.model import check_config
 
     check_config(base)
-    say = (lambda m: None) if args.json else (
-        lambda m: print(m, file=sys.stderr, flush=True))
-    r = bench_sweep(scenario, base, args.points, args.workers, say)
+    r = bench_sweep(scenario, base, args.points, args.workers, ctx.say)
     rows = [(x.backend, x.wall_s, x.cpu_s, x.cpu_points_s) for x in r.runs]
     text = table(["backend", "wall [s]", "CPU [s]", "CPU in points [s]"], rows, fmt=".3g",
                  title=f"sweep {scenario}, {args.points} points (sim.seed 0..{args.points - 1}"
@@ -231,15 +206,11 @@ def cmd_bench_sweep(args: argparse.Namespace) -> int:
             "runs": [vars(x) for x in r.runs], "speedup_wall": r.speedup_wall,
             "cpu_ratio": r.cpu_ratio, "identical": r.identical,
             "load_before": r.load_before, "load_after": r.load_after, "cores": r.cores}
-    if args.json:
-        print(json.dumps(data, indent=2))
-    else:
-        print(text)
-    return 0 if r.identical else 1
+    return Outcome(text, data, EXIT_OK if r.identical else EXIT_FAILED)
 
 
-def add_parsers(sub: Any, bsub: Any, common: Callable[..., argparse.ArgumentParser]) -> None:
-    """Register ``sweep`` and ``bench sweep`` (``common``: the CLI's shared options)."""
+def add_parsers(sub: Any, bsub: Any) -> None:
+    """Register ``sweep`` and ``bench sweep``."""
     from hil.scenarios import names
 
     p = sub.add_parser(
@@ -292,7 +263,7 @@ def add_parsers(sub: Any, bsub: Any, common: Callable[..., argparse.ArgumentPars
                    "must hold); with --resume, a finished sweep is judged again at no cost")
     p.add_argument("--min-yield", type=float_range(0.0, 1.0), default=None,
                    help="exit 1 when a judged metric's yield is below this fraction")
-    p.set_defaults(func=_one_line_errors(cmd_sweep))
+    command(p, cmd_sweep)
 
     b = bsub.add_parser("sweep", parents=[common(plot=False)],
                         help="speed-up of the local process pool over a serial sweep, wall "
@@ -302,4 +273,4 @@ def add_parsers(sub: Any, bsub: Any, common: Callable[..., argparse.ArgumentPars
     b.add_argument("--points", type=int_range(2, 1000), default=8, help="points, 2..1000")
     b.add_argument("--workers", type=int_range(2, 1024), default=None,
                    help="pool workers (default: one per core)")
-    b.set_defaults(func=_one_line_errors(cmd_bench_sweep))
+    command(b, cmd_bench_sweep)

@@ -3,20 +3,15 @@
 from __future__ import annotations
 
 import argparse
-import json
 import sys
-from collections.abc import Callable
 from pathlib import Path
 
-from hil.cli.args import float_range, int_range
+from hil.cli.args import common, float_range, int_range
+from hil.cli.contract import EXIT_FAILED, EXIT_OK, Context, Outcome, UsageError, command
 from hil.output.tables import table
 
-EXIT_MISMATCH = 1
-
-
-class ToolMissing(Exception):
-    """The check cannot run: a system tool it needs is not installed, or the command line
-    asks for nothing (one line, exit 2)."""
+#: A mismatch, or a build that failed: the check did not pass.
+EXIT_MISMATCH = EXIT_FAILED
 
 
 def _rtl_dir(text: str) -> str:
@@ -42,26 +37,28 @@ def add_rtl_option(parser: argparse.ArgumentParser) -> None:
 
 
 def rtl_sets(args: argparse.Namespace) -> list[str]:
-    """The ``--set`` strings ``--rtl DIR`` stands for (none without it)."""
-    rtl = getattr(args, "rtl", None)
+    """The ``--set`` strings ``--rtl DIR`` stands for (none without it, or on a verb that
+    has no ``--rtl``)."""
+    rtl = vars(args).get("rtl")
     return [] if rtl is None else ["fpga.impl=rtl", f"fpga.rtl_dir={rtl}"]
 
 
-def rtl_verdict(code: int) -> int:
+def rtl_verdict(outcome: Outcome, ctx: Context) -> Outcome:
     """After a run: each RTL in the loop that differed from the board model, as one line on
-    stderr naming the first tick and signal; exit 1 then, else ``code``."""
+    stderr naming the first tick and signal; exit 1 then, else the outcome as it is."""
     from hil.sim.verilator import take_divergences
 
     found = take_divergences()
     for d in found:
-        print(f"eha-hil: {d.line()}", file=sys.stderr)
-    return EXIT_MISMATCH if found else code
+        print(f"{ctx.verb}: {d.line()}", file=sys.stderr)
+    if found:
+        outcome.code = EXIT_MISMATCH
+    return outcome
 COUNT = int_range(0, 100_000_000)
 SEED = int_range(0, 2**32 - 1)
 
 
-def add_parsers(sub: argparse._SubParsersAction,
-                common: Callable[..., argparse.ArgumentParser]) -> None:
+def add_parsers(sub: argparse._SubParsersAction) -> None:
     verify = sub.add_parser("verify", help="check the firmware models bit for bit against "
                             "independent builds (C on the host or a Cortex-M4 under QEMU; "
                             "RTL under Icarus/cocotb); exit 1 on any mismatch")
@@ -82,7 +79,7 @@ def add_parsers(sub: argparse._SubParsersAction,
     p.add_argument("--contract", choices=("off", "fast"), default="off",
                    help="the build's -ffp-contract (default off, as the firmware is built; "
                    "fast shows what fused multiply-adds change)")
-    p.set_defaults(func=cmd_verify_mcu)
+    command(p, cmd_verify_mcu)
 
     p = vsub.add_parser("current-loop", parents=[common(plot=False)],
                         help="the driver board's current loop: Python board model against "
@@ -99,35 +96,34 @@ def add_parsers(sub: argparse._SubParsersAction,
                    "(--set fpga.impl=rtl), all vectors in one call; icarus: Icarus Verilog "
                    "under cocotb, one vector per cocotb cycle (default verilator)")
     p.add_argument("--seed", type=SEED, default=1, help="random vectors' seed (default 1)")
-    p.set_defaults(func=cmd_verify_current_loop)
+    command(p, cmd_verify_current_loop)
 
 
-def cmd_verify_mcu(args: argparse.Namespace) -> int:
+def cmd_verify_mcu(args: argparse.Namespace, ctx: Context) -> Outcome:
     from hil.sim import mcu_builds
     from hil.verify.mcu.verify import verify_mcu
 
     if args.steps == 0 and args.stack_seconds == 0:
-        raise ToolMissing("verify mcu: --steps 0 and --stack-seconds 0 leave nothing to compare")
+        raise UsageError("--steps 0 and --stack-seconds 0 leave nothing to compare")
     target = args.against
     missing = mcu_builds.missing_tools(target)
     if missing:
-        raise ToolMissing(f"verify mcu --against {args.against}: {', '.join(missing)} not "
+        raise UsageError(f"--against {args.against}: {', '.join(missing)} not "
                           "installed (make system-deps installs them)")
     if args.against == "image" and args.contract != "off":
-        raise ToolMissing("verify mcu --against image: the image is built with "
-                          "-ffp-contract=off only")
+        raise UsageError("--against image: the image is built with -ffp-contract=off only")
     try:
         rep = verify_mcu(args.against, args.steps, args.seed, args.stack_seconds,
                          args.contract, args.config, args.set or ())
     except mcu_builds.BuildError as exc:
-        print(f"eha-hil: error: {exc}", file=sys.stderr)
-        return EXIT_MISMATCH
-    _print_report(args, rep, f"MCU law: Python model vs {args.against} "
+        return Outcome(code=EXIT_MISMATCH, error=str(exc))
+    out = _report(rep, f"MCU law: Python model vs {args.against} "
                   f"(-ffp-contract={args.contract}, {rep.build})")
-    if rep.profiles and not args.json:
-        print(_profile_table(rep.profiles))
-    overrun = any(p.get("period_share_max", 0) > 1 for p in rep.profiles)
-    return EXIT_MISMATCH if rep.mismatches or overrun else 0
+    if rep.profiles:
+        out.text += "\n" + _profile_table(rep.profiles)
+    if any(p.get("period_share_max", 0) > 1 for p in rep.profiles):  # overran its period
+        out.code = EXIT_MISMATCH
+    return out
 
 
 def _profile_table(profiles: list[dict]) -> str:
@@ -141,41 +137,40 @@ def _profile_table(profiles: list[dict]) -> str:
                  "docs/mcu.md)")
 
 
-def _print_report(args: argparse.Namespace, rep, title: str) -> None:
-    if args.json:
-        print(json.dumps(rep.as_dict(), indent=2))
-        return
+def _report(rep, title: str) -> Outcome:  # noqa: ANN001 - a verify report
     rows = [(c.source, c.vectors, c.mismatches) for c in rep.sets]
-    print(table(["set", "vectors", "mismatches"], rows, title=title))
-    print(f"{rep.vectors} vectors compared, {rep.mismatches} mismatches ({rep.seconds:.1f} s)")
+    lines = [table(["set", "vectors", "mismatches"], rows, title=title),
+             f"{rep.vectors} vectors compared, {rep.mismatches} mismatches "
+             f"({rep.seconds:.1f} s)"]
     first = rep.first
     if first is not None:
         m = first.first
-        print(f"first mismatch: {first.source}, step {m.step}, field {m.field}: "
-              f"model {m.model}, build {m.build}")
+        lines.append(f"first mismatch: {first.source}, step {m.step}, field {m.field}: "
+                     f"model {m.model}, build {m.build}")
+    return Outcome("\n".join(lines), rep.as_dict(),
+                   EXIT_MISMATCH if rep.mismatches else EXIT_OK)
 
 
-def cmd_verify_current_loop(args: argparse.Namespace) -> int:
+def cmd_verify_current_loop(args: argparse.Namespace, ctx: Context) -> Outcome:
     from hil.sim import verilator as rtl_verilator
     from hil.verify.current_loop import rtl as rtl_run
     from hil.verify.current_loop.verify import verify_current_loop
-    from plant.config import load_config
 
     tools = rtl_verilator if args.simulator == "verilator" else rtl_run
     missing = tools.missing_tools()
     if missing:
-        raise ToolMissing(f"verify current-loop --simulator {args.simulator}: "
-                          f"{', '.join(missing)} not installed (make system-deps; pip install "
-                          "'eha-hil[test]')")
+        raise UsageError(f"--simulator {args.simulator}: {', '.join(missing)} not installed "
+                         "(make system-deps; pip install 'eha-hil[test]')")
+    from plant.config import load_config
+
     rtl_dir = Path(args.rtl) if args.rtl else rtl_run.RTL_DIR
-    cfg = load_config(args.config, args.set or ())
+    cfg = load_config(args.config, args.set or ())  # its --rtl is the RTL under test
     try:
         if args.simulator == "verilator":
             rtl_verilator.top_file(rtl_dir)
         rtl_run.rtl_sources(rtl_dir)
         rep = verify_current_loop(cfg, args.vectors, args.seed, rtl_dir, args.simulator)
     except rtl_run.RtlError as exc:  # the RTL is not a loop that builds: the input's fault
-        raise ToolMissing(str(exc)) from None
+        raise UsageError(str(exc)) from None
     sim = "Verilator" if args.simulator == "verilator" else "Icarus Verilog + cocotb"
-    _print_report(args, rep, f"current loop: Python board model vs RTL ({rtl_dir}, {sim})")
-    return EXIT_MISMATCH if rep.mismatches else 0
+    return _report(rep, f"current loop: Python board model vs RTL ({rtl_dir}, {sim})")

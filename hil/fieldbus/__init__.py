@@ -10,3 +10,5 @@ joint driver boxes (slaves), over any transport of :mod:`hil.transports`.
 * :mod:`~hil.fieldbus.esc.chain`: the boxes as EtherCAT slaves (one ESC model each) for a
   real master on raw Ethernet (docs/ethercat-slaves.md).
 """
+
+from firmware_model import jit_cache  # noqa: F401  (before any kernel is defined)

@@ -21,6 +21,7 @@ import numpy as np
 from firmware_model.mcu.board import McuBoard
 from hil.fieldbus import pdo
 from hil.fieldbus.topology import Box
+from hil.sim.interfaces import BoardStack
 from hil.sim.scheduler import Scheduler
 from plant.config import Config, ConfigError
 from plant.echo_actuator import EchoActuators
@@ -153,7 +154,7 @@ class StackBox(McuBox):
         if cfg.get("fpga.impl") != "python":
             raise ConfigError("fpga.impl = 'rtl' runs in the single-actuator stack only; the "
                               "fieldbus boxes run the board's own loop (fpga.impl = 'python')")
-        self.stacks = [FpgaStack(cfg) for _ in box.actuators]
+        self.stacks: list[BoardStack] = [FpgaStack(cfg) for _ in box.actuators]
         super().__init__(box, cfg, [s.mcu_link for s in self.stacks],
                          [s.board.calibrated_offset for s in self.stacks])
         #: The whole-robot engine that advances this box with all others (hil.sim.robot), and

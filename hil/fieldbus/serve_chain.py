@@ -36,7 +36,8 @@ def main(argv: list[str] | None = None) -> int:
     cfg = Config(json.loads(args.config_json), ["chain process"])
     chain = Chain(load_topology(args.topology), cfg, args.model, crc_trailer=args.crc_trailer)
     if args.faults_json:
-        from hil.fieldbus.faults import install_box_faults, parse_faults
+        from hil.fieldbus.faults import parse_faults
+        from hil.fieldbus.stack_faults import install_box_faults
 
         plan = parse_faults(json.loads(args.faults_json), "faults (from the master)")
         if plan.box_faults:

@@ -114,12 +114,8 @@ class BusSystem:
     def _install_faults(self, faults: object) -> None:
         """Fieldbus faults around the master's end; LVDS/sensor faults on the chain's boxes
         (which must then run in this process). See :mod:`hil.fieldbus.faults`."""
-        from hil.fieldbus.faults import (
-            FaultError,
-            FaultyTransport,
-            install_box_faults,
-            parse_faults,
-        )
+        from hil.fieldbus.faults import FaultError, FaultyTransport, parse_faults
+        from hil.fieldbus.stack_faults import install_box_faults
 
         plan = parse_faults(faults)
         self.faults = plan

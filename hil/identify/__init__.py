@@ -10,3 +10,5 @@ HAC confidence intervals), :mod:`~hil.identify.stats`, :mod:`~hil.identify.resid
 plant), :mod:`~hil.identify.thesis` (the thesis 2.4.3 residual), :mod:`~hil.cli.identify`.
 See docs/identify.md.
 """
+
+from firmware_model import jit_cache  # noqa: F401  (before any kernel is defined)

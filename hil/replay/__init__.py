@@ -6,3 +6,5 @@ CRC-error count each 5 kHz step) and every output it gives (the downstream LVDS 
 after each step, the fieldbus inputs each cycle). :func:`~hil.replay.replay.replay_mcu` feeds
 the logged inputs to the current MCU model and reports the first output that differs.
 """
+
+from firmware_model import jit_cache  # noqa: F401  (before any kernel is defined)

@@ -16,7 +16,7 @@ when one core is busy with the master and the PC loop,
 and the process data of all boxes is decoded and packed with whole-array operations. The
 arrays of every :class:`~hil.sim.actuator.FpgaStack` are rebound to rows of the engine's arrays,
 so faults and tools that hold a stack see the same memory. A stack with a sensor fault
-(:class:`~hil.fieldbus.faults.FaultyStack` overriding plant outputs tick by tick) is left
+(:class:`~hil.fieldbus.stack_faults.FaultyStack` overriding plant outputs tick by tick) is left
 out of the compiled call and advanced by its own wrapper between the same two copies.
 
 Same results as the per-actuator path, bit for bit (``tests/hil/test_robot.py``).

@@ -20,8 +20,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from hil.sim.interfaces import Ticked
 from plant.layout import N_OUTPUTS, OUTPUT_NAMES
-from plant.model import Plant
 
 TaskFn = Callable[[int], None]
 
@@ -82,7 +82,7 @@ class Record:
 class Scheduler:
     """Runs a plant and discrete tasks on an integer tick clock."""
 
-    def __init__(self, plant: Plant, record_every: int = 1) -> None:
+    def __init__(self, plant: Ticked, record_every: int = 1) -> None:
         if record_every < 0:
             raise ValueError("record_every must be >= 0 (0 = record nothing)")
         self.plant = plant

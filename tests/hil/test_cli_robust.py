@@ -4,7 +4,7 @@ The matrix feeds every verb's every option that takes a number or a path with va
 may type by mistake (NaN, inf, 0, negative, huge, a directory, a missing file, a file of
 the wrong type, an empty file). The options are found by walking the parser, so a new
 option is covered without editing this file; the cases run in this process through
-``hil.cli.main`` (a few through the console script, to show that is the same thing).
+``hil.cli.root.main`` (a few through the console script, to show that is the same thing).
 """
 
 from __future__ import annotations

@@ -76,28 +76,3 @@ def esi_xml(topo: Topology) -> str:
             _device(devices, d, image)
     ET.indent(root)
     return '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, "unicode") + "\n"
-
-
-def add_parser(sub) -> None:
-    """Register ``eha-hil esi``."""
-    p = sub.add_parser("esi", help="write the EtherCAT slave information (ESI XML) of the "
-                       "boxes of a topology to stdout",
-                       epilog="Example: eha-hil esi --topology hydra_full > Hydra.xml "
-                       "(docs/ethercat-slaves.md)")
-    p.add_argument("--topology", default="hydra_full",
-                   help="shipped topology name or TOML file")
-    p.set_defaults(func=_cmd_esi)
-
-
-def _cmd_esi(args) -> int:
-    import sys
-
-    from hil.fieldbus.topology import TopologyError, load_topology
-    from plant.config import ConfigError
-
-    try:
-        topo = load_topology(args.topology)
-    except TopologyError as exc:  # reported by the CLI as one line, exit 2
-        raise ConfigError(str(exc)) from None
-    sys.stdout.write(esi_xml(topo))
-    return 0
