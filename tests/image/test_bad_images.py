@@ -54,7 +54,7 @@ def test_a_broken_step_fails_the_run_with_one_line(capsys, make_image, body, pat
     assert code == 1
     assert len(err) == 1, err
     assert re.search(pattern, err[0]), err[0]
-    assert err[0].startswith("eha-hil: error: mcu image ")
+    assert err[0].startswith("eha-hil run f5: mcu image ")  # the one form: eha-hil VERB: what
 
 
 def test_a_fault_at_boot_names_the_boot(capsys, make_image):
