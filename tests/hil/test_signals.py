@@ -218,6 +218,7 @@ def test_identify_report_is_all_or_nothing(sig, tmp_path):
 def test_run_thesis_keeps_the_finished_plots(sig, tmp_path):
     run = Running(["run", "thesis", "--plot-dir", "plots"], tmp_path)
     run.wait_for(r"f4 \.\.\.")  # f3 is done and its plot written
+    time.sleep(1.0)  # into f4 (a signal inside the print of "f4 ..." would cut its line)
     code, lines = run.stop(sig)
     last = _ended(code, lines, sig, "run thesis")
     done = r"plots? ([\w-]+\.png, )*f3\.png(, [\w-]+\.png)* written to plots/$"
