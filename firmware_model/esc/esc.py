@@ -253,6 +253,11 @@ class Esc:
             if lo >= hi:
                 continue
             plo, phi = ps + lo - ls, ps + hi - ls
+            if phi > r.MEMORY_SIZE:  # the part past the slave's memory maps to nothing
+                hi -= phi - r.MEMORY_SIZE
+                phi = r.MEMORY_SIZE
+                if lo >= hi:
+                    continue
             if typ & r.FMMU_WRITE and cmd != Command.LRD and self._sm_allows(
                     plo, phi, r.SM_DIR_WRITE):
                 self.mem[plo:phi] = incoming[lo - lad:hi - lad]

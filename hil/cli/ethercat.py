@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import argparse
 
-from hil.cli.args import common, int_range
+from hil.cli.args import common, float_range, int_range
 from hil.cli.contract import Context, Outcome, UsageError, command
 
 
@@ -24,8 +24,16 @@ def add_parsers(sub, bsub) -> None:  # noqa: ANN001 - argparse's sub-parsers
     p.add_argument("--cycles", type=int_range(10, 1_000_000), default=2000,
                    help="timed cycles of the echo row (the stack row: a quarter), 10..1e6")
     p.add_argument("--wire", action="store_true",
-                   help="also over a veth pair with SOEM (pysoem) as the master (root; "
-                   "makes and removes its own network namespace)")
+                   help="instead: SOEM (pysoem) as the master over a veth pair, serve "
+                   "--realtime on the other end (root; makes and removes its own network "
+                   "namespace)")
+    p.add_argument("--model", choices=("robot", "stack", "echo"), default="robot",
+                   help="--wire: the boxes behind every slave (default robot: the full "
+                   "stack of all 47 actuators)")
+    p.add_argument("--seconds", type=float_range(1.0, 86_400.0, unit="s"), default=60.0,
+                   help="--wire: wall seconds of 1 kHz cycles (default 60)")
+    p.add_argument("--bring-ups", type=int_range(0, 1000), default=25,
+                   help="--wire: bring-ups to OP counted first (default 25)")
     command(p, _cmd_bench)
 
 
@@ -43,9 +51,8 @@ def _cmd_esi(args: argparse.Namespace, ctx: Context) -> Outcome:
 def _cmd_bench(args: argparse.Namespace, ctx: Context) -> Outcome:
     from hil.bench.ethercat import bench_ethercat, format_table
 
-    rows = bench_ethercat(ctx.config(), args.cycles)
     if args.wire:
-        from hil.bench.ethercat import bench_wire
+        from hil.bench.ethercat import bench_wire, format_wire
         from hil.fieldbus.esc.veth import NamespaceError
 
         try:
@@ -53,7 +60,9 @@ def _cmd_bench(args: argparse.Namespace, ctx: Context) -> Outcome:
         except ImportError:
             raise UsageError("--wire: needs pysoem (pip install pysoem)") from None
         try:
-            rows += bench_wire(args.cycles)
+            res = bench_wire(args.model, args.seconds, args.bring_ups)
         except NamespaceError as exc:
             raise UsageError(f"--wire: {exc}") from None
+        return Outcome(format_wire(res), res)
+    rows = bench_ethercat(ctx.config(), args.cycles)
     return Outcome(format_table(rows), rows)

@@ -32,8 +32,9 @@ from dataclasses import asdict, dataclass
 
 from hil.cli.args import common, float_range, int_range
 from hil.cli.contract import EXIT_FAILED, EXIT_OK, Context, Outcome, UsageError, command
-from hil.fieldbus import wire
+from hil.fieldbus import reply_times, wire
 from hil.fieldbus.chain import Chain
+from hil.fieldbus.reply_times import ReplyTimes
 from hil.transports import TransportError
 from protocols import ethercat as ec
 
@@ -48,6 +49,10 @@ WARMUP_CYCLES = 3
 SESSION_GAP_S = 0.2
 #: Default allowance of overrunning cycles [% of cycles] before the run counts as failed.
 DEFAULT_MAX_OVERRUN_PERCENT = 1.0
+#: Default allowance of late replies [% of frames] (ethercat) before the run fails.
+DEFAULT_MAX_LATE_PERCENT = 0.1
+#: Default allowance of simulated time behind wall time [ms] (the slaves' watchdog time).
+DEFAULT_MAX_LAG_MS = 100.0
 
 
 @dataclass
@@ -71,6 +76,7 @@ class ServeStats:
     incomplete_cycles: int = 0  # master cycles whose frames did not cover every box
     sessions: int = 0           # runs of frames separated by more than SESSION_GAP_S
     send_errors: int = 0        # replies the transport refused
+    lag_max_s: float = 0.0      # largest lag of simulated time behind wall time
 
     def as_dict(self) -> dict:
         d = asdict(self)
@@ -83,6 +89,7 @@ class ServeStats:
         d["worst_advance_ms"] = self.worst_advance_s * 1e3
         d["worst_late_ms"] = self.worst_late_s * 1e3
         d["overrun_fraction"] = self.overruns / self.cycles if self.cycles else 0.0
+        d["lag_max_ms"] = self.lag_max_s * 1e3
         return d
 
 
@@ -92,7 +99,8 @@ class PacedServer:
 
     def __init__(self, chain: Chain, end, period_s: float = PERIOD_S,
                  clock: Callable[[], float] = time.perf_counter,
-                 capture: Callable[[int, str, bytes], None] | None = None) -> None:
+                 capture: Callable[[int, str, bytes], None] | None = None,
+                 late_us: float = 1000.0) -> None:
         if not chain.paced:
             raise ValueError("PacedServer needs Chain(..., paced=True)")
         self.chain = chain
@@ -102,6 +110,9 @@ class PacedServer:
         #: capture(wall time ns, "tx"/"rx", frame): every frame received and reply sent.
         self.capture = capture
         self.stats = ServeStats()
+        #: Per answered frame: from its arrival (the transport's recv returning) to the
+        #: reply's send returning.
+        self.replies = ReplyTimes(late_us)
         self.error: str | None = None  # a transport failure that ended the run
         self._windows = [(w.lad, w.end) for w in chain.plan.windows]
         self._all = (1 << len(self._windows)) - 1
@@ -126,6 +137,7 @@ class PacedServer:
             try:
                 self.end.send(reply)
                 st.frames_served += 1
+                self.replies.add((self.clock() - t) * 1e6)
                 if self.capture is not None:
                     self.capture(time.time_ns(), "rx", reply)
             except TransportError as exc:
@@ -178,13 +190,13 @@ class PacedServer:
             chain.advance()
         gc.collect()
         gc.freeze()  # long-lived objects out of the collector's way: shorter pauses
-        limit = None if seconds is None else int(round(seconds / period))
         t0 = start = clock()
+        end = None if seconds is None else start + seconds  # wall seconds, whatever the lag
         next_report = start + progress_every_s
         k = 0  # cycles run on the clock
         was_late = False
         try:
-            while not stop() and (limit is None or k < limit) and self.error is None:
+            while not stop() and (end is None or clock() < end) and self.error is None:
                 now = clock()
                 release = t0 + k * period
                 if now >= release:
@@ -206,9 +218,11 @@ class PacedServer:
                             t0 += behind * period
                             st.slipped_cycles += behind
                     was_late = late > 0
+                    st.lag_max_s = max(st.lag_max_s, done - start - k * period)
                     self._drain()
                 else:
-                    frame = self.end.recv(timeout=release - now)
+                    wait = release - now if end is None else min(release, end) - now
+                    frame = self.end.recv(timeout=max(wait, 0.0))
                     if frame is not None:
                         self._serve(frame)
                 if progress is not None and now >= next_report:
@@ -343,7 +357,8 @@ def _serve(args: argparse.Namespace, cfg, topo, capture: str | None) -> Outcome:
             if release is not None:
                 release()
             raise _usage(str(exc)) from None
-    server = PacedServer(chain, end, capture=None if cap is None else cap.write)
+    server = PacedServer(chain, end, capture=None if cap is None else cap.write,
+                         late_us=args.late_us)
     frames = [{"lad": lad, "length": n, "wkc": wkc} for lad, n, wkc in chain.plan.frames]
     plan = ", ".join(f"LRW lad {f['lad']} len {f['length']} WKC {f['wkc']}" for f in frames)
     print(f"eha-hil serve: ready on {where}; {topo.name}, {model} model, "
@@ -404,6 +419,8 @@ def _serve(args: argparse.Namespace, cfg, topo, capture: str | None) -> Outcome:
     if st.overruns > allowed:
         failures.append(f"{st.overruns} overruns > {args.max_overrun_percent:g}% of "
                         f"{st.cycles} cycles")
+    failures += _timing_failures(server.replies.late, st.frames_served, st.lag_max_s * 1e3,
+                                 args)
     data = {"transport": args.transport, "where": where, "topology": topo.name,
             "crc_trailer": trailer, "capture": args.capture,
             "captured_frames": None if cap is None else cap.frames,
@@ -412,6 +429,10 @@ def _serve(args: argparse.Namespace, cfg, topo, capture: str | None) -> Outcome:
             "max_overrun_percent": args.max_overrun_percent,
             "overrun_limit_exceeded": st.overruns > allowed,
             **st.as_dict(), "transport_stats": transport,
+            "frames_late": server.replies.late, "late_us": args.late_us,
+            "reply_us": reply_times.summary(server.replies.hist, server.replies.max_us),
+            "reply_histogram_us": reply_times.decades(server.replies.hist),
+            "max_late_percent": args.max_late_percent, "max_lag_ms": args.max_lag_ms,
             "chain": {k: v for k, v in chain.stats.__dict__.items() if k != "extra"},
             "ok": not failures, "failures": failures}
     # the report for people (the root prints ``data`` instead under --json)
@@ -430,7 +451,12 @@ def _serve(args: argparse.Namespace, cfg, topo, capture: str | None) -> Outcome:
          f"allowed {args.max_overrun_percent:g}%) in {st.stalls} stalls"],
         ["worst lateness", f"{d['worst_late_ms']:.3f} ms"],
         ["slipped cycles", st.slipped_cycles],
+        ["lag of simulated behind wall time, max", f"{d['lag_max_ms']:.2f} ms "
+         f"(allowed {args.max_lag_ms:g} ms)"],
         ["frames received / served", f"{st.frames_received} / {st.frames_served}"],
+        ["reply p50 / p99 / p99.9 / max", reply_times.line(data["reply_us"])],
+        [f"replies later than {args.late_us:g} us", f"{server.replies.late} "
+         f"(allowed {args.max_late_percent:g}%)"],
         ["bad / stale frames", f"{st.bad_frames} / {st.stale_frames}"],
         ["transport CRC / framing / oversize", f"{transport['crc_errors']} / "
          f"{transport['framing_errors']} / {transport['oversize']}"],
@@ -446,10 +472,12 @@ def _serve(args: argparse.Namespace, cfg, topo, capture: str | None) -> Outcome:
 
 
 def cmd_serve_ethercat(args: argparse.Namespace, cfg, topo) -> Outcome:
-    """``--transport ethercat``: the ESC chain (:mod:`hil.fieldbus.esc.chain`) on a raw
+    """``--transport ethercat``: the ESC slaves (:mod:`hil.fieldbus.esc.serve`) on a raw
     Ethernet interface for a real master (docs/ethercat-slaves.md)."""
-    from hil.fieldbus.esc.chain import EscChain
-    from hil.fieldbus.esc.serve import latency_summary, serve, warm_up
+    import threading
+
+    from hil.fieldbus.esc.serve import ServedChain, serve
+    from hil.sim.realtime import RealtimePlan
     from hil.transports.rawether import RawEthernet
 
     if not args.interface:
@@ -462,42 +490,119 @@ def cmd_serve_ethercat(args: argparse.Namespace, cfg, topo) -> Outcome:
     bad = [b for b in args.stack_boxes if not 0 <= b < len(topo.boxes)]
     if bad:
         raise _usage(f"--stack-box {bad[0]}: {topo.name} has boxes 0..{len(topo.boxes) - 1}")
-    model = args.model or "echo"
-    chain = EscChain(topo, cfg, model, tuple(args.stack_boxes))
-    warm_up(chain)
     try:
         link = RawEthernet(args.interface)
     except TransportError as exc:
         raise _usage(str(exc)) from None
-    if args.realtime:
-        _realtime_priority()
-
-    def ready() -> None:
-        print(f"eha-hil serve: ready on {args.interface} (EtherType 0x88a4); {topo.name}, "
-              f"{len(topo.boxes)} slaves, {model} model"
-              + (f", full stack behind box(es) {args.stack_boxes}" if args.stack_boxes
-                 else ""), file=sys.stderr, flush=True)
-
-    stopping = []
-    old = {s: signal.signal(s, lambda signum, frame: stopping.append(signum))
-           for s in (signal.SIGINT, signal.SIGTERM)}
+    model = args.model or "echo"
+    rt = RealtimePlan(args.realtime)
     try:
-        st = serve(chain, link, args.seconds, stop=lambda: bool(stopping), ready=ready)
+        chain = ServedChain(topo, cfg, model, tuple(args.stack_boxes))
+        if chain.engine is not None and rt.compute_cpus is not None:
+            chain.engine.workers = min(len(rt.compute_cpus), chain.engine._workers())
+        rt.process()
+
+        def ready() -> None:
+            print(f"eha-hil serve: ready on {args.interface} (EtherType 0x88a4); {topo.name}, "
+                  f"{len(topo.boxes)} slaves, {model} model"
+                  + (f", full stack behind box(es) {args.stack_boxes}" if args.stack_boxes
+                     else "") + ("; real time: " + ", ".join(rt.applied) if rt.applied
+                                 else ""), file=sys.stderr, flush=True)
+            for w in rt.warnings:
+                print(f"eha-hil serve: warning: --realtime: {w}; running without it",
+                      file=sys.stderr, flush=True)
+
+        stopping = []
+        wake = threading.Event()
+
+        def on_signal(signum, frame) -> None:
+            stopping.append(signum)
+            wake.set()
+
+        old = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+        try:
+            st, hist = serve(chain, link, args.seconds, stop=lambda: bool(stopping),
+                             wake=wake, ready=ready, late_us=args.late_us,
+                             frame_setup=rt.frame_thread, box_setup=rt.box_thread,
+                             box_behind=rt.box_behind)
+        finally:
+            for s, h in old.items():
+                signal.signal(s, h)
     finally:
-        for s, h in old.items():
-            signal.signal(s, h)
         link.close()
-    failures = [] if st.frames_answered else ["no EtherCAT frame arrived from a master"]
+    reply = reply_times.summary(hist, st.reply_max_us)
+    failures = ethercat_failures(st, args)
     data = {"transport": "ethercat", "interface": args.interface, "topology": topo.name,
             "model": model, "stack_boxes": list(args.stack_boxes), **st.as_dict(),
-            "reply_us": latency_summary(st.reply_us),
-            "chain": chain.stats.__dict__.copy(), "slaves": chain.watchdog_report(),
-            "ok": not failures, "failures": failures}
-    text = (f"serve {args.interface}: {st.cycles} cycles in {st.wall_s:.1f} s, "
-            f"{st.frames_answered} frames answered, {chain.stats.dropped_frames} dropped, "
-            f"{st.overruns} overruns\n" + ("ok" if not failures else
-                                           "FAILED: " + "; ".join(failures)))
+            "simulated_s": st.cycles * PERIOD_S,
+            "overrun_percent": 100 * st.overruns / st.cycles if st.cycles else 0.0,
+            "late_percent": (100 * st.frames_late / st.frames_answered
+                             if st.frames_answered else 0.0),
+            "reply_us": reply,
+            "reply_histogram_us": reply_times.decades(hist),
+            "realtime": {"applied": rt.applied, "refused": rt.warnings,
+                         "box_thread_demotions": rt.demotions},
+            "thresholds": {"max_overrun_percent": args.max_overrun_percent,
+                           "max_late_percent": args.max_late_percent,
+                           "max_lag_ms": args.max_lag_ms, "late_us": args.late_us},
+            "slaves": chain.watchdog_report(), "ok": not failures, "failures": failures}
+    text = ethercat_table(data) + "\n" + ("ok" if not failures else
+                                           "FAILED: " + "; ".join(failures))
     return Outcome(text, data, EXIT_OK if not failures else EXIT_FAILED)
+
+
+def _timing_failures(late: int, answered: int, lag_max_ms: float,
+                     args: argparse.Namespace) -> list[str]:
+    """Late replies and lag past their documented thresholds (every transport)."""
+    out = []
+    if answered and 100 * late / answered > args.max_late_percent:
+        out.append(f"{late} of {answered} replies later than {args.late_us:g} us "
+                   f"(> {args.max_late_percent:g}%)")
+    if lag_max_ms > args.max_lag_ms:
+        out.append(f"simulated time fell {lag_max_ms:.1f} ms behind wall time "
+                   f"(> {args.max_lag_ms:g} ms)")
+    return out
+
+
+def ethercat_failures(st, args: argparse.Namespace) -> list[str]:
+    """What exceeded a documented threshold (docs/ethercat-slaves.md, 'Timing')."""
+    out = []
+    if not st.frames_answered:
+        out.append("no EtherCAT frame arrived from a master")
+    if st.cycles and 100 * st.overruns / st.cycles > args.max_overrun_percent:
+        out.append(f"{st.overruns} of {st.cycles} box cycles overran "
+                   f"(> {args.max_overrun_percent:g}%)")
+    out += _timing_failures(st.frames_late, st.frames_answered, st.lag_max_ms, args)
+    if st.dropped_frames:
+        out.append(f"{st.dropped_frames} EtherCAT frames did not decode (dropped)")
+    if st.send_errors:
+        out.append(f"{st.send_errors} replies could not be sent")
+    return out
+
+
+def ethercat_table(d: dict) -> str:
+    from hil.output.tables import table
+
+    rows = [
+        ["wall time / simulated time", f"{d['wall_s']:.2f} s / {d['simulated_s']:.3f} s"],
+        ["box cycles (1 ms each)", d["cycles"]],
+        ["box cycle compute worst", f"{d['worst_cycle_ms']:.2f} ms"],
+        ["overruns", f"{d['overruns']} ({d['overrun_percent']:.2f}%, allowed "
+         f"{d['thresholds']['max_overrun_percent']:g}%)"],
+        ["slipped cycles", d["slipped_cycles"]],
+        ["lag of simulated behind wall time, max",
+         f"{d['lag_max_ms']:.2f} ms (allowed {d['thresholds']['max_lag_ms']:g} ms)"],
+        ["frames received / answered", f"{d['frames_received']} / {d['frames_answered']}"],
+        ["reply p50 / p99 / p99.9 / max", reply_times.line(d["reply_us"])],
+        [f"replies later than {d['late_us']:g} us", f"{d['frames_late']} "
+         f"({d['late_percent']:.3f}%, allowed {d['thresholds']['max_late_percent']:g}%)"],
+        ["frames dropped (bad) / not EtherCAT", f"{d['dropped_frames']} / "
+         f"{d['other_frames']}"],
+        ["real time", ", ".join(d["realtime"]["applied"]) or "off"],
+    ]
+    hist = ", ".join(f"{k}: {v}" for k, v in d["reply_histogram_us"].items() if v)
+    return (f"serve {d['interface']}: {d['topology']}, {d['model']} model\n"
+            + table(["", "value"], rows) + f"\nreply times: {hist or 'none'}")
 
 
 def add_parser(sub) -> None:  # noqa: ANN001 - argparse's sub-parsers
@@ -525,7 +630,7 @@ def add_parser(sub) -> None:  # noqa: ANN001 - argparse's sub-parsers
                    help="serial line speed, 50..100000000 (ignored by ptys)")
     p.add_argument("--topology", default="bench_one_box",
                    help="shipped topology name or TOML file")
-    p.add_argument("--model", choices=("stack", "echo"),
+    p.add_argument("--model", choices=("stack", "robot", "echo"),
                    help="box model; default stack for <= 5 actuators, echo otherwise")
     p.add_argument("--seconds", type=float_range(1e-3, 1e7, unit="s"),
                    help="wall seconds to serve, in [0.001, 1e7] (default: until Ctrl-C / "
@@ -534,6 +639,17 @@ def add_parser(sub) -> None:  # noqa: ANN001 - argparse's sub-parsers
                    default=DEFAULT_MAX_OVERRUN_PERCENT, metavar="P",
                    help="exit 1 if more than P%% of the cycles overran their deadline, "
                    "P in [0, 100]")
+    p.add_argument("--max-late-percent", type=float_range(0.0, 100.0, unit="%"),
+                   default=DEFAULT_MAX_LATE_PERCENT, metavar="P",
+                   help="exit 1 if more than P%% of the replies left later than --late-us "
+                   "after their frame arrived")
+    p.add_argument("--late-us", type=float_range(1.0, 1e6, unit="us"), default=1000.0,
+                   metavar="US", help="a reply later than this is late "
+                   "(default 1000 us, one cycle)")
+    p.add_argument("--max-lag-ms", type=float_range(0.0, 1e7, unit="ms"),
+                   default=DEFAULT_MAX_LAG_MS, metavar="MS",
+                   help="exit 1 if the boxes' simulated time fell more than MS behind "
+                   "the wall clock")
     p.add_argument("--realtime", action="store_true",
                    help="run with SCHED_FIFO priority 50 (like chrt -f 50; needs root or "
                    "CAP_SYS_NICE): far fewer overruns on a busy machine")

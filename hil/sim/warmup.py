@@ -111,6 +111,14 @@ def _robot(cfg) -> None:
         bs.chain.engine.wait()
 
 
+def _esc_frames(cfg) -> None:
+    """The EtherCAT frame path of ``serve --transport ethercat`` (every slave's datagram
+    processing, the 3-buffers, the frame loop)."""
+    from hil.fieldbus.esc.frames import warm_up
+
+    warm_up()
+
+
 STEPS: list[tuple[str, Callable]] = [
     ("plant", _plant),
     ("driver board + link", _fpga_value_level),
@@ -120,6 +128,7 @@ STEPS: list[tuple[str, Callable]] = [
     ("current loop RTL (Verilator)", _rtl),
     ("identification model", _identify_model),
     ("robot engine", _robot),
+    ("EtherCAT frame path", _esc_frames),
 ]
 
 

@@ -19,6 +19,15 @@ from protocols.ethercat import ETHERTYPE_ETHERCAT
 PACKET_OUTGOING = 4  # sll_pkttype of a frame this host sent
 
 
+def _is_up(interface: str) -> bool:
+    """IFF_UP of the interface (sysfs; True if it cannot be read: let the bind decide)."""
+    try:
+        with open(f"/sys/class/net/{interface}/flags") as f:
+            return bool(int(f.read(), 16) & 0x1)
+    except (OSError, ValueError):
+        return True
+
+
 class RawEthernet:
     """One AF_PACKET socket bound to ``interface`` for EtherType 0x88A4."""
 
@@ -31,6 +40,9 @@ class RawEthernet:
         except OSError:
             raise TransportError(f"--interface {interface}: no such network interface"
                                  ) from None
+        if not _is_up(interface):
+            raise TransportError(f"--interface {interface}: the interface is down (ip link "
+                                 f"set {interface} up)")
         try:
             self.sock = socket.socket(socket.AF_PACKET, socket.SOCK_RAW,
                                       socket.htons(ETHERTYPE_ETHERCAT))

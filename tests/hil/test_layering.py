@@ -221,6 +221,9 @@ ALLOWED = {
         "steps per actuator, and copies process-data bytes",
     ("hil/fieldbus/hip_box.py", "kernel"):
         "the hip box's compiled wiring loop: both stacks and the thigh's coupling tick by tick",
+    ("hil/fieldbus/esc/frames.py", "kernel"):
+        "the EtherCAT frame loop: receives and sends through the C library, without the "
+        "interpreter lock, and passes each frame to the ESC model's compiled frame path",
     ("hil/replay/fpga_replay.py", "kernel"):
         "feeds logged words through the board's compiled tick and compares its outputs",
     ("hil/identify/model.py", "kernel"):

@@ -226,9 +226,11 @@ def test_serve_udp_capture_holds_every_exchange(tmp_path):
             time.sleep(1e-3)
     out, err = proc.communicate(timeout=120)
     served = json.loads(out)
-    # exit 1 may only come from overruns on a busy machine (the pacing has its own test)
+    # exit 1 may only come from timing on a busy machine: overruns, late replies, lag (the
+    # pacing and the thresholds have their own tests)
+    timing = ("overruns", "replies later than", "behind wall time")
     assert proc.returncode == 0 or served["failures"] == [
-        f for f in served["failures"] if "overruns" in f], served["failures"]
+        f for f in served["failures"] if any(t in f for t in timing)], served["failures"]
     assert served["frames_served"] == served["captured_frames"] // 2 == 100
     assert m.stats.frames_ok == 100
     traffic = read_traffic(cap)

@@ -111,25 +111,10 @@ class EscChain:
             box.advance(CYCLE_TICKS)
         self.stats.cycles += 1
 
-    def take_outputs(self) -> list[bytes | None]:
-        """Each ESC's outputs for its box since the last call (None: nothing new)."""
-        return [esc.pending_outputs() for esc in self.escs]
-
-    def apply_outputs(self, outs: list[bytes | None]) -> None:
-        for out, box in zip(outs, self.boxes, strict=True):
-            if out is not None:
-                box.apply(out)
-
     def publish_inputs(self) -> None:
         """Every box's input record into its ESC's input buffer."""
         for esc, box in zip(self.escs, self.boxes, strict=True):
             esc.set_inputs(box.inputs())
-
-    def run_clock(self, now_ns: int) -> None:
-        """The slaves' own clock (their watchdogs) to ``now_ns`` (monotonic, never back)."""
-        for esc in self.escs:
-            if now_ns > esc.now_ns:
-                esc.tick(now_ns - esc.now_ns)
 
     def watchdog_report(self) -> list[dict]:
         """Per slave: watchdog time, trips and the delay of the last trip [ms]."""

@@ -1,165 +1,290 @@
 """Serve the chain of ESC slaves on a raw Ethernet interface, on two clocks as the hardware
 runs: ``eha-hil serve --transport ethercat --interface IF --topology hydra_full``.
 
-* The **frame thread** answers every arriving frame at once from the slaves' memories
-  (registers, SII, sync-manager buffers, FMMUs): it never waits for the boxes. It also runs
-  the slaves' own clock, their process-data watchdogs, on the wall clock, as an ESC does.
-* The **box thread** advances the boxes behind the slaves (echo models, or the full stack)
-  one 1 ms cycle at a time, cycle ``k`` released at the absolute deadline ``t0 + k * 1 ms``
-  (never from the previous wake-up, so no drift). At each cycle's start it takes the
-  outputs the master wrote since the last one; at its end it hands the inputs to the ESCs.
-  A box thread that falls behind runs cycles back to back; more than
-  :data:`MAX_LAG_CYCLES` behind, it moves its schedule forward (slipped cycles): the
-  simulated time then lags the wall clock, which the report gives as ``lag_max_ms``.
+* The **frame path** (:mod:`hil.fieldbus.esc.frames`) answers every frame at once from the
+  slaves' memories (registers, SII, sync-manager buffers, FMMUs) in compiled code that holds
+  no interpreter lock, and runs the slaves' own clock (process-data watchdogs) on the wall
+  clock. It never waits for a box.
+* The **box clock** (:class:`BoxClock`) advances the boxes behind the slaves (echo models,
+  the full stack, or the whole-robot engine) one 1 ms cycle at a time in a thread of its
+  own: cycle ``k`` is released at the absolute deadline ``t0 + k * 1 ms`` (never from the
+  previous wake-up, so no drift). At the start of a cycle each box takes the newest output
+  record its ESC holds, at its end it publishes its input record: the sync managers'
+  3-buffers (:mod:`firmware_model.esc.compiled`), so neither side ever sees half a record
+  and neither waits for the other. Behind its schedule, the box clock runs cycles back to
+  back; more than :data:`MAX_LAG_CYCLES` behind, it moves the schedule forward (slipped
+  cycles). How far simulated time fell behind wall time is reported (``lag_max_ms``).
 
-The two meet only at the process-data exchange (a lock held for a copy). Before the frame
-thread starts, the boxes run :data:`WARMUP_CYCLES` cycles: the first call of the compiled
-models loads them (tens of ms; seconds with a cold cache), which must not happen while a
-master is reading the slaves' SII.
+Before the frame path starts, the boxes run :data:`WARMUP_CYCLES` cycles and the frame loop
+is compiled (or loaded): first calls take tens of ms (seconds with a cold cache), which
+must not happen while a master reads the slaves' SII.
 """
 
 from __future__ import annotations
 
 import gc
-import sys
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from hil.fieldbus.esc.chain import EscChain
-from hil.transports.base import TransportError
+from firmware_model.esc import compiled as ec
+from firmware_model.esc.compiled import EscArrays
+from hil.fieldbus.boxes import box_engine, make_box
+from hil.fieldbus.chain import CYCLE_TICKS
+from hil.fieldbus.esc import frames as esc_frames
+from hil.fieldbus.esc.slaves import describe_all
+from hil.fieldbus.topology import Topology
 from hil.transports.rawether import RawEthernet
+from plant.config import Config
 
 PERIOD_NS = 1_000_000
 MAX_LAG_CYCLES = 50
 WARMUP_CYCLES = 3
-#: The frame thread wakes at least this often [s] (watchdogs, stop requests).
-POLL_S = 1e-3
-#: Interpreter switch interval while serving [s]: a frame thread waiting for the
-#: interpreter gets it within this (the default, 5 ms, exceeds a master's reply timeout).
-SWITCH_INTERVAL_S = 1e-4
+#: A reply later than this [us] after its frame arrived counts as late (SOEM's stock
+#: receive timeout is 2000 us; one cycle is 1000 us).
+DEFAULT_LATE_US = 1000.0
+#: The serving thread looks at its stop conditions this often [s] (or when woken).
+WATCH_S = 0.5
+
+
+class ServedChain:
+    """The slaves' memories (:class:`EscArrays`) and the boxes behind them. ``model``:
+    echo, stack or robot (every box; the whole-robot engine advances all at once);
+    ``stack_boxes``: boxes that get the full stack whatever ``model`` says."""
+
+    def __init__(self, topo: Topology, cfg: Config, model: str = "echo",
+                 stack_boxes: tuple[int, ...] = ()) -> None:
+        self.topology = topo
+        self.model = model
+        self.arrays = EscArrays(describe_all(topo))
+        self.boxes = [make_box("stack" if b.id in stack_boxes and model != "robot" else model,
+                               b, cfg) for b in topo.boxes]
+        self.engine = box_engine(model, self.boxes, cfg, overlap=False)
+        self.publish_inputs()
+
+    def take_outputs(self) -> None:
+        """Each box takes the newest output record its ESC holds, if new."""
+        for i, box in enumerate(self.boxes):
+            out = self.arrays.pending_outputs(i)
+            if out is not None:
+                box.apply(out)
+
+    def advance(self) -> None:
+        if self.engine is not None:
+            self.engine.advance(CYCLE_TICKS)
+        else:
+            for box in self.boxes:
+                box.advance(CYCLE_TICKS)
+
+    def publish_inputs(self) -> None:
+        for i, box in enumerate(self.boxes):
+            self.arrays.set_inputs(i, box.inputs())
+
+    def cycle(self) -> None:
+        """One 1 ms cycle of every box, exchanging process data with the ESCs."""
+        self.take_outputs()
+        self.advance()
+        self.publish_inputs()
+
+    def watchdog_report(self) -> list[dict]:
+        """Per slave: watchdog time, trips and the delay of the last trip [ms], AL status."""
+        a = self.arrays
+        return [{"box": i, "watchdog_ms": ec.watchdog_ns(a.mem[i]) / 1e6,
+                 "trips": int(a.st[i, ec.S_TRIPS]),
+                 "last_trip_after_ms": int(a.st[i, ec.S_TRIP_DELAY]) / 1e6,
+                 "al_status": int(a.mem[i, 0x130]) | int(a.mem[i, 0x131]) << 8,
+                 "al_status_code": int(a.mem[i, 0x134]) | int(a.mem[i, 0x135]) << 8}
+                for i in range(a.n)]
+
+
+@dataclass
+class BoxClockStats:
+    cycles: int = 0              # box cycles run (1 ms simulated each)
+    overruns: int = 0            # cycles finished after their deadline
+    slipped_cycles: int = 0      # cycles skipped when more than MAX_LAG_CYCLES behind
+    lag_max_ms: float = 0.0      # largest lag of simulated behind wall time
+    compute_s: float = 0.0       # wall time spent in the cycles
+    worst_cycle_ms: float = 0.0
+    worst_cycle_at: int = 0      # its number
+
+
+class BoxClock(threading.Thread):
+    """Runs ``cycle()`` every :data:`PERIOD_NS` of the monotonic clock from ``t0_ns``,
+    sleeping to absolute deadlines, until :meth:`stop`. ``on_start``: run first inside the
+    thread (its scheduling, its CPU)."""
+
+    def __init__(self, cycle: Callable[[], None], on_start: Callable[[], None] | None = None,
+                 behind: Callable[[int], None] | None = None) -> None:
+        super().__init__(name="box-clock", daemon=True)
+        self.cycle = cycle
+        self.on_start = on_start
+        #: behind(cycles): after each cycle, how many whole cycles it is behind schedule.
+        self.behind = behind
+        self.stats = BoxClockStats()
+        self.error: BaseException | None = None
+        self._stop_ev = threading.Event()
+        self._set_up = threading.Event()
+        self.t0 = 0
+
+    def begin(self, t0_ns: int) -> None:
+        """Start (returns once the thread set itself up) with cycle 0 released at t0_ns."""
+        self.t0 = t0_ns
+        self.start()
+        self._set_up.wait()
+
+    def stop(self) -> None:
+        self._stop_ev.set()
+        self.join()
+
+    def run(self) -> None:
+        try:
+            try:
+                if self.on_start is not None:
+                    self.on_start()
+            finally:
+                self._set_up.set()
+            self._run()
+        except BaseException as exc:  # reported by the owner, never lost with the thread
+            self.error = exc
+
+    def _run(self) -> None:
+        st, clock, sleep_until = self.stats, time.monotonic_ns, _sleep_until
+        t0 = self.t0
+        k = 0
+        gc.disable()  # a collection inside the loop would be a stall; collected between
+        try:
+            while not self._stop_ev.is_set():
+                release = t0 + k * PERIOD_NS
+                if clock() < release:
+                    sleep_until(release)
+                    continue
+                begin = clock()
+                self.cycle()
+                done = clock()
+                k += 1
+                st.cycles += 1
+                spent = done - begin
+                st.compute_s += spent * 1e-9
+                if spent / 1e6 > st.worst_cycle_ms:
+                    st.worst_cycle_ms, st.worst_cycle_at = spent / 1e6, k - 1
+                late = done - (t0 + k * PERIOD_NS)
+                behind = max(late, 0) // PERIOD_NS
+                if late > 0:
+                    st.overruns += 1
+                    if behind > MAX_LAG_CYCLES:
+                        t0 += behind * PERIOD_NS
+                        st.slipped_cycles += behind
+                if self.behind is not None:
+                    self.behind(behind)
+                lag = done - self.t0 - st.cycles * PERIOD_NS
+                st.lag_max_ms = max(st.lag_max_ms, lag / 1e6)
+        finally:
+            gc.enable()
+
+
+def _sleep_until(deadline_ns: int) -> None:
+    """Sleep to an absolute CLOCK_MONOTONIC deadline (clock_nanosleep, TIMER_ABSTIME)."""
+    _rt.sleep_until(deadline_ns)
+
+
+class _Rt:
+    def __init__(self) -> None:
+        import ctypes
+
+        libc = ctypes.CDLL(None, use_errno=True)
+        self._ts = (ctypes.c_long * 2)()
+        f = libc.clock_nanosleep
+        f.restype, f.argtypes = ctypes.c_int, [ctypes.c_int, ctypes.c_int, ctypes.c_void_p,
+                                               ctypes.c_void_p]
+        self._f = f
+
+    def sleep_until(self, deadline_ns: int) -> None:
+        ts = self._ts
+        ts[0], ts[1] = divmod(deadline_ns, 1_000_000_000)
+        self._f(1, 1, ts, None)  # CLOCK_MONOTONIC, TIMER_ABSTIME (ctypes drops the GIL)
+
+
+_rt = _Rt()
 
 
 @dataclass
 class EcatServeStats:
-    cycles: int = 0              # box cycles run (1 ms simulated each)
     wall_s: float = 0.0
-    overruns: int = 0            # box cycles finished after their deadline
-    slipped_cycles: int = 0      # cycles skipped when more than MAX_LAG_CYCLES behind
-    lag_max_ms: float = 0.0      # largest lag of simulated behind wall time
+    cycles: int = 0
+    overruns: int = 0
+    slipped_cycles: int = 0
+    lag_max_ms: float = 0.0
+    compute_s: float = 0.0
+    worst_cycle_ms: float = 0.0
+    worst_cycle_at: int = 0
     frames_received: int = 0
     frames_answered: int = 0
-    reply_us: list = field(default_factory=list)  # per answered frame, receive -> sent
+    frames_late: int = 0
+    other_frames: int = 0
+    dropped_frames: int = 0
+    send_errors: int = 0
+    late_us: float = DEFAULT_LATE_US
+    reply_max_us: float = 0.0
 
     def as_dict(self) -> dict:
-        d = asdict(self)
-        d.pop("reply_us")
-        return d
+        return asdict(self)
 
 
-def warm_up(chain: EscChain, cycles: int = WARMUP_CYCLES) -> None:
-    """Run the boxes a few cycles before serving (first calls load compiled code)."""
-    for _ in range(cycles):
-        chain.advance_boxes()
-    chain.publish_inputs()
-
-
-class _Boxes(threading.Thread):
-    def __init__(self, chain: EscChain, lock: threading.Lock, st: EcatServeStats,
-                 t0_ns: int, stop: threading.Event) -> None:
-        super().__init__(name="esc-boxes", daemon=True)
-        self.chain, self.lock, self.st, self.t0, self.stop_ev = chain, lock, st, t0_ns, stop
-        self.error: BaseException | None = None
-
-    def run(self) -> None:
-        try:
-            self._run()
-        except BaseException as exc:  # reported by serve(), never lost with the thread
-            self.error = exc
-            self.stop_ev.set()
-
-    def _run(self) -> None:
-        chain, lock, st = self.chain, self.lock, self.st
-        t0, k, clock = self.t0, 0, time.monotonic_ns
-        while not self.stop_ev.is_set():
-            release = t0 + k * PERIOD_NS
-            now = clock()
-            if release > now:
-                time.sleep((release - now) * 1e-9)
-                continue
-            with lock:
-                outs = chain.take_outputs()
-            chain.apply_outputs(outs)
-            chain.advance_boxes()
-            with lock:
-                chain.publish_inputs()
-            k += 1
-            st.cycles += 1
-            done = clock()
-            late = done - (t0 + k * PERIOD_NS)
-            if late > 0:
-                st.overruns += 1
-                behind = late // PERIOD_NS
-                if behind > MAX_LAG_CYCLES:
-                    t0 += behind * PERIOD_NS
-                    st.slipped_cycles += behind
-            lag = done - self.t0 - st.cycles * PERIOD_NS
-            st.lag_max_ms = max(st.lag_max_ms, lag / 1e6)
-
-
-def serve(chain: EscChain, link: RawEthernet, seconds: float | None = None,
-          stop: Callable[[], bool] = lambda: False,
-          ready: Callable[[], None] = lambda: None) -> EcatServeStats:
-    """Serve until ``seconds`` of wall time pass or ``stop()`` returns True. ``ready()`` is
-    called once frames are answered at once (a master started after it finds the slaves
-    answering from its first frame)."""
-    st = EcatServeStats()
-    lock = threading.Lock()
-    stop_ev = threading.Event()
-    switch = sys.getswitchinterval()
+def serve(chain: ServedChain, link: RawEthernet, seconds: float | None = None,
+          stop: Callable[[], bool] = lambda: False, wake: threading.Event | None = None,
+          ready: Callable[[], None] = lambda: None, late_us: float = DEFAULT_LATE_US,
+          frame_setup: Callable[[], None] | None = None,
+          box_setup: Callable[[], None] | None = None,
+          box_behind: Callable[[int], None] | None = None
+          ) -> tuple[EcatServeStats, np.ndarray]:
+    """Serve until ``seconds`` of wall time pass or ``stop()`` returns True (looked at when
+    ``wake`` is set, e.g. by a signal handler, else every WATCH_S); (stats, reply
+    time histogram, 1 us bins). ``ready()`` is called once frames are answered (a master
+    started after it finds every slave answering from its first frame). ``frame_setup`` /
+    ``box_setup`` run first in the frame / box thread (priority, CPU)."""
+    wake = wake or threading.Event()
+    for _ in range(WARMUP_CYCLES):
+        chain.cycle()
+    esc_frames.warm_up()
+    frames = esc_frames.FrameThread(link.sock, chain.arrays, late_us, frame_setup)
+    boxes = BoxClock(chain.cycle, box_setup, box_behind)
     gc.collect()
-    gc.freeze()  # long-lived objects out of the collector's way: shorter pauses
-    sys.setswitchinterval(SWITCH_INTERVAL_S)
+    gc.freeze()  # what exists now is never collected: no pause scans it
     clock = time.monotonic_ns
     start = clock()
-    end = None if seconds is None else start + int(seconds * 1e9)
-    boxes = _Boxes(chain, lock, st, start, stop_ev)
-    boxes.start()
+    frames.start(start)
+    boxes.begin(start)
     ready()
+    end = None if seconds is None else start + int(seconds * 1e9)
     try:
-        while not stop() and not stop_ev.is_set() and (end is None or clock() < end):
-            frame = link.recv(POLL_S)
-            t_rx = clock()
-            with lock:
-                chain.run_clock(t_rx - start)
-                if frame is None:
-                    continue
-                st.frames_received += 1
-                reply = chain.handle(frame)
-            if reply is not None:
-                link.send(reply)
-                st.frames_answered += 1
-                st.reply_us.append((clock() - t_rx) / 1e3)
-    except TransportError:
-        raise
+        # This thread holds the interpreter lock only a moment every WATCH_S (a holder
+        # preempted by the machine's load would hold up the box thread waiting for it).
+        while (not stop() and frames.alive() and boxes.is_alive()
+               and (end is None or clock() < end)):
+            left = WATCH_S if end is None else min(WATCH_S, (end - clock()) * 1e-9)
+            if left > 0:
+                wake.wait(left)
     finally:
-        stop_ev.set()
-        boxes.join()
-        sys.setswitchinterval(switch)
+        frames.stop()
+        boxes.stop()
+        wall = (clock() - start) * 1e-9
         gc.unfreeze()
-        st.wall_s = (clock() - start) / 1e9
-    if boxes.error is not None:
-        raise boxes.error
-    return st
-
-
-def latency_summary(us: list[float]) -> dict:
-    """p50/p99/p99.9/max of reply times [us] (None when nothing was answered)."""
-    if not us:
-        return {"p50": None, "p99": None, "p99_9": None, "max": None}
-    a = np.asarray(us)
-    p50, p99, p999 = np.percentile(a, [50, 99, 99.9])
-    return {"p50": float(p50), "p99": float(p99), "p99_9": float(p999), "max": float(a.max())}
+    for err in (frames.error, boxes.error):
+        if err is not None:
+            raise err
+    f, b = frames.stats, boxes.stats
+    st = EcatServeStats(wall_s=wall, cycles=b.cycles, overruns=b.overruns,
+                        slipped_cycles=b.slipped_cycles, lag_max_ms=b.lag_max_ms,
+                        compute_s=b.compute_s, worst_cycle_ms=b.worst_cycle_ms,
+                        worst_cycle_at=b.worst_cycle_at,
+                        frames_received=int(f[esc_frames.F_RECEIVED]),
+                        frames_answered=int(f[esc_frames.F_ANSWERED]),
+                        frames_late=int(f[esc_frames.F_LATE]),
+                        other_frames=int(f[esc_frames.F_OTHER]),
+                        dropped_frames=int(f[esc_frames.F_DROPPED]),
+                        send_errors=int(f[esc_frames.F_SEND_ERRORS]), late_us=late_us,
+                        reply_max_us=int(f[esc_frames.F_MAX_NS]) / 1e3)
+    return st, frames.hist.copy()

@@ -6,6 +6,7 @@ MODE ``cycles N``: config_init, config_map, SAFEOP, OP, N process-data cycles at
 (outputs all zero), then stops sending, waits WAIT s and reads every slave's AL state.
 MODE ``force BOX SLOT NEWTONS N``: as far as OP, then N cycles commanding a force on that
 actuator (mode 1, enable), and reports that actuator's f_pressure input over the cycles.
+MODE ``bringups K IMAGE_BYTES``: K bring-ups to OP, each from a fresh master, counted.
 MODE ``rtt N``: as far as OP, every actuator enabled with a force command, N cycles at
 1 kHz; the wall time of each cycle's send + receive (the frames' round trip) in us.
 """
@@ -69,8 +70,32 @@ def paced(m: pysoem.Master, n: int, each=None, rtt: list | None = None
     return bad, seen
 
 
+def bring_ups(ifname: str, n: int, image_bytes: int) -> dict:
+    """``n`` bring-ups to OP, each from a fresh master, no step retried: how many reached OP
+    with every slave and the full map, and what the others got."""
+    ok, failed = 0, []
+    for k in range(n):
+        m, info = bring_up(ifname)
+        good = (info["found"] > 0 and info["image_bytes"] == image_bytes
+                and info["safeop"] == pysoem.SAFEOP_STATE and info["op"] == pysoem.OP_STATE
+                and set(info["states"]) == {pysoem.OP_STATE})
+        if good:
+            ok += 1
+        else:
+            failed.append({"try": k, "found": info["found"], "image_bytes": info["image_bytes"],
+                           "safeop": info["safeop"], "op": info["op"],
+                           "states": sorted(set(info["states"]))})
+        m.state = pysoem.INIT_STATE
+        m.write_state()
+        m.close()
+    return {"bring_ups": n, "bring_ups_ok": ok, "failed": failed}
+
+
 def main(argv: list[str]) -> None:
     ifname, mode = argv[0], argv[1]
+    if mode == "bringups":
+        print(json.dumps(bring_ups(ifname, int(argv[2]), int(argv[3]))))
+        return
     m, info = bring_up(ifname)
     if mode == "cycles":
         n, wait = int(argv[2]), float(argv[3])

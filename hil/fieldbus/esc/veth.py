@@ -77,25 +77,44 @@ def start_serve(ns: str, *extra: str) -> subprocess.Popen:
                                "hydra_full", "--realtime", "--json", *extra),
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                          env=_env())
-    line = p.stderr.readline()
-    if "ready on" not in line:
-        p.kill()
-        raise RuntimeError(f"serve did not start: {line.strip()} {p.stderr.read().strip()}")
-    return p
+    seen = []
+    for line in p.stderr:  # (warnings may come first)
+        if "ready on" in line:
+            return p
+        seen.append(line.strip())
+    p.kill()
+    raise RuntimeError(f"serve did not start: {' | '.join(seen)[-800:]}")
 
 
 def stop_serve(p: subprocess.Popen) -> dict:
-    """Stop it (SIGTERM) and return its JSON report."""
+    """Stop it (SIGTERM) and return its JSON report (with ``exit_code``: 1 if a threshold
+    was exceeded, the report's ``failures`` say which)."""
     p.send_signal(signal.SIGTERM)
     out, err = p.communicate(timeout=30)
-    if p.returncode:
-        raise RuntimeError(f"serve failed ({p.returncode}): {err.strip()}")
-    return json.loads(out)
+    try:
+        report = json.loads(out)
+    except json.JSONDecodeError:
+        raise RuntimeError(f"serve failed ({p.returncode}): {err.strip()[-800:]}") from None
+    report["exit_code"] = p.returncode
+    return report
+
+
+def master_cpu() -> list[str]:
+    """``taskset`` arguments putting the master on the CPU of the served frame thread
+    (:mod:`hil.sim.realtime`: the last one), off the CPUs computing the boxes: SOEM waits for
+    each reply polling, which at its real-time priority would hold a box thread's CPU."""
+    from hil.sim.realtime import split_cpus
+
+    frame_cpus, _ = split_cpus()
+    if frame_cpus is None or shutil.which("taskset") is None:
+        return []
+    return ["taskset", "-c", ",".join(map(str, sorted(frame_cpus)))]
 
 
 def run_master(ns: str, *args: str) -> dict:
-    """:mod:`hil.fieldbus.esc.soem_master` on ``ecm`` at real-time priority; its JSON."""
-    r = subprocess.run(in_ns(ns, "chrt", "-f", "40", sys.executable, "-m",
+    """:mod:`hil.fieldbus.esc.soem_master` on ``ecm`` at real-time priority (below the
+    frame thread's), on the frame thread's CPU; its JSON."""
+    r = subprocess.run(in_ns(ns, *master_cpu(), "chrt", "-f", "40", sys.executable, "-m",
                              "hil.fieldbus.esc.soem_master", MASTER_IF, *args),
                        capture_output=True, text=True, timeout=300, env=_env())
     if r.returncode:

@@ -1,0 +1,524 @@
+"""The chain of ESCs in compiled code: a whole Ethernet frame through every slave in one call
+that holds no interpreter lock (numba, ``nogil``), from the slaves' memories only.
+
+The same slaves as :class:`firmware_model.esc.esc.Esc` (the readable reference, tested equal
+byte for byte on random frames: ``tests/fieldbus/test_esc_compiled.py``): register space,
+SII EEPROM interface, AL state machine, FMMUs, sync managers, working counters, the
+process-data watchdog. State lives in arrays (:class:`EscArrays`), one row per slave.
+
+The application side (the box's MCU behind the ESC) meets the frame side through two
+3-buffers per slave, as an ESC's process-data sync managers in 3-buffer mode do: the box
+publishes a complete input record, the frame side publishes a complete output record, and
+each side takes the newest complete record the other published, never a half-written one,
+without a lock and without waiting (:func:`publish`, :func:`take`). The frame side copies
+a new input record into the slave's memory before the next datagram reaches the slave;
+it publishes the output buffer when a write completes it in OP (the safe, all-zero outputs
+on leaving OP or on a watchdog trip).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit, types
+from numba.core import cgutils
+from numba.extending import intrinsic
+
+from firmware_model.esc import registers as r
+from firmware_model.esc.esc import _WRITABLE, ESC_TYPE, Esc
+from firmware_model.esc.sii import SlaveDescription
+
+MEM = r.MEMORY_SIZE
+#: Capacity of one 3-buffer slot [bytes] (a sync manager may span the whole memory).
+BUF = r.MEMORY_SIZE
+FRESH = 4  # bit of the shared 3-buffer index: the shared slot holds a record not yet taken
+
+# Per-slave state words (int64 columns of ``EscArrays.st``).
+S_STATE, S_ERROR, S_CODE, S_NOW, S_LAST_OUT, S_TRIPS, S_TRIP_DELAY = range(7)
+S_ALIAS, S_OUT_BYTES, S_SII0_START, S_SII0_LEN, S_SII1_START, S_SII1_LEN = range(7, 13)
+S_SII_LEN, S_IN_START = 13, 14
+N_ST = 15
+# 3-buffer index words (int64 columns of ``EscArrays.oidx`` / ``iidx``).
+B_WRITER, B_SHARED, B_READER = 0, 1, 2
+
+# Return codes of :func:`handle_frame` (else: the reply's length).
+NOT_ETHERCAT = -1   # not an EtherCAT frame (or not even Ethernet): ignored
+DROPPED = -2        # EtherCAT frame that does not decode: dropped, as an ESC drops a bad FCS
+
+_INIT, _PREOP, _BOOT, _SAFEOP, _OP = 1, 2, 3, 4, 8
+_AL_ERROR = 0x10
+
+
+class EscArrays:
+    """The memories and state of a chain of slaves (``descs``: (description, SII image) in
+    line order), laid out as the compiled frame path reads them."""
+
+    def __init__(self, described: list[tuple[SlaveDescription, bytes]]) -> None:
+        n = len(described)
+        self.n = n
+        self.mem = np.zeros((n, MEM), dtype=np.uint8)
+        sii_max = max(len(img) for _d, img in described)
+        self.sii = np.full((n, sii_max), 0xFF, dtype=np.uint8)
+        self.st = np.zeros((n, N_ST), dtype=np.int64)
+        self.wmask = np.frombuffer(_WRITABLE, dtype=np.uint8).copy()
+        self.obuf = np.zeros((n, 3, BUF), dtype=np.uint8)
+        self.olen = np.zeros((n, 3), dtype=np.int64)
+        self.ibuf = np.zeros((n, 3, BUF), dtype=np.uint8)
+        self.ilen = np.zeros((n, 3), dtype=np.int64)
+        self.oidx = np.tile(np.array([0, 1, 2], dtype=np.int64), (n, 1))
+        self.iidx = self.oidx.copy()
+        self.scratch = np.zeros(2048, dtype=np.uint8)
+        for i, (d, img) in enumerate(described):
+            ref = Esc(d, img, last=i == n - 1)   # the reference's reset state, copied
+            self.mem[i] = np.frombuffer(bytes(ref.mem), dtype=np.uint8)
+            self.sii[i, :len(img)] = np.frombuffer(img, dtype=np.uint8)
+            st = self.st[i]
+            st[S_STATE], st[S_CODE] = int(ref.state), int(ref.code)
+            st[S_ALIAS], st[S_OUT_BYTES] = d.alias, d.out_bytes
+            st[S_SII0_START], st[S_SII0_LEN] = d.sms[0].start, d.sms[0].length
+            st[S_SII1_START], st[S_SII1_LEN] = d.sms[1].start, d.sms[1].length
+            st[S_SII_LEN], st[S_IN_START] = len(img), d.sms[1].start
+        assert self.mem[0, r.TYPE] == ESC_TYPE
+
+    def frame_args(self) -> tuple:
+        """The arrays :func:`handle_frame` takes after the frame, in order."""
+        return (self.mem, self.sii, self.st, self.wmask, self.obuf, self.olen, self.oidx,
+                self.ibuf, self.ilen, self.iidx, self.scratch)
+
+    # --- the application side, from Python ---------------------------------------------------
+    def set_inputs(self, i: int, data: bytes) -> None:
+        """Box ``i`` publishes its input record."""
+        rec = np.frombuffer(data, dtype=np.uint8)
+        publish(self.ibuf[i], self.ilen[i], self.iidx[i], rec, len(rec))
+
+    def pending_outputs(self, i: int) -> bytes | None:
+        """The newest output record for box ``i`` since the last call, or None."""
+        slot = take(self.oidx[i])
+        if slot < 0:
+            return None
+        return self.obuf[i, slot, :self.olen[i, slot]].tobytes()
+
+    def state(self, i: int) -> tuple[int, bool, int]:
+        """(AL state, error, AL status code) of slave ``i``."""
+        st = self.st[i]
+        return int(st[S_STATE]), bool(st[S_ERROR]), int(st[S_CODE])
+
+
+# --- lock-free 3-buffer -------------------------------------------------------------------------
+@intrinsic
+def _xchg(typingctx, arr, i, value):
+    """``old = arr[i]; arr[i] = value`` as one atomic operation; returns ``old``."""
+    if not (isinstance(arr, types.Array) and arr.dtype == types.int64):
+        return None
+
+    def codegen(context, builder, signature, args):
+        aryty = signature.args[0]
+        ary = context.make_array(aryty)(context, builder, args[0])
+        ptr = cgutils.get_item_pointer(context, builder, aryty, ary, [args[1]])
+        return builder.atomic_rmw("xchg", ptr, args[2], "seq_cst")
+
+    return types.int64(arr, types.intp, types.int64), codegen
+
+
+@njit(cache=True, nogil=True)
+def publish(bufs, lens, idx, data, n):
+    """Writer side: ``data[:n]`` into the writer's slot, then that slot becomes the shared
+    one (marked fresh) and the previously shared slot the writer's."""
+    w = idx[B_WRITER]
+    bufs[w, :n] = data[:n]
+    lens[w] = n
+    idx[B_WRITER] = _xchg(idx, B_SHARED, w | FRESH) & 3
+
+
+@njit(cache=True, nogil=True)
+def take(idx):
+    """Reader side: the slot of the newest complete record if one arrived since the last
+    take (it becomes the reader's), else -1."""
+    if not idx[B_SHARED] & FRESH:
+        return -1
+    idx[B_READER] = _xchg(idx, B_SHARED, idx[B_READER]) & 3
+    return idx[B_READER]
+
+
+# --- little-endian helpers ----------------------------------------------------------------------
+@njit(cache=True, nogil=True, inline="always")
+def _u16(a, o):
+    return np.int64(a[o]) | (np.int64(a[o + 1]) << 8)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _u32(a, o):
+    return _u16(a, o) | (_u16(a, o + 2) << 16)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _put16(a, o, v):
+    a[o] = v & 0xFF
+    a[o + 1] = (v >> 8) & 0xFF
+
+
+# --- one slave ----------------------------------------------------------------------------------
+@njit(cache=True, nogil=True)
+def _set_al_status(m, st):
+    _put16(m, r.AL_STATUS, st[S_STATE] | (_AL_ERROR if st[S_ERROR] else 0))
+    _put16(m, r.AL_STATUS_CODE, st[S_CODE])
+
+
+@njit(cache=True, nogil=True)
+def _refuse(m, st, code):
+    st[S_ERROR] = 1
+    st[S_CODE] = code
+    _set_al_status(m, st)
+
+
+@njit(cache=True, nogil=True)
+def _publish_out(obuf, olen, oidx, src, lo, n):
+    w = oidx[B_WRITER]
+    obuf[w, :n] = src[lo:lo + n]
+    olen[w] = n
+    oidx[B_WRITER] = _xchg(oidx, B_SHARED, w | FRESH) & 3
+
+
+@njit(cache=True, nogil=True)
+def _publish_safe(obuf, olen, oidx, n):
+    w = oidx[B_WRITER]
+    obuf[w, :n] = 0
+    olen[w] = n
+    oidx[B_WRITER] = _xchg(oidx, B_SHARED, w | FRESH) & 3
+
+
+@njit(cache=True, nogil=True)
+def _enter(m, st, obuf, olen, oidx, state):
+    was_op = st[S_STATE] == _OP
+    st[S_STATE] = state
+    if state == _OP and not was_op:
+        st[S_LAST_OUT] = st[S_NOW]
+        _put16(m, r.WD_STATUS_PD, 1)
+    if was_op and state != _OP and st[S_OUT_BYTES]:
+        _publish_safe(obuf, olen, oidx, st[S_OUT_BYTES])
+    _set_al_status(m, st)
+
+
+@njit(cache=True, nogil=True)
+def _sm(m, k):
+    b = r.SM0 + k * r.SM_SIZE
+    return _u16(m, b), _u16(m, b + 2), np.int64(m[b + 4]), np.int64(m[b + 6])
+
+
+@njit(cache=True, nogil=True)
+def _fmmu(m, k):
+    b = r.FMMU0 + k * r.FMMU_SIZE
+    return (_u32(m, b), _u16(m, b + 4), _u16(m, b + 8), np.int64(m[b + 11]),
+            np.int64(m[b + 12]))
+
+
+@njit(cache=True, nogil=True)
+def _sm_allows(m, st, lo, hi, direction):
+    for k in range(r.N_SM):
+        start, length, control, act = _sm(m, k)
+        if not length or hi <= start or lo >= start + length:
+            continue
+        return bool(act & r.SM_ENABLE and (control & r.SM_DIR_MASK) == direction
+                    and (st[S_STATE] == _SAFEOP or st[S_STATE] == _OP))
+    return True
+
+
+@njit(cache=True, nogil=True)
+def _check_pd_config(m, st):
+    for k in range(2):
+        if k == 0:
+            want, code, ftype = r.SM_DIR_WRITE, 0x001D, r.FMMU_WRITE
+            s_start, s_len = st[S_SII0_START], st[S_SII0_LEN]
+        else:
+            want, code, ftype = r.SM_DIR_READ, 0x001E, r.FMMU_READ
+            s_start, s_len = st[S_SII1_START], st[S_SII1_LEN]
+        if not s_len:
+            continue
+        start, length, control, act = _sm(m, k)
+        if (start != s_start or length != s_len or not act & r.SM_ENABLE
+                or (control & r.SM_DIR_MASK) != want):
+            return code
+        covered = 0
+        for f in range(r.N_FMMU):
+            _ls, ll, ps, typ, fact = _fmmu(m, f)
+            if fact & 1 and ll and typ and typ & ftype:
+                covered += max(0, min(ps + ll, start + length) - max(ps, start))
+        if covered < length:
+            return code
+    return 0
+
+
+@njit(cache=True, nogil=True)
+def _al_control(m, st, obuf, olen, oidx, value):
+    req, ack = value & 0x0F, (value & _AL_ERROR) != 0
+    if st[S_ERROR]:
+        if ack:
+            st[S_ERROR] = 0
+            st[S_CODE] = 0
+        elif req >= st[S_STATE]:
+            return
+    if not (req == _INIT or req == _PREOP or req == _BOOT or req == _SAFEOP or req == _OP):
+        _refuse(m, st, 0x0012)
+        return
+    if req == _BOOT:
+        _refuse(m, st, 0x0013)
+        return
+    cur = st[S_STATE]
+    if req != cur and req != _INIT and not (
+            (cur == _INIT and req == _PREOP) or (cur == _PREOP and req == _SAFEOP)
+            or (cur == _SAFEOP and req == _OP) or (cur == _OP and req == _SAFEOP)
+            or (cur == _OP and req == _PREOP) or (cur == _SAFEOP and req == _PREOP)):
+        _refuse(m, st, 0x0011)
+        return
+    if cur == _PREOP and req == _SAFEOP:
+        code = _check_pd_config(m, st)
+        if code:
+            _refuse(m, st, code)
+            return
+    _enter(m, st, obuf, olen, oidx, req)
+
+
+@njit(cache=True, nogil=True)
+def _eeprom_command(m, st, sii):
+    cmd = _u16(m, r.EEP_CONTROL) & r.EEP_CMD_MASK
+    status = r.EEP_STAT_READ8
+    if cmd == r.EEP_CMD_READ:
+        a = 2 * _u32(m, r.EEP_ADDRESS)
+        n = st[S_SII_LEN]
+        for j in range(8):
+            m[r.EEP_DATA + j] = sii[a + j] if a + j < n else 0xFF
+    elif cmd == r.EEP_CMD_WRITE:
+        status |= r.EEP_STAT_CMD_ERROR
+    elif cmd == r.EEP_CMD_RELOAD:
+        _put16(m, r.STATION_ALIAS, st[S_ALIAS])
+    _put16(m, r.EEP_CONTROL, status)
+
+
+@njit(cache=True, nogil=True)
+def _ram_written(m, st, obuf, olen, oidx, lo, hi):
+    if not st[S_OUT_BYTES]:
+        return
+    start, length, control, _act = _sm(m, 0)
+    if length and lo < start + length <= hi:
+        if control & r.SM_WATCHDOG:
+            st[S_LAST_OUT] = st[S_NOW]
+            _put16(m, r.WD_STATUS_PD, 1)
+        if st[S_STATE] == _OP:
+            _publish_out(obuf, olen, oidx, m, start, min(length, MEM - start))
+
+
+@njit(cache=True, nogil=True)
+def _write(m, st, sii, wmask, obuf, olen, oidx, ado, src, s0, n):
+    """The master writes ``src[s0:s0 + n]`` at ``ado``."""
+    end = min(ado + n, MEM)
+    if ado >= end:
+        return
+    if ado >= r.RAM_START:
+        if _sm_allows(m, st, ado, end, r.SM_DIR_WRITE):
+            m[ado:end] = src[s0:s0 + end - ado]
+            _ram_written(m, st, obuf, olen, oidx, ado, end)
+        return
+    for a in range(ado, end):
+        if wmask[a]:
+            m[a] = src[s0 + a - ado]
+    if ado < r.AL_CONTROL + 2 and end > r.AL_CONTROL:
+        _al_control(m, st, obuf, olen, oidx, _u16(m, r.AL_CONTROL))
+    if ado < r.EEP_CONTROL + 2 and end > r.EEP_CONTROL:
+        _eeprom_command(m, st, sii)
+    if ado < r.ERROR_COUNTERS_END and end > r.RX_ERROR:
+        m[r.RX_ERROR:r.ERROR_COUNTERS_END] = 0
+    if ado <= r.WD_COUNTER_PDI and end > r.WD_COUNTER_PD:
+        m[r.WD_COUNTER_PD] = 0
+        m[r.WD_COUNTER_PDI] = 0
+
+
+@njit(cache=True, nogil=True)
+def _read_into(m, ado, dst, d0, n, orr):
+    """Memory at ``ado`` (zeros past its end) into ``dst[d0:d0 + n]``; ``orr``: OR it in."""
+    for j in range(n):
+        a = ado + j
+        v = m[a] if a < MEM else 0
+        if orr:
+            dst[d0 + j] |= v
+        else:
+            dst[d0 + j] = v
+
+
+@njit(cache=True, nogil=True)
+def _logical(m, st, obuf, olen, oidx, cmd, lad, buf, d0, n, scratch, wkc):
+    if cmd == 12:  # LRW: the FMMUs that write take the data as it arrived here
+        scratch[:n] = buf[d0:d0 + n]
+    read_hit = write_hit = False
+    for k in range(r.N_FMMU):
+        ls, ll, ps, typ, act = _fmmu(m, k)
+        if not (act & 1 and ll and typ):
+            continue
+        lo, hi = max(lad, ls), min(lad + n, ls + ll)
+        if lo >= hi:
+            continue
+        plo, phi = ps + lo - ls, ps + hi - ls
+        if phi > MEM:  # the part past the slave's memory maps to nothing
+            hi -= phi - MEM
+            phi = MEM
+            if lo >= hi:
+                continue
+        if typ & r.FMMU_WRITE and cmd != 10 and _sm_allows(m, st, plo, phi, r.SM_DIR_WRITE):
+            if cmd == 12:
+                m[plo:phi] = scratch[lo - lad:hi - lad]
+            else:
+                m[plo:phi] = buf[d0 + lo - lad:d0 + hi - lad]
+            _ram_written(m, st, obuf, olen, oidx, plo, phi)
+            write_hit = True
+        if typ & r.FMMU_READ and cmd != 11 and _sm_allows(m, st, plo, phi, r.SM_DIR_READ):
+            buf[d0 + lo - lad:d0 + hi - lad] = m[plo:phi]
+            read_hit = True
+    if cmd == 12:
+        return wkc + read_hit + 2 * write_hit
+    return wkc + (read_hit if cmd == 10 else write_hit)
+
+
+@njit(cache=True, nogil=True)
+def _take_inputs(m, st, ibuf, ilen, iidx):
+    slot = take(iidx)
+    if slot >= 0:
+        start = st[S_IN_START]
+        n = min(ilen[slot], MEM - start)
+        m[start:start + n] = ibuf[slot, :n]
+
+
+@njit(cache=True, nogil=True)
+def _process(m, st, sii, wmask, obuf, olen, oidx, cmd, adp, ado, buf, d0, n, wkc, scratch):
+    """One datagram (data ``buf[d0:d0 + n]``, changed in place) through one slave; returns
+    (ADP, WKC) as it leaves. Mirrors :meth:`Esc.process`."""
+    if cmd == 1 or cmd == 2 or cmd == 3 or cmd == 13:
+        hit = adp == 0
+        adp = (adp + 1) & 0xFFFF
+    elif cmd == 4 or cmd == 5 or cmd == 6 or cmd == 14:
+        hit = adp == _u16(m, r.STATION_ADDRESS) or (
+            (m[r.DL_CONTROL + 3] & 1) != 0 and adp == _u16(m, r.STATION_ALIAS))
+    elif cmd == 7 or cmd == 8 or cmd == 9:
+        hit = True
+        adp = (adp + 1) & 0xFFFF
+    elif cmd == 10 or cmd == 11 or cmd == 12:
+        return adp, _logical(m, st, obuf, olen, oidx, cmd, adp | (ado << 16), buf, d0, n,
+                             scratch, wkc)
+    else:
+        return adp, wkc
+    if not hit:
+        if cmd == 13 or cmd == 14:
+            _write(m, st, sii, wmask, obuf, olen, oidx, ado, buf, d0, n)
+            return adp, wkc + 1
+        return adp, wkc
+    if cmd == 1 or cmd == 4 or cmd == 7:
+        _read_into(m, ado, buf, d0, n, cmd == 7)
+        return adp, wkc + 1
+    if cmd == 2 or cmd == 5 or cmd == 8:
+        _write(m, st, sii, wmask, obuf, olen, oidx, ado, buf, d0, n)
+        return adp, wkc + 1
+    if cmd == 3 or cmd == 6 or cmd == 9:
+        scratch[:n] = buf[d0:d0 + n]
+        _read_into(m, ado, buf, d0, n, cmd == 9)
+        _write(m, st, sii, wmask, obuf, olen, oidx, ado, scratch, 0, n)
+        return adp, wkc + 3
+    _read_into(m, ado, buf, d0, n, False)   # ARMW / FRMW: the addressed slave reads
+    return adp, wkc + 1
+
+
+# --- the frame --------------------------------------------------------------------------------
+@njit(cache=True, nogil=True)
+def _check_pdu(buf, n):
+    """End of the EtherCAT PDU in ``buf[:n]`` (from offset 14), or -1 if it does not
+    decode (the rules of :func:`protocols.ethercat.decode_pdu`, trailing bytes allowed)."""
+    if n < 16:
+        return -1
+    word = _u16(buf, 14)
+    if word >> 12 != 1 or word & 0x0800:
+        return -1
+    length = word & 0x07FF
+    end = 16 + length
+    if length == 0 or end > n:
+        return -1
+    pos = 16
+    while True:
+        if pos + 10 > end:
+            return -1
+        if buf[pos] > 14:
+            return -1
+        lw = _u16(buf, pos + 6)
+        if lw & 0x3800:
+            return -1
+        nxt = pos + 10 + (lw & 0x07FF) + 2
+        if nxt > end:
+            return -1
+        pos = nxt
+        if lw & 0x8000:
+            if pos == end:
+                return -1
+        else:
+            return end if pos == end else -1
+
+
+@njit(cache=True, nogil=True)
+def handle_frame(buf, n, mem, sii, st, wmask, obuf, olen, oidx, ibuf, ilen, iidx, scratch):
+    """The Ethernet frame ``buf[:n]`` through every slave, in place; returns the reply's
+    length (``buf[:length]``, padded to 60 bytes), :data:`NOT_ETHERCAT` or
+    :data:`DROPPED`. ``buf`` must have room for 60 bytes."""
+    if n < 14:
+        return NOT_ETHERCAT
+    ethertype = (np.int64(buf[12]) << 8) | buf[13]
+    if ethertype < 0x0600 or ethertype != 0x88A4:
+        return NOT_ETHERCAT
+    end = _check_pdu(buf, n)
+    if end < 0 or end - 14 > 1500:
+        return DROPPED
+    n_slaves = mem.shape[0]
+    pos = 16
+    while pos < end:
+        cmd = np.int64(buf[pos])
+        adp = _u16(buf, pos + 2)
+        ado = _u16(buf, pos + 4)
+        dlen = _u16(buf, pos + 6) & 0x07FF
+        d0 = pos + 10
+        wkc = _u16(buf, d0 + dlen)
+        for i in range(n_slaves):
+            m, s = mem[i], st[i]
+            _take_inputs(m, s, ibuf[i], ilen[i], iidx[i])
+            adp, wkc = _process(m, s, sii[i], wmask, obuf[i], olen[i], oidx[i], cmd, adp,
+                                ado, buf, d0, dlen, wkc, scratch)
+        _put16(buf, pos + 2, adp)
+        _put16(buf, d0 + dlen, wkc & 0xFFFF)
+        pos = d0 + dlen + 2
+    buf[6] |= 0x02   # the source MAC handed back with the locally-administered bit set
+    if end < 60:
+        buf[end:60] = 0
+        end = 60
+    return end
+
+
+@njit(cache=True, nogil=True)
+def tick(mem, st, obuf, olen, oidx, dt_ns):
+    """Every slave's clock ``dt_ns`` on; in OP a slave whose output buffer was not written
+    for its watchdog time trips (outputs safe, SAFEOP + error, code 0x001B). Mirrors
+    :meth:`Esc.tick`."""
+    for i in range(mem.shape[0]):
+        m, s = mem[i], st[i]
+        s[S_NOW] += dt_ns
+        if s[S_STATE] != _OP or not s[S_OUT_BYTES]:
+            continue
+        wd = 40 * (_u16(m, r.WD_DIVIDER) + 2) * _u16(m, r.WD_TIME_PD)
+        if not wd or not _sm(m, 0)[2] & r.SM_WATCHDOG:
+            continue
+        quiet = s[S_NOW] - s[S_LAST_OUT]
+        if quiet >= wd:
+            _put16(m, r.WD_STATUS_PD, 0)
+            m[r.WD_COUNTER_PD] = min(np.int64(m[r.WD_COUNTER_PD]) + 1, 0xFF)
+            s[S_TRIPS] += 1
+            s[S_TRIP_DELAY] = quiet
+            _enter(m, s, obuf[i], olen[i], oidx[i], _SAFEOP)
+            _refuse(m, s, 0x001B)
+
+
+def watchdog_ns(mem_row: np.ndarray) -> int:
+    """Process-data watchdog time [ns] of one slave (0: disabled)."""
+    div = int(mem_row[r.WD_DIVIDER]) | int(mem_row[r.WD_DIVIDER + 1]) << 8
+    t = int(mem_row[r.WD_TIME_PD]) | int(mem_row[r.WD_TIME_PD + 1]) << 8
+    return 40 * (div + 2) * t

@@ -1,0 +1,180 @@
+"""The frame path of ``serve --transport ethercat``: one thread that receives each EtherCAT
+frame from the raw socket, passes it through every slave
+(:func:`firmware_model.esc.compiled.handle_frame`) and sends it back, all in compiled code
+that never takes the interpreter lock: no Python runs per frame, and no box model, however
+slow, can hold a frame up.
+
+The loop calls the C library directly (``poll``, ``recv``, ``send``, ``clock_gettime``,
+``ioctl(SIOCGSTAMPNS)``); it wakes when a frame arrives, or every :data:`POLL_MS` to run the
+slaves' clock (their process-data watchdogs, on the wall clock as an ESC's) and to look at
+its stop word. Per answered frame it measures the reply time: from the kernel's receive
+time stamp of the frame to the return of ``send`` (so the wake-up of this thread counts),
+into a 1 us histogram.
+"""
+
+from __future__ import annotations
+
+import socket
+import threading
+
+import numpy as np
+from numba import njit, types
+
+from firmware_model.esc.compiled import DROPPED, NOT_ETHERCAT, EscArrays, handle_frame, tick
+from hil.fieldbus.reply_times import HIST_US
+
+POLL_MS = 1
+SIOCGSTAMPNS = 0x8907
+SOL_PACKET, PACKET_IGNORE_OUTGOING = 263, 23
+CLOCK_REALTIME, CLOCK_MONOTONIC = 0, 1
+MSG_DONTWAIT = 0x40
+
+# Words of the control / statistics arrays shared with Python.
+C_STOP, C_T0, C_LATE_NS = 0, 1, 2
+N_CTL = 3
+(F_RECEIVED, F_ANSWERED, F_OTHER, F_DROPPED, F_LATE, F_SEND_ERRORS, F_MAX_NS,
+ F_RECV_ERRORS, F_NO_STAMP, F_ERRNO) = range(10)
+N_STATS = 10
+
+# The C library's functions, linked by name (cacheable, unlike ctypes pointers); pointers
+# pass as intp (arrays hand their address).
+_poll = types.ExternalFunction("poll", types.int32(types.intp, types.uint64, types.int32))
+_recv = types.ExternalFunction("recv", types.intp(types.int32, types.intp, types.uintp,
+                                                  types.int32))
+_send = types.ExternalFunction("send", types.intp(types.int32, types.intp, types.uintp,
+                                                  types.int32))
+_clock_gettime = types.ExternalFunction("clock_gettime", types.int32(types.int32, types.intp))
+_ioctl = types.ExternalFunction("ioctl", types.int32(types.int32, types.uint64, types.intp))
+
+
+@njit(cache=True, nogil=True)
+def _now(ts, clock):
+    _clock_gettime(clock, ts.ctypes.data)
+    return ts[0] * 1_000_000_000 + ts[1]
+
+
+@njit(cache=True, nogil=True)
+def frame_loop(fd, ctl, stats, hist, buf, mem, sii, st, wmask, obuf, olen, oidx, ibuf, ilen,
+               iidx, scratch):
+    """Serve frames on socket ``fd`` until ``ctl[C_STOP]`` is set (by another thread)."""
+    pfd = np.zeros(2, dtype=np.int32)
+    pfd[0] = fd
+    pfd[1] = 1  # events: POLLIN
+    ts = np.zeros(2, dtype=np.int64)
+    stamp = np.zeros(2, dtype=np.int64)
+    last = ctl[C_T0]
+    nbins = hist.shape[0]
+    while ctl[C_STOP] == 0:
+        ready = _poll(pfd.ctypes.data, 1, POLL_MS)
+        now = _now(ts, CLOCK_MONOTONIC)
+        if now > last:
+            tick(mem, st, obuf, olen, oidx, now - last)
+            last = now
+        if ready <= 0:
+            continue
+        while True:
+            n = _recv(fd, buf.ctypes.data, 2048, MSG_DONTWAIT)
+            if n < 0:
+                break
+            stats[F_RECEIVED] += 1
+            if _ioctl(fd, SIOCGSTAMPNS, stamp.ctypes.data) == 0 and stamp[0] > 0:
+                t_rx = stamp[0] * 1_000_000_000 + stamp[1]
+            else:
+                stats[F_NO_STAMP] += 1
+                t_rx = _now(ts, CLOCK_REALTIME)
+            out = handle_frame(buf, n, mem, sii, st, wmask, obuf, olen, oidx, ibuf, ilen,
+                               iidx, scratch)
+            if out == NOT_ETHERCAT:
+                stats[F_OTHER] += 1
+                continue
+            if out == DROPPED:
+                stats[F_DROPPED] += 1
+                continue
+            if _send(fd, buf.ctypes.data, out, 0) != out:
+                stats[F_SEND_ERRORS] += 1
+                continue
+            lat = _now(ts, CLOCK_REALTIME) - t_rx
+            stats[F_ANSWERED] += 1
+            if lat > stats[F_MAX_NS]:
+                stats[F_MAX_NS] = lat
+            if lat > ctl[C_LATE_NS]:
+                stats[F_LATE] += 1
+            b = max(lat, 0) // 1000
+            hist[min(b, nbins - 1)] += 1
+    return 0
+
+
+class FrameThread:
+    """The frame path on ``sock`` (an AF_PACKET socket bound to the interface) over the
+    slaves ``arrays``. :meth:`start`, then :meth:`stop`; ``stats``/``hist`` while it runs.
+    ``on_start``: run first inside the thread (its priority, its CPU)."""
+
+    def __init__(self, sock: socket.socket, arrays: EscArrays, late_us: float,
+                 on_start=None) -> None:  # noqa: ANN001
+        try:  # our own replies are never received; frames other hosts send are
+            sock.setsockopt(SOL_PACKET, PACKET_IGNORE_OUTGOING, 1)
+        except OSError:
+            pass  # kernels before 4.20: the compiled path answers only EtherCAT requests
+        self.sock = sock
+        self.arrays = arrays
+        self.ctl = np.zeros(N_CTL, dtype=np.int64)
+        self.ctl[C_LATE_NS] = int(late_us * 1e3)
+        self.stats = np.zeros(N_STATS, dtype=np.int64)
+        self.hist = np.zeros(HIST_US + 1, dtype=np.int64)
+        self.buf = np.zeros(2048, dtype=np.uint8)
+        self.on_start = on_start
+        self.error: BaseException | None = None
+        self._thread = threading.Thread(target=self._run, name="esc-frames", daemon=True)
+        self._set_up = threading.Event()
+
+    def start(self, t0_ns: int) -> None:
+        """Start serving (returns once the thread set itself up); ``t0_ns``:
+        CLOCK_MONOTONIC origin of the slaves' clock."""
+        self.ctl[C_T0] = t0_ns
+        self._thread.start()
+        self._set_up.wait()
+
+    def _run(self) -> None:
+        try:
+            try:
+                if self.on_start is not None:
+                    self.on_start()
+            finally:
+                self._set_up.set()
+            frame_loop(self.sock.fileno(), self.ctl, self.stats, self.hist, self.buf,
+                       *self.arrays.frame_args())
+        except BaseException as exc:  # reported by the owner
+            self.error = exc
+
+    def stop(self) -> None:
+        self.ctl[C_STOP] = 1
+        self._thread.join()
+
+    def alive(self) -> bool:
+        return self._thread.is_alive()
+
+
+def warm_up() -> None:
+    """Compile (or load) the frame loop before a master is waiting on it."""
+    from firmware_model.esc.esc import Esc  # noqa: F401  (the reference's tables)
+
+    a, b = socket.socketpair()
+    try:
+        arrays = _tiny_chain()
+        ctl = np.zeros(N_CTL, dtype=np.int64)
+        ctl[C_STOP] = 1
+        frame_loop(a.fileno(), ctl, np.zeros(N_STATS, dtype=np.int64),
+                   np.zeros(2, dtype=np.int64), np.zeros(2048, dtype=np.uint8),
+                   *arrays.frame_args())
+    finally:
+        a.close()
+        b.close()
+
+
+def _tiny_chain() -> EscArrays:
+    from firmware_model.esc.sii import SlaveDescription, SyncManager, build_image
+
+    d = SlaveDescription(0, 0, 0, 0, "warm-up", "warm-up", (), (),
+                         (SyncManager(0x1000, 0, 0x64, False),
+                          SyncManager(0x1100, 0, 0x20, False)))
+    return EscArrays([(d, build_image(d))])

@@ -1,0 +1,264 @@
+"""The compiled frame path (:mod:`firmware_model.esc.compiled`) against the readable chain of
+:class:`~firmware_model.esc.esc.Esc` slaves: the same reply bytes, the same memories and
+states, the same outputs handed to the boxes, on random sequences of frames (register,
+SII, logical, broadcast, misaddressed, truncated, not EtherCAT), box inputs and clock
+ticks. And the sync managers' 3-buffers under writers and readers in two threads."""
+
+from __future__ import annotations
+
+import struct
+import threading
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from firmware_model.esc import compiled as cc
+from firmware_model.esc import registers as r
+from hil.fieldbus.esc.chain import EscChain
+from hil.fieldbus.esc.master import EscMaster
+from hil.fieldbus.esc.slaves import describe_all
+from protocols import ethercat as ec
+from tests.fieldbus.test_esc import THREE
+
+MAC_DST, MAC_SRC = b"\xff" * 6, b"\x01\x01\x01\x01\x01\x01"
+
+
+class Both:
+    """The reference chain and the compiled arrays fed the same; every step compared."""
+
+    def __init__(self, cfg) -> None:  # noqa: ANN001
+        self.ref = EscChain(THREE, cfg, "echo")
+        self.ref._hand_outputs = lambda: None  # the outputs are compared, not applied
+        self.arr = cc.EscArrays(describe_all(THREE))
+        self.buf = np.zeros(2048, dtype=np.uint8)
+        for i, esc in enumerate(self.ref.escs):  # the boxes' first inputs, as the chain's
+            s = esc.desc.sms[1]
+            self.arr.set_inputs(i, bytes(esc.mem[s.start:s.start + esc.desc.in_bytes]))
+
+    def handle(self, frame: bytes) -> bytes | None:
+        want = self.ref.handle(frame)
+        self.buf[:len(frame)] = np.frombuffer(frame, dtype=np.uint8)
+        n = cc.handle_frame(self.buf, len(frame), *self.arr.frame_args())
+        got = None if n < 0 else self.buf[:n].tobytes()
+        assert got == want, frame.hex()
+        if want is None:
+            assert n == (cc.DROPPED if self.ref.stats.dropped_frames > self._dropped
+                         else cc.NOT_ETHERCAT)
+        self._dropped = self.ref.stats.dropped_frames
+        self.check()
+        return want
+
+    _dropped = 0
+
+    def set_inputs(self, i: int, data: bytes) -> None:
+        self.ref.escs[i].set_inputs(data)
+        self.arr.set_inputs(i, data)
+
+    def outputs(self) -> None:
+        for i, esc in enumerate(self.ref.escs):
+            assert self.arr.pending_outputs(i) == esc.pending_outputs()
+
+    def tick(self, dt: int) -> None:
+        for esc in self.ref.escs:
+            esc.tick(dt)
+        cc.tick(self.arr.mem, self.arr.st, self.arr.obuf, self.arr.olen, self.arr.oidx, dt)
+        self.check()
+
+    def check(self) -> None:
+        for i, esc in enumerate(self.ref.escs):
+            # The compiled slave takes new inputs when the next datagram reaches it: compare
+            # the memory outside a buffer a box may just have published into.
+            s = esc.desc.sms[1]
+            mem = bytearray(esc.mem)
+            got = bytearray(self.arr.mem[i].tobytes())
+            if self.arr.iidx[i, cc.B_SHARED] & cc.FRESH:
+                mem[s.start:s.start + esc.desc.in_bytes] = bytes(esc.desc.in_bytes)
+                got[s.start:s.start + esc.desc.in_bytes] = bytes(esc.desc.in_bytes)
+            assert got == mem, f"slave {i}: memories differ"
+            assert self.arr.state(i) == (int(esc.state), esc.error, int(esc.code))
+            assert self.arr.st[i, cc.S_TRIPS] == esc.watchdog_trips
+
+
+# --- random traffic -------------------------------------------------------------------------------
+_REGS = [r.TYPE, r.STATION_ADDRESS, r.STATION_ALIAS, r.DL_CONTROL, r.DL_STATUS, r.AL_CONTROL,
+         r.AL_STATUS, r.AL_STATUS_CODE, r.RX_ERROR, r.WD_DIVIDER, r.WD_TIME_PD,
+         r.WD_STATUS_PD, r.WD_COUNTER_PD, r.EEP_CONFIG, r.EEP_CONTROL, r.EEP_ADDRESS,
+         r.EEP_DATA, r.FMMU0, r.FMMU0 + 16, r.SM0, r.SM0 + 8, r.DC_START, 0x1000, 0x1020,
+         0x1100, 0x1140, 0x1FF8, 0xFFF0]
+
+ado_st = st.one_of(st.sampled_from(_REGS), st.integers(0, 0xFFFF),
+                   st.sampled_from(_REGS).flatmap(lambda a: st.integers(a - 4, a + 4)
+                                                  .map(lambda x: x & 0xFFFF)))
+adp_st = st.one_of(st.integers(0, 3), st.sampled_from([0xFFFF, 0xFFFE, 0x1001, 0x1002,
+                                                       0x1003, 0x1004]),
+                   st.integers(0, 0xFFFF))
+
+
+@st.composite
+def datagram_st(draw):  # noqa: ANN001, ANN201
+    cmd = draw(st.integers(0, 14))
+    n = draw(st.one_of(st.integers(0, 8), st.integers(0, 160)))
+    data = draw(st.binary(min_size=n, max_size=n))
+    if cmd in (ec.Command.LRD, ec.Command.LWR, ec.Command.LRW):
+        lad = draw(st.one_of(st.integers(0, 400), st.integers(0, 0xFFFFFFFF)))
+        return ec.Datagram.logical(cmd, lad, data, draw(st.integers(0, 255)),
+                                   draw(st.integers(0, 0xFFFF)))
+    if cmd == ec.Command.FPWR and draw(st.booleans()):  # the AL and EEPROM commands
+        ado = draw(st.sampled_from([r.AL_CONTROL, r.EEP_CONTROL]))
+        data = struct.pack("<H", draw(st.sampled_from(
+            [1, 2, 3, 4, 8, 0x11, 0x12, 0x14, 0x18, 5, 0x100, 0x200, 0x300, 0x0])))
+        return ec.Datagram(cmd, draw(st.integers(0, 255)), draw(adp_st), ado, data)
+    return ec.Datagram(cmd, draw(st.integers(0, 255)), draw(adp_st), draw(ado_st), data,
+                       draw(st.integers(0, 0xFFFF)), draw(st.integers(0, 0xFFFF)),
+                       draw(st.booleans()))
+
+
+@st.composite
+def frame_st(draw):  # noqa: ANN001, ANN201
+    dgs = draw(st.lists(datagram_st(), min_size=1, max_size=4))
+    frame = bytearray(ec.encode_frame(dgs, MAC_DST, MAC_SRC))
+    how = draw(st.sampled_from(["ok"] * 6 + ["cut", "pad", "type", "flip", "short"]))
+    if how == "cut":
+        frame = frame[:draw(st.integers(0, len(frame)))]
+    elif how == "pad":
+        frame += draw(st.binary(max_size=20))
+    elif how == "type":
+        frame[12:14] = draw(st.sampled_from([b"\x08\x00", b"\x05\xdc", b"\x88\xa5"]))
+    elif how == "flip":
+        k = draw(st.integers(14, len(frame) - 1))
+        frame[k] ^= 1 << draw(st.integers(0, 7))
+    else:
+        frame = frame[:draw(st.integers(0, 15))]
+    return bytes(frame)
+
+
+op_st = st.one_of(
+    frame_st().map(lambda f: ("frame", f)),
+    st.tuples(st.just("inputs"), st.integers(0, 2), st.randoms(use_true_random=False)),
+    st.tuples(st.just("tick"), st.sampled_from([1_000, 1_000_000, 20_000_000, 120_000_000])),
+    st.just(("outputs",)))
+
+
+def _run(both: Both, ops: list) -> None:
+    for op in ops:
+        if op[0] == "frame":
+            both.handle(op[1])
+        elif op[0] == "inputs":
+            esc = both.ref.escs[op[1]]
+            both.set_inputs(op[1], op[2].randbytes(esc.desc.in_bytes))
+        elif op[0] == "tick":
+            both.tick(op[1])
+        else:
+            both.outputs()
+
+
+@given(ops=st.lists(op_st, min_size=1, max_size=25))
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+def test_compiled_path_equals_the_chain_from_reset(cfg, ops):
+    _run(Both(cfg), ops)
+
+
+@given(ops=st.lists(op_st, min_size=1, max_size=25), cyclic=st.integers(0, 30))
+@settings(max_examples=80, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+def test_compiled_path_equals_the_chain_in_op(cfg, ops, cyclic):
+    """From OP (a master's whole bring-up passed through both: SII reads, sync managers,
+    FMMUs, AL states), cyclic LRW frames with outputs, then random traffic."""
+    both = Both(cfg)
+    master = EscMaster(both)
+    master.bring_up()
+    for k in range(cyclic):
+        master.image[:] = bytes((k + j) & 0xFF for j in range(len(master.image)))
+        master.cycle()
+        both.outputs()
+    _run(both, ops)
+    both.outputs()
+
+
+# --- 3-buffer ------------------------------------------------------------------------------------
+def test_three_buffer_reader_never_sees_a_torn_record():
+    """A writer publishes records whose words all equal a counter, as fast as it can; a
+    reader in another thread takes them: every record it gets is whole and none older
+    than one it had."""
+    n, records = 112, 20_000
+    bufs = np.zeros((3, cc.BUF), dtype=np.uint8)
+    lens = np.zeros(3, dtype=np.int64)
+    idx = np.array([0, 1, 2], dtype=np.int64)
+    seen = {"torn": 0, "backwards": 0, "taken": 0, "last": -1}
+
+    def writer() -> None:
+        words = np.zeros(n // 4, dtype=np.uint32)
+        rec = words.view(np.uint8)
+        for k in range(records):
+            words[:] = k
+            cc.publish(bufs, lens, idx, rec, n)
+
+    def reader() -> None:
+        last = -1
+        while t.is_alive() or idx[cc.B_SHARED] & cc.FRESH:
+            slot = cc.take(idx)
+            if slot < 0:
+                continue
+            rec = bufs[slot, :lens[slot]].view(np.uint32)
+            v = int(rec[0])
+            seen["torn"] += int((rec != v).any())
+            seen["backwards"] += int(v < last)
+            seen["taken"] += 1
+            last = v
+        seen["last"] = last
+
+    t = threading.Thread(target=writer)
+    t.start()
+    reader()
+    t.join()
+    assert seen["torn"] == 0 and seen["backwards"] == 0
+    assert seen["last"] == records - 1   # the newest record is never lost
+    assert seen["taken"] > 0
+
+
+def test_master_reads_whole_input_records_while_a_box_publishes(cfg):
+    """LRD frames of every slave's inputs in one thread (the compiled path, without the
+    interpreter lock) while the boxes' records are published in another: every input
+    record a frame carries is one the box published whole."""
+    both = Both(cfg)
+    master = EscMaster(both)
+    master.bring_up()
+    arr = both.arr
+    sizes = [esc.desc.in_bytes for esc in both.ref.escs]
+    stop = threading.Event()
+    for i, n in enumerate(sizes):  # (the boxes' first records are not uniform)
+        arr.set_inputs(i, bytes(n))
+
+    def boxes() -> None:
+        k = 0
+        while not stop.is_set():
+            k += 1
+            for i, n in enumerate(sizes):
+                arr.set_inputs(i, bytes([k & 0xFF]) * n)
+
+    lrd = [ec.Datagram.logical(ec.Command.LRD, s.in_lad, bytes(s.in_len), 1)
+           for s in master.slaves if s.in_len]
+    frame = ec.encode_frame(lrd, MAC_DST, MAC_SRC)
+    buf = np.zeros(2048, dtype=np.uint8)
+    t = threading.Thread(target=boxes)
+    t.start()
+    torn = 0
+    try:
+        for _ in range(5000):
+            buf[:len(frame)] = np.frombuffer(frame, dtype=np.uint8)
+            n = cc.handle_frame(buf, len(frame), *arr.frame_args())
+            for d in ec.decode_frame(buf[:n].tobytes()):
+                assert d.wkc == 1
+                torn += len(set(d.data)) != 1
+    finally:
+        stop.set()
+        t.join()
+    assert torn == 0
+
+
+@pytest.mark.parametrize("cut", [0, 5, 13, 15])
+def test_short_frames_are_not_ethercat_or_dropped(cfg, cut):
+    both = Both(cfg)
+    frame = ec.encode_frame([ec.Datagram(ec.Command.BRD, 1, 0, 0, bytes(2))], MAC_DST, MAC_SRC)
+    assert both.handle(frame[:cut]) is None

@@ -1,0 +1,136 @@
+"""``eha-hil serve`` keeps its word: ``--seconds`` is wall seconds, and the run exits 1 and
+names what failed when a documented threshold is exceeded, on the ethercat transport (in a
+network namespace of the test's own, a raw-socket master on the other end of a veth pair)
+and on udp. And ``eha-hil bench ethercat --wire`` with SOEM and the whole robot."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+import sys
+import time
+
+import pytest
+
+from hil.fieldbus.esc.veth import (
+    MASTER_IF,
+    SLAVE_IF,
+    NamespaceError,
+    _env,
+    in_ns,
+    veth_namespace,
+)
+
+#: A master that sends one BRD frame per ms for ``seconds`` and counts the replies.
+RAW_MASTER = """
+import socket, sys, time
+s = socket.socket(socket.AF_PACKET, socket.SOCK_RAW, socket.htons(0x88A4))
+s.bind((sys.argv[1], 0x88A4)); s.settimeout(0.002)
+frame = bytes.fromhex("ffffffffffff010101010101 88a4 0e10 0701 0000 3001 0200 0000 0000 0000"
+                      .replace(" ", "")) + bytes(60)
+frame = frame[:60]
+end, got = time.monotonic() + float(sys.argv[2]), 0
+while time.monotonic() < end:
+    s.send(frame)
+    try:
+        while s.recv(2048)[6] != 0x03: pass
+        got += 1
+    except TimeoutError:
+        pass
+    time.sleep(0.001)
+print(got)
+"""
+
+
+@pytest.fixture
+def netns():
+    try:
+        with veth_namespace() as name:
+            yield name
+    except NamespaceError as exc:
+        pytest.skip(str(exc))
+
+
+def _serve(ns: str, *args: str, master_s: float | None = None) -> tuple[int, dict, float]:
+    """serve --transport ethercat on ecs with ``args``; the raw master on ecm for
+    ``master_s`` seconds if given; (exit code, JSON report, wall seconds of the process)."""
+    t0 = time.monotonic()
+    p = subprocess.Popen(in_ns(ns, sys.executable, "-m", "hil.cli", "serve", "--transport",
+                               "ethercat", "--interface", SLAVE_IF, "--topology",
+                               "hydra_full", "--json", *args),
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=_env())
+    if master_s is not None:
+        for line in p.stderr:
+            if "ready on" in line:
+                break
+        subprocess.run(in_ns(ns, sys.executable, "-c", RAW_MASTER, MASTER_IF, str(master_s)),
+                       check=True, capture_output=True, timeout=120)
+    out, err = p.communicate(timeout=300)
+    return p.returncode, json.loads(out), time.monotonic() - t0
+
+
+def test_seconds_are_wall_seconds_and_no_master_fails(netns):
+    code, rep, _ = _serve(netns, "--seconds", "1.5", "--model", "echo")
+    assert 1.5 <= rep["wall_s"] < 1.5 + 0.3
+    assert code == 1 and rep["ok"] is False
+    assert "no EtherCAT frame arrived from a master" in rep["failures"]
+
+
+def test_a_threshold_exceeded_exits_1_and_says_which(netns):
+    loose = ("--max-lag-ms", "1e6", "--max-overrun-percent", "100", "--max-late-percent",
+             "100")
+    code, rep, _ = _serve(netns, "--seconds", "3", *loose, master_s=1.0)
+    assert rep["frames_answered"] > 100, rep
+    assert code == 0 and rep["ok"] and rep["failures"] == []
+    # every reply takes longer than 1 us: all late, over an allowance of 0 %
+    code, rep, _ = _serve(netns, "--seconds", "3", *loose, "--late-us", "1",
+                          "--max-late-percent", "0", master_s=1.0)
+    assert code == 1 and not rep["ok"]
+    assert rep["frames_late"] == rep["frames_answered"] > 100
+    assert any("replies later than 1 us" in f for f in rep["failures"]), rep["failures"]
+
+
+def test_udp_serve_seconds_are_wall_seconds():
+    p = subprocess.run([sys.executable, "-m", "hil.cli", "serve", "--transport", "udp",
+                        "--port", "0", "--seconds", "1", "--json", "-q"],
+                       capture_output=True, text=True, timeout=120, env=_env())
+    rep = json.loads(p.stdout)
+    assert 1.0 <= rep["wall_s"] < 1.3
+    assert p.returncode == 1 and "no frame was served" in " ".join(rep["failures"])
+    assert rep["reply_us"]["p50"] is None and rep["lag_max_ms"] >= 0
+
+
+@pytest.mark.slow
+def test_bench_wire_whole_robot_30_s():
+    """SOEM at stock timeouts against all 16 boxes with the whole-robot engine behind them:
+    every bring-up reaches OP and no cycle has a wrong working counter. (Timing figures are
+    the benchmark's to report, not the test's to assert.)"""
+    if shutil.which("ip") is None:
+        pytest.skip("needs `ip` (iproute2)")
+    try:
+        import pysoem  # noqa: F401
+    except ImportError:
+        pytest.skip("needs pysoem (pip install -e .[test])")
+    from hil.bench.ethercat import bench_wire
+
+    try:
+        res = bench_wire("robot", 30.0, 3)
+    except NamespaceError as exc:
+        pytest.skip(str(exc))
+    assert res["bring_ups_ok"] == 3, res["failed"]
+    assert res["cycles"] >= 29_000 and res["wkc_errors"] == 0
+    s = res["serve"]
+    assert s["frames_answered"] >= 2 * res["cycles"]
+    assert s["cycles"] > 0 and s["reply_us"]["p50"] is not None
+
+
+def test_an_interface_that_is_down_is_one_line(netns):
+    subprocess.run(["ip", "-n", netns, "link", "set", SLAVE_IF, "down"], check=True)
+    p = subprocess.run(in_ns(netns, sys.executable, "-m", "hil.cli", "serve", "--transport",
+                             "ethercat", "--interface", SLAVE_IF, "--seconds", "1"),
+                       capture_output=True, text=True, timeout=120, env=_env())
+    assert p.returncode == 2
+    assert p.stderr.strip().splitlines()[-1].endswith(
+        f"--interface {SLAVE_IF}: the interface is down (ip link set {SLAVE_IF} up)")
+    assert "Traceback" not in p.stderr
