@@ -366,8 +366,17 @@ def _set_checked(data: dict[str, Any], key: str, value: Any, where: str) -> None
             raise ConfigError(f"{where}: unknown section '{'.'.join(parts[: i + 1])}'")
         node = node[part]
     leaf = parts[-1]
-    if not isinstance(node, dict) or leaf not in node or isinstance(node[leaf], dict):
-        known = ", ".join(k for k, v in node.items() if not isinstance(v, dict))
+    if isinstance(node, dict) and isinstance(node.get(leaf), dict):
+        # a section, not a value: say what it holds (e.g. effects.pulsation=3)
+        inner = ", ".join(f"{key}.{k}" for k, v in node[leaf].items() if not isinstance(v, dict))
+        raise ConfigError(f"{where}: '{key}' is a section, not a value; give one of its keys: "
+                          f"{inner or 'none (it holds only sections)'}")
+    if not isinstance(node, dict) or leaf not in node:
+        keys = [k for k, v in node.items() if not isinstance(v, dict)] if isinstance(
+            node, dict) else []
+        subs = [f"[{k}]" for k, v in node.items() if isinstance(v, dict)] if isinstance(
+            node, dict) else []
+        known = ", ".join(keys + subs) or "none"
         raise ConfigError(f"{where}: unknown key '{key}' (known here: {known})")
     node[leaf] = _check_value(key, value, node[leaf], where)
 

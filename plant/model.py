@@ -83,6 +83,34 @@ def choose_substeps(p: np.ndarray, tick_s: float) -> int:
     return int(n)
 
 
+#: Most RK4 sub-steps per tick (as ``sim.substeps`` allows): beyond it a simulated second
+#: takes hours. A configuration whose stiffness needs more is refused, naming the keys.
+MAX_SUBSTEPS = 1000
+
+#: Sub-steps the compiled loop runs per call of :meth:`Plant.advance` before Python gets
+#: control back (a few ms): Ctrl-C is seen between two calls, also on a long advance.
+CHUNK_SUBSTEPS = 100_000
+
+def bounded_substeps(p: np.ndarray, tick_s: float, cfg: Config) -> int:
+    """:func:`choose_substeps`, or ConfigError (one line) when it exceeds MAX_SUBSTEPS."""
+    n = choose_substeps(p, tick_s)
+    if n <= MAX_SUBSTEPS:
+        return n
+    from plant.config import ConfigError
+
+    raise ConfigError(
+        f"{' + '.join(cfg.sources)}: needs {n:,} RK4 sub-steps per {tick_s * 1e6:g} us tick "
+        f"(at most {MAX_SUBSTEPS}): a mode far too fast for the tick (the masses, "
+        "stiffnesses, dampings, inductance and friction smoothing set it); change that "
+        f"value, or set sim.substeps (1..{MAX_SUBSTEPS}) to accept a coarser integration")
+
+
+def check_config(cfg: Config) -> None:
+    """ConfigError (one line) if ``cfg`` cannot be simulated in bounded work (see
+    :func:`bounded_substeps`): for commands that build their plants later, in workers."""
+    build_params(cfg)
+
+
 def build_params(cfg: Config, substeps: int | None = None) -> np.ndarray:
     """Flatten a configuration into the kernel's parameter array (done once, not per tick)."""
     h = cfg.section("hydraulics")
@@ -173,7 +201,7 @@ def build_params(cfg: Config, substeps: int | None = None) -> np.ndarray:
     p[L.P_Q_TEMP] = e["temperature_lsb_c"] or 1e-300
 
     tick_s = cfg.get("sim.tick_ns") * 1e-9
-    n_sub = substeps or cfg.get("sim.substeps") or choose_substeps(p, tick_s)
+    n_sub = substeps or cfg.get("sim.substeps") or bounded_substeps(p, tick_s, cfg)
     p[L.P_N_SUB] = n_sub
     p[L.P_H_SUB] = tick_s / n_sub
     p[L.P_NUMERICS] = cfg.get("sim.plant_numerics")
@@ -270,11 +298,19 @@ class Plant:
         Returns the next free row of ``rec``.
         """
         rows = self._no_rec if rec is None else rec
-        row = kernel.advance(
-            self.x, self.params, self.u, n_ticks, self.y, rows, row0, every, self.tick,
-            self.rng, self._work,
-        )
-        self.tick += n_ticks
+        # in chunks of CHUNK_SUBSTEPS: Ctrl-C is seen within a few ms (recording goes by
+        # the absolute tick, so the chunks give the same rows and bits as one call)
+        chunk = max(1, CHUNK_SUBSTEPS // self.substeps)
+        row = row0
+        done = 0
+        while done < n_ticks:
+            n = min(chunk, n_ticks - done)
+            row = kernel.advance(
+                self.x, self.params, self.u, n, self.y, rows, row, every, self.tick,
+                self.rng, self._work,
+            )
+            self.tick += n
+            done += n
         return row
 
     def output(self, name: str) -> float:
@@ -282,4 +318,5 @@ class Plant:
         return float(self.y[L.OUTPUT_NAMES.index(name)])
 
 
-__all__ = ["Plant", "build_params", "choose_substeps", "motor_torque_constant"]
+__all__ = ["MAX_SUBSTEPS", "Plant", "bounded_substeps", "build_params", "check_config",
+           "choose_substeps", "motor_torque_constant"]

@@ -17,6 +17,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import NoReturn
 
+from hil.cli import outputs
 from hil.cli.contract import EXIT_USAGE
 
 
@@ -28,10 +29,75 @@ class Parser(argparse.ArgumentParser):
         kwargs.setdefault("formatter_class", HelpFormatter)
         super().__init__(*args, **kwargs)
 
+    #: The deepest parser the last command line reached (``eha-hil log info``), so that an
+    #: unknown option is named with the command it is not an option of.
+    _leaf: Parser | None = None
+
+    def parse_known_args(self, args=None, namespace=None):  # noqa: ANN001, ANN201 - argparse's
+        ns, extras = super().parse_known_args(args, namespace)
+        if args is not None:  # a sub-parser always gets its own list
+            self._check_scopes([str(a) for a in args], ns)
+        if Parser._leaf is None or len(self.prog) > len(Parser._leaf.prog):
+            Parser._leaf = self
+        return ns, extras
+
+    def parse_args(self, args=None, namespace=None):  # noqa: ANN001, ANN201 - argparse's
+        Parser._leaf = None
+        ns, extras = self.parse_known_args(args, namespace)
+        if extras:
+            leaf = Parser._leaf or self
+            # argparse lists every leftover, and an unknown option's value may have been
+            # taken for a positional: name the option, the real mistake
+            opts = [e for e in extras if e.startswith("-") and e not in ("-", "--")]
+            if opts:
+                leaf.error(f"argument {opts[0].split('=', 1)[0]}: not an option of "
+                           f"{leaf.prog}")
+            leaf.error(f"unrecognized arguments: {' '.join(extras)}")
+        return ns
+
+    def _check_scopes(self, argv: list[str], ns: argparse.Namespace) -> None:
+        """The one place an option meant for another choice is refused (see
+        :func:`only_with`): ``serve --transport udp --baudrate 9600`` would else be
+        silently ignored."""
+        for action in self._actions:
+            scope = getattr(action, "only_with", None)
+            if scope is None or not _given(action, argv):
+                continue
+            dest, allowed = scope
+            chosen = getattr(ns, dest, None)
+            if chosen not in allowed:
+                self.error(f"argument {'/'.join(action.option_strings)}: only with "
+                           f"--{dest.replace('_', '-')} {' or '.join(allowed)} "
+                           f"(not {chosen}): it would be ignored")
+
     def error(self, message: str) -> NoReturn:
         # argparse prints the whole usage block first; one line says the same and keeps
         # stderr readable for scripts (``--help`` has the usage).
         self.exit(EXIT_USAGE, f"{self.prog}: {message} (see {self.prog} --help)\n")
+
+
+def _given(action: argparse.Action, argv: list[str]) -> bool:
+    """Whether the command line names ``action``'s option (also as ``--opt=V`` or an
+    abbreviation argparse accepts); values after ``--`` are not options."""
+    for token in argv:
+        if token == "--":
+            return False
+        if not token.startswith("-"):
+            continue
+        name = token.split("=", 1)[0]
+        for opt in action.option_strings:
+            if name == opt or (opt.startswith("--") and len(name) > 2
+                               and name.startswith("--") and opt.startswith(name)):
+                return True
+    return False
+
+
+def only_with(action: argparse.Action, dest: str, *allowed: str) -> argparse.Action:
+    """Mark an option as meaningful only when option ``dest`` is one of ``allowed`` (e.g.
+    ``--baudrate`` only with ``--transport serial``); :class:`Parser` refuses it otherwise
+    with one line, before any work."""
+    action.only_with = (dest, tuple(allowed))  # type: ignore[attr-defined]
+    return action
 
 
 class HelpFormatter(argparse.HelpFormatter):
@@ -157,12 +223,14 @@ def _looks_like_text(p: Path) -> bool:
     return True
 
 
-def output_file(suffixes: Sequence[str], text: bool = False,
+def output_file(suffixes: Sequence[str] | None, text: bool = False,
                 stdout: bool = False) -> Callable[[str], str]:
-    """A file to write: one of ``suffixes`` (case-insensitive), its directory exists, not a
-    directory. ``text``: an existing file is overwritten only if it holds text, so a
-    mistyped name never replaces an image or a log. ``stdout``: ``-`` means stdout."""
-    names = ", ".join(suffixes)
+    """A file to write: one of ``suffixes`` (case-insensitive; None: any), its directory
+    exists and takes a new file (:func:`hil.cli.outputs.check_writable`), not a directory.
+    ``text``: an existing file is overwritten only if it holds text, so a mistyped name
+    never replaces an image or a log. ``stdout``: ``-`` means stdout. The value comes back
+    as a :class:`hil.cli.outputs.OutputPath` (the root refuses one that is also an input)."""
+    names = ", ".join(suffixes or ("any name",))
 
     def parse(value: str) -> str:
         if stdout and value == "-":
@@ -171,34 +239,40 @@ def output_file(suffixes: Sequence[str], text: bool = False,
         if p.is_dir():
             raise argparse.ArgumentTypeError(f"{value}: is a directory; give a file name "
                                              f"({names})")
-        if p.suffix.lower() not in suffixes:
+        if suffixes is not None and p.suffix.lower() not in suffixes:
             raise argparse.ArgumentTypeError(f"{value}: use a file name ending {names}")
         parent = p.parent if str(p.parent) else Path(".")
+        if parent.exists() and not parent.is_dir():
+            raise argparse.ArgumentTypeError(f"{value}: {parent} is not a directory")
         if not parent.is_dir():
             raise argparse.ArgumentTypeError(f"{value}: directory {parent} does not exist")
-        if p.exists():
+        # a character device (/dev/null, /dev/full, also behind a link) is written in place
+        if p.exists() and not outputs.is_device(p):
             if not p.is_file():
                 raise argparse.ArgumentTypeError(f"{value}: exists and is not a regular file")
             if text and not _looks_like_text(p):
                 raise argparse.ArgumentTypeError(f"{value}: exists and is not a text file; "
                                                  "not overwriting it")
-        return value
+        try:
+            outputs.check_writable(p)  # before any work: a read-only or full directory
+        except outputs.OutputError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
+        return outputs.OutputPath(value)
 
     parse.__name__ = "file name"
     parse.kind = "output"  # type: ignore[attr-defined]
-    parse.suffixes = tuple(suffixes)  # type: ignore[attr-defined]
+    parse.suffixes = tuple(suffixes or (".csv",))  # type: ignore[attr-defined]
     return parse
 
 
 def output_dir(value: str) -> str:
-    """A directory to write into: an existing directory, or a new one whose parent exists."""
-    p = Path(value)
-    if p.exists() and not p.is_dir():
-        raise argparse.ArgumentTypeError(f"{value}: exists and is not a directory")
-    parent = p.parent if str(p.parent) else Path(".")
-    if not p.exists() and not parent.is_dir():
-        raise argparse.ArgumentTypeError(f"{value}: parent directory {parent} does not exist")
-    return value
+    """A directory to write into: an existing directory, or a new one whose parent exists;
+    either must take new files (:func:`hil.cli.outputs.check_dir_writable`)."""
+    try:
+        outputs.check_dir_writable(value)
+    except outputs.OutputError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return outputs.OutputPath(value)
 
 
 output_dir.kind = "dir"  # type: ignore[attr-defined]
@@ -258,7 +332,9 @@ def common(json_plot: bool = True, plot: bool = True,
 
 
 def plot_dir(path: str) -> Path:
-    """The --plot-dir directory (checked by its argument type), created if missing."""
+    """The --plot-dir directory, created if missing (checked again: 'thesis' has a default
+    that no argument type saw)."""
+    outputs.check_dir_writable(path)
     out_dir = Path(path)
     out_dir.mkdir(exist_ok=True)
     return out_dir

@@ -22,6 +22,9 @@ from hil.fieldbus.master import Master
 from hil.output.tables import table
 from hil.sim.pc import demo_pc
 
+#: Cycles between two progress updates of ``bus run`` (a tenth of a simulated second).
+PROGRESS_CYCLES = 100
+
 #: Input images ``bus run`` keeps (the last second).
 KEEP_CYCLES = 1000
 
@@ -35,9 +38,41 @@ def _topology(name: str):
         raise UsageError(str(exc)) from None
 
 
+#: The files ``bus run`` streams to while it runs: (option dest, label in messages).
+STREAMS = (("log", "log"), ("capture", "capture"), ("can_log", "CAN log"))
+
+
 def _run_bus(args: argparse.Namespace, cfg, topo, cycles: int, model: str, pc, progress):
     """(record, wall seconds) of the run, logged to ``args.log``, captured to
-    ``args.capture`` and its CAN traffic logged to ``args.can_log`` if given."""
+    ``args.capture`` and its CAN traffic logged to ``args.can_log`` if given.
+
+    Each file is written under a temporary name in its directory and renamed when its
+    writer has closed it, also after an interruption (what ran is a readable log of what
+    ran); a write that fails mid-run removes it and ends the run (exit 1, one line)."""
+    from hil.cli import outputs
+
+    labels = dict(STREAMS)
+    with outputs.streaming({d: getattr(args, d, None) for d in labels}, labels,
+                           _READABLE) as tmp:
+        return _run_bus_to(argparse.Namespace(**{**vars(args), **tmp}), cfg, topo, cycles,
+                           model, pc, progress)
+
+
+def _readable_traffic(path) -> str:  # noqa: ANN001 - a Path
+    """"" if a capture or CAN log reads back whole, else why not."""
+    from hil.fieldbus.traffic import TrafficError, read_traffic
+
+    try:
+        return read_traffic(path).cut or ""
+    except TrafficError as exc:
+        return str(exc)
+
+
+_READABLE = {"log": cli_progress.readable_log, "capture": _readable_traffic,
+             "can_log": _readable_traffic}
+
+
+def _run_bus_to(args: argparse.Namespace, cfg, topo, cycles: int, model: str, pc, progress):
     from hil.fieldbus.capture import CaptureError, CaptureWriter
     from hil.fieldbus.faults import FaultError
     from hil.fieldbus.system import BusSystem
@@ -49,7 +84,7 @@ def _run_bus(args: argparse.Namespace, cfg, topo, cycles: int, model: str, pc, p
                                                  "can_channel": args.can_channel})
     except TransportError as exc:
         raise UsageError(str(exc)) from None
-    faults = _faults(args.faults, topo, model)
+    faults = _faults(args.faults, topo, model, cycles / 1000)
     tick_ns = cfg.get("sim.tick_ns")
     meta = {"topology": args.topology, "model": model, "mode": "lockstep (bus run)",
             "config": json.dumps(cfg.data)}
@@ -68,8 +103,6 @@ def _run_bus(args: argparse.Namespace, cfg, topo, cycles: int, model: str, pc, p
                                 "run keeps the in-process default, with the trailer)")
         from hil.replay.record import run_logged
 
-        if args.log:
-            cli_progress.output("log", args.log, cli_progress.readable_log)
         try:
             cap = (CaptureWriter(args.capture, crc_trailer=True, metadata=meta)
                    if args.capture else None)
@@ -108,19 +141,28 @@ def _run_bus(args: argparse.Namespace, cfg, topo, cycles: int, model: str, pc, p
     return rec, time.perf_counter() - t0, cap, recorder
 
 
-def _faults(path: str | None, topo, model: str) -> dict | None:
+def _faults(path: str | None, topo, model: str, seconds: float) -> dict | None:
     """The ``[[fault]]`` declaration of ``--faults FILE.toml``, checked against the
-    topology and the box model (one line naming the file, the entry and the key)."""
+    topology, the box model and the run's length (one line naming the file, the entry and
+    the key; an unknown table such as ``[[faults]]`` is refused, not ignored)."""
     if path is None:
         return None
     import tomllib
 
-    from hil.fieldbus.faults import FaultError, check_topology, parse_faults
+    from hil.fieldbus.faults import (
+        FaultError,
+        check_file,
+        check_topology,
+        check_window,
+        parse_faults,
+    )
 
     try:
         data = tomllib.loads(Path(path).read_text(encoding="utf-8"))
+        check_file(data, path)
         plan = parse_faults(data, path)
         check_topology(plan, topo)
+        check_window(plan, seconds)
     except OSError as exc:
         raise UsageError(f"--faults {path}: cannot read: {exc.strerror}") from None
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
@@ -157,6 +199,10 @@ def cmd_bus_run(args: argparse.Namespace, ctx: Context) -> Outcome:
     cycles = int(round(args.seconds * 1000))
     model = args.model or ("stack" if topo.n_actuators <= 5 else "echo")
     sine = demo_pc(args.amplitude, args.frequency)
+    # the logged run reports its own progress; the others report it from the PC loop
+    logged = bool(args.log) or getattr(args, "foxglove", None) is not None
+    progress = ctx.progress("bus run", "cycles", note=False)
+    report = None if logged else progress
     with cli_progress.interrupt_between_steps() as check:
 
         def pc(cycle: int, m: Master) -> None:
@@ -164,11 +210,14 @@ def cmd_bus_run(args: argparse.Namespace, ctx: Context) -> Outcome:
             # log write), and the simulated time is what the interrupt line reports.
             check()
             cli_progress.at(f"at t={cycle * 1e-3:.3f} s")
+            if report is not None and cycle and cycle % PROGRESS_CYCLES == 0:
+                report(cycle, cycles)
             sine(cycle, m)
 
         # The position is noted by the PC loop (simulated time), not by these counts.
-        rec, wall, cap, recorder = _run_bus(args, cfg, topo, cycles, model, pc,
-                                            ctx.progress("bus run", "cycles", note=False))
+        rec, wall, cap, recorder = _run_bus(args, cfg, topo, cycles, model, pc, progress)
+        if report is not None:
+            report(cycles, cycles)
     data = {"topology": topo.name, "boxes": len(topo.boxes), "actuators": topo.n_actuators,
             "transport": args.transport, "model": model, "cycles": cycles,
             "wall_s": wall, "real_time_factor": args.seconds / wall,
@@ -203,7 +252,7 @@ def cmd_replay_traffic(args: argparse.Namespace, cfg) -> Outcome:
     """Replay a capture or CAN log of a bus run through a fresh chain (exit 0: every logged
     reply matches; 1: a divergence; 2: the file cannot be read or holds no exchange)."""
     from hil.fieldbus.traffic import TrafficError, read_traffic
-    from hil.fieldbus.traffic_replay import replay_traffic
+    from hil.fieldbus.traffic_replay import TopologyMismatch, replay_traffic
     from plant.config import Config, load_config
 
     try:
@@ -217,22 +266,34 @@ def cmd_replay_traffic(args: argparse.Namespace, cfg) -> Outcome:
     topo = _topology(args.topology or meta.get("topology", "bench_one_box"))
     model = args.model or meta.get("model") or ("stack" if topo.n_actuators <= 5 else "echo")
     t0 = time.perf_counter()
-    res = replay_traffic(traffic, topo, cfg, model)
+    try:
+        res = replay_traffic(traffic, topo, cfg, model)
+    except TopologyMismatch as exc:
+        raise UsageError(str(exc)) from None
     wall = time.perf_counter() - t0
     data = {"ok": res.ok, "format": traffic.kind, "topology": topo.name, "model": model,
             **{k: v for k, v in res.__dict__.items()}, "wall_s": wall}
+    cut = (f"TRUNCATED file ({traffic.cut}), replayed up to t = "
+           f"{traffic.read_until_s or 0:.3f} s: " if traffic.cut else "")
+    data.update(truncated=traffic.cut is not None, stop_reason=traffic.cut)
     if res.divergence is not None:
-        text = f"replay {args.log}: first divergence at {res.divergence}"
+        text = f"replay {args.log}: {cut}first divergence at {res.divergence}"
     elif res.ok:
-        text = (f"replay {args.log}: {res.compared} replies of {topo.name} ({model} model) "
-                f"match bit for bit ({res.requests} requests, {res.unanswered} without a "
-                f"logged reply, {res.skipped} frames skipped; {wall:.2f} s)")
+        text = (f"replay {args.log}: {cut}{res.compared} replies of {topo.name} ({model} "
+                f"model) match bit for bit ({res.requests} requests, {res.unanswered} without "
+                f"a logged reply, {res.skipped} frames skipped; {wall:.2f} s)")
     else:
         # Nothing to compare: a mistake of the input, but --json still gets its reading.
         return Outcome(None, data, EXIT_USAGE,
                        error=f"{args.log}: no request/reply pair to replay "
                        f"({len(traffic.frames)} fieldbus frames: {res.requests} requests, "
                        f"{res.unmatched} unmatched replies, {res.skipped} skipped)")
+    if traffic.cut:
+        # a cut file that matches is not a whole run that matches: say where it ends
+        from hil.cli import cutfiles
+
+        return Outcome(text, data, EXIT_FAILED, error=cutfiles.message(
+            args.log, traffic.cut, traffic.read_until_s, "replayed"))
     return Outcome(text, data, EXIT_OK if res.ok else EXIT_FAILED)
 
 
@@ -276,8 +337,10 @@ def cmd_replay(args: argparse.Namespace, ctx: Context) -> Outcome:
     else:
         text = f"replay {args.log}: {cut}first divergence at {res.divergence}"
     # A cut log that matches is not a whole run that matches: say where it ends, exit 1.
-    note = (f"{args.log}: truncated: {res.stop_reason}; replayed up to "
-            f"t = {res.simulated_s:.6f} s") if res.truncated else None
+    from hil.cli import cutfiles
+
+    note = cutfiles.message(args.log, res.stop_reason, res.simulated_s,
+                            "replayed") if res.truncated else None
     return Outcome(text, data, EXIT_OK if res.ok and not res.truncated else EXIT_FAILED,
                    error=note)
 

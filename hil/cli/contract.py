@@ -86,6 +86,9 @@ class Outcome:
     code: int = EXIT_OK
     error: str | None = None
     end: str = "\n"
+    #: files written after the result is printed (:class:`hil.cli.outputs.Later`): an
+    #: interruption or a failure while they are written keeps the result
+    files: tuple = ()
 
 
 class Run(Protocol):
@@ -197,7 +200,7 @@ def _quiet_stdout() -> None:
 def execute(run: Run, args: argparse.Namespace, verb: str) -> int:
     """Run one parsed command through the contract and return its exit code: its outcome
     printed (:func:`emit`), a mistake, a failing stdout or a signal as one line on stderr."""
-    from hil.cli import progress
+    from hil.cli import outputs, progress
     from hil.cli.args import image_sets
     from hil.cli.signals import signal_of
     from hil.sim.image.errors import ImageFault
@@ -207,6 +210,8 @@ def execute(run: Run, args: argparse.Namespace, verb: str) -> int:
     sys.stdout = GuardedStdout(stdout)
     try:
         progress.start(verb)
+        outputs.reset()
+        outputs.check_args(vars(args))  # an output that is also an input: refused
         image_sets(args)  # --mcu-image FILE: the --set entries it stands for
         ctx = Context(args, verb)
         outcome = run(args, ctx)
@@ -215,10 +220,13 @@ def execute(run: Run, args: argparse.Namespace, verb: str) -> int:
         emit(outcome, ctx.json)
         if outcome.error:
             print(error_line(verb, outcome.error), file=sys.stderr, flush=True)
-        return outcome.code
+        outputs.write_later(outcome.files, ctx.json, lambda line: print(line, flush=True))
+        return outputs.finish(verb, outcome.code)
     except (ConfigError, UsageError) as exc:
         print(error_line(verb, str(exc)), file=sys.stderr, flush=True)
         return EXIT_USAGE
+    except outputs.StreamFailed:  # a log or capture of the run failed: the line says which
+        return outputs.finish(verb, EXIT_FAILED)
     except ImageFault as exc:  # the firmware image broke the interface: the run failed
         print(error_line(verb, str(exc)), file=sys.stderr, flush=True)
         return EXIT_FAILED

@@ -30,8 +30,22 @@ from hil.cli.args import (
     output_dir,
     output_file,
 )
-from hil.cli.contract import EXIT_USAGE, Context, Outcome, UsageError, standalone
+from hil.cli.contract import (
+    EXIT_FAILED,
+    EXIT_OK,
+    EXIT_USAGE,
+    Context,
+    Outcome,
+    UsageError,
+    standalone,
+)
 
+#: Rows identified by default: ~40 s at 5 kHz, about 1.5 GB at the peak (docs/identify.md).
+DEFAULT_MAX_ROWS = 200_000
+#: Peak memory of an identification: a base plus this per row used (measured with
+#: /usr/bin/time -v, docs/identify.md), for the size check before any reading.
+BASE_BYTES = 400e6
+BYTES_PER_ROW = 7_000
 #: CPU seconds (all threads) a 16 s, 5 kHz record may take to identify on the 2-core machine.
 CPU_BUDGET_S = 20.0
 
@@ -49,6 +63,10 @@ def configure_identify(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--max-effects", type=int_range(0, 20), default=6,
                         help="stop after adding this many effects, 0..20")
     parser.add_argument("--quiet", action="store_true", help="no progress on stderr")
+    parser.add_argument("--max-rows", type=int_range(1000, 5_000_000), default=DEFAULT_MAX_ROWS,
+                        metavar="N", help="use at most the first N data rows (a longer file "
+                        "is not read past them; the size check says how many it holds and "
+                        "the memory it would need), 1000..5000000")
     parser.add_argument("--load", choices=("fixed_piston", "free_piston", "conrod_fixed"),
                         default=None, help="load case, for a file without a '# load:' line "
                         "(a header line that says otherwise is an error)")
@@ -71,16 +89,21 @@ def run_identify(args: argparse.Namespace, ctx: Context) -> Outcome:
     from plant.config import load_config
 
     cfg = load_config(args.config, args.set or ())  # a ConfigError names the preset and key
-    try:
-        data = read_measured(args.data, load=args.load, sample_rate_hz=args.sample_rate)
-    except CsvError as exc:
-        raise UsageError(str(exc)) from None
-    from hil.identify import report
-    from hil.identify.pipeline import identify
 
     def progress(msg: str) -> None:
         if not args.quiet:
             print(f"identify: {msg}", file=sys.stderr, flush=True)
+
+    too_big = _size_check(args.data, args.max_rows, progress)
+    if too_big:
+        raise UsageError(too_big)
+    try:
+        data = read_measured(args.data, load=args.load, sample_rate_hz=args.sample_rate,
+                             max_rows=args.max_rows, progress=progress)
+    except CsvError as exc:
+        raise UsageError(str(exc)) from None
+    from hil.identify import report
+    from hil.identify.pipeline import identify
 
     for note in data.notes:  # what reading did to the file (also in the report's notes)
         progress(f"{args.data}: {note}")
@@ -95,12 +118,48 @@ def run_identify(args: argparse.Namespace, ctx: Context) -> Outcome:
     except ValueError as exc:
         raise UsageError(f"{args.data}: {exc}") from None
     rep.notes[:0] = [n for n in data.notes if n not in rep.notes]
+    files = ()
     if args.report:
-        try:
-            report.write_report(rep, args.report)
-        except OSError as exc:
-            raise UsageError(f"--report {args.report}: {exc}") from None
-    return Outcome(report.text(rep), json.loads(report.to_json(rep)))
+        # the report goes to a temporary directory whose files are moved in when all are
+        # written, after the result is printed: a failed report leaves nothing
+        # half-written, an interruption while it is written keeps the result
+        from hil.cli.outputs import Later
+
+        files = (Later("report", args.report, lambda tmp: report.write_report(rep, tmp),
+                       directory=True),)
+    code, error = EXIT_OK, None
+    if data.cut:  # a cut file: identified up to its last whole line, and said so (exit 1)
+        from hil.cli import cutfiles
+
+        code, error = EXIT_FAILED, cutfiles.message(args.data, data.cut,
+                                                    float(data.t[-1] - data.t[0]))
+    return Outcome(report.text(rep), json.loads(report.to_json(rep)), code, error=error,
+                   files=files)
+
+
+def _size_check(path: str, max_rows: int, progress) -> str:  # noqa: ANN001
+    """Before reading: how many rows the file holds (by its size), how many will be used,
+    the memory that takes; the refusal (one line) if it cannot fit in this machine."""
+    import os
+
+    from hil.identify.csvdata import estimate_rows
+
+    rows = estimate_rows(path)
+    used = min(rows, max_rows)
+    need = BASE_BYTES + BYTES_PER_ROW * used
+    try:
+        avail = os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (ValueError, OSError, AttributeError):  # pragma: no cover - not Linux
+        avail = None
+    size = os.path.getsize(path)
+    if avail is not None and need > avail:
+        return (f"{path}: identifying {used:,} rows needs about {need / 1e9:.1f} GB, "
+                f"{avail / 1e9:.1f} GB is free: give a smaller --max-rows")
+    if rows > max_rows or size > 50e6:
+        progress(f"{path}: {size / 1e6:,.0f} MB, about {rows:,} rows by its size; using "
+                 f"{'the first ' if rows > max_rows else ''}{used:,} (--max-rows {max_rows:,})"
+                 f", about {need / 1e9:.1f} GB")
+    return ""
 
 
 def configure_synth(parser: argparse.ArgumentParser) -> None:
@@ -210,9 +269,12 @@ def run_synth(args: argparse.Namespace, ctx: Context) -> Outcome:
     except (ConfigError, ValueError) as exc:
         raise UsageError(str(exc)) from None
     truth = "; ".join(f"{k} {v}" for k, v in res.truth.items()) or "none"
-    write_measured(out, res.data, {"effects": truth})
-    return Outcome(f"wrote {out}: {args.load}, {res.data.n} samples at "
-                   f"{res.data.sample_rate_hz:g} Hz, effects: {truth}")
+    from hil.cli import outputs
+
+    wrote = outputs.write("record", out, lambda tmp: write_measured(tmp, res.data,
+                                                                     {"effects": truth}))
+    return Outcome(f"{'wrote' if wrote else 'made (NOT written)'} {out}: {args.load}, "
+                   f"{res.data.n} samples at {res.data.sample_rate_hz:g} Hz, effects: {truth}")
 
 
 def _run_rig_synth(args: argparse.Namespace) -> Outcome:
@@ -241,11 +303,14 @@ def _run_rig_synth(args: argparse.Namespace) -> Outcome:
     except (ConfigError, ValueError) as exc:
         raise UsageError(str(exc)) from None
     # the truth is printed, not written: the file holds only what a rig's log would
-    write_measured(out, res.data, dict(res.data.header))
+    from hil.cli import outputs
+
+    wrote = outputs.write("record", out, lambda tmp: write_measured(tmp, res.data,
+                                                                     dict(res.data.header)))
     par = res.truth["parameters"]
-    lines = [f"wrote {out}: rig, {args.load}, {res.data.n} samples at "
-             f"{res.data.sample_rate_hz:g} Hz, intersample {res.config['intersample']}, "
-             f"temperature {res.config['temperature']}",
+    lines = [f"{'wrote' if wrote else 'made (NOT written)'} {out}: rig, {args.load}, "
+             f"{res.data.n} samples at {res.data.sample_rate_hz:g} Hz, intersample "
+             f"{res.config['intersample']}, temperature {res.config['temperature']}",
              "  true parameters: " + ", ".join(f"{k} {v:.6g}" for k, v in par.items())]
     for name, vals in res.truth["effects"].items():
         lines.append(f"  {name}: " + ", ".join(f"{k} {v:.6g}" for k, v in vals.items()))

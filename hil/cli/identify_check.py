@@ -57,11 +57,16 @@ def run_check(args: argparse.Namespace, ctx: Context) -> Outcome:
 
     results = run_matrix(cases, args.seeds, jobs=args.jobs, progress=progress)
     table = markdown(results)
-    if args.markdown:
-        with open(args.markdown, "w", encoding="utf-8") as fh:
-            fh.write(table + "\n")
+    files = ()
+    if args.markdown:  # written after the result is printed: an interruption keeps it
+        from pathlib import Path
+
+        from hil.cli.outputs import Later
+
+        files = (Later("table", args.markdown,
+                       lambda tmp: Path(tmp).write_text(table + "\n", encoding="utf-8")),)
     return Outcome(table, [r.as_dict() for r in results],
-                   EXIT_OK if all(r.right for r in results) else EXIT_FAILED)
+                   EXIT_OK if all(r.right for r in results) else EXIT_FAILED, files=files)
 
 
 __all__ = ["configure_check", "run_check"]

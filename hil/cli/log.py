@@ -38,8 +38,11 @@ def configure_log(parser: argparse.ArgumentParser) -> None:
     p = sub.add_parser("export", help="decode frames to CSV (t_s, topic, decoded fields), "
                        "or one board's measurements as an identification CSV")
     p.add_argument("log", metavar="LOG", help="MCAP frame log")
-    p.add_argument("out", metavar="OUT", help="file to write: .parquet for Parquet, else CSV "
-                   "('-': stdout)")
+    from hil.cli.args import output_file
+
+    p.add_argument("out", metavar="OUT", type=output_file(None, stdout=True),
+                   help="file to write: .parquet for Parquet, else CSV ('-': stdout); never "
+                   "the LOG itself")
     p.add_argument("--format", choices=("frames", "identify"), default="frames",
                    help="frames (default): one row per frame with its decoded fields; "
                    "identify: what the MCU read from one board, in SI units, as the input of "
@@ -63,10 +66,11 @@ def _truncated(info: LogInfo, text: str | None, data: object = None) -> Outcome:
     script must not take it for a whole one, hence the exit code."""
     if info.complete:
         return Outcome(text, data)
-    upto = "nothing" if info.readable_until_ns is None else \
-        f"t = {info.readable_until_ns / 1e9:.6f} s"
-    return Outcome(text, data, EXIT_FAILED,
-                   error=f"{info.path}: truncated: {info.stop_reason}; readable up to {upto}")
+    from hil.cli import cutfiles
+
+    return Outcome(text, data, EXIT_FAILED, error=cutfiles.message(
+        info.path, info.stop_reason,
+        None if info.readable_until_ns is None else info.readable_until_ns / 1e9))
 
 
 def _traffic_info(args: argparse.Namespace) -> Outcome:
@@ -74,13 +78,16 @@ def _traffic_info(args: argparse.Namespace) -> Outcome:
     from hil.fieldbus.traffic import TrafficError, read_traffic, summary, summary_text
 
     try:
-        s = summary(read_traffic(args.log))
+        traffic = read_traffic(args.log)
     except TrafficError as exc:
         raise FrameLogError(str(exc)) from None
-    for note in s["notes"]:
-        if note.startswith("damaged"):
-            return Outcome(summary_text(s), s, EXIT_FAILED, error=f"{args.log}: {note}")
-    return Outcome(summary_text(s), s)
+    s = summary(traffic)
+    if traffic.cut is None:
+        return Outcome(summary_text(s), s)
+    from hil.cli import cutfiles
+
+    return Outcome(summary_text(s), s, EXIT_FAILED,
+                   error=cutfiles.message(args.log, traffic.cut, traffic.read_until_s))
 
 
 def _info(args: argparse.Namespace) -> Outcome:
@@ -93,13 +100,7 @@ def _info(args: argparse.Namespace) -> Outcome:
 
 
 def _export(args: argparse.Namespace) -> Outcome:
-    out = Path(args.out)
-    if args.out != "-":
-        parent = out.parent if str(out.parent) else Path(".")
-        if not parent.is_dir():
-            raise FrameLogError(f"{args.out}: directory {parent} does not exist")
-        if out.is_dir():
-            raise FrameLogError(f"{args.out}: is a directory; give a .csv file name")
+    out = Path(args.out)  # checked by its argument type (directory, writable, not the LOG)
     fmt = args.format
     if fmt == "identify":
         for opt in ("topic", "field"):
@@ -112,7 +113,11 @@ def _export(args: argparse.Namespace) -> Outcome:
     if fmt == "identify":
         from hil.framelog.identify_export import export_identify
 
-        res = export_identify(args.log, args.out, board=args.board, info=info)
+        got: list = []
+        if not _written(args.out, lambda o: got.append(export_identify(
+                args.log, o, board=args.board, info=info))):
+            return _truncated(info, None)
+        res = got[0]
         text = None if args.out == "-" else (
             f"wrote {res.rows} samples of board {res.board} ({res.load}, "
             f"{res.sample_rate_hz:g} Hz; {res.skipped} leading frame(s) from before the "
@@ -121,10 +126,25 @@ def _export(args: argparse.Namespace) -> Outcome:
     if out.suffix.lower() == ".parquet":
         if args.out == "-":
             raise FrameLogError("Parquet cannot go to stdout: give a .parquet file name")
-        n = export_parquet(args.log, args.out, topics=args.topic, fields=args.field, info=info)
+        export = export_parquet
     else:
-        n = export_csv(args.log, args.out, topics=args.topic, fields=args.field, info=info)
-    return _truncated(info, None if args.out == "-" else f"wrote {n} rows to {args.out}")
+        export = export_csv
+    rows: list[int] = []
+    if not _written(args.out, lambda o: rows.append(export(
+            args.log, o, topics=args.topic, fields=args.field, info=info))):
+        return _truncated(info, None)
+    return _truncated(info, None if args.out == "-" else f"wrote {rows[0]} rows to {args.out}")
+
+
+def _written(out: str, fn) -> bool:  # noqa: ANN001 - fn(path) writes the export
+    """Write the export to ``out`` whole or not at all (:func:`hil.cli.outputs.write`; stdout
+    as it comes). False: it failed, and the root's line says so (exit 1)."""
+    from hil.cli import outputs
+
+    if out == "-":
+        fn(out)
+        return True
+    return outputs.write("export", out, fn)
 
 
 @standalone("eha-hil log")

@@ -51,12 +51,13 @@ def cmd_plant_bode(args: argparse.Namespace, ctx: Context) -> Outcome:
                      f"simulated peak at {r.peak_hz():g} Hz\n")
         data["responses"].append({"load": r.load, "output": r.output, "points": r.rows(),
                                   "max_gain_error_db": ge, "max_phase_error_deg": pe})
-    if args.plot:
+    files = ()
+    if args.plot:  # written after the result is printed (hil.cli.outputs.Later)
+        from hil.cli.outputs import Later
         from hil.output.plots import plot_bode
 
-        plot_bode(results, args.plot)
-        parts.append(f"plot written to {args.plot}")
-    return Outcome("\n".join(parts), data)
+        files = (Later("plot", args.plot, lambda tmp: plot_bode(results, tmp)),)
+    return Outcome("\n".join(parts), data, files=files)
 
 
 # --- plant tn-curve --------------------------------------------------------------------------
@@ -78,12 +79,13 @@ def cmd_plant_tn(args: argparse.Namespace, ctx: Context) -> Outcome:
     text += (f"\nstall force {curve.stall_force_n:.0f} N, no-load velocity "
              f"{curve.no_load_velocity_m_s * 1e3:.1f} mm/s, peak efficiency "
              f"{100 * pk.efficiency:.1f} % at {pk.force_n:.0f} N")
-    if args.plot:
+    files = ()
+    if args.plot:  # written after the result is printed (hil.cli.outputs.Later)
+        from hil.cli.outputs import Later
         from hil.output.plots import plot_tn_curve
 
-        plot_tn_curve(curve, args.plot)
-        text += f"\nplot written to {args.plot}"
-    return Outcome(text, {"config": cfg.sources, **curve.as_dict()})
+        files = (Later("plot", args.plot, lambda tmp: plot_tn_curve(curve, tmp)),)
+    return Outcome(text, {"config": cfg.sources, **curve.as_dict()}, files=files)
 
 
 # --- main job --------------------------------------------------------------------------------

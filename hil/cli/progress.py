@@ -55,6 +55,11 @@ def at(position: str) -> None:
     _state.position = position
 
 
+def position() -> str:
+    """The position last noted with :func:`at` ("" if none)."""
+    return _state.position
+
+
 def output(label: str, path: str | Path, check: Callable[[Path], str] | None = None,
            done: bool = False) -> None:
     """A file the command writes; ``check(path)`` returns "" if it is readable as it is."""

@@ -4,11 +4,12 @@ from __future__ import annotations
 
 import argparse
 import sys
-from pathlib import Path
 
+from hil.cli import outputs
 from hil.cli import progress as cli_progress
 from hil.cli.args import common, output_dir, output_file, plot_dir
 from hil.cli.contract import EXIT_FAILED, EXIT_OK, Context, Outcome, UsageError, command
+from hil.cli.outputs import Later
 from hil.cli.verify import add_rtl_option, rtl_sets, rtl_verdict
 from hil.output.tables import table
 from plant.config import load_config
@@ -32,6 +33,7 @@ def cmd_run_thesis(args: argparse.Namespace, ctx: Context) -> Outcome:
     results = []
     notes = []
     profiles: list[dict] = []
+    plotted: list[str] = []
     _image_profile(cfg, "")  # this command's steps only
     for name in names:
         t0 = time.perf_counter()
@@ -44,9 +46,9 @@ def cmd_run_thesis(args: argparse.Namespace, ctx: Context) -> Outcome:
         prof = _image_profile(cfg, name.upper())
         if prof:
             profiles.append(prof)
-        if res.plot:
-            res.plot(res, out_dir / f"{name}.png")
-            cli_progress.output("plot", out_dir / f"{name}.png", done=True)
+        if res.plot and outputs.write("plot", out_dir / f"{name}.png",
+                                      lambda tmp, res=res: res.plot(res, tmp)):
+            plotted.append(f"{name}.png")
         for m in res.metrics:
             diff = "" if m.thesis is None else f"{(m.value - m.thesis) / m.thesis * 100:+.0f} %"
             mark = "" if m.ok is None else ("ok" if m.ok else "MISSED")
@@ -57,7 +59,8 @@ def cmd_run_thesis(args: argparse.Namespace, ctx: Context) -> Outcome:
                  fmt=".3g", title=f"thesis experiments on the full stack ({cfg.sources[-1]})")
     if notes:
         text += "\n" + "\n".join(f"note: {n}" for n in notes)
-    text += f"\nplots written to {out_dir}/ ({', '.join(n + '.png' for n in names)})"
+    if plotted:
+        text += f"\nplots written to {out_dir}/ ({', '.join(plotted)})"
     text += _profile_text(profiles)
     ok = all(r.ok for r, _ in results)
     data = {"config": cfg.sources, "ok": ok, "scenarios": [
@@ -90,7 +93,8 @@ def _profile_text(profiles: list[dict]) -> str:
 
 
 def _run_live(res, address: str) -> str:  # noqa: ANN001 - ScenarioResult
-    """``run --foxglove``: serve the scenario's series until a client takes them."""
+    """``run --foxglove``: serve the scenario's series until a client takes them (after the
+    result is printed: giving up with Ctrl-C keeps the table of the finished run)."""
     from hil.framelog.live import FoxgloveLive, LiveError, parse_address
     from hil.framelog.series_export import publish_live
 
@@ -103,7 +107,7 @@ def _run_live(res, address: str) -> str:  # noqa: ANN001 - ScenarioResult
               "(Open connection > Foxglove WebSocket) and subscribe (e.g. a Plot panel); "
               "Ctrl-C to give up", file=sys.stderr, flush=True)
         publish_live(res, live)
-    return f"\nseries sent to Foxglove at {live.url}"
+    return f"series sent to Foxglove at {live.url}"
 
 
 def cmd_run(args: argparse.Namespace, ctx: Context) -> Outcome:
@@ -128,6 +132,13 @@ def cmd_run(args: argparse.Namespace, ctx: Context) -> Outcome:
         args.plot = str(plot_dir(args.plot_dir) / f"{scenario.name}.png")
     from hil.scenarios.knobs import split_sets
 
+    if args.foxglove is not None:  # a bad address: before the run
+        from hil.framelog.live import parse_address
+
+        try:
+            parse_address(args.foxglove)
+        except ValueError as exc:
+            raise UsageError(str(exc)) from None
     config_sets, knob_values = split_sets(args.set or ())
     cfg = load_config(args.config, [*config_sets, *rtl_sets(args)])
     _image_profile(cfg, "")  # this command's steps only
@@ -140,26 +151,33 @@ def cmd_run(args: argparse.Namespace, ctx: Context) -> Outcome:
     if res.notes:
         text += "\n" + "\n".join(f"note: {n}" for n in res.notes)
     text += _profile_text([prof] if prof else [])
+    # files (and the wait for a Foxglove client) after the result is printed: an
+    # interruption or a failed write keeps the table of a finished run (hil.cli.outputs)
+    files: list[Later] = []
     if args.plot and res.plot:
-        res.plot(res, Path(args.plot))
-        text += f"\nplot written to {args.plot}"
-    if args.foxglove is not None:
-        text += _run_live(res, args.foxglove)
+        files.append(Later("plot", args.plot, lambda tmp: res.plot(res, tmp)))
     if args.series:
-        from hil.framelog.series_export import write_series
+        from hil.framelog.series_export import tables, write_series
 
-        try:
-            rows = write_series(res, args.series)
-        except ValueError as exc:
-            raise UsageError(str(exc)) from None
-        text += f"\nseries written to {args.series} ({rows} rows)"
+        if not tables(res.series, res.name)[0]:
+            raise UsageError(f"{res.name}: the scenario has no time series to write")
+        n_rows: list[int] = []
+        files.append(Later("series", args.series,
+                           lambda tmp: n_rows.append(write_series(res, tmp)),
+                           lambda: f" ({n_rows[0]} rows)"))
+    if args.foxglove is not None:
+        said: list[str] = []
+        files.append(Later("waiting for a Foxglove client", "",
+                           lambda _: said.append(_run_live(res, args.foxglove)),
+                           lambda: said[0] if said else "", action=True))
     data = {"scenario": res.name, "title": res.title, "config": cfg.sources, "ok": res.ok,
             "metrics": [{"name": m.name, "value": m.value, "unit": m.unit,
                          "requirement": m.requirement, "ok": m.ok} for m in res.metrics],
             "notes": res.notes}
     if prof:
         data["mcu_image_profile"] = prof
-    return rtl_verdict(Outcome(text, data, EXIT_OK if res.ok else EXIT_FAILED), ctx)
+    return rtl_verdict(Outcome(text, data, EXIT_OK if res.ok else EXIT_FAILED,
+                               files=tuple(files)), ctx)
 
 
 def add_parser(sub) -> None:  # noqa: ANN001 - argparse's sub-parsers

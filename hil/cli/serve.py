@@ -324,6 +324,14 @@ def cmd_serve(args: argparse.Namespace, cfg) -> Outcome:
         raise _usage(str(exc)) from None
     if args.transport == "ethercat":
         return cmd_serve_ethercat(args, cfg, topo)
+    from hil.cli import outputs
+
+    # the capture is written under a temporary name, renamed when closed (hil.cli.outputs)
+    with outputs.streaming({"capture": args.capture}, {"capture": "capture"}) as tmp:
+        return _serve(args, cfg, topo, tmp.get("capture"))
+
+
+def _serve(args: argparse.Namespace, cfg, topo, capture: str | None) -> Outcome:
     from hil.fieldbus.capture import CaptureError, CaptureWriter
     from hil.transports import backend
 
@@ -343,7 +351,7 @@ def cmd_serve(args: argparse.Namespace, cfg) -> Outcome:
             return None if ends is None else (ends[1], ends[0])
 
         try:
-            cap = CaptureWriter(args.capture, trailer, endpoints)
+            cap = CaptureWriter(capture, trailer, endpoints)
         except CaptureError as exc:
             end.close()
             if release is not None:
@@ -653,4 +661,18 @@ def add_parser(sub) -> None:  # noqa: ANN001 - argparse's sub-parsers
     p.add_argument("--foxglove", nargs="?", const="", metavar="HOST:PORT",
                    help="stream the boxes' decoded signals to Foxglove Studio (WebSocket; "
                    "default 127.0.0.1:8765, loopback)")
+    _scope_options(p)
     command(p, run_serve)
+
+
+def _scope_options(p: argparse.ArgumentParser) -> None:
+    """Each transport's own options, refused with another (hil.cli.args.only_with)."""
+    from hil.cli.args import only_with
+
+    # (--capture and --foxglove with ethercat are refused by cmd_serve_ethercat, with hints)
+    stream = tuple(serve_backends())
+    scopes = {"baudrate": ("serial",), "host": ("udp",), "port": stream,
+              "interface": ("ethercat",), "stack_boxes": ("ethercat",)}
+    for action in p._actions:
+        if action.dest in scopes:
+            only_with(action, "transport", *scopes[action.dest])

@@ -9,6 +9,7 @@ configuration; 130 interrupted (the journal keeps every finished point: ``--resu
 from __future__ import annotations
 
 import argparse
+import errno
 import sys
 from collections.abc import Callable
 from pathlib import Path
@@ -28,6 +29,10 @@ def _duration(seconds: float | None) -> str:
     s = int(round(seconds))
     return f"{s // 3600}h{s // 60 % 60:02d}m" if s >= 3600 else (
         f"{s // 60}m{s % 60:02d}s" if s >= 60 else f"{s}s")
+
+
+#: errno values of a write that the disk refused (full, quota, read-only, I/O error).
+_DISK_ERRORS = (errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EIO, errno.EFBIG)
 
 
 def _usage(message: str) -> Exception:
@@ -83,6 +88,9 @@ def cmd_sweep(args: argparse.Namespace, ctx: Context) -> Outcome:
     scen = scenarios.get(scenario)
     config_sets, fixed_knobs = split_sets(args.set or ())
     base = load_config(args.config, config_sets)
+    from plant.model import check_config
+
+    check_config(base)  # a base the points cannot simulate (work unbounded): one line now
     scen.settings(fixed_knobs, "--set")  # one line naming the setting, before anything runs
     plan = space.build_plan(base, args.param or [], args.tolerance or [], args.samples or 0,
                             args.seeds or (), args.distribution, args.draw_seed,
@@ -111,6 +119,16 @@ def cmd_sweep(args: argparse.Namespace, ctx: Context) -> Outcome:
                             on_point=_reporter(scenario, show))
     except JournalError as exc:
         raise _usage(str(exc)) from None
+    except OSError as exc:
+        if journal is None or exc.errno not in _DISK_ERRORS:
+            raise
+        # the journal could not be written (a full disk): the sweep stops, the line says
+        # which file and where (hil.cli.outputs.finish), exit 1
+        from hil.cli import outputs
+
+        outputs.failed("journal", journal.path, f"{exc.strerror} (stopped "
+                       f"{cli_progress.position() or 'at the start'})")
+        raise outputs.StreamFailed from None
     finally:
         backend.close()
     try:
@@ -129,18 +147,22 @@ def cmd_sweep(args: argparse.Namespace, ctx: Context) -> Outcome:
         lines.append(f"point {row['point']} failed: {row['error']}")
     if len(errors) > 5:
         lines.append(f"... and {len(errors) - 5} more (column 'error' of the table)")
-    if args.out:
-        table.write(df, args.out)
-        cli_progress.output("table", args.out, done=True)
+    from hil.cli import outputs
+
+    table_ok = bool(args.out) and outputs.write("table", args.out,
+                                                lambda tmp: table.write(df, tmp))
+    if table_ok:
         lines.append(f"table written to {args.out} ({len(df)} rows; journal "
                      f"{journal_path(args.out).name})")
     plot_paths: list[Path] = []
     if args.plot_dir:
         out_dir = Path(args.plot_dir)
-        out_dir.mkdir(exist_ok=True)
-        plot_paths = plots.plot_sweep(df, plan, records, out_dir, title)
-        lines.append(f"plots written to {out_dir}/ ("
-                     f"{', '.join(p.name for p in plot_paths)})")
+        made: list[Path] = []
+        if outputs.write_dir("plots", out_dir, lambda tmp: made.extend(
+                plots.plot_sweep(df, plan, records, tmp, title))):
+            plot_paths = [out_dir / p.name for p in made]
+            lines.append(f"plots written to {out_dir}/ ("
+                         f"{', '.join(p.name for p in plot_paths)})")
     lines.append(f"{outcome.computed} points computed, {outcome.resumed} from the journal, "
                  f"{_duration(outcome.wall_s)} on {outcome.backend}")
     low = []
@@ -152,7 +174,7 @@ def cmd_sweep(args: argparse.Namespace, ctx: Context) -> Outcome:
     data = {"scenario": scenario, "config": base.sources, "kind": plan.kind,
             "parameters": plan.parameters, "computed": outcome.computed,
             "resumed": outcome.resumed, "backend": outcome.backend,
-            "out": args.out, "plots": [str(p) for p in plot_paths],
+            "out": args.out if table_ok else None, "plots": [str(p) for p in plot_paths],
             "summary": summ.as_dict(), "below_min_yield": low,
             "errors": [{"point": int(r["point"]), "error": r["error"]}
                        for _, r in errors.iterrows()]}
@@ -167,6 +189,9 @@ def cmd_bench_sweep(args: argparse.Namespace, ctx: Context) -> Outcome:
     args.scenario = args.scenario_name
     scenario = _resolve_scenario(args)
     base = load_config(args.config, args.set or ())
+    from plant.model import check_config
+
+    check_config(base)
     r = bench_sweep(scenario, base, args.points, args.workers, ctx.say)
     rows = [(x.backend, x.wall_s, x.cpu_s, x.cpu_points_s) for x in r.runs]
     text = table(["backend", "wall [s]", "CPU [s]", "CPU in points [s]"], rows, fmt=".3g",

@@ -182,7 +182,36 @@ def load_faults(path: str | Path) -> FaultPlan:
         raise FaultError(f"{path}: cannot read: {exc.strerror}") from None
     except tomllib.TOMLDecodeError as exc:
         raise FaultError(f"{path}: not valid TOML: {exc}") from None
+    check_file(data, str(path))
     return parse_faults(data, str(path))
+
+
+#: What a fault file (``--faults FILE.toml``) may hold at its top level.
+FILE_KEYS = ("seed", "fault")
+
+
+def check_file(data: dict, where: str) -> None:
+    """A fault file holds ``seed`` and ``[[fault]]`` tables and at least one fault: a
+    misspelt table (``[[faults]]``) would otherwise inject nothing and say nothing."""
+    for key, value in data.items():
+        if key not in FILE_KEYS:
+            what = ("table" if isinstance(value, dict | list) else "key")
+            shown = f"[[{key}]]" if isinstance(value, list) else (
+                f"[{key}]" if isinstance(value, dict) else key)
+            raise FaultError(f"{where}: unknown {what} {shown} (a fault file holds "
+                             "seed = N and [[fault]] tables)")
+    if not data.get("fault"):
+        raise FaultError(f"{where}: no [[fault]] table: nothing to inject")
+
+
+def check_window(plan: FaultPlan, seconds: float) -> None:
+    """Every fault's window must start inside a run of ``seconds``: one that starts
+    after the end would never act (a run of N cycles holds cycles 0..N-1)."""
+    cycles = _cycle_at(seconds)
+    for f in plan.faults:
+        if f.start_cycle >= cycles:
+            raise FaultError(f"{plan.where}: {f.name}: key 'start_s' = {f.start_s:g} s is "
+                             f"not inside the run ({seconds:g} s): the fault would never act")
 
 
 def parse_faults(data: Any, where: str = "faults") -> FaultPlan:

@@ -79,6 +79,18 @@ class Traffic:
     notes: list[str] = field(default_factory=list)
     metadata: dict[str, str] = field(default_factory=dict)  # from a pcapng comment
     can_errors: dict[str, int] = field(default_factory=dict)
+    #: why the file ends early (cut by a killed writer, a full disk, a copy), None if whole;
+    #: reported by :func:`hil.cli.cutfiles.line` with how far it was read
+    cut: str | None = None
+
+    @property
+    def read_until_s(self) -> float | None:
+        """Time of the last frame read from the first (for a cut file: how far it reads),
+        s: captures of ``bus run`` count from the run's start, CAN logs in wall time."""
+        if not self.frames:
+            return None
+        times = [f.ts_ns for f in self.frames]
+        return (max(times) - min(times)) / 1e9
 
 
 def _pdu(payload: bytes, exact: bool) -> tuple[bytes, list[ec.Datagram], int]:
@@ -184,12 +196,54 @@ def read_capture(path: str | os.PathLike[str]) -> Traffic:
                 if frame is not None:
                     out.frames.append(frame)
         except (dpkt.dpkt.Error, ValueError, EOFError, IndexError) as exc:
-            out.notes.append(f"damaged or cut after packet {out.packets}: "
-                             f"{type(exc).__name__} {exc}".strip())
+            size = os.path.getsize(path)
+            why = "the file ends inside a block" if isinstance(
+                exc, dpkt.dpkt.NeedData) else f"{type(exc).__name__} {exc}".strip()
+            out.cut = f"{why} after packet {out.packets} ({size} bytes)"
+        else:
+            # dpkt stops quietly at a cut block header and skips a cut block of a kind it
+            # does not read: the file's own framing says whether it is whole
+            end = _framing_end(path, kind)
+            size = os.path.getsize(path)
+            if end < size:
+                out.cut = (f"the file ends inside a block at byte {end} of {size} (after "
+                           f"packet {out.packets})")
     if kind == "pcapng":
         out.metadata = _pcapng_comment(path)
     _udp_directions(out, udp_frames)
     return out
+
+
+def _framing_end(path: str, kind: str) -> int:
+    """Where the last whole block (pcapng: length at +4, repeated at its end) or record
+    (pcap: 16-byte header with the captured length at +8) of a capture ends."""
+    size = os.path.getsize(path)
+    with open(path, "rb") as fh:
+        head = fh.read(24)
+        little = head[:4] in (b"\xd4\xc3\xb2\xa1", b"\x4d\x3c\xb2\xa1") or (
+            kind == "pcapng" and head[8:12] == b"\x4d\x3c\x2b\x1a")
+        order = "little" if little else "big"
+        pos = 0 if kind == "pcapng" else 24
+        while pos < size:
+            fh.seek(pos)
+            hdr = fh.read(16 if kind == "pcap" else 8)
+            if kind == "pcap":
+                if len(hdr) < 16:
+                    return pos
+                step = 16 + int.from_bytes(hdr[8:12], order)
+            else:
+                if len(hdr) < 8:
+                    return pos
+                step = int.from_bytes(hdr[4:8], order)
+                if step < 12 or pos + step > size:
+                    return pos
+                fh.seek(pos + step - 4)
+                if int.from_bytes(fh.read(4), order) != step:
+                    return pos
+            if pos + step > size:
+                return pos
+            pos += step
+    return pos
 
 
 def _read_packet(buf: bytes, ts_ns: int, out: Traffic,
@@ -259,7 +313,10 @@ def read_can_traffic(path: str | os.PathLike[str], base_id: int = 0x100) -> Traf
         messages = read_can_log(path)
     except CanLogError as exc:
         raise TrafficError(str(exc)) from None
-    out = Traffic(path, Path(path).suffix.lower().lstrip("."), packets=len(messages))
+    from hil.transports.canlog import cut_reason
+
+    out = Traffic(path, Path(path).suffix.lower().lstrip("."), packets=len(messages),
+                  cut=cut_reason(path, len(messages)))
     ids = (base_id, base_id + 1)
     out.other_packets = sum(1 for m in messages if m.arbitration_id not in ids)
     stats: dict = {}
@@ -320,6 +377,8 @@ def summary(t: Traffic) -> dict:
         "metadata": {k: (v if len(v) <= 80 else f"<{len(v)} bytes>")
                      for k, v in t.metadata.items()},
         "notes": t.notes,
+        "truncated": t.cut is not None, "stop_reason": t.cut,
+        "read_until_s": t.read_until_s,
     }
 
 

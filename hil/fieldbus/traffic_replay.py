@@ -65,11 +65,42 @@ def _difference(logged: bytes, replayed: bytes, topo_windows) -> str:
     return f"{len(want)} datagrams logged, {len(have)} replayed"
 
 
+class TopologyMismatch(ValueError):
+    """The file's cycle does not have the frames the topology sends (one line)."""
+
+
+def _layout_text(frames: object) -> str:
+    return ", ".join(f"LRW lad {lad} len {n}" for lad, n in sorted(frames)) or "none"
+
+
+def check_layout(traffic: Traffic, topo: Topology,
+                 plan: tuple[tuple[int, int, int], ...]) -> None:
+    """TopologyMismatch when the logged requests' LRW datagrams (address, length) are not
+    the ones ``topo`` sends each cycle: a capture of another robot would else be reported
+    as a firmware divergence at its first reply."""
+    logged: set[tuple[int, int]] = set()
+    for f in traffic.frames:
+        if f.direction == "tx" and f.pdu is not None:
+            logged.update((d.adp | d.ado << 16, len(d.data)) for d in f.datagrams
+                          if d.cmd == ec.Command.LRW)
+            if len(logged) > len(plan):
+                break
+    want = {(lad, n) for lad, n, _ in plan}
+    if logged and logged != want:
+        meta = traffic.metadata.get("topology")
+        hint = (f"; it was recorded with --topology {meta}" if meta and meta != topo.name
+                else "; give the run's --topology")
+        raise TopologyMismatch(
+            f"{traffic.path}: its cycle ({_layout_text(logged)}) is not that of topology "
+            f"{topo.name} ({_layout_text(want)}){hint}")
+
+
 def replay_traffic(traffic: Traffic, topo: Topology, cfg: Config,
                    model: str = "stack") -> TrafficReplayResult:
     """Feed ``traffic``'s requests to a fresh chain; compare every logged reply. Stops at the
     first divergence."""
     chain = Chain(topo, cfg, model, crc_trailer=False)
+    check_layout(traffic, topo, chain.plan.frames)
     windows = chain.plan.windows
     res = TrafficReplayResult()
     pending: dict[tuple[int, int], deque[bytes]] = defaultdict(deque)

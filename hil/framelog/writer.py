@@ -170,11 +170,15 @@ class FrameLogWriter:
             self._file.close()
             raise ValueError(f"compression {compression!r} unavailable ({exc}); "
                              "use compression='none'") from None
-        self._writer.start(profile=profile, library=f"eha-hil/{package_version()}")
-        self._fast = batch.supported(self._writer)
-        self._writer.add_metadata(METADATA_NAME, {
-            "level": level, "version": package_version(), "time": "ns of simulated time",
-            **meta})
+        try:
+            self._writer.start(profile=profile, library=f"eha-hil/{package_version()}")
+            self._fast = batch.supported(self._writer)
+            self._writer.add_metadata(METADATA_NAME, {
+                "level": level, "version": package_version(), "time": "ns of simulated time",
+                **meta})
+        except BaseException:
+            self._file.close()  # e.g. a full disk: no descriptor left open
+            raise
         self._channels: dict[int, _Channel] = {}
         self._topics: set[str] = set()
         self._schemas: dict[tuple[str, str, bytes], int] = {}

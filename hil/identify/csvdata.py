@@ -37,8 +37,10 @@ and the column, so the command line can print it and exit with code 2.
 from __future__ import annotations
 
 import csv
+import functools
 import math
 import re
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -138,6 +140,8 @@ class MeasuredData:
     header: dict[str, str] = field(default_factory=dict)
     ignored: list[str] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
+    #: why the file ends early (its last line cut), None if whole (hil.cli.cutfiles)
+    cut: str | None = None
 
     @property
     def n(self) -> int:
@@ -238,7 +242,8 @@ def _lines_text(a: int, b: int) -> str:
 
 
 def read_measured(path: str | Path, load: str | None = None,
-                  sample_rate_hz: float | None = None) -> MeasuredData:
+                  sample_rate_hz: float | None = None, max_rows: int | None = None,
+                  progress: Callable[[str], None] | None = None) -> MeasuredData:
     """Read and validate a measured-data CSV (see the module docstring).
 
     ``load`` and ``sample_rate_hz`` (the command line's ``--load``, ``--sample-rate``) stand
@@ -253,18 +258,29 @@ def read_measured(path: str | Path, load: str | None = None,
     """
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8-sig")  # a byte-order mark is dropped
+        # a byte-order mark is dropped; the file is read as a stream (chunks of rows), so a
+        # long record never sits in memory as text
+        fh = open(path, encoding="utf-8-sig")  # noqa: SIM115 - closed below
     except FileNotFoundError:
         raise CsvError(path, None, None, "no such file") from None
-    except (OSError, UnicodeDecodeError) as exc:
+    except OSError as exc:
         raise CsvError(path, None, None, f"cannot read: {exc}") from None
-    lines = text.splitlines()
+    try:
+        with fh:
+            return _read_open(path, fh, load, sample_rate_hz, max_rows, progress)
+    except UnicodeDecodeError as exc:
+        raise CsvError(path, None, None, f"cannot read: {exc}") from None
+
+
+def _read_open(path: Path, fh, load: str | None, sample_rate_hz: float | None,  # noqa: ANN001
+               max_rows: int | None, progress: Callable[[str], None] | None
+               ) -> MeasuredData:
     header: dict[str, str] = {}
     header_at: dict[str, int] = {}
     lineno = 0
     names: list[str] | None = None
     header_line = 0
-    for lineno, line in enumerate(lines, start=1):
+    for lineno, line in enumerate(fh, start=1):
         stripped = line.strip()
         if not stripped:
             continue
@@ -409,32 +425,18 @@ def read_measured(path: str | Path, load: str | None = None,
     used = [(j, c) for j, c in enumerate(canon) if c is not None]
     used_names = [c for _, c in used]
     idx = [j for j, _ in used]
-    n_cols = len(names)
-    rows: list[list[float]] = []
-    row_lines: list[int] = []
-    for lineno in range(header_line + 1, len(lines) + 1):
-        line = lines[lineno - 1].strip()
-        if not line or line.startswith("#"):
-            continue
-        cells = _split(line)
-        if len(cells) != n_cols:
-            raise CsvError(path, lineno, None,
-                           f"expected {n_cols} cells, found {len(cells)}")
-        try:
-            values = [float(cells[j]) for j in idx]
-        except ValueError:  # an empty or NA cell, or a mistake: cell by cell
-            values = [_cell(path, lineno, names[j], cells[j]) for j in idx]
-        rows.append(values)
-        row_lines.append(lineno)
-    if len(rows) < MIN_ROWS:
+    rows = _DataRows(path, fh, header_line, names, idx, max_rows, progress)
+    arr, row_lines = rows.arr, rows.lines.tolist()  # line numbers as ints, for messages
+    n_rows = len(arr)
+    notes += rows.notes
+    if len(arr) < MIN_ROWS:
         raise CsvError(path, header_line, None,
-                       f"only {len(rows)} data rows (need >= {MIN_ROWS})")
-    arr = np.asarray(rows, dtype=float)
+                       f"only {len(arr)} data rows (need >= {MIN_ROWS})")
     inf = np.argwhere(np.isinf(arr))
     if inf.size:
         r, k = (int(x) for x in inf[0])
-        cell = _split(lines[row_lines[r] - 1].strip())[idx[k]].strip()
-        raise CsvError(path, row_lines[r], names[idx[k]], f"'{cell}' is not finite")
+        cell = _split(_line_at(path, int(row_lines[r])).strip())[idx[k]].strip()
+        raise CsvError(path, int(row_lines[r]), names[idx[k]], f"'{cell}' is not finite")
     for col, (scale, offset) in convert.items():
         k = used_names.index(col)
         arr[:, k] = arr[:, k] * scale + offset
@@ -520,7 +522,7 @@ def read_measured(path: str | Path, load: str | None = None,
         if sel.size < MIN_ROWS:
             worst = int(np.argmax(missing.sum(axis=0)))
             hint = (f"; column '{seen[used_names[worst]]}' is empty or NaN in "
-                    f"{int(missing[:, worst].sum())} of {len(rows)} rows"
+                    f"{int(missing[:, worst].sum())} of {n_rows} rows"
                     if missing[:, worst].any() else "")
             where = (f"longest is {_lines_text(row_lines[sel[0]], row_lines[sel[-1]])}, "
                      f"{sel.size} samples" if sel.size else "no complete row")
@@ -528,11 +530,171 @@ def read_measured(path: str | Path, load: str | None = None,
                            f"samples ({where}); gaps at {shown}{hint}")
         notes.append(f"gaps in the data at {shown}: using the longest stretch without gaps, "
                      f"{_lines_text(row_lines[sel[0]], row_lines[sel[-1]])} ({sel.size} of "
-                     f"{len(rows)} samples)")
+                     f"{n_rows} samples)")
         arr = arr[sel]
     columns = {c: arr[:, k].copy() for k, c in enumerate(used_names) if c != "t"}
     return MeasuredData(str(path), load, fs, arr[:, ti].copy(), columns, header, ignored,
-                        notes)
+                        notes, rows.cut)
+
+
+@functools.cache
+def _exact_floats() -> dict:
+    """pandas' parser option for Python's own float bits: the default since pandas 3
+    (tested), ``float_precision="round_trip"`` before (deprecated in 3)."""
+    import pandas as pd
+
+    major = int(pd.__version__.split(".", 1)[0])
+    return {} if major >= 3 else {"float_precision": "round_trip"}
+
+
+def estimate_rows(path: str | Path) -> int:
+    """About how many data rows the file holds, from its size and its first 64 KiB (for
+    the size check before reading: a long file is never read just to learn its length)."""
+    p = Path(path)
+    size = p.stat().st_size
+    with open(p, "rb") as fh:
+        head = fh.read(1 << 16)
+    rows = [ln for ln in head.split(b"\n")[:-1] if ln.strip() and not ln.startswith(b"#")]
+    if len(rows) < 2:
+        return len(rows)
+    data = rows[1:]  # the first is the header row
+    per_row = sum(len(r) + 1 for r in data) / len(data)
+    return max(len(data), int(size / per_row))
+
+
+#: Rows parsed at a time: a few tens of MB of text (pandas' C parser per chunk).
+CHUNK_ROWS = 200_000
+
+
+def _line_at(path: Path, lineno: int) -> str:
+    """Line ``lineno`` (1-based) of the file, read again for an error message."""
+    with open(path, encoding="utf-8-sig") as fh:
+        for k, line in enumerate(fh, start=1):
+            if k == lineno:
+                return line
+    return ""
+
+
+class _DataRows:
+    """The data rows after the header row, parsed in chunks of CHUNK_ROWS lines.
+
+    A chunk of plain numbers goes through pandas' C parser (its default, exact since pandas
+    3: the same bits
+    as Python's ``float``); a chunk it refuses, or one with quotes or comments, is parsed
+    line by line, which names the line and cell of a mistake. ``max_rows``: stop after
+    that many rows (``notes`` says how many of about how many were used). A last line
+    without its newline and with too few cells is a cut file: left out, said in ``cut``."""
+
+    def __init__(self, path: Path, fh, header_line: int, names: list[str],  # noqa: ANN001
+                 idx: list[int], max_rows: int | None,
+                 progress: Callable[[str], None] | None) -> None:
+        import itertools
+
+        self.path, self.names, self.idx = path, names, idx
+        self.n_cols = len(names)
+        self.notes: list[str] = []
+        self.cut: str | None = None
+        size = path.stat().st_size
+        blocks: list[np.ndarray] = []
+        line_blocks: list[np.ndarray] = []
+        n = 0
+        lineno = header_line
+        read_bytes = 0
+        more = False
+        while True:
+            want = CHUNK_ROWS if max_rows is None else min(CHUNK_ROWS, max_rows - n + 1)
+            chunk = list(itertools.islice(fh, want))
+            if not chunk:
+                break
+            if chunk[-1] and not chunk[-1].endswith("\n"):
+                last = chunk[-1].strip()
+                if last and not last.startswith("#") and \
+                        len(_split(last)) < self.n_cols:
+                    self.cut = (f"the last line ({lineno + len(chunk)}) is cut: "
+                                f"{len(_split(last))} of {self.n_cols} cells")
+                    chunk = chunk[:-1]
+            read_bytes += sum(len(x) for x in chunk)
+            vals, lines = self._parse(chunk, lineno)
+            lineno += len(chunk)
+            if max_rows is not None and n + len(vals) > max_rows:
+                vals, lines = vals[:max_rows - n], lines[:max_rows - n]
+                more = True
+            blocks.append(vals)
+            line_blocks.append(lines)
+            n += len(vals)
+            if max_rows is not None and n >= max_rows and not more:
+                more = any(x.strip() and not x.lstrip().startswith("#") for x in fh)
+            if progress is not None and (more or n >= CHUNK_ROWS):
+                progress(f"reading {path.name}: {n:,} rows ({read_bytes / size:.0%} of "
+                         f"{size / 1e6:,.0f} MB)" if not more else
+                         f"reading {path.name}: {n:,} rows, the --max-rows limit")
+            if more:
+                break
+        if more:
+            per_row = read_bytes / max(lineno - header_line, 1)
+            about = int(size / per_row) if per_row else n
+            self.notes.append(f"used the first {n:,} of about {about:,} rows (by the file's "
+                              f"size): --max-rows {max_rows:,} bounds time and memory")
+            self.cut = None  # the rest was not read: its end is not known
+        self.arr = (np.concatenate(blocks) if blocks else
+                    np.zeros((0, len(idx))))
+        self.lines = (np.concatenate(line_blocks) if line_blocks else
+                      np.zeros(0, dtype=np.int64))
+
+    def _parse(self, chunk: list[str], line0: int) -> tuple[np.ndarray, np.ndarray]:
+        text = "".join(chunk)
+        if '"' not in text and "#" not in text:
+            fast = self._fast(chunk, text, line0)
+            if fast is not None:
+                return fast
+        return self._slow(chunk, line0)
+
+    def _fast(self, chunk: list[str], text: str, line0: int
+              ) -> tuple[np.ndarray, np.ndarray] | None:
+        import io
+
+        import pandas as pd
+
+        keep = [k for k, line in enumerate(chunk) if line.strip()]
+        if len(keep) != len(chunk):
+            return None  # blank lines: the careful path numbers them right
+        want = self.n_cols - 1
+        if any(line.count(",") != want for line in chunk):
+            return None  # a row of the wrong length: the careful path names it
+        na = sorted(NA_TOKENS | {t.upper() for t in NA_TOKENS} | {"NaN", "N/A", "#N/A",
+                                                                 "Null", "None", ""})
+        try:
+            df = pd.read_csv(io.StringIO(text), header=None, usecols=self.idx,
+                             dtype=np.float64, na_values=na, keep_default_na=False,
+                             engine="c", **_exact_floats())
+        except (ValueError, pd.errors.ParserError):
+            return None
+        if df.shape != (len(chunk), len(self.idx)):
+            return None
+        vals = df[self.idx].to_numpy(dtype=np.float64)
+        return vals, np.arange(line0 + 1, line0 + 1 + len(chunk), dtype=np.int64)
+
+    def _slow(self, chunk: list[str], line0: int) -> tuple[np.ndarray, np.ndarray]:
+        rows: list[list[float]] = []
+        row_lines: list[int] = []
+        for k, raw in enumerate(chunk):
+            lineno = line0 + 1 + k
+            line = raw.strip()
+            if not line or line.startswith("#"):
+                continue
+            cells = _split(line)
+            if len(cells) != self.n_cols:
+                raise CsvError(self.path, lineno, None,
+                               f"expected {self.n_cols} cells, found {len(cells)}")
+            try:
+                values = [float(cells[j]) for j in self.idx]
+            except ValueError:  # an empty or NA cell, or a mistake: cell by cell
+                values = [_cell(self.path, lineno, self.names[j], cells[j])
+                          for j in self.idx]
+            rows.append(values)
+            row_lines.append(lineno)
+        return (np.asarray(rows, dtype=float).reshape(len(rows), len(self.idx)),
+                np.asarray(row_lines, dtype=np.int64))
 
 
 def write_measured(path: str | Path, data: MeasuredData, extra_header: dict | None = None) -> None:
@@ -551,5 +713,6 @@ def write_measured(path: str | Path, data: MeasuredData, extra_header: dict | No
         np.savetxt(fh, mat, delimiter=",", fmt="%.12g")
 
 
-__all__ = ["CsvError", "KNOWN_COLUMNS", "LOAD_CASES", "MeasuredData", "UNITS", "read_measured",
+__all__ = ["CsvError", "KNOWN_COLUMNS", "LOAD_CASES", "MeasuredData", "UNITS", "estimate_rows",
+           "read_measured",
            "write_measured"]

@@ -271,11 +271,13 @@ def run_matrix(cases: Sequence[Case], seeds: Sequence[int], jobs: int = 1,
             if progress:
                 progress(results[i], i + 1, len(work))  # type: ignore[arg-type]
         return results  # type: ignore[return-value]
-    import multiprocessing as mp
-    from concurrent.futures import ProcessPoolExecutor, as_completed
+    from concurrent.futures import as_completed
+
+    from hil.workers.pools import process_pool
 
     _warm()  # compile the kernels into numba's cache once, not in every worker at once
-    with ProcessPoolExecutor(jobs, mp_context=mp.get_context("spawn")) as pool:
+    # workers leave Ctrl-C to this process and end with it (no orphans, no wait)
+    with process_pool(jobs) as pool:
         futures = {pool.submit(_run_packed, w): i for i, w in enumerate(work)}
         for done, fut in enumerate(as_completed(futures), start=1):
             res = fut.result()  # a worker that died raises BrokenProcessPool here

@@ -63,8 +63,7 @@ class Serial:
 
 
 def _worker_init() -> None:
-    # Ctrl-C reaches the whole process group; the parent decides what happens.
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    # (hil.workers.pools: Ctrl-C reaches the whole process group; the parent decides what happens)
     from hil import scenarios
     from hil.sweep.point import single_threaded_blas
 
@@ -81,31 +80,22 @@ class LocalPool:
 
     def map(self, fn: Callable[[Any], Any], tasks: Sequence[Any], on_lost: Lost
             ) -> Iterator[Any]:
-        import multiprocessing
-        from concurrent.futures import ProcessPoolExecutor, as_completed
+        from concurrent.futures import as_completed
         from concurrent.futures.process import BrokenProcessPool
+
+        from hil.workers.pools import process_pool
 
         if not tasks:
             return
-        pool = ProcessPoolExecutor(max_workers=min(self.workers, len(tasks)),
-                                   mp_context=multiprocessing.get_context("spawn"),
-                                   initializer=_worker_init)
-        clean = False
-        try:
+        # Interrupted or abandoned (the generator closed): the pool ends the workers now
+        # rather than after their current point.
+        with process_pool(min(self.workers, len(tasks)), _worker_init) as pool:
             futures = {pool.submit(fn, task): task for task in tasks}
             for fut in as_completed(futures):
                 try:
                     yield fut.result()
                 except BrokenProcessPool as exc:
                     yield on_lost(futures[fut], f"worker process died ({exc})")
-            clean = True
-        finally:
-            if not clean:
-                # Interrupted or abandoned: end the workers now rather than after their
-                # current point (Python 3.11 has no public way; 3.14: terminate_workers).
-                for proc in list(getattr(pool, "_processes", {}).values()):
-                    proc.terminate()
-            pool.shutdown(wait=True, cancel_futures=True)
 
     def close(self) -> None:
         pass

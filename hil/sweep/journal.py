@@ -69,11 +69,15 @@ class Journal:
                   "points": points}
         # Rewritten whole (header + kept records), then appended to: no cut line survives.
         tmp = self.path.with_name(self.path.name + ".tmp")
-        with tmp.open("w", encoding="utf-8") as f:
-            f.write(json.dumps(header) + "\n")
-            for index in sorted(done):
-                f.write(json.dumps(done[index]) + "\n")
-        os.replace(tmp, self.path)
+        try:
+            with tmp.open("w", encoding="utf-8") as f:
+                f.write(json.dumps(header) + "\n")
+                for index in sorted(done):
+                    f.write(json.dumps(done[index]) + "\n")
+            os.replace(tmp, self.path)
+        except OSError:
+            tmp.unlink(missing_ok=True)  # a full disk: no half journal left behind
+            raise
         self._file = self.path.open("a", encoding="utf-8")
         return done
 

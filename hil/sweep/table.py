@@ -64,14 +64,13 @@ def frame(plan: Plan, records: list[dict[str, Any]]) -> pd.DataFrame:
 
 
 def write(df: pd.DataFrame, path: str | Path) -> None:
-    """``.parquet`` (pyarrow) or ``.csv``; written to a temporary name, then renamed."""
+    """``.parquet`` (pyarrow) or ``.csv`` (the command writes it through
+    :func:`hil.cli.outputs.write`: a temporary name, renamed when complete)."""
     path = Path(path)
-    tmp = path.with_name(path.name + ".tmp")
     if path.suffix.lower() == ".parquet":
-        df.to_parquet(tmp, index=False)
+        df.to_parquet(path, index=False)
     else:
-        df.to_csv(tmp, index=False)
-    tmp.replace(path)
+        df.to_csv(path, index=False)
 
 
 def read(path: str | Path) -> pd.DataFrame:

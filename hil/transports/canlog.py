@@ -102,6 +102,15 @@ def read_can_log(path: str | os.PathLike[str]) -> list[can.Message]:
     """Every message of a BLF, ASC or candump file, through ``can.LogReader``."""
     p = check_log_name(path) if Path(path).suffix else Path(path)
     try:
+        if p.suffix.lower() in (".asc", ".log") and _last_line_cut(p):
+            # a cut text log: its readers stop at the partial line with an error; read the
+            # complete lines (cut_reason reports the cut)
+            import io
+
+            text = p.read_text(errors="replace")
+            text = text[: text.rfind("\n") + 1]
+            reader = can.ASCReader if p.suffix.lower() == ".asc" else can.CanutilsLogReader
+            return list(reader(io.StringIO(text)))
         return list(can.LogReader(str(p)))
     except (OSError, ValueError, EOFError, IndexError, KeyError, can.CanError) as exc:
         raise CanLogError(f"{path}: not a readable CAN log: "
@@ -109,6 +118,48 @@ def read_can_log(path: str | os.PathLike[str]) -> list[can.Message]:
     except Exception as exc:  # a reader's own parse failure (struct.error, zlib.error...)
         raise CanLogError(f"{path}: not a readable CAN log: {type(exc).__name__}: "
                           f"{' '.join(str(exc).split())}") from None
+
+
+def _last_line_cut(p: Path) -> bool:
+    size = p.stat().st_size
+    if not size:
+        return False
+    with open(p, "rb") as fh:
+        fh.seek(size - 1)
+        return fh.read(1) != b"\n"
+
+
+def cut_reason(path: str | os.PathLike[str], messages: int) -> str | None:
+    """Why a CAN log read back with ``messages`` messages ends early, or None if whole.
+
+    python-can's readers stop quietly at a cut; each format says it another way: a BLF
+    header declares the file size and the object count (both 0 when the writer was never
+    closed), an ASC file ends with ``End TriggerBlock``, a candump line with a newline."""
+    p = Path(path)
+    size = p.stat().st_size
+    suffix = p.suffix.lower()
+    if suffix == ".blf":
+        try:
+            reader = can.BLFReader(str(p))
+            declared_size, declared = reader.file_size, reader.object_count
+            reader.stop()
+        except Exception:  # noqa: BLE001 - read_can_log has reported a broken header
+            return None
+        if declared_size == 0 and declared == 0:
+            return f"not finalised (the writer was not closed; {size} bytes)"
+        if size < declared_size:
+            return f"the file ends at byte {size} of {declared_size}"
+        if messages < declared:
+            return f"{messages} of the {declared} objects its header declares"
+        return None
+    with open(p, "rb") as fh:
+        fh.seek(max(0, size - 4096))
+        tail = fh.read()
+    if suffix == ".asc" and b"End TriggerBlock" not in tail:
+        return f"no 'End TriggerBlock' line (the file ends at byte {size})"
+    if tail and not tail.endswith(b"\n"):
+        return f"the last line is cut (the file ends at byte {size})"
+    return None
 
 
 @dataclass(frozen=True)

@@ -133,8 +133,6 @@ def test_cli_export(log: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str
     (["info", "{missing}"], "no such file"),
     (["info", "{empty}"], "empty file"),
     (["info", "{text}"], "not an MCAP file"),
-    (["export", "{log}", "{tmp}/nodir/x.csv"], "does not exist"),
-    (["export", "{log}", "{tmp}"], "is a directory"),
     (["export", "{log}", "{tmp}/y.csv", "--topic", "/x"], "no topic '/x'"),
     (["export", "{log}", "{tmp}/y.csv", "--field", "zz"], "field 'zz'"),
 ])
@@ -149,6 +147,30 @@ def test_cli_errors_are_one_line(log: Path, tmp_path: Path, capsys: pytest.Captu
     err = capsys.readouterr().err
     assert err.startswith("eha-hil log: ") and match in err
     assert err.count("\n") == 1 and "Traceback" not in err
+
+
+@pytest.mark.parametrize(("out", "match"), [
+    ("{tmp}/nodir/x.csv", "does not exist"),
+    ("{tmp}", "is a directory"),
+    ("{log}", "is also an input"),  # the log itself: never overwritten with its CSV
+    ("{tmp}/./{logname}", "is also an input"),  # another spelling of the same file
+])
+def test_export_output_checked_by_the_command_line(
+        log: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str], out: str,
+        match: str) -> None:
+    from hil.cli import main
+
+    (tmp_path / log.name).write_bytes(log.read_bytes())
+    log = tmp_path / log.name
+    before = log.read_bytes()
+    try:
+        code = main(["log", "export", str(log),
+                     out.format(tmp=tmp_path, log=log, logname=log.name)])
+    except SystemExit as exc:  # argparse's own exit for a bad argument
+        code = exc.code
+    err = capsys.readouterr().err
+    assert code == 2 and match in err and err.count("\n") == 1, err
+    assert log.read_bytes() == before
 
 
 def test_cli_damaged_file(log: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]

@@ -137,8 +137,10 @@ def test_config_show_and_presets(capsys):
         (["bus", "run", "--log", "/nonexistent/x.mcap"], "/nonexistent does not exist"),
         (["main", "-c", "/tmp"], "/tmp: is a directory"),
         # Options a verb does not use are not offered.
-        (["config", "presets", "-c", "hydra_linear"], "unrecognized arguments: -c"),
-        (["bench", "codecs", "--set", "sim.seed=2"], "unrecognized arguments: --set"),
+        (["config", "presets", "-c", "hydra_linear"],
+         "argument -c: not an option of eha-hil config presets"),
+        (["bench", "codecs", "--set", "sim.seed=2"],
+         "argument --set: not an option of eha-hil bench codecs"),
     ],
 )
 def test_user_mistakes_give_one_line_and_exit_2(capsys, argv, fragment):

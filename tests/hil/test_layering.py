@@ -85,15 +85,16 @@ def test_layers_import_only_downwards():
 #: sit on them; the command line (cli) sits on everything and nothing imports it.
 ROOMS: dict[str, set[str]] = {
     "transports": set(),
+    "workers": set(),
     "analysis": set(),
     "output": {"analysis"},
     "framelog": {"output"},
     "sim": {"fieldbus"},
     "fieldbus": {"sim", "transports"},
     "replay": {"fieldbus", "framelog", "sim"},
-    "identify": {"analysis", "output"},
+    "identify": {"analysis", "output", "workers"},
     "scenarios": {"analysis", "fieldbus", "identify", "output", "sim"},
-    "sweep": {"output", "scenarios"},
+    "sweep": {"output", "scenarios", "workers"},
     "verify": {"sim"},
     "bench": {"fieldbus", "framelog", "replay", "sim", "sweep", "transports"},
     "cli": {"analysis", "bench", "fieldbus", "framelog", "identify", "output", "replay",

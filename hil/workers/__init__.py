@@ -1,0 +1,1 @@
+"""Worker processes of the commands that fan work out (a pool that ends with them)."""
