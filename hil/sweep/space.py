@@ -166,6 +166,9 @@ def parse_param(text: str) -> GridParam:
         if count < 1 or (count == 1 and start != stop):
             raise argparse.ArgumentTypeError(f"{text!r}: COUNT needs to be at least 2 "
                                              "(1 only with START = STOP)")
+        if count > MAX_POINTS:  # refused before the values are made, not after
+            raise argparse.ArgumentTypeError(
+                f"{text!r}: COUNT {count} is more than a sweep's {MAX_POINTS} points")
         values = tuple(float(v) for v in np.linspace(start, stop, count))
     else:
         items = [s.strip() for s in spec.split(",")]
@@ -204,6 +207,9 @@ def parse_seeds(text: str) -> tuple[int, ...]:
             lo, hi = (int(s, 10) for s in text.split(".."))
             if hi < lo:
                 raise argparse.ArgumentTypeError(f"{text!r}: need A <= B in A..B")
+            if hi - lo + 1 > MAX_POINTS:
+                raise argparse.ArgumentTypeError(
+                    f"{text!r}: {hi - lo + 1} seeds is more than a sweep's {MAX_POINTS} points")
             seeds = tuple(range(lo, hi + 1))
         else:
             seeds = tuple(int(s, 10) for s in text.split(","))
@@ -302,6 +308,10 @@ def build_plan(base: Config, grid: list[GridParam] = (), tolerances: list[Tolera
         raise ConfigError("--tolerance: give the number of Monte Carlo samples (--samples N)")
     if samples and not tolerances:
         raise ConfigError("--samples: nothing to draw; give a --tolerance")
+    # The size first: checking every value of a grid that is refused anyway takes minutes.
+    n = math.prod(len(g.values) for g in grid) * max(len(seeds), 1) * max(samples, 1)
+    if n > MAX_POINTS:
+        raise ConfigError(f"sweep: {n} points; at most {MAX_POINTS} in one sweep")
     typed = []
     for g in grid:
         values = tuple(_typed(keys_, g.key, v) for v in g.values)
@@ -327,9 +337,6 @@ def build_plan(base: Config, grid: list[GridParam] = (), tolerances: list[Tolera
             for sign in (-1.0, 1.0):  # the band's edges: any draw lies between them
                 _check({key: _toleranced(keys_, tol, key, sign * tol.width)},
                        f"--tolerance {key}")
-    n = math.prod(len(g.values) for g in typed) * max(len(seeds), 1) * max(samples, 1)
-    if n > MAX_POINTS:
-        raise ConfigError(f"sweep: {n} points; at most {MAX_POINTS} in one sweep")
     deviations = [[draw(t, draw_seed, j, distribution) for t in tolerances]
                   for j in range(samples)]
     points = []

@@ -37,6 +37,10 @@ def _code(argv: list[str]) -> int:
     (["f3", "--tolerance", "hydraulics.jp_kg=10%"], ["--samples"]),
     (["f3", "--seeds", "0..3", "--resume"], ["--resume", "--out"]),
     (["f3"], ["nothing to vary"]),
+    # sizes refused before any value is made or checked (a count of 1e8 used to hang)
+    (["f3", "--param", "mcu.kp_force=1:2:100000000"], ["COUNT 100000000", "points"]),
+    (["f3", "--seeds", "0..100000000"], ["100000001 seeds", "points"]),
+    (["f3", "--param", "mcu.kp_force=1:2:1001", "--seeds", "0..999"], ["1001000 points"]),
     (["thesis", "--seeds", "1,2"], ["one scenario"]),
     (["f33", "--seeds", "1,2"], ["unknown scenario"]),
     (["f3", "--seeds", "1,2", "--out", "x.txt"], ["--out", ".parquet"]),
