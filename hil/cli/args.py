@@ -278,13 +278,16 @@ def output_dir(value: str) -> str:
 output_dir.kind = "dir"  # type: ignore[attr-defined]
 
 
-def add_config_options(parser: argparse.ArgumentParser) -> None:
+def add_config_options(parser: argparse.ArgumentParser, mcu: bool = True) -> None:
     """``-c/--config`` and ``--set``, the same on every verb that simulates the actuator (the
-    values are checked by :func:`plant.config.load_config`, against the schema's ranges)."""
+    values are checked by :func:`plant.config.load_config`, against the schema's ranges);
+    ``--mcu-image`` only where an MCU runs (``mcu``): elsewhere it would be ignored."""
     parser.add_argument("-c", "--config", metavar="PRESET|FILE",
                         help="actuator preset name or TOML file (default: hydra_default)")
     parser.add_argument("--set", action="append", metavar="SECTION.KEY=VALUE",
                         help="override one configuration value (repeatable)")
+    if not mcu:
+        return
     parser.add_argument("--mcu-image", metavar="FILE.elf", type=mcu_image,
                         help="run this Cortex-M4F firmware ELF as the MCU (sets mcu.impl="
                         "image and mcu.image; the interface: docs/mcu.md)")
@@ -317,12 +320,13 @@ def image_sets(args: argparse.Namespace) -> None:
 PLOT_FILE = output_file((".png", ".svg", ".pdf"))
 
 
-def common(json_plot: bool = True, plot: bool = True,
-           config: bool = True) -> argparse.ArgumentParser:
-    """The options verbs share: ``-c``/``--set`` (``config``), ``--json`` and ``--plot``."""
+def common(json_plot: bool = True, plot: bool = True, config: bool = True,
+           mcu: bool = True) -> argparse.ArgumentParser:
+    """The options verbs share: ``-c``/``--set`` (``config``), ``--mcu-image`` (``mcu``: the
+    verb runs the MCU law), ``--json`` and ``--plot``."""
     parent = Parser(add_help=False)
     if config:
-        add_config_options(parent)
+        add_config_options(parent, mcu=mcu)
     if json_plot:
         parent.add_argument("--json", action="store_true", help="print JSON instead of tables")
     if plot:

@@ -158,12 +158,12 @@ def cmd_bench_codecs(args: argparse.Namespace, ctx: Context) -> Outcome:
 
 def add_parsers(bsub) -> None:  # noqa: ANN001 - argparse's sub-parsers of ``bench``
     """Register ``bench plant|fpga|stack|robot|codecs|joint|log``."""
-    p = bsub.add_parser("plant", parents=[common(plot=False)],
+    p = bsub.add_parser("plant", parents=[common(plot=False, mcu=False)],
                         help="real-time factor of the plant alone, default effects on")
     p.add_argument("--seconds", type=positive_float(600, "s"), default=5.0,
                    help="simulated seconds, in (0, 600]")
     command(p, cmd_bench_plant)
-    p = bsub.add_parser("fpga", parents=[common(plot=False)],
+    p = bsub.add_parser("fpga", parents=[common(plot=False, mcu=False)],
                         help="real-time factor of plant + driver board + LVDS link")
     p.add_argument("--seconds", type=positive_float(600, "s"), default=2.0,
                    help="simulated seconds, value-level path, in (0, 600]")

@@ -55,7 +55,7 @@ def configure_identify(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("data", metavar="DATA.csv", type=input_file("measured-data CSV"),
                         help="measured-data CSV (docs/identify.md)")
     # -c/--set: the constants and start values, as on every other verb
-    add_config_options(parser)
+    add_config_options(parser, mcu=False)
     parser.add_argument("--preset", dest="config", help=argparse.SUPPRESS)  # old name of -c
     parser.add_argument("--report", metavar="DIR", type=output_dir,
                         help="write tables and plots into DIR")
@@ -324,7 +324,7 @@ def configure_bench(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--load", default="fixed_piston",
                         choices=("fixed_piston", "free_piston", "conrod_fixed"),
                         help="load case of the synthetic record")
-    add_config_options(parser)  # the fitted model's configuration, as for identify
+    add_config_options(parser, mcu=False)  # the fitted model's configuration, as for identify
     parser.add_argument("--effect", action="append", default=None,
                         help="effects in the record (default: pump_pulsation and "
                              "pump_coulomb_friction)")

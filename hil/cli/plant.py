@@ -184,7 +184,7 @@ def add_parsers(sub) -> None:  # noqa: ANN001 - argparse's sub-parsers
 
     plant = sub.add_parser("plant", help="plant-only studies")
     psub = plant.add_subparsers(dest="plant_command", metavar="STUDY", required=True)
-    p = psub.add_parser("bode", parents=[common()],
+    p = psub.add_parser("bode", parents=[common(mcu=False)],
                         help="open-loop Bode by simulation next to d_s k_s/G1 and d_s k_s/G3")
     p.add_argument("--load", choices=["fixed", "free", "both"], default="both",
                    help="piston fixed, free, or both")
@@ -197,7 +197,7 @@ def add_parsers(sub) -> None:  # noqa: ANN001 - argparse's sub-parsers
     p.add_argument("--linear", action="store_true",
                    help="use the hydra_linear preset (all effects off) unless -c is given")
     command(p, cmd_plant_bode)
-    p = psub.add_parser("tn-curve", parents=[common()],
+    p = psub.add_parser("tn-curve", parents=[common(mcu=False)],
                         help="T-N curve and efficiencies at constant current (thesis F2)")
     # Beyond the driver board's +/- 40 A current range the piston reaches its end stop
     # before the sweep settles and the integration breaks down.

@@ -81,7 +81,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
                    "fast shows what fused multiply-adds change)")
     command(p, cmd_verify_mcu)
 
-    p = vsub.add_parser("current-loop", parents=[common(plot=False)],
+    p = vsub.add_parser("current-loop", parents=[common(plot=False, mcu=False)],
                         help="the driver board's current loop: Python board model against "
                         "the RTL under Verilator or Icarus Verilog and cocotb")
     p.add_argument("--against", required=True, choices=("rtl",),

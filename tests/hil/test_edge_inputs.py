@@ -203,6 +203,31 @@ def test_option_of_another_transport_refused(case, tmp_path, monkeypatch):
         assert out == ""
 
 
+# --mcu-image only where an MCU law runs: elsewhere it would be accepted and ignored
+NO_MCU = [["plant", "bode"], ["plant", "tn-curve"], ["bench", "plant"], ["bench", "fpga"],
+          ["verify", "current-loop", "--against", "rtl"], ["identify", "DATA"],
+          ["identify-check"]]
+
+
+@pytest.mark.parametrize("argv", NO_MCU, ids=" ".join)
+def test_mcu_image_refused_where_no_mcu_runs(argv, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "DATA").write_text("t,iq\n0,0\n")  # a file, so only the option is wrong
+    code, out, err = _run([*argv, "--mcu-image", "law.elf"])
+    line = _one_line(err)
+    assert code == 2 and "--mcu-image" in line and "not an option" in line, line
+    assert out == ""
+
+
+def test_mcu_image_offered_where_the_mcu_runs():
+    with_mcu = {p.prog for p in walk(build_parser())
+                if any("--mcu-image" in a.option_strings for a in p._actions)}
+    assert {"eha-hil run", "eha-hil bench stack", "eha-hil sweep",
+            "eha-hil verify mcu"} <= with_mcu
+    assert not with_mcu & {"eha-hil " + " ".join(a[:2] if a[0] != "identify" else a[:1])
+                           for a in NO_MCU}
+
+
 def test_unknown_option_is_named_not_its_value(tmp_path):
     code, _, err = _run(["log", "info", "-c", "x", str(tmp_path / "run.mcap")])
     line = _one_line(err)
