@@ -27,6 +27,7 @@ from __future__ import annotations
 import math
 import threading
 from concurrent.futures import Future, ThreadPoolExecutor
+from typing import NamedTuple
 
 import llvmlite.binding as llvm
 import numba
@@ -110,26 +111,88 @@ def _claim(typingctx, counter):
     return types.int64(counter), codegen
 
 
+class PlantRows(NamedTuple):
+    """The plants' arrays, one row per actuator (:class:`plant.model.Plant`)."""
+    x: np.ndarray       #: state
+    params: np.ndarray  #: parameters
+    u: np.ndarray       #: inputs (drive mode, duties)
+    y: np.ndarray       #: outputs
+    rng: np.ndarray     #: noise generators' states
+    work: np.ndarray    #: the integrator's scratch
+
+
+class SensorRows(NamedTuple):
+    """The sensor chips' parameters and the raw words they gave the board this tick."""
+    chips: np.ndarray
+    raw: np.ndarray
+
+
+class BoardRows(NamedTuple):
+    """The driver boards (:class:`firmware_model.fpga.driver_board.DriverBoard`)."""
+    params: np.ndarray
+    state: np.ndarray
+    down: np.ndarray  #: downstream memory (what the MCU sent)
+    up: np.ndarray    #: upstream memory (what the board sends)
+
+
+class LinkRows(NamedTuple):
+    """The LVDS links: the MCU side's memories and the link's own state."""
+    mcu_down: np.ndarray
+    mcu_up: np.ndarray
+    state: np.ndarray
+
+
+class StackRows(NamedTuple):
+    """Every array one actuator's stack below the MCU works on (:func:`advance_stack`), one
+    row per actuator. A tuple of arrays to numba: the kernel reads the fields by name at
+    no cost once compiled."""
+    plant: PlantRows
+    sensors: SensorRows
+    board: BoardRows
+    link: LinkRows
+
+
+class McuRows(NamedTuple):
+    """The MCU programs' records, one row per actuator."""
+    ptrs: np.ndarray   #: addresses of its state, input and output record
+    in16: np.ndarray   #: input records as 16-bit words
+    in32: np.ndarray   #: input records as 32-bit words
+    out16: np.ndarray  #: output records as 16-bit words
+    err: np.ndarray    #: link error counts the program read at its last step
+
+
+#: Where each field of :class:`StackRows` lives on an :class:`~hil.sim.actuator.FpgaStack`:
+#: (object path, attribute), in the bundles' field order.
+_SOURCES = (
+    (PlantRows, (("plant", "x"), ("plant", "params"), ("plant", "u"), ("plant", "y"),
+                 ("plant", "rng"), ("plant", "_work"))),
+    (SensorRows, (("", "chips"), ("", "raw"))),
+    (BoardRows, (("board", "params"), ("board", "state"), ("board", "down"),
+                 ("board", "up"))),
+    (LinkRows, (("mcu_link", "down"), ("mcu_link", "up"), ("", "link"))),
+)
+
+
 # No reference counting (``_nrt=False``, as the parts' tick functions): every row view
 # below would otherwise increment and decrement the parent array's count, an atomic on a
 # cache line all compute threads share (~200 ns per actuator tick with one thread, more
-# with two).
+# with two). Reading a field of a bundle is a static tuple index: no count either.
 @njit(cache=True, nogil=True, _nrt=False)
-def advance_robot(counter, n_periods, period, tick0, batched, ptrs, no_rec, no_trace, x, p,
-                  u, y, rng, work, k, raw, c, st, down, up, mdown, mup, lk, in16, in32,
-                  out16, err):
+def advance_robot(counter, n_periods, period, tick0, batched, s, mcu, no_rec, no_trace):
     """``n_periods`` MCU periods of ``period`` ticks from ``tick0`` for the actuators this
     thread claims (``counter``: the next unclaimed index, shared by every thread of the
     cycle), those with ``batched[i]``: its MCU program (state, input and output record at
-    the addresses ``ptrs[i]``) steps, its downstream words go into its LVDS memory, its
-    stack advances one period, its upstream words and the link's CRC count go into its
-    input record. ``err[i]``: the link error counts the program read at its last step.
-    ``no_rec`` and ``no_trace``: empty record and trace arrays (nothing recorded here).
-    Returns how many actuators this thread advanced."""
+    the addresses ``mcu.ptrs[i]``) steps, its downstream words go into its LVDS memory, its
+    stack (``s``, a :class:`StackRows`) advances one period, its upstream words and the
+    link's CRC count go into its input record. ``mcu.err[i]``: the link error counts the
+    program read at its last step. ``no_rec`` and ``no_trace``: empty record and trace
+    arrays (nothing recorded here). Returns how many actuators this thread advanced."""
+    pl, se, bd, lk = s.plant, s.sensors, s.board, s.link
+    in16, in32 = mcu.in16, mcu.in32
     done = 0
     while True:
         i = _claim(counter)
-        if i >= x.shape[0]:
+        if i >= pl.x.shape[0]:
             return done
         if not batched[i]:
             continue
@@ -137,19 +200,20 @@ def advance_robot(counter, n_periods, period, tick0, batched, ptrs, no_rec, no_t
         for n in range(n_periods):
             t = tick0 + n * period
             in32[i, _IN_TICK] = t
-            _mcu_law_step_many(ptrs[i, 0], ptrs[i, 1], 1, ptrs[i, 2])
+            _mcu_law_step_many(mcu.ptrs[i, 0], mcu.ptrs[i, 1], 1, mcu.ptrs[i, 2])
             in32[i, _IN_FLAGS] = 0
             if n == n_periods - 1:
-                err[i, 0] = in16[i, _IN_UP + B.U_ERR_LINK_CRC]
-                err[i, 1] = in32[i, _IN_CRC]
-            for w in range(mdown.shape[1]):
-                mdown[i, w] = out16[i, _OUT_DOWN + w]
-            advance_stack(period, x[i], p[i], u[i], y[i], no_rec, 0, 1, t, rng[i], work[i],
-                          k[i], raw[i], c[i], st[i], down[i], up[i], mdown[i], mup[i], lk[i],
-                          no_trace)
-            for w in range(mup.shape[1]):
-                in16[i, _IN_UP + w] = mup[i, w] & 0xFFFF
-            in32[i, _IN_CRC] = lk[i, LK.LK_MASTER_CRC]
+                mcu.err[i, 0] = in16[i, _IN_UP + B.U_ERR_LINK_CRC]
+                mcu.err[i, 1] = in32[i, _IN_CRC]
+            for w in range(lk.mcu_down.shape[1]):
+                lk.mcu_down[i, w] = mcu.out16[i, _OUT_DOWN + w]
+            advance_stack(period, pl.x[i], pl.params[i], pl.u[i], pl.y[i], no_rec, 0, 1, t,
+                          pl.rng[i], pl.work[i], se.chips[i], se.raw[i], bd.params[i],
+                          bd.state[i], bd.down[i], bd.up[i], lk.mcu_down[i], lk.mcu_up[i],
+                          lk.state[i], no_trace)
+            for w in range(lk.mcu_up.shape[1]):
+                in16[i, _IN_UP + w] = lk.mcu_up[i, w] & 0xFFFF
+            in32[i, _IN_CRC] = lk.state[i, LK.LK_MASTER_CRC]
 
 
 @njit(cache=True)
@@ -235,14 +299,6 @@ def give_inputs(image, at, out32, outf32, x_prev, dt, cos_alpha, err, lsb, bound
         _put(image, pos + 4, 2, min(err[i, 1], 0xFFFF))
 
 
-#: (object path, attribute) of every array the stack's compiled tick works on, in the order
-#: of :func:`advance_robot`'s arguments from ``x`` to ``lk``.
-_ARRAYS = (("plant", "x"), ("plant", "params"), ("plant", "u"), ("plant", "y"),
-           ("plant", "rng"), ("plant", "_work"), ("", "chips"), ("", "raw"),
-           ("board", "params"), ("board", "state"), ("board", "down"), ("board", "up"),
-           ("mcu_link", "down"), ("mcu_link", "up"), ("", "link"))
-
-
 class RobotEngine:
     """All StackBoxes of a chain advanced as one; ``workers`` threads share the actuators
     (``None``: one per core). The calling thread is one of them once its own work of the
@@ -309,6 +365,7 @@ class RobotEngine:
                                self.inp.ctypes.data + j * INPUT.itemsize,
                                self.out.ctypes.data + j * OUTPUT.itemsize] for j in range(n)],
                              dtype=np.int64).reshape(n, 3)
+        self.mcu = McuRows(self.ptrs, self.in16, self.in32, self.out16, self.err)
         for b in self.boxes:
             b.pending = None
             b.engine = self
@@ -348,15 +405,19 @@ class RobotEngine:
         self._first = np.cumsum([0] + [len(b.stacks) for b in self.boxes])
 
     def _bind_arrays(self) -> None:
-        """Stack the stacks' arrays and rebind every stack to its row."""
-        self.arrays = []
+        """Stack the stacks' arrays into :attr:`arrays` (a :class:`StackRows`) and rebind
+        every stack to its row."""
         stacks = [self._inner(b.stacks[i]) for b, i in self.slots]
-        for owner, name in _ARRAYS:
+
+        def rows(owner: str, name: str) -> np.ndarray:
             parts = [getattr(s, owner) if owner else s for s in stacks]
             whole = np.ascontiguousarray(np.stack([getattr(o, name) for o in parts]))
             for j, o in enumerate(parts):
                 setattr(o, name, whole[j])
-            self.arrays.append(whole)
+            return whole
+
+        self.arrays = StackRows(*(kind(*(rows(*at) for at in fields))
+                                  for kind, fields in _SOURCES))
 
     @staticmethod
     def _inner(stack: object) -> object:
@@ -364,9 +425,9 @@ class RobotEngine:
 
     def _refresh_inputs(self, which: np.ndarray) -> None:
         """Upstream words and CRC counts of the stacks ``which`` into the input records."""
-        mup, lk = self.arrays[13], self.arrays[14]
-        self.inp["up"][which] = mup[which] & 0xFFFF
-        self.inp["up_crc_errors"][which] = lk[which, LK.LK_MASTER_CRC]
+        link = self.arrays.link
+        self.inp["up"][which] = link.mcu_up[which] & 0xFFFF
+        self.inp["up_crc_errors"][which] = link.state[which, LK.LK_MASTER_CRC]
 
     # --- one fieldbus cycle ----------------------------------------------------------------
     def applied(self, box: object) -> None:
@@ -472,8 +533,8 @@ class RobotEngine:
         if started is not None:
             started.release()
         return advance_robot(self._counter, ticks // self.period, self.period, self.tick,
-                             self._batched, self.ptrs, self._no_rec, self._no_trace,
-                             *self.arrays, self.in16, self.in32, self.out16, self.err)
+                             self._batched, self.arrays, self.mcu, self._no_rec,
+                             self._no_trace)
 
     def _finish(self, ticks: int) -> None:
         batched = self._batched
@@ -499,7 +560,7 @@ class RobotEngine:
                 if t + self.period >= self.tick + ticks:
                     self.err[j] = (self.in16[j, _IN_UP + B.U_ERR_LINK_CRC],
                                    self.in32[j, _IN_CRC])
-                self.arrays[12][j] = self.out["down"][j]
+                self.arrays.link.mcu_down[j] = self.out["down"][j]
                 b.stacks[i].advance(self.period)
             which = np.zeros(self.n, dtype=bool)
             which[external] = True
@@ -530,7 +591,8 @@ class RobotEngine:
 
 def plant_records(engine: RobotEngine) -> np.ndarray:
     """The plant outputs of every actuator now, (actuators, outputs), chain order."""
-    return engine.arrays[3].copy()
+    return engine.arrays.plant.y.copy()
 
 
-__all__ = ["RobotEngine", "advance_robot", "plant_records", "L"]
+__all__ = ["BoardRows", "LinkRows", "McuRows", "PlantRows", "RobotEngine", "SensorRows",
+           "StackRows", "advance_robot", "plant_records", "L"]

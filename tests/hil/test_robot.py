@@ -167,3 +167,25 @@ def test_the_law_the_engine_links_has_no_fused_multiply_add():
                          check=True).stdout
     assert "mcu_law_step_many" in asm and "mulss" in asm
     assert not [line for line in asm.splitlines() if "vfm" in line or "vfnm" in line]
+
+
+def test_the_kernel_counts_no_references_through_its_bundles():
+    """Each row view of a bundle's array would bump the parent's reference count (an atomic
+    on a line the compute threads share): the kernel, compiled with its own options for
+    the engine's bundles, has no count in its body; with numba's runtime it has."""
+    from hil.sim import robot
+
+    cfg = load_config()
+    with BusSystem(load_topology("bench_one_box"), cfg, "inproc", model="robot") as bs:
+        e = bs.chain.engine
+        args = (e._counter, 1, e.period, e.tick, e._batched, e.arrays, e.mcu, e._no_rec,
+                e._no_trace)
+    opts = {k: v for k, v in robot.advance_robot.targetoptions.items()
+            if k not in ("cache", "nopython")}
+    counts = []
+    for o in (opts, {k: v for k, v in opts.items() if k != "_nrt"}):
+        kernel = numba.njit(**o)(robot.advance_robot.py_func)
+        kernel.compile(tuple(numba.typeof(a) for a in args))
+        counts.append(next(iter(kernel.inspect_llvm().values())).count("NRT_incref"))
+    assert counts[0] == 0
+    assert counts[1] > 0  # the check sees counts where there are some
