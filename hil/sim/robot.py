@@ -27,7 +27,6 @@ from __future__ import annotations
 import math
 import threading
 from concurrent.futures import Future, ThreadPoolExecutor
-from typing import NamedTuple
 
 import llvmlite.binding as llvm
 import numba
@@ -51,6 +50,7 @@ from firmware_model.mcu.c_abi import (
 )
 from hil.fieldbus import pdo
 from hil.sim.actuator import advance_stack
+from hil.sim.stack_rows import SOURCES, McuRows, StackRows
 from plant import layout as L
 from plant.config import Config, ConfigError
 
@@ -109,68 +109,6 @@ def _claim(typingctx, counter):
         return builder.atomic_rmw("add", ptr, ir.Constant(ir.IntType(64), 1), "seq_cst")
 
     return types.int64(counter), codegen
-
-
-class PlantRows(NamedTuple):
-    """The plants' arrays, one row per actuator (:class:`plant.model.Plant`)."""
-    x: np.ndarray       #: state
-    params: np.ndarray  #: parameters
-    u: np.ndarray       #: inputs (drive mode, duties)
-    y: np.ndarray       #: outputs
-    rng: np.ndarray     #: noise generators' states
-    work: np.ndarray    #: the integrator's scratch
-
-
-class SensorRows(NamedTuple):
-    """The sensor chips' parameters and the raw words they gave the board this tick."""
-    chips: np.ndarray
-    raw: np.ndarray
-
-
-class BoardRows(NamedTuple):
-    """The driver boards (:class:`firmware_model.fpga.driver_board.DriverBoard`)."""
-    params: np.ndarray
-    state: np.ndarray
-    down: np.ndarray  #: downstream memory (what the MCU sent)
-    up: np.ndarray    #: upstream memory (what the board sends)
-
-
-class LinkRows(NamedTuple):
-    """The LVDS links: the MCU side's memories and the link's own state."""
-    mcu_down: np.ndarray
-    mcu_up: np.ndarray
-    state: np.ndarray
-
-
-class StackRows(NamedTuple):
-    """Every array one actuator's stack below the MCU works on (:func:`advance_stack`), one
-    row per actuator. A tuple of arrays to numba: the kernel reads the fields by name at
-    no cost once compiled."""
-    plant: PlantRows
-    sensors: SensorRows
-    board: BoardRows
-    link: LinkRows
-
-
-class McuRows(NamedTuple):
-    """The MCU programs' records, one row per actuator."""
-    ptrs: np.ndarray   #: addresses of its state, input and output record
-    in16: np.ndarray   #: input records as 16-bit words
-    in32: np.ndarray   #: input records as 32-bit words
-    out16: np.ndarray  #: output records as 16-bit words
-    err: np.ndarray    #: link error counts the program read at its last step
-
-
-#: Where each field of :class:`StackRows` lives on an :class:`~hil.sim.actuator.FpgaStack`:
-#: (object path, attribute), in the bundles' field order.
-_SOURCES = (
-    (PlantRows, (("plant", "x"), ("plant", "params"), ("plant", "u"), ("plant", "y"),
-                 ("plant", "rng"), ("plant", "_work"))),
-    (SensorRows, (("", "chips"), ("", "raw"))),
-    (BoardRows, (("board", "params"), ("board", "state"), ("board", "down"),
-                 ("board", "up"))),
-    (LinkRows, (("mcu_link", "down"), ("mcu_link", "up"), ("", "link"))),
-)
 
 
 # No reference counting (``_nrt=False``, as the parts' tick functions): every row view
@@ -417,7 +355,7 @@ class RobotEngine:
             return whole
 
         self.arrays = StackRows(*(kind(*(rows(*at) for at in fields))
-                                  for kind, fields in _SOURCES))
+                                  for kind, fields in SOURCES))
 
     @staticmethod
     def _inner(stack: object) -> object:
@@ -594,5 +532,4 @@ def plant_records(engine: RobotEngine) -> np.ndarray:
     return engine.arrays.plant.y.copy()
 
 
-__all__ = ["BoardRows", "LinkRows", "McuRows", "PlantRows", "RobotEngine", "SensorRows",
-           "StackRows", "advance_robot", "plant_records", "L"]
+__all__ = ["RobotEngine", "advance_robot", "plant_records", "L"]

@@ -1,0 +1,76 @@
+"""The arrays of many actuators' stacks as named bundles, one row per actuator: what the
+robot engine's compiled kernel (:func:`hil.sim.robot.advance_robot`) takes instead of a
+long list of positional arrays. numba passes a :class:`typing.NamedTuple` of arrays as a
+tuple: a field read is a static index, resolved when the kernel is compiled."""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+
+class PlantRows(NamedTuple):
+    """The plants' arrays, one row per actuator (:class:`plant.model.Plant`)."""
+    x: np.ndarray       #: state
+    params: np.ndarray  #: parameters
+    u: np.ndarray       #: inputs (drive mode, duties)
+    y: np.ndarray       #: outputs
+    rng: np.ndarray     #: noise generators' states
+    work: np.ndarray    #: the integrator's scratch
+
+
+class SensorRows(NamedTuple):
+    """The sensor chips' parameters and the raw words they gave the board this tick."""
+    chips: np.ndarray
+    raw: np.ndarray
+
+
+class BoardRows(NamedTuple):
+    """The driver boards (:class:`firmware_model.fpga.driver_board.DriverBoard`)."""
+    params: np.ndarray
+    state: np.ndarray
+    down: np.ndarray  #: downstream memory (what the MCU sent)
+    up: np.ndarray    #: upstream memory (what the board sends)
+
+
+class LinkRows(NamedTuple):
+    """The LVDS links: the MCU side's memories and the link's own state."""
+    mcu_down: np.ndarray
+    mcu_up: np.ndarray
+    state: np.ndarray
+
+
+class StackRows(NamedTuple):
+    """Every array one actuator's stack below the MCU works on (:func:`advance_stack`), one
+    row per actuator. A tuple of arrays to numba: the kernel reads the fields by name at
+    no cost once compiled."""
+    plant: PlantRows
+    sensors: SensorRows
+    board: BoardRows
+    link: LinkRows
+
+
+class McuRows(NamedTuple):
+    """The MCU programs' records, one row per actuator."""
+    ptrs: np.ndarray   #: addresses of its state, input and output record
+    in16: np.ndarray   #: input records as 16-bit words
+    in32: np.ndarray   #: input records as 32-bit words
+    out16: np.ndarray  #: output records as 16-bit words
+    err: np.ndarray    #: link error counts the program read at its last step
+
+
+#: Where each field of :class:`StackRows` lives on an :class:`~hil.sim.actuator.FpgaStack`:
+#: (object path, attribute), in the bundles' field order.
+SOURCES = (
+    (PlantRows, (("plant", "x"), ("plant", "params"), ("plant", "u"), ("plant", "y"),
+                 ("plant", "rng"), ("plant", "_work"))),
+    (SensorRows, (("", "chips"), ("", "raw"))),
+    (BoardRows, (("board", "params"), ("board", "state"), ("board", "down"),
+                 ("board", "up"))),
+    (LinkRows, (("mcu_link", "down"), ("mcu_link", "up"), ("", "link"))),
+)
+
+
+__all__ = ["SOURCES", "BoardRows", "LinkRows", "McuRows", "PlantRows", "SensorRows",
+           "StackRows"]
