@@ -44,3 +44,12 @@ def test_the_rig_loads_nothing_of_the_fitted_model():
     assert "hil.identify.rig_effects" in out  # the probe saw the rig's modules
     leaked = [m for m in FITTED_SIDE if m in out]
     assert not leaked, f"the independent rig loads the fitted side: {leaked}"
+
+
+def test_the_plant_generator_makes_every_library_effect():
+    from hil.identify.synth import OUTSIDE_EFFECTS as SYNTH_OUTSIDE
+    from hil.identify.synth_effects import SYNTH_REGISTRY
+
+    assert set(EFFECTS) <= set(SYNTH_REGISTRY)
+    assert not set(SYNTH_OUTSIDE) & set(EFFECTS)
+    assert all(e.name == n for n, e in SYNTH_REGISTRY.items())
