@@ -726,6 +726,94 @@ def _sensors(zs: np.ndarray, cur: np.ndarray, temps: np.ndarray, p: np.ndarray,
     return cols, rotor, rail
 
 
+@dataclass
+class _Kernel:
+    """The kernel's parameters for one record: the vector ``p`` (:mod:`rig_layout`), the
+    pulsation orders, the temperature shape's parameters and its start (degC), the rotor
+    angle at the encoder's zero and the mains hum's phase (rad), the effects' setup and the
+    input delay (s)."""
+
+    p: np.ndarray
+    orders: np.ndarray
+    tp: np.ndarray
+    t_oil0: float
+    theta0: float
+    hum_phase: float
+    setup: KernelSetup
+    delay: float
+
+
+def _kernel_parameters(load: str, mags: dict[str, dict[str, float]], cfg: Config,
+                       truep: Mapping[str, float], kc: float, kp: float, half: float,
+                       t_ref: float, temperature: str, seconds: float,
+                       rng_misc: np.random.Generator) -> _Kernel:
+    """The kernel's parameters from the drawn truth, the preset and the effects (each
+    effect's class sets its own); two angles drawn from ``rng_misc``."""
+    p = np.zeros(N_P)
+    p[I_K] = truep["gain_n_per_a"]
+    p[I_DS] = truep["ds"]
+    p[I_DP] = truep["dp"]
+    p[I_DC] = truep["dc"]
+    p[I_KS] = truep["ks"]
+    p[I_JP] = truep["jp"]
+    p[I_JC] = truep["jc"]
+    p[I_KROD] = truep["k_rod"]
+    p[I_CROD] = truep["c_rod"]
+    p[I_P0] = truep["precharge_pa"]
+    p[I_KC] = kc
+    p[I_KCKP] = kc / kp
+    p[I_LOAD] = {"fixed_piston": 0, "free_piston": 1, "conrod_fixed": 2}[load]
+    p[I_HALF] = half
+    p[I_TREF] = t_ref
+    p[I_WP] = 2.0 * math.pi * SENSORS["pressure_bandwidth_hz"]
+    p[I_WS] = 2.0 * math.pi * SENSORS["strain_bandwidth_hz"]
+    theta0 = float(rng_misc.uniform(0.0, 2.0 * math.pi))  # rotor angle at the encoder's zero
+    hum_phase = float(rng_misc.uniform(0.0, 2.0 * math.pi))
+    p[I_TH0] = theta0
+    p[I_TAU_CL] = 1.0 / (2.0 * math.pi * CURRENT_LOOP_HZ)
+    p[I_XLSB] = SENSORS["piston_lsb_m"]
+    orders = np.zeros((0, 5))
+    if "pump_pulsation" in mags:
+        orders = np.array(pulsation_orders(mags["pump_pulsation"]), dtype=float).reshape(-1, 5)
+    tp = _temperature_params(temperature, seconds)
+    t_oil0 = float(_temperature(0.0, tp))
+    p[I_T0] = t_oil0
+    setup = KernelSetup(load, truep, cfg, kc, half)
+    for name, effect in RIG_REGISTRY.items():  # in the registry's order: see there
+        if name in mags:
+            effect.set_kernel(p, mags[name], setup)
+    delay = float(mags.get("input_delay", {}).get("delay_s", 0.0))
+    if delay < 0 or not math.isfinite(delay):
+        raise ValueError(f"input_delay: delay_s {delay} must be >= 0")
+    return _Kernel(p, orders, tp, t_oil0, theta0, hum_phase, setup, delay)
+
+
+
+def _initial_state(initial_state: Mapping[str, float] | None, load: str, p: np.ndarray,
+                   kc: float, t_oil0: float, t_ref: float) -> np.ndarray:
+    """The state at t = 0: the given ``theta_p, v_p, tau_q, x_c, v_c`` (a fixed piston
+    stays put) and the sensor filters settled on them."""
+    z0 = np.zeros(N_Z)
+    if initial_state:
+        names = {"theta_p": Z_THP, "v_p": Z_VP, "tau_q": Z_TAUS, "x_c": Z_XC, "v_c": Z_VC}
+        for key, value in initial_state.items():
+            if key not in names:
+                raise ValueError(f"initial_state: unknown key {key!r} (known: {', '.join(names)})")
+            z0[names[key]] = float(value)
+        if load == "fixed_piston":
+            z0[Z_XC] = z0[Z_VC] = 0.0
+    f0 = z0[Z_TAUS]
+    fc0 = f0 - p[I_DC] * math.exp(-p[I_VISC] * (t_oil0 - t_ref)) * z0[Z_VC]
+    z0[Z_PPA] = p[I_P0] + max(f0, 0.0) / kc
+    z0[Z_PPB] = p[I_P0] + max(-f0, 0.0) / kc
+    z0[Z_PCA] = p[I_P0] + max(fc0, 0.0) / kc
+    z0[Z_PCB] = p[I_P0] + max(-fc0, 0.0) / kc
+    rod0 = {"fixed_piston": fc0, "free_piston": 0.0,
+            "conrod_fixed": p[I_KROD] * z0[Z_XC] + p[I_CROD] * z0[Z_VC]}[load]
+    z0[Z_FS] = rod0
+    return z0
+
+
 def generate_rig(
     load: str = "fixed_piston",
     effects: Mapping[str, Mapping[str, float]] | Sequence[str] = (),
@@ -805,42 +893,10 @@ def generate_rig(
     t = np.arange(n) * ts
 
     # --- parameters of the kernel ---------------------------------------------------------
-    p = np.zeros(N_P)
-    p[I_K] = truep["gain_n_per_a"]
-    p[I_DS] = truep["ds"]
-    p[I_DP] = truep["dp"]
-    p[I_DC] = truep["dc"]
-    p[I_KS] = truep["ks"]
-    p[I_JP] = truep["jp"]
-    p[I_JC] = truep["jc"]
-    p[I_KROD] = truep["k_rod"]
-    p[I_CROD] = truep["c_rod"]
-    p[I_P0] = truep["precharge_pa"]
-    p[I_KC] = kc
-    p[I_KCKP] = kc / kp
-    p[I_LOAD] = {"fixed_piston": 0, "free_piston": 1, "conrod_fixed": 2}[load]
-    p[I_HALF] = half
-    p[I_TREF] = t_ref
-    p[I_WP] = 2.0 * math.pi * SENSORS["pressure_bandwidth_hz"]
-    p[I_WS] = 2.0 * math.pi * SENSORS["strain_bandwidth_hz"]
-    theta0 = float(rng_misc.uniform(0.0, 2.0 * math.pi))  # rotor angle at the encoder's zero
-    hum_phase = float(rng_misc.uniform(0.0, 2.0 * math.pi))
-    p[I_TH0] = theta0
-    p[I_TAU_CL] = 1.0 / (2.0 * math.pi * CURRENT_LOOP_HZ)
-    p[I_XLSB] = SENSORS["piston_lsb_m"]
-    orders = np.zeros((0, 5))
-    if "pump_pulsation" in mags:
-        orders = np.array(pulsation_orders(mags["pump_pulsation"]), dtype=float).reshape(-1, 5)
-    tp = _temperature_params(temperature, seconds)
-    t_oil0 = float(_temperature(0.0, tp))
-    p[I_T0] = t_oil0
-    setup = KernelSetup(load, truep, cfg, kc, half)
-    for name, effect in RIG_REGISTRY.items():  # in the registry's order: see there
-        if name in mags:
-            effect.set_kernel(p, mags[name], setup)
-    delay = float(mags.get("input_delay", {}).get("delay_s", 0.0))
-    if delay < 0 or not math.isfinite(delay):
-        raise ValueError(f"input_delay: delay_s {delay} must be >= 0")
+    kern = _kernel_parameters(load, mags, cfg, truep, kc, kp, half, t_ref, temperature,
+                              seconds, rng_misc)
+    p, orders, tp, t_oil0 = kern.p, kern.orders, kern.tp, kern.t_oil0
+    theta0, hum_phase, setup, delay = kern.theta0, kern.hum_phase, kern.setup, kern.delay
 
     # --- excitation -----------------------------------------------------------------------
     exc = _excitation(load, profile, cfg, t, rng_exc, excitation_lines, position_loop_a_per_m)
@@ -855,24 +911,7 @@ def generate_rig(
     n_temp = rng_noise.standard_normal(n) * SENSORS["temperature_noise_c"]
 
     # --- simulate -------------------------------------------------------------------------
-    z0 = np.zeros(N_Z)
-    if initial_state:
-        names = {"theta_p": Z_THP, "v_p": Z_VP, "tau_q": Z_TAUS, "x_c": Z_XC, "v_c": Z_VC}
-        for key, value in initial_state.items():
-            if key not in names:
-                raise ValueError(f"initial_state: unknown key {key!r} (known: {', '.join(names)})")
-            z0[names[key]] = float(value)
-        if load == "fixed_piston":
-            z0[Z_XC] = z0[Z_VC] = 0.0
-    f0 = z0[Z_TAUS]
-    fc0 = f0 - p[I_DC] * math.exp(-p[I_VISC] * (t_oil0 - t_ref)) * z0[Z_VC]
-    z0[Z_PPA] = p[I_P0] + max(f0, 0.0) / kc
-    z0[Z_PPB] = p[I_P0] + max(-f0, 0.0) / kc
-    z0[Z_PCA] = p[I_P0] + max(fc0, 0.0) / kc
-    z0[Z_PCB] = p[I_P0] + max(-fc0, 0.0) / kc
-    rod0 = {"fixed_piston": fc0, "free_piston": 0.0,
-            "conrod_fixed": p[I_KROD] * z0[Z_XC] + p[I_CROD] * z0[Z_VC]}[load]
-    z0[Z_FS] = rod0
+    z0 = _initial_state(initial_state, load, p, kc, t_oil0, t_ref)
     zs = np.zeros((n, N_Z))
     temps = np.zeros(n)
     cur = np.zeros((n, 3))
