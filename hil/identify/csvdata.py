@@ -521,8 +521,8 @@ def _time_base(path: Path, t_all: np.ndarray, missing: np.ndarray, used_names: l
         bad = np.flatnonzero(dtg <= 0)
         if bad.size:
             a, b = good[bad[0]], good[bad[0] + 1]
-            raise CsvError(path, row_lines[b], tcol,
-                           f"time does not increase ({t_all[b]!r} after {t_all[a]!r})")
+            raise CsvError(path, row_lines[b], tcol, "time does not increase "
+                           f"({float(t_all[b])!r} after {float(t_all[a])!r})")
         adjacent = np.diff(good) == 1
         steps = dtg[adjacent] if adjacent.any() else dtg
         step = float(np.median(steps))
