@@ -268,25 +268,21 @@ def write(label: str, path: str | os.PathLike[str], fn: Callable[[Path], object]
     """Run ``fn(tmp)`` to write ``path`` through :func:`replacing`; True when it is in
     place. An OSError is noted (:func:`failed`) and gives False: the caller goes on and
     prints its result without claiming the file."""
-    from hil.cli import progress as cli_progress
-
-    try:
-        with replacing(path) as tmp:
-            fn(tmp)
-    except OSError as exc:
-        failed(label, path, exc)
-        return False
-    cli_progress.output(label, path, done=True)
-    return True
+    return _write_through(replacing, label, path, fn)
 
 
 def write_dir(label: str, path: str | os.PathLike[str], fn: Callable[[Path], object]
               ) -> bool:
     """As :func:`write`, for a directory of files (:func:`replacing_dir`)."""
+    return _write_through(replacing_dir, label, path, fn)
+
+
+def _write_through(replace: Callable, label: str, path: str | os.PathLike[str],
+                   fn: Callable[[Path], object]) -> bool:
     from hil.cli import progress as cli_progress
 
     try:
-        with replacing_dir(path) as tmp:
+        with replace(path) as tmp:
             fn(tmp)
     except OSError as exc:
         failed(label, path, exc)

@@ -6,8 +6,11 @@ Modules, one job each: :mod:`~hil.identify.csvdata` (reader, one-line errors),
 (fast exactly discretised model + effect terms), :mod:`~hil.identify.fit` (output-error fit,
 HAC confidence intervals), :mod:`~hil.identify.stats`, :mod:`~hil.identify.residuals`,
 :mod:`~hil.identify.candidates` (effect library and tests), :mod:`~hil.identify.pipeline`
-(the loop), :mod:`~hil.identify.report`, :mod:`~hil.identify.synth` (datasets from the
-plant), :mod:`~hil.identify.thesis` (the thesis 2.4.3 residual), :mod:`~hil.cli.identify`.
+(the loop), :mod:`~hil.identify.effects` (one class per library effect),
+:mod:`~hil.identify.report`, :mod:`~hil.identify.synth` (datasets from the plant),
+:mod:`~hil.identify.rig` (the independent generator; its per-effect classes in
+:mod:`~hil.identify.rig_effects`), :mod:`~hil.identify.thesis` (the thesis 2.4.3
+residual), :mod:`~hil.cli.identify`.
 See docs/identify.md.
 """
 

@@ -275,11 +275,68 @@ def read_measured(path: str | Path, load: str | None = None,
 def _read_open(path: Path, fh, load: str | None, sample_rate_hz: float | None,  # noqa: ANN001
                max_rows: int | None, progress: Callable[[str], None] | None
                ) -> MeasuredData:
+    header, header_at, names, header_line = _preamble(path, fh)
+    notes: list[str] = []
+    load = _load_case(path, header, header_at, load)
+    fs, fs_source = _sample_rate(path, header, header_at, sample_rate_hz)
+    cols = _header_row(path, names, header_line, load, notes)
+    convert = _units(path, header, header_at, header_line, cols, notes)
+    seen, groups = cols.seen, cols.groups
+
+    # --- data rows ----------------------------------------------------------------------
+    used = [(j, c) for j, c in enumerate(cols.canon) if c is not None]
+    used_names = [c for _, c in used]
+    idx = [j for j, _ in used]
+    rows = _DataRows(path, fh, header_line, names, idx, max_rows, progress)
+    arr, row_lines = rows.arr, rows.lines.tolist()  # line numbers as ints, for messages
+    n_rows = len(arr)
+    notes += rows.notes
+    if len(arr) < MIN_ROWS:
+        raise CsvError(path, header_line, None,
+                       f"only {len(arr)} data rows (need >= {MIN_ROWS})")
+    inf = np.argwhere(np.isinf(arr))
+    if inf.size:
+        r, k = (int(x) for x in inf[0])
+        cell = _split(_line_at(path, int(row_lines[r])).strip())[idx[k]].strip()
+        raise CsvError(path, int(row_lines[r]), names[idx[k]], f"'{cell}' is not finite")
+    for col, (scale, offset) in convert.items():
+        k = used_names.index(col)
+        arr[:, k] = arr[:, k] * scale + offset
+
+    # --- columns empty in every row are left out ------------------------------------------
+    missing = np.isnan(arr)
+    empty = [c for k, c in enumerate(used_names) if missing[:, k].all()]
+    if "t" in empty:
+        raise CsvError(path, header_line, seen["t"], "no value in any row")
+    if empty:
+        if "iq" in empty:
+            raise CsvError(path, header_line, seen["iq"], "no value in any row")
+        left = [c for c in used_names if c not in empty]
+        if not any(all(c in left for c in g) for g in groups):
+            first = next(c for g in groups for c in g if c in empty)
+            raise CsvError(path, header_line, seen[first], f"no value in any row (load {load} "
+                           f"needs {' or '.join('+'.join(g) for g in groups)})")
+        notes.append("left out, empty in every row: " + ", ".join(seen[c] for c in empty))
+        keep = [k for k, c in enumerate(used_names) if c not in empty]
+        arr, missing = arr[:, keep], missing[:, keep]
+        used_names = left
+    ti = used_names.index("t")
+
+    fs, sel = _time_base(path, arr[:, ti], missing, used_names, row_lines, seen, fs,
+                         fs_source, n_rows, notes)
+    if sel is not None:
+        arr = arr[sel]
+    columns = {c: arr[:, k].copy() for k, c in enumerate(used_names) if c != "t"}
+    return MeasuredData(str(path), load, fs, arr[:, ti].copy(), columns, header,
+                        cols.ignored, notes, rows.cut)
+
+
+def _preamble(path: Path, fh) -> tuple[dict[str, str], dict[str, int], list[str], int]:  # noqa: ANN001
+    """The '# key: value' header lines (value, line of each) and the header row (its names,
+    its line), read up to the header row."""
     header: dict[str, str] = {}
     header_at: dict[str, int] = {}
     lineno = 0
-    names: list[str] | None = None
-    header_line = 0
     for lineno, line in enumerate(fh, start=1):
         stripped = line.strip()
         if not stripped:
@@ -297,14 +354,13 @@ def _read_open(path: Path, fh, load: str | None, sample_rate_hz: float | None,  
                 header.setdefault(k, value)
                 header_at.setdefault(k, lineno)
             continue
-        names = [c.strip() for c in _split(stripped)]
-        header_line = lineno
-        break
-    if names is None:
-        raise CsvError(path, lineno or None, None, "no header row (expected t,iq,...)")
-    notes: list[str] = []
+        return header, header_at, [c.strip() for c in _split(stripped)], lineno
+    raise CsvError(path, lineno or None, None, "no header row (expected t,iq,...)")
 
-    # --- load case: header line or the caller's --load ------------------------------------
+
+def _load_case(path: Path, header: dict[str, str], header_at: dict[str, int],
+               load: str | None) -> str:
+    """The load case: header line or the caller's --load (both: they must agree)."""
     if "load" in header:
         if header["load"] not in LOAD_CASES:
             raise CsvError(path, header_at["load"], None, f"unknown load '{header['load']}' "
@@ -312,17 +368,20 @@ def _read_open(path: Path, fh, load: str | None, sample_rate_hz: float | None,  
         if load is not None and load != header["load"]:
             raise CsvError(path, header_at["load"], None, f"'# load: {header['load']}' "
                            f"disagrees with --load {load}")
-        load = header["load"]
-    elif load is None:
+        return header["load"]
+    if load is None:
         raise CsvError(path, 1, None, "missing header line '# load: ...' "
                        f"(one of {', '.join(LOAD_CASES)}), or pass --load")
-    elif load not in LOAD_CASES:
+    if load not in LOAD_CASES:
         raise CsvError(path, None, None, f"--load {load}: unknown load (expected one of "
                        f"{', '.join(LOAD_CASES)})")
+    return load
 
-    # --- sample rate: header line, the caller's --sample-rate, else inferred below --------
-    fs: float | None = None
-    fs_source = "sample_rate_hz"
+
+def _sample_rate(path: Path, header: dict[str, str], header_at: dict[str, int],
+                 sample_rate_hz: float | None) -> tuple[float | None, str]:
+    """The sample rate (Hz) and where it came from: header line, the caller's
+    --sample-rate, else None (inferred from the time column in :func:`_time_base`)."""
     if "sample_rate_hz" in header:
         line_of = header_at["sample_rate_hz"]
         try:
@@ -335,15 +394,35 @@ def _read_open(path: Path, fh, load: str | None, sample_rate_hz: float | None,  
         if sample_rate_hz is not None and abs(sample_rate_hz - fs) > 1e-9 * fs:
             raise CsvError(path, line_of, None, f"'# sample_rate_hz: {header['sample_rate_hz']}'"
                            f" disagrees with --sample-rate {sample_rate_hz:g}")
-    elif sample_rate_hz is not None:
+        return fs, "sample_rate_hz"
+    if sample_rate_hz is not None:
         if not math.isfinite(sample_rate_hz) or sample_rate_hz <= 0:
             raise CsvError(path, None, None, f"--sample-rate must be > 0, got {sample_rate_hz}")
-        fs, fs_source = float(sample_rate_hz), "--sample-rate"
+        return float(sample_rate_hz), "--sample-rate"
+    return None, "sample_rate_hz"
 
-    # --- header row: index column, time aliases, units in the names -------------------------
-    canon: list[str | None] = []   # known column each position is read as, None: not read
+
+@dataclass
+class _HeaderRow:
+    """What the header row says: the known column each position is read as (None: not
+    read), units given in the names, read-as name -> name as written, the columns not read,
+    the time column's alias, and the load's groups of output columns."""
+
+    canon: list[str | None]
+    unit_in_name: dict[str, str]
+    seen: dict[str, str]
+    ignored: list[str]
+    time_alias: str
+    groups: tuple[tuple[str, ...], ...]
+
+
+def _header_row(path: Path, names: list[str], header_line: int, load: str,
+                notes: list[str]) -> _HeaderRow:
+    """The header row: index column, time aliases, units in the names; the required
+    columns present."""
+    canon: list[str | None] = []
     unit_in_name: dict[str, str] = {}
-    seen: dict[str, str] = {}      # read-as name -> name as written
+    seen: dict[str, str] = {}
     ignored: list[str] = []
     raw_seen: set[str] = set()
     time_alias = "t"
@@ -397,8 +476,14 @@ def _read_open(path: Path, fh, load: str | None, sample_rate_hz: float | None,  
         first_missing = next(c for c in groups[0] if c not in seen)
         raise CsvError(path, header_line, first_missing,
                        f"required column missing: load {load} needs {need}")
+    return _HeaderRow(canon, unit_in_name, seen, ignored, time_alias, groups)
 
-    # --- units: '# units:' line and units in the names ----------------------------------
+
+def _units(path: Path, header: dict[str, str], header_at: dict[str, int], header_line: int,
+           cols: _HeaderRow, notes: list[str]) -> dict[str, tuple[float, float]]:
+    """Units from the '# units:' line and the names (they must agree): the (scale, offset)
+    to SI of each column not already in SI."""
+    seen, unit_in_name = cols.seen, cols.unit_in_name
     units = dict(unit_in_name)
     if "units" in header:
         line_of = header_at["units"]
@@ -407,7 +492,7 @@ def _read_open(path: Path, fh, load: str | None, sample_rate_hz: float | None,  
                 raise CsvError(path, line_of, seen[col], f"unit '{unit}' disagrees with "
                                f"'{unit_in_name[col]}' in the header row")
             units[col] = unit
-    if time_alias == "t_s" and units.get("t", "s") != "s":
+    if cols.time_alias == "t_s" and units.get("t", "s") != "s":
         raise CsvError(path, header_line, seen["t"], f"is in seconds by its name, not "
                        f"'{units['t']}' (call the column t or time)")
     convert: dict[str, tuple[float, float]] = {}
@@ -420,58 +505,24 @@ def _read_open(path: Path, fh, load: str | None, sample_rate_hz: float | None,  
             f"{seen[c]} from {units[c]}" for c in KNOWN_COLUMNS if c in convert))
     if seen["t"] != "t":
         notes.append(f"time column '{seen['t']}' read as t")
+    return convert
 
-    # --- data rows ----------------------------------------------------------------------
-    used = [(j, c) for j, c in enumerate(canon) if c is not None]
-    used_names = [c for _, c in used]
-    idx = [j for j, _ in used]
-    rows = _DataRows(path, fh, header_line, names, idx, max_rows, progress)
-    arr, row_lines = rows.arr, rows.lines.tolist()  # line numbers as ints, for messages
-    n_rows = len(arr)
-    notes += rows.notes
-    if len(arr) < MIN_ROWS:
-        raise CsvError(path, header_line, None,
-                       f"only {len(arr)} data rows (need >= {MIN_ROWS})")
-    inf = np.argwhere(np.isinf(arr))
-    if inf.size:
-        r, k = (int(x) for x in inf[0])
-        cell = _split(_line_at(path, int(row_lines[r])).strip())[idx[k]].strip()
-        raise CsvError(path, int(row_lines[r]), names[idx[k]], f"'{cell}' is not finite")
-    for col, (scale, offset) in convert.items():
-        k = used_names.index(col)
-        arr[:, k] = arr[:, k] * scale + offset
 
-    # --- columns empty in every row are left out ------------------------------------------
-    missing = np.isnan(arr)
-    empty = [c for k, c in enumerate(used_names) if missing[:, k].all()]
-    if "t" in empty:
-        raise CsvError(path, header_line, seen["t"], "no value in any row")
-    if empty:
-        if "iq" in empty:
-            raise CsvError(path, header_line, seen["iq"], "no value in any row")
-        left = [c for c in used_names if c not in empty]
-        if not any(all(c in left for c in g) for g in groups):
-            first = next(c for g in groups for c in g if c in empty)
-            raise CsvError(path, header_line, seen[first], f"no value in any row (load {load} "
-                           f"needs {' or '.join('+'.join(g) for g in groups)})")
-        notes.append("left out, empty in every row: " + ", ".join(seen[c] for c in empty))
-        keep = [k for k, c in enumerate(used_names) if c not in empty]
-        arr, missing = arr[:, keep], missing[:, keep]
-        used_names = left
-    ti = used_names.index("t")
+def _time_base(path: Path, t_all: np.ndarray, missing: np.ndarray, used_names: list[str],
+               row_lines: list[int], seen: dict[str, str], fs: float | None, fs_source: str,
+               n_rows: int, notes: list[str]) -> tuple[float, np.ndarray | None]:
+    """The time base and the gaps: the sample rate (checked, or inferred from the median
+    step) and the rows of the longest stretch without gaps (None: no gap, every row)."""
     tcol = seen["t"]
-
-    # --- time base, gaps ----------------------------------------------------------------
     hole = missing.any(axis=1)
     good = np.flatnonzero(~hole)
-    t_all = arr[:, ti]
     if good.size >= 2:
         dtg = np.diff(t_all[good])
         bad = np.flatnonzero(dtg <= 0)
         if bad.size:
             a, b = good[bad[0]], good[bad[0] + 1]
-            raise CsvError(path, row_lines[b], tcol,
-                           f"time does not increase ({t_all[b]!r} after {t_all[a]!r})")
+            raise CsvError(path, row_lines[b], tcol, "time does not increase "
+                           f"({float(t_all[b])!r} after {float(t_all[a])!r})")
         adjacent = np.diff(good) == 1
         steps = dtg[adjacent] if adjacent.any() else dtg
         step = float(np.median(steps))
@@ -509,32 +560,30 @@ def _read_open(path: Path, fh, load: str | None, sample_rate_hz: float | None,  
         gaps.append((row_lines[b], f"line {row_lines[b]} ({tcol} jumps {dtg[k]:.6g} s = "
                      f"{ratio[k]:.3g} sample periods)"))
     gaps.sort()
-    if gaps:
-        # stretches of good rows without a hole or a jump inside
-        cut = np.r_[False, jump | ~adjacent] if good.size else np.zeros(0, dtype=bool)
-        seg_id = np.cumsum(cut)
-        counts = np.bincount(seg_id) if good.size else np.zeros(1, dtype=int)
-        best = int(np.argmax(counts))
-        sel = good[seg_id == best] if good.size else good
-        shown = "; ".join(g for _, g in gaps[:_MAX_GAPS_SHOWN])
-        if len(gaps) > _MAX_GAPS_SHOWN:
-            shown += f"; and {len(gaps) - _MAX_GAPS_SHOWN} more"
-        if sel.size < MIN_ROWS:
-            worst = int(np.argmax(missing.sum(axis=0)))
-            hint = (f"; column '{seen[used_names[worst]]}' is empty or NaN in "
-                    f"{int(missing[:, worst].sum())} of {n_rows} rows"
-                    if missing[:, worst].any() else "")
-            where = (f"longest is {_lines_text(row_lines[sel[0]], row_lines[sel[-1]])}, "
-                     f"{sel.size} samples" if sel.size else "no complete row")
-            raise CsvError(path, gaps[0][0], None, f"no stretch without gaps has {MIN_ROWS} "
-                           f"samples ({where}); gaps at {shown}{hint}")
-        notes.append(f"gaps in the data at {shown}: using the longest stretch without gaps, "
-                     f"{_lines_text(row_lines[sel[0]], row_lines[sel[-1]])} ({sel.size} of "
-                     f"{n_rows} samples)")
-        arr = arr[sel]
-    columns = {c: arr[:, k].copy() for k, c in enumerate(used_names) if c != "t"}
-    return MeasuredData(str(path), load, fs, arr[:, ti].copy(), columns, header, ignored,
-                        notes, rows.cut)
+    if not gaps:
+        return fs, None
+    # stretches of good rows without a hole or a jump inside
+    cut = np.r_[False, jump | ~adjacent] if good.size else np.zeros(0, dtype=bool)
+    seg_id = np.cumsum(cut)
+    counts = np.bincount(seg_id) if good.size else np.zeros(1, dtype=int)
+    best = int(np.argmax(counts))
+    sel = good[seg_id == best] if good.size else good
+    shown = "; ".join(g for _, g in gaps[:_MAX_GAPS_SHOWN])
+    if len(gaps) > _MAX_GAPS_SHOWN:
+        shown += f"; and {len(gaps) - _MAX_GAPS_SHOWN} more"
+    if sel.size < MIN_ROWS:
+        worst = int(np.argmax(missing.sum(axis=0)))
+        hint = (f"; column '{seen[used_names[worst]]}' is empty or NaN in "
+                f"{int(missing[:, worst].sum())} of {n_rows} rows"
+                if missing[:, worst].any() else "")
+        where = (f"longest is {_lines_text(row_lines[sel[0]], row_lines[sel[-1]])}, "
+                 f"{sel.size} samples" if sel.size else "no complete row")
+        raise CsvError(path, gaps[0][0], None, f"no stretch without gaps has {MIN_ROWS} "
+                       f"samples ({where}); gaps at {shown}{hint}")
+    notes.append(f"gaps in the data at {shown}: using the longest stretch without gaps, "
+                 f"{_lines_text(row_lines[sel[0]], row_lines[sel[-1]])} ({sel.size} of "
+                 f"{n_rows} samples)")
+    return fs, sel
 
 
 @functools.cache

@@ -13,8 +13,8 @@ effect's name in the candidate library, the loop and the check against the rig:
 * which of its magnitudes **the check against the rig judges** (:attr:`Effect.judged`:
   truth key, report key, tolerance kind).
 
-The independent rig's own model of each effect (:mod:`hil.identify.rig`) stays apart on
-purpose: it is the other side of the test.
+The independent rig's own model of each effect (:mod:`hil.identify.rig_effects`, registered
+under the same names) stays apart on purpose: it is the other side of the test.
 """
 
 from __future__ import annotations

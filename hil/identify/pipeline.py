@@ -20,6 +20,7 @@
 from __future__ import annotations
 
 import dataclasses
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -294,61 +295,82 @@ def identify(
 def _identify(data: MeasuredData, cfg: Config, max_effects: int,
               progress: Callable[[str], None] | None, intersample: str | None
               ) -> IdentifyReport:
-    import time
-
     t_start = time.perf_counter()
-    say = progress or (lambda msg: None)
-    check_record(data)
-    if intersample is None:
-        intersample = data.header.get("intersample")
-    exp, theta_prov = choose_intersample(data, cfg, intersample, say)
-    say(f"intersample {exp.intersample}: {exp.intersample_reason}")
-    model = FastModel(exp)
-    # the candidates' signatures are derivatives for a score test, not a fit: half the
-    # sub-steps (100 us at 5 kHz) move them by far less than their standard errors, at half
-    # the cost of the several dozen simulations each round takes
-    test_model = FastModel(exp, n_sub=max(1, model.n_sub // 2))
-    noise = estimate_input_noise(exp.iq, exp.data.sample_rate_hz, quantum(exp.iq))
-    noisy_model = FastModel(noisy_experiment(exp, noise.rms_a)) if noise.rms_a > 0 else None
+    loop = _Loop(data, cfg, progress or (lambda msg: None), intersample)
+    loop.forward(max_effects)
+    loop.drop_shrunk()
+    loop.joint(max_effects)
+    loop.free_held_again()
+    return loop.report(t_start)
 
-    def noise_part(theta: np.ndarray) -> dict[str, np.ndarray] | None:
-        if noisy_model is None:
+
+class _Loop:
+    """The state of one identification run, step by step: the baseline fit
+    (:meth:`__init__`), effects added one at a time (:meth:`forward`), effects dropped that
+    shrank once others were in (:meth:`drop_shrunk`), effects that come only together
+    (:meth:`joint`), held baseline parameters freed again (:meth:`free_held_again`), the
+    report (:meth:`report`). ``current`` is the fit so far."""
+
+    def __init__(self, data: MeasuredData, cfg: Config, say: Callable[[str], None],
+                 intersample: str | None) -> None:
+        self.data = data
+        self.say = say
+        check_record(data)
+        if intersample is None:
+            intersample = data.header.get("intersample")
+        exp, theta_prov = choose_intersample(data, cfg, intersample, say)
+        self.exp = exp
+        say(f"intersample {exp.intersample}: {exp.intersample_reason}")
+        self.model = model = FastModel(exp)
+        # the candidates' signatures are derivatives for a score test, not a fit: half the
+        # sub-steps (100 us at 5 kHz) move them by far less than their standard errors, at
+        # half the cost of the several dozen simulations each round takes
+        self.test_model = FastModel(exp, n_sub=max(1, model.n_sub // 2))
+        self.noise = noise = estimate_input_noise(exp.iq, exp.data.sample_rate_hz,
+                                                  quantum(exp.iq))
+        self.noisy_model = (FastModel(noisy_experiment(exp, noise.rms_a)) if noise.rms_a > 0
+                            else None)
+
+        say(f"baseline fit ({exp.load}, {exp.n} samples, channels {', '.join(exp.channels)})")
+        self.base = base = fit_baseline(model, theta0=theta_prov)
+        check_fit(exp, base)
+        self.skew_fitter = OutputErrorFit(model, NUISANCE_SCALES(exp.dt))
+        if "skew_s" in base.free and self.skew_fitter.at_bound(base, "skew_s"):
+            exp.skew_at_bound = base.value("skew_s") > 0
+            exp.notes.append(f"the baseline's timing skew sits at its bound "
+                             f"({base.value('skew_s') * 1e6:+.0f} us, half a sample): the "
+                             "outputs and the logged input are further apart in time than a "
+                             "sampling alignment")
+        self.names = [n for n in BASELINE_LABELS if n in base.free or n in base.held]
+        self.baseline_est = _estimates(base, self.names)
+        residual0 = {c: exp.measured[c] - base.outputs[c] for c in exp.channels}
+        self.analysis0 = analyse(exp, residual0, exp.val, self.noise_part(base.theta))
+        self.sigma_ref = dict(base.sigma)
+        self.current = base
+        self.held = dict(base.held)
+        self.defs_all = {d.label: d for d in library(exp)}
+        self.added: list[EffectAdded] = []
+        self.added_labels: set[str] = set()
+        self.rejected: list[str] = []
+        self.excluded: set[str] = set()
+        self.rounds: list[list[CandidateTest]] = []
+        self.joint_rows: list[dict] = []
+        self.est_mask = OutputErrorFit(model).fit_mask()
+        self.configured = model.start_vector()
+        self.prefit: dict[str, tuple[FitResult, dict[str, str]]] = {}
+
+    def noise_part(self, theta: np.ndarray) -> dict[str, np.ndarray] | None:
+        if self.noisy_model is None:
             return None
-        return predicted_residual(model.outputs(theta), noisy_model.outputs(theta))
+        return predicted_residual(self.model.outputs(theta), self.noisy_model.outputs(theta))
 
-    say(f"baseline fit ({exp.load}, {exp.n} samples, channels {', '.join(exp.channels)})")
-    base = fit_baseline(model, theta0=theta_prov)
-    check_fit(exp, base)
-    skew_fitter = OutputErrorFit(model, NUISANCE_SCALES(exp.dt))
-    if "skew_s" in base.free and skew_fitter.at_bound(base, "skew_s"):
-        exp.skew_at_bound = base.value("skew_s") > 0
-        exp.notes.append(f"the baseline's timing skew sits at its bound "
-                         f"({base.value('skew_s') * 1e6:+.0f} us, half a sample): the outputs "
-                         "and the logged input are further apart in time than a sampling "
-                         "alignment")
-    names = [n for n in BASELINE_LABELS if n in base.free or n in base.held]
-    baseline_est = _estimates(base, names)
-    residual0 = {c: exp.measured[c] - base.outputs[c] for c in exp.channels}
-    analysis0 = analyse(exp, residual0, exp.val, noise_part(base.theta))
-    sigma_ref = dict(base.sigma)
-    current = base
-    held = dict(base.held)
-    defs_all = {d.label: d for d in library(exp)}
-    added: list[EffectAdded] = []
-    added_labels: set[str] = set()
-    rejected: list[str] = []
-    excluded: set[str] = set()
-    rounds: list[list[CandidateTest]] = []
-    fitter = OutputErrorFit(model)
-    est_mask = fitter.fit_mask()
-    configured = model.start_vector()
-
-    def refit_with(d: EffectDef | list[EffectDef], start: dict[str, float],
+    def refit_with(self, d: EffectDef | list[EffectDef], start: dict[str, float],
                    robust: bool = False) -> tuple[FitResult, dict[str, str]]:
         """``current`` refitted with the effect ``d`` (or several at once) in, their
         parameters from ``start``. ``robust``: the linear parameters that the fit without
         them moved beyond :data:`DIFFERS_FACTOR` of their configured values start from those
         (the effects may have been what moved them there)."""
+        exp, current, configured = self.exp, self.current, self.configured
         ds_ = d if isinstance(d, list) else [d]
         theta0 = current.theta.copy()
         if robust:
@@ -366,14 +388,14 @@ def _identify(data: MeasuredData, cfg: Config, max_effects: int,
                 new_free.append(p)
         for e in ds_:
             EFFECTS[e.name].prepare_refit(theta0, credible, new_free, exp, current.free,
-                                          est_mask)
+                                          self.est_mask)
         scales = {p: nom for e in ds_ for p, nom in zip(e.params, e.nominal, strict=True)}
-        refitter = OutputErrorFit(model, {**NUISANCE_SCALES(exp.dt), **_all_scales(defs_all),
-                                          **scales})
+        refitter = OutputErrorFit(self.model, {**NUISANCE_SCALES(exp.dt),
+                                               **_all_scales(self.defs_all), **scales})
         return guarded_fit(refitter, theta0, new_free, credible, sigma=current.sigma,
                            configured=configured)
 
-    def verdict_on(ds_: list[EffectDef], new: FitResult, held_now: dict[str, str]
+    def verdict_on(self, ds_: list[EffectDef], new: FitResult, held_now: dict[str, str]
                    ) -> str:
         """Why the refit ``new`` with the effects ``ds_`` in is not kept ("" if it is): a
         parameter of theirs held (not credible), a validation cost lowered by less than
@@ -383,8 +405,8 @@ def _identify(data: MeasuredData, cfg: Config, max_effects: int,
         own = [p for p in held_now if any(p in e.params for e in ds_)]
         if own:
             return f"not credible after the refit ({own[0]}: {held_now[own[0]]})"
-        before = _val_cost(exp, current.outputs, sigma_ref)
-        after = _val_cost(exp, new.outputs, sigma_ref)
+        before = _val_cost(self.exp, self.current.outputs, self.sigma_ref)
+        after = _val_cost(self.exp, new.outputs, self.sigma_ref)
         if not after < (1.0 - MIN_SHARE) * before:
             return (f"refit lowered the validation cost by less than {MIN_SHARE:.1%} "
                     f"({after:.6g} vs {before:.6g})")
@@ -397,206 +419,239 @@ def _identify(data: MeasuredData, cfg: Config, max_effects: int,
                         f"({sizes[p]:.1%} of a realistic size)")
         return ""
 
-    def weighted_ss(out: dict[str, np.ndarray], mask: np.ndarray) -> float:
-        w = current.weights
-        return sum(float(np.nansum(((exp.measured[c] - out[c])[mask] / w[c]) ** 2))
-                   for c in exp.channels)
+    def weighted_ss(self, out: dict[str, np.ndarray], mask: np.ndarray) -> float:
+        w = self.current.weights
+        return sum(float(np.nansum(((self.exp.measured[c] - out[c])[mask] / w[c]) ** 2))
+                   for c in self.exp.channels)
 
-    prefit: dict[str, tuple[FitResult, dict[str, str]]] = {}
-
-    def judge_at_fit(d: EffectDef) -> FitJudgement:
+    def judge_at_fit(self, d: EffectDef) -> FitJudgement:
         """A candidate that takes over a nuisance pinned at its bound, judged at its own fit
         (the refit it would get if selected, kept for that)."""
-        say(f"fitting {d.label} to judge it (the fit's skew sits at its bound)")
-        new, held_now = prefit[d.label] = refit_with(d, {p: 0.0 for p in d.params})
+        self.say(f"fitting {d.label} to judge it (the fit's skew sits at its bound)")
+        new, held_now = self.prefit[d.label] = self.refit_with(d, {p: 0.0 for p in d.params})
         own = [p for p in held_now if p in d.params]
         if own:
             return FitJudgement(refused=f"not credible at its own fit ({own[0]}: "
                                         f"{held_now[own[0]]})")
         # the restricted model reaches a delay of the skew's bound (half a sample)
-        reach = {"delay_s": skew_fitter.skew_limit * exp.dt}
+        reach = {"delay_s": self.skew_fitter.skew_limit * self.exp.dt}
         beta = {p: new.value(p) for p in d.params}
         shares = []
-        for mask in (est_mask, exp.val):
-            before = weighted_ss(current.outputs, mask)
-            shares.append(1.0 - weighted_ss(new.outputs, mask) / before if before > 0 else 0.0)
+        for mask in (self.est_mask, self.exp.val):
+            before = self.weighted_ss(self.current.outputs, mask)
+            shares.append(1.0 - self.weighted_ss(new.outputs, mask) / before if before > 0
+                          else 0.0)
         return FitJudgement(beta=beta, excess={p: v - reach.get(p, 0.0) for p, v in beta.items()},
                             se={p: new.se.get(p, float("nan")) for p in d.params},
                             share_est=shares[0], share_val=shares[1])
 
-    for rnd in range(max_effects + 1):
-        defs = [d for lbl, d in defs_all.items()
-                if lbl not in added_labels and lbl not in excluded]
-        residual = {c: exp.measured[c] - current.outputs[c] for c in exp.channels}
-        say(f"round {rnd}: testing {len(defs)} candidates")
-        prefit.clear()
-        tests = test_candidates(defs, test_model.outputs, current.theta, IDX, exp, current.weights,
-                                residual, est_mask, exp.val, current.free)
-        rounds.append(tests)
-        ranked = rank(tests)
-        if not ranked and len(added) < max_effects and judge_deferred(tests, defs,
-                                                                      judge_at_fit):
+    def forward(self, max_effects: int) -> None:
+        """Rounds of score tests, each adding the best candidate that its refit confirms."""
+        exp, defs_all, say, held = self.exp, self.defs_all, self.say, self.held
+        for rnd in range(max_effects + 1):
+            defs = [d for lbl, d in defs_all.items()
+                    if lbl not in self.added_labels and lbl not in self.excluded]
+            residual = {c: exp.measured[c] - self.current.outputs[c] for c in exp.channels}
+            say(f"round {rnd}: testing {len(defs)} candidates")
+            self.prefit.clear()
+            tests = test_candidates(defs, self.test_model.outputs, self.current.theta, IDX, exp,
+                                    self.current.weights, residual, self.est_mask, exp.val,
+                                    self.current.free)
+            self.rounds.append(tests)
             ranked = rank(tests)
-        if not ranked or len(added) >= max_effects:
-            break
-        best = ranked[0]
-        d = defs_all[best.label]
-        if best.label in prefit:
-            say(f"round {rnd}: adding {best.label} (its fit from the test)")
-            new, held_now = prefit[best.label]
-        else:
-            say(f"round {rnd}: adding {best.label}; refit")
-            new, held_now = refit_with(d, best.beta)
-        why = verdict_on([d], new, held_now)
-        if why and far_from_configuration(current, exp):
-            # forward from a robust baseline: the fit without the effect may have absorbed
-            # it into parameters far from their configured values (two frictions on a free
-            # piston: J_c 40x, d_c 4.5x), a start the refit does not come back from
-            say(f"round {rnd}: {best.label} {why}; refit from the configured values of "
-                + ", ".join(far_from_configuration(current, exp)))
-            new2, held2 = refit_with(d, best.beta, robust=True)
-            why2 = verdict_on([d], new2, held2)
-            if not why2:
-                new, held_now, why = new2, held2, ""
+            if not ranked and len(self.added) < max_effects and judge_deferred(
+                    tests, defs, self.judge_at_fit):
+                ranked = rank(tests)
+            if not ranked or len(self.added) >= max_effects:
+                break
+            best = ranked[0]
+            d = defs_all[best.label]
+            if best.label in self.prefit:
+                say(f"round {rnd}: adding {best.label} (its fit from the test)")
+                new, held_now = self.prefit[best.label]
             else:
-                why += f"; from the configured values too ({why2})"
-        if why:
-            excluded.add(best.label)
-            rejected.append(f"{best.label}: {why}")
-            continue
-        for p, _ in d.refit_extra:
-            if p in held_now:  # a shape the data cannot pin: the preset's, and say so
-                held[p] = f"after adding {best.label}: {held_now.pop(p)}"
+                say(f"round {rnd}: adding {best.label}; refit")
+                new, held_now = self.refit_with(d, best.beta)
+            why = self.verdict_on([d], new, held_now)
+            if why and far_from_configuration(self.current, exp):
+                # forward from a robust baseline: the fit without the effect may have
+                # absorbed it into parameters far from their configured values (two
+                # frictions on a free piston: J_c 40x, d_c 4.5x), a start the refit does not
+                # come back from
+                say(f"round {rnd}: {best.label} {why}; refit from the configured values of "
+                    + ", ".join(far_from_configuration(self.current, exp)))
+                new2, held2 = self.refit_with(d, best.beta, robust=True)
+                why2 = self.verdict_on([d], new2, held2)
+                if not why2:
+                    new, held_now, why = new2, held2, ""
+                else:
+                    why += f"; from the configured values too ({why2})"
+            if why:
+                self.excluded.add(best.label)
+                self.rejected.append(f"{best.label}: {why}")
+                continue
+            for p, _ in d.refit_extra:
+                if p in held_now:  # a shape the data cannot pin: the preset's, and say so
+                    held[p] = f"after adding {best.label}: {held_now.pop(p)}"
+            for p, why in held_now.items():
+                held[p] = f"after adding {best.label}: {why}"
+            self.current = new
+            if "skew_s" in self.current.free:
+                # the skew pinned at +T/2 may have been another effect's doing: the delay is
+                # offered against the current fit's skew
+                exp.skew_at_bound = (self.skew_fitter.at_bound(self.current, "skew_s")
+                                     and self.current.value("skew_s") > 0)
+            best.selected = True
+            self.added_labels.add(best.label)
+            self.added.append(EffectAdded(best.name, best.label, {}, rnd, best.p_holm,
+                                          best.share_val))
+
+    def drop_shrunk(self) -> None:
+        """An effect added early, by a local test, may have shrunk to nothing once a later
+        one was in (a pump friction standing in for a pulsation): drop it and refit without
+        it."""
+        exp, held = self.exp, self.held
+        for e in list(self.added):
+            d = self.defs_all[e.label]
+            current = self.current
+            sizes = {p: abs(current.value(p)) / abs(nom)
+                     for p, nom in zip(d.params, d.nominal, strict=True) if nom}
+            if len(self.added) < 2 or not sizes or max(sizes.values()) >= MIN_MAGNITUDE:
+                continue
+            p_max = max(sizes, key=sizes.get)
+            shrunk = current.value(p_max)
+            self.say(f"dropping {e.label}: shrank to {shrunk:.4g} once the others were in")
+            theta = current.theta.copy()
+            drop = list(d.params) + [p for p, _ in d.refit_extra]
+            for p in drop:
+                theta[IDX[p]] = 0.0
+                held.pop(p, None)
+            refitter = OutputErrorFit(self.model, {**NUISANCE_SCALES(exp.dt),
+                                                   **_all_scales(self.defs_all)})
+            self.current, held_now = guarded_fit(
+                refitter, theta, [p for p in current.free if p not in drop], theta,
+                sigma=current.sigma, passes=1, max_nfev=9)
+            for p, why in held_now.items():
+                held[p] = f"after dropping {e.label}: {why}"
+            self.added.remove(e)
+            self.added_labels.discard(e.label)
+            self.rejected.append(f"{e.label}: shrank to {shrunk:.4g} "
+                                 f"({sizes[p_max]:.1%} of a realistic size) once the others "
+                                 "were in; dropped")
+
+    def joint(self, max_effects: int) -> None:
+        """Effects that come together: a residual with structure left and no candidate that
+        passes alone, so the library's candidates are refitted in pairs (then as one
+        triple), from the robust start, each judged on the validation part as a single one
+        is."""
+        exp, defs_all, held, joint = self.exp, self.defs_all, self.held, self.joint_rows
+        if not (len(self.added) + 2 <= max_effects and self.rounds):
+            return
+        residual_now = {c: exp.measured[c] - self.current.outputs[c] for c in exp.channels}
+        left = _verdict(analyse(exp, residual_now, exp.val,
+                                self.noise_part(self.current.theta)))[0]
+        if not (left or consistency(self.current, exp, self.est_mask).inconsistent):
+            return
+        pool = _joint_pool(self.rounds, defs_all, self.added_labels)
+        sets = [[a, b] for i, a in enumerate(pool) for b in pool[i + 1:]]
+        if len(pool) >= 3:
+            sets.append(pool[:3])
+        best_set: tuple[float, list[str], FitResult, dict[str, str]] | None = None
+        before = _val_cost(exp, self.current.outputs, self.sigma_ref)
+        for labels in sets:
+            if best_set is not None and len(labels) > 2:
+                break  # a triple only where no pair passes
+            ds_ = [defs_all[lbl] for lbl in labels]
+            self.say(f"jointly: {' + '.join(labels)}")
+            start = {p: 0.25 * nom for e in ds_
+                     for p, nom in zip(e.params, e.nominal, strict=True)}
+            new, held_now = self.refit_with(ds_, start, robust=True)
+            why = self.verdict_on(ds_, new, held_now)
+            after = _val_cost(exp, new.outputs, self.sigma_ref)
+            joint.append({"effects": labels, "validation_cost_change": after / before - 1.0,
+                          "outcome": why or "passes"})
+            if not why and (best_set is None or after < best_set[0]):
+                best_set = (after, labels, new, held_now)
+        if best_set is None:
+            return
+        _, labels, new, held_now = best_set
+        for row in joint:
+            if row["effects"] == labels:
+                row["outcome"] = "added"
+        for lbl in labels:
+            for p, _ in defs_all[lbl].refit_extra:
+                if p in held_now:
+                    held[p] = f"after adding {lbl}: {held_now.pop(p)}"
         for p, why in held_now.items():
-            held[p] = f"after adding {best.label}: {why}"
-        current = new
-        if "skew_s" in current.free:
-            # the skew pinned at +T/2 may have been another effect's doing: the delay is
-            # offered against the current fit's skew
-            exp.skew_at_bound = (skew_fitter.at_bound(current, "skew_s")
-                                 and current.value("skew_s") > 0)
-        best.selected = True
-        added_labels.add(best.label)
-        added.append(EffectAdded(best.name, best.label, {}, rnd, best.p_holm, best.share_val))
-    # An effect added early, by a local test, may have shrunk to nothing once a later one was
-    # in (a pump friction standing in for a pulsation): drop it and refit without it.
-    for e in list(added):
-        d = defs_all[e.label]
-        sizes = {p: abs(current.value(p)) / abs(nom)
-                 for p, nom in zip(d.params, d.nominal, strict=True) if nom}
-        if len(added) < 2 or not sizes or max(sizes.values()) >= MIN_MAGNITUDE:
-            continue
-        p_max = max(sizes, key=sizes.get)
-        shrunk = current.value(p_max)
-        say(f"dropping {e.label}: shrank to {shrunk:.4g} once the others were in")
-        theta = current.theta.copy()
-        drop = list(d.params) + [p for p, _ in d.refit_extra]
-        for p in drop:
-            theta[IDX[p]] = 0.0
-            held.pop(p, None)
-        refitter = OutputErrorFit(model, {**NUISANCE_SCALES(exp.dt), **_all_scales(defs_all)})
-        current, held_now = guarded_fit(refitter, theta,
-                                        [p for p in current.free if p not in drop], theta,
-                                        sigma=current.sigma, passes=1, max_nfev=9)
-        for p, why in held_now.items():
-            held[p] = f"after dropping {e.label}: {why}"
-        added.remove(e)
-        added_labels.discard(e.label)
-        rejected.append(f"{e.label}: shrank to {shrunk:.4g} "
-                        f"({sizes[p_max]:.1%} of a realistic size) once the others were in; "
-                        "dropped")
-    # Effects that come together: a residual with structure left and no candidate that passes
-    # alone, so the library's candidates are refitted in pairs (then as one triple), from
-    # the robust start, each judged on the validation part as a single one is.
-    joint: list[dict] = []
-    if len(added) + 2 <= max_effects and rounds:
-        residual_now = {c: exp.measured[c] - current.outputs[c] for c in exp.channels}
-        left = _verdict(analyse(exp, residual_now, exp.val, noise_part(current.theta)))[0]
-        if left or consistency(current, exp, est_mask).inconsistent:
-            pool = _joint_pool(rounds, defs_all, added_labels)
-            sets = [[a, b] for i, a in enumerate(pool) for b in pool[i + 1:]]
-            if len(pool) >= 3:
-                sets.append(pool[:3])
-            best_set: tuple[float, list[str], FitResult, dict[str, str]] | None = None
-            before = _val_cost(exp, current.outputs, sigma_ref)
-            for labels in sets:
-                if best_set is not None and len(labels) > 2:
-                    break  # a triple only where no pair passes
-                ds_ = [defs_all[lbl] for lbl in labels]
-                say(f"jointly: {' + '.join(labels)}")
-                start = {p: 0.25 * nom for e in ds_
-                         for p, nom in zip(e.params, e.nominal, strict=True)}
-                new, held_now = refit_with(ds_, start, robust=True)
-                why = verdict_on(ds_, new, held_now)
-                after = _val_cost(exp, new.outputs, sigma_ref)
-                joint.append({"effects": labels, "validation_cost_change": after / before - 1.0,
-                              "outcome": why or "passes"})
-                if not why and (best_set is None or after < best_set[0]):
-                    best_set = (after, labels, new, held_now)
-            if best_set is not None:
-                _, labels, new, held_now = best_set
-                for row in joint:
-                    if row["effects"] == labels:
-                        row["outcome"] = "added"
-                for lbl in labels:
-                    for p, _ in defs_all[lbl].refit_extra:
-                        if p in held_now:
-                            held[p] = f"after adding {lbl}: {held_now.pop(p)}"
-                for p, why in held_now.items():
-                    held[p] = f"after adding {' + '.join(labels)}: {why}"
-                current = new
-                last = {t.label: t for tests in rounds for t in tests}
-                for lbl in labels:
-                    added_labels.add(lbl)
-                    last[lbl].selected = True
-                    added.append(EffectAdded(defs_all[lbl].name, lbl, {}, len(rounds) - 1,
-                                             last[lbl].p_holm, last[lbl].share_val))
-    # A baseline parameter held because an unmodelled effect blurred it may be credible now
-    # that the effect is in: free the held ones once more (the guard holds them again if not).
-    retry = [p for p in held if p in BASELINE_LABELS and p not in current.free]
-    if added and retry:
-        say(f"refit with {', '.join(retry)} free again")
-        fitter = OutputErrorFit(model, {**NUISANCE_SCALES(exp.dt), **_all_scales(defs_all)})
+            held[p] = f"after adding {' + '.join(labels)}: {why}"
+        self.current = new
+        last = {t.label: t for tests in self.rounds for t in tests}
+        for lbl in labels:
+            self.added_labels.add(lbl)
+            last[lbl].selected = True
+            self.added.append(EffectAdded(defs_all[lbl].name, lbl, {}, len(self.rounds) - 1,
+                                          last[lbl].p_holm, last[lbl].share_val))
+
+    def free_held_again(self) -> None:
+        """A baseline parameter held because an unmodelled effect blurred it may be credible
+        now that the effect is in: free the held ones once more (the guard holds them again
+        if not)."""
+        current, held = self.current, self.held
+        retry = [p for p in held if p in BASELINE_LABELS and p not in current.free]
+        if not (self.added and retry):
+            return
+        self.say(f"refit with {', '.join(retry)} free again")
+        fitter = OutputErrorFit(self.model, {**NUISANCE_SCALES(self.exp.dt),
+                                             **_all_scales(self.defs_all)})
         again, held_again = guarded_fit(fitter, current.theta, current.free + retry,
                                         current.theta, sigma=current.sigma, passes=1,
-                                        max_nfev=9, configured=model.start_vector())
+                                        max_nfev=9, configured=self.model.start_vector())
         if not any(p in held_again for p in current.free):
             for p in retry:
                 if p not in held_again:
                     held.pop(p)
-            current = again
-    # describe the added effects with the final fit's covariance
-    for e in added:
-        d = defs_all[e.label]
-        e.params = EFFECTS[d.name].describe(d, current, exp)
-    residual1 = {c: exp.measured[c] - current.outputs[c] for c in exp.channels}
-    analysis1 = analyse(exp, residual1, exp.val, noise_part(current.theta))
-    channels = [ChannelError(c, nrmse(exp.measured[c][exp.val], base.outputs[c][exp.val]),
-                             nrmse(exp.measured[c][exp.val], current.outputs[c][exp.val]))
-                for c in exp.channels]
-    unexplained, detail = _verdict(analysis1)
-    say("consistency of the parameters across frequency bands, time segments and channels")
-    agree = consistency(current, exp, est_mask)
-    if agree.inconsistent:
-        # a white residual bought with parameters that differ with the part of the record
-        # that pins them: the model absorbs a structure it does not have
-        unexplained = True
-        detail = "; ".join(filter(None, [detail, "parameters disagree between parts of the "
-                                         "record, the model lacks structure: " + "; ".join(
-                                             s.describe(BASELINE_LABELS[s.name][0])
-                                             for s in agree.inconsistent)]))
-    final_est = _estimates(current, names)
-    differs = differs_from_configuration(current, exp, final_est)
-    return IdentifyReport(
-        data.path, data.load, exp.n, data.sample_rate_hz, baseline_est, final_est,
-        held, added, rounds, channels, analysis0, analysis1, unexplained, detail,
-        notes=list(data.notes) + list(exp.notes)
-        + [f"ignored column {c}" for c in data.ignored],
-        rejected=rejected, joint=joint, wall_s=time.perf_counter() - t_start, experiment=exp,
-        outputs_before=base.outputs, outputs_after=current.outputs,
-        intersample=exp.intersample, intersample_reason=exp.intersample_reason,
-        input_noise=noise, consistency=agree, differs=differs,
-    )
+            self.current = again
+
+    def report(self, t_start: float) -> IdentifyReport:
+        """The added effects described with the final fit's covariance, the residual judged
+        again, the parameters' consistency across parts of the record; the wall time from
+        ``t_start`` (:func:`time.perf_counter`)."""
+        exp, current, base, data = self.exp, self.current, self.base, self.data
+        for e in self.added:
+            d = self.defs_all[e.label]
+            e.params = EFFECTS[d.name].describe(d, current, exp)
+        residual1 = {c: exp.measured[c] - current.outputs[c] for c in exp.channels}
+        analysis1 = analyse(exp, residual1, exp.val, self.noise_part(current.theta))
+        channels = [ChannelError(c, nrmse(exp.measured[c][exp.val], base.outputs[c][exp.val]),
+                                 nrmse(exp.measured[c][exp.val], current.outputs[c][exp.val]))
+                    for c in exp.channels]
+        unexplained, detail = _verdict(analysis1)
+        self.say("consistency of the parameters across frequency bands, time segments and "
+                 "channels")
+        agree = consistency(current, exp, self.est_mask)
+        if agree.inconsistent:
+            # a white residual bought with parameters that differ with the part of the
+            # record that pins them: the model absorbs a structure it does not have
+            unexplained = True
+            detail = "; ".join(filter(None, [detail, "parameters disagree between parts of "
+                                             "the record, the model lacks structure: "
+                                             + "; ".join(
+                                                 s.describe(BASELINE_LABELS[s.name][0])
+                                                 for s in agree.inconsistent)]))
+        final_est = _estimates(current, self.names)
+        differs = differs_from_configuration(current, exp, final_est)
+        return IdentifyReport(
+            data.path, data.load, exp.n, data.sample_rate_hz, self.baseline_est, final_est,
+            self.held, self.added, self.rounds, channels, self.analysis0, analysis1,
+            unexplained, detail,
+            notes=list(data.notes) + list(exp.notes)
+            + [f"ignored column {c}" for c in data.ignored],
+            rejected=self.rejected, joint=self.joint_rows,
+            wall_s=time.perf_counter() - t_start, experiment=exp,
+            outputs_before=base.outputs, outputs_after=current.outputs,
+            intersample=exp.intersample, intersample_reason=exp.intersample_reason,
+            input_noise=self.noise, consistency=agree, differs=differs,
+        )
 
 
 #: Candidates refitted together when none passes alone: the best few of the last round.

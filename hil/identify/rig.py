@@ -55,19 +55,75 @@ import numpy as np
 from numba import njit
 
 from hil.identify.csvdata import LOAD_CASES, MeasuredData
+from hil.identify.rig_effects import (
+    POSITIVE_KEYS,
+    RIG_REGISTRY,
+    KernelSetup,
+    RigRecord,
+    ks_of_x,
+    pulsation_orders,
+)
+from hil.identify.rig_layout import (
+    I_CROD,
+    I_DC,
+    I_DP,
+    I_DRIFT,
+    I_DS,
+    I_HALF,
+    I_JC,
+    I_JP,
+    I_K,
+    I_KAPPA,
+    I_KC,
+    I_KCKP,
+    I_KM,
+    I_KM_RATE,
+    I_KPIPE,
+    I_KROD,
+    I_KS,
+    I_KSX,
+    I_LOAD,
+    I_P0,
+    I_PC,
+    I_PC_EPS,
+    I_SF_C,
+    I_SF_EPS,
+    I_SF_S,
+    I_SF_VS,
+    I_T0,
+    I_TAU_CL,
+    I_TH0,
+    I_TREF,
+    I_VISC,
+    I_VSIDE,
+    I_WP,
+    I_WS,
+    I_XLSB,
+    N_P,
+    N_Z,
+    Z_FS,
+    Z_PCA,
+    Z_PCB,
+    Z_PPA,
+    Z_PPB,
+    Z_TAUM,
+    Z_TAUS,
+    Z_THP,
+    Z_VC,
+    Z_VP,
+    Z_XC,
+)
 from plant.config import Config, load_config
 
 # --------------------------------------------------------------------------------------
 # Defaults
 # --------------------------------------------------------------------------------------
 
-#: Effects of the identification library, as the rig implements them.
-LIBRARY_EFFECTS: tuple[str, ...] = (
-    "pump_pulsation", "pump_coulomb_friction", "seal_friction", "stiffness_vs_position",
-    "viscosity_temperature", "strain_thermal_drift", "input_delay", "sensor_saturation",
-)
+#: Effects of the identification library, as the rig implements them
+#: (:mod:`hil.identify.rig_effects`, one class per effect).
+LIBRARY_EFFECTS: tuple[str, ...] = tuple(n for n, e in RIG_REGISTRY.items() if e.library)
 #: Effects outside the library (for "unexplained" tests).
-OUTSIDE_EFFECTS: tuple[str, ...] = ("hose_viscoelastic", "mains_hum", "backlash")
+OUTSIDE_EFFECTS: tuple[str, ...] = tuple(n for n, e in RIG_REGISTRY.items() if not e.library)
 RIG_EFFECTS: tuple[str, ...] = LIBRARY_EFFECTS + OUTSIDE_EFFECTS
 
 #: Realistic default magnitudes. Pulsation: further orders by suffix (``order_2``,
@@ -75,24 +131,10 @@ RIG_EFFECTS: tuple[str, ...] = LIBRARY_EFFECTS + OUTSIDE_EFFECTS
 #: Friction regularisation and Stribeck velocities differ from the fit's defaults on purpose
 #: (fit: tanh, eps_pump 1e-4 m/s; seal Stribeck 5 mm/s, eps 2 mm/s).
 RIG_DEFAULT_MAGNITUDES: dict[str, dict[str, float]] = {
-    "pump_pulsation": {"order": 4.0, "amplitude": 0.02, "phase_rad": 0.3, "torque_n": 150.0,
-                       "torque_phase_rad": 1.1, "order_2": 0.0, "amplitude_2": 0.0,
-                       "phase_rad_2": 0.0, "torque_n_2": 0.0, "torque_phase_rad_2": 0.0},
-    "pump_coulomb_friction": {"force_n": 80.0, "eps_m_per_s": 3.0e-4},
-    "seal_friction": {"coulomb_n": 20.0, "static_n": 35.0, "stribeck_m_per_s": 4.0e-3,
-                      "eps_m_per_s": 1.0e-3},
-    "stiffness_vs_position": {"side_volume_m3": float("nan")},  # nan: the preset's
-    "viscosity_temperature": {"coeff_per_c": 0.03},
-    "strain_thermal_drift": {"n_per_c": 2.5},
-    "input_delay": {"delay_s": 300e-6},
-    "sensor_saturation": {"level_pa": 4.0e6},
-    "hose_viscoelastic": {"stiffness_ratio": 0.5, "corner_hz": 30.0},
-    "mains_hum": {"amplitude_pa": 1.0e4, "freq_hz": 50.0},
-    "backlash": {"width_rad": 0.05},
-}
+    n: dict(RIG_REGISTRY[n].defaults) for n in RIG_EFFECTS}
 
 #: Effects that need a moving oil temperature.
-NEEDS_TEMPERATURE = ("viscosity_temperature", "strain_thermal_drift")
+NEEDS_TEMPERATURE = tuple(n for n in RIG_EFFECTS if RIG_REGISTRY[n].needs_temperature)
 
 #: Sensor chain: first-order bandwidth (Hz), Gaussian noise (1 sigma) and quantisation.
 SENSORS: dict[str, float] = {
@@ -139,14 +181,6 @@ STEP_S = 10e-6
 # --------------------------------------------------------------------------------------
 # Kernel (numba): parameter vector layout
 # --------------------------------------------------------------------------------------
-
-(I_K, I_DS, I_DP, I_DC, I_KS, I_JP, I_JC, I_KROD, I_CROD, I_P0, I_KC, I_KCKP, I_LOAD,
- I_PC, I_PC_EPS, I_SF_C, I_SF_S, I_SF_VS, I_SF_EPS, I_KSX, I_VSIDE, I_KAPPA, I_KPIPE, I_HALF,
- I_VISC, I_TREF, I_DRIFT, I_T0, I_KM, I_KM_RATE, I_WP, I_WS, I_TH0, I_TAU_CL, I_XLSB,
- N_P) = range(36)
-
-#: State vector layout.
-(Z_THP, Z_VP, Z_TAUS, Z_TAUM, Z_XC, Z_VC, Z_PPA, Z_PPB, Z_PCA, Z_PCB, Z_FS, N_Z) = range(12)
 
 _TWO_OVER_PI = 2.0 / math.pi
 
@@ -488,12 +522,11 @@ def _normalise_effects(effects: Mapping[str, Mapping[str, float]] | Sequence[str
             raise ValueError(f"unknown rig effect {name!r} (known: {', '.join(RIG_EFFECTS)})")
         mag = dict(RIG_DEFAULT_MAGNITUDES[name])
         for key, value in dict(over).items():
-            extra_order = name == "pump_pulsation" and key.rsplit("_", 1)[-1].isdigit()
-            if key not in mag and not extra_order:
+            if not RIG_REGISTRY[name].accepts(key):
                 raise ValueError(f"effect {name}: unknown magnitude {key!r} "
                                  f"(known: {', '.join(RIG_DEFAULT_MAGNITUDES[name]) or 'none'})")
             mag[key] = float(value)
-        for key in ("eps_m_per_s", "stribeck_m_per_s", "corner_hz", "level_pa"):
+        for key in POSITIVE_KEYS:
             # regularisation velocities and corners divide: zero would give inf/nan
             if key in mag and not mag[key] > 0:
                 raise ValueError(f"effect {name}: {key} must be > 0, got {mag[key]}")
@@ -501,24 +534,7 @@ def _normalise_effects(effects: Mapping[str, Mapping[str, float]] | Sequence[str
     return out
 
 
-def _pulsation_orders(mag: Mapping[str, float]) -> list[tuple[float, float, float, float, float]]:
-    """(order, flow amplitude, flow phase, torque N, torque phase) per switched-on order."""
-    rows = []
-    suffixes = [""] + sorted({k.rsplit("_", 1)[1] for k in mag
-                              if k.startswith("order_") and k.rsplit("_", 1)[1].isdigit()},
-                             key=int)
-    for sfx in suffixes:
-        tail = f"_{sfx}" if sfx else ""
-        order = float(mag.get(f"order{tail}", 0.0))
-        if order <= 0:
-            continue
-        if order != round(order):
-            raise ValueError(f"pump_pulsation: order{tail} must be a whole number, got {order}")
-        rows.append((order, float(mag.get(f"amplitude{tail}", 0.0)),
-                     float(mag.get(f"phase_rad{tail}", 0.0)),
-                     float(mag.get(f"torque_n{tail}", 0.0)),
-                     float(mag.get(f"torque_phase_rad{tail}", 0.0))))
-    return rows
+_pulsation_orders = pulsation_orders
 
 
 def _preset_config(preset: str | Config) -> Config:
@@ -562,14 +578,7 @@ def draw_parameters(preset: str | Config = "hydra_default", seed: int = 1,
     return out
 
 
-def _ks_of_x(x: np.ndarray | float, v_side: float, kappa: float, kc: float, half: float,
-             k_pipe: float) -> np.ndarray:
-    """Series stiffness (N/m) at piston position ``x`` (m) by Eq. 2.25-2.27."""
-    x = np.asarray(x, dtype=float)
-    v1 = v_side + kc * (half + x)
-    v2 = v_side + kc * (half - x)
-    kf = kappa * kc * kc * (1.0 / v1 + 1.0 / v2)
-    return 1.0 / (1.0 / kf + 1.0 / k_pipe)
+_ks_of_x = ks_of_x  # the physical law, for the tests of the physics
 
 
 def _backlash(theta: np.ndarray, width: float) -> np.ndarray:
@@ -670,69 +679,6 @@ def _excitation(load: str, profile: str, cfg: Config, t: np.ndarray, rng_exc: np
     return _Excitation(lf, la, lph, float(kx), xref, ff, sweep_m, sweep_hz, exc_desc)
 
 
-def _effect_truth(mags: dict[str, dict[str, float]], zs: np.ndarray, temps: np.ndarray,
-                  p: np.ndarray, cols: dict[str, np.ndarray], kc: float, half: float,
-                  v_side: float, delay: float, p_lsb: float, hum_phase: float, cfg: Config
-                  ) -> dict[str, dict[str, float]]:
-    """Each effect's truth in the identification report's terms, from the magnitudes and
-    the simulated record (states ``zs``, true oil temperature ``temps``, logged ``cols``)."""
-    eff_truth: dict[str, dict[str, float]] = {}
-    press_names = ("p_pump_a", "p_pump_b", "p_cyl_a", "p_cyl_b", "p_acc")
-    t_ref = float(p[I_TREF])
-    for name, mag in mags.items():
-        if name == "pump_pulsation":
-            rows = _pulsation_orders(mag)
-            for i, (o, a, ph, tq, tph) in enumerate(rows):
-                d = {"order": o, "amplitude": a, "phase_rad": ph, "torque_n": tq,
-                     "torque_phase_rad": tph}
-                if i == 0:
-                    eff_truth["pump_pulsation"] = dict(d)
-                if len(rows) > 1:
-                    # several orders: each also under the report's label
-                    eff_truth[f"pump_pulsation[order={int(o)}]"] = d
-        elif name == "pump_coulomb_friction":
-            eff_truth[name] = {"force_n": mag["force_n"], "eps_m_per_s": mag["eps_m_per_s"]}
-        elif name == "seal_friction":
-            eff_truth[name] = dict(mag)
-        elif name == "stiffness_vs_position":
-            x = zs[:, Z_XC]
-            lo, hi = float(x.min()), float(x.max())
-            kfun = _ks_of_x(np.array([lo, 0.5 * (lo + hi), hi]), v_side, p[I_KAPPA], kc,
-                            half, p[I_KPIPE])
-            a_eq = (v_side + kc * half) * p[I_KAPPA] / cfg.get("hydraulics.bulk_modulus_pa")
-            eff_truth[name] = {
-                "ks_relative_span": float(0.5 * (kfun[0] + kfun[2]) / kfun[1] - 1.0),
-                "side_volume_m3": v_side,
-                # what the report's volume (computed with the preset's bulk modulus) sees
-                "side_volume_at_preset_kappa_m3": float(a_eq - kc * half),
-                "bulk_modulus_pa": float(p[I_KAPPA]),
-                "ks_pipe_n_per_m": float(p[I_KPIPE]),
-                "ks_mid_stroke_n_per_m": float(p[I_KS]),
-                "x_min_m": lo, "x_max_m": hi,
-            }
-        elif name == "viscosity_temperature":
-            eff_truth[name] = {"coeff_per_c": mag["coeff_per_c"], "reference_c": t_ref}
-        elif name == "strain_thermal_drift":
-            eff_truth[name] = {"n_per_c": mag["n_per_c"],
-                               "drift_n": float(mag["n_per_c"] * (temps[-1] - temps[0]))}
-        elif name == "input_delay":
-            eff_truth[name] = {"delay_s": delay}
-        elif name == "sensor_saturation":
-            level_code = math.floor(mag["level_pa"] / p_lsb + 0.5)
-            fracs = {c: float(np.mean(cols[c] >= level_code * p_lsb)) for c in press_names}
-            eff_truth[name] = {"level_pa": level_code * p_lsb, "level_set_pa": mag["level_pa"],
-                               **{f"clip_fraction_{c}": v for c, v in fracs.items()}}
-        elif name == "hose_viscoelastic":
-            eff_truth[name] = {"k_m_n_per_m": float(p[I_KM]),
-                               "c_m_ns_per_m": float(p[I_KM] / p[I_KM_RATE]),
-                               "corner_hz": mag["corner_hz"]}
-        elif name == "mains_hum":
-            eff_truth[name] = {**mag, "phase_rad": hum_phase}
-        else:
-            eff_truth[name] = dict(mag)
-    return eff_truth
-
-
 def _steps() -> tuple[float, float, float]:
     """The converters' steps of :data:`SENSORS`: pressure (Pa), strain (N), encoder (rad)."""
     return (SENSORS["pressure_full_scale_pa"] / 2 ** SENSORS["pressure_bits"],
@@ -778,6 +724,94 @@ def _sensors(zs: np.ndarray, cur: np.ndarray, temps: np.ndarray, p: np.ndarray,
     t_lsb = SENSORS["temperature_lsb_c"]
     cols["temp_c"] = np.floor((temps + n_temp) / t_lsb + 0.5) * t_lsb
     return cols, rotor, rail
+
+
+@dataclass
+class _Kernel:
+    """The kernel's parameters for one record: the vector ``p`` (:mod:`rig_layout`), the
+    pulsation orders, the temperature shape's parameters and its start (degC), the rotor
+    angle at the encoder's zero and the mains hum's phase (rad), the effects' setup and the
+    input delay (s)."""
+
+    p: np.ndarray
+    orders: np.ndarray
+    tp: np.ndarray
+    t_oil0: float
+    theta0: float
+    hum_phase: float
+    setup: KernelSetup
+    delay: float
+
+
+def _kernel_parameters(load: str, mags: dict[str, dict[str, float]], cfg: Config,
+                       truep: Mapping[str, float], kc: float, kp: float, half: float,
+                       t_ref: float, temperature: str, seconds: float,
+                       rng_misc: np.random.Generator) -> _Kernel:
+    """The kernel's parameters from the drawn truth, the preset and the effects (each
+    effect's class sets its own); two angles drawn from ``rng_misc``."""
+    p = np.zeros(N_P)
+    p[I_K] = truep["gain_n_per_a"]
+    p[I_DS] = truep["ds"]
+    p[I_DP] = truep["dp"]
+    p[I_DC] = truep["dc"]
+    p[I_KS] = truep["ks"]
+    p[I_JP] = truep["jp"]
+    p[I_JC] = truep["jc"]
+    p[I_KROD] = truep["k_rod"]
+    p[I_CROD] = truep["c_rod"]
+    p[I_P0] = truep["precharge_pa"]
+    p[I_KC] = kc
+    p[I_KCKP] = kc / kp
+    p[I_LOAD] = {"fixed_piston": 0, "free_piston": 1, "conrod_fixed": 2}[load]
+    p[I_HALF] = half
+    p[I_TREF] = t_ref
+    p[I_WP] = 2.0 * math.pi * SENSORS["pressure_bandwidth_hz"]
+    p[I_WS] = 2.0 * math.pi * SENSORS["strain_bandwidth_hz"]
+    theta0 = float(rng_misc.uniform(0.0, 2.0 * math.pi))  # rotor angle at the encoder's zero
+    hum_phase = float(rng_misc.uniform(0.0, 2.0 * math.pi))
+    p[I_TH0] = theta0
+    p[I_TAU_CL] = 1.0 / (2.0 * math.pi * CURRENT_LOOP_HZ)
+    p[I_XLSB] = SENSORS["piston_lsb_m"]
+    orders = np.zeros((0, 5))
+    if "pump_pulsation" in mags:
+        orders = np.array(pulsation_orders(mags["pump_pulsation"]), dtype=float).reshape(-1, 5)
+    tp = _temperature_params(temperature, seconds)
+    t_oil0 = float(_temperature(0.0, tp))
+    p[I_T0] = t_oil0
+    setup = KernelSetup(load, truep, cfg, kc, half)
+    for name, effect in RIG_REGISTRY.items():  # in the registry's order: see there
+        if name in mags:
+            effect.set_kernel(p, mags[name], setup)
+    delay = float(mags.get("input_delay", {}).get("delay_s", 0.0))
+    if delay < 0 or not math.isfinite(delay):
+        raise ValueError(f"input_delay: delay_s {delay} must be >= 0")
+    return _Kernel(p, orders, tp, t_oil0, theta0, hum_phase, setup, delay)
+
+
+
+def _initial_state(initial_state: Mapping[str, float] | None, load: str, p: np.ndarray,
+                   kc: float, t_oil0: float, t_ref: float) -> np.ndarray:
+    """The state at t = 0: the given ``theta_p, v_p, tau_q, x_c, v_c`` (a fixed piston
+    stays put) and the sensor filters settled on them."""
+    z0 = np.zeros(N_Z)
+    if initial_state:
+        names = {"theta_p": Z_THP, "v_p": Z_VP, "tau_q": Z_TAUS, "x_c": Z_XC, "v_c": Z_VC}
+        for key, value in initial_state.items():
+            if key not in names:
+                raise ValueError(f"initial_state: unknown key {key!r} (known: {', '.join(names)})")
+            z0[names[key]] = float(value)
+        if load == "fixed_piston":
+            z0[Z_XC] = z0[Z_VC] = 0.0
+    f0 = z0[Z_TAUS]
+    fc0 = f0 - p[I_DC] * math.exp(-p[I_VISC] * (t_oil0 - t_ref)) * z0[Z_VC]
+    z0[Z_PPA] = p[I_P0] + max(f0, 0.0) / kc
+    z0[Z_PPB] = p[I_P0] + max(-f0, 0.0) / kc
+    z0[Z_PCA] = p[I_P0] + max(fc0, 0.0) / kc
+    z0[Z_PCB] = p[I_P0] + max(-fc0, 0.0) / kc
+    rod0 = {"fixed_piston": fc0, "free_piston": 0.0,
+            "conrod_fixed": p[I_KROD] * z0[Z_XC] + p[I_CROD] * z0[Z_VC]}[load]
+    z0[Z_FS] = rod0
+    return z0
 
 
 def generate_rig(
@@ -859,68 +893,10 @@ def generate_rig(
     t = np.arange(n) * ts
 
     # --- parameters of the kernel ---------------------------------------------------------
-    p = np.zeros(N_P)
-    p[I_K] = truep["gain_n_per_a"]
-    p[I_DS] = truep["ds"]
-    p[I_DP] = truep["dp"]
-    p[I_DC] = truep["dc"]
-    p[I_KS] = truep["ks"]
-    p[I_JP] = truep["jp"]
-    p[I_JC] = truep["jc"]
-    p[I_KROD] = truep["k_rod"]
-    p[I_CROD] = truep["c_rod"]
-    p[I_P0] = truep["precharge_pa"]
-    p[I_KC] = kc
-    p[I_KCKP] = kc / kp
-    p[I_LOAD] = {"fixed_piston": 0, "free_piston": 1, "conrod_fixed": 2}[load]
-    p[I_HALF] = half
-    p[I_TREF] = t_ref
-    p[I_WP] = 2.0 * math.pi * SENSORS["pressure_bandwidth_hz"]
-    p[I_WS] = 2.0 * math.pi * SENSORS["strain_bandwidth_hz"]
-    theta0 = float(rng_misc.uniform(0.0, 2.0 * math.pi))  # rotor angle at the encoder's zero
-    hum_phase = float(rng_misc.uniform(0.0, 2.0 * math.pi))
-    p[I_TH0] = theta0
-    p[I_TAU_CL] = 1.0 / (2.0 * math.pi * CURRENT_LOOP_HZ)
-    p[I_XLSB] = SENSORS["piston_lsb_m"]
-    orders = np.zeros((0, 5))
-    if "pump_pulsation" in mags:
-        orders = np.array(_pulsation_orders(mags["pump_pulsation"]), dtype=float).reshape(-1, 5)
-    if "pump_coulomb_friction" in mags:
-        m = mags["pump_coulomb_friction"]
-        p[I_PC] = m["force_n"]
-        p[I_PC_EPS] = m["eps_m_per_s"]
-    if "seal_friction" in mags and load != "fixed_piston":
-        m = mags["seal_friction"]
-        p[I_SF_C] = m["coulomb_n"]
-        p[I_SF_S] = m["static_n"]
-        p[I_SF_VS] = m["stribeck_m_per_s"]
-        p[I_SF_EPS] = m["eps_m_per_s"]
-    v_side = float("nan")
-    if "stiffness_vs_position" in mags:
-        v_side = mags["stiffness_vs_position"]["side_volume_m3"]
-        if not math.isfinite(v_side):
-            v_side = float(cfg.get("hydraulics.dead_volume_m3")
-                           + cfg.get("hydraulics.pipe_volume_m3"))
-        p[I_KSX] = 1.0
-        p[I_VSIDE] = v_side
-        p[I_KAPPA] = truep["bulk_modulus_pa"]
-        p[I_KPIPE] = truep["ks_pipe_n_per_m"]
-        # the baseline k_s is then the mid-stroke value of the physical law
-        p[I_KS] = float(_ks_of_x(0.0, v_side, p[I_KAPPA], kc, half, p[I_KPIPE]))
-    tp = _temperature_params(temperature, seconds)
-    t_oil0 = float(_temperature(0.0, tp))
-    p[I_T0] = t_oil0
-    if "viscosity_temperature" in mags:
-        p[I_VISC] = mags["viscosity_temperature"]["coeff_per_c"]
-    if "strain_thermal_drift" in mags:
-        p[I_DRIFT] = mags["strain_thermal_drift"]["n_per_c"]
-    if "hose_viscoelastic" in mags:
-        m = mags["hose_viscoelastic"]
-        p[I_KM] = m["stiffness_ratio"] * p[I_KS]
-        p[I_KM_RATE] = 2.0 * math.pi * m["corner_hz"]
-    delay = float(mags.get("input_delay", {}).get("delay_s", 0.0))
-    if delay < 0 or not math.isfinite(delay):
-        raise ValueError(f"input_delay: delay_s {delay} must be >= 0")
+    kern = _kernel_parameters(load, mags, cfg, truep, kc, kp, half, t_ref, temperature,
+                              seconds, rng_misc)
+    p, orders, tp, t_oil0 = kern.p, kern.orders, kern.tp, kern.t_oil0
+    theta0, hum_phase, setup, delay = kern.theta0, kern.hum_phase, kern.setup, kern.delay
 
     # --- excitation -----------------------------------------------------------------------
     exc = _excitation(load, profile, cfg, t, rng_exc, excitation_lines, position_loop_a_per_m)
@@ -935,24 +911,7 @@ def generate_rig(
     n_temp = rng_noise.standard_normal(n) * SENSORS["temperature_noise_c"]
 
     # --- simulate -------------------------------------------------------------------------
-    z0 = np.zeros(N_Z)
-    if initial_state:
-        names = {"theta_p": Z_THP, "v_p": Z_VP, "tau_q": Z_TAUS, "x_c": Z_XC, "v_c": Z_VC}
-        for key, value in initial_state.items():
-            if key not in names:
-                raise ValueError(f"initial_state: unknown key {key!r} (known: {', '.join(names)})")
-            z0[names[key]] = float(value)
-        if load == "fixed_piston":
-            z0[Z_XC] = z0[Z_VC] = 0.0
-    f0 = z0[Z_TAUS]
-    fc0 = f0 - p[I_DC] * math.exp(-p[I_VISC] * (t_oil0 - t_ref)) * z0[Z_VC]
-    z0[Z_PPA] = p[I_P0] + max(f0, 0.0) / kc
-    z0[Z_PPB] = p[I_P0] + max(-f0, 0.0) / kc
-    z0[Z_PCA] = p[I_P0] + max(fc0, 0.0) / kc
-    z0[Z_PCB] = p[I_P0] + max(-fc0, 0.0) / kc
-    rod0 = {"fixed_piston": fc0, "free_piston": 0.0,
-            "conrod_fixed": p[I_KROD] * z0[Z_XC] + p[I_CROD] * z0[Z_VC]}[load]
-    z0[Z_FS] = rod0
+    z0 = _initial_state(initial_state, load, p, kc, t_oil0, t_ref)
     zs = np.zeros((n, N_Z))
     temps = np.zeros(n)
     cur = np.zeros((n, 3))
@@ -982,8 +941,10 @@ def generate_rig(
                                     "k_rod", "c_rod", "precharge_pa")}
     params["ks"] = float(p[I_KS])
     params["reference_c"] = t_ref
-    eff_truth = _effect_truth(mags, zs, temps, p, cols, kc, half, v_side, delay, p_lsb,
-                              hum_phase, cfg)
+    rec = RigRecord(zs, temps, p, cols, setup, delay, p_lsb, hum_phase)
+    eff_truth: dict[str, dict[str, float]] = {}
+    for name, mag in mags.items():
+        eff_truth.update(RIG_REGISTRY[name].truth(mag, rec))
     truth = {
         "parameters": params,
         "effects": eff_truth,

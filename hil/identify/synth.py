@@ -32,30 +32,19 @@ from typing import Any
 import numpy as np
 
 from hil.identify.csvdata import LOAD_CASES, MeasuredData
+from hil.identify.synth_effects import SYNTH_REGISTRY
 from plant import layout as L
 from plant.config import Config, load_config
 from plant.model import Plant, stiffness_range  # noqa: F401  (re-exported for docs)
 
-#: Realistic default magnitudes of each library effect (the plant's preset values where
-#: there is one). ``order`` of the pulsation is the 4-tooth trochoid's.
+#: Realistic default magnitudes of each effect (the plant's preset values where there is
+#: one), from the per-effect classes of :mod:`hil.identify.synth_effects`.
 DEFAULT_MAGNITUDES: dict[str, dict[str, float]] = {
-    "pump_pulsation": {"order": 4, "amplitude": 0.02, "torque_n": 150.0},
-    "pump_coulomb_friction": {"force_n": 80.0},
-    "seal_friction": {"coulomb_n": 20.0, "static_n": 35.0},
-    "stiffness_vs_position": {},
-    "viscosity_temperature": {"coeff_per_c": 0.03, "initial_c": 15.0, "ambient_c": 25.0},
-    "strain_thermal_drift": {"n_per_c": 2.5, "ambient_c": 35.0},
-    "input_delay": {"delay_ticks": 5},
-    "pump_pulsation_extra": {"order": 2, "torque_n": 100.0, "phase_rad": 0.7},
-    "sensor_saturation": {"level_pa": 4.0e6},
-    "mains_hum": {"amplitude_pa": 1.0e4, "freq_hz": 50.0},
-    "backlash": {"width_rad": 0.05},
-}
+    n: dict(e.defaults) for n, e in SYNTH_REGISTRY.items()}
 
-PLANT_EFFECTS = ("pump_pulsation", "pump_coulomb_friction", "seal_friction",
-                 "stiffness_vs_position", "viscosity_temperature", "strain_thermal_drift")
-WRAPPER_EFFECTS = ("input_delay", "sensor_saturation", "pump_pulsation_extra")
-OUTSIDE_EFFECTS = ("mains_hum", "backlash")
+PLANT_EFFECTS = tuple(n for n, e in SYNTH_REGISTRY.items() if e.kind == "plant")
+WRAPPER_EFFECTS = tuple(n for n, e in SYNTH_REGISTRY.items() if e.kind == "wrapper")
+OUTSIDE_EFFECTS = tuple(n for n, e in SYNTH_REGISTRY.items() if e.kind == "outside")
 ALL_SYNTH_EFFECTS = PLANT_EFFECTS + WRAPPER_EFFECTS + OUTSIDE_EFFECTS
 #: Excitation profiles of :func:`generate`.
 PROFILES = ("multisine", "resonance", "slide")
@@ -99,32 +88,9 @@ def synth_config(load: str, effects: dict[str, dict[str, float]],
         "effects.quantisation.enabled": noise,
     }
     for name, mag in effects.items():
-        if name == "pump_pulsation":
-            ov.update({"effects.pulsation.enabled": True,
-                       "effects.pulsation.order": int(mag["order"]),
-                       "effects.pulsation.amplitude": float(mag["amplitude"]),
-                       "effects.pulsation.torque_n": float(mag["torque_n"]),
-                       # The identifier models a load-independent torque ripple only.
-                       "effects.pulsation.torque_amplitude": 0.0,
-                       "effects.pulsation.phase_rad": float(mag.get("phase_rad", 0.0))})
-        elif name == "pump_coulomb_friction":
-            ov.update({"effects.pump_coulomb.enabled": True,
-                       "effects.pump_coulomb.force_n": float(mag["force_n"])})
-        elif name == "seal_friction":
-            ov.update({"effects.seal_friction.enabled": True,
-                       "effects.seal_friction.coulomb_n": float(mag["coulomb_n"]),
-                       "effects.seal_friction.static_n": float(mag["static_n"])})
-        elif name == "stiffness_vs_position":
-            ov["effects.ks_position.enabled"] = True
-        elif name == "viscosity_temperature":
-            ov.update({"effects.oil_temperature.enabled": True,
-                       "effects.oil_temperature.viscosity_coeff_per_c":
-                           float(mag["coeff_per_c"]),
-                       "effects.oil_temperature.initial_c": float(mag["initial_c"]),
-                       "effects.oil_temperature.ambient_c": float(mag["ambient_c"])})
-        elif name == "strain_thermal_drift":
-            ov.update({"effects.strain_drift.enabled": True,
-                       "effects.strain_drift.n_per_c": float(mag["n_per_c"])})
+        effect = SYNTH_REGISTRY.get(name)
+        if effect is not None:
+            ov.update(effect.plant_overrides(mag))
     return cfg.with_overrides(ov, source="identify synth")
 
 
@@ -260,7 +226,7 @@ def generate(
     }
     truth: dict[str, dict[str, float]] = {}
     for name, mag in mags.items():
-        truth[name] = _truth(name, mag, cfg, rec, fs)
+        truth[name] = SYNTH_REGISTRY[name].truth(mag, cfg, rec, fs)
     if "sensor_saturation" in mags:
         level = mags["sensor_saturation"]["level_pa"]
         for c in ("p_pump_a", "p_pump_b", "p_cyl_a", "p_cyl_b", "p_acc"):
@@ -297,45 +263,6 @@ def _backlash(theta: np.ndarray, width: float) -> np.ndarray:
             pos = th + half
         out[i] = pos
     return out
-
-
-def _truth(name: str, mag: dict[str, float], cfg: Config, rec: np.ndarray,
-           fs: float) -> dict[str, float]:
-    """The effect's parameters in the identification library's terms."""
-    if name == "stiffness_vs_position":
-        x = rec[:, L.Y_X_PISTON]
-        return {"ks_relative_span": _ks_span(cfg, float(x.min()), float(x.max())),
-                "side_volume_m3": cfg.get("hydraulics.dead_volume_m3")
-                + cfg.get("hydraulics.pipe_volume_m3")}
-    if name == "strain_thermal_drift":
-        from plant.model import build_params
-
-        p = build_params(cfg)
-        tau = p[L.P_ROD_TAU]
-        t_end = (rec.shape[0] - 1) / fs
-        t_amb0 = cfg.get("effects.oil_temperature.ambient_c")
-        step = mag["ambient_c"] - t_amb0
-        return {"drift_n": mag["n_per_c"] * step * (1 - math.exp(-t_end / tau)),
-                "n_per_c": mag["n_per_c"]}
-    if name == "input_delay":
-        return {"delay_s": mag["delay_ticks"] * cfg.get("sim.tick_ns") * 1e-9}
-    if name == "pump_pulsation_extra":
-        return {"order": mag["order"], "amplitude": 0.0, "torque_n": mag["torque_n"]}
-    if name == "viscosity_temperature":
-        return {"coeff_per_c": mag["coeff_per_c"]}
-    return {k: float(v) for k, v in mag.items()}
-
-
-def _ks_span(cfg: Config, x_lo: float, x_hi: float) -> float:
-    """(k_s(x_hi) + k_s(x_lo)) / 2 / k_s(mid-range) - 1 over the visited range (Eq. 2.27)."""
-    from plant import kernel
-    from plant.model import build_params
-
-    p = build_params(cfg, substeps=1)
-    p[L.P_KSX_ON] = 1.0
-    mid = 0.5 * (x_lo + x_hi)
-    k_mid = kernel.series_stiffness(p, mid)
-    return 0.5 * (kernel.series_stiffness(p, x_lo) + kernel.series_stiffness(p, x_hi)) / k_mid - 1
 
 
 __all__ = ["ALL_SYNTH_EFFECTS", "DEFAULT_MAGNITUDES", "PROFILES", "SynthResult", "generate",

@@ -15,6 +15,7 @@ import shutil
 import struct
 import subprocess
 import tempfile
+from collections.abc import Iterable, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -69,9 +70,18 @@ def _cache_dir() -> Path:
 
 
 def _build(compiler: str, flags: tuple[str, ...], sources: tuple[str, ...], name: str) -> Path:
-    """Compile ``sources`` once per content and flags into the cache; the output path."""
+    """Compile the law's ``sources`` once per content and flags into the cache."""
+    inputs = sorted(SOURCE_DIR.rglob("*.[ch]")) + [SOURCE_DIR / "target/netduinoplus2.ld"]
+    return compile_cached(compiler, flags, sources, inputs, name, cwd=SOURCE_DIR)
+
+
+def compile_cached(compiler: str, flags: tuple[str, ...], sources: Sequence[str | Path],
+                   inputs: Iterable[Path], name: str, cwd: Path | None = None) -> Path:
+    """Compile ``sources`` into ``name`` once per compiler, flags and the bytes of ``inputs``
+    (every file the build reads), in the cache; the output path. Written under a temporary
+    name and renamed, so a build killed half-way leaves nothing a later run would trust."""
     digest = hashlib.sha256(" ".join((compiler, *flags)).encode())
-    for path in sorted(SOURCE_DIR.rglob("*.[ch]")) + [SOURCE_DIR / "target/netduinoplus2.ld"]:
+    for path in inputs:
         digest.update(path.read_bytes())
     out = _cache_dir() / digest.hexdigest()[:16] / name
     if out.exists():
@@ -79,11 +89,11 @@ def _build(compiler: str, flags: tuple[str, ...], sources: tuple[str, ...], name
     try:
         out.parent.mkdir(parents=True, exist_ok=True)
         tmp = out.with_suffix(f".tmp{os.getpid()}")
-        cmd = [compiler, *flags, *sources, "-o", str(tmp)]
-        r = subprocess.run(cmd, cwd=SOURCE_DIR, capture_output=True, text=True)
+        cmd = [compiler, *flags, *map(str, sources), "-o", str(tmp)]
+        r = subprocess.run(cmd, cwd=cwd, capture_output=True, text=True)
         if r.returncode:
-            raise BuildError(f"{compiler} failed on {' '.join(sources)}: "
-                             f"{_first_error(r.stderr)}")
+            raise BuildError(f"{compiler} failed on {', '.join(Path(s).name for s in sources)}"
+                             f": {_first_error(r.stderr)}")
         tmp.replace(out)
     except OSError as exc:
         raise BuildError(f"cannot build into {out.parent}: {exc}") from None

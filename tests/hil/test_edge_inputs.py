@@ -7,8 +7,6 @@ diagnoses, and big inputs (streamed, bounded, with progress).
 from __future__ import annotations
 
 import argparse
-import contextlib
-import io
 import re
 import subprocess
 from pathlib import Path
@@ -18,16 +16,7 @@ import pytest
 
 from hil.cli.args import walk
 from hil.cli.root import build_parser, main
-
-
-def _run(argv: list[str]) -> tuple[int, str, str]:
-    out, err = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-        try:
-            code = main(argv)
-        except SystemExit as exc:
-            code = exc.code
-    return code, out.getvalue(), err.getvalue()
+from tests.hil.test_outputs import _run  # eha-hil ARGV in this process: code, out, err
 
 
 def _one_line(err: str) -> str:

@@ -66,6 +66,7 @@ def test_non_monotonic_time(tmp_path):
     rows[7], rows[8] = rows[8], rows[7]
     e = _error(tmp_path, HEADER + COLS + "".join(rows))
     assert e.column == "t" and e.line == 12 and "does not increase" in str(e)
+    assert "np." not in str(e)  # the values as a user wrote them, not numpy's repr
 
 
 def test_unknown_load(tmp_path):

@@ -10,7 +10,14 @@ import shutil
 import subprocess
 from pathlib import Path
 
-from hil.sim.mcu_builds import ARM_GCC, COMMON_FLAGS, BuildError, _cache_dir, host_compiler
+from hil.sim.mcu_builds import (
+    ARM_GCC,
+    COMMON_FLAGS,
+    BuildError,
+    _cache_dir,
+    compile_cached,
+    host_compiler,
+)
 
 HERE = Path(__file__).resolve().parent
 MCU_DIR = Path(__file__).resolve().parents[3] / "firmware_model" / "mcu"
@@ -27,37 +34,13 @@ LAW_INPUTS = (*LAW_SOURCES, TEMPLATE_DIR / "eha_hil.h", TEMPLATE_DIR / "eha_hil.
               MCU_DIR / "c" / "mcu_law.h")
 
 
-def _cached(compiler: str, flags: tuple[str, ...], sources: tuple[Path, ...],
-            inputs: tuple[Path, ...], name: str) -> Path:
-    digest = hashlib.sha256(" ".join((compiler, *flags)).encode())
-    for path in inputs:
-        digest.update(path.read_bytes())
-    out = _cache_dir() / digest.hexdigest()[:16] / name
-    if out.exists():
-        return out
-    try:
-        out.parent.mkdir(parents=True, exist_ok=True)
-        tmp = out.with_suffix(f".tmp{os.getpid()}")
-        r = subprocess.run([compiler, *flags, *map(str, sources), "-o", str(tmp)],
-                           capture_output=True, text=True)
-        if r.returncode:
-            lines = [ln for ln in r.stderr.splitlines() if "error" in ln] or \
-                r.stderr.splitlines() or ["no message"]
-            raise BuildError(f"{compiler} failed on {', '.join(s.name for s in sources)}: "
-                             f"{lines[0].strip()}")
-        tmp.replace(out)
-    except OSError as exc:
-        raise BuildError(f"cannot build into {out.parent}: {exc}") from None
-    return out
-
-
 def hooks_library() -> Path:
     """The Unicorn hooks (``hooks.c``) as a host shared library."""
     cc = host_compiler()
     if cc is None:
         raise BuildError("no C compiler (cc, gcc or $CC) for the image hooks")
     src = HERE / "hooks.c"
-    return _cached(cc, ("-O2", "-Wall", "-fPIC", "-shared"), (src,), (src,), "eha_hooks.so")
+    return compile_cached(cc, ("-O2", "-Wall", "-fPIC", "-shared"), (src,), (src,), "eha_hooks.so")
 
 
 def law_image() -> Path:
@@ -65,7 +48,7 @@ def law_image() -> Path:
     if shutil.which(ARM_GCC) is None:
         raise BuildError(f"{ARM_GCC} not installed (make system-deps)")
     flags = (*IMAGE_FLAGS, "-T", str(TEMPLATE_DIR / "eha_hil.ld"))
-    return _cached(ARM_GCC, flags, LAW_SOURCES, LAW_INPUTS, "mcu_law_image.elf")
+    return compile_cached(ARM_GCC, flags, LAW_SOURCES, LAW_INPUTS, "mcu_law_image.elf")
 
 
 def template_image(src: Path = TEMPLATE_DIR) -> Path:
