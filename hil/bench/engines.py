@@ -18,8 +18,24 @@ from plant.config import Config
 from plant.model import Plant
 
 
+class RealTimeFactors:
+    """The real-time factors of a run with ``simulated_s``, ``wall_s`` and ``cpu_s``."""
+
+    simulated_s: float
+    wall_s: float
+    cpu_s: float
+
+    @property
+    def real_time_factor(self) -> float:
+        return self.simulated_s / self.wall_s
+
+    @property
+    def cpu_real_time_factor(self) -> float:
+        return self.simulated_s / self.cpu_s
+
+
 @dataclass
-class PlantBench:
+class PlantBench(RealTimeFactors):
     """Result of ``bench plant``."""
 
     simulated_s: float
@@ -29,14 +45,6 @@ class PlantBench:
     tick_s: float
     cpu_s: float = math.nan  # CPU seconds of the process over the run, where measured
     loop: str = ""           # the board's current loop, where there is a choice
-
-    @property
-    def real_time_factor(self) -> float:
-        return self.simulated_s / self.wall_s
-
-    @property
-    def cpu_real_time_factor(self) -> float:
-        return self.simulated_s / self.cpu_s
 
     @property
     def ticks_per_s(self) -> float:
@@ -122,20 +130,12 @@ def bench_stack(cfg: Config, seconds: float = 2.0) -> PlantBench:
 
 
 @dataclass
-class TimedRun:
+class TimedRun(RealTimeFactors):
     """Simulated, wall and CPU seconds of a benchmarked run, and its real-time factors."""
 
     simulated_s: float
     wall_s: float
     cpu_s: float
-
-    @property
-    def real_time_factor(self) -> float:
-        return self.simulated_s / self.wall_s
-
-    @property
-    def cpu_real_time_factor(self) -> float:
-        return self.simulated_s / self.cpu_s
 
 
 @dataclass

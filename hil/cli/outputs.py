@@ -71,11 +71,16 @@ def check_writable(path: str | os.PathLike[str]) -> None:
         except OSError as exc:
             raise OutputError(f"{path}: cannot write: {_why(exc)}") from None
         return
+    _probe_parent(p, path, "directory")
+
+
+def _probe_parent(p: Path, path: str | os.PathLike[str], what: str) -> None:
+    """OutputError unless the directory ``path`` would be made in takes files."""
     parent = p.parent if str(p.parent) else Path(".")
     if parent.exists() and not parent.is_dir():
         raise OutputError(f"{path}: {parent} is not a directory")
     if not parent.is_dir():
-        raise OutputError(f"{path}: directory {parent} does not exist")
+        raise OutputError(f"{path}: {what} {parent} does not exist")
     _probe(parent, path)
 
 
@@ -87,12 +92,7 @@ def check_dir_writable(path: str | os.PathLike[str]) -> None:
     if p.is_dir():
         _probe(p, path)
         return
-    parent = p.parent if str(p.parent) else Path(".")
-    if parent.exists() and not parent.is_dir():
-        raise OutputError(f"{path}: {parent} is not a directory")
-    if not parent.is_dir():
-        raise OutputError(f"{path}: parent directory {parent} does not exist")
-    _probe(parent, path)
+    _probe_parent(p, path, "parent directory")
 
 
 def _probe(directory: Path, named: str | os.PathLike[str]) -> None:
