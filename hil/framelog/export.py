@@ -12,19 +12,20 @@ interleaving of the links visible (which frame came before which) and plots with
 
 from __future__ import annotations
 
-import csv
-import math
 import os
 import sys
-from collections.abc import Sequence
-from dataclasses import dataclass
+from collections.abc import Iterator, Sequence
 
-from hil.framelog.channel_decode import channel_decoder
+import numpy as np
+
+from hil.framelog.columnar import Columns, decode_channel
 from hil.framelog.decoders import DecodeError
 from hil.framelog.reader import FrameLogError, FrameLogReader, LogInfo
 from hil.output.tables import table
 
 _MAX_META_SHOWN = 60
+#: Rows written per batch (CSV) / row group (Parquet): bounds the memory of an export.
+_SLICE_ROWS = 1 << 16
 
 
 def _fmt_s(t_ns: int | None) -> str:
@@ -77,75 +78,144 @@ def summary_text(info: LogInfo) -> str:
     return "\n".join(lines)
 
 
-def _cell(v: object) -> object:
-    if isinstance(v, float) and math.isnan(v):
-        return "nan"
-    return v
+class _Plan:
+    """The decoded channels of an export and the order of their frames: ``order`` indexes
+    the concatenated frames of ``chans`` in simulated-time order, ties in file order."""
 
-
-@dataclass
-class _Table:
-    """Decoded frames in simulated-time order: ``rows`` (t_ns, topic, values), the field
-    columns in order, the unit of each column that has one, whether a frame failed."""
-
-    rows: list[tuple[int, str, dict[str, object]]]
-    columns: list[str]
-    units: dict[str, str]
-    errors: bool
-
-
-def _decode_all(log_path: str | os.PathLike[str], topics: Sequence[str] | None,
-                fields: Sequence[str] | None, info: LogInfo | None) -> _Table:
-    reader = FrameLogReader(log_path)
-    if info is None:
-        info = reader.info()
-    if topics:
-        for t in topics:
-            info.channel(t)  # FrameLogError naming the topics present
-    selected = list(topics) if topics else [c.topic for c in info.channels]
-    decoders = {}
-    for c in info.channels:
-        if c.topic in selected:
-            try:
-                decoders[c.topic] = channel_decoder(c)
-            except DecodeError as exc:
-                raise FrameLogError(f"{log_path}: {exc}") from None
-    rows: list[tuple[int, str, dict[str, object]]] = []
-    columns: dict[str, None] = {}  # insertion-ordered set
-    units: dict[str, str] = {}
-    errors = False
-    for topic, t_ns, data in reader.frames(selected):
-        dec = decoders[topic]
-        values: dict[str, object]
-        try:
-            values = dict(dec.decode(data))
-        except DecodeError as exc:
-            values = {"decode_error": str(exc)}
+    def __init__(self, log_path: str | os.PathLike[str], topics: Sequence[str] | None,
+                 fields: Sequence[str] | None, info: LogInfo | None) -> None:
+        reader = FrameLogReader(log_path)
+        if info is None:
+            info = reader.info()
+        if topics:
+            for t in topics:
+                info.channel(t)  # FrameLogError naming the topics present
+        selected = list(topics) if topics else [c.topic for c in info.channels]
+        raws = reader.raw_channels(selected)
+        chans: list[Columns] = []
+        for c in info.channels:
+            if c.topic in selected and c.topic in raws:
+                try:
+                    chans.append(decode_channel(c, raws[c.topic]))
+                except DecodeError as exc:
+                    raise FrameLogError(f"{log_path}: {exc}") from None
         if fields:
-            if not any(f in values for f in fields):
-                continue
-        else:
-            for k in values:
-                if k != "decode_error" and k not in columns:
-                    columns[k] = None
-                    if k in dec.units:
-                        units.setdefault(k, dec.units[k])
-        errors = errors or "decode_error" in values
-        rows.append((t_ns, topic, values))
-    if fields:
-        present = {k for _, _, v in rows for k in v}
-        missing = [f for f in fields if f not in present]
-        if missing:
-            raise FrameLogError(f"{log_path}: field {missing[0]!r} occurs in no frame of "
-                                f"{', '.join(selected)}")
-        cols = list(fields)
-        for f in fields:
-            for d in decoders.values():
-                if f in d.units:
-                    units.setdefault(f, d.units[f])
+            chans = [_keep_fields(c, fields) for c in chans]
+            present = {k for c in chans if c.n for k in c.columns}
+            missing = [f for f in fields if f not in present]
+            if missing:
+                raise FrameLogError(f"{log_path}: field {missing[0]!r} occurs in no frame "
+                                    f"of {', '.join(selected)}")
+        # columns in order of first appearance: channels by their first frame
+        chans.sort(key=lambda c: (int(c.t_ns[0]), int(c.seq[0])) if c.n else (1 << 64, 0))
+        names: dict[str, None] = {}
+        units: dict[str, str] = {}
+        floats: set[str] = set()
+        for c in chans:
+            for k, v in c.columns.items():
+                names.setdefault(k, None)
+                if k in c.units:
+                    units.setdefault(k, c.units[k])
+                if v.dtype.kind == "f":
+                    floats.add(k)
+        self.columns = list(fields) if fields else list(names)
+        self.units = units
+        self.floats = floats
+        self.errors = any(c.errors is not None for c in chans)
+        self.chans = chans
+        self.log_path = log_path
+        sizes = [c.n for c in chans]
+        self.rows = sum(sizes)
+        ts = [c.t_ns for c in chans]
+        if any(t.dtype == np.uint64 for t in ts):
+            ts = [t.astype(np.uint64) for t in ts]
+        self.t_ns = np.concatenate(ts) if ts else np.zeros(0, np.int64)
+        self.src = np.repeat(np.arange(len(chans), dtype=np.int32), sizes)
+        self.src_row = np.concatenate([np.arange(n, dtype=np.int64) for n in sizes]) \
+            if sizes else np.zeros(0, np.int64)
+        seq = np.concatenate([c.seq for c in chans]) if chans else np.zeros(0, np.int64)
+        row = np.concatenate([c.row for c in chans]) if chans else np.zeros(0, np.int64)
+        self.order = np.lexsort((row, seq, self.t_ns))
+
+    def slices(self, size: int = _SLICE_ROWS) -> Iterator[tuple[np.ndarray, dict[str, object]]]:
+        """Per ``size`` rows in time order: their times and ``{column: (values, valid)}``
+        (and ``decode_error``: a list of str/None), filled from the channels by numpy."""
+        by_col: dict[str, list[int]] = {}
+        for i, c in enumerate(self.chans):
+            for k in c.columns:
+                by_col.setdefault(k, []).append(i)
+        for start in range(0, self.rows, size):
+            idx = self.order[start:start + size]
+            src, srow = self.src[idx], self.src_row[idx]
+            sort = np.argsort(src, kind="stable")
+            bounds = np.searchsorted(src[sort], np.arange(len(self.chans) + 1))
+            pos = [sort[bounds[i]:bounds[i + 1]] for i in range(len(self.chans))]
+            rows = [srow[p] for p in pos]
+            m = len(idx)
+            out: dict[str, object] = {}
+            for name in self.columns:
+                is_f = name in self.floats
+                vals = np.full(m, np.nan) if is_f else np.zeros(m, np.int64)
+                ok = np.zeros(m, bool)
+                for i in by_col.get(name, ()):
+                    if not len(pos[i]):
+                        continue
+                    c = self.chans[i]
+                    vals[pos[i]] = c.columns[name][rows[i]]
+                    v = c.valid[name]
+                    ok[pos[i]] = True if v is None else v[rows[i]]
+                out[name] = (vals, ok)
+            if self.errors:
+                err: list[str | None] = [None] * m
+                for i, c in enumerate(self.chans):
+                    if c.errors is not None:
+                        for p, r in zip(pos[i].tolist(), rows[i].tolist(), strict=True):
+                            err[p] = c.errors[r]
+                out["decode_error"] = err
+            yield self.t_ns[idx], out, src
+
+    def topics(self) -> list[str]:
+        return [c.topic for c in self.chans]
+
+    def names(self) -> list[str]:
+        return [*self.columns] + (["decode_error"] if self.errors else [])
+
+
+def _keep_fields(c: Columns, fields: Sequence[str]) -> Columns:
+    """Only the frames of ``c`` that have one of ``fields``, and only those columns."""
+    keep = np.zeros(c.n, bool)
+    for f in fields:
+        if f in c.columns:
+            v = c.valid[f]
+            keep |= True if v is None else v
+    cols = {f: c.columns[f][keep] for f in fields if f in c.columns}
+    valid = {f: (None if c.valid[f] is None else c.valid[f][keep]) for f in cols}
+    return Columns(c.topic, c.t_ns[keep], c.seq[keep], c.row[keep], cols, valid, c.units,
+                   None)
+
+
+def _arrays(plan: _Plan, t_ns: np.ndarray, cols: dict[str, object], src: np.ndarray,
+            csv_text: bool) -> list:
+    import pyarrow as pa
+    import pyarrow.compute as pc
+
+    topic = pa.DictionaryArray.from_arrays(pa.array(src, pa.int32()),
+                                           pa.array(plan.topics(), pa.string()))
+    if csv_text:
+        t = t_ns  # int64, or uint64 for a foreign file's times beyond 2^63 ns
+        sec = pa.array(t // 1_000_000_000).cast(pa.string())
+        frac = pc.utf8_lpad(pa.array(t % 1_000_000_000).cast(pa.string()), 9, "0")
+        arrays = [pc.binary_join_element_wise(sec, frac, "."), topic.dictionary_decode()]
     else:
-        cols = list(columns)
-    return _Table(rows, cols, units, errors)
+        arrays = [pa.array(t_ns, pa.uint64() if t_ns.dtype == np.uint64 else pa.int64()),
+                  pa.array(t_ns.astype(np.float64) / 1e9, pa.float64()), topic]
+    for name in plan.columns:
+        vals, ok = cols[name]  # type: ignore[misc]
+        arrays.append(pa.array(vals, pa.float64() if name in plan.floats else pa.int64(),
+                               mask=None if ok.all() else ~ok))
+    if plan.errors:
+        arrays.append(pa.array(cols["decode_error"], pa.string()))
+    return arrays
 
 
 def export_csv(log_path: str | os.PathLike[str], out_path: str | os.PathLike[str],
@@ -158,57 +228,76 @@ def export_csv(log_path: str | os.PathLike[str], out_path: str | os.PathLike[str
     have at least one of them (so frames that fail to decode are left out too);
     FrameLogError if a field occurs in no selected frame. A column whose field has an SI
     unit is headed ``field [unit]``. Each channel is decoded as
-    :func:`hil.framelog.channel_decode.channel_decoder` says (its schema first).
-    Returns the number of data rows written. A truncated log exports what is readable.
-    ``info``: the log's :meth:`FrameLogReader.info` if the caller has it already (saves a
-    pass over the file).
+    :func:`hil.framelog.channel_decode.channel_decoder` says (its schema first), by
+    columns (:mod:`hil.framelog.columnar`), and written with pyarrow's CSV writer in
+    slices of rows. Returns the number of data rows written. A truncated log exports what
+    is readable. ``info``: the log's :meth:`FrameLogReader.info` if the caller has it
+    already (saves a pass over the file).
     """
-    tab = _decode_all(log_path, topics, fields, info)
-    names = [*tab.columns] + (["decode_error"] if tab.errors else [])
-    header = ["t_s", "topic"] + [f"{c} [{tab.units[c]}]" if c in tab.units else c
+    import pyarrow as pa
+    import pyarrow.csv as pcsv
+
+    plan = _Plan(log_path, topics, fields, info)
+    names = plan.names()
+    header = ["t_s", "topic"] + [f"{c} [{plan.units[c]}]" if c in plan.units else c
                                  for c in names]
-    out = sys.stdout if str(out_path) == "-" else open(out_path, "w", newline="")  # noqa: SIM115
-    try:
-        w = csv.writer(out, lineterminator="\n")
-        w.writerow(header)
-        for t_ns, topic, values in tab.rows:
-            w.writerow([f"{t_ns // 1_000_000_000}.{t_ns % 1_000_000_000:09d}", topic,
-                        *(_cell(values.get(c, "")) for c in names)])
-    finally:
-        if out is not sys.stdout:
-            out.close()
-    return len(tab.rows)
+    schema = pa.schema([pa.field("t_s", pa.string()), pa.field("topic", pa.string())]
+                       + [pa.field(c, pa.float64() if c in plan.floats else pa.int64())
+                          for c in plan.columns]
+                       + ([pa.field("decode_error", pa.string())] if plan.errors else []))
+    # Values never need quotes (topics and numbers) unless a foreign topic or an error
+    # message has a comma or quote in it: then quote where needed.
+    plain = not plan.errors and not any(set(t) & set(',"\n\r') for t in plan.topics())
+    opts = pcsv.WriteOptions(include_header=False, quoting_style="none" if plain else "needed")
+    line = ",".join(_csv_quote(h) for h in header) + "\n"
+    batches = (pa.RecordBatch.from_arrays(_arrays(plan, t_ns, cols, src, True), schema=schema)
+               for t_ns, cols, src in plan.slices())
+    if str(out_path) == "-":
+        # stdout takes text (it may be a wrapper without a byte buffer): a batch at a time
+        sys.stdout.write(line)
+        for batch in batches:
+            buf = pa.BufferOutputStream()
+            pcsv.write_csv(batch, buf, write_options=opts)
+            sys.stdout.write(buf.getvalue().to_pybytes().decode())
+        return plan.rows
+    with pa.OSFile(str(out_path), "wb") as out:
+        out.write(line.encode())
+        with pcsv.CSVWriter(out, schema, write_options=opts) as w:
+            for batch in batches:
+                w.write_batch(batch)
+    return plan.rows
+
+
+def _csv_quote(s: str) -> str:
+    return f'"{s.replace(chr(34), chr(34) * 2)}"' if set(s) & set(',"\n\r') else s
 
 
 def export_parquet(log_path: str | os.PathLike[str], out_path: str | os.PathLike[str],
                    topics: Sequence[str] | None = None,
                    fields: Sequence[str] | None = None, info: LogInfo | None = None) -> int:
     """As :func:`export_csv`, to a Parquet file (pyarrow): columns ``t_ns`` (int64, exact),
-    ``t_s`` (float64), ``topic``, then one per field (int64 or float64, null where a frame
-    has no such field); each field's unit in its column metadata (``unit``), the log's
-    path in the file metadata (``eha-hil.source``). Returns the number of rows."""
+    ``t_s`` (float64), ``topic`` (dictionary), then one per field (int64 or float64, null
+    where a frame has no such field); each field's unit in its column metadata (``unit``),
+    the log's path in the file metadata (``eha-hil.source``). One row group per slice of
+    rows. Returns the number of rows."""
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    tab = _decode_all(log_path, topics, fields, info)
-    t_ns = [r[0] for r in tab.rows]
-    arrays = [pa.array(t_ns, pa.int64()), pa.array([t / 1e9 for t in t_ns], pa.float64()),
-              pa.array([r[1] for r in tab.rows], pa.string()).dictionary_encode()]
-    schema_fields = [pa.field("t_ns", pa.int64(), metadata={"unit": "ns"}),
-                     pa.field("t_s", pa.float64(), metadata={"unit": "s"}),
-                     pa.field("topic", arrays[2].type)]
-    names = [*tab.columns] + (["decode_error"] if tab.errors else [])
-    for c in names:
-        col = [r[2].get(c) for r in tab.rows]
-        if c == "decode_error":
-            arr = pa.array(col, pa.string())
-        else:
-            kinds = {type(v) for v in col if v is not None}
-            arr = pa.array(col, pa.int64() if kinds <= {int} and kinds else pa.float64())
-        arrays.append(arr)
-        meta = {"unit": tab.units[c]} if c in tab.units else None
-        schema_fields.append(pa.field(c, arr.type, metadata=meta))
-    table = pa.Table.from_arrays(arrays, schema=pa.schema(
-        schema_fields, metadata={"eha-hil.source": str(log_path)}))
-    pq.write_table(table, out_path)
-    return len(tab.rows)
+    plan = _Plan(log_path, topics, fields, info)
+    t_type = pa.uint64() if plan.t_ns.dtype == np.uint64 else pa.int64()
+    fields_ = [pa.field("t_ns", t_type, metadata={"unit": "ns"}),
+               pa.field("t_s", pa.float64(), metadata={"unit": "s"}),
+               pa.field("topic", pa.dictionary(pa.int32(), pa.string()))]
+    for c in plan.columns:
+        fields_.append(pa.field(c, pa.float64() if c in plan.floats else pa.int64(),
+                                metadata={"unit": plan.units[c]} if c in plan.units else None))
+    if plan.errors:
+        fields_.append(pa.field("decode_error", pa.string()))
+    schema = pa.schema(fields_, metadata={"eha-hil.source": str(log_path)})
+    with pq.ParquetWriter(out_path, schema) as w:
+        for t_ns, cols, src in plan.slices():
+            w.write_batch(pa.RecordBatch.from_arrays(_arrays(plan, t_ns, cols, src, False),
+                                                     schema=schema))
+        if not plan.rows:
+            w.write_table(schema.empty_table())
+    return plan.rows
