@@ -26,6 +26,8 @@ from hil.output.tables import table
 _MAX_META_SHOWN = 60
 #: Rows written per batch (CSV) / row group (Parquet): bounds the memory of an export.
 _SLICE_ROWS = 1 << 16
+#: CSV rows built per slice (the per-channel work per slice is a fixed cost: larger slices)
+_CSV_SLICE_ROWS = 1 << 18
 
 
 def _fmt_s(t_ns: int | None) -> str:
@@ -96,7 +98,7 @@ class _Plan:
         for c in info.channels:
             if c.topic in selected and c.topic in raws:
                 try:
-                    chans.append(decode_channel(c, raws[c.topic]))
+                    chans.append(decode_channel(c, raws.pop(c.topic)))
                 except DecodeError as exc:
                     raise FrameLogError(f"{log_path}: {exc}") from None
         if fields:
@@ -137,6 +139,89 @@ class _Plan:
         row = np.concatenate([c.row for c in chans]) if chans else np.zeros(0, np.int64)
         self.order = np.lexsort((row, seq, self.t_ns))
 
+    def parts(self, size: int) -> Iterator[tuple[np.ndarray, np.ndarray, list[np.ndarray],
+                                                  list[np.ndarray]]]:
+        """Per ``size`` rows in time order: their indexes into the concatenated frames,
+        their channel numbers, and per channel where its rows go in the slice and which
+        of its rows they are."""
+        for start in range(0, self.rows, size):
+            idx = self.order[start:start + size]
+            src, srow = self.src[idx], self.src_row[idx]
+            sort = np.argsort(src, kind="stable")
+            bounds = np.searchsorted(src[sort], np.arange(len(self.chans) + 1))
+            pos = [sort[bounds[i]:bounds[i + 1]] for i in range(len(self.chans))]
+            yield idx, src, pos, [srow[p] for p in pos]
+
+    def csv_lines(self, size: int = _CSV_SLICE_ROWS) -> Iterator[memoryview]:
+        """The CSV rows, a slice at a time, as bytes. The rows of channels with the same
+        columns (every board's register channel, ...) are built together from those
+        columns only (Arrow casts them to text and joins them, a run of commas standing
+        for the columns they lack), then the slice's rows are put in time order: the work
+        is in proportion to the values, not to rows x columns."""
+        import pyarrow as pa
+        import pyarrow.compute as pc
+
+        where = {name: j for j, name in enumerate(self.columns)}
+        width = len(self.columns)
+        groups: dict[tuple, list[int]] = {}
+        for i, c in enumerate(self.chans):
+            key = tuple(sorted((where[k], v.dtype.kind) for k, v in c.columns.items()
+                               if k in where))
+            groups.setdefault(key, []).append(i)
+        topics = pa.array([_csv_text(c.topic) for c in self.chans], pa.string())
+        for _idx, _src, pos, rows in self.parts(size):
+            parts, places = [], []
+            for key, members in groups.items():
+                members = [i for i in members if len(pos[i])]
+                if not members:
+                    continue
+                parts.append(self._group_lines(key, members, rows, width, topics, pa, pc))
+                places.extend(pos[i] for i in members)
+            lines = pa.chunked_array(parts).take(pa.array(np.argsort(np.concatenate(places))))
+            lines = lines.combine_chunks() if lines.num_chunks != 1 else lines.chunk(0)
+            offsets = np.frombuffer(lines.buffers()[1], np.int32)
+            data = lines.buffers()[2]
+            yield memoryview(data)[offsets[lines.offset]:offsets[lines.offset + len(lines)]]
+
+    def _group_lines(self, key: tuple, members: list[int], rows: list[np.ndarray],
+                     width: int, topics, pa, pc):  # noqa: ANN001 - pyarrow modules
+        """CSV lines (with their newline) of the rows ``rows[i]`` of channels ``members``,
+        which share the columns ``key`` ((position, dtype kind) pairs)."""
+        t = np.concatenate([self.chans[i].t_ns[rows[i]] for i in members])
+        which = np.repeat(np.asarray(members, np.int32), [len(rows[i]) for i in members])
+        args: list = [pc.binary_join_element_wise(
+            pa.array(t // 1_000_000_000).cast(pa.string()),
+            pc.utf8_lpad(pa.array(t % 1_000_000_000).cast(pa.string()), 9, "0"), "."),
+            topics.take(pa.array(which))]
+        at = 0
+        for j, _kind in key:
+            name = self.columns[j]
+            if j > at:
+                args.append(pa.scalar("," * (j - at - 1)))
+            vals = np.concatenate([self.chans[i].columns[name][rows[i]] for i in members])
+            masks = [self.chans[i].valid[name] for i in members]
+            ok = None if all(m is None for m in masks) else np.concatenate(
+                [np.ones(len(rows[i]), bool) if m is None else m[rows[i]]
+                 for i, m in zip(members, masks, strict=True)])
+            args.append(pa.array(vals, mask=None if ok is None else ~ok).cast(pa.string()))
+            at = j + 1
+        if self.errors:
+            if width > at:
+                args.append(pa.scalar("," * (width - at - 1)))
+            errs = [None if self.chans[i].errors is None else _csv_text(e)
+                    if (e := self.chans[i].errors[k]) is not None else None
+                    for i in members for k in rows[i].tolist()]
+            args.append(pa.array(errs, pa.string()))
+            tail = None
+        elif width > at:  # the trailing commas and the newline in one
+            args.append(pa.scalar("," * (width - at - 1) + "\n"))
+            tail = ""
+        else:
+            tail = None
+        line = pc.binary_join_element_wise(*args, ",", null_handling="replace",
+                                           null_replacement="")
+        return line if tail is not None else pc.binary_join_element_wise(line, "", "\n")
+
     def slices(self, size: int = _SLICE_ROWS) -> Iterator[tuple[np.ndarray, dict[str, object]]]:
         """Per ``size`` rows in time order: their times and ``{column: (values, valid)}``
         (and ``decode_error``: a list of str/None), filled from the channels by numpy."""
@@ -144,13 +229,7 @@ class _Plan:
         for i, c in enumerate(self.chans):
             for k in c.columns:
                 by_col.setdefault(k, []).append(i)
-        for start in range(0, self.rows, size):
-            idx = self.order[start:start + size]
-            src, srow = self.src[idx], self.src_row[idx]
-            sort = np.argsort(src, kind="stable")
-            bounds = np.searchsorted(src[sort], np.arange(len(self.chans) + 1))
-            pos = [sort[bounds[i]:bounds[i + 1]] for i in range(len(self.chans))]
-            rows = [srow[p] for p in pos]
+        for idx, src, pos, rows in self.parts(size):
             m = len(idx)
             out: dict[str, object] = {}
             for name in self.columns:
@@ -194,21 +273,14 @@ def _keep_fields(c: Columns, fields: Sequence[str]) -> Columns:
                    None)
 
 
-def _arrays(plan: _Plan, t_ns: np.ndarray, cols: dict[str, object], src: np.ndarray,
-            csv_text: bool) -> list:
+def _arrays(plan: _Plan, t_ns: np.ndarray, cols: dict[str, object], src: np.ndarray) -> list:
+    """The Parquet columns of one slice."""
     import pyarrow as pa
-    import pyarrow.compute as pc
 
     topic = pa.DictionaryArray.from_arrays(pa.array(src, pa.int32()),
                                            pa.array(plan.topics(), pa.string()))
-    if csv_text:
-        t = t_ns  # int64, or uint64 for a foreign file's times beyond 2^63 ns
-        sec = pa.array(t // 1_000_000_000).cast(pa.string())
-        frac = pc.utf8_lpad(pa.array(t % 1_000_000_000).cast(pa.string()), 9, "0")
-        arrays = [pc.binary_join_element_wise(sec, frac, "."), topic.dictionary_decode()]
-    else:
-        arrays = [pa.array(t_ns, pa.uint64() if t_ns.dtype == np.uint64 else pa.int64()),
-                  pa.array(t_ns.astype(np.float64) / 1e9, pa.float64()), topic]
+    arrays = [pa.array(t_ns, pa.uint64() if t_ns.dtype == np.uint64 else pa.int64()),
+              pa.array(t_ns.astype(np.float64) / 1e9, pa.float64()), topic]
     for name in plan.columns:
         vals, ok = cols[name]  # type: ignore[misc]
         arrays.append(pa.array(vals, pa.float64() if name in plan.floats else pa.int64(),
@@ -234,41 +306,25 @@ def export_csv(log_path: str | os.PathLike[str], out_path: str | os.PathLike[str
     is readable. ``info``: the log's :meth:`FrameLogReader.info` if the caller has it
     already (saves a pass over the file).
     """
-    import pyarrow as pa
-    import pyarrow.csv as pcsv
-
     plan = _Plan(log_path, topics, fields, info)
-    names = plan.names()
     header = ["t_s", "topic"] + [f"{c} [{plan.units[c]}]" if c in plan.units else c
-                                 for c in names]
-    schema = pa.schema([pa.field("t_s", pa.string()), pa.field("topic", pa.string())]
-                       + [pa.field(c, pa.float64() if c in plan.floats else pa.int64())
-                          for c in plan.columns]
-                       + ([pa.field("decode_error", pa.string())] if plan.errors else []))
-    # Values never need quotes (topics and numbers) unless a foreign topic or an error
-    # message has a comma or quote in it: then quote where needed.
-    plain = not plan.errors and not any(set(t) & set(',"\n\r') for t in plan.topics())
-    opts = pcsv.WriteOptions(include_header=False, quoting_style="none" if plain else "needed")
-    line = ",".join(_csv_quote(h) for h in header) + "\n"
-    batches = (pa.RecordBatch.from_arrays(_arrays(plan, t_ns, cols, src, True), schema=schema)
-               for t_ns, cols, src in plan.slices())
+                                 for c in plan.names()]
+    line = ",".join(_csv_text(h) for h in header) + "\n"
     if str(out_path) == "-":
-        # stdout takes text (it may be a wrapper without a byte buffer): a batch at a time
+        # stdout takes text (it may be a wrapper without a byte buffer)
         sys.stdout.write(line)
-        for batch in batches:
-            buf = pa.BufferOutputStream()
-            pcsv.write_csv(batch, buf, write_options=opts)
-            sys.stdout.write(buf.getvalue().to_pybytes().decode())
+        for chunk in plan.csv_lines():
+            sys.stdout.write(bytes(chunk).decode())
         return plan.rows
-    with pa.OSFile(str(out_path), "wb") as out:
+    with open(out_path, "wb") as out:
         out.write(line.encode())
-        with pcsv.CSVWriter(out, schema, write_options=opts) as w:
-            for batch in batches:
-                w.write_batch(batch)
+        for chunk in plan.csv_lines():
+            out.write(chunk)
     return plan.rows
 
 
-def _csv_quote(s: str) -> str:
+def _csv_text(s: str) -> str:
+    """``s`` as one CSV cell (quoted if it holds a comma, quote or line break)."""
     return f'"{s.replace(chr(34), chr(34) * 2)}"' if set(s) & set(',"\n\r') else s
 
 
@@ -296,7 +352,7 @@ def export_parquet(log_path: str | os.PathLike[str], out_path: str | os.PathLike
     schema = pa.schema(fields_, metadata={"eha-hil.source": str(log_path)})
     with pq.ParquetWriter(out_path, schema) as w:
         for t_ns, cols, src in plan.slices():
-            w.write_batch(pa.RecordBatch.from_arrays(_arrays(plan, t_ns, cols, src, False),
+            w.write_batch(pa.RecordBatch.from_arrays(_arrays(plan, t_ns, cols, src),
                                                      schema=schema))
         if not plan.rows:
             w.write_table(schema.empty_table())

@@ -73,7 +73,7 @@ def _pattern(topic: str) -> re.Pattern:
 
 def _doc_fields() -> dict[str, list[tuple[str, str]]]:
     """Message name -> [(field, unit)] from the tables of "Decoded signals (protobuf)"."""
-    sec = DOC.split("### Decoded signals (protobuf)", 1)[1].split("### Raw channels", 1)[0]
+    sec = DOC.split("### Decoded signals (protobuf)", 1)[1].split("### Byte layouts", 1)[0]
     out: dict[str, list[tuple[str, str]]] = {}
     for block in sec.split("\n### ")[1:]:
         name = block.splitlines()[0].strip()
@@ -160,7 +160,7 @@ def test_bus_channel_matches_the_masters_report(logs):
     assert all(d.wkc == d.wkc_expected > 0 for _, d in msgs)
 
 
-def test_schemas_are_foxglove_encodings_or_documented_raw(logs):
+def test_schemas_are_foxglove_encodings_and_raw_ones_documented(logs):
     doc = _doc_topics()
     for level in ("mcu", "full"):
         summary = _channels(logs[level][0])
@@ -168,10 +168,9 @@ def test_schemas_are_foxglove_encodings_or_documented_raw(logs):
             enc = summary.schemas[ch.schema_id].encoding if ch.schema_id else ""
             rows = [r for r in doc if _pattern(r["topic"]).match(ch.topic)]
             assert len(rows) == 1, ch.topic
-            if enc in FOXGLOVE_SCHEMA_ENCODINGS:
-                assert rows[0]["viewer"] == "decoded" and ch.message_encoding == enc
-            else:
-                assert rows[0]["viewer"] == "raw", ch.topic
+            assert enc in FOXGLOVE_SCHEMA_ENCODINGS and ch.message_encoding == enc, ch.topic
+            raw = ch.metadata.get("eha-hil.container") == "protobuf"
+            assert rows[0]["viewer"] == ("raw" if raw else "decoded"), ch.topic
 
 
 def test_doc_topic_table_matches_real_logs(logs):
