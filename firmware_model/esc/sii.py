@@ -34,6 +34,12 @@ BITS = {"i1": 8, "i2": 16, "i4": 32, "u1": 8, "u2": 16, "u4": 32}
 
 #: FMMU category codes.
 FMMU_OUTPUTS, FMMU_INPUTS = 1, 2
+#: SyncM category, byte 7 of an entry: the sync manager's type (ETG.2010).
+SM_TYPE_OUTPUTS, SM_TYPE_INPUTS = 3, 4
+#: General category, PhysicalPort: 4 bits per port (0 not used, 1 MII, 3 EBUS).
+PORTS_MII_MII = 0x0011
+#: Word 0x3E: EEPROM size in KiBit, minus 1 (0x000F: 16 KiBit).
+EEPROM_SIZE_CODE = 0x000F
 
 
 @dataclass(frozen=True)
@@ -137,7 +143,7 @@ def build_image(d: SlaveDescription) -> bytes:
     head = bytearray(cfg + struct.pack("<H", crc8_config(cfg)))
     head += struct.pack("<IIII", d.vendor_id, d.product_code, d.revision, d.serial)
     head += bytes(0x3E * 2 - len(head))
-    head += struct.pack("<HH", 0x000F, 0x0001)  # 16 KiBit - 1 coded as in ETG.2010; version 1
+    head += struct.pack("<HH", EEPROM_SIZE_CODE, 0x0001)  # version 1
     strings = _Strings()
     name_idx = strings.add(d.name)  # string 1: the device name
     group_idx = strings.add(d.group)
@@ -150,10 +156,12 @@ def build_image(d: SlaveDescription) -> bytes:
     general[3] = name_idx           # name
     # bytes 5..9: CoE/FoE/EoE/SoE details: none (no mailbox)
     struct.pack_into("<h", general, 12, 0)  # current on E-bus [mA]: none (MII ports)
-    struct.pack_into("<H", general, 16, 0x000F)  # physical ports 0,1: MII; 2,3: none
+    struct.pack_into("<H", general, 16, PORTS_MII_MII)  # ports 0,1: MII; 2,3: not used
     fmmu = bytes([FMMU_OUTPUTS, FMMU_INPUTS])
     syncm = b"".join(struct.pack("<HHBBBB", s.start, s.length, s.control, 0,
-                                 1 if s.enable else 0, 0) for s in d.sms)
+                                 1 if s.enable else 0, sm_type)
+                     for s, sm_type in zip(d.sms, (SM_TYPE_OUTPUTS, SM_TYPE_INPUTS),
+                                           strict=False))
     str_data = bytes([len(strings.items)]) + b"".join(
         bytes([len(s)]) + s for s in strings.items)
     body = (_category(CAT_STRINGS, str_data) + _category(CAT_GENERAL, bytes(general))
@@ -164,7 +172,11 @@ def build_image(d: SlaveDescription) -> bytes:
         body += _category(CAT_RXPDO, rxpdo)
     body += struct.pack("<H", CAT_END)
     image = bytes(head) + body
-    return image + bytes(-len(image) % 8)
+    image += bytes(-len(image) % 8)
+    if len(image) > eeprom_bytes(image):
+        raise ValueError(f"{d.name}: SII image of {len(image)} bytes does not fit the "
+                         f"{eeprom_bytes(image)}-byte EEPROM it declares")
+    return image
 
 
 # --- reading an image back (for the ESI cross-check and the docs) ---------------------------
@@ -179,6 +191,11 @@ def categories(image: bytes) -> dict[int, bytes]:
         out[kind] = image[pos + 4:pos + 4 + size]
         pos += 4 + size
     return out
+
+
+def eeprom_bytes(image: bytes) -> int:
+    """The EEPROM size the image declares (word 0x3E: KiBit - 1), in bytes."""
+    return (struct.unpack_from("<H", image, 0x3E * 2)[0] + 1) * 1024 // 8
 
 
 def identity(image: bytes) -> tuple[int, int, int, int]:

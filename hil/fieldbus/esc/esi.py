@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import xml.etree.ElementTree as ET
 
+from firmware_model.esc import sii
 from firmware_model.esc.sii import SlaveDescription
 from hil.fieldbus.esc.slaves import VENDOR_ID, describe_all
 from hil.fieldbus.topology import Topology
@@ -53,7 +54,8 @@ def _device(devices: ET.Element, d: SlaveDescription, image: bytes) -> None:
                 _sub(en, "Name", e.name)
                 _sub(en, "DataType", ESI_TYPES[e.dtype])
     eep = _sub(dev, "Eeprom")
-    _sub(eep, "ByteSize", str(len(image)))
+    # the EEPROM's size as the image declares it (word 0x3E), not the bytes it fills
+    _sub(eep, "ByteSize", str(sii.eeprom_bytes(image)))
     _sub(eep, "ConfigData", image[:14].hex().upper())
 
 
