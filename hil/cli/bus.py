@@ -52,10 +52,20 @@ def _run_bus(args: argparse.Namespace, cfg, topo, cycles: int, model: str, pc, p
     from hil.cli import outputs
 
     labels = dict(STREAMS)
-    with outputs.streaming({d: getattr(args, d, None) for d in labels}, labels,
-                           _READABLE) as tmp:
-        return _run_bus_to(argparse.Namespace(**{**vars(args), **tmp}), cfg, topo, cycles,
-                           model, pc, progress)
+    try:
+        with outputs.streaming({d: getattr(args, d, None) for d in labels}, labels,
+                               _READABLE) as tmp:
+            return _run_bus_to(argparse.Namespace(**{**vars(args), **tmp}), cfg, topo,
+                               cycles, model, pc, progress)
+    finally:
+        can_log = getattr(args, "can_log", None)
+        if can_log and Path(can_log).is_file():
+            # what a CAN log has no place for (topology, model, configuration), beside it
+            from hil.transports.canlog import write_sidecar
+
+            write_sidecar(can_log, {"topology": args.topology or topo.name, "model": model,
+                                    "mode": "lockstep (bus run)",
+                                    "config": json.dumps(cfg.data)})
 
 
 def _readable_traffic(path) -> str:  # noqa: ANN001 - a Path
@@ -263,6 +273,11 @@ def cmd_replay_traffic(args: argparse.Namespace, cfg) -> Outcome:
     if cfg is None:
         cfg = (Config(json.loads(meta["config"]), [f"{args.log} (capture metadata)"])
                if "config" in meta else load_config(None))
+    if not args.topology and not meta.get("topology") and traffic.kind in ("blf", "asc", "log"):
+        from hil.transports.canlog import sidecar_path
+
+        raise UsageError(f"{args.log}: the CAN log names no topology (no "
+                         f"{sidecar_path(args.log).name} beside it): give --topology")
     topo = _topology(args.topology or meta.get("topology", "bench_one_box"))
     model = args.model or meta.get("model") or ("stack" if topo.n_actuators <= 5 else "echo")
     t0 = time.perf_counter()

@@ -369,17 +369,18 @@ def _paired_directions(frames: list[BusFrame], indexes: list[int]) -> dict[int, 
 def read_can_traffic(path: str | os.PathLike[str], base_id: int = 0x100) -> Traffic:
     """The fieldbus frames of a CAN log: segments on ``base_id`` (master -> chain) and
     ``base_id + 1`` reassembled."""
-    from hil.transports.canlog import CanLogError, read_can_log, reassemble
+    from hil.transports.canlog import CanLogError, read_can_log, read_sidecar, reassemble
 
     path = str(path)
     try:
         messages = read_can_log(path)
+        meta = read_sidecar(path)
     except CanLogError as exc:
         raise TrafficError(str(exc)) from None
     from hil.transports.canlog import cut_reason
 
     out = Traffic(path, Path(path).suffix.lower().lstrip("."), packets=len(messages),
-                  cut=cut_reason(path, len(messages)))
+                  cut=cut_reason(path, len(messages)), metadata=meta)
     ids = (base_id, base_id + 1)
     out.other_packets = sum(1 for m in messages if m.arbitration_id not in ids)
     stats: dict = {}
@@ -445,6 +446,13 @@ def summary(t: Traffic) -> dict:
     }
 
 
+def _wall(t_s: float) -> str:
+    import datetime
+
+    return datetime.datetime.fromtimestamp(t_s, datetime.UTC).strftime(
+        "%Y-%m-%d %H:%M:%S.%f UTC")
+
+
 def summary_text(s: dict) -> str:
     lines = [f"{s['file']}: {s['format']}, {s['packets']} packets/messages, "
              f"{s['fieldbus_frames']} EtherCAT frames ({s['requests']} requests, "
@@ -452,7 +460,10 @@ def summary_text(s: dict) -> str:
              + (f", {s['direction_unknown']} of unknown direction" if s["direction_unknown"]
                 else "") + f"), {s['malformed']} malformed"]
     if s["first_s"] is not None:
-        lines.append(f"time: {s['first_s']:.6f} .. {s['last_s']:.6f} s")
+        # relative to the file's first frame (a CAN log or a foreign capture stamps wall
+        # time: epoch seconds say nothing at a glance); where that start is, once
+        lines.append(f"time: 0 .. {s['last_s'] - s['first_s']:.6f} s from the first frame"
+                     + (f" ({_wall(s['first_s'])})" if s["first_s"] > 1e8 else ""))
     rows = [("carriers", s["carriers"]), ("datagrams", s["datagrams"]),
             ("reply working counters", s["reply_wkc"]),
             ("CRC-32 trailers (good)", s["crc_trailers"]),
