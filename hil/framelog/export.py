@@ -189,10 +189,7 @@ class _Plan:
         which share the columns ``key`` ((position, dtype kind) pairs)."""
         t = np.concatenate([self.chans[i].t_ns[rows[i]] for i in members])
         which = np.repeat(np.asarray(members, np.int32), [len(rows[i]) for i in members])
-        args: list = [pc.binary_join_element_wise(
-            pa.array(t // 1_000_000_000).cast(pa.string()),
-            pc.utf8_lpad(pa.array(t % 1_000_000_000).cast(pa.string()), 9, "0"), "."),
-            topics.take(pa.array(which))]
+        args: list = [_seconds_text(t, pa, pc), topics.take(pa.array(which))]
         at = 0
         for j, _kind in key:
             name = self.columns[j]
@@ -258,6 +255,26 @@ class _Plan:
 
     def names(self) -> list[str]:
         return [*self.columns] + (["decode_error"] if self.errors else [])
+
+
+def _seconds_text(t_ns: np.ndarray, pa, pc):  # noqa: ANN001, ANN202 - pyarrow modules
+    """``t_ns`` as seconds with 9 decimals ("0.000200000"), exact: the ns as the unscaled
+    value of a decimal with scale 9, which Arrow prints (but below 1000 ns in scientific
+    notation, "5E-9": those few are written out by hand)."""
+    n = len(t_ns)
+    raw = np.zeros((n, 2), np.int64)
+    if t_ns.dtype == np.uint64:
+        raw[:, 0] = t_ns.view(np.int64)  # the low word; high 0: values up to 2^64 - 1
+    else:
+        raw[:, 0] = t_ns
+        raw[:, 1] = t_ns >> 63
+    text = pa.Array.from_buffers(pa.decimal128(38, 9), n, [None, pa.py_buffer(raw)]
+                                 ).cast(pa.string())
+    small = t_ns < 1000
+    if not small.any():
+        return text
+    fix = pa.array([f"0.{int(v):09d}" for v in t_ns[small]], pa.string())
+    return pc.replace_with_mask(text, pa.array(small), fix)
 
 
 def _keep_fields(c: Columns, fields: Sequence[str]) -> Columns:
