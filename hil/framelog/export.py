@@ -27,7 +27,7 @@ _MAX_META_SHOWN = 60
 #: Rows written per batch (CSV) / row group (Parquet): bounds the memory of an export.
 _SLICE_ROWS = 1 << 16
 #: CSV rows built per slice (the per-channel work per slice is a fixed cost: larger slices)
-_CSV_SLICE_ROWS = 1 << 18
+_CSV_SLICE_ROWS = 1 << 17
 
 
 def _fmt_s(t_ns: int | None) -> str:
