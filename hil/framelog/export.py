@@ -124,90 +124,89 @@ class _Plan:
         self.units = units
         self.floats = floats
         self.errors = any(c.errors is not None for c in chans)
-        self.chans = chans
         self.log_path = log_path
-        sizes = [c.n for c in chans]
-        self.rows = sum(sizes)
-        ts = [c.t_ns for c in chans]
+        # Channels with the same columns (every board's register channel, ...) form a
+        # group, stored one after the other: a group's columns are single arrays, so a
+        # slice of rows is filled a group at a time, not a channel at a time.
+        where = {name: j for j, name in enumerate(self.columns)}
+        keys: dict[tuple, list[Columns]] = {}
+        for c in chans:
+            keys.setdefault(tuple(sorted((where[k], v.dtype.kind) for k, v in
+                                         c.columns.items() if k in where)), []).append(c)
+        self.chans = [c for members in keys.values() for c in members]
+        self.groups = []
+        start = first = 0
+        for key, members in keys.items():
+            self.groups.append(_Group(key, members, start, self.columns, first))
+            start += sum(c.n for c in members)
+            first += len(members)
+        self.rows = start
+        ts = [c.t_ns for c in self.chans]
         if any(t.dtype == np.uint64 for t in ts):
             ts = [t.astype(np.uint64) for t in ts]
         self.t_ns = np.concatenate(ts) if ts else np.zeros(0, np.int64)
-        self.src = np.repeat(np.arange(len(chans), dtype=np.int32), sizes)
-        self.src_row = np.concatenate([np.arange(n, dtype=np.int64) for n in sizes]) \
-            if sizes else np.zeros(0, np.int64)
-        seq = np.concatenate([c.seq for c in chans]) if chans else np.zeros(0, np.int64)
-        row = np.concatenate([c.row for c in chans]) if chans else np.zeros(0, np.int64)
+        self.src = np.concatenate([g.which for g in self.groups]) if self.groups \
+            else np.zeros(0, np.int32)
+        self.group_of = np.repeat(np.arange(len(self.groups), dtype=np.int32),
+                                  [g.n for g in self.groups])
+        seq = np.concatenate([c.seq for c in self.chans]) if chans else np.zeros(0, np.int64)
+        row = np.concatenate([c.row for c in self.chans]) if chans else np.zeros(0, np.int64)
         self.order = np.lexsort((row, seq, self.t_ns))
+        for c in chans:  # the groups hold the values now
+            c.columns, c.valid, c.errors = {}, {}, None
 
-    def parts(self, size: int) -> Iterator[tuple[np.ndarray, np.ndarray, list[np.ndarray],
+    def parts(self, size: int) -> Iterator[tuple[np.ndarray, list[np.ndarray],
                                                   list[np.ndarray]]]:
         """Per ``size`` rows in time order: their indexes into the concatenated frames,
-        their channel numbers, and per channel where its rows go in the slice and which
-        of its rows they are."""
+        and per group where its rows go in the slice and which of its rows they are."""
         for start in range(0, self.rows, size):
             idx = self.order[start:start + size]
-            src, srow = self.src[idx], self.src_row[idx]
-            sort = np.argsort(src, kind="stable")
-            bounds = np.searchsorted(src[sort], np.arange(len(self.chans) + 1))
-            pos = [sort[bounds[i]:bounds[i + 1]] for i in range(len(self.chans))]
-            yield idx, src, pos, [srow[p] for p in pos]
+            grp = self.group_of[idx]
+            sort = np.argsort(grp, kind="stable")
+            bounds = np.searchsorted(grp[sort], np.arange(len(self.groups) + 1))
+            pos = [sort[bounds[i]:bounds[i + 1]] for i in range(len(self.groups))]
+            yield idx, pos, [idx[p] - g.start for p, g in zip(pos, self.groups, strict=True)]
 
     def csv_lines(self, size: int = _CSV_SLICE_ROWS) -> Iterator[memoryview]:
-        """The CSV rows, a slice at a time, as bytes. The rows of channels with the same
-        columns (every board's register channel, ...) are built together from those
+        """The CSV rows, a slice at a time, as bytes. Each group's rows are built from its
         columns only (Arrow casts them to text and joins them, a run of commas standing
-        for the columns they lack), then the slice's rows are put in time order: the work
+        for the columns it lacks), then the slice's rows are put in time order: the work
         is in proportion to the values, not to rows x columns."""
         import pyarrow as pa
         import pyarrow.compute as pc
 
-        where = {name: j for j, name in enumerate(self.columns)}
-        width = len(self.columns)
-        groups: dict[tuple, list[int]] = {}
-        for i, c in enumerate(self.chans):
-            key = tuple(sorted((where[k], v.dtype.kind) for k, v in c.columns.items()
-                               if k in where))
-            groups.setdefault(key, []).append(i)
         topics = pa.array([_csv_text(c.topic) for c in self.chans], pa.string())
-        for _idx, _src, pos, rows in self.parts(size):
+        for _idx, pos, rows in self.parts(size):
             parts, places = [], []
-            for key, members in groups.items():
-                members = [i for i in members if len(pos[i])]
-                if not members:
-                    continue
-                parts.append(self._group_lines(key, members, rows, width, topics, pa, pc))
-                places.extend(pos[i] for i in members)
+            for g, p, r in zip(self.groups, pos, rows, strict=True):
+                if len(p):
+                    parts.append(self._group_lines(g, r, topics, pa, pc))
+                    places.append(p)
             lines = pa.chunked_array(parts).take(pa.array(np.argsort(np.concatenate(places))))
             lines = lines.combine_chunks() if lines.num_chunks != 1 else lines.chunk(0)
             offsets = np.frombuffer(lines.buffers()[1], np.int32)
             data = lines.buffers()[2]
             yield memoryview(data)[offsets[lines.offset]:offsets[lines.offset + len(lines)]]
 
-    def _group_lines(self, key: tuple, members: list[int], rows: list[np.ndarray],
-                     width: int, topics, pa, pc):  # noqa: ANN001 - pyarrow modules
-        """CSV lines (with their newline) of the rows ``rows[i]`` of channels ``members``,
-        which share the columns ``key`` ((position, dtype kind) pairs)."""
-        t = np.concatenate([self.chans[i].t_ns[rows[i]] for i in members])
-        which = np.repeat(np.asarray(members, np.int32), [len(rows[i]) for i in members])
-        args: list = [_seconds_text(t, pa, pc), topics.take(pa.array(which))]
+    def _group_lines(self, g: _Group, r: np.ndarray, topics, pa, pc):  # noqa: ANN001
+        """CSV lines (with their newline) of the rows ``r`` of group ``g``."""
+        width = len(self.columns)
+        args: list = [_seconds_text(self.t_ns[g.start + r], pa, pc),
+                      topics.take(pa.array(g.which[r]))]
         at = 0
-        for j, _kind in key:
+        for j, _kind in g.key:
             name = self.columns[j]
             if j > at:
                 args.append(pa.scalar("," * (j - at - 1)))
-            vals = np.concatenate([self.chans[i].columns[name][rows[i]] for i in members])
-            masks = [self.chans[i].valid[name] for i in members]
-            ok = None if all(m is None for m in masks) else np.concatenate(
-                [np.ones(len(rows[i]), bool) if m is None else m[rows[i]]
-                 for i, m in zip(members, masks, strict=True)])
-            args.append(pa.array(vals, mask=None if ok is None else ~ok).cast(pa.string()))
+            ok = g.valid[name]
+            args.append(pa.array(g.columns[name][r], mask=None if ok is None else ~ok[r]
+                                 ).cast(pa.string()))
             at = j + 1
         if self.errors:
             if width > at:
                 args.append(pa.scalar("," * (width - at - 1)))
-            errs = [None if self.chans[i].errors is None else _csv_text(e)
-                    if (e := self.chans[i].errors[k]) is not None else None
-                    for i in members for k in rows[i].tolist()]
+            errs = [None] * len(r) if g.errors is None else \
+                [None if (e := g.errors[k]) is None else _csv_text(e) for k in r.tolist()]
             args.append(pa.array(errs, pa.string()))
             tail = None
         elif width > at:  # the trailing commas and the newline in one
@@ -219,36 +218,36 @@ class _Plan:
                                            null_replacement="")
         return line if tail is not None else pc.binary_join_element_wise(line, "", "\n")
 
-    def slices(self, size: int = _SLICE_ROWS) -> Iterator[tuple[np.ndarray, dict[str, object]]]:
-        """Per ``size`` rows in time order: their times and ``{column: (values, valid)}``
-        (and ``decode_error``: a list of str/None), filled from the channels by numpy."""
+    def slices(self, size: int = _SLICE_ROWS) -> Iterator[tuple[np.ndarray, dict[str, object],
+                                                              np.ndarray]]:
+        """Per ``size`` rows in time order: their times, ``{column: (values, valid)}``
+        (and ``decode_error``: a list of str/None) filled a group at a time, and their
+        channel numbers."""
         by_col: dict[str, list[int]] = {}
-        for i, c in enumerate(self.chans):
-            for k in c.columns:
+        for i, g in enumerate(self.groups):
+            for k in g.columns:
                 by_col.setdefault(k, []).append(i)
-        for idx, src, pos, rows in self.parts(size):
+        for idx, pos, rows in self.parts(size):
             m = len(idx)
             out: dict[str, object] = {}
             for name in self.columns:
-                is_f = name in self.floats
-                vals = np.full(m, np.nan) if is_f else np.zeros(m, np.int64)
+                vals = np.empty(m, np.float64 if name in self.floats else np.int64)
                 ok = np.zeros(m, bool)
                 for i in by_col.get(name, ()):
-                    if not len(pos[i]):
-                        continue
-                    c = self.chans[i]
-                    vals[pos[i]] = c.columns[name][rows[i]]
-                    v = c.valid[name]
-                    ok[pos[i]] = True if v is None else v[rows[i]]
+                    if len(pos[i]):
+                        g = self.groups[i]
+                        vals[pos[i]] = g.columns[name][rows[i]]
+                        v = g.valid[name]
+                        ok[pos[i]] = True if v is None else v[rows[i]]
                 out[name] = (vals, ok)
             if self.errors:
                 err: list[str | None] = [None] * m
-                for i, c in enumerate(self.chans):
-                    if c.errors is not None:
-                        for p, r in zip(pos[i].tolist(), rows[i].tolist(), strict=True):
-                            err[p] = c.errors[r]
+                for g, p, r in zip(self.groups, pos, rows, strict=True):
+                    if g.errors is not None:
+                        for k, j in zip(p.tolist(), r.tolist(), strict=True):
+                            err[k] = g.errors[j]
                 out["decode_error"] = err
-            yield self.t_ns[idx], out, src
+            yield self.t_ns[idx], out, self.src[idx]
 
     def topics(self) -> list[str]:
         return [c.topic for c in self.chans]
@@ -275,6 +274,30 @@ def _seconds_text(t_ns: np.ndarray, pa, pc):  # noqa: ANN001, ANN202 - pyarrow m
         return text
     fix = pa.array([f"0.{int(v):09d}" for v in t_ns[small]], pa.string())
     return pc.replace_with_mask(text, pa.array(small), fix)
+
+
+class _Group:
+    """Channels with the same columns, their values concatenated (channel after channel):
+    ``key`` ((column position, dtype kind) pairs), ``start`` (first row in the export's
+    concatenation), ``which`` (channel number per row), columns, masks, errors."""
+
+    def __init__(self, key: tuple, members: list[Columns], start: int, names: list[str],
+                 first_channel: int) -> None:
+        self.key = key
+        self.start = start
+        self.n = sum(c.n for c in members)
+        self.which = np.repeat(np.arange(first_channel, first_channel + len(members),
+                                         dtype=np.int32), [c.n for c in members])
+        self.columns = {names[j]: np.concatenate([c.columns[names[j]] for c in members])
+                        for j, _ in key}
+        self.valid: dict[str, np.ndarray | None] = {}
+        for j, _ in key:
+            masks = [c.valid[names[j]] for c in members]
+            self.valid[names[j]] = None if all(m is None for m in masks) else np.concatenate(
+                [np.ones(c.n, bool) if m is None else m for c, m in
+                 zip(members, masks, strict=True)])
+        self.errors = None if all(c.errors is None for c in members) else \
+            [e for c in members for e in (c.errors or [None] * c.n)]
 
 
 def _keep_fields(c: Columns, fields: Sequence[str]) -> Columns:
