@@ -64,7 +64,7 @@ F6_REINFORCED_HZ = 53.0
 #: that has been run under pressure has dissolved most of its free air).
 AIR_FRACTION_BOUND = (0.0, 0.02)
 
-#: The three ways the piston can be held, by name: the configuration's overrides.
+#: The three ways the piston can be held, by name (:func:`held` builds each one's configuration).
 FIXTURES = ("cylinder end", "rod end, weak beam", "rod end, reinforced")
 
 
