@@ -24,9 +24,9 @@ from hil.framelog.reader import FrameLogError, FrameLogReader, LogInfo
 from hil.output.tables import table
 
 _MAX_META_SHOWN = 60
-#: Rows written per batch (CSV) / row group (Parquet): bounds the memory of an export.
-_SLICE_ROWS = 1 << 16
-#: CSV rows built per slice (the per-channel work per slice is a fixed cost: larger slices)
+#: Rows per Parquet row group / per batch of CSV text: bounds the memory of the output
+#: (the decoded columns are held whole); smaller costs more calls per group and column.
+_SLICE_ROWS = 1 << 17
 _CSV_SLICE_ROWS = 1 << 17
 
 
