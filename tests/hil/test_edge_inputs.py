@@ -248,6 +248,9 @@ def test_cut_file_reported_the_same_way(verb, suffix, logs, tmp_path):
     cut = tmp_path / f"cut{suffix}"
     data = whole.read_bytes()
     cut.write_bytes(data[: len(data) * 2 // 5 + 3])  # inside a record, a block, a line
+    side = Path(f"{whole}.eha-hil.json")  # a CAN log's metadata travels with it
+    if side.is_file():
+        Path(f"{cut}.eha-hil.json").write_bytes(side.read_bytes())
     code, out, err = _run([*verb.split(), str(cut)])
     line = _one_line(err)
     m = CUT.match(line)
