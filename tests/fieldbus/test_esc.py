@@ -119,7 +119,15 @@ def test_refused_transitions_set_the_error_bit_and_code(chain):
     # INIT -> OP skips states: refused, INIT + error, 0x0011
     _one(chain, ec.Command.APWR, 0, r.AL_CONTROL, struct.pack("<H", r.AlState.OP))
     assert _al(chain, 0) == (r.AlState.INIT | r.AL_ERROR, r.AlStatusCode.INVALID_STATE_CHANGE)
-    # acknowledged and PREOP; then SAFEOP without any sync manager set: 0x001D
+    # acknowledged, PREOP without the mailbox sync managers: refused, 0x0016
+    _one(chain, ec.Command.APWR, 0, r.AL_CONTROL, struct.pack("<H", 0x12))
+    assert _al(chain, 0) == (r.AlState.INIT | r.AL_ERROR,
+                             r.AlStatusCode.INVALID_MAILBOX_CONFIG)
+    # with SM0/SM1 as the SII's mailboxes, PREOP; then SAFEOP without the process data's
+    # sync managers: 0x001D
+    for k in range(3):
+        syncm = sii.categories(chain.escs[k].sii)[sii.CAT_SYNCM]
+        _one(chain, ec.Command.APWR, (-k) & 0xFFFF, r.SM0, syncm[:16])
     _one(chain, ec.Command.APWR, 0, r.AL_CONTROL, struct.pack("<H", 0x12))
     assert _al(chain, 0) == (r.AlState.PREOP, 0)
     _one(chain, ec.Command.APWR, 0, r.AL_CONTROL, struct.pack("<H", r.AlState.SAFEOP))

@@ -35,6 +35,7 @@ from firmware_model.esc.compiled import EscArrays
 from hil.fieldbus.boxes import box_engine, make_box
 from hil.fieldbus.chain import CYCLE_TICKS
 from hil.fieldbus.esc import frames as esc_frames
+from hil.fieldbus.esc.mailbox import Mailboxes
 from hil.fieldbus.esc.slaves import describe_all
 from hil.fieldbus.topology import Topology
 from hil.transports.rawether import RawEthernet
@@ -59,9 +60,12 @@ class ServedChain:
                  stack_boxes: tuple[int, ...] = ()) -> None:
         self.topology = topo
         self.model = model
-        self.arrays = EscArrays(describe_all(topo))
+        described = describe_all(topo)
+        self.arrays = EscArrays(described)
         self.boxes = [make_box("stack" if b.id in stack_boxes and model != "robot" else model,
                                b, cfg) for b in topo.boxes]
+        #: The boxes' mailbox side (CoE), run on the box clock after each cycle.
+        self.mailboxes = Mailboxes(described, self.boxes, self.arrays, cfg)
         self.engine = box_engine(model, self.boxes, cfg, overlap=False)
         self.publish_inputs()
 
@@ -70,7 +74,7 @@ class ServedChain:
         for i, box in enumerate(self.boxes):
             out = self.arrays.pending_outputs(i)
             if out is not None:
-                box.apply(out)
+                box.apply(self.mailboxes.expand(i, out))
 
     def advance(self) -> None:
         if self.engine is not None:
@@ -81,12 +85,13 @@ class ServedChain:
 
     def publish_inputs(self) -> None:
         for i, box in enumerate(self.boxes):
-            self.arrays.set_inputs(i, box.inputs())
+            self.arrays.set_inputs(i, self.mailboxes.select(i, box.inputs()))
 
     def cycle(self) -> None:
         """One 1 ms cycle of every box, exchanging process data with the ESCs."""
         self.take_outputs()
         self.advance()
+        self.mailboxes.step()
         self.publish_inputs()
 
     def watchdog_report(self) -> list[dict]:
