@@ -104,7 +104,8 @@ class CoeServer:
     def _abort(self, index: int, sub: int, code: Abort) -> None:
         self._seg = None
         self.stats[f"abort_{int(code):#010x}"] += 1
-        self._send(TYPE_COE, struct.pack("<HBHBI", COE_SDO_RESPONSE << 12, 0x80, index, sub,
+        # An abort is an "Abort SDO Transfer Request": CoE service 2, from either side.
+        self._send(TYPE_COE, struct.pack("<HBHBI", COE_SDO_REQUEST << 12, 0x80, index, sub,
                                          int(code)))
 
     def _respond(self, body: bytes) -> None:

@@ -19,13 +19,13 @@ import numpy as np
 from firmware_model.calibration import FirmwareCalibration, calibration
 from firmware_model.fpga import layout as B
 from firmware_model.fpga.driver_board import LinkMemory
+from firmware_model.mcu import tunables
 from firmware_model.mcu.controller import (
     LIMIT_CURRENT,
     LIMIT_FORCE,
     LIMIT_PRESSURE,
     ActuatorController,
 )
-from firmware_model.mcu import tunables
 from firmware_model.mcu.measure import Measurements
 
 F32 = np.float32

@@ -54,13 +54,14 @@ WATCH_S = 0.5
 class ServedChain:
     """The slaves' memories (:class:`EscArrays`) and the boxes behind them. ``model``:
     echo, stack or robot (every box; the whole-robot engine advances all at once);
-    ``stack_boxes``: boxes that get the full stack whatever ``model`` says."""
+    ``stack_boxes``: boxes that get the full stack whatever ``model`` says; ``coe``: the
+    slaves have their CoE mailbox (False: none, process data on SM0/SM1)."""
 
     def __init__(self, topo: Topology, cfg: Config, model: str = "echo",
-                 stack_boxes: tuple[int, ...] = ()) -> None:
+                 stack_boxes: tuple[int, ...] = (), coe: bool = True) -> None:
         self.topology = topo
         self.model = model
-        described = describe_all(topo)
+        described = describe_all(topo, coe)
         self.arrays = EscArrays(described)
         self.boxes = [make_box("stack" if b.id in stack_boxes and model != "robot" else model,
                                b, cfg) for b in topo.boxes]

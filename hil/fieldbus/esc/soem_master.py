@@ -9,6 +9,11 @@ actuator (mode 1, enable), and reports that actuator's f_pressure input over the
 MODE ``bringups K IMAGE_BYTES``: K bring-ups to OP, each from a fresh master, counted.
 MODE ``rtt N``: as far as OP, every actuator enabled with a force command, N cycles at
 1 kHz; the wall time of each cycle's send + receive (the frames' round trip) in us.
+MODE ``coe BOX N``: in PREOP every slave's identity read by SDO (0x1018:1..4), then box BOX's
+first TxPDO left out of 0x1C13 (complete access write; BOX < 0: no remap), config_map, OP,
+N cycles with a force command on BOX's slot 0, its inputs recorded; then the master stops
+sending, and after the watchdogs tripped it reads every slave's mailbox: the emergencies.
+Also each abort a probe SDO gets (a missing object, a read-only write, an out-of-range gain).
 """
 
 from __future__ import annotations
@@ -91,8 +96,83 @@ def bring_ups(ifname: str, n: int, image_bytes: int) -> dict:
     return {"bring_ups": n, "bring_ups_ok": ok, "failed": failed}
 
 
+def _abort_of(call) -> int | None:  # noqa: ANN001
+    try:
+        call()
+    except pysoem.SdoError as exc:
+        return exc.abort_code
+    return None
+
+
+def coe(ifname: str, box: int, n: int) -> dict:
+    """MODE coe (see the module's docstring)."""
+    m = pysoem.Master()
+    m.open(ifname)
+    info: dict = {"found": m.config_init()}
+    info["identity"] = [[struct.unpack("<I", s.sdo_read(0x1018, k))[0] for k in range(1, 5)]
+                        for s in m.slaves]
+    info["sii_identity"] = [[s.man, s.id, s.rev] for s in m.slaves]
+    emcy: list[list] = []
+    for k, s in enumerate(m.slaves):
+        s.add_emergency_callback(
+            lambda e, k=k: emcy.append([k, e.error_code, e.error_reg, e.b1, e.w1, e.w2]))
+    if box >= 0:
+        s = m.slaves[box]
+        raw = s.sdo_read(0x1C13, 0, ca=True)
+        count = raw[0]
+        idx = list(struct.unpack_from(f"<{count}H", raw, 2))
+        info["assigned_before"] = idx
+        s.sdo_write(0x1C13, 0, struct.pack(f"<BB{count - 1}H", count - 1, 0, *idx[1:]), ca=True)
+        raw = s.sdo_read(0x1C13, 0, ca=True)
+        info["assigned_after"] = list(struct.unpack_from(f"<{raw[0]}H", raw, 2))
+    probe = m.slaves[0]
+    info["aborts"] = {
+        "missing_object": _abort_of(lambda: probe.sdo_read(0x3000, 0)),
+        "missing_subindex": _abort_of(lambda: probe.sdo_read(0x1018, 9)),
+        "read_only": _abort_of(lambda: probe.sdo_write(0x1018, 1, b"\0\0\0\0")),
+        "gain_too_high": _abort_of(lambda: probe.sdo_write(0x2000, 1, struct.pack("<f", 1e6))),
+    }
+    info["name"] = probe.sdo_read(0x1008, 0).decode()
+    info["image_bytes"] = m.config_map()
+    info["in_bytes"] = [len(s.input) for s in m.slaves]
+    info["safeop"] = m.state_check(pysoem.SAFEOP_STATE, STATE_TIMEOUT_US)
+    m.state = pysoem.OP_STATE
+    m.send_processdata()
+    m.receive_processdata(RECV_TIMEOUT_US)
+    m.write_state()
+    info["op"] = m.state_check(pysoem.OP_STATE, STATE_TIMEOUT_US)
+    target = m.slaves[max(box, 0)]
+    out = bytearray(target.output)
+    struct.pack_into("<BBi", out, 0, 1, 1, 30_000)  # slot 0: force mode, enabled, 300 N
+    target.output = bytes(out)
+    inputs: list[str] = []
+
+    def sample(_k: int) -> None:
+        inputs.append(target.input.hex())
+
+    info["bad_wkc"], info["bad_wkc_values"] = paced(m, n, sample)
+    info["inputs_last"] = inputs[-1] if inputs else ""
+    time.sleep(0.3)  # nothing sent: the MCU command watchdog, then the ESC's, trip
+    for s in m.slaves:
+        for _ in range(4):
+            try:
+                s.mbx_receive()
+            except pysoem.Emergency as e:  # (raised when no callback takes it)
+                emcy.append([-1, e.error_code, e.error_reg, e.b1, e.w1, e.w2])
+    info["emergencies"] = emcy
+    m.read_state()
+    info["after_stop"] = [s.state for s in m.slaves]
+    m.state = pysoem.INIT_STATE
+    m.write_state()
+    m.close()
+    return info
+
+
 def main(argv: list[str]) -> None:
     ifname, mode = argv[0], argv[1]
+    if mode == "coe":
+        print(json.dumps(coe(ifname, int(argv[2]), int(argv[3]))))
+        return
     if mode == "bringups":
         print(json.dumps(bring_ups(ifname, int(argv[2]), int(argv[3]))))
         return
