@@ -229,6 +229,9 @@ mailbox_op_st = st.one_of(
     .map(lambda dgs: ("frame", ec.encode_frame(dgs, MAC_DST, MAC_SRC))),
     st.tuples(st.just("take"), st.integers(0, 2)),
     st.tuples(st.just("post"), st.integers(0, 2), st.binary(max_size=140)),
+    st.tuples(st.just("frame"), st.integers(0, 2).map(lambda k: ec.encode_frame(
+        [ec.Datagram(ec.Command.APRD, 1, (-k) & 0xFFFF, 0x1080, bytes(128))],
+        MAC_DST, MAC_SRC))),
     op_st)
 
 
@@ -240,6 +243,30 @@ def test_compiled_path_equals_the_chain_in_mailbox_traffic(cfg, ops):
     both = Both(cfg)
     EscMaster(both).bring_up(to_op=False)
     _run(both, ops)
+
+
+def test_mailbox_answers_repeat_and_refusals_equal(cfg):
+    """A long answer, then a shorter one (SM1's rest zeroed), a lost read repeated, a
+    request written while the last is not taken (refused), equal in both paths."""
+    both = Both(cfg)
+    EscMaster(both).bring_up(to_op=False)
+
+    def frame(*dgs: ec.Datagram) -> list[ec.Datagram]:
+        return ec.decode_frame(both.handle(ec.encode_frame(list(dgs), MAC_DST, MAC_SRC)))
+
+    read = ec.Datagram(ec.Command.APRD, 1, 0, 0x1080, bytes(128))
+    write = ec.Datagram(ec.Command.APWR, 1, 0, 0x1000, bytes(range(128)))
+    both.post_mailbox(0, b"\x11" * 100)
+    assert frame(read)[0].wkc == 1
+    assert frame(read)[0].wkc == 0                      # empty now: refused
+    both.post_mailbox(0, b"\x22" * 10)
+    assert frame(read)[0].data == b"\x22" * 10 + bytes(118)
+    frame(ec.Datagram(ec.Command.APWR, 1, 0, r.SM0 + 13, bytes([0, 3])))  # repeat request
+    d = frame(read, ec.Datagram(ec.Command.APRD, 1, 0, r.SM0 + 15, bytes(1)))
+    assert d[0].wkc == 1 and d[0].data[:10] == b"\x22" * 10 and d[1].data[0] & 2
+    assert [d.wkc for d in frame(write, write)] == [1, 0]  # full: the second refused
+    both.take_mailbox(0)
+    assert frame(write)[0].wkc == 1                     # taken: SM0 free again
 
 
 # --- 3-buffer ------------------------------------------------------------------------------------
