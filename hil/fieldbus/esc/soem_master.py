@@ -11,7 +11,8 @@ MODE ``rtt N``: as far as OP, every actuator enabled with a force command, N cyc
 1 kHz; the wall time of each cycle's send + receive (the frames' round trip) in us.
 MODE ``coe BOX N``: in PREOP every slave's identity read by SDO (0x1018:1..4), then box BOX's
 first TxPDO left out of 0x1C13 (complete access write; BOX < 0: no remap), config_map, OP,
-N cycles with a force command on BOX's slot 0, its inputs recorded; then the master stops
+N cycles with force commands on BOX's actuators (100 N per slot number + 1), its last
+inputs recorded; then the master stops
 sending, and after the watchdogs tripped it reads every slave's mailbox: the emergencies.
 Also each abort a probe SDO gets (a missing object, a read-only write, an out-of-range gain).
 """
@@ -143,22 +144,19 @@ def coe(ifname: str, box: int, n: int) -> dict:
     info["op"] = m.state_check(pysoem.OP_STATE, STATE_TIMEOUT_US)
     target = m.slaves[max(box, 0)]
     out = bytearray(target.output)
-    struct.pack_into("<BBi", out, 0, 1, 1, 30_000)  # slot 0: force mode, enabled, 300 N
+    for k in range(len(out) // 10):  # actuator slot k: force mode, enabled, 100 (k + 1) N
+        struct.pack_into("<BBi", out, 10 * k, 1, 1, 10_000 * (k + 1))
     target.output = bytes(out)
-    inputs: list[str] = []
-
-    def sample(_k: int) -> None:
-        inputs.append(target.input.hex())
-
-    info["bad_wkc"], info["bad_wkc_values"] = paced(m, n, sample)
-    info["inputs_last"] = inputs[-1] if inputs else ""
+    info["bad_wkc"], info["bad_wkc_values"] = paced(m, n)
+    info["inputs_last"] = target.input.hex()
     time.sleep(0.3)  # nothing sent: the MCU command watchdog, then the ESC's, trip
-    for s in m.slaves:
-        for _ in range(4):
+    for s in m.slaves:  # SM1 holds one message; the box puts the next one a cycle later
+        for _ in range(6):
             try:
                 s.mbx_receive()
             except pysoem.Emergency as e:  # (raised when no callback takes it)
                 emcy.append([-1, e.error_code, e.error_reg, e.b1, e.w1, e.w2])
+            time.sleep(0.003)
     info["emergencies"] = emcy
     m.read_state()
     info["after_stop"] = [s.state for s in m.slaves]
