@@ -126,6 +126,10 @@ class EscArrays:
         st[S_MBX_RX] = 2  # (only the frame side writes it otherwise, and not while it is 1)
         return data
 
+    def mailbox_requests(self) -> list[int]:
+        """The slaves whose application has a mailbox request to take."""
+        return np.flatnonzero(self.st[:, S_MBX_RX] == 1).tolist()
+
     def post_mailbox(self, i: int, data: bytes) -> bool:
         """Box ``i``'s answer for its SM1; False if the previous one has not gone in yet."""
         st = self.st[i]

@@ -38,6 +38,7 @@ EMERGENCY_BITS = ((mcu_status.CMD_TIMEOUT, coe.EMCY_MCU_WATCHDOG, coe.ERR_COMMUN
                   (mcu_status.LINK_ERROR, coe.EMCY_LINK, coe.ERR_COMMUNICATION),
                   (mcu_status.BOARD_FAULT, coe.EMCY_DRIVER_TRIP, coe.ERR_GENERIC))
 _STATUS_OFF = pdo.ACTUATOR_IN_DTYPE.fields["status"][1]
+_U16 = struct.Struct("<H")
 
 
 def software_version() -> str:
@@ -55,6 +56,9 @@ class EscPort:
 
     def take_mailbox(self, i: int) -> bytes | None:
         return self.escs[i].take_mailbox()
+
+    def mailbox_requests(self) -> list[int]:
+        return [i for i, e in enumerate(self.escs) if e.mbx_rx_state == 1]
 
     def post_mailbox(self, i: int, data: bytes) -> bool:
         return self.escs[i].post_mailbox(data)
@@ -91,6 +95,7 @@ class BoxMailbox:
         self.in_ranges = _ranges(desc.tx_pdos, [p.index for p in desc.tx_pdos])
         self.remapped = False
         self._status = [0] * len(self.actuators)
+        self._status_at = [box._in_off[slot] + _STATUS_OFF for slot in self.actuators]
 
     # --- the dictionary's effects ---------------------------------------------------------
     def _tune(self, entry: objects.Entry, value: float) -> None:
@@ -136,23 +141,29 @@ class BoxMailbox:
         return b"".join(rec[off:off + n] for off, n in self.in_ranges)
 
     # --- once per box cycle -----------------------------------------------------------------
-    def step(self) -> None:
+    def receive(self) -> None:
         req = self.port.take_mailbox(self.i)
         if req is not None:
             self.server.receive(req)
-        self._watch(self.box.inputs())
+
+    def flush(self) -> None:
+        """The next answer or emergency into SM1's hand-over, if it is free."""
         msg = self.server.outgoing()
         if msg is not None and self.port.post_mailbox(self.i, msg):
             self.server.sent()
 
-    def _watch(self, inputs: bytes) -> None:
-        for j, slot in enumerate(self.actuators):
-            status = struct.unpack_from("<H", inputs, self.box._in_off[slot] + _STATUS_OFF)[0]
+    def watch(self) -> None:
+        """Emergencies on the rising edges of the actuators' status bits (the box's record
+        as it stands after its cycle)."""
+        buf = self.box._in_buf
+        for j, at in enumerate(self._status_at):
+            status = _U16.unpack_from(buf, at)[0]
             rising = status & ~self._status[j]
             self._status[j] = status
-            for bit, code, register in EMERGENCY_BITS:
-                if rising & bit:
-                    self.server.emergency(code, register, bytes([slot]))
+            if rising:
+                for bit, code, register in EMERGENCY_BITS:
+                    if rising & bit:
+                        self.server.emergency(code, register, bytes([self.actuators[j]]))
 
 
 class Mailboxes:
@@ -162,11 +173,19 @@ class Mailboxes:
                  cfg: Config) -> None:
         self.each = [BoxMailbox(i, d, b, port, cfg) if d.coe else None
                      for i, ((d, _img), b) in enumerate(zip(described, boxes, strict=True))]
+        self.active = [m for m in self.each if m is not None]
+        self.port = port
 
     def step(self) -> None:
-        for m in self.each:
-            if m is not None:
-                m.step()
+        """One box cycle: waiting requests served, emergencies looked for, answers out."""
+        each = self.each
+        for i in self.port.mailbox_requests():
+            if each[i] is not None:
+                each[i].receive()
+        for m in self.active:
+            m.watch()
+            if m.server.outgoing() is not None:
+                m.flush()
 
     def expand(self, i: int, rec: bytes) -> bytes:
         m = self.each[i]
