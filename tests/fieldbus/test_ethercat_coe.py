@@ -10,10 +10,12 @@ import signal
 import struct
 import subprocess
 
+import numpy as np
 import pytest
 
 from firmware_model.esc import coe
 from firmware_model.esc.objects import Abort
+from hil.fieldbus.boxes import make_box
 from hil.fieldbus.esc.slaves import describe_all
 from hil.fieldbus.esc.veth import MASTER_IF, in_ns, run_master, start_serve, stop_serve
 from tests.fieldbus.test_ethercat_pysoem import netns  # noqa: F401  (the fixture)
@@ -105,3 +107,45 @@ def test_config_map_from_coe_equals_the_sii_alone(netns):  # noqa: F811
     assert over_coe["bad_wkc"] == sii["bad_wkc"] == 0
     # over CoE the map came from the dictionaries: every slave was asked
     assert all(s.get("sdo_requests", 0) > 4 for s in report["mailbox"])
+
+
+STEP_N, KP = 300.0, 0.5
+
+
+def _rise_cycles(f: list[float], newtons: float) -> int:
+    """Cycles from the first sample above 10 % of the step to the first above 80 %."""
+    f = np.asarray(f)
+    return int(np.argmax(f > 0.8 * newtons) - np.argmax(f > 0.1 * newtons))
+
+
+def _predicted(box, cfg, n: int) -> list[float]:  # noqa: ANN001
+    """The same protocol on a box model in this process: 200 cycles at 0 N, then the step."""
+    rec = bytearray(box.out_dtype.itemsize)
+    out = []
+    for k in range(n):
+        struct.pack_into("<BBi", rec, 0, 1, 1, 0 if k < 200 else round(STEP_N / 0.01))
+        box.apply(bytes(rec))
+        box.advance(20)
+        out.append(struct.unpack_from("<h", box.inputs(), 6)[0] * 0.1)
+    return out
+
+
+def test_force_gain_written_by_soem_changes_that_box_only(netns, full, cfg):  # noqa: F811
+    """Box 0's Kp written by pysoem (0.5 instead of the calibration's 2): its force step
+    rises as slowly as the box model with Kp 0.5 predicts; box 1 (same type, untouched)
+    as fast as the calibration's. (The F5 bandwidth these gains give: docs.)"""
+    serve = start_serve(netns, "--stack-box", "0", "--stack-box", "1")
+    try:
+        res = run_master(netns, "gain", "0", "1", str(KP), str(STEP_N), "400")
+    finally:
+        stop_serve(serve)
+    assert (res["kp_read"], res["kp_other"]) == (KP, cfg.get("mcu.kp_force"))
+    assert (res["op"], res["bad_wkc"]) == (8, 0)
+    tuned = _rise_cycles(_predicted(make_box(
+        "stack", full.boxes[0], cfg.with_overrides({"mcu.kp_force": KP}, "kp")), cfg, 400),
+        STEP_N)
+    plain = _rise_cycles(_predicted(make_box("stack", full.boxes[0], cfg), cfg, 400), STEP_N)
+    assert tuned >= plain + 4          # the prediction tells them apart
+    served_tuned, served_other = (_rise_cycles(f, STEP_N) for f in res["f_pressure"])
+    # the wire adds up to a cycle of jitter on each side of the rise
+    assert abs(served_tuned - tuned) <= 2 and abs(served_other - plain) <= 2

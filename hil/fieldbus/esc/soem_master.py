@@ -15,6 +15,8 @@ N cycles with force commands on BOX's actuators (100 N per slot number + 1), its
 inputs recorded; then the master stops
 sending, and after the watchdogs tripped it reads every slave's mailbox: the emergencies.
 Also each abort a probe SDO gets (a missing object, a read-only write, an out-of-range gain).
+MODE ``gain BOX OTHER KP NEWTONS N``: box BOX's force gain written by SDO, then a force step
+on slot 0 of BOX and OTHER (see :func:`gain`).
 """
 
 from __future__ import annotations
@@ -166,8 +168,47 @@ def coe(ifname: str, box: int, n: int) -> dict:
     return info
 
 
+def gain(ifname: str, box: int, other: int, kp: float, newtons: float, n: int) -> dict:
+    """MODE gain: in PREOP box BOX's force gain of actuator slot 0 (0x2000:1) written by
+    SDO and read back (and box OTHER's read); OP; slot 0 of both enabled at 0 N for 200
+    cycles, then a NEWTONS step for the rest of N cycles; both f_pressure inputs per cycle."""
+    m = pysoem.Master()
+    m.open(ifname)
+    info: dict = {"found": m.config_init()}
+    a, b = m.slaves[box], m.slaves[other]
+    a.sdo_write(0x2000, 1, struct.pack("<f", kp))
+    info["kp_read"] = struct.unpack("<f", a.sdo_read(0x2000, 1))[0]
+    info["kp_other"] = struct.unpack("<f", b.sdo_read(0x2000, 1))[0]
+    info["image_bytes"] = m.config_map()
+    info["safeop"] = m.state_check(pysoem.SAFEOP_STATE, STATE_TIMEOUT_US)
+    m.state = pysoem.OP_STATE
+    m.send_processdata()
+    m.receive_processdata(RECV_TIMEOUT_US)
+    m.write_state()
+    info["op"] = m.state_check(pysoem.OP_STATE, STATE_TIMEOUT_US)
+    f: dict[int, list[float]] = {box: [], other: []}
+
+    def each(k: int) -> None:
+        for s, key in ((a, box), (b, other)):
+            out = bytearray(s.output)
+            struct.pack_into("<BBi", out, 0, 1, 1, 0 if k < 200 else round(newtons / 0.01))
+            s.output = bytes(out)
+            f[key].append(struct.unpack_from("<h", s.input, 6)[0] * 0.1)
+
+    info["bad_wkc"], info["bad_wkc_values"] = paced(m, n, each)
+    info["f_pressure"] = [f[box], f[other]]
+    m.state = pysoem.INIT_STATE
+    m.write_state()
+    m.close()
+    return info
+
+
 def main(argv: list[str]) -> None:
     ifname, mode = argv[0], argv[1]
+    if mode == "gain":
+        print(json.dumps(gain(ifname, int(argv[2]), int(argv[3]), float(argv[4]),
+                              float(argv[5]), int(argv[6]))))
+        return
     if mode == "coe":
         print(json.dumps(coe(ifname, int(argv[2]), int(argv[3]))))
         return
