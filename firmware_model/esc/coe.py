@@ -71,6 +71,13 @@ class CoeServer:
         # expected size, next toggle).
         self._seg: tuple | None = None
 
+    def reset(self) -> None:
+        """The mailbox went off (INIT): no counter to repeat, no transfer under way, nothing
+        waiting for a master that is gone (emergencies stay queued)."""
+        self._last_counter = 0
+        self._seg = None
+        self._out.clear()
+
     # --- messages out --------------------------------------------------------------------
     def _send(self, kind: int, data: bytes) -> None:
         self._counter = self._counter % 7 + 1   # 1..7, never 0

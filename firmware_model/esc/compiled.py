@@ -130,6 +130,10 @@ class EscArrays:
         """The slaves whose application has a mailbox request to take."""
         return np.flatnonzero(self.st[:, S_MBX_RX] == 1).tolist()
 
+    def in_init(self) -> list[int]:
+        """The slaves in INIT (their mailboxes off)."""
+        return np.flatnonzero(self.st[:, S_STATE] == _INIT).tolist()
+
     def post_mailbox(self, i: int, data: bytes) -> bool:
         """Box ``i``'s answer for its SM1; False if the previous one has not gone in yet."""
         st = self.st[i]

@@ -337,3 +337,15 @@ def test_force_gain_by_sdo_gives_the_response_the_model_predicts(cfg):
     sdo, tuned_f, plain_f = (np.array(rows[k]) for k in ("sdo", "tuned", "plain"))
     assert np.array_equal(sdo, tuned_f)
     assert not np.array_equal(sdo, plain_f)
+
+
+def test_a_new_master_after_init_is_served_from_its_first_counter(preop):
+    """A master's session ends with INIT; the next one starts its counter at 1 again, which
+    must not be taken for a repeat of the last request."""
+    preop.coe(struct.pack("<BHB", 0x40, 0x1018, 1), counter=1)
+    preop.m.set_state(STATION_BASE, r.AlState.INIT)
+    preop.chain.cycle()
+    c = Client(preop.chain)
+    c.m.bring_up(to_op=False)
+    ans = c.coe(struct.pack("<BHB", 0x40, 0x1018, 2), counter=1)
+    assert struct.unpack_from("<I", ans, 6)[0] == preop.chain.escs[0].desc.product_code

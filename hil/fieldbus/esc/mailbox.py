@@ -60,6 +60,9 @@ class EscPort:
     def mailbox_requests(self) -> list[int]:
         return [i for i, e in enumerate(self.escs) if e.mbx_rx_state == 1]
 
+    def in_init(self) -> list[int]:
+        return [i for i, e in enumerate(self.escs) if e.state == 1]
+
     def post_mailbox(self, i: int, data: bytes) -> bool:
         return self.escs[i].post_mailbox(data)
 
@@ -177,8 +180,12 @@ class Mailboxes:
         self.port = port
 
     def step(self) -> None:
-        """One box cycle: waiting requests served, emergencies looked for, answers out."""
+        """One box cycle: waiting requests served, emergencies looked for, answers out. A
+        slave in INIT forgets its mailbox session (the next master starts counting anew)."""
         each = self.each
+        for i in self.port.in_init():
+            if each[i] is not None:
+                each[i].server.reset()
         for i in self.port.mailbox_requests():
             if each[i] is not None:
                 each[i].receive()
