@@ -206,6 +206,8 @@ class Dictionary:
         v = self._value(e, data)
         obj = self.objects[index]
         if index in (0x1C12, 0x1C13):
+            if sub and obj.entries[0].value:  # entries change only while sub 0 is 0
+                raise SdoAbort(Abort.SUB0_NOT_ZERO)
             self._write_assignment(obj, {sub: int(v)})
             return
         if index == 0x2100:
@@ -256,14 +258,17 @@ class Dictionary:
 
     # --- the special objects ----------------------------------------------------------------
     def _write_assignment(self, obj: Obj, values: dict[int, int]) -> None:
-        """0x1C12 / 0x1C13: every assigned index must be one of this direction's PDOs, each
-        once; the box takes the new assignment (and the ESC its lengths) at once."""
+        """0x1C12 / 0x1C13 (ETG.1000.6: sub 0 set to 0, the entries written, sub 0 set to
+        their number): every index written must be one of this direction's PDOs, each
+        assigned once; the box takes the new assignment (and the ESC its lengths) at once."""
         now = {k: int(e.value) for k, e in obj.entries.items()}
         now.update(values)
         n = now[0]
         pdo_base = 0x1600 if obj.index == 0x1C12 else 0x1A00
         assigned = [now[k] for k in range(1, n + 1)]
-        if any(not (pdo_base <= p < pdo_base + 0x200 and p in self.objects) for p in assigned):
+        written = [v for k, v in values.items() if k]
+        if any(not (pdo_base <= p < pdo_base + 0x200 and p in self.objects)
+               for p in assigned + written):
             raise SdoAbort(Abort.VALUE_RANGE)
         if len(set(assigned)) != len(assigned):
             raise SdoAbort(Abort.PARAMETER_INCOMPATIBLE)

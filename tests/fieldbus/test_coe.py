@@ -118,10 +118,11 @@ ABORTS = [  # (what, state, (upload index, sub) or (download index, sub, data), 
     ("value too high", "preop", (0x2000, 1, struct.pack("<f", 1e6)), Abort.VALUE_HIGH),
     ("value too low", "preop", (0x2000, 1, struct.pack("<f", -1.0)), Abort.VALUE_LOW),
     ("value range", "preop", (0x1C13, 0, b"\x09"), Abort.VALUE_RANGE),
-    ("PDO that does not exist", "preop", (0x1C13, 1, struct.pack("<H", 0x1A07)),
+    ("entry written while sub 0 is not 0", "preop", (0x1C13, 1, struct.pack("<H", 0x1A01)),
+     Abort.SUB0_NOT_ZERO),
+    ("PDO that does not exist", "sub0=0", (0x1C13, 1, struct.pack("<H", 0x1A07)),
      Abort.VALUE_RANGE),
-    ("PDO assigned twice", "preop", (0x1C13, 2, struct.pack("<H", 0x1A00)),
-     Abort.PARAMETER_INCOMPATIBLE),
+    ("PDO assigned twice", "twice", (0x1C13, 0, b"\x02"), Abort.PARAMETER_INCOMPATIBLE),
     ("not in this state", "op", (0x1C13, 0, b"\x01"), Abort.STATE),
     ("restore without its signature", "preop", (0x2100, 0, b"save"), Abort.NOT_STORED),
     ("general error: the echo model has no force loop", "preop",
@@ -133,6 +134,11 @@ ABORTS = [  # (what, state, (upload index, sub) or (download index, sub, data), 
 def test_every_abort_path_answers_its_standard_code(preop, what, state, req, code):
     if state == "op":
         _op(preop)
+    if state in ("sub0=0", "twice"):  # ETG.1000.6's order: sub 0 to 0, then the entries
+        assert preop.download(0x1C13, 0, b"\0") == 0
+    if state == "twice":
+        for k in (1, 2):
+            assert preop.download(0x1C13, k, struct.pack("<H", 0x1A00)) == 0
     od = preop.chain.mailboxes.each[0].od
     before = {(o.index, e.sub): e.value for o in od.objects.values() for e in o.entries.values()}
     if len(req) == 2:
