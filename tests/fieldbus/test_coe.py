@@ -355,3 +355,30 @@ def test_a_new_master_after_init_is_served_from_its_first_counter(preop):
     c.m.bring_up(to_op=False)
     ans = c.coe(struct.pack("<BHB", 0x40, 0x1018, 2), counter=1)
     assert struct.unpack_from("<I", ans, 6)[0] == preop.chain.escs[0].desc.product_code
+
+
+def test_lvds_link_failure_and_driver_trip_send_their_emergencies(cfg):
+    """The LVDS link to box 0's first driver board dead for 10 ms (a fault plan): the link
+    failure, then the board's trip on its own watchdog, each one emergency, read from SM1."""
+    from hil.fieldbus.faults import parse_faults
+    from hil.fieldbus.stack_faults import install_box_faults
+
+    chain = EscChain(THREE, cfg, "echo", stack_boxes=(0,))
+    install_box_faults(chain, parse_faults({"fault": [
+        {"link": "lvds.down", "kind": "dead", "box": 0, "slot": 0, "start_s": 0.05,
+         "end_s": 0.06}]}, "test"))
+    c = Client(chain)
+    c.m.bring_up(to_op=False)
+    rec = bytearray(chain.boxes[0].out_dtype.itemsize)
+    struct.pack_into("<BBi", rec, 0, 1, 1, 20_000)
+    seen = []
+    for _ in range(80):
+        chain.boxes[0].apply(bytes(rec))    # (as OP would hand it: the commands stay fresh)
+        chain.cycle()
+        d = c.m.one(ec.Command.FPRD, STATION_BASE, 0x1080, bytes(MBX))
+        if d.wkc:
+            head, code, register, slot = struct.unpack_from("<HHBB", d.data, 6)
+            assert head >> 12 == coe.COE_EMERGENCY
+            seen.append((code, register, slot))
+    assert seen == [(coe.EMCY_LINK, coe.ERR_COMMUNICATION, 0),
+                    (coe.EMCY_DRIVER_TRIP, coe.ERR_GENERIC, 0)]

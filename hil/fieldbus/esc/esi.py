@@ -42,10 +42,8 @@ _ACCESS = {"ro": ("ro", None), "rw": ("rw", None), "wo": ("wo", None),
 
 
 def _default(e: objects.Entry) -> str:
-    if e.dtype == "str":
-        return str(e.value)
-    raw = e.encode()
-    return raw.hex().upper() if e.dtype != "f32" else repr(float(e.value))
+    """A string's text, else its bytes as sent (little endian) in hex, as ETG.2000 has it."""
+    return str(e.value) if e.dtype == "str" else e.encode().hex().upper()
 
 
 def _dictionary(profile: ET.Element, od: objects.Dictionary) -> None:
