@@ -11,7 +11,8 @@ bad FCS.
 
 Time: :meth:`EscChain.cycle` is one 1 ms bus cycle of the boxes (20 ticks): each slave's
 watchdog advances, outputs the master wrote in OP (or the safe outputs) are applied, the
-box runs, and its inputs go into the slave's input buffer. The project's own master keeps
+box runs, its mailbox side serves CoE (:mod:`hil.fieldbus.esc.mailbox`), and its inputs go
+into the slave's input buffer. The project's own master keeps
 its preconfigured chain (:class:`hil.fieldbus.chain.Chain`, fixed logical windows, no AL
 states), on which the committed logs replay.
 """

@@ -14,6 +14,8 @@ runs: ``eha-hil serve --transport ethercat --interface IF --topology hydra_full`
   and neither waits for the other. Behind its schedule, the box clock runs cycles back to
   back; more than :data:`MAX_LAG_CYCLES` behind, it moves the schedule forward (slipped
   cycles). How far simulated time fell behind wall time is reported (``lag_max_ms``).
+  After each cycle the boxes' mailbox side (:mod:`hil.fieldbus.esc.mailbox`) serves the
+  CoE requests the ESCs' SM0 handed over and posts answers and emergencies for SM1.
 
 Before the frame path starts, the boxes run :data:`WARMUP_CYCLES` cycles and the frame loop
 is compiled (or loaded): first calls take tens of ms (seconds with a cold cache), which
