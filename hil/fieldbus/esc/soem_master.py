@@ -112,8 +112,16 @@ def coe(ifname: str, box: int, n: int) -> dict:
     m = pysoem.Master()
     m.open(ifname)
     info: dict = {"found": m.config_init()}
-    info["identity"] = [[struct.unpack("<I", s.sdo_read(0x1018, k))[0] for k in range(1, 5)]
-                        for s in m.slaves]
+    sdo_us: list[float] = []
+
+    def timed_read(s, k: int) -> int:  # noqa: ANN001
+        t = time.perf_counter()
+        raw = s.sdo_read(0x1018, k)
+        sdo_us.append((time.perf_counter() - t) * 1e6)
+        return struct.unpack("<I", raw)[0]
+
+    info["identity"] = [[timed_read(s, k) for k in range(1, 5)] for s in m.slaves]
+    info["sdo_read_us"] = sdo_us  # wall time of each expedited upload (one box cycle or two)
     info["sii_identity"] = [[s.man, s.id, s.rev] for s in m.slaves]
     emcy: list[list] = []
     for k, s in enumerate(m.slaves):
