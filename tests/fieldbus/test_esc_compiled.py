@@ -236,7 +236,7 @@ mailbox_op_st = st.one_of(
 
 
 @given(ops=st.lists(mailbox_op_st, min_size=1, max_size=30))
-@settings(max_examples=50, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 def test_compiled_path_equals_the_chain_in_mailbox_traffic(cfg, ops):
     """From PREOP with the mailboxes set up (a master's bring-up): requests, answers, partial
     and refused accesses, repeat requests, state changes, interleaved with random traffic."""
