@@ -96,8 +96,8 @@ def _run_bus_to(args: argparse.Namespace, cfg, topo, cycles: int, model: str, pc
         what = "--log" if args.log else "--foxglove"
         if not backend(args.transport).in_memory:
             raise UsageError(f"{what} records the in-process run; use --transport inproc")
-        if model != "stack":
-            raise UsageError(f"{what} records the MCU model: use --model stack")
+        if model not in ("stack", "robot"):
+            raise UsageError(f"{what} records the MCU model: use --model stack or robot")
         if args.crc_trailer is not None:
             raise UsageError(f"--crc-trailer/--no-crc-trailer: not with {what} (the logged "
                                 "run keeps the in-process default, with the trailer)")
@@ -112,7 +112,8 @@ def _run_bus_to(args: argparse.Namespace, cfg, topo, cycles: int, model: str, pc
             with _live_view(live_addr) as live:
                 rec = run_logged(topo, cfg, cycles, pc, args.log, level=args.level,
                                  progress=progress, faults=faults,
-                                 capture=None if cap is None else cap.tap(tick_ns), live=live)
+                                 capture=None if cap is None else cap.tap(tick_ns), live=live,
+                                 model=model)
         finally:
             if cap is not None:
                 cap.close()
