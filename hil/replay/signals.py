@@ -294,6 +294,8 @@ def actuator_block(cal: FirmwareCalibration, up: np.ndarray, down: np.ndarray, e
     and ``v_piston_valid`` flag torn reads (:func:`tear_offsets`)."""
     a, n = up.shape[:2]
     keep = np.arange(every - 1, n, every)
+    if not n:
+        return keep, {}
     counts = piston_counts(up)
     before = counts[:, 0] if carry.count is None else carry.count
     off = tear_offsets(counts, before, carry.offset)
@@ -308,9 +310,8 @@ def actuator_block(cal: FirmwareCalibration, up: np.ndarray, down: np.ndarray, e
     cols["x_piston_valid"] = valid[:, keep].reshape(a * k)
     cols["v_piston_valid"] = (cols["x_piston_valid"] & valid_before.reshape(a * k)
                               & np.isfinite(x_before.reshape(a * k)))
-    if n:
-        carry.x, carry.count = x[:, -1].copy(), counts[:, -1].copy()
-        carry.offset, carry.valid = off[:, -1].copy(), valid[:, -1].copy()
+    carry.x, carry.count = x[:, -1].copy(), counts[:, -1].copy()
+    carry.offset, carry.valid = off[:, -1].copy(), valid[:, -1].copy()
     return keep, cols
 
 
