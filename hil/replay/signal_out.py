@@ -43,11 +43,11 @@ class SignalOut:
             return
         k = len(t_ns)
         message = self._channels[channels[0]][0]
-        payloads = message.encode(columns, len(channels) * k)
+        payloads = message.encode_array(columns, len(channels) * k)
         for j, channel in enumerate(channels):
             _, cid, handle = self._channels[channel]
             part = payloads[j * k:(j + 1) * k]
             if cid is not None:
                 self.log.write_messages(cid, t_ns, part)
             if handle is not None:
-                self.live.log(handle, t_ns, part)
+                self.live.log(handle, t_ns, [bytes(m) for m in part])
