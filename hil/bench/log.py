@@ -66,7 +66,8 @@ def _timed(fn) -> tuple[float, float]:  # noqa: ANN001
 
 
 def bench_overhead(cfg, seconds: float = 1.0, level: str = "mcu", pairs: int = 3,  # noqa: ANN001
-                   topology: str | None = None, model: str = "stack") -> Overhead:
+                   topology: str | None = None, model: str = "stack",
+                   compression: str = "zstd") -> Overhead:
     """Paired bare and logged runs of ``seconds`` simulated seconds with the box model
     ``model`` (stack or robot; see the module doc). ``topology`` None: ``bench_one_box``
     for the stack model, ``hydra_full`` for the robot engine."""
@@ -87,7 +88,8 @@ def bench_overhead(cfg, seconds: float = 1.0, level: str = "mcu", pairs: int = 3
                 bs.run(n, demo_pc(), keep=1)
 
         def logged(n: int = cycles) -> None:
-            run_logged(topo, cfg, n, demo_pc(), path, level=level, model=model)
+            run_logged(topo, cfg, n, demo_pc(), path, level=level, model=model,
+                       compression=compression)
 
         bare(50)
         logged(50)  # warm-up: compiled code loaded, imports done
@@ -102,7 +104,7 @@ def bench_overhead(cfg, seconds: float = 1.0, level: str = "mcu", pairs: int = 3
             runs.append((b, lg))
         size = path.stat().st_size
     med = statistics.median
-    return Overhead(level, f"{topology}, {model} model", cycles / 1000, pairs,
+    return Overhead(level, f"{topology}, {compression}, {model} model", cycles / 1000, pairs,
                     med(lg[0] / b[0] for b, lg in runs), med(lg[1] / b[1] for b, lg in runs),
                     min(lg[0] for _, lg in runs) / min(b[0] for b, _ in runs),
                     med(b[0] for b, _ in runs), med(b[1] for b, _ in runs),

@@ -226,7 +226,8 @@ def cmd_bench_log(args: argparse.Namespace, ctx: Context) -> Outcome:
 
     cfg = ctx.config()
     ov = None if args.seconds == 0 else bench_overhead(cfg, args.seconds, args.level,
-                                                       args.pairs, args.topology, args.model)
+                                                       args.pairs, args.topology, args.model,
+                                                       args.compression)
     enc = bench_encodings(args.samples)
     return Outcome(format_report(ov, enc),
                    {"overhead": None if ov is None else asdict(ov),
@@ -247,6 +248,8 @@ def add_log_parser(bsub) -> None:  # noqa: ANN001
     p.add_argument("--model", choices=("stack", "robot"), default="stack",
                    help="box model: stack (each box on its own) or robot (every box in the "
                    "whole-robot engine)")
+    p.add_argument("--compression", default="zstd", choices=("zstd", "lz4", "none"),
+                   help="compression of the logged runs' chunks (bus run --log-compression)")
     p.add_argument("--topology", help="shipped topology name or TOML file (default: "
                    "bench_one_box for --model stack, hydra_full for --model robot)")
     p.add_argument("--samples", type=int_range(10, 1_000_000), default=5000,

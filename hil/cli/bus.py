@@ -113,7 +113,7 @@ def _run_bus_to(args: argparse.Namespace, cfg, topo, cycles: int, model: str, pc
                 rec = run_logged(topo, cfg, cycles, pc, args.log, level=args.level,
                                  progress=progress, faults=faults,
                                  capture=None if cap is None else cap.tap(tick_ns), live=live,
-                                 model=model)
+                                 model=model, compression=args.log_compression)
         finally:
             if cap is not None:
                 cap.close()
@@ -417,6 +417,9 @@ def add_parsers(sub, bsub) -> None:  # noqa: ANN001 - argparse's sub-parsers
                    " lost, corrupted, duplicated or delayed frames, LVDS and sensor faults")
     p.add_argument("--log", metavar="FILE.mcap", type=output_file((".mcap",)),
                    help="log MCU inputs/outputs for replay")
+    p.add_argument("--log-compression", default="zstd", choices=("zstd", "lz4", "none"),
+                   help="--log: compression of the log's chunks (default zstd; lz4 costs "
+                   "about half the CPU for ~1.8x the file, docs/framelog.md)")
     p.add_argument("--level", default="mcu", choices=("bus", "mcu", "full"),
                    help="log detail")
     add_wire_options(p)

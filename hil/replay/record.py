@@ -340,7 +340,7 @@ def run_logged(topo: Topology, cfg: Config, cycles: int, pc: Callable[[int, Mast
                progress: Callable[[int, int], None] | None = None,
                faults: object = None, live: object = None,
                capture: Callable[[int, int, bytes, str], None] | None = None,
-               model: str = "stack") -> BusRecord:
+               model: str = "stack", compression: str = "zstd") -> BusRecord:
     """Run ``cycles`` cycles in-process with the box model ``model`` (``stack``: each box
     on its own, :class:`RecordingStackBox`; ``robot``: every box in the whole-robot engine,
     :class:`hil.replay.robot_record.RobotRecorder`: the same channels) and log them to
@@ -351,7 +351,8 @@ def run_logged(topo: Topology, cfg: Config, cycles: int, pc: Callable[[int, Mast
     all, so the replay reproduces a faulty run too. ``live``: a live view the decoded
     signals also go to (:class:`SignalOut`); ``log_path`` None: only there. ``capture``: a
     further tap that sees every fieldbus frame (e.g.
-    :meth:`hil.fieldbus.capture.CaptureWriter.tap`)."""
+    :meth:`hil.fieldbus.capture.CaptureWriter.tap`). ``compression``: of the log's chunks
+    (zstd, lz4 or none; :class:`~hil.framelog.writer.FrameLogWriter`)."""
     import contextlib
 
     tick_ns = cfg.get("sim.tick_ns")
@@ -359,7 +360,8 @@ def run_logged(topo: Topology, cfg: Config, cycles: int, pc: Callable[[int, Mast
         log = None
         if log_path is not None:
             log = stack.enter_context(FrameLogWriter(
-                log_path, level=level, flush_every_ns=FLUSH_CYCLES * CYCLE_TICKS * tick_ns))
+                log_path, level=level, flush_every_ns=FLUSH_CYCLES * CYCLE_TICKS * tick_ns,
+                compression=compression))
         out = SignalOut(log, live)
         ch_bus = None
         if log is not None:
