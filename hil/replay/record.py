@@ -278,17 +278,41 @@ def add_signal_channels(out: SignalOut, box, cfg: Config) -> tuple[dict, list[in
                  for k in range(len(box.actuators))]
 
 
-def signal_boxes(chain, cfg: Config, live: object) -> list[RecordingStackBox]:  # noqa: ANN001
-    """Replace the stack boxes of ``chain`` (before it runs) by boxes that send their
-    decoded signals to ``live`` (no log); call :meth:`RecordingStackBox.flush` at the end.
-    Echo boxes stay as they are (they have no MCU to decode)."""
-    out = SignalOut(None, live)
+def signal_boxes(chain, cfg: Config, live: object) -> list:  # noqa: ANN001
+    """Make the boxes of ``chain`` (before it runs) send their decoded signals to ``live``
+    (no log); call ``close()`` (or ``flush()``) of each returned recorder at the end."""
+    return attach_recorders(chain, cfg, None, live)
+
+
+def attach_recorders(chain, cfg: Config, log: FrameLogWriter | None, live: object = None,  # noqa: ANN001
+                     level: str = "mcu", background: bool = False) -> list:
+    """Log the MCU boundary of ``chain``'s boxes (a :class:`~hil.fieldbus.chain.Chain` or
+    anything with ``boxes`` and ``engine``, before it runs) to ``log`` and/or send their
+    decoded signals to ``live``: the whole-robot engine's :class:`RobotRecorder`
+    (``background``: written by a thread of its own), else each stack box replaced by a
+    :class:`RecordingStackBox`. Echo boxes have no MCU to log. Returns the recorders: call
+    ``close()`` (a RobotRecorder) or ``flush()`` of each at the end."""
+    out = SignalOut(log, live)
+    engine = getattr(chain, "engine", None)
+    if engine is not None:
+        from hil.replay.robot_record import RobotRecorder
+
+        return [RobotRecorder(engine, chain.boxes, cfg, log, out, level, background)]
     recs = []
     for i, b in enumerate(chain.boxes):
         if isinstance(b, StackBox):
-            chain.boxes[i] = RecordingStackBox(b.box, cfg, None, out)
+            chain.boxes[i] = RecordingStackBox(b.box, cfg, log, out)
             recs.append(chain.boxes[i])
     return recs
+
+
+def replay_metadata(topo: Topology, cfg: Config, boxes: list, model: str,
+                    cycles: int) -> dict[str, str]:
+    """The ``eha-hil.replay`` Metadata record of a log of ``boxes`` (what a replay needs)."""
+    offsets = {f"{b.box.id}.{k}": int(s.board.calibrated_offset)
+               for b in boxes for k, s in enumerate(getattr(b, "stacks", ()))}
+    return {"config": json.dumps(cfg.data), "topology": topo.source, "model": model,
+            "offsets": json.dumps(offsets), "cycles": str(cycles)}
 
 
 class BusSignals:
@@ -410,13 +434,9 @@ def run_logged(topo: Topology, cfg: Config, cycles: int, pc: Callable[[int, Mast
                 flushers = [RobotRecorder(engine, boxes, cfg, log, out, level)]
             if faults is not None:
                 bs._install_faults(faults)  # after the recording boxes replaced the plain ones
-            offsets = {f"{b.box.id}.{k}": int(s.board.calibrated_offset)
-                       for b in boxes for k, s in enumerate(getattr(b, "stacks", ()))}
             if log is not None:
-                log.add_metadata("eha-hil.replay", {
-                    "config": json.dumps(cfg.data), "topology": topo.source,
-                    "model": model, "offsets": json.dumps(offsets),
-                    "cycles": str(cycles)})
+                log.add_metadata("eha-hil.replay",
+                                 replay_metadata(topo, cfg, boxes, model, cycles))
             step = max(cycles // 20, 1)
             rec = None
             done = 0
@@ -435,5 +455,5 @@ def run_logged(topo: Topology, cfg: Config, cycles: int, pc: Callable[[int, Mast
             if engine is not None:
                 engine.wait()
             for f in flushers:
-                f.flush()
+                getattr(f, "close", f.flush)()
         return rec

@@ -15,6 +15,9 @@ channel, and the decoded signals of all actuators computed and encoded as whole 
 
 from __future__ import annotations
 
+from concurrent.futures import Future, ThreadPoolExecutor
+from dataclasses import dataclass
+
 import numpy as np
 
 from firmware_model.calibration import calibration
@@ -40,10 +43,13 @@ BLOCK_CYCLES = {"full": 10}
 class RobotRecorder:
     """Logs the run of ``engine`` (whose boxes are ``boxes``, the chain's, in order) to
     ``log`` (None: only the decoded signals, to ``out``'s live view). Attach before the
-    run; :meth:`flush` after it."""
+    run; :meth:`close` after it. ``background``: blocks are written by a thread of their
+    own (a chain paced by the wall clock, ``serve``: a cycle must not wait for a block's
+    writing; the thread takes the interpreter lock while it encodes)."""
 
     def __init__(self, engine: RobotEngine, boxes: list, cfg: Config,
-                 log: FrameLogWriter | None, out: SignalOut, level: str = "mcu") -> None:
+                 log: FrameLogWriter | None, out: SignalOut, level: str = "mcu",
+                 background: bool = False) -> None:
         self.engine = engine
         self.log = log
         self.out = out
@@ -81,6 +87,9 @@ class RobotRecorder:
         self._last_out = [(np.zeros(0, np.int64), np.zeros((0, b.out_dtype.itemsize), np.uint8))
                           for b in engine.boxes]
         self.carry = SG.PistonCarry.start(n)
+        self._pool = (ThreadPoolExecutor(1, thread_name_prefix="robot-log")
+                      if background else None)
+        self._jobs: list[Future] = []
         self._channels(log)
         engine.tap = self.tap
         engine.log = self
@@ -148,29 +157,55 @@ class RobotRecorder:
     # --- writing a block -----------------------------------------------------------------
     def flush(self) -> None:
         """Write the buffered cycles and steps: one block per raw channel, the decoded
-        signals of every box and actuator."""
+        signals of every box and actuator (in the background with ``background``: the
+        block is copied and the engine's next cycle does not wait for the writing)."""
         c, r = self.n_cycles, int(self.tap.row[0])
         c_out = c + self._taken  # the run's last outputs, taken for a cycle never run
+        self.n_cycles = 0
+        self._taken = False
+        self.tap.row[0] = 0
         if not c_out and not r:
             return
-        ns, tap, log = self.ns, self.tap, self.log
         end = int(self.in_t[c - 1]) if c else self.engine.tick
-        t_steps = end - self.period * np.arange(r, 0, -1, dtype=np.int64)
-        out_t, in_t = self.out_t[:c_out], self.in_t[:c]
+        tap = self.tap
+        block = _Block(c, c_out, end - self.period * np.arange(r, 0, -1, dtype=np.int64),
+                       self.out_t[:c_out], self.out_rows[:c_out], self.out_got[:c_out],
+                       self.in_t[:c], self.in_rows[:c], [o[:c] for o in self.other_in],
+                       tap.up[:, :r], tap.down[:, :r], tap.trace[:, :r * self.period])
+        if self._pool is None:
+            self._write(block)
+            return
+        block = block.copy()
+        self._jobs.append(self._pool.submit(self._write, block))
+        while self._jobs and self._jobs[0].done():
+            self._jobs.pop(0).result()  # a failed write ends the run here
+
+    def close(self) -> None:
+        """The last block written; with ``background``, once every block is."""
+        self.flush()
+        if self._pool is not None:
+            for job in self._jobs:
+                job.result()
+            self._jobs.clear()
+            self._pool.shutdown()
+
+    def _write(self, k: _Block) -> None:
+        c = k.cycles
+        ns, log = self.ns, self.log
         period_s = self.period * ns * 1e-9
-        others = iter(self.other_in)
+        others = iter(k.other_in)
         box_out: list[tuple[np.ndarray, np.ndarray]] = []
         for n_box, b in enumerate(self.boxes):
             e = self.engine_box[n_box]
             if e is None:
-                ins = next(others)[:c]
+                ins = next(others)
                 outs = None
             else:
                 lo, hi = self.in_span[e]
-                ins = self.in_rows[:c, lo:hi]
-                got = self.out_got[:c_out, e]
+                ins = k.in_rows[:, lo:hi]
+                got = k.out_got[:, e]
                 olo, ohi = self.out_span[e]
-                outs = (out_t[got], self.out_rows[:c_out][got, olo:ohi])
+                outs = (k.out_t[got], k.out_rows[got, olo:ohi])
                 if len(outs[0]):
                     self._last_out[e] = (outs[0][-1:], outs[1][-1:])
                     box_out.append(outs)
@@ -178,24 +213,23 @@ class RobotRecorder:
                     box_out.append(self._last_out[e])
             if log is not None:
                 if c:
-                    log.write_block(self.ch_in[n_box], in_t * ns, ins)
+                    log.write_block(self.ch_in[n_box], k.in_t * ns, ins)
                 if outs is not None and len(outs[0]) and self.ch_out[n_box] is not None:
                     log.write_block(self.ch_out[n_box], outs[0] * ns, outs[1])
             sig = self.sig_rec[n_box]
             if "inputs" in sig and c:
-                self.out.write(sig["inputs"], in_t * ns, SG.record_columns(b.box, "inputs", ins))
+                self.out.write(sig["inputs"], k.in_t * ns,
+                               SG.record_columns(b.box, "inputs", ins))
             if "outputs" in sig and outs is not None and len(outs[0]):
                 self.out.write(sig["outputs"], outs[0] * ns,
                                SG.record_columns(b.box, "outputs", outs[1]))
-        if r:
-            self._write_steps(t_steps, r, box_out, period_s)
-        self.n_cycles = 0
-        self._taken = False
-        tap.row[0] = 0
+        if len(k.t_steps):
+            self._write_steps(k, box_out, period_s)
 
-    def _write_steps(self, t_steps: np.ndarray, r: int, box_out: list, period_s: float) -> None:
-        ns, tap, log, n = self.ns, self.tap, self.log, self.engine.n
-        up, down = tap.up[:, :r], tap.down[:, :r]
+    def _write_steps(self, k: _Block, box_out: list, period_s: float) -> None:
+        ns, log, n = self.ns, self.log, self.engine.n
+        t_steps, up, down = k.t_steps, k.up, k.down
+        r = len(t_steps)
         if log is not None:
             t = t_steps * ns
             for j in range(n):
@@ -204,7 +238,7 @@ class RobotRecorder:
             if self.full:
                 tt = (t_steps[0] + np.arange(r * self.period, dtype=np.int64)) * ns
                 for j in range(n):
-                    tr = tap.trace[j, :r * self.period]
+                    tr = k.trace[j]
                     log.write_block(self.ch_trace[j], tt, tr)
                     log.write_block(self.ch_raw[j], tt, tr[:, :B.N_RAW])
                     for d, ch in enumerate(self.ch_words[j]):
@@ -212,8 +246,7 @@ class RobotRecorder:
                         if len(tw):
                             log.write_block(ch, tw, words[:, None])
         keep, cols = SG.actuator_block(self.cal, up, down, self.every, period_s, self.carry)
-        k = len(keep)
-        if not k:
+        if not len(keep):
             return
         t = t_steps[keep]
         pc = []
@@ -224,3 +257,27 @@ class RobotRecorder:
         for name in pc[0]:
             cols[name] = np.concatenate([p[name] for p in pc])
         self.out.write_split(self.sig_act, t * ns, cols)
+
+
+@dataclass
+class _Block:
+    """One block of the run as :meth:`RobotRecorder._write` takes it."""
+
+    cycles: int
+    cycles_out: int
+    t_steps: np.ndarray
+    out_t: np.ndarray
+    out_rows: np.ndarray
+    out_got: np.ndarray
+    in_t: np.ndarray
+    in_rows: np.ndarray
+    other_in: list[np.ndarray]
+    up: np.ndarray
+    down: np.ndarray
+    trace: np.ndarray
+
+    def copy(self) -> _Block:
+        return _Block(self.cycles, self.cycles_out, *(
+            [a.copy() for a in v] if isinstance(v, list) else v.copy()
+            for v in (self.t_steps, self.out_t, self.out_rows, self.out_got, self.in_t,
+                      self.in_rows, self.other_in, self.up, self.down, self.trace)))
