@@ -208,15 +208,25 @@ def piston_counts(up: np.ndarray) -> np.ndarray:
 def tear_offsets(counts: np.ndarray, count_before: np.ndarray,
                  offset_before: np.ndarray) -> np.ndarray:
     """Per read of the piston position (``counts``, (actuators, n) consecutive MCU steps),
-    how many :data:`TEAR_COUNTS` it is off by: a step between two reads of more than half
-    of TEAR_COUNTS (0.17 mm in one MCU step, 0.87 m/s: beyond any piston speed) is a
-    torn read starting or ending, and its rounded multiple adds up. 0: a whole read.
-    ``count_before``/``offset_before`` (actuators,): the read before the first and its
-    offset (carried from the previous block)."""
+    how many :data:`TEAR_COUNTS` it is off by (0: a whole read). The two words are read
+    at most one board tick apart, in which the piston moves far less than TEAR_COUNTS, so
+    a torn read is off by exactly one TEAR_COUNTS (plus that motion): a step between two
+    reads that rounds to +-1 TEAR_COUNTS (more than half of it, 0.17 mm in one MCU step,
+    0.87 m/s: beyond any piston speed) is a torn read starting or ending, and these add
+    up. A step of two or more (the link's first words after start, a sensor fault) is a
+    real jump: the count after it is taken as whole. ``count_before``/``offset_before``
+    (actuators,): the read before the first and its offset (from the previous block)."""
     c = np.asarray(counts, dtype=np.int64)
+    n = c.shape[-1]
     d = np.diff(c, axis=-1, prepend=np.asarray(count_before, np.int64)[..., None])
     jumps = np.floor_divide(d + TEAR_COUNTS // 2, TEAR_COUNTS)
-    return np.cumsum(jumps, axis=-1) + np.asarray(offset_before, np.int64)[..., None]
+    reset = np.abs(jumps) >= 2
+    total = np.cumsum(np.where(reset, 0, jumps), axis=-1) + np.asarray(
+        offset_before, np.int64)[..., None]
+    # from a real jump on, count from 0 again: less the total at the last one
+    last = np.maximum.accumulate(np.where(reset, np.arange(n), -1), axis=-1)
+    base = np.where(last >= 0, np.take_along_axis(total, np.maximum(last, 0), axis=-1), 0)
+    return total - base
 
 
 def piston_x(cal: FirmwareCalibration, up: np.ndarray) -> np.ndarray:
