@@ -51,6 +51,10 @@ class RobotRecorder:
                  log: FrameLogWriter | None, out: SignalOut, level: str = "mcu",
                  background: bool = False) -> None:
         self.engine = engine
+        if getattr(engine, "lanes", False) and not getattr(engine, "lanes_tap", False):
+            # a kernel that does not fill the tap would leave the log's words at 0; the
+            # scalar kernel gives the same bits per actuator
+            engine.lanes = False
         self.log = log
         self.out = out
         self.cfg = cfg
