@@ -107,9 +107,9 @@ def add_messages(w: Writer, channel_id: int, times: Sequence[int] | np.ndarray,
         cb.message_start_time = min(cb.message_start_time, t_first)
     cb.message_end_time = max(cb.message_end_time, t_last)
     index = cb.message_indices.get(channel_id)
-    if not index:
-        index = cb.message_indices[channel_id] = _MessageIndex(channel_id=channel_id,
-                                                               records=[])
+    if not isinstance(index, _MessageIndex):  # none yet, or the library's own (add_message)
+        index = cb.message_indices[channel_id] = _MessageIndex(
+            channel_id=channel_id, records=list(index.records) if index else [])
     base = cb.record_writer.count
     size = len(data[0])
     if isinstance(data, np.ndarray) or all(len(d) == size for d in data):

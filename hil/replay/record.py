@@ -22,6 +22,12 @@ Channels per box ``b`` (blocks of fixed-width frames, times in ns of simulated t
 The Metadata record holds the configuration (JSON), the topology, the box model and each
 board's calibrated angle offset, so a replay needs nothing but the file.
 
+The whole-robot engine (``--model robot``) writes the same channels, frame for frame, through
+:class:`hil.replay.robot_record.RobotRecorder`; :func:`attach_recorders` picks the recorder
+for a chain (``bus run``, ``serve``). A box without an output record has no outputs
+channels; decoded signals leave out what is not measured and flag torn piston reads
+(:mod:`hil.replay.signals`, docs/framelog.md).
+
 Beside these raw channels, the decoded signals of :mod:`hil.replay.signals` (protobuf, SI
 units, one message per sample) go to the log and/or a live view (:class:`SignalOut`):
 ``/signals/actuator/b.k`` each fieldbus cycle (each MCU step at level "full"),
