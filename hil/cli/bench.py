@@ -225,6 +225,10 @@ def cmd_bench_log(args: argparse.Namespace, ctx: Context) -> Outcome:
     from hil.bench.log import bench_encodings, bench_overhead, format_report
 
     cfg = ctx.config()
+    if args.topology is not None:
+        from hil.cli.bus import _topology
+
+        _topology(args.topology)  # a bad name or file: one line, before any run
     ov = None if args.seconds == 0 else bench_overhead(cfg, args.seconds, args.level,
                                                        args.pairs, args.topology, args.model,
                                                        args.compression)

@@ -28,11 +28,11 @@ import numpy as np
 
 from firmware_model.calibration import FirmwareCalibration
 from firmware_model.fpga import layout as B
+from firmware_model.mcu import measure
 from firmware_model.mcu.measure import upstream_si
 from hil.fieldbus import pdo
 from hil.fieldbus.topology import Box
 from hil.framelog.protobuf import Field, MessageType
-from protocols.biss import LINEAR_COUNT_M
 
 PACKAGE = "eha_hil"
 #: One field per analog input of the board (pressures, temperatures), from its declaration.
@@ -201,8 +201,7 @@ TEAR_COUNTS = 1 << 16
 
 def piston_counts(up: np.ndarray) -> np.ndarray:
     """The BiSS piston count (int64) the MCU assembles from its two upstream words."""
-    u = np.asarray(up).astype(np.int64) & 0xFFFF
-    return (u[..., B.U_PISTON_HI] << 16) | u[..., B.U_PISTON_LO]
+    return measure.piston_count(up)
 
 
 def tear_offsets(counts: np.ndarray, count_before: np.ndarray,
@@ -310,7 +309,7 @@ def actuator_block(cal: FirmwareCalibration, up: np.ndarray, down: np.ndarray, e
     before = counts[:, 0] if carry.count is None else carry.count
     off = tear_offsets(counts, before, carry.offset)
     valid = off == 0
-    x = (counts - cal.biss_zero_count) * LINEAR_COUNT_M
+    x = measure.piston_x(counts, cal)
     x_before = np.concatenate([carry.x[:, None], x], axis=1)[:, keep]
     valid_before = np.concatenate([carry.valid[:, None], valid], axis=1)[:, keep]
     k = len(keep)
