@@ -51,7 +51,7 @@ class RobotRecorder:
                  log: FrameLogWriter | None, out: SignalOut, level: str = "mcu",
                  background: bool = False) -> None:
         self.engine = engine
-        if getattr(engine, "lanes", False) and not getattr(engine, "lanes_tap", False):
+        if getattr(engine, "lanes", False) and not getattr(engine, "lanes_log_rows", False):
             # a kernel that does not fill the tap would leave the log's words at 0; the
             # scalar kernel gives the same bits per actuator
             engine.lanes = False
@@ -95,7 +95,7 @@ class RobotRecorder:
                       if background else None)
         self._jobs: list[Future] = []
         self._channels(log)
-        engine.tap = self.tap
+        engine.log_rows = self.tap
         engine.log = self
 
     # --- channels ------------------------------------------------------------------------

@@ -307,8 +307,9 @@ class RobotEngine:
         self._images()
         self._no_rec = np.zeros((0, L.N_OUTPUTS))
         #: Copies of each MCU step's words (and board traces) for a frame log, and who
-        #: writes them out (:meth:`set_log`); no rows and None: no log.
-        self.tap = no_tap(n)
+        #: writes them out (a :class:`hil.replay.robot_record.RobotRecorder` sets both); no
+        #: rows and None: no log.
+        self.log_rows = no_tap(n)
         self.log: EngineLog | None = None
         self.err = np.zeros((n, 2), dtype=np.int64)
         self._batched = np.ones(n, dtype=bool)
@@ -484,7 +485,8 @@ class RobotEngine:
         if started is not None:
             started.release()
         return advance_robot(self._counter, ticks // self.period, self.period, self.tick,
-                             self._batched, self.arrays, self.mcu, self._no_rec, self.tap)
+                             self._batched, self.arrays, self.mcu, self._no_rec,
+                             self.log_rows)
 
     def _finish(self, ticks: int) -> None:
         batched = self._batched
@@ -502,7 +504,7 @@ class RobotEngine:
         """The stacks under a sensor fault: their own wrapper advances them tick by tick,
         between the same steps of their programs as :func:`advance_robot` makes."""
         size = self.law.state_size
-        tap, p = self.tap, self.period
+        tap, p = self.log_rows, self.period
         for n, t in enumerate(range(self.tick, self.tick + ticks, p)):
             r = int(tap.row[0]) + n
             for j in external:
