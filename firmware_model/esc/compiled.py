@@ -23,7 +23,9 @@ from numba import njit, types
 from numba.core import cgutils
 from numba.extending import intrinsic
 
+from firmware_model.esc import dc_compiled as dcc
 from firmware_model.esc import registers as r
+from firmware_model.esc.dc import DcParams, dc_line
 from firmware_model.esc.esc import _WRITABLE, ESC_TYPE, Esc
 from firmware_model.esc.sii import SlaveDescription
 
@@ -36,7 +38,8 @@ FRESH = 4  # bit of the shared 3-buffer index: the shared slot holds a record no
 S_STATE, S_ERROR, S_CODE, S_NOW, S_LAST_OUT, S_TRIPS, S_TRIP_DELAY = range(7)
 S_ALIAS, S_OUT_BYTES, S_SII0_START, S_SII0_LEN, S_SII1_START, S_SII1_LEN = range(7, 13)
 S_SII_LEN, S_IN_START = 13, 14
-N_ST = 15
+# Distributed clocks: columns dcc.DC_BASE .. dcc.DC_END (firmware_model.esc.dc_compiled).
+N_ST = dcc.DC_END
 # 3-buffer index words (int64 columns of ``EscArrays.oidx`` / ``iidx``).
 B_WRITER, B_SHARED, B_READER = 0, 1, 2
 
@@ -50,10 +53,13 @@ _AL_ERROR = 0x10
 
 class EscArrays:
     """The memories and state of a chain of slaves (``descs``: (description, SII image) in
-    line order), laid out as the compiled frame path reads them."""
+    line order), laid out as the compiled frame path reads them. ``dc``: the slaves' clocks
+    and delays (:func:`firmware_model.esc.dc.dc_line` by default)."""
 
-    def __init__(self, described: list[tuple[SlaveDescription, bytes]]) -> None:
+    def __init__(self, described: list[tuple[SlaveDescription, bytes]],
+                 dc: list[DcParams] | None = None) -> None:
         n = len(described)
+        dc = dc if dc is not None else dc_line(n)
         self.n = n
         self.mem = np.zeros((n, MEM), dtype=np.uint8)
         sii_max = max(len(img) for _d, img in described)
@@ -68,7 +74,7 @@ class EscArrays:
         self.iidx = self.oidx.copy()
         self.scratch = np.zeros(2048, dtype=np.uint8)
         for i, (d, img) in enumerate(described):
-            ref = Esc(d, img, last=i == n - 1)   # the reference's reset state, copied
+            ref = Esc(d, img, last=i == n - 1, dc=dc[i])  # the reference's reset state
             self.mem[i] = np.frombuffer(bytes(ref.mem), dtype=np.uint8)
             self.sii[i, :len(img)] = np.frombuffer(img, dtype=np.uint8)
             st = self.st[i]
@@ -77,6 +83,7 @@ class EscArrays:
             st[S_SII0_START], st[S_SII0_LEN] = d.sms[0].start, d.sms[0].length
             st[S_SII1_START], st[S_SII1_LEN] = d.sms[1].start, d.sms[1].length
             st[S_SII_LEN], st[S_IN_START] = len(img), d.sms[1].start
+            dcc.init_row(self.mem[i], st, dc[i])
         assert self.mem[0, r.TYPE] == ESC_TYPE
 
     def frame_args(self) -> tuple:
@@ -329,6 +336,8 @@ def _write(m, st, sii, wmask, obuf, olen, oidx, ado, src, s0, n):
     if ado <= r.WD_COUNTER_PDI and end > r.WD_COUNTER_PD:
         m[r.WD_COUNTER_PD] = 0
         m[r.WD_COUNTER_PDI] = 0
+    if ado < r.DC_END and end > r.DC_START:
+        dcc.written(m, st, ado, end, src, s0, st[S_NOW])
 
 
 @njit(cache=True, nogil=True)
@@ -408,6 +417,8 @@ def _process(m, st, sii, wmask, obuf, olen, oidx, cmd, adp, ado, buf, d0, n, wkc
             _write(m, st, sii, wmask, obuf, olen, oidx, ado, buf, d0, n)
             return adp, wkc + 1
         return adp, wkc
+    if ado < r.DC_END and ado + n > r.DC_START:
+        dcc.before_read(m, st, ado, ado + n, st[S_NOW])
     if cmd == 1 or cmd == 4 or cmd == 7:
         _read_into(m, ado, buf, d0, n, cmd == 7)
         return adp, wkc + 1
@@ -515,6 +526,8 @@ def tick(mem, st, obuf, olen, oidx, dt_ns):
             s[S_TRIP_DELAY] = quiet
             _enter(m, s, obuf[i], olen[i], oidx[i], _SAFEOP)
             _refuse(m, s, 0x001B)
+    if mem.shape[0]:
+        dcc.tick(mem, st, st[0, S_NOW])
 
 
 def watchdog_ns(mem_row: np.ndarray) -> int:
