@@ -13,8 +13,9 @@ and keeps a **local copy of the system time** (register 0x0910)::
 
     system(t) = local(t) + offset (0x0920) + correction(t)
 
-``correction`` is what the time control loop has added: it runs at ``rate`` ppb since the
-loop's last update. Everything is integer arithmetic on 64-bit words (wrapping), so the
+``correction`` is what the time control loop has added: it runs ``freq`` ppb faster since
+the loop's last update, and slews the phase correction it decided at the last compare
+(``slew``) at up to 1000 ppm until it is done. Everything is integer arithmetic on 64-bit words (wrapping), so the
 compiled path gives the same bits.
 
 Registers (ETG.1000.4 / ESC datasheets), as this model answers them:
@@ -27,11 +28,14 @@ Registers (ETG.1000.4 / ESC datasheets), as this model answers them:
   are written, else the low 32 bits) feeds the time control loop.
 * The time control loop (a model of the ESC's, not its gate-level arithmetic): a filtered
   difference (0x0934 filter depth: exponential average with weight 2**-depth, shown in
-  0x092C as sign and magnitude) drives a proportional-integral correction of the clock's
-  rate: per compare, ``rate = freq - diff / (Np * h)`` and ``freq -= diff / (Nf * h)``, ``h``
-  the local time since the previous compare, ``Np = start >> 9`` and ``Nf = start >> 4``
-  from the speed counter start 0x0930 (0x1000: Np 8, Nf 256, critically damped), rate and
-  freq limited to +-1000 ppm. A write to 0x0930 resets the loop (and 0x092C, 0x0932).
+  0x092C as sign and magnitude) drives a proportional-integral correction. Per compare the
+  clock slews ``-diff / Np`` of phase (at up to 1000 ppm, then stops: a master that stalls
+  between compares does not make it overshoot) and its frequency correction moves by
+  ``-diff / (Nf * h)``, ``h`` the local time since the previous compare (compares closer
+  than 100 us correct only the phase), ``Np = start >> 9`` and ``Nf = start >> 4`` from the
+  speed counter start 0x0930 (0x1000: Np 8, Nf 256, about critically damped); the
+  frequency correction is limited to +-1000 ppm. A write to 0x0930 resets the loop (and
+  0x092C, 0x0932).
 * SYNC0: with 0x0981 = cyclic operation + SYNC0 (bits 0, 1), pulses at system times
   ``start + k * cycle`` (0x0990, 0x09A0). The box's MCU samples at these pulses.
 
@@ -51,8 +55,10 @@ from dataclasses import dataclass
 from firmware_model.esc import registers as r
 
 NS = 1_000_000_000
-#: The loop's rate and frequency correction are limited to this [ppb] (1000 ppm).
+#: The loop's frequency correction and its phase slew are limited to this [ppb] (1000 ppm).
 MAX_RATE_PPB = 1_000_000
+#: Compares closer than this [ns, local] to the previous one leave the frequency alone.
+MIN_H_NS = 100_000
 #: The compared difference is limited to this [ns] (the magnitude 0x092C can show).
 MAX_DIFF_NS = 0x7FFFFFFF
 #: The local time between two compares the loop divides by is capped at this [ns].
@@ -135,7 +141,7 @@ class DcUnit:
         self.p = params or DcParams()
         self.corr_u = 0      # correction [1e-9 ns] up to local time l_upd
         self.l_upd = 0
-        self.rate = 0        # [ppb]
+        self.slew = 0        # phase correction still to apply [1e-9 ns]
         self.freq = 0        # [ppb] integral part
         self.l_cmp = 0       # local time of the last compare
         self.diff_f = 0      # filtered difference [ns]
@@ -155,15 +161,27 @@ class DcUnit:
         m[r.DC_SPEED_FILTER] = SPEED_FILTER_DEFAULT
 
     # --- the clock ---------------------------------------------------------------------------
+    def _slewed(self, dt: int) -> int:
+        """Of the pending slew, what ``dt`` local ns apply [1e-9 ns]."""
+        if dt <= 0 or self.slew == 0:
+            return 0
+        step = MAX_RATE_PPB * min(dt, MAX_H_NS)
+        return min(self.slew, step) if self.slew > 0 else max(self.slew, -step)
+
+    def _corr_u(self, loc: int) -> int:
+        dt = wrap64(loc - self.l_upd)
+        return wrap64(self.corr_u + self.freq * dt + self._slewed(dt))
+
     def system_ns(self, mem: bytearray, t: int) -> int:
         loc = local_ns(self.p, t)
         off = _I64.unpack_from(mem, r.DC_SYSTEM_OFFSET)[0]
-        corr = wrap64(self.corr_u + self.rate * wrap64(loc - self.l_upd)) // NS
-        return wrap64(loc + off + corr)
+        return wrap64(loc + off + self._corr_u(loc) // NS)
 
     def _settle(self, loc: int) -> None:
-        """The correction accumulated up to local time ``loc`` (before the rate changes)."""
-        self.corr_u = wrap64(self.corr_u + self.rate * wrap64(loc - self.l_upd))
+        """The correction accumulated up to local time ``loc`` (before the loop changes)."""
+        dt = wrap64(loc - self.l_upd)
+        self.corr_u = self._corr_u(loc)
+        self.slew -= self._slewed(dt)
         self.l_upd = loc
 
     # --- frame events --------------------------------------------------------------------------
@@ -205,7 +223,7 @@ class DcUnit:
             self._compare(mem, ado, end, data, t)
         if ado < r.DC_SPEED_START + 2 and end > r.DC_SPEED_START:
             self._settle(local_ns(self.p, t))
-            self.rate = self.freq = self.diff_f = 0
+            self.slew = self.freq = self.diff_f = 0
             _U32.pack_into(mem, r.DC_SYSTEM_DIFF, 0)
             _U16.pack_into(mem, r.DC_SPEED_DIFF, 0)
         if has(r.DC_ACTIVATION):
@@ -252,8 +270,9 @@ class DcUnit:
         start = _U16.unpack_from(mem, r.DC_SPEED_START)[0] & 0x7FFF
         n_p, n_f = max(start >> 9, 1), max(start >> 4, 8)
         lim = MAX_RATE_PPB
-        self.freq = max(-lim, min(lim, self.freq - (f * NS) // (n_f * h)))
-        self.rate = max(-lim, min(lim, self.freq - (f * NS) // (n_p * h)))
+        if h >= MIN_H_NS:
+            self.freq = max(-lim, min(lim, self.freq - (f * NS) // (n_f * h)))
+        self.slew = -(f * NS) // n_p
         _U16.pack_into(mem, r.DC_SPEED_DIFF, max(-32768, min(32767, self.freq // 100)) & 0xFFFF)
         self.compares += 1
 
@@ -293,8 +312,10 @@ class DcUnit:
             return -1
         # invert system(w) = target: a first guess at the clock's speed, then to the ns
         target = wrap64(sys_t + ahead)
-        speed = NS + self.p.drift_ppb + self.rate
+        speed = NS + self.p.drift_ppb + self.freq
         w = t + (ahead * NS) // speed
+        for _ in range(3):   # the slew still pending moves it by up to its amount
+            w += (wrap64(target - self.system_ns(mem, w)) * NS) // speed
         for _ in range(64):
             if self.system_ns(mem, w) >= target:
                 break

@@ -19,6 +19,7 @@ from firmware_model.esc.dc import (
     MAX_DIFF_NS,
     MAX_H_NS,
     MAX_RATE_PPB,
+    MIN_H_NS,
     NS,
     SPEED_FILTER_DEFAULT,
     SPEED_START_DEFAULT,
@@ -30,7 +31,7 @@ from firmware_model.esc.dc import (
 
 #: First DC column of the per-slave state rows (after the ESC's own words).
 DC_BASE = 15
-(D_DRIFT, D_PHASE, D_ARRIVE, D_RETURN, D_CORR_U, D_L_UPD, D_RATE, D_FREQ, D_L_CMP, D_DIFF_F,
+(D_DRIFT, D_PHASE, D_ARRIVE, D_RETURN, D_CORR_U, D_L_UPD, D_SLEW, D_FREQ, D_L_CMP, D_DIFF_F,
  D_COMPARES, D_ERRORS, D_LAST_ERROR, D_SYNC_STATE, D_SYNC_START, D_SYNC_CYCLE, D_NEXT_SYNC0,
  D_SPREAD) = range(DC_BASE, DC_BASE + 18)
 #: Columns in all (the state row's length).
@@ -80,15 +81,32 @@ def local_ns(s, t):
 
 
 @njit(cache=True, nogil=True)
+def _slewed(s, dt):
+    slew = s[D_SLEW]
+    if dt <= 0 or slew == 0:
+        return np.int64(0)
+    step = MAX_RATE_PPB * min(dt, MAX_H_NS)
+    return min(slew, step) if slew > 0 else max(slew, -step)
+
+
+@njit(cache=True, nogil=True)
+def _corr_u(s, loc):
+    dt = loc - s[D_L_UPD]
+    return s[D_CORR_U] + s[D_FREQ] * dt + _slewed(s, dt)
+
+
+@njit(cache=True, nogil=True)
 def system_ns(m, s, t):
     loc = local_ns(s, t)
-    corr = (s[D_CORR_U] + s[D_RATE] * (loc - s[D_L_UPD])) // NS
-    return loc + _get64(m, r.DC_SYSTEM_OFFSET) + corr
+    return loc + _get64(m, r.DC_SYSTEM_OFFSET) + _corr_u(s, loc) // NS
 
 
 @njit(cache=True, nogil=True)
 def _settle(s, loc):
-    s[D_CORR_U] = s[D_CORR_U] + s[D_RATE] * (loc - s[D_L_UPD])
+    dt = loc - s[D_L_UPD]
+    c = _corr_u(s, loc)
+    s[D_SLEW] = s[D_SLEW] - _slewed(s, dt)
+    s[D_CORR_U] = c
     s[D_L_UPD] = loc
 
 
@@ -141,8 +159,9 @@ def _compare(m, s, ado, end, src, s0, t):
     start = (np.int64(m[r.DC_SPEED_START]) | (np.int64(m[r.DC_SPEED_START + 1]) << 8)) & 0x7FFF
     n_p, n_f = max(start >> 9, 1), max(start >> 4, 8)
     lim = MAX_RATE_PPB
-    s[D_FREQ] = max(-lim, min(lim, s[D_FREQ] - (f * NS) // (n_f * h)))
-    s[D_RATE] = max(-lim, min(lim, s[D_FREQ] - (f * NS) // (n_p * h)))
+    if h >= MIN_H_NS:
+        s[D_FREQ] = max(-lim, min(lim, s[D_FREQ] - (f * NS) // (n_f * h)))
+    s[D_SLEW] = -(f * NS) // n_p
     sd = max(-32768, min(32767, s[D_FREQ] // 100)) & 0xFFFF
     m[r.DC_SPEED_DIFF] = sd & 0xFF
     m[r.DC_SPEED_DIFF + 1] = sd >> 8
@@ -159,8 +178,10 @@ def next_pulse_wall(m, s, t):
     if ahead < 0 or ahead > MAX_AHEAD_NS:
         return -1
     target = sys_t + ahead
-    speed = NS + s[D_DRIFT] + s[D_RATE]
+    speed = NS + s[D_DRIFT] + s[D_FREQ]
     w = t + (ahead * NS) // speed
+    for _ in range(3):
+        w += ((target - system_ns(m, s, w)) * NS) // speed
     for _ in range(64):
         if system_ns(m, s, w) >= target:
             break
@@ -217,7 +238,7 @@ def written(m, s, ado, end, src, s0, now):
         _compare(m, s, ado, end, src, s0, t)
     if ado < r.DC_SPEED_START + 2 and end > r.DC_SPEED_START:
         _settle(s, local_ns(s, t))
-        s[D_RATE] = 0
+        s[D_SLEW] = 0
         s[D_FREQ] = 0
         s[D_DIFF_F] = 0
         _put32(m, r.DC_SYSTEM_DIFF, 0)

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import argparse
 import gc
+import math
 import os
 import signal
 import sys
@@ -497,7 +498,7 @@ def cmd_serve_ethercat(args: argparse.Namespace, cfg, topo) -> Outcome:
     model = args.model or "echo"
     rt = RealtimePlan(args.realtime)
     try:
-        chain = ServedChain(topo, cfg, model, tuple(args.stack_boxes))
+        chain = ServedChain(topo, cfg, model, tuple(args.stack_boxes), _dc_line(args, topo))
         if chain.engine is not None and rt.compute_cpus is not None:
             chain.engine.workers = min(len(rt.compute_cpus), chain.engine._workers())
         rt.process()
@@ -545,10 +546,34 @@ def cmd_serve_ethercat(args: argparse.Namespace, cfg, topo) -> Outcome:
             "thresholds": {"max_overrun_percent": args.max_overrun_percent,
                            "max_late_percent": args.max_late_percent,
                            "max_lag_ms": args.max_lag_ms, "late_us": args.late_us},
-            "slaves": chain.watchdog_report(), "ok": not failures, "failures": failures}
+            "slaves": chain.watchdog_report(), "dc": chain.dc_report(),
+            "ok": not failures, "failures": failures}
     text = ethercat_table(data) + "\n" + ("ok" if not failures else
                                            "FAILED: " + "; ".join(failures))
     return Outcome(text, data, EXIT_OK if not failures else EXIT_FAILED)
+
+
+def _dc_line(args: argparse.Namespace, topo):  # noqa: ANN202 - list[DcParams]
+    """The slaves' clocks from --dc-drift-ppm / --dc-hop-ns (one line naming the mistake)."""
+    from firmware_model.esc.dc import dc_line
+
+    n = len(topo.boxes)
+    drift = args.dc_drift_ppm if len(args.dc_drift_ppm) > 1 else args.dc_drift_ppm[0]
+    try:
+        return dc_line(n, drift, args.dc_hop_ns)
+    except ValueError as exc:
+        raise _usage(f"--dc-drift-ppm: {exc} ({topo.name} has {n} slaves)") from None
+
+
+def _ppm_list(text: str) -> list[float]:
+    try:
+        out = [float(v) for v in text.split(",")]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number or a comma-separated "
+                                         "list of numbers") from None
+    if not all(math.isfinite(v) and abs(v) <= 500 for v in out):
+        raise argparse.ArgumentTypeError(f"{text!r}: each drift must be within +-500 ppm")
+    return out
 
 
 def _timing_failures(late: int, answered: int, lag_max_ms: float,
@@ -600,6 +625,14 @@ def ethercat_table(d: dict) -> str:
          f"{d['other_frames']}"],
         ["real time", ", ".join(d["realtime"]["applied"]) or "off"],
     ]
+    dc = d.get("dc")
+    if dc and any(s["offset_set"] or s["sync0"] for s in dc["slaves"]):
+        spread = dc["spread_ns"]
+        rows.append(["distributed clocks", f"SYNC0 on {sum(s['sync0'] for s in dc['slaves'])} "
+                     f"of {len(dc['slaves'])} slaves; box cycles at SYNC0 {d['sync0_cycles']}; "
+                     f"system-time spread, last {dc['spread_window_cycles']} cycles "
+                     f"{spread[-1] if spread else 0} ns; out-of-order writes "
+                     f"{sum(s['out_of_order_writes'] for s in dc['slaves'])}"])
     hist = ", ".join(f"{k}: {v}" for k, v in d["reply_histogram_us"].items() if v)
     return (f"serve {d['interface']}: {d['topology']}, {d['model']} model\n"
             + table(["", "value"], rows) + f"\nreply times: {hist or 'none'}")
@@ -620,6 +653,13 @@ def add_parser(sub) -> None:  # noqa: ANN001 - argparse's sub-parsers
     p.add_argument("--stack-box", dest="stack_boxes", type=int_range(0, 255), action="append",
                    default=[], metavar="N",
                    help="ethercat: box N runs the full stack (repeatable; others: --model)")
+    p.add_argument("--dc-drift-ppm", type=_ppm_list, default=[50.0], metavar="PPM",
+                   help="ethercat: crystal error of each slave's distributed clock: one "
+                   "value X for +X, -X, +X, ... along the line (default 50), or one per "
+                   "slave, comma-separated; within +-500")
+    p.add_argument("--dc-hop-ns", type=int_range(0, 100_000, unit="ns"), default=500,
+                   metavar="NS", help="ethercat: simulated propagation delay from one "
+                   "slave to the next, each way, 0..100000 (default 500)")
     p.add_argument("--port",
                    help="serial (required): device path or pyserial URL, or 'pty' for a new "
                    "pseudo-terminal whose path is printed; udp: local port number (default "
@@ -672,7 +712,8 @@ def _scope_options(p: argparse.ArgumentParser) -> None:
     # (--capture and --foxglove with ethercat are refused by cmd_serve_ethercat, with hints)
     stream = tuple(serve_backends())
     scopes = {"baudrate": ("serial",), "host": ("udp",), "port": stream,
-              "interface": ("ethercat",), "stack_boxes": ("ethercat",)}
+              "interface": ("ethercat",), "stack_boxes": ("ethercat",),
+              "dc_drift_ppm": ("ethercat",), "dc_hop_ns": ("ethercat",)}
     for action in p._actions:
         if action.dest in scopes:
             only_with(action, "transport", *scopes[action.dest])

@@ -82,12 +82,12 @@ class Both:
             assert self.arr.st[i, cc.S_TRIPS] == esc.watchdog_trips
             dc, row = esc.dc, self.arr.st[i]
             assert [int(row[c]) for c in _DC_COLUMNS] == [
-                dc.corr_u, dc.l_upd, dc.rate, dc.freq, dc.l_cmp, dc.diff_f, dc.compares,
+                dc.corr_u, dc.l_upd, dc.slew, dc.freq, dc.l_cmp, dc.diff_f, dc.compares,
                 dc.errors, dc.last_error, dc.sync_state, dc.sync_start, dc.sync_cycle,
                 dc.next_sync0], f"slave {i}: DC state differs"
 
 
-_DC_COLUMNS = (dcc.D_CORR_U, dcc.D_L_UPD, dcc.D_RATE, dcc.D_FREQ, dcc.D_L_CMP, dcc.D_DIFF_F,
+_DC_COLUMNS = (dcc.D_CORR_U, dcc.D_L_UPD, dcc.D_SLEW, dcc.D_FREQ, dcc.D_L_CMP, dcc.D_DIFF_F,
                dcc.D_COMPARES, dcc.D_ERRORS, dcc.D_LAST_ERROR, dcc.D_SYNC_STATE,
                dcc.D_SYNC_START, dcc.D_SYNC_CYCLE, dcc.D_NEXT_SYNC0)
 
