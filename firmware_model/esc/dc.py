@@ -15,8 +15,8 @@ and keeps a **local copy of the system time** (register 0x0910)::
 
 ``correction`` is what the time control loop has added: it runs ``freq`` ppb faster since
 the loop's last update, and slews the phase correction it decided at the last compare
-(``slew``) at up to 1000 ppm until it is done. Everything is integer arithmetic on 64-bit words (wrapping), so the
-compiled path gives the same bits.
+(``slew``) at up to 1000 ppm until it is done. Everything is integer arithmetic on
+64-bit words (wrapping), so the compiled path gives the same bits.
 
 Registers (ETG.1000.4 / ESC datasheets), as this model answers them:
 

@@ -12,8 +12,13 @@ from __future__ import annotations
 
 import pytest
 
-from hil.fieldbus.esc.veth import NamespaceError, run_master, start_serve, stop_serve, \
-    veth_namespace
+from hil.fieldbus.esc.veth import (
+    NamespaceError,
+    run_master,
+    start_serve,
+    stop_serve,
+    veth_namespace,
+)
 
 HOP_NS = 500
 CYCLES = 11_000        # 1 s to settle, then 10 s

@@ -115,10 +115,13 @@ class ServedChain:
             nxt = int(st[i, dcc.D_NEXT_SYNC0])
             if nxt < 0 or int(st[i, dcc.D_SYNC_CYCLE]) != PERIOD_NS:
                 continue
+            # the frame thread refreshed it at its last wake-up (the pulse after that): the
+            # first pulse after ``after_ns`` is a whole number of cycles of this slave's
+            # clock (its crystal and the loop's frequency correction) from it
             at = self.t0 + nxt
-            if at <= after_ns:   # the frame thread refreshes it every ms: step on
-                at += -((at - after_ns - 1) // PERIOD_NS) * PERIOD_NS
-            return at
+            cyc = PERIOD_NS * 1e9 / (1e9 + int(st[i, dcc.D_DRIFT]) + int(st[i, dcc.D_FREQ]))
+            k = (at - after_ns - 1) // cyc
+            return at - round(k * cyc)
         return None
 
     def _record_dc(self) -> None:
