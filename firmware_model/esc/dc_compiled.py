@@ -30,7 +30,7 @@ from firmware_model.esc.dc import (
 )
 
 #: First DC column of the per-slave state rows (after the ESC's own words).
-DC_BASE = 15
+DC_BASE = 23   # after the mailbox columns (S_OUT_SM..S_MBX1_LEN = 15..22)
 (D_DRIFT, D_PHASE, D_ARRIVE, D_RETURN, D_CORR_U, D_L_UPD, D_SLEW, D_FREQ, D_L_CMP, D_DIFF_F,
  D_COMPARES, D_ERRORS, D_LAST_ERROR, D_SYNC_STATE, D_SYNC_START, D_SYNC_CYCLE, D_NEXT_SYNC0,
  D_SPREAD) = range(DC_BASE, DC_BASE + 18)

@@ -491,6 +491,7 @@ def cmd_serve_ethercat(args: argparse.Namespace, cfg, topo) -> Outcome:
     bad = [b for b in args.stack_boxes if not 0 <= b < len(topo.boxes)]
     if bad:
         raise _usage(f"--stack-box {bad[0]}: {topo.name} has boxes 0..{len(topo.boxes) - 1}")
+    dc = _dc_line(args, topo)
     try:
         link = RawEthernet(args.interface)
     except TransportError as exc:
@@ -498,7 +499,7 @@ def cmd_serve_ethercat(args: argparse.Namespace, cfg, topo) -> Outcome:
     model = args.model or "echo"
     rt = RealtimePlan(args.realtime)
     try:
-        chain = ServedChain(topo, cfg, model, tuple(args.stack_boxes), _dc_line(args, topo))
+        chain = ServedChain(topo, cfg, model, tuple(args.stack_boxes), dc)
         if chain.engine is not None and rt.compute_cpus is not None:
             chain.engine.workers = min(len(rt.compute_cpus), chain.engine._workers())
         rt.process()
@@ -562,7 +563,7 @@ def _dc_line(args: argparse.Namespace, topo):  # noqa: ANN202 - list[DcParams]
     try:
         return dc_line(n, drift, args.dc_hop_ns)
     except ValueError as exc:
-        raise _usage(f"--dc-drift-ppm: {exc} ({topo.name} has {n} slaves)") from None
+        raise _usage(f"--dc-drift-ppm: {exc} ({topo.name})") from None
 
 
 def _ppm_list(text: str) -> list[float]:

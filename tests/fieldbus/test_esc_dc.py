@@ -174,3 +174,51 @@ def test_dc_registers_written_out_of_order(cfg, what, steps, code, count, runnin
     assert (esc.dc.next_sync0 >= 0) == running
     # the others were not touched
     assert all(e.dc.errors == 0 and e.dc.sync_state == fdc.SYNC_OFF for e in chain.escs[1:])
+
+
+def test_esi_offers_free_run_and_dc_synchronous_and_they_work(cfg, full):
+    """The ESI's DC operation modes: a master writes AssignActivate to 0x0980 as a word
+    (low byte cyclic unit control, high byte activation) after start time and cycle:
+    DcSync starts SYNC0 on the model, FreeRun leaves it off."""
+    import xml.etree.ElementTree as ET
+
+    from hil.fieldbus.esc.esi import esi_xml
+
+    root = ET.fromstring(esi_xml(full))
+    for dev in root.iter("Device"):
+        modes = {op.find("Name").text: op for op in dev.findall("Dc/OpMode")}
+        assert set(modes) == {"FreeRun", "DcSync"}
+        assert modes["DcSync"].find("CycleTimeSync0").get("Factor") == "1"
+    for name, running in (("FreeRun", False), ("DcSync", True)):
+        assign = int(modes[name].find("AssignActivate").text[2:], 16)
+        chain = EscChain(THREE, cfg, "echo")
+        master = EscMaster(chain)
+        master.bring_up(to_op=False)
+        t = struct.unpack("<q", master.one(ec.Command.FPRD, STATION_BASE, r.DC_SYSTEM_TIME,
+                                           bytes(8)).data)[0]
+        master.one(ec.Command.FPWR, STATION_BASE, r.DC_START_TIME,
+                   struct.pack("<q", t + 100_000_000))
+        master.one(ec.Command.FPWR, STATION_BASE, r.DC_SYNC0_CYCLE,
+                   struct.pack("<I", 1_000_000))
+        master.one(ec.Command.FPWR, STATION_BASE, r.DC_CYCLIC_CONTROL,
+                   struct.pack("<H", assign))
+        esc = chain.escs[0]
+        assert (esc.dc.sync_state == fdc.SYNC_RUNNING) == running and esc.dc.errors == 0
+
+
+@pytest.mark.parametrize("argv, says", [
+    (["--dc-drift-ppm", "1,2"], "--dc-drift-ppm: 2 drifts for 16 slaves (hydra_full)"),
+    (["--dc-drift-ppm", "600"], "each drift must be within +-500 ppm"),
+    (["--dc-drift-ppm", "fast"], "'fast' is not a number"),
+    (["--dc-hop-ns", "-1"], "--dc-hop-ns: -1: need an integer in 0..100000 ns"),
+])
+def test_serve_dc_options_mistakes_are_one_line(capsys, argv, says):
+    from hil.cli import main
+
+    try:
+        code = main(["serve", "--transport", "ethercat", "--topology", "hydra_full",
+                     "--interface", "nosuch0", *argv])
+    except SystemExit as exc:   # argparse's own checks
+        code = exc.code
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and says in err and len(err.splitlines()) == 1, err
