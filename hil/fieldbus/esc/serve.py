@@ -255,6 +255,8 @@ class BoxClock(threading.Thread):
                     if behind > MAX_LAG_CYCLES:
                         t0 += behind * PERIOD_NS
                         st.slipped_cycles += behind
+                        if pulse is not None:   # the missed pulses are skipped too
+                            last = done - PERIOD_NS
                 if self.behind is not None:
                     self.behind(behind)
                 lag = done - self.t0 - st.cycles * PERIOD_NS
