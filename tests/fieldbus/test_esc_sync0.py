@@ -129,4 +129,7 @@ def test_box_clock_runs_the_box_cycles_at_sync0(cfg):
         # whole cycles of the wall clock: the crystal's 50 ppm make < 100 ns)
         assert _off_pulse_ns(chain, 0, rel - t0) < 100
     gaps = np.diff([rel for _b, rel in begins])
-    assert set((gaps + PERIOD_NS // 2) // PERIOD_NS) == {1}   # one cycle per pulse
+    pulses = (gaps + PERIOD_NS // 2) // PERIOD_NS
+    assert pulses.min() == 1          # one cycle per pulse, never two at one pulse
+    if st.slipped_cycles == 0:        # (a stall of this process > 50 ms skips pulses)
+        assert set(pulses) == {1}
