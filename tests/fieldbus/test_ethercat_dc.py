@@ -48,6 +48,14 @@ def test_soem_distributed_clocks_on_hydra_full(netns, full):
     finally:
         report = stop_serve(serve)
     n = len(full.boxes)
+    late = [got for k, got in res["dc_checks"] if k >= SETTLE_CYCLES and got] or [(0, 0)]
+    err = max(abs(s["delay_ns"] - s["simulated_delay_ns"]) for s in report["dc"]["slaves"])
+    print(f"DC figures: delay error max {err} ns; "
+          f"after {SETTLE_CYCLES} cycles: read spread max {max(g[0] for g in late)} ns, "
+          f"0x092C max {max(g[1] for g in late)} ns, model spread max "
+          f"{max(report['dc']['spread_ns'][SETTLE_CYCLES // 100 + 2:])} ns; bad WKC "
+          f"{res['bad_wkc']} of {res['cycles']}; box cycles at SYNC0 {report['sync0_cycles']} "
+          f"of {report['cycles']}, start late max {report['sync0_start_late_max_us']:.0f} us")
     assert (res["found"], res["image_bytes"], res["op"]) == (n, 1552, 8)
     assert set(res["states"]) == {8}
     dc = report["dc"]["slaves"]
@@ -76,5 +84,7 @@ def test_soem_distributed_clocks_on_hydra_full(netns, full):
     spread = report["dc"]["spread_ns"]
     tail = spread[-(CYCLES - SETTLE_CYCLES) // report["dc"]["spread_window_cycles"]:]
     assert len(tail) >= 90 and max(tail) < 100, tail[:10]
-    # the boxes' cycles ran at SYNC0 once it started (100 ms after SOEM set it up)
-    assert report["sync0_cycles"] >= 0.9 * CYCLES, report["sync0_cycles"]
+    # the boxes' cycles ran at SYNC0 once it started (100 ms after SOEM set it up), every
+    # one of them from then on
+    first = report["sync0_first_cycle"]
+    assert 0 <= first and report["sync0_cycles"] == report["cycles"] - first > 0.5 * CYCLES

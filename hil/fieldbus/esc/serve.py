@@ -173,6 +173,7 @@ class BoxClockStats:
     worst_cycle_ms: float = 0.0
     worst_cycle_at: int = 0      # its number
     sync0_cycles: int = 0        # cycles released at a SYNC0 pulse (DC active)
+    sync0_first_cycle: int = -1  # number of the first of them
     sync0_start_late_max_us: float = 0.0  # latest start of such a cycle after its pulse
 
 
@@ -239,6 +240,8 @@ class BoxClock(threading.Thread):
                 done = clock()
                 last = release
                 if pulse is not None:
+                    if st.sync0_first_cycle < 0:
+                        st.sync0_first_cycle = st.cycles
                     st.sync0_cycles += 1
                     st.sync0_start_late_max_us = max(st.sync0_start_late_max_us,
                                                      (begin - pulse) / 1e3)
@@ -301,6 +304,7 @@ class EcatServeStats:
     worst_cycle_ms: float = 0.0
     worst_cycle_at: int = 0
     sync0_cycles: int = 0
+    sync0_first_cycle: int = -1
     sync0_start_late_max_us: float = 0.0
     frames_received: int = 0
     frames_answered: int = 0
@@ -363,6 +367,7 @@ def serve(chain: ServedChain, link: RawEthernet, seconds: float | None = None,
                         slipped_cycles=b.slipped_cycles, lag_max_ms=b.lag_max_ms,
                         compute_s=b.compute_s, worst_cycle_ms=b.worst_cycle_ms,
                         worst_cycle_at=b.worst_cycle_at, sync0_cycles=b.sync0_cycles,
+                        sync0_first_cycle=b.sync0_first_cycle,
                         sync0_start_late_max_us=b.sync0_start_late_max_us,
                         frames_received=int(f[esc_frames.F_RECEIVED]),
                         frames_answered=int(f[esc_frames.F_ANSWERED]),
