@@ -49,6 +49,20 @@ def init_row(m: np.ndarray, s: np.ndarray, p: DcParams) -> None:
     m[r.DC_SPEED_FILTER] = SPEED_FILTER_DEFAULT
 
 
+def slave_report(m: np.ndarray, s: np.ndarray) -> dict:
+    """What a master set on one slave (delay, offset, SYNC0) beside its simulated clock, the
+    loop's compares and the out-of-order writes (for a run's report)."""
+    from firmware_model.esc.dc import ERROR_NAMES
+
+    return {"drift_ppm": int(s[D_DRIFT]) / 1000, "simulated_delay_ns": int(s[D_ARRIVE]),
+            "delay_ns": int(_get32(m, r.DC_SYSTEM_DELAY)),
+            "offset_set": bool(m[r.DC_SYSTEM_OFFSET:r.DC_SYSTEM_OFFSET + 8].any()),
+            "compares": int(s[D_COMPARES]), "sync0": int(s[D_SYNC_STATE]) == SYNC_RUNNING,
+            "sync0_cycle_ns": int(s[D_SYNC_CYCLE]),
+            "out_of_order_writes": int(s[D_ERRORS]),
+            "last_out_of_order": ERROR_NAMES.get(int(s[D_LAST_ERROR]), "?")}
+
+
 @njit(cache=True, nogil=True, inline="always")
 def _get64(m, o):
     v = np.int64(0)

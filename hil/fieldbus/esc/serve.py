@@ -38,9 +38,8 @@ import numpy as np
 
 from firmware_model.esc import compiled as ec
 from firmware_model.esc import dc_compiled as dcc
-from firmware_model.esc import registers as regs
 from firmware_model.esc.compiled import EscArrays
-from firmware_model.esc.dc import ERROR_NAMES, SYNC_RUNNING, DcParams
+from firmware_model.esc.dc import DcParams
 from hil.fieldbus.boxes import box_engine, make_box
 from hil.fieldbus.chain import CYCLE_TICKS
 from hil.fieldbus.esc import frames as esc_frames
@@ -144,20 +143,8 @@ class ServedChain:
     def dc_report(self) -> dict:
         """Per slave what the master set (offset, delay, SYNC0) beside the simulated clock,
         the loop's compares, out-of-order writes; the spread record."""
-        a, slaves = self.arrays, []
-        for i in range(a.n):
-            m, s = a.mem[i], a.st[i]
-            slaves.append({
-                "slave": i, "drift_ppm": int(s[dcc.D_DRIFT]) / 1000,
-                "simulated_delay_ns": int(s[dcc.D_ARRIVE]),
-                "delay_ns": int.from_bytes(m[regs.DC_SYSTEM_DELAY:regs.DC_SYSTEM_DELAY + 4]
-                                           .tobytes(), "little"),
-                "offset_set": bool(m[regs.DC_SYSTEM_OFFSET:regs.DC_SYSTEM_OFFSET + 8].any()),
-                "compares": int(s[dcc.D_COMPARES]),
-                "sync0": int(s[dcc.D_SYNC_STATE]) == SYNC_RUNNING,
-                "sync0_cycle_ns": int(s[dcc.D_SYNC_CYCLE]),
-                "out_of_order_writes": int(s[dcc.D_ERRORS]),
-                "last_out_of_order": ERROR_NAMES.get(int(s[dcc.D_LAST_ERROR]), "?")})
+        a = self.arrays
+        slaves = [{"slave": i, **dcc.slave_report(a.mem[i], a.st[i])} for i in range(a.n)]
         return {"slaves": slaves, "spread_window_cycles": self.DC_WINDOW_CYCLES,
                 "spread_ns": list(self.dc_spread_ns)}
 
