@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import argparse
 import gc
+import math
 import os
 import signal
 import sys
@@ -538,6 +539,7 @@ def cmd_serve_ethercat(args: argparse.Namespace, cfg, topo) -> Outcome:
     bad = [b for b in args.stack_boxes if not 0 <= b < len(topo.boxes)]
     if bad:
         raise _usage(f"--stack-box {bad[0]}: {topo.name} has boxes 0..{len(topo.boxes) - 1}")
+    dc = _dc_line(args, topo)
     model = args.model or "echo"
     if args.log and model == "echo" and not args.stack_boxes:
         raise _usage("--log records the MCU's words: use --model stack or robot, or "
@@ -549,11 +551,11 @@ def cmd_serve_ethercat(args: argparse.Namespace, cfg, topo) -> Outcome:
             link = RawEthernet(args.interface)
         except TransportError as exc:
             raise _usage(str(exc)) from None
-        return _serve_ethercat(args, cfg, topo, link, model, tmp.get("log"))
+        return _serve_ethercat(args, cfg, topo, link, model, tmp.get("log"), dc)
 
 
 def _serve_ethercat(args: argparse.Namespace, cfg, topo, link, model: str,  # noqa: ANN001
-                    log_path: str | None) -> Outcome:
+                    log_path: str | None, dc) -> Outcome:  # noqa: ANN001
     import threading
 
     from hil.fieldbus.chain import CYCLE_TICKS
@@ -563,7 +565,7 @@ def _serve_ethercat(args: argparse.Namespace, cfg, topo, link, model: str,  # no
     rt = RealtimePlan(args.realtime)
     log = recs = None
     try:
-        chain = ServedChain(topo, cfg, model, tuple(args.stack_boxes), coe=args.coe)
+        chain = ServedChain(topo, cfg, model, tuple(args.stack_boxes), coe=args.coe, dc=dc)
         if log_path is not None:
             from hil.replay.record import attach_recorders
 
@@ -625,12 +627,36 @@ def _serve_ethercat(args: argparse.Namespace, cfg, topo, link, model: str,  # no
             "thresholds": {"max_overrun_percent": args.max_overrun_percent,
                            "max_late_percent": args.max_late_percent,
                            "max_lag_ms": args.max_lag_ms, "late_us": args.late_us},
-            "slaves": chain.watchdog_report(), "ok": not failures, "failures": failures}
+            "slaves": chain.watchdog_report(), "dc": chain.dc_report(),
+            "ok": not failures, "failures": failures}
     text = ethercat_table(data) + "\n" + ("ok" if not failures else
                                            "FAILED: " + "; ".join(failures))
     if log is not None:
         text += f"\nlog: {args.log} (eha-hil log info {args.log}; eha-hil replay {args.log})"
     return Outcome(text, data, EXIT_OK if not failures else EXIT_FAILED)
+
+
+def _dc_line(args: argparse.Namespace, topo):  # noqa: ANN202 - list[DcParams]
+    """The slaves' clocks from --dc-drift-ppm / --dc-hop-ns (one line naming the mistake)."""
+    from firmware_model.esc.dc import dc_line
+
+    n = len(topo.boxes)
+    drift = args.dc_drift_ppm if len(args.dc_drift_ppm) > 1 else args.dc_drift_ppm[0]
+    try:
+        return dc_line(n, drift, args.dc_hop_ns)
+    except ValueError as exc:
+        raise _usage(f"--dc-drift-ppm: {exc} ({topo.name})") from None
+
+
+def _ppm_list(text: str) -> list[float]:
+    try:
+        out = [float(v) for v in text.split(",")]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number or a comma-separated "
+                                         "list of numbers") from None
+    if not all(math.isfinite(v) and abs(v) <= 500 for v in out):
+        raise argparse.ArgumentTypeError(f"{text!r}: each drift must be within +-500 ppm")
+    return out
 
 
 def _timing_failures(late: int, answered: int, lag_max_ms: float,
@@ -682,6 +708,14 @@ def ethercat_table(d: dict) -> str:
          f"{d['other_frames']}"],
         ["real time", ", ".join(d["realtime"]["applied"]) or "off"],
     ]
+    dc = d.get("dc")
+    if dc and any(s["offset_set"] or s["sync0"] for s in dc["slaves"]):
+        spread = dc["spread_ns"]
+        rows.append(["distributed clocks", f"SYNC0 on {sum(s['sync0'] for s in dc['slaves'])} "
+                     f"of {len(dc['slaves'])} slaves; box cycles at SYNC0 {d['sync0_cycles']}; "
+                     f"system-time spread, last {dc['spread_window_cycles']} cycles "
+                     f"{spread[-1] if spread else 0} ns; out-of-order writes "
+                     f"{sum(s['out_of_order_writes'] for s in dc['slaves'])}"])
     hist = ", ".join(f"{k}: {v}" for k, v in d["reply_histogram_us"].items() if v)
     return (f"serve {d['interface']}: {d['topology']}, {d['model']} model\n"
             + table(["", "value"], rows) + f"\nreply times: {hist or 'none'}")
@@ -702,6 +736,13 @@ def add_parser(sub) -> None:  # noqa: ANN001 - argparse's sub-parsers
     p.add_argument("--stack-box", dest="stack_boxes", type=int_range(0, 255), action="append",
                    default=[], metavar="N",
                    help="ethercat: box N runs the full stack (repeatable; others: --model)")
+    p.add_argument("--dc-drift-ppm", type=_ppm_list, default=[50.0], metavar="PPM",
+                   help="ethercat: crystal error of each slave's distributed clock: one "
+                   "value X for +X, -X, +X, ... along the line (default 50), or one per "
+                   "slave, comma-separated; within +-500")
+    p.add_argument("--dc-hop-ns", type=int_range(0, 100_000, unit="ns"), default=500,
+                   metavar="NS", help="ethercat: simulated propagation delay from one "
+                   "slave to the next, each way, 0..100000 (default 500)")
     p.add_argument("--no-coe", dest="coe", action="store_false",
                    help="ethercat: slaves without a mailbox (no CoE; a master maps the "
                    "process data from the SII alone)")
@@ -764,7 +805,8 @@ def _scope_options(p: argparse.ArgumentParser) -> None:
     # (--capture and --foxglove with ethercat are refused by cmd_serve_ethercat, with hints)
     stream = tuple(serve_backends())
     scopes = {"baudrate": ("serial",), "host": ("udp",), "port": stream,
-              "interface": ("ethercat",), "stack_boxes": ("ethercat",)}
+              "interface": ("ethercat",), "stack_boxes": ("ethercat",),
+              "dc_drift_ppm": ("ethercat",), "dc_hop_ns": ("ethercat",)}
     for action in p._actions:
         if action.dest in scopes:
             only_with(action, "transport", *scopes[action.dest])
