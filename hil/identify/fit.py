@@ -461,7 +461,7 @@ def levenberg_marquardt(
 def guarded_fit(fitter: OutputErrorFit, theta0: np.ndarray, free: list[str],
                 credible: np.ndarray, sigma: dict[str, float] | None = None,
                 passes: int = 2, guard: list[str] | None = None, max_nfev: int = 40,
-                configured: np.ndarray | None = None,
+                configured: np.ndarray | None = None, first: FitResult | None = None,
                 ) -> tuple[FitResult, dict[str, str]]:
     """Fit, then hold every non-credible parameter (of ``guard``, default all free) at its
     last credible value (from ``credible``), worst first, refitting after each hold.
@@ -473,10 +473,13 @@ def guarded_fit(fitter: OutputErrorFit, theta0: np.ndarray, free: list[str],
     once that effect is in, it contradicts the other parameters, the configured value
     does not.
 
+    ``first``: that first fit, when the caller has made it already.
+
     Returns the fit and ``{parameter: why it was held}``.
     """
     free = list(free)
-    result = fitter.fit(theta0, free, sigma=sigma, passes=passes, max_nfev=max_nfev)
+    result = first if first is not None else fitter.fit(theta0, free, sigma=sigma,
+                                                        passes=passes, max_nfev=max_nfev)
     held: dict[str, str] = {}
     for _ in range(len(free)):
         bad = fitter.offenders(result, guard)

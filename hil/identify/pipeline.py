@@ -623,9 +623,16 @@ class _Loop:
         if not retry:
             return
         self.say(f"refit with {', '.join(retry)} free again")
+        first = fitter.fit(current.theta, current.free + retry, sigma=current.sigma, passes=1,
+                           max_nfev=9)
+        if set(retry) <= {n for n, _, _ in fitter.offenders(first)}:
+            # not one of them credible at the refit: the guard would hold them again one at
+            # a time, a refit each, and come back to the fit there is
+            return
         again, held_again = guarded_fit(fitter, current.theta, current.free + retry,
                                         current.theta, sigma=current.sigma, passes=1,
-                                        max_nfev=9, configured=self.model.start_vector())
+                                        max_nfev=9, configured=self.model.start_vector(),
+                                        first=first)
         if not any(p in held_again for p in current.free):
             for p in retry:
                 if p not in held_again:
