@@ -569,18 +569,13 @@ class _Loop:
                      for p, nom in zip(e.params, e.nominal, strict=True)}
             new, held_now = self.refit_with(ds_, start, robust=True)
             after = _val_cost(exp, new.outputs, self.sigma_ref)
-            ratio = after / before
-            if not (np.isfinite(ratio) and ratio <= DIVERGED_RATIO):
-                # several effects' parameters fitted at once from small starts can find a
-                # model that fits the estimation part and runs away on the held-out one
-                why = (f"diverged on the validation part (cost {ratio:.3g} x the fit "
-                       "without them)")
-                joint.append({"effects": labels, "validation_cost_change": None,
-                              "outcome": why})
-                continue
-            why = self.verdict_on(ds_, new, held_now)
-            joint.append({"effects": labels, "validation_cost_change": ratio - 1.0,
+            change, why = joint_change(before, after)
+            if not why:
+                why = self.verdict_on(ds_, new, held_now)
+            joint.append({"effects": labels, "validation_cost_change": change,
                           "outcome": why or "passes"})
+            if change is None:
+                continue
             if not why and (best_set is None or after < best_set[0]):
                 best_set = (after, labels, new, held_now)
         if best_set is None:
@@ -709,6 +704,18 @@ def _joint_pool(rounds: list[list[CandidateTest]], defs: dict[str, EffectDef],
             pool.append(t.label)
             names.add(t.name)
     return pool[:JOINT_POOL]
+
+
+def joint_change(before: float, after: float) -> tuple[float | None, str]:
+    """The relative change of the validation cost by a joint refit, and why the refit is
+    out at once ("" if not): several effects' parameters fitted together from small starts
+    can find a model that fits the estimation part and runs away on the held-out one (a
+    cost beyond :data:`DIVERGED_RATIO` times the one before, or not finite); its change is
+    None then, not a percentage of a runaway."""
+    ratio = after / before if before > 0 else float("inf")
+    if np.isfinite(ratio) and ratio <= DIVERGED_RATIO:
+        return ratio - 1.0, ""
+    return None, f"diverged on the validation part (cost {ratio:.3g} x the fit without them)"
 
 
 def _all_scales(defs: dict[str, EffectDef]) -> dict[str, float]:
