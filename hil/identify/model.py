@@ -100,6 +100,13 @@ def map_threads(fn: Callable[[_T], _R], items: Iterable[_T]) -> list[_R]:
     return list(_POOL.map(fn, items))
 
 
+#: Parameters that act on the outputs only, after the simulation (an offset, a gauge's drift,
+#: the sensors' lags, the clips): :meth:`FastModel.states` never reads them, so a fit's
+#: Jacobian column for one of them maps the same states to new outputs, no simulation.
+OUTPUT_ONLY = frozenset({"strain_offset_n", "drift_n_per_c", "lag_pressure_s", "lag_strain_s",
+                         SAT_PRESSURE, *(f"sat_{c}" for c in SAT_CHANNELS)})
+
+
 def discretise(a: np.ndarray, b: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:
     """Exact zero-order-hold discretisation: (A_d, B_d) for step ``h`` s."""
     n, m = b.shape
@@ -570,5 +577,5 @@ class FastModel:
         return out
 
 
-__all__ = ["BASE_NAMES", "EFFECT_NAMES", "FastModel", "IDX", "N_PARAMS", "PARAM_NAMES",
-           "continuous", "discretise", "map_threads"]
+__all__ = ["BASE_NAMES", "EFFECT_NAMES", "OUTPUT_ONLY", "FastModel", "IDX", "N_PARAMS",
+           "PARAM_NAMES", "continuous", "discretise", "fast_stop", "map_threads"]
