@@ -458,7 +458,7 @@ class _Loop:
             self.prefit.clear()
             tests = test_candidates(defs, self.test_model.outputs, self.current.theta, IDX, exp,
                                     self.current.weights, residual, self.est_mask, exp.val,
-                                    self.current.free)
+                                    self.current.free, states=self.test_model.states)
             self.rounds.append(tests)
             ranked = rank(tests)
             if not ranked and len(self.added) < max_effects and judge_deferred(
