@@ -106,6 +106,8 @@ def cmd_bench_robot(args: argparse.Namespace, ctx: Context) -> Outcome:
 
     cfg = ctx.config()
     load = os.getloadavg()[0]
+    if args.stages:
+        return _robot_stages(cfg, load, ctx)
     rows, data = [], []
     for w in args.workers:
         ctx.say(f"bench robot: simulating {args.seconds:g} s with {w} worker(s) ...")
@@ -123,6 +125,19 @@ def cmd_bench_robot(args: argparse.Namespace, ctx: Context) -> Outcome:
                  f"{load:.2f} on {os.cpu_count()} cores at the start (target >= 1x wall)")
     return Outcome(text, {"config": cfg.sources, "load_average": load, "runs": data})
 
+
+def _robot_stages(cfg, load: float, ctx: Context) -> Outcome:  # noqa: ANN001 - a Config
+    from hil.bench.robot_stages import stage_costs
+
+    ctx.say("bench robot --stages: 0.2 s of hydra_full, then each stage alone ...")
+    r = stage_costs(cfg)
+    text = table(["stage", "CPU ns/actuator/tick"], r.rows, fmt=".0f",
+                 title=f"hydra_full, {r.actuators} actuators, each stage alone over "
+                 f"{r.ticks} ticks from a running robot's state (1 thread, best of 3), "
+                 f"{cfg.sources[-1]}; load average {load:.2f} at the start")
+    return Outcome(text, {"config": cfg.sources, "load_average": load,
+                          "stages": [{"stage": s, "ns_per_actuator_tick": v}
+                                     for s, v in r.rows]})
 
 
 def cmd_bench_codecs(args: argparse.Namespace, ctx: Context) -> Outcome:
@@ -184,6 +199,9 @@ def add_parsers(bsub) -> None:  # noqa: ANN001 - argparse's sub-parsers of ``ben
     p.add_argument("--workers", type=int_list(1, os.cpu_count() or 1), default=[1, 2],
                    help="comma-separated numbers of compute threads, one run each "
                    "(default: 1,2)")
+    p.add_argument("--stages", action="store_true",
+                   help="instead: CPU ns per actuator tick of each stage of the per-tick "
+                   "work (plant, sensors, board, link, MCU law), each timed alone")
     command(p, cmd_bench_robot)
     p = bsub.add_parser("codecs", parents=[common(plot=False, config=False)],
                         help="encode+decode throughput of every protocol codec")
