@@ -20,13 +20,14 @@ from numba import njit
 
 from firmware_model.fpga.tick import control_tick
 from firmware_model.lvds import link as LK
-from plant import kernel
+from plant import kernel, lanes
+from plant import layout as L
 from plant.config import Config
 from plant.sensors.harness import digitise
 
 #: Stage names, in the order of one tick.
 STAGES = ("plant RK4 + effects", "plant outputs + noise", "sensor chips", "driver board",
-          "LVDS link", "MCU law (C build)")
+          "LVDS link", "MCU law (C build)", "plant RK4 + effects, in lanes")
 
 
 @njit(cache=True, nogil=True)
@@ -46,6 +47,18 @@ def _stage(which, n_ticks, tick0, x, p, u, y, rng, work, k, raw, c, st, down, up
             else:
                 LK.sweep_down(lk[i], mdown[i], st[i], down[i])
                 LK.sweep_up(lk[i], up[i], mup[i])
+
+
+@njit(cache=True, nogil=True)
+def _rk4_in_lanes(n_ticks, x, p, u, blocks, sizes, n_sub_max, buf):
+    """``n_ticks`` RK4 ticks of every actuator, batch by batch in lanes, with the moves in
+    and out of the lane buffer the engine makes every tick."""
+    for b in range(blocks.shape[0]):
+        lanes.load_params(buf, p, blocks[b], sizes[b])
+        for _ in range(n_ticks):
+            lanes.load_states(buf, x, u, blocks[b], sizes[b])
+            lanes.rk4_lanes(buf, n_sub_max)
+            lanes.store_states(buf, x, blocks[b], sizes[b])
 
 
 @dataclass
@@ -103,15 +116,34 @@ def stage_costs(cfg: Config, ticks: int = 2000, warm_s: float = 0.2,
                 eng.law.step_many(states, inp, out)
             best = min(best, time.thread_time() - c0)
         rows.append((STAGES[5], best * 1e9 / (n * ticks)))
-        # The engine's compiled call as a whole (every stage, 1 thread), same ticks.
+        if eng.lanes:
+            eng._make_blocks()
+            buf = lanes.lane_buffer()
+            n_sub = int(snap[1][:, L.P_N_SUB].max())
+            _rk4_in_lanes(1, snap[0].copy(), snap[1], snap[2], eng._blocks, eng._sizes, n_sub,
+                          buf)
+            best = np.inf
+            for _ in range(3):
+                x = snap[0].copy()
+                c0 = time.thread_time()
+                _rk4_in_lanes(ticks, x, snap[1], snap[2], eng._blocks, eng._sizes, n_sub, buf)
+                best = min(best, time.thread_time() - c0)
+            rows.append((STAGES[6], best * 1e9 / (n * ticks)))
+        # The engine's compiled call as a whole (every stage, 1 thread), same ticks, with
+        # the plants one actuator at a time and (where the recipe allows) in lanes.
         cycles = max(1, ticks // eng.cycle_ticks)
         eng.overlap = False
-        c0 = time.thread_time()
-        for _ in range(cycles):
+        for use_lanes in (False, True) if eng.lanes else (False,):
+            eng.lanes = use_lanes
             eng._counter[0] = 0
-            eng._compute(eng.cycle_ticks)
-        rows.append(("total (engine's compiled call)",
-                     (time.thread_time() - c0) * 1e9 / (n * cycles * eng.cycle_ticks)))
+            eng._compute(eng.cycle_ticks)  # compile outside the timing
+            c0 = time.thread_time()
+            for _ in range(cycles):
+                eng._counter[0] = 0
+                eng._compute(eng.cycle_ticks)
+            rows.append((f"total: the engine's compiled call, "
+                         f"{'plants in lanes' if use_lanes else 'one actuator at a time'}",
+                         (time.thread_time() - c0) * 1e9 / (n * cycles * eng.cycle_ticks)))
     return StageCosts(n, ticks, rows)
 
 

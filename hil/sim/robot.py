@@ -50,7 +50,7 @@ from firmware_model.mcu.c_abi import (
     config_record,
 )
 from hil.fieldbus import pdo
-from hil.sim.actuator import advance_stack, drive_plant
+from hil.sim.actuator import TRACE_WIDTH, TRACE_WORDS, _trace_row, advance_stack, drive_plant
 from hil.sim.stack_rows import SOURCES, McuRows, StackRows
 from plant import kernel
 from plant import lanes as lanes_mod
@@ -160,7 +160,7 @@ def advance_robot(counter, n_periods, period, tick0, batched, s, mcu, no_rec, no
 
 @njit(cache=True, nogil=True, _nrt=False)
 def advance_robot_lanes(counter, n_periods, period, tick0, blocks, sizes, n_sub_max, s, mcu,
-                        buf):
+                        buf, tap_y, tap_trace):
     """:func:`advance_robot` with the plants in lanes: this thread claims whole batches
     (``blocks[b, :sizes[b]]``: up to :data:`plant.lanes.LW` actuator rows, counted by
     ``counter``) and runs their MCU periods together. Per tick every actuator of the
@@ -169,6 +169,9 @@ def advance_robot_lanes(counter, n_periods, period, tick0, blocks, sizes, n_sub_
     in one pass over the lanes (:func:`plant.lanes.rk4_lanes`, in ``buf``, this thread's
     lane buffer), then each plant's outputs. Each actuator sees the operations of
     :func:`advance_stack` in its order: the batch only interleaves independent actuators.
+    ``tap_y`` (actuators, ticks, outputs) and ``tap_trace`` (actuators, ticks,
+    ``TRACE_WIDTH``): where given (not empty), every tick's plant outputs and board trace
+    row (:func:`advance_stack`'s) of every actuator (:attr:`RobotEngine.tap`).
     Returns how many actuators this thread advanced."""
     pl, se, bd, lk = s.plant, s.sensors, s.board, s.link
     in16, in32 = mcu.in16, mcu.in32
@@ -194,13 +197,22 @@ def advance_robot_lanes(counter, n_periods, period, tick0, blocks, sizes, n_sub_
                 for w in range(lk.mcu_down.shape[1]):
                     lk.mcu_down[i, w] = mcu.out16[i, _OUT_DOWN + w]
             for k in range(period):
+                at = n * period + k
                 for j in range(m):
                     i = rows[j]
                     st = bd.state[i]
                     digitise(pl.y[i], se.chips[i], t + k, se.raw[i])
                     LK.sweep_down(lk.state[i], lk.mcu_down[i], st, bd.down[i])
+                    since, crc = st[B.F_SINCE_VALID], st[B.F_ERR_LINK_CRC]
                     on = control_tick(bd.params[i], st, bd.down[i], bd.up[i], se.raw[i])
+                    if tap_trace.shape[0] > 0:
+                        _trace_row(tap_trace[i], at, se.raw[i], bd.down[i], since, crc,
+                                   bd.up[i], on, st)
                     LK.sweep_up(lk.state[i], bd.up[i], lk.mcu_up[i])
+                    if tap_trace.shape[0] > 0:
+                        for w in range(2 * LK.WORDS_W):
+                            tap_trace[i, at, TRACE_WORDS + w] = lk.state[i, LK.LK_DOWN_WORDLOG
+                                                                         + w]
                     drive_plant(on, st, 1.0 / bd.params[i, B.C_PWM_TOP], pl.u[i], pl.x[i])
                 lanes_mod.load_states(buf, pl.x, pl.u, rows, m)
                 lanes_mod.rk4_lanes(buf, n_sub_max)
@@ -208,6 +220,9 @@ def advance_robot_lanes(counter, n_periods, period, tick0, blocks, sizes, n_sub_
                 for j in range(m):
                     i = rows[j]
                     kernel.outputs(pl.x[i], pl.params[i], pl.u[i], pl.rng[i], pl.y[i])
+                    if tap_y.shape[0] > 0:
+                        for w in range(pl.y.shape[1]):
+                            tap_y[i, at, w] = pl.y[i, w]
             for j in range(m):
                 i = rows[j]
                 for w in range(lk.mcu_up.shape[1]):
@@ -394,6 +409,9 @@ class RobotEngine:
         self._sizes = np.zeros(0, dtype=np.int64)
         self._blocks_for: bytes = b""
         self._lane_bufs: list[np.ndarray] = []
+        #: Called with the first tick of each cycle once it is computed (:meth:`tap`).
+        self.on_cycle = None
+        self.tap(False, False)
 
     # --- set-up --------------------------------------------------------------------------
     def _images(self) -> None:
@@ -570,16 +588,37 @@ class RobotEngine:
         if self.lanes:
             return advance_robot_lanes(self._counter, ticks // self.period, self.period,
                                        self.tick, self._blocks, self._sizes,
-                                       self._n_sub_max, self.arrays, self.mcu, buf)
+                                       self._n_sub_max, self.arrays, self.mcu, buf,
+                                       *self._taps(ticks))
         return advance_robot(self._counter, ticks // self.period, self.period, self.tick,
                              self._batched, self.arrays, self.mcu, self._no_rec,
                              self._no_trace)
+
+    def tap(self, plant: bool = True, trace: bool = False) -> None:
+        """Keep every tick of the next cycles (lanes only): :attr:`tap_y` (actuators,
+        cycle ticks, plant outputs) and :attr:`tap_trace` (actuators, cycle ticks,
+        ``TRACE_WIDTH``: the board's inputs and outputs, as :func:`advance_stack` traces
+        them), chain order, overwritten each cycle: read them after :meth:`advance`
+        returns (or from :attr:`on_cycle`, called there with the cycle's first tick).
+        ``tap(False, False)`` stops. A stack under a sensor fault (advanced by its own
+        wrapper) leaves its rows as they were."""
+        ticks = self.cycle_ticks
+        self.tap_y = np.zeros((self.n if plant else 0, ticks, L.N_OUTPUTS))
+        self.tap_trace = np.zeros((self.n if trace else 0, ticks, TRACE_WIDTH), dtype=np.int64)
+
+    def _taps(self, ticks: int) -> tuple[np.ndarray, np.ndarray]:
+        if (self.tap_y.shape[0] and ticks > self.tap_y.shape[1]) or (
+                self.tap_trace.shape[0] and ticks > self.tap_trace.shape[1]):
+            raise ValueError(f"the tap holds {self.cycle_ticks} ticks, not {ticks}")
+        return self.tap_y, self.tap_trace
 
     def _finish(self, ticks: int) -> None:
         batched = self._batched
         for j, (b, i) in enumerate(self.slots):
             if batched[j]:
                 self._inner(b.stacks[i]).plant.tick += ticks
+        if self.on_cycle is not None:
+            self.on_cycle(self.tick)
         self.tick += ticks
         for b in self.all_boxes:
             b.tick = self.tick
