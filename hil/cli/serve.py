@@ -497,7 +497,7 @@ def cmd_serve_ethercat(args: argparse.Namespace, cfg, topo) -> Outcome:
     model = args.model or "echo"
     rt = RealtimePlan(args.realtime)
     try:
-        chain = ServedChain(topo, cfg, model, tuple(args.stack_boxes))
+        chain = ServedChain(topo, cfg, model, tuple(args.stack_boxes), coe=args.coe)
         if chain.engine is not None and rt.compute_cpus is not None:
             chain.engine.workers = min(len(rt.compute_cpus), chain.engine._workers())
         rt.process()
@@ -534,6 +534,7 @@ def cmd_serve_ethercat(args: argparse.Namespace, cfg, topo) -> Outcome:
     failures = ethercat_failures(st, args)
     data = {"transport": "ethercat", "interface": args.interface, "topology": topo.name,
             "model": model, "stack_boxes": list(args.stack_boxes), **st.as_dict(),
+            "mailbox": chain.mailboxes.stats(),
             "simulated_s": st.cycles * PERIOD_S,
             "overrun_percent": 100 * st.overruns / st.cycles if st.cycles else 0.0,
             "late_percent": (100 * st.frames_late / st.frames_answered
@@ -620,6 +621,9 @@ def add_parser(sub) -> None:  # noqa: ANN001 - argparse's sub-parsers
     p.add_argument("--stack-box", dest="stack_boxes", type=int_range(0, 255), action="append",
                    default=[], metavar="N",
                    help="ethercat: box N runs the full stack (repeatable; others: --model)")
+    p.add_argument("--no-coe", dest="coe", action="store_false",
+                   help="ethercat: slaves without a mailbox (no CoE; a master maps the "
+                   "process data from the SII alone)")
     p.add_argument("--port",
                    help="serial (required): device path or pyserial URL, or 'pty' for a new "
                    "pseudo-terminal whose path is printed; udp: local port number (default "
