@@ -96,8 +96,8 @@ def _run_bus_to(args: argparse.Namespace, cfg, topo, cycles: int, model: str, pc
         what = "--log" if args.log else "--foxglove"
         if not backend(args.transport).in_memory:
             raise UsageError(f"{what} records the in-process run; use --transport inproc")
-        if model != "stack":
-            raise UsageError(f"{what} records the MCU model: use --model stack")
+        if model not in ("stack", "robot"):
+            raise UsageError(f"{what} records the MCU model: use --model stack or robot")
         if args.crc_trailer is not None:
             raise UsageError(f"--crc-trailer/--no-crc-trailer: not with {what} (the logged "
                                 "run keeps the in-process default, with the trailer)")
@@ -112,7 +112,8 @@ def _run_bus_to(args: argparse.Namespace, cfg, topo, cycles: int, model: str, pc
             with _live_view(live_addr) as live:
                 rec = run_logged(topo, cfg, cycles, pc, args.log, level=args.level,
                                  progress=progress, faults=faults,
-                                 capture=None if cap is None else cap.tap(tick_ns), live=live)
+                                 capture=None if cap is None else cap.tap(tick_ns), live=live,
+                                 model=model, compression=args.log_compression)
         finally:
             if cap is not None:
                 cap.close()
@@ -416,6 +417,9 @@ def add_parsers(sub, bsub) -> None:  # noqa: ANN001 - argparse's sub-parsers
                    " lost, corrupted, duplicated or delayed frames, LVDS and sensor faults")
     p.add_argument("--log", metavar="FILE.mcap", type=output_file((".mcap",)),
                    help="log MCU inputs/outputs for replay")
+    p.add_argument("--log-compression", default="zstd", choices=("zstd", "lz4", "none"),
+                   help="--log: compression of the log's chunks (default zstd; lz4 costs "
+                   "about half the CPU for ~1.8x the file, docs/framelog.md)")
     p.add_argument("--level", default="mcu", choices=("bus", "mcu", "full"),
                    help="log detail")
     add_wire_options(p)

@@ -359,23 +359,30 @@ class FrameLogWriter:
                                  ch.count & 0xFFFFFFFF)
         ch.count += 1
 
-    def write_messages(self, channel_id: int, t_ns: np.ndarray, messages: list[bytes]) -> None:
+    def write_messages(self, channel_id: int, t_ns: np.ndarray,
+                       messages: list[bytes] | np.ndarray) -> None:
         """Log ``messages[i]`` at ``t_ns[i]`` (int ns, non-decreasing), one MCAP message each,
         on a single-frame channel (e.g. :meth:`add_protobuf_channel`): the same records as
-        :meth:`write` per message, built in one go (:mod:`hil.framelog.batch`)."""
+        :meth:`write` per message, built in one go (:mod:`hil.framelog.batch`).
+        ``messages`` may be a (n, size) uint8 array of messages of one length (e.g.
+        :meth:`~hil.framelog.protobuf.MessageType.encode_array`): no bytes object each."""
         ch = self._channel(channel_id)
         if ch.block:
             raise ValueError(f"{ch.topic} is a block channel: use write_block")
         t = np.asarray(t_ns)
+        if isinstance(messages, np.ndarray) and (messages.ndim != 2
+                                                 or messages.dtype != np.uint8):
+            raise ValueError(f"{ch.topic}: messages as an array must be (n, size) uint8, "
+                             f"got {messages.shape} {messages.dtype}")
         if t.ndim != 1 or t.shape[0] != len(messages) or t.dtype.kind not in "iu":
             raise ValueError(f"{ch.topic}: need (n,) integer times for {len(messages)} "
                              f"messages, got {t.shape} {t.dtype}")
         if not len(messages):
             return
-        times = t.astype(np.int64).tolist()
-        if times[0] < 0 or any(b < a for a, b in zip(times, times[1:], strict=False)):
+        times = t.astype(np.int64)
+        if times[0] < 0 or (len(times) > 1 and bool(np.any(times[1:] < times[:-1]))):
             raise ValueError(f"{ch.topic}: message times must be >= 0 and non-decreasing")
-        self._advance(ch, times[0], times[-1])
+        self._advance(ch, int(times[0]), int(times[-1]))
         batch.add_messages(self._writer, channel_id, times, messages, ch.count, self._fast)
         ch.count += len(messages)
 
@@ -384,6 +391,8 @@ class FrameLogWriter:
         # Integer state arrays are int64 in the models: accept any integer array whose
         # values fit, rather than make every caller cast (and risk a silent wrap-around).
         assert ch.dtype is not None
+        if f.dtype == ch.dtype:
+            return f  # (pack_block makes the one copy it needs)
         if f.dtype.kind in "iub" and ch.dtype.kind in "iu":
             info = np.iinfo(ch.dtype)
             if f.size and (int(f.min()) < info.min or int(f.max()) > info.max):

@@ -170,7 +170,8 @@ def _scoped() -> list[tuple[str, str, str, tuple[str, ...]]]:
 
 
 VALUES = {"--baudrate": "9600", "--host": "0.0.0.0", "--port": "pty", "--interface": "lo",
-          "--stack-box": "0", "--capture": "c.pcapng", "--foxglove": "127.0.0.1:1"}
+          "--stack-box": "0", "--capture": "c.pcapng", "--foxglove": "127.0.0.1:1",
+          "--dc-drift-ppm": "50", "--dc-hop-ns": "500"}
 
 
 def test_serve_options_are_scoped():

@@ -149,9 +149,30 @@ def _device(devices: ET.Element, d: SlaveDescription, image: bytes, box: Box,
         _dictionary(profile, od)
         dev.remove(profile)
         dev.insert(3, profile)  # ETG.2000's order: Type, Name, GroupType, Profile, Fmmu, ...
+    _dc_opmodes(dev)  # after Mailbox, before Eeprom
     eep = _sub(dev, "Eeprom")
     _sub(eep, "ByteSize", str(len(image)))
     _sub(eep, "ConfigData", image[:14].hex().upper())
+
+
+#: DC operation modes: (name, description, AssignActivate: the word a master writes to
+#: 0x0980/0x0981 (low byte cyclic unit control, high byte activation), SYNC0 cycle factor).
+DC_OPMODES = (("FreeRun", "Free run: the MCU cycles on its own clock", 0x0000, None),
+              ("DcSync", "DC synchronous: the MCU samples at SYNC0, one pulse per bus cycle",
+               0x0300, 1))
+
+
+def _dc_opmodes(dev: ET.Element) -> None:
+    """The distributed-clock operation modes (firmware_model.esc.dc)."""
+    dc = _sub(dev, "Dc")
+    for name, desc, assign, factor in DC_OPMODES:
+        op = _sub(dc, "OpMode")
+        _sub(op, "Name", name)
+        _sub(op, "Desc", desc)
+        _sub(op, "AssignActivate", _hex(assign, 4))
+        if factor is not None:
+            _sub(op, "CycleTimeSync0", "0", Factor=str(factor))
+            _sub(op, "ShiftTimeSync0", "0")
 
 
 def esi_xml(topo: Topology, cfg: Config | None = None) -> str:
