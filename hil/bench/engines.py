@@ -145,6 +145,8 @@ class RobotBench(TimedRun):
     workers: int = 1
     actuators: int = 0
     tick_s: float = 50e-6
+    engine: str = "lanes"  #: "lanes" or "per-actuator" (hil.sim.robot)
+    numerics: int = 3      #: the plant's arithmetic recipe it ran
 
     @property
     def ns_per_actuator_tick(self) -> float:
@@ -153,11 +155,12 @@ class RobotBench(TimedRun):
 
 
 def bench_robot(cfg: Config, seconds: float = 10.0, workers: int = 1,
-                topology: str = "hydra_full") -> RobotBench:
+                topology: str = "hydra_full", lanes: bool | None = None) -> RobotBench:
     """Time the whole robot over the fieldbus: every box's MCU board and its stacks
     (plant, sensor chips, driver board, LVDS link) in the robot engine (:mod:`hil.sim.robot`)
     with ``workers`` compute threads, the master and the PC loop (a force sine on every
-    actuator) at 1 kHz in lockstep. CPU time is the process's, all threads."""
+    actuator) at 1 kHz in lockstep. CPU time is the process's, all threads. ``lanes``: the
+    plants in vector lanes or one actuator at a time (None: the engine's default)."""
     from hil.fieldbus.system import BusSystem
     from hil.fieldbus.topology import load_topology
     from hil.sim.pc import demo_pc
@@ -167,13 +170,18 @@ def bench_robot(cfg: Config, seconds: float = 10.0, workers: int = 1,
     pc = demo_pc()
     with BusSystem(topo, cfg, "inproc", model="robot") as bs:
         bs.chain.engine.workers = workers
+        if lanes is not None:
+            bs.chain.engine.lanes = lanes
+        used = bs.chain.engine.lanes
         bs.run(20, pc)  # compile / warm up outside the timing
         t0, c0 = time.perf_counter(), time.process_time()
         bs.run(cycles, pc, keep=0)
         wall, cpu = time.perf_counter() - t0, time.process_time() - c0
         bs.chain.engine.wait()
     return RobotBench(cycles * 1e-3, wall, cpu, workers=workers, actuators=topo.n_actuators,
-                      tick_s=cfg.get("sim.tick_ns") * 1e-9)
+                      tick_s=cfg.get("sim.tick_ns") * 1e-9,
+                      engine="lanes" if used else "per-actuator",
+                      numerics=cfg.get("sim.plant_numerics"))
 
 
 # --- one tick's call of the current loop: RTL under Verilator against the board model ------

@@ -106,23 +106,55 @@ def cmd_bench_robot(args: argparse.Namespace, ctx: Context) -> Outcome:
 
     cfg = ctx.config()
     load = os.getloadavg()[0]
+    if args.stages:
+        return _robot_stages(cfg, load, ctx)
     rows, data = [], []
     for w in args.workers:
-        ctx.say(f"bench robot: simulating {args.seconds:g} s with {w} worker(s) ...")
-        r = bench_robot(cfg, args.seconds, w)
-        rows.append((w, r.simulated_s, r.wall_s, r.cpu_s, r.real_time_factor,
-                     r.cpu_real_time_factor, r.ns_per_actuator_tick))
-        data.append({"workers": w, "simulated_s": r.simulated_s, "wall_s": r.wall_s,
-                     "cpu_s": r.cpu_s, "real_time_factor": r.real_time_factor,
-                     "cpu_real_time_factor": r.cpu_real_time_factor,
-                     "ns_per_actuator_tick": r.ns_per_actuator_tick})
-    text = table(["workers", "simulated [s]", "wall [s]", "CPU [s]", "real-time (wall)",
-                  "real-time (CPU)", "CPU ns/actuator/tick"], rows, fmt=".3g",
+        for engine, lanes, numerics in _ROBOT_ENGINES[args.engine]:
+            ctx.say(f"bench robot: simulating {args.seconds:g} s with {w} worker(s), "
+                    f"{engine} ...")
+            run_cfg = cfg.with_overrides({"sim.plant_numerics": numerics},
+                                         source=f"plant recipe {numerics}") if numerics else cfg
+            r = bench_robot(run_cfg, args.seconds, w, lanes=lanes)
+            label = f"{r.engine}, recipe {r.numerics}"
+            rows.append((w, label, r.simulated_s, r.wall_s, r.cpu_s, r.real_time_factor,
+                         r.cpu_real_time_factor, r.ns_per_actuator_tick))
+            data.append({"workers": w, "engine": r.engine, "plant_numerics": r.numerics,
+                         "simulated_s": r.simulated_s, "wall_s": r.wall_s,
+                         "cpu_s": r.cpu_s, "real_time_factor": r.real_time_factor,
+                         "cpu_real_time_factor": r.cpu_real_time_factor,
+                         "ns_per_actuator_tick": r.ns_per_actuator_tick})
+    text = table(["workers", "engine", "simulated [s]", "wall [s]", "CPU [s]",
+                  "real-time (wall)", "real-time (CPU)", "CPU ns/actuator/tick"], rows,
+                 fmt=".3g",
                  title=f"hydra_full, {r.actuators} actuators, full stack behind every box "
                  f"(robot engine), PC loop at 1 kHz, {cfg.sources[-1]}; load average "
-                 f"{load:.2f} on {os.cpu_count()} cores at the start (target >= 1x wall)")
+                 f"{load:.2f} on {os.cpu_count()} cores at the start (target: lanes >= 2x "
+                 "wall with 1 worker, >= 3.5x with 2)")
     return Outcome(text, {"config": cfg.sources, "load_average": load, "runs": data})
 
+
+#: ``bench robot --engine``: (label, lanes, plant recipe or None for the configured one).
+#: "both": the engine as it was (one actuator at a time, recipe 2) beside the lanes.
+_ROBOT_ENGINES = {
+    "both": (("per-actuator", False, 2), ("lanes", True, None)),
+    "per-actuator": (("per-actuator", False, None),),
+    "lanes": (("lanes", True, None),),
+}
+
+
+def _robot_stages(cfg, load: float, ctx: Context) -> Outcome:  # noqa: ANN001 - a Config
+    from hil.bench.robot_stages import stage_costs
+
+    ctx.say("bench robot --stages: 0.2 s of hydra_full, then each stage alone ...")
+    r = stage_costs(cfg)
+    text = table(["stage", "CPU ns/actuator/tick"], r.rows, fmt=".0f",
+                 title=f"hydra_full, {r.actuators} actuators, each stage alone over "
+                 f"{r.ticks} ticks from a running robot's state (1 thread, best of 3), "
+                 f"{cfg.sources[-1]}; load average {load:.2f} at the start")
+    return Outcome(text, {"config": cfg.sources, "load_average": load,
+                          "stages": [{"stage": s, "ns_per_actuator_tick": v}
+                                     for s, v in r.rows]})
 
 
 def cmd_bench_codecs(args: argparse.Namespace, ctx: Context) -> Outcome:
@@ -184,6 +216,13 @@ def add_parsers(bsub) -> None:  # noqa: ANN001 - argparse's sub-parsers of ``ben
     p.add_argument("--workers", type=int_list(1, os.cpu_count() or 1), default=[1, 2],
                    help="comma-separated numbers of compute threads, one run each "
                    "(default: 1,2)")
+    p.add_argument("--engine", choices=sorted(_ROBOT_ENGINES), default="both",
+                   help="both (default): the per-actuator engine on plant recipe 2 (as "
+                   "before the lanes) and the lanes engine on the configured recipe, one run "
+                   "each per number of workers; or one of them on the configured recipe")
+    p.add_argument("--stages", action="store_true",
+                   help="instead: CPU ns per actuator tick of each stage of the per-tick "
+                   "work (plant, sensors, board, link, MCU law), each timed alone")
     command(p, cmd_bench_robot)
     p = bsub.add_parser("codecs", parents=[common(plot=False, config=False)],
                         help="encode+decode throughput of every protocol codec")

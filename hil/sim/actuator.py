@@ -73,6 +73,21 @@ def _trace_row(tr, j, raw, down, link_since, link_crc, up, on, st):
     tr[j, TRACE_DUTY + 2] = st[B.F_DUTY_C]
 
 
+@njit(cache=True, inline="always")
+def drive_plant(on, st, inv_top, u, x):
+    """The inverter's gates as the board's tick left them (``on``: PWM running) into the
+    plant's inputs: duties = compare counts / top, or gates off (currents zero at once)."""
+    if on != 0:
+        u[L.IN_MODE] = L.DriveMode.DUTY.value
+        u[L.IN_DA] = st[B.F_DUTY_A] * inv_top
+        u[L.IN_DB] = st[B.F_DUTY_B] * inv_top
+        u[L.IN_DC] = st[B.F_DUTY_C] * inv_top
+    else:
+        if int(u[L.IN_MODE]) != L.DriveMode.OFF:
+            u[L.IN_MODE] = L.DriveMode.OFF.value
+            kernel.gates_off(x)
+
+
 @njit(cache=True)
 def advance_stack(n_ticks, x, p, u, y, rec, row0, every, tick0, rng, work,
                   k, raw, c, st, down, up, mdown, mup, lk, trace):
@@ -96,15 +111,7 @@ def advance_stack(n_ticks, x, p, u, y, rec, row0, every, tick0, rng, work,
         if tracing:
             for i in range(2 * LK.WORDS_W):
                 trace[j, TRACE_WORDS + i] = lk[LK.LK_DOWN_WORDLOG + i]
-        if on != 0:
-            u[L.IN_MODE] = L.DriveMode.DUTY.value
-            u[L.IN_DA] = st[B.F_DUTY_A] * inv_top
-            u[L.IN_DB] = st[B.F_DUTY_B] * inv_top
-            u[L.IN_DC] = st[B.F_DUTY_C] * inv_top
-        else:
-            if int(u[L.IN_MODE]) != L.DriveMode.OFF:
-                u[L.IN_MODE] = L.DriveMode.OFF.value
-                kernel.gates_off(x)
+        drive_plant(on, st, inv_top, u, x)
         kernel.rk4_tick(x, p, u, work)
         kernel.outputs(x, p, u, rng, y)
         if n_rows > 0 and (t + 1) % every == 0 and row < n_rows:

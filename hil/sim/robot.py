@@ -38,6 +38,7 @@ from numba.core import cgutils
 from numba.extending import intrinsic
 
 from firmware_model.fpga import layout as B
+from firmware_model.fpga.tick import control_tick
 from firmware_model.lvds import link as LK
 from firmware_model.mcu.c_abi import (
     IN_CLEAR_FAULT,
@@ -50,10 +51,13 @@ from firmware_model.mcu.c_abi import (
     config_record,
 )
 from hil.fieldbus import pdo
-from hil.sim.actuator import TRACE_WIDTH, advance_stack
+from hil.sim.actuator import TRACE_WIDTH, TRACE_WORDS, _trace_row, advance_stack, drive_plant
 from hil.sim.stack_rows import SOURCES, McuRows, StackRows, TapRows
+from plant import kernel
+from plant import lanes as lanes_mod
 from plant import layout as L
 from plant.config import Config, ConfigError
+from plant.sensors.harness import digitise
 
 #: Offsets of the input record's fields, in 16-bit words (the kernel writes through a view).
 _IN_U16 = INPUT.itemsize // 2
@@ -164,6 +168,78 @@ def advance_robot(counter, n_periods, period, tick0, batched, s, mcu, no_rec, ta
             in32[i, _IN_CRC] = lk.state[i, LK.LK_MASTER_CRC]
 
 
+@njit(cache=True, nogil=True, _nrt=False)
+def advance_robot_lanes(counter, n_periods, period, tick0, blocks, sizes, n_sub_max, s, mcu,
+                        buf, tap_y, tap_trace):
+    """:func:`advance_robot` with the plants in lanes: this thread claims whole batches
+    (``blocks[b, :sizes[b]]``: up to :data:`plant.lanes.LW` actuator rows, counted by
+    ``counter``) and runs their MCU periods together. Per tick every actuator of the
+    batch goes through its sensor chips, LVDS link and board tick (one after the other,
+    the calls :func:`advance_stack` makes), then all their plants take the tick's RK4 step
+    in one pass over the lanes (:func:`plant.lanes.rk4_lanes`, in ``buf``, this thread's
+    lane buffer), then each plant's outputs. Each actuator sees the operations of
+    :func:`advance_stack` in its order: the batch only interleaves independent actuators.
+    ``tap_y`` (actuators, ticks, outputs) and ``tap_trace`` (actuators, ticks,
+    ``TRACE_WIDTH``): where given (not empty), every tick's plant outputs and board trace
+    row (:func:`advance_stack`'s) of every actuator (:attr:`RobotEngine.tap`).
+    Returns how many actuators this thread advanced."""
+    pl, se, bd, lk = s.plant, s.sensors, s.board, s.link
+    in16, in32 = mcu.in16, mcu.in32
+    done = 0
+    while True:
+        b = _claim(counter)
+        if b >= blocks.shape[0]:
+            return done
+        m = sizes[b]
+        rows = blocks[b]
+        done += m
+        lanes_mod.load_params(buf, pl.params, rows, m)
+        for n in range(n_periods):
+            t = tick0 + n * period
+            for j in range(m):
+                i = rows[j]
+                in32[i, _IN_TICK] = t
+                _mcu_law_step_many(mcu.ptrs[i, 0], mcu.ptrs[i, 1], 1, mcu.ptrs[i, 2])
+                in32[i, _IN_FLAGS] = 0
+                if n == n_periods - 1:
+                    mcu.err[i, 0] = in16[i, _IN_UP + B.U_ERR_LINK_CRC]
+                    mcu.err[i, 1] = in32[i, _IN_CRC]
+                for w in range(lk.mcu_down.shape[1]):
+                    lk.mcu_down[i, w] = mcu.out16[i, _OUT_DOWN + w]
+            for k in range(period):
+                at = n * period + k
+                for j in range(m):
+                    i = rows[j]
+                    st = bd.state[i]
+                    digitise(pl.y[i], se.chips[i], t + k, se.raw[i])
+                    LK.sweep_down(lk.state[i], lk.mcu_down[i], st, bd.down[i])
+                    since, crc = st[B.F_SINCE_VALID], st[B.F_ERR_LINK_CRC]
+                    on = control_tick(bd.params[i], st, bd.down[i], bd.up[i], se.raw[i])
+                    if tap_trace.shape[0] > 0:
+                        _trace_row(tap_trace[i], at, se.raw[i], bd.down[i], since, crc,
+                                   bd.up[i], on, st)
+                    LK.sweep_up(lk.state[i], bd.up[i], lk.mcu_up[i])
+                    if tap_trace.shape[0] > 0:
+                        for w in range(2 * LK.WORDS_W):
+                            tap_trace[i, at, TRACE_WORDS + w] = lk.state[i, LK.LK_DOWN_WORDLOG
+                                                                         + w]
+                    drive_plant(on, st, 1.0 / bd.params[i, B.C_PWM_TOP], pl.u[i], pl.x[i])
+                lanes_mod.load_states(buf, pl.x, pl.u, rows, m)
+                lanes_mod.rk4_lanes(buf, n_sub_max)
+                lanes_mod.store_states(buf, pl.x, rows, m)
+                for j in range(m):
+                    i = rows[j]
+                    kernel.outputs(pl.x[i], pl.params[i], pl.u[i], pl.rng[i], pl.y[i])
+                    if tap_y.shape[0] > 0:
+                        for w in range(pl.y.shape[1]):
+                            tap_y[i, at, w] = pl.y[i, w]
+            for j in range(m):
+                i = rows[j]
+                for w in range(lk.mcu_up.shape[1]):
+                    in16[i, _IN_UP + w] = lk.mcu_up[i, w] & 0xFFFF
+                in32[i, _IN_CRC] = lk.state[i, LK.LK_MASTER_CRC]
+
+
 @njit(cache=True)
 def _le(image, at, n_bytes, signed):
     """The little-endian integer of ``n_bytes`` at ``image[at]``."""
@@ -253,7 +329,8 @@ class RobotEngine:
     cycle is done; with overlap and one worker, that worker is the background thread."""
 
     def __init__(self, boxes: list, cfg: Config, workers: int | None = None,
-                 overlap: bool = True, cycle_ticks: int = 20) -> None:
+                 overlap: bool = True, cycle_ticks: int = 20, lanes: bool | None = None
+                 ) -> None:
         from hil.sim.mcu_builds import BuildError, HostLaw, build_host
 
         self.all_boxes = boxes
@@ -273,6 +350,15 @@ class RobotEngine:
         self.law = HostLaw(library)
         llvm.load_library_permanently(str(library))  # for advance_robot's call by name
         self._bind_arrays()
+        recipes = self.arrays.plant.params[:, L.P_NUMERICS]
+        lane_ok = n > 0 and recipes.min() >= 3.0
+        if lanes and not lane_ok:
+            raise ConfigError("the robot engine's lanes need the plant's arithmetic recipe 3 "
+                              "(sim.plant_numerics >= 3); this configuration has "
+                              f"{int(recipes.min()) if n else 'no actuators'}")
+        #: The plants in vector lanes (:func:`advance_robot_lanes`); else one actuator at a
+        #: time (:func:`advance_robot`). Default: lanes where the recipe allows them.
+        self.lanes = lane_ok if lanes is None else lanes
         config = config_record(cfg)
         size = self.law.state_size
         self.states = np.zeros(n * size, dtype=np.uint8)
@@ -333,6 +419,13 @@ class RobotEngine:
         self._ready: list[int] | None = None  # prepared, with stacks under sensor faults
         self._pending: set[int] = set()
         self._used: dict[int, bytes] = {}
+        self._blocks = np.zeros((0, lanes_mod.LW), dtype=np.int64)
+        self._sizes = np.zeros(0, dtype=np.int64)
+        self._blocks_for: bytes = b""
+        self._lane_bufs: list[np.ndarray] = []
+        #: Called with the first tick of each cycle once it is computed (:meth:`tap`).
+        self.on_cycle = None
+        self.tap(False, False)
 
     # --- set-up --------------------------------------------------------------------------
     def _images(self) -> None:
@@ -448,7 +541,23 @@ class RobotEngine:
         for _, s in wrapped:  # LVDS faults switch at cycle boundaries (FaultyStack)
             if not s.sensors:
                 s._switch_lvds(self.tick // self.cycle_ticks)
+        if self.lanes and batched.tobytes() != self._blocks_for:
+            self._make_blocks()
         return external
+
+    def _make_blocks(self) -> None:
+        """The batches of :func:`advance_robot_lanes`: the batched actuators in chain
+        order, cut into as few batches of at most ``LW`` as they need, of equal sizes (so
+        that the threads claiming them get equal shares)."""
+        rows = np.flatnonzero(self._batched)
+        n_blocks = -(-len(rows) // lanes_mod.LW)
+        self._blocks = np.zeros((n_blocks, lanes_mod.LW), dtype=np.int64)
+        self._sizes = np.zeros(n_blocks, dtype=np.int64)
+        for b, part in enumerate(np.array_split(rows, n_blocks) if n_blocks else []):
+            self._blocks[b, :len(part)] = part
+            self._sizes[b] = len(part)
+        self._n_sub_max = int(self.arrays.plant.params[:, L.P_N_SUB].max())
+        self._blocks_for = self._batched.tobytes()
 
     def _workers(self) -> int:
         return self.workers or numba.config.NUMBA_NUM_THREADS
@@ -464,8 +573,8 @@ class RobotEngine:
                 self._pool.shutdown()
             self._pool = ThreadPoolExecutor(helpers, thread_name_prefix="robot-engine")
             self._pool_size = helpers
-        self._jobs = [self._pool.submit(self._compute, ticks, self._started)
-                      for _ in range(helpers)]
+        self._jobs = [self._pool.submit(self._compute, ticks, self._started, k + 1)
+                      for k in range(helpers)]
         for _ in range(helpers):
             # Hand the GIL over until the thread has released it in the compiled call: else
             # it could wait for the interpreter's switch interval (5 ms) before it starts.
@@ -479,20 +588,51 @@ class RobotEngine:
         for job in jobs:
             job.result()
 
-    def _compute(self, ticks: int, started: threading.Semaphore | None = None) -> int:
+    def _compute(self, ticks: int, started: threading.Semaphore | None = None,
+                 slot: int = 0) -> int:
         """Claim and advance actuators until none is left (nothing here but the compiled
-        call, which releases the GIL)."""
+        call, which releases the GIL). ``slot``: which lane buffer this thread uses (0: the
+        calling thread, k: the k-th helper)."""
+        if self.lanes:
+            while len(self._lane_bufs) <= slot:
+                self._lane_bufs.append(lanes_mod.lane_buffer())
+            buf = self._lane_bufs[slot]
         if started is not None:
             started.release()
+        if self.lanes:
+            return advance_robot_lanes(self._counter, ticks // self.period, self.period,
+                                       self.tick, self._blocks, self._sizes,
+                                       self._n_sub_max, self.arrays, self.mcu, buf,
+                                       *self._taps(ticks))
         return advance_robot(self._counter, ticks // self.period, self.period, self.tick,
                              self._batched, self.arrays, self.mcu, self._no_rec,
                              self.log_rows)
+
+    def tap(self, plant: bool = True, trace: bool = False) -> None:
+        """Keep every tick of the next cycles (lanes only): :attr:`tap_y` (actuators,
+        cycle ticks, plant outputs) and :attr:`tap_trace` (actuators, cycle ticks,
+        ``TRACE_WIDTH``: the board's inputs and outputs, as :func:`advance_stack` traces
+        them), chain order, overwritten each cycle: read them after :meth:`advance`
+        returns (or from :attr:`on_cycle`, called there with the cycle's first tick).
+        ``tap(False, False)`` stops. A stack under a sensor fault (advanced by its own
+        wrapper) leaves its rows as they were."""
+        ticks = self.cycle_ticks
+        self.tap_y = np.zeros((self.n if plant else 0, ticks, L.N_OUTPUTS))
+        self.tap_trace = np.zeros((self.n if trace else 0, ticks, TRACE_WIDTH), dtype=np.int64)
+
+    def _taps(self, ticks: int) -> tuple[np.ndarray, np.ndarray]:
+        if (self.tap_y.shape[0] and ticks > self.tap_y.shape[1]) or (
+                self.tap_trace.shape[0] and ticks > self.tap_trace.shape[1]):
+            raise ValueError(f"the tap holds {self.cycle_ticks} ticks, not {ticks}")
+        return self.tap_y, self.tap_trace
 
     def _finish(self, ticks: int) -> None:
         batched = self._batched
         for j, (b, i) in enumerate(self.slots):
             if batched[j]:
                 self._inner(b.stacks[i]).plant.tick += ticks
+        if self.on_cycle is not None:
+            self.on_cycle(self.tick)
         self.tick += ticks
         for b in self.all_boxes:
             b.tick = self.tick

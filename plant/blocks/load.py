@@ -10,11 +10,10 @@ Stribeck, ``effects.seal_friction``) and inelastic end stops at +/- stroke/2.
 
 from __future__ import annotations
 
-import math
-
 from numba import njit
 
 from plant.blocks import TICK
+from plant.blocks.lanemath import exp_r, tanh_r
 from plant.layout import (
     IN_F_EXT,
     LOAD_CART,
@@ -28,6 +27,7 @@ from plant.layout import (
     P_K_ROD,
     P_LOAD_KIND,
     P_M_CART,
+    P_NUMERICS,
     P_SF_COULOMB,
     P_SF_EPS,
     P_SF_ON,
@@ -47,8 +47,9 @@ def seal_friction(p, v):
     """Rod-seal friction force in N opposing v: Coulomb + Stribeck, tanh-regularised."""
     if p[P_SF_ON] > 0.5:
         vs = v / p[P_SF_VS]
-        level = p[P_SF_COULOMB] + (p[P_SF_STATIC] - p[P_SF_COULOMB]) * math.exp(-vs * vs)
-        return level * math.tanh(v / p[P_SF_EPS])
+        level = p[P_SF_COULOMB] + (p[P_SF_STATIC] - p[P_SF_COULOMB]) * exp_r(-vs * vs,
+                                                                            p[P_NUMERICS])
+        return level * tanh_r(v / p[P_SF_EPS], p[P_NUMERICS])
     return 0.0
 
 

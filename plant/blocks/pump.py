@@ -10,12 +10,12 @@ shaft seal's Coulomb friction (``effects.pump_coulomb``) are the pump's friction
 
 from __future__ import annotations
 
-import math
-
 from numba import njit
 
+from plant.blocks.lanemath import sin_r, tanh_r
 from plant.layout import (
     P_JP,
+    P_NUMERICS,
     P_PC_EPS,
     P_PC_FORCE,
     P_PC_ON,
@@ -36,9 +36,9 @@ def ripple_and_friction(p, vp, theta_rotor, tq):
     g = 1.0
     f_cp = 0.0
     if p[P_PC_ON] > 0.5:
-        f_cp = p[P_PC_FORCE] * math.tanh(vp / p[P_PC_EPS])
+        f_cp = p[P_PC_FORCE] * tanh_r(vp / p[P_PC_EPS], p[P_NUMERICS])
     if p[P_PULS_ON] > 0.5:
-        ripple = math.sin(p[P_PULS_ORDER] * theta_rotor + p[P_PULS_PHASE])
+        ripple = sin_r(p[P_PULS_ORDER] * theta_rotor + p[P_PULS_PHASE], p[P_NUMERICS])
         g = 1.0 + p[P_PULS_AMP] * ripple
         # Meshing torque ripple: a load torque that depends on where the teeth mesh, a
         # constant part and one proportional to the pressure force the pump works against

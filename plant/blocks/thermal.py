@@ -10,14 +10,14 @@ E_in + E_ext = E_diss + E_stored closes.
 
 from __future__ import annotations
 
-import math
-
 from numba import njit
 
+from plant.blocks.lanemath import exp_r
 from plant.layout import (
     IN_T_AMB,
     P_COOL_G,
     P_HEAT_CAP,
+    P_NUMERICS,
     P_ROD_TAU,
     P_T_REF,
     P_TEMP_ON,
@@ -35,7 +35,7 @@ from plant.layout import (
 def viscosity_ratio(p, t_oil):
     """mu(T)/mu(T_ref): 1 when the oil-temperature effect is off."""
     if p[P_TEMP_ON] > 0.5:
-        return math.exp(-p[P_VISC_COEFF] * (t_oil - p[P_T_REF]))
+        return exp_r(-p[P_VISC_COEFF] * (t_oil - p[P_T_REF]), p[P_NUMERICS])
     return 1.0
 
 

@@ -16,6 +16,7 @@ from hil.fieldbus.system import BusSystem
 from hil.fieldbus.topology import load_topology
 from hil.sim.pc import demo_pc
 from plant.config import load_config
+from plant.layout import Y_TAU_Q
 
 FAULTS = [
     {"link": "fieldbus.down", "kind": "drop", "rate": 0.05, "start_s": 0.3, "end_s": 0.5,
@@ -38,13 +39,23 @@ def _stacks(bs):
     return [s for b in bs.chain.boxes for s in getattr(b, "stacks", [])]
 
 
-def _run(topo, cfg, model, cycles, faults=None, workers=1, overlap=True, sample=False):
-    """(fieldbus input images, per-cycle MCU downstream words and plant outputs or None)."""
+def _run(topo, cfg, model, cycles, faults=None, workers=1, overlap=True, sample=False,
+         lanes=None, tap=None):
+    """(fieldbus input images, per-cycle MCU downstream words and plant outputs or None).
+    ``lanes``: the engine's plants in lanes or not (None: its default); ``tap``: a list
+    that receives the engine's tap (plant outputs of every tick) of every cycle."""
     numba.set_num_threads(workers)
     with BusSystem(topo, cfg, "inproc", model=model, faults=faults) as bs:
-        if bs.chain.engine is not None:
-            bs.chain.engine.overlap = overlap
-            bs.chain.engine.workers = workers
+        e = bs.chain.engine
+        if e is not None:
+            e.overlap = overlap
+            e.workers = workers
+            if lanes is not None:
+                e.lanes = lanes
+            if tap is not None:
+                e.tap(plant=True, trace=True)
+                e.on_cycle = lambda t: tap.append((e.tap_y.copy(), e.tap_trace.copy(),
+                                                   e.arrays.plant.y.copy()))
         stacks = _stacks(bs)
         words, plant = [], []
         pc = demo_pc(400.0, 3.0)
@@ -82,9 +93,33 @@ def test_workers_and_overlap_do_not_change_results():
     topo, cfg = load_topology("hydra_full"), load_config("hydra_default")
     ref, _ = _run(topo, cfg, "stack", 40)
     assert np.unique(ref.inputs[20:], axis=0).shape[0] == 20  # the actuators move
-    for workers, overlap in ((1, False), (2, False), (2, True)):
-        rec, _ = _run(topo, cfg, "robot", 40, workers=workers, overlap=overlap)
-        assert rec.inputs.tobytes() == ref.inputs.tobytes(), (workers, overlap)
+    for workers, overlap, lanes in ((1, False, True), (2, False, True), (2, True, True),
+                                    (1, False, False), (2, True, False)):
+        rec, _ = _run(topo, cfg, "robot", 40, workers=workers, overlap=overlap, lanes=lanes)
+        assert rec.inputs.tobytes() == ref.inputs.tobytes(), (workers, overlap, lanes)
+
+
+def test_the_tap_gives_every_tick_and_changes_nothing():
+    """The engine's tap (plant outputs and board trace of every tick of a cycle): a run
+    with it gives the same bytes as one without; each cycle's last row is the plant's
+    state after the cycle; the rows move from tick to tick; the trace's PWM columns are
+    the board's compare counts, the duties the plant was driven with."""
+    from hil.sim.actuator import TRACE_DUTY, TRACE_ON
+
+    topo, cfg = load_topology("hydra_full"), load_config("hydra_default")
+    plain, _ = _run(topo, cfg, "robot", 30, lanes=True)
+    taps = []
+    tapped, _ = _run(topo, cfg, "robot", 30, lanes=True, tap=taps)
+    assert tapped.inputs.tobytes() == plain.inputs.tobytes()
+    assert len(taps) >= 29
+    for ys, _, y_after in taps:
+        np.testing.assert_array_equal(ys[:, -1], y_after)
+    ys, trace, _ = taps[-1]
+    assert ys.shape == (topo.n_actuators, 20, y_after.shape[1])
+    moving = np.all(np.diff(ys[:, :, Y_TAU_Q], axis=1) != 0, axis=1)
+    assert moving.sum() > topo.n_actuators // 2
+    on = trace[:, :, TRACE_ON] != 0
+    assert on.any() and np.all(trace[:, :, TRACE_DUTY][on] > 0)
 
 
 def test_bus_records_keep_the_last_cycles_in_order():

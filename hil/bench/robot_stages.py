@@ -1,0 +1,150 @@
+"""Where the robot engine's time goes: each stage of the per-tick work (plant RK4, plant
+outputs with noise, sensor chips, driver board, LVDS link, MCU law) timed on its own over
+every actuator of a warmed-up ``hydra_full`` robot, in CPU ns per actuator tick.
+
+Each stage runs from a snapshot of the robot's arrays, alone, ``ticks`` times over all
+actuators, in the order the engine would visit them (the per-actuator layout: every
+actuator's whole stage, one after the other; or, for the lane-wise engine, each stage over
+all actuators at once). A stage alone keeps its working set in cache as it would inside the
+engine, and its inputs are those the engine left (a running robot), so the figures add up
+to the compiled call's cost to within the calls' overhead (``total`` row: the engine's
+compiled call itself over the same cycles)."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from firmware_model.fpga.tick import control_tick
+from firmware_model.lvds import link as LK
+from plant import kernel, lanes
+from plant import layout as L
+from plant.config import Config
+from plant.sensors.harness import digitise
+
+#: Stage names, in the order of one tick.
+STAGES = ("plant RK4 + effects", "plant outputs + noise", "sensor chips", "driver board",
+          "LVDS link", "MCU law (C build)", "plant RK4 + effects, in lanes")
+
+
+@njit(cache=True, nogil=True)
+def _stage(which, n_ticks, tick0, x, p, u, y, rng, work, k, raw, c, st, down, up, mdown,
+           mup, lk):
+    """``n_ticks`` ticks of one stage for every actuator (rows), actuator by actuator."""
+    for i in range(x.shape[0]):
+        for j in range(n_ticks):
+            if which == 0:
+                kernel.rk4_tick(x[i], p[i], u[i], work[i])
+            elif which == 1:
+                kernel.outputs(x[i], p[i], u[i], rng[i], y[i])
+            elif which == 2:
+                digitise(y[i], k[i], tick0 + j, raw[i])
+            elif which == 3:
+                control_tick(c[i], st[i], down[i], up[i], raw[i])
+            else:
+                LK.sweep_down(lk[i], mdown[i], st[i], down[i])
+                LK.sweep_up(lk[i], up[i], mup[i])
+
+
+@njit(cache=True, nogil=True)
+def _rk4_in_lanes(n_ticks, x, p, u, blocks, sizes, n_sub_max, buf):
+    """``n_ticks`` RK4 ticks of every actuator, batch by batch in lanes, with the moves in
+    and out of the lane buffer the engine makes every tick."""
+    for b in range(blocks.shape[0]):
+        lanes.load_params(buf, p, blocks[b], sizes[b])
+        for _ in range(n_ticks):
+            lanes.load_states(buf, x, u, blocks[b], sizes[b])
+            lanes.rk4_lanes(buf, n_sub_max)
+            lanes.store_states(buf, x, blocks[b], sizes[b])
+
+
+@dataclass
+class StageCosts:
+    """CPU ns per actuator tick of each stage (``rows``: (stage, ns)), over ``ticks``."""
+
+    actuators: int
+    ticks: int
+    rows: list[tuple[str, float]]
+
+
+def _snapshot(arrays) -> list[np.ndarray]:
+    s = arrays
+    return [a.copy() for a in (s.plant.x, s.plant.params, s.plant.u, s.plant.y, s.plant.rng,
+                                s.plant.work, s.sensors.chips, s.sensors.raw, s.board.params,
+                                s.board.state, s.board.down, s.board.up, s.link.mcu_down,
+                                s.link.mcu_up, s.link.state)]
+
+
+def stage_costs(cfg: Config, ticks: int = 2000, warm_s: float = 0.2,
+                topology: str = "hydra_full") -> StageCosts:
+    """Run ``warm_s`` of the robot (force sines from the demo PC), then time each stage
+    alone over ``ticks`` ticks from that state (best of three)."""
+    from hil.fieldbus.system import BusSystem
+    from hil.fieldbus.topology import load_topology
+    from hil.sim.pc import demo_pc
+
+    topo = load_topology(topology)
+    pc = demo_pc()
+    with BusSystem(topo, cfg, "inproc", model="robot") as bs:
+        eng = bs.chain.engine
+        eng.workers = 1
+        bs.run(int(round(warm_s * 1000)), pc, keep=0)
+        eng.wait()
+        snap = _snapshot(eng.arrays)
+        n = eng.n
+        rows = []
+        for which, name in enumerate(STAGES[:5]):
+            _stage(which, 1, 0, *_snapshot(eng.arrays))  # compile outside the timing
+            best = np.inf
+            for _ in range(3):
+                arrays = [a.copy() for a in snap]
+                c0 = time.thread_time()
+                _stage(which, ticks, eng.tick, *arrays)
+                best = min(best, time.thread_time() - c0)
+            rows.append((name, best * 1e9 / (n * ticks)))
+        # The MCU law: one step per MCU period per actuator, from copies of the records.
+        period = eng.period
+        steps = ticks // period
+        best = np.inf
+        for _ in range(3):
+            states, inp, out = eng.states.copy(), eng.inp.copy(), eng.out.copy()
+            c0 = time.thread_time()
+            for _ in range(steps):
+                eng.law.step_many(states, inp, out)
+            best = min(best, time.thread_time() - c0)
+        rows.append((STAGES[5], best * 1e9 / (n * ticks)))
+        if eng.lanes:
+            eng._make_blocks()
+            buf = lanes.lane_buffer()
+            n_sub = int(snap[1][:, L.P_N_SUB].max())
+            _rk4_in_lanes(1, snap[0].copy(), snap[1], snap[2], eng._blocks, eng._sizes, n_sub,
+                          buf)
+            best = np.inf
+            for _ in range(3):
+                x = snap[0].copy()
+                c0 = time.thread_time()
+                _rk4_in_lanes(ticks, x, snap[1], snap[2], eng._blocks, eng._sizes, n_sub, buf)
+                best = min(best, time.thread_time() - c0)
+            rows.append((STAGES[6], best * 1e9 / (n * ticks)))
+        # The engine's compiled call as a whole (every stage, 1 thread), same ticks, with
+        # the plants one actuator at a time and (where the recipe allows) in lanes.
+        cycles = max(1, ticks // eng.cycle_ticks)
+        eng.overlap = False
+        for use_lanes in (False, True) if eng.lanes else (False,):
+            eng.lanes = use_lanes
+            eng._counter[0] = 0
+            eng._compute(eng.cycle_ticks)  # compile outside the timing
+            c0 = time.thread_time()
+            for _ in range(cycles):
+                eng._counter[0] = 0
+                eng._compute(eng.cycle_ticks)
+            rows.append((f"total: the engine's compiled call, "
+                         f"{'plants in lanes' if use_lanes else 'one actuator at a time'}",
+                         (time.thread_time() - c0) * 1e9 / (n * cycles * eng.cycle_ticks)))
+    return StageCosts(n, ticks, rows)
+
+
+__all__ = ["STAGES", "StageCosts", "stage_costs"]
