@@ -26,7 +26,7 @@ import gc
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
@@ -37,6 +37,7 @@ from hil.fieldbus.chain import CYCLE_TICKS
 from hil.fieldbus.esc import frames as esc_frames
 from hil.fieldbus.esc.slaves import describe_all
 from hil.fieldbus.topology import Topology
+from hil.sim.cpu_account import run_delay_ns, steal_during, steal_s
 from hil.transports.rawether import RawEthernet
 from plant.config import Config
 
@@ -125,6 +126,8 @@ class BoxClock(threading.Thread):
         self.behind = behind
         self.stats = BoxClockStats()
         self.error: BaseException | None = None
+        #: Time the thread was runnable but waited for its CPU while on the clock [ns].
+        self.run_delay_ns: int | None = None
         self._stop_ev = threading.Event()
         self._set_up = threading.Event()
         self.t0 = 0
@@ -146,7 +149,13 @@ class BoxClock(threading.Thread):
                     self.on_start()
             finally:
                 self._set_up.set()
-            self._run()
+            d0 = run_delay_ns()
+            try:
+                self._run()
+            finally:
+                d1 = run_delay_ns()
+                if d0 is not None and d1 is not None:
+                    self.run_delay_ns = d1 - d0
         except BaseException as exc:  # reported by the owner, never lost with the thread
             self.error = exc
 
@@ -228,6 +237,16 @@ class EcatServeStats:
     send_errors: int = 0
     late_us: float = DEFAULT_LATE_US
     reply_max_us: float = 0.0
+    #: Longest the frame thread did not run past its 1 ms poll, and its longest wake-up.
+    frame_gap_max_us: float = 0.0
+    frame_work_max_us: float = 0.0
+    #: Time the frame / box thread was runnable but waited for its CPU [ms] (None: unknown).
+    frame_run_delay_ms: float | None = None
+    box_run_delay_ms: float | None = None
+    #: Per CPU: time the hypervisor did not run it during the serving [ms] (None: unknown).
+    steal_ms: dict | None = None
+    #: The first late replies: when, how long, wake-up and work (FrameThread.late_replies).
+    late_replies: list = field(default_factory=list)
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -254,6 +273,7 @@ def serve(chain: ServedChain, link: RawEthernet, seconds: float | None = None,
     gc.collect()
     gc.freeze()  # what exists now is never collected: no pause scans it
     clock = time.monotonic_ns
+    steal0 = steal_s()
     start = clock()
     frames.start(start)
     boxes.begin(start)
@@ -271,6 +291,7 @@ def serve(chain: ServedChain, link: RawEthernet, seconds: float | None = None,
         frames.stop()
         boxes.stop()
         wall = (clock() - start) * 1e-9
+        steal1 = steal_s()
         gc.unfreeze()
     for err in (frames.error, boxes.error):
         if err is not None:
@@ -286,5 +307,15 @@ def serve(chain: ServedChain, link: RawEthernet, seconds: float | None = None,
                         other_frames=int(f[esc_frames.F_OTHER]),
                         dropped_frames=int(f[esc_frames.F_DROPPED]),
                         send_errors=int(f[esc_frames.F_SEND_ERRORS]), late_us=late_us,
-                        reply_max_us=int(f[esc_frames.F_MAX_NS]) / 1e3)
+                        reply_max_us=int(f[esc_frames.F_MAX_NS]) / 1e3,
+                        frame_gap_max_us=max(int(f[esc_frames.F_MAX_GAP_NS]), 0) / 1e3,
+                        frame_work_max_us=int(f[esc_frames.F_MAX_WORK_NS]) / 1e3,
+                        frame_run_delay_ms=_ms(frames.run_delay_ns),
+                        box_run_delay_ms=_ms(boxes.run_delay_ns),
+                        steal_ms=steal_during(steal0, steal1),
+                        late_replies=frames.late_replies(start))
     return st, frames.hist.copy()
+
+
+def _ms(ns: int | None) -> float | None:
+    return None if ns is None else round(ns / 1e6, 3)
