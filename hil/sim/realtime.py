@@ -43,6 +43,14 @@ def split_cpus() -> tuple[set[int] | None, set[int] | None]:
     return {c[-1]}, set(c[:-1])
 
 
+def compute_cpu_count(plan: RealtimePlan | None = None) -> int:
+    """CPUs for the boxes' compute: the plan's compute CPUs, else all but one (the frames
+    keep one), at least one."""
+    if plan is not None and plan.compute_cpus is not None:
+        return len(plan.compute_cpus)
+    return max(1, len(cpus()) - 1)
+
+
 def mlockall() -> str | None:
     """Lock every page; None, or why not."""
     libc = ctypes.CDLL(None, use_errno=True)

@@ -5,15 +5,13 @@ runs: ``eha-hil serve --transport ethercat --interface IF --topology hydra_full`
   slaves' memories (registers, SII, sync-manager buffers, FMMUs) in compiled code that holds
   no interpreter lock, and runs the slaves' own clock (process-data watchdogs) on the wall
   clock. It never waits for a box.
-* The **box clock** (:class:`BoxClock`) advances the boxes behind the slaves (echo models,
-  the full stack, or the whole-robot engine) one 1 ms cycle at a time in a thread of its
-  own: cycle ``k`` is released at the absolute deadline ``t0 + k * 1 ms`` (never from the
-  previous wake-up, so no drift). At the start of a cycle each box takes the newest output
-  record its ESC holds, at its end it publishes its input record: the sync managers'
-  3-buffers (:mod:`firmware_model.esc.compiled`), so neither side ever sees half a record
-  and neither waits for the other. Behind its schedule, the box clock runs cycles back to
-  back; more than :data:`MAX_LAG_CYCLES` behind, it moves the schedule forward (slipped
-  cycles). How far simulated time fell behind wall time is reported (``lag_max_ms``).
+* The **box clock** (:class:`hil.fieldbus.box_clock.BoxClock`) advances the boxes behind
+  the slaves (echo models, the full stack, or the whole-robot engine) one 1 ms cycle at a
+  time in a thread of its own, released at absolute deadlines. At the start of a cycle
+  each box takes the newest output record its ESC holds, at its end it publishes its input
+  record: the sync managers' 3-buffers (:mod:`firmware_model.esc.compiled`), so neither
+  side ever sees half a record and neither waits for the other. How far simulated time
+  fell behind wall time is reported (``lag_max_ms``).
 
 Before the frame path starts, the boxes run :data:`WARMUP_CYCLES` cycles and the frame loop
 is compiled (or loaded): first calls take tens of ms (seconds with a cold cache), which
@@ -32,17 +30,16 @@ import numpy as np
 
 from firmware_model.esc import compiled as ec
 from firmware_model.esc.compiled import EscArrays
+from hil.fieldbus.box_clock import BoxClock
 from hil.fieldbus.boxes import box_engine, make_box
 from hil.fieldbus.chain import CYCLE_TICKS
 from hil.fieldbus.esc import frames as esc_frames
 from hil.fieldbus.esc.slaves import describe_all
 from hil.fieldbus.topology import Topology
-from hil.sim.cpu_account import run_delay_ns, steal_during, steal_s
+from hil.sim.cpu_account import steal_during, steal_s
 from hil.transports.rawether import RawEthernet
 from plant.config import Config
 
-PERIOD_NS = 1_000_000
-MAX_LAG_CYCLES = 50
 WARMUP_CYCLES = 3
 #: A reply later than this [us] after its frame arrived counts as late (SOEM's stock
 #: receive timeout is 2000 us; one cycle is 1000 us).
@@ -99,125 +96,6 @@ class ServedChain:
                  "al_status": int(a.mem[i, 0x130]) | int(a.mem[i, 0x131]) << 8,
                  "al_status_code": int(a.mem[i, 0x134]) | int(a.mem[i, 0x135]) << 8}
                 for i in range(a.n)]
-
-
-@dataclass
-class BoxClockStats:
-    cycles: int = 0              # box cycles run (1 ms simulated each)
-    overruns: int = 0            # cycles finished after their deadline
-    slipped_cycles: int = 0      # cycles skipped when more than MAX_LAG_CYCLES behind
-    lag_max_ms: float = 0.0      # largest lag of simulated behind wall time
-    compute_s: float = 0.0       # wall time spent in the cycles
-    worst_cycle_ms: float = 0.0
-    worst_cycle_at: int = 0      # its number
-
-
-class BoxClock(threading.Thread):
-    """Runs ``cycle()`` every :data:`PERIOD_NS` of the monotonic clock from ``t0_ns``,
-    sleeping to absolute deadlines, until :meth:`stop`. ``on_start``: run first inside the
-    thread (its scheduling, its CPU)."""
-
-    def __init__(self, cycle: Callable[[], None], on_start: Callable[[], None] | None = None,
-                 behind: Callable[[int], None] | None = None) -> None:
-        super().__init__(name="box-clock", daemon=True)
-        self.cycle = cycle
-        self.on_start = on_start
-        #: behind(cycles): after each cycle, how many whole cycles it is behind schedule.
-        self.behind = behind
-        self.stats = BoxClockStats()
-        self.error: BaseException | None = None
-        #: Time the thread was runnable but waited for its CPU while on the clock [ns].
-        self.run_delay_ns: int | None = None
-        self._stop_ev = threading.Event()
-        self._set_up = threading.Event()
-        self.t0 = 0
-
-    def begin(self, t0_ns: int) -> None:
-        """Start (returns once the thread set itself up) with cycle 0 released at t0_ns."""
-        self.t0 = t0_ns
-        self.start()
-        self._set_up.wait()
-
-    def stop(self) -> None:
-        self._stop_ev.set()
-        self.join()
-
-    def run(self) -> None:
-        try:
-            try:
-                if self.on_start is not None:
-                    self.on_start()
-            finally:
-                self._set_up.set()
-            d0 = run_delay_ns()
-            try:
-                self._run()
-            finally:
-                d1 = run_delay_ns()
-                if d0 is not None and d1 is not None:
-                    self.run_delay_ns = d1 - d0
-        except BaseException as exc:  # reported by the owner, never lost with the thread
-            self.error = exc
-
-    def _run(self) -> None:
-        st, clock, sleep_until = self.stats, time.monotonic_ns, _sleep_until
-        t0 = self.t0
-        k = 0
-        gc.disable()  # a collection inside the loop would be a stall; collected between
-        try:
-            while not self._stop_ev.is_set():
-                release = t0 + k * PERIOD_NS
-                if clock() < release:
-                    sleep_until(release)
-                    continue
-                begin = clock()
-                self.cycle()
-                done = clock()
-                k += 1
-                st.cycles += 1
-                spent = done - begin
-                st.compute_s += spent * 1e-9
-                if spent / 1e6 > st.worst_cycle_ms:
-                    st.worst_cycle_ms, st.worst_cycle_at = spent / 1e6, k - 1
-                late = done - (t0 + k * PERIOD_NS)
-                behind = max(late, 0) // PERIOD_NS
-                if late > 0:
-                    st.overruns += 1
-                    if behind > MAX_LAG_CYCLES:
-                        t0 += behind * PERIOD_NS
-                        st.slipped_cycles += behind
-                if self.behind is not None:
-                    self.behind(behind)
-                lag = done - self.t0 - st.cycles * PERIOD_NS
-                st.lag_max_ms = max(st.lag_max_ms, lag / 1e6)
-        finally:
-            gc.enable()
-
-
-def _sleep_until(deadline_ns: int) -> None:
-    """Sleep to an absolute CLOCK_MONOTONIC deadline (clock_nanosleep, TIMER_ABSTIME)."""
-    _rt.sleep_until(deadline_ns)
-
-
-class _Rt:
-    def __init__(self) -> None:
-        import ctypes
-
-        libc = ctypes.CDLL(None, use_errno=True)
-        self._ts = (ctypes.c_long * 2)()
-        f = libc.clock_nanosleep
-        f.restype, f.argtypes = ctypes.c_int, [ctypes.c_int, ctypes.c_int, ctypes.c_void_p,
-                                               ctypes.c_void_p]
-        self._f = f
-
-    def sleep_until(self, deadline_ns: int) -> None:
-        ts = self._ts
-        ts[0], ts[1] = divmod(deadline_ns, 1_000_000_000)
-        self._f(1, 1, ts, None)  # CLOCK_MONOTONIC, TIMER_ABSTIME (ctypes drops the GIL)
-
-
-_rt = _Rt()
-
 
 @dataclass
 class EcatServeStats:
