@@ -104,6 +104,7 @@ class EcatServeStats:
     overruns: int = 0
     slipped_cycles: int = 0
     lag_max_ms: float = 0.0
+    lag_max_at_s: float = 0.0
     compute_s: float = 0.0
     worst_cycle_ms: float = 0.0
     worst_cycle_at: int = 0
@@ -125,6 +126,9 @@ class EcatServeStats:
     steal_ms: dict | None = None
     #: The first late replies: when, how long, wake-up and work (FrameThread.late_replies).
     late_replies: list = field(default_factory=list)
+    #: CLOCK_MONOTONIC at the start [s], the origin of the times above (to find them in a
+    #: system trace, e.g. ftrace with trace_clock mono).
+    start_monotonic_s: float = 0.0
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -177,6 +181,7 @@ def serve(chain: ServedChain, link: RawEthernet, seconds: float | None = None,
     f, b = frames.stats, boxes.stats
     st = EcatServeStats(wall_s=wall, cycles=b.cycles, overruns=b.overruns,
                         slipped_cycles=b.slipped_cycles, lag_max_ms=b.lag_max_ms,
+                        lag_max_at_s=b.lag_max_at_s,
                         compute_s=b.compute_s, worst_cycle_ms=b.worst_cycle_ms,
                         worst_cycle_at=b.worst_cycle_at,
                         frames_received=int(f[esc_frames.F_RECEIVED]),
@@ -191,7 +196,8 @@ def serve(chain: ServedChain, link: RawEthernet, seconds: float | None = None,
                         frame_run_delay_ms=_ms(frames.run_delay_ns),
                         box_run_delay_ms=_ms(boxes.run_delay_ns),
                         steal_ms=steal_during(steal0, steal1),
-                        late_replies=frames.late_replies(start))
+                        late_replies=frames.late_replies(start),
+                        start_monotonic_s=start * 1e-9)
     return st, frames.hist.copy()
 
 
