@@ -350,6 +350,7 @@ def cmd_serve(args: argparse.Namespace, cfg) -> Outcome:
 
 def _serve(args: argparse.Namespace, cfg, topo, capture: str | None) -> Outcome:
     from hil.fieldbus.capture import CaptureError, CaptureWriter
+    from hil.sim.cpu_account import steal_during, steal_s
     from hil.sim.realtime import RealtimePlan
     from hil.transports import backend
 
@@ -400,6 +401,7 @@ def _serve(args: argparse.Namespace, cfg, topo, capture: str | None) -> Outcome:
         stopping.append(signum)
 
     old = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+    steal0 = steal_s()
     try:
         st = server.run(args.seconds, stop=lambda: bool(stopping),
                         progress=None if args.quiet else progress,
@@ -456,6 +458,9 @@ def _serve(args: argparse.Namespace, cfg, topo, capture: str | None) -> Outcome:
             "reply_us": reply_times.summary(server.replies.hist, server.replies.max_us),
             "reply_histogram_us": reply_times.decades(server.replies.hist),
             "max_late_percent": args.max_late_percent, "max_lag_ms": args.max_lag_ms,
+            "steal_ms": steal_during(steal0, steal_s()),
+            "realtime": {"applied": rt.applied, "refused": rt.warnings,
+                         "box_thread_demotions": rt.demotions},
             "chain": {k: v for k, v in chain.stats.__dict__.items() if k != "extra"},
             "ok": not failures, "failures": failures}
     # the report for people (the root prints ``data`` instead under --json)
@@ -486,6 +491,8 @@ def _serve(args: argparse.Namespace, cfg, topo, capture: str | None) -> Outcome:
         ["master cycles missed / incomplete", f"{st.missed_cycles} / "
          f"{st.incomplete_cycles}"],
         ["master sessions", st.sessions],
+        ["time the hypervisor stole from each CPU", _steal(data["steal_ms"])],
+        ["real time", ", ".join(rt.applied) or "off"],
     ]
     lines = [f"serve {where}: {topo.name}, {model} model", table(["", "value"], rows)]
     if cap is not None:
@@ -554,6 +561,7 @@ def cmd_serve_ethercat(args: argparse.Namespace, cfg, topo) -> Outcome:
     data = {"transport": "ethercat", "interface": args.interface, "topology": topo.name,
             "model": model, "stack_boxes": list(args.stack_boxes), **st.as_dict(),
             "simulated_s": st.cycles * PERIOD_S,
+            "frames_per_s": st.frames_answered / st.wall_s if st.wall_s > 0 else 0.0,
             "overrun_percent": 100 * st.overruns / st.cycles if st.cycles else 0.0,
             "late_percent": (100 * st.frames_late / st.frames_answered
                              if st.frames_answered else 0.0),
@@ -611,17 +619,35 @@ def ethercat_table(d: dict) -> str:
         ["slipped cycles", d["slipped_cycles"]],
         ["lag of simulated behind wall time, max",
          f"{d['lag_max_ms']:.2f} ms (allowed {d['thresholds']['max_lag_ms']:g} ms)"],
-        ["frames received / answered", f"{d['frames_received']} / {d['frames_answered']}"],
+        ["frames received / answered", f"{d['frames_received']} / {d['frames_answered']}"
+         f" ({d['frames_per_s']:.0f} per s; the boxes take the newest outputs once per "
+         "1 ms cycle)"],
         ["reply p50 / p99 / p99.9 / max", reply_times.line(d["reply_us"])],
         [f"replies later than {d['late_us']:g} us", f"{d['frames_late']} "
          f"({d['late_percent']:.3f}%, allowed {d['thresholds']['max_late_percent']:g}%)"],
         ["frames dropped (bad) / not EtherCAT", f"{d['dropped_frames']} / "
          f"{d['other_frames']}"],
+        ["frame thread: longest absence past its 1 ms poll / longest work",
+         f"{d['frame_gap_max_us']:.0f} / {d['frame_work_max_us']:.0f} us"],
+        ["time the hypervisor stole from each CPU", _steal(d["steal_ms"])],
         ["real time", ", ".join(d["realtime"]["applied"]) or "off"],
     ]
     hist = ", ".join(f"{k}: {v}" for k, v in d["reply_histogram_us"].items() if v)
+    late = sorted(d["late_replies"], key=lambda e: -e["reply_us"])[:5]
     return (f"serve {d['interface']}: {d['topology']}, {d['model']} model\n"
-            + table(["", "value"], rows) + f"\nreply times: {hist or 'none'}")
+            + table(["", "value"], rows) + f"\nreply times: {hist or 'none'}"
+            + ("\nlate replies, worst: " + "; ".join(
+                f"at {e['at_s']:.3f} s {e['reply_us']:.0f} us (woke {e['wake_us']:.0f} us "
+                f"after the frame arrived, then {e['work_us']:.0f} us to its send)"
+                for e in late) if late else ""))
+
+
+def _steal(per_cpu: dict | None) -> str:
+    """Stolen time per CPU [ms] (a virtual machine's CPU not run by its host: every
+    thread here stops, whatever its priority)."""
+    if per_cpu is None:
+        return "unknown (no /proc/stat)"
+    return ", ".join(f"{c} {v:.0f} ms" for c, v in per_cpu.items())
 
 
 def add_parser(sub) -> None:  # noqa: ANN001 - argparse's sub-parsers
