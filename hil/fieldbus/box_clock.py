@@ -35,6 +35,8 @@ from hil.sim.cpu_account import run_delay_ns
 PERIOD_NS = 1_000_000
 #: More than this many cycles behind, the schedule moves forward (the cycles are slipped).
 MAX_LAG_CYCLES = 50
+#: The busy share handed to ``behind`` is measured over windows this long [ns].
+BUSY_WINDOW_NS = 250_000_000
 
 
 @dataclass
@@ -57,11 +59,12 @@ class BoxClock(threading.Thread):
     thread (its scheduling, its CPU)."""
 
     def __init__(self, cycle: Callable[[], None], on_start: Callable[[], None] | None = None,
-                 behind: Callable[[int], None] | None = None) -> None:
+                 behind: Callable[[int, float], None] | None = None) -> None:
         super().__init__(name="box-clock", daemon=True)
         self.cycle = cycle
         self.on_start = on_start
-        #: behind(cycles): after each cycle, how many whole cycles it is behind schedule.
+        #: behind(cycles, busy): after each cycle, how many whole cycles it is behind
+        #: schedule, and the share of the last full BUSY_WINDOW_NS it spent in cycles.
         self.behind = behind
         self.stats = BoxClockStats()
         self.error: BaseException | None = None
@@ -103,6 +106,7 @@ class BoxClock(threading.Thread):
         t0 = self.t0
         k = 0
         was_late = False
+        busy, window0, window_spent = 0.0, t0, 0
         gc.disable()  # a collection inside the loop would be a stall; collected between
         try:
             while not self._stop_ev.is_set():
@@ -129,8 +133,11 @@ class BoxClock(threading.Thread):
                         t0 += behind * PERIOD_NS
                         st.slipped_cycles += behind
                 was_late = late > 0
+                window_spent += spent
+                if done - window0 >= BUSY_WINDOW_NS:
+                    busy, window0, window_spent = window_spent / (done - window0), done, 0
                 if self.behind is not None:
-                    self.behind(behind)
+                    self.behind(behind, busy)
                 lag = done - self.t0 - st.cycles * PERIOD_NS
                 if lag / 1e6 > st.lag_max_ms:
                     st.lag_max_ms, st.lag_max_at_s = lag / 1e6, (done - self.t0) * 1e-9
