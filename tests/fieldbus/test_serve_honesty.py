@@ -171,3 +171,43 @@ def test_a_master_faster_than_the_boxes_is_answered_and_reported(netns):
     assert rep["cycles"] + rep["slipped_cycles"] >= 0.8 * rep["wall_s"] * 1000
     assert rep["frames_per_s"] == pytest.approx(rep["frames_answered"] / rep["wall_s"])
     assert rep["frames_per_s"] > 1000  # faster than the boxes, and said so
+
+
+@pytest.mark.slow  # a server process with the whole-robot engine, ~10 s at load
+def test_udp_serve_runs_the_whole_robot_on_its_own_clock():
+    """``serve --transport udp --model robot``: the whole-robot engine behind the 16 boxes of
+    hydra_full on the box clock; a master's enable and force command cross the 3-buffers
+    (actuator 0's board reports enabled) and every frame comes back with the plan's WKC."""
+    from firmware_model.mcu.mcu import BOARD_ENABLED
+    from hil.fieldbus.master import Master
+    from hil.fieldbus.topology import load_topology
+    from hil.transports import open_transport
+
+    p = subprocess.Popen([sys.executable, "-m", "hil.cli", "serve", "--transport", "udp",
+                          "--port", "0", "--topology", "hydra_full", "--model", "robot",
+                          "--seconds", "4", "--json", "-q", "--max-lag-ms", "1e6",
+                          "--max-overrun-percent", "100", "--max-late-percent", "100"],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=_env())
+    line = p.stderr.readline()
+    assert "ready on udp 127.0.0.1:" in line and "robot model" in line, line
+    port = int(line.split("ready on udp 127.0.0.1:")[1].split(";")[0])
+    m = Master(load_topology("hydra_full"), crc_trailer=False)
+    status = 0
+    with open_transport("udp", "master", remote_port=port) as end:
+        for _ in range(300):
+            m.set_actuator(0, "force", 200.0, enable=True)
+            for f in m.frames():
+                end.send(f)
+            while not all(m._answered):
+                reply = end.recv(timeout=5.0)
+                assert reply is not None
+                m.receive(reply)
+            status = m.actuator_inputs(0)["status"]
+            m.end_cycle()
+            time.sleep(1e-3)
+    out, err = p.communicate(timeout=120)
+    rep = json.loads(out)
+    assert rep["model"] == "robot" and p.returncode == 0, rep["failures"]
+    assert m.stats.frames_ok == 600 and m.stats.wkc_errors == 0
+    assert rep["frames_served"] == 600 and rep["cycles"] > 300
+    assert status & BOARD_ENABLED
