@@ -33,6 +33,8 @@ RECORDED_BEFORE: dict[str, Any] = {
     # Runs recorded before entrained air existed had none (the fraction is then unused).
     "effects.entrained_air.enabled": False,
     "effects.entrained_air.volume_fraction": 0.01,
+    # Read only by the F1 and F6 scenarios, never by a plant a log recorded.
+    "load.beam_reinforced_axial_stiffness_n_per_m": 5.813e6,
 }
 
 #: Keys that take one of a fixed set of strings.
@@ -106,6 +108,7 @@ RANGES: dict[str, Range] = {
     "load.conrod_damping_ns_per_m": _span(0.0, 1e8),
     "load.beam_axial_stiffness_n_per_m": _pos(1e11),
     "load.beam_reinforcement_ratio": _pos(1e3),
+    "load.beam_reinforced_axial_stiffness_n_per_m": _pos(1e11),
     "load.cart_mass_kg": _pos(1e5),
     "load.cart_damping_ns_per_m": _span(0.0, 1e8),
     "load.x0_m": _span(-1.0, 1.0),

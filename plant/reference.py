@@ -9,6 +9,10 @@ piston.
     d tau_q/dt  = k_s (v_p - tau_q / d_s - v_c)                leakage d_s, elasticity k_s
     J_c dv_c/dt = tau_q - d_c v_c + f_ext                      piston (free; held: v_c = 0)
 
+A piston held through a rod path instead (``load.kind = "conrod"``: the testbed's beam,
+guide, bearings and rod to a fixed end, thesis 5.4) has the rod's spring and damper on it:
+``f_ext = -k_rod (x_c - x_anchor) - c_rod v_c``, in series with k_s for the pressure.
+
 This is the same model the compiled kernel (:mod:`plant.kernel`, :mod:`plant.blocks`)
 integrates when every effect is off and the pump force is given (``DriveMode.FORCE``);
 ``tests/plant/test_reference.py`` holds the two equal. :class:`EntrainedAir` writes out the
@@ -40,29 +44,40 @@ class LinearEha:
     dc: float   # N/(m/s), piston-side friction
     ds: float   # N/(m/s), internal-leakage series damper
     ks: float   # N/m, series elasticity (its average)
+    k_rod: float = 0.0     # N/m, rod path to a fixed end (0: none)
+    c_rod: float = 0.0     # N/(m/s), its damping
+    x_anchor: float = 0.0  # m, piston position at which the rod path is unloaded
 
     @classmethod
     def from_config(cls, cfg: Config) -> LinearEha:
+        """Table 2.1's parameters; the rod path's when ``load.kind`` is "conrod"."""
         h = cfg.section("hydraulics")
+        rod = {}
+        if cfg.get("load.kind") == "conrod":
+            rod = {"k_rod": cfg.get("load.conrod_stiffness_n_per_m"),
+                   "c_rod": cfg.get("load.conrod_damping_ns_per_m"),
+                   "x_anchor": cfg.get("load.x0_m")}
         return cls(jp=h["jp_kg"], jc=h["jc_kg"], dp=h["dp_ns_per_m"], dc=h["dc_ns_per_m"],
-                   ds=h["ds_ns_per_m"], ks=h["ks_n_per_m"])
+                   ds=h["ds_ns_per_m"], ks=h["ks_n_per_m"], **rod)
 
     def derivatives(self, state: np.ndarray, tau_p: float, f_ext: float = 0.0,
                     piston_free: bool = True, ks: float | None = None) -> np.ndarray:
         """d/dt of ``state`` (in :data:`STATES` order); ``ks``: the series stiffness at
         this state when an effect sets it (:class:`EntrainedAir`), else the constant."""
-        _theta_p, v_p, tau_q, _x_c, v_c = state
+        _theta_p, v_p, tau_q, x_c, v_c = state
         if not piston_free:
             v_c = 0.0
         if ks is None:
             ks = self.ks
+        f_rod = self.k_rod * (x_c - self.x_anchor) + self.c_rod * v_c
         dv_p = (tau_p - self.dp * v_p - tau_q) / self.jp
         dtau_q = ks * (v_p - tau_q / self.ds - v_c)
-        dv_c = (tau_q - self.dc * v_c + f_ext) / self.jc if piston_free else 0.0
+        dv_c = (tau_q - self.dc * v_c - f_rod + f_ext) / self.jc if piston_free else 0.0
         return np.array([v_p, dv_p, dtau_q, v_c, dv_c])
 
     def state_space(self, piston_free: bool = True) -> tuple[np.ndarray, np.ndarray]:
-        """(A, B) of dx/dt = A x + B [tau_p, f_ext] in :data:`STATES` order."""
+        """(A, B) of dx/dt = A x + B [tau_p, f_ext] in :data:`STATES` order (x_c counted
+        from the rod path's anchor when there is one)."""
         a = np.zeros((5, 5))
         b = np.zeros((5, 2))
         a[0, 1] = 1.0
@@ -72,7 +87,8 @@ class LinearEha:
         if piston_free:
             a[2, 4] = -self.ks
             a[3, 4] = 1.0
-            a[4, 2], a[4, 4] = 1.0 / self.jc, -self.dc / self.jc
+            a[4, 2], a[4, 4] = 1.0 / self.jc, -(self.dc + self.c_rod) / self.jc
+            a[4, 3] = -self.k_rod / self.jc
             b[4, 1] = 1.0 / self.jc
         return a, b
 

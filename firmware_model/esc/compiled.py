@@ -14,6 +14,13 @@ without a lock and without waiting (:func:`publish`, :func:`take`). The frame si
 a new input record into the slave's memory before the next datagram reaches the slave;
 it publishes the output buffer when a write completes it in OP (the safe, all-zero outputs
 on leaving OP or on a watchdog trip).
+
+The mailbox (SM0/SM1, 1-buffer mode, as :class:`~firmware_model.esc.esc.Esc` describes it)
+meets the application through two more slots of the output buffers (:data:`MBX_RX`: the
+master's request the frame side hands over; :data:`MBX_TX`: the application's answer) and
+two state words set with atomic exchanges (``S_MBX_RX``: 1 handed over, 2 taken;
+``S_MBX_TX``: 1 posted). Only the frame side writes the slaves' memories: a taken request
+frees SM0, a posted answer enters an empty SM1, when the next datagram reaches the slave.
 """
 
 from __future__ import annotations
@@ -36,7 +43,15 @@ FRESH = 4  # bit of the shared 3-buffer index: the shared slot holds a record no
 S_STATE, S_ERROR, S_CODE, S_NOW, S_LAST_OUT, S_TRIPS, S_TRIP_DELAY = range(7)
 S_ALIAS, S_OUT_BYTES, S_SII0_START, S_SII0_LEN, S_SII1_START, S_SII1_LEN = range(7, 13)
 S_SII_LEN, S_IN_START = 13, 14
-N_ST = 15
+# Mailbox: sync-manager indices of the process data, the hand-over words, the SII's mailbox
+# sync managers (length 0: no mailbox). S_SII0_*/S_SII1_* are the process data's
+# (S_SII0_LEN/S_SII1_LEN: the lengths the application expects, changed by a PDO remap).
+S_OUT_SM, S_IN_SM, S_MBX_RX, S_MBX_TX = 15, 16, 17, 18
+S_MBX0_START, S_MBX0_LEN, S_MBX1_START, S_MBX1_LEN = 19, 20, 21, 22
+N_ST = 23
+#: Slots of ``obuf``/``olen`` after the output 3-buffer: the mailbox hand-over buffers.
+MBX_RX, MBX_TX = 3, 4
+N_OSLOTS = 5
 # 3-buffer index words (int64 columns of ``EscArrays.oidx`` / ``iidx``).
 B_WRITER, B_SHARED, B_READER = 0, 1, 2
 
@@ -60,8 +75,8 @@ class EscArrays:
         self.sii = np.full((n, sii_max), 0xFF, dtype=np.uint8)
         self.st = np.zeros((n, N_ST), dtype=np.int64)
         self.wmask = np.frombuffer(_WRITABLE, dtype=np.uint8).copy()
-        self.obuf = np.zeros((n, 3, BUF), dtype=np.uint8)
-        self.olen = np.zeros((n, 3), dtype=np.int64)
+        self.obuf = np.zeros((n, N_OSLOTS, BUF), dtype=np.uint8)
+        self.olen = np.zeros((n, N_OSLOTS), dtype=np.int64)
         self.ibuf = np.zeros((n, 3, BUF), dtype=np.uint8)
         self.ilen = np.zeros((n, 3), dtype=np.int64)
         self.oidx = np.tile(np.array([0, 1, 2], dtype=np.int64), (n, 1))
@@ -74,9 +89,14 @@ class EscArrays:
             st = self.st[i]
             st[S_STATE], st[S_CODE] = int(ref.state), int(ref.code)
             st[S_ALIAS], st[S_OUT_BYTES] = d.alias, d.out_bytes
-            st[S_SII0_START], st[S_SII0_LEN] = d.sms[0].start, d.sms[0].length
-            st[S_SII1_START], st[S_SII1_LEN] = d.sms[1].start, d.sms[1].length
-            st[S_SII_LEN], st[S_IN_START] = len(img), d.sms[1].start
+            out_sm, in_sm = d.sms[d.out_sm], d.sms[d.in_sm]
+            st[S_SII0_START], st[S_SII0_LEN] = out_sm.start, out_sm.length
+            st[S_SII1_START], st[S_SII1_LEN] = in_sm.start, in_sm.length
+            st[S_SII_LEN], st[S_IN_START] = len(img), in_sm.start
+            st[S_OUT_SM], st[S_IN_SM] = d.out_sm, d.in_sm
+            if d.coe:
+                st[S_MBX0_START], st[S_MBX0_LEN] = d.sms[0].start, d.sms[0].length
+                st[S_MBX1_START], st[S_MBX1_LEN] = d.sms[1].start, d.sms[1].length
         assert self.mem[0, r.TYPE] == ESC_TYPE
 
     def frame_args(self) -> tuple:
@@ -96,6 +116,40 @@ class EscArrays:
         if slot < 0:
             return None
         return self.obuf[i, slot, :self.olen[i, slot]].tobytes()
+
+    def take_mailbox(self, i: int) -> bytes | None:
+        """Box ``i``'s application takes the master's mailbox request, if one is there."""
+        st = self.st[i]
+        if st[S_MBX_RX] != 1:
+            return None
+        data = self.obuf[i, MBX_RX, :self.olen[i, MBX_RX]].tobytes()
+        st[S_MBX_RX] = 2  # (only the frame side writes it otherwise, and not while it is 1)
+        return data
+
+    def mailbox_requests(self) -> list[int]:
+        """The slaves whose application has a mailbox request to take."""
+        return np.flatnonzero(self.st[:, S_MBX_RX] == 1).tolist()
+
+    def in_init(self) -> list[int]:
+        """The slaves in INIT (their mailboxes off)."""
+        return np.flatnonzero(self.st[:, S_STATE] == _INIT).tolist()
+
+    def post_mailbox(self, i: int, data: bytes) -> bool:
+        """Box ``i``'s answer for its SM1; False if the previous one has not gone in yet."""
+        st = self.st[i]
+        if st[S_MBX_TX]:
+            return False
+        n = len(data)
+        self.obuf[i, MBX_TX, :n] = np.frombuffer(data, dtype=np.uint8)
+        self.olen[i, MBX_TX] = n
+        st[S_MBX_TX] = 1  # after the data: the frame side copies it once it sees the 1
+        return True
+
+    def set_pd_lengths(self, i: int, out_bytes: int, in_bytes: int) -> None:
+        """The process-data lengths box ``i`` expects from now on (a PDO remap in PREOP)."""
+        st = self.st[i]
+        st[S_SII0_LEN] = st[S_OUT_BYTES] = out_bytes
+        st[S_SII1_LEN] = in_bytes
 
     def state(self, i: int) -> tuple[int, bool, int]:
         """(AL state, error, AL status code) of slave ``i``."""
@@ -195,6 +249,9 @@ def _enter(m, st, obuf, olen, oidx, state):
         _put16(m, r.WD_STATUS_PD, 1)
     if was_op and state != _OP and st[S_OUT_BYTES]:
         _publish_safe(obuf, olen, oidx, st[S_OUT_BYTES])
+    if state == _INIT:  # the PDI turns the mailboxes off: both empty
+        m[r.SM0 + r.SM_STATUS] &= ~r.SM_STATUS_FULL & 0xFF
+        m[r.SM0 + r.SM_SIZE + r.SM_STATUS] &= ~r.SM_STATUS_FULL & 0xFF
     _set_al_status(m, st)
 
 
@@ -218,7 +275,97 @@ def _sm_allows(m, st, lo, hi, direction):
         if not length or hi <= start or lo >= start + length:
             continue
         return bool(act & r.SM_ENABLE and (control & r.SM_DIR_MASK) == direction
+                    and (control & r.SM_MODE_MASK) != r.SM_MODE_MAILBOX
                     and (st[S_STATE] == _SAFEOP or st[S_STATE] == _OP))
+    return True
+
+
+# --- mailbox (mirrors Esc._mailbox_at .. Esc._pdi) -----------------------------------------
+@njit(cache=True, nogil=True)
+def _mailbox_at(m, lo, hi):
+    for k in range(r.N_SM):
+        start, length, control, _act = _sm(m, k)
+        if not length or hi <= start or lo >= start + length:
+            continue
+        return k if (control & r.SM_MODE_MASK) == r.SM_MODE_MAILBOX else -1
+    return -1
+
+
+@njit(cache=True, nogil=True)
+def _mbx_open(m, st, k, lo, hi, direction):
+    start, length, control, act = _sm(m, k)
+    return ((act & r.SM_ENABLE) != 0 and (control & r.SM_DIR_MASK) == direction
+            and st[S_STATE] != _INIT and start <= lo and hi <= start + length)
+
+
+@njit(cache=True, nogil=True)
+def _mbx_write(m, st, obuf, olen, k, lo, hi, src, s0):
+    status = r.SM0 + k * r.SM_SIZE + r.SM_STATUS
+    if not _mbx_open(m, st, k, lo, hi, r.SM_DIR_WRITE) or m[status] & r.SM_STATUS_FULL:
+        return 0
+    m[lo:hi] = src[s0:s0 + hi - lo]
+    start, length, _c, _a = _sm(m, k)
+    if hi == start + length:
+        m[status] |= r.SM_STATUS_FULL
+        obuf[MBX_RX, :length] = m[start:start + length]
+        olen[MBX_RX] = length
+        _xchg(st, S_MBX_RX, 1)
+    return 1
+
+
+@njit(cache=True, nogil=True)
+def _mbx_read(m, st, ado, n):
+    """1 if a read of [ado, ado + n) counts (0: a refused mailbox read); a read of a full
+    mailbox's last byte empties it."""
+    end = min(ado + n, MEM)
+    if ado < r.RAM_START or ado >= end:
+        return 1
+    k = _mailbox_at(m, ado, end)
+    if k < 0:
+        return 1
+    status = r.SM0 + k * r.SM_SIZE + r.SM_STATUS
+    if not _mbx_open(m, st, k, ado, end, r.SM_DIR_READ) or not m[status] & r.SM_STATUS_FULL:
+        return 0
+    start, length, _c, _a = _sm(m, k)
+    if end == start + length:
+        m[status] &= ~r.SM_STATUS_FULL & 0xFF
+    return 1
+
+
+@njit(cache=True, nogil=True)
+def _pdi_mailbox(m, st, obuf, olen):
+    if st[S_MBX_RX] == 2:
+        m[r.SM0 + r.SM_STATUS] &= ~r.SM_STATUS_FULL & 0xFF
+        _xchg(st, S_MBX_RX, 0)
+    b1 = r.SM0 + r.SM_SIZE
+    if (m[b1 + 4] & r.SM_MODE_MASK) != r.SM_MODE_MAILBOX or st[S_STATE] == _INIT:
+        return
+    if (m[b1 + 6] ^ m[b1 + r.SM_PDI_CONTROL]) & r.SM_REPEAT:
+        m[b1 + r.SM_PDI_CONTROL] ^= r.SM_REPEAT
+        m[b1 + r.SM_STATUS] |= r.SM_STATUS_FULL
+    start, length, _c, act = _sm(m, 1)
+    if (st[S_MBX_TX] == 1 and act & r.SM_ENABLE and length
+            and not m[b1 + r.SM_STATUS] & r.SM_STATUS_FULL):
+        length = min(length, MEM - start)
+        n = min(olen[MBX_TX], length)
+        m[start:start + n] = obuf[MBX_TX, :n]
+        m[start + n:start + length] = 0
+        m[b1 + r.SM_STATUS] |= r.SM_STATUS_FULL
+        _xchg(st, S_MBX_TX, 0)
+
+
+@njit(cache=True, nogil=True)
+def _mailbox_config_ok(m, st):
+    if not st[S_MBX0_LEN]:
+        return True
+    for k in range(2):
+        want = r.SM_DIR_WRITE if k == 0 else r.SM_DIR_READ
+        s_start = st[S_MBX0_START] if k == 0 else st[S_MBX1_START]
+        s_len = st[S_MBX0_LEN] if k == 0 else st[S_MBX1_LEN]
+        start, length, control, act = _sm(m, k)
+        if (start != s_start or length != s_len or not act & r.SM_ENABLE
+                or (control & (r.SM_DIR_MASK | r.SM_MODE_MASK)) != (want | r.SM_MODE_MAILBOX)):
+            return False
     return True
 
 
@@ -227,13 +374,13 @@ def _check_pd_config(m, st):
     for k in range(2):
         if k == 0:
             want, code, ftype = r.SM_DIR_WRITE, 0x001D, r.FMMU_WRITE
-            s_start, s_len = st[S_SII0_START], st[S_SII0_LEN]
+            s_start, s_len, sm = st[S_SII0_START], st[S_SII0_LEN], st[S_OUT_SM]
         else:
             want, code, ftype = r.SM_DIR_READ, 0x001E, r.FMMU_READ
-            s_start, s_len = st[S_SII1_START], st[S_SII1_LEN]
+            s_start, s_len, sm = st[S_SII1_START], st[S_SII1_LEN], st[S_IN_SM]
         if not s_len:
             continue
-        start, length, control, act = _sm(m, k)
+        start, length, control, act = _sm(m, sm)
         if (start != s_start or length != s_len or not act & r.SM_ENABLE
                 or (control & r.SM_DIR_MASK) != want):
             return code
@@ -269,6 +416,9 @@ def _al_control(m, st, obuf, olen, oidx, value):
             or (cur == _OP and req == _PREOP) or (cur == _SAFEOP and req == _PREOP)):
         _refuse(m, st, 0x0011)
         return
+    if cur == _INIT and req == _PREOP and not _mailbox_config_ok(m, st):
+        _refuse(m, st, 0x0016)
+        return
     if cur == _PREOP and req == _SAFEOP:
         code = _check_pd_config(m, st)
         if code:
@@ -297,7 +447,7 @@ def _eeprom_command(m, st, sii):
 def _ram_written(m, st, obuf, olen, oidx, lo, hi):
     if not st[S_OUT_BYTES]:
         return
-    start, length, control, _act = _sm(m, 0)
+    start, length, control, _act = _sm(m, st[S_OUT_SM])
     if length and lo < start + length <= hi:
         if control & r.SM_WATCHDOG:
             st[S_LAST_OUT] = st[S_NOW]
@@ -308,15 +458,19 @@ def _ram_written(m, st, obuf, olen, oidx, lo, hi):
 
 @njit(cache=True, nogil=True)
 def _write(m, st, sii, wmask, obuf, olen, oidx, ado, src, s0, n):
-    """The master writes ``src[s0:s0 + n]`` at ``ado``."""
+    """The master writes ``src[s0:s0 + n]`` at ``ado``; 1 if the write counts (0: refused
+    by a mailbox)."""
     end = min(ado + n, MEM)
     if ado >= end:
-        return
+        return 1
     if ado >= r.RAM_START:
+        k = _mailbox_at(m, ado, end)
+        if k >= 0:
+            return _mbx_write(m, st, obuf, olen, k, ado, end, src, s0)
         if _sm_allows(m, st, ado, end, r.SM_DIR_WRITE):
             m[ado:end] = src[s0:s0 + end - ado]
             _ram_written(m, st, obuf, olen, oidx, ado, end)
-        return
+        return 1
     for a in range(ado, end):
         if wmask[a]:
             m[a] = src[s0 + a - ado]
@@ -329,6 +483,7 @@ def _write(m, st, sii, wmask, obuf, olen, oidx, ado, src, s0, n):
     if ado <= r.WD_COUNTER_PDI and end > r.WD_COUNTER_PD:
         m[r.WD_COUNTER_PD] = 0
         m[r.WD_COUNTER_PDI] = 0
+    return 1
 
 
 @njit(cache=True, nogil=True)
@@ -405,22 +560,21 @@ def _process(m, st, sii, wmask, obuf, olen, oidx, cmd, adp, ado, buf, d0, n, wkc
         return adp, wkc
     if not hit:
         if cmd == 13 or cmd == 14:
-            _write(m, st, sii, wmask, obuf, olen, oidx, ado, buf, d0, n)
-            return adp, wkc + 1
+            return adp, wkc + _write(m, st, sii, wmask, obuf, olen, oidx, ado, buf, d0, n)
         return adp, wkc
     if cmd == 1 or cmd == 4 or cmd == 7:
         _read_into(m, ado, buf, d0, n, cmd == 7)
-        return adp, wkc + 1
+        return adp, wkc + _mbx_read(m, st, ado, n)
     if cmd == 2 or cmd == 5 or cmd == 8:
-        _write(m, st, sii, wmask, obuf, olen, oidx, ado, buf, d0, n)
-        return adp, wkc + 1
+        return adp, wkc + _write(m, st, sii, wmask, obuf, olen, oidx, ado, buf, d0, n)
     if cmd == 3 or cmd == 6 or cmd == 9:
         scratch[:n] = buf[d0:d0 + n]
         _read_into(m, ado, buf, d0, n, cmd == 9)
-        _write(m, st, sii, wmask, obuf, olen, oidx, ado, scratch, 0, n)
-        return adp, wkc + 3
+        ok = _mbx_read(m, st, ado, n)
+        wrote = _write(m, st, sii, wmask, obuf, olen, oidx, ado, scratch, 0, n)
+        return adp, wkc + ok + 2 * wrote
     _read_into(m, ado, buf, d0, n, False)   # ARMW / FRMW: the addressed slave reads
-    return adp, wkc + 1
+    return adp, wkc + _mbx_read(m, st, ado, n)
 
 
 # --- the frame --------------------------------------------------------------------------------
@@ -482,6 +636,7 @@ def handle_frame(buf, n, mem, sii, st, wmask, obuf, olen, oidx, ibuf, ilen, iidx
         for i in range(n_slaves):
             m, s = mem[i], st[i]
             _take_inputs(m, s, ibuf[i], ilen[i], iidx[i])
+            _pdi_mailbox(m, s, obuf[i], olen[i])
             adp, wkc = _process(m, s, sii[i], wmask, obuf[i], olen[i], oidx[i], cmd, adp,
                                 ado, buf, d0, dlen, wkc, scratch)
         _put16(buf, pos + 2, adp)
@@ -505,7 +660,7 @@ def tick(mem, st, obuf, olen, oidx, dt_ns):
         if s[S_STATE] != _OP or not s[S_OUT_BYTES]:
             continue
         wd = 40 * (_u16(m, r.WD_DIVIDER) + 2) * _u16(m, r.WD_TIME_PD)
-        if not wd or not _sm(m, 0)[2] & r.SM_WATCHDOG:
+        if not wd or not _sm(m, s[S_OUT_SM])[2] & r.SM_WATCHDOG:
             continue
         quiet = s[S_NOW] - s[S_LAST_OUT]
         if quiet >= wd:

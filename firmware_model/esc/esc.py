@@ -18,6 +18,15 @@ The application side (the PDI: the MCU board behind the ESC) is :meth:`set_input
 :meth:`pending_outputs` and :meth:`tick` (time for the watchdog). Outputs reach the box only
 in OP; leaving OP, or the watchdog expiring, hands the box its safe outputs (all zero:
 mode off, drives disabled). Time is what :meth:`tick` is given (the box's 1 ms cycles).
+
+Mailbox (a description with ``coe``): SM0 and SM1 in 1-buffer mode. A master's write that
+completes SM0's buffer sets its full bit and hands the buffer to the application
+(:meth:`take_mailbox`); further writes are refused (working counter not incremented) until
+the application has taken it. The application's answer (:meth:`post_mailbox`) enters SM1's
+buffer when that is empty; the master's read of its last byte empties it; reading an empty
+one is refused. A toggled repeat request (SM1 activate bit 1) offers the last answer again
+and is acknowledged in SM1's PDI control bit 1. The application's side of these (the PDI)
+runs when the next datagram reaches the slave, as the compiled path does it.
 """
 
 from __future__ import annotations
@@ -119,13 +128,19 @@ class Esc:
         self.watchdog_trips = 0
         self.last_trip_delay_ns = 0
         self._pending: bytes | None = None
-        self.safe_outputs = bytes(desc.out_bytes)
+        #: Process-data lengths the application expects (the SII's, or as CoE remapped).
+        self.out_bytes, self.in_bytes = desc.out_bytes, desc.in_bytes
+        #: Mailbox hand-over: 0 idle, 1 a request for the application, 2 taken by it.
+        self.mbx_rx_state = 0
+        self._mbx_rx = b""
+        self._mbx_tx: bytes | None = None
 
     # --- the frame side ---------------------------------------------------------------------
     def process(self, cmd: int, adp: int, ado: int, data: bytearray, wkc: int
                 ) -> tuple[int, int]:
         """Let one datagram pass; ``data`` is changed in place. Returns (ADP, WKC) as the
         datagram leaves this slave."""
+        self._pdi()
         if cmd in _AUTO:
             hit = adp == 0
             adp = (adp + 1) & 0xFFFF
@@ -142,47 +157,56 @@ class Esc:
             return adp, wkc
         if not hit:
             if cmd in (Command.ARMW, Command.FRMW):  # the others write what it read
-                self._write(ado, bytes(data))
-                return adp, wkc + 1
+                return adp, wkc + self._write(ado, bytes(data))
             return adp, wkc
         n = len(data)
         if cmd in _READS:
-            old = self._read(ado, n)
+            old, ok = self._read(ado, n)
             if cmd == Command.BRD:
                 data[:] = bytes(a | b for a, b in zip(data, old, strict=True))
             else:
                 data[:] = old
-            return adp, wkc + 1
+            return adp, wkc + ok
         if cmd in _WRITES:
-            self._write(ado, bytes(data))
-            return adp, wkc + 1
+            return adp, wkc + self._write(ado, bytes(data))
         if cmd in _RWS:
-            old = self._read(ado, n)
-            self._write(ado, bytes(data))
+            old, ok = self._read(ado, n)
+            wrote = self._write(ado, bytes(data))
             if cmd == Command.BRW:
                 data[:] = bytes(a | b for a, b in zip(data, old, strict=True))
             else:
                 data[:] = old
-            return adp, wkc + 3
+            return adp, wkc + ok + 2 * wrote
         # ARMW / FRMW: the addressed slave reads, the others write.
-        data[:] = self._read(ado, n)
-        return adp, wkc + 1
+        data[:], ok = self._read(ado, n)
+        return adp, wkc + ok
 
     # --- memory ---------------------------------------------------------------------------
-    def _read(self, ado: int, n: int) -> bytes:
+    def _read(self, ado: int, n: int) -> tuple[bytes, int]:
+        """(the bytes, 1 if the read counts: 0 for a refused mailbox read)."""
         out = bytes(self.mem[ado:ado + n])
-        return out + bytes(n - len(out))
+        ok = 1
+        end = min(ado + n, r.MEMORY_SIZE)
+        if ado >= r.RAM_START and ado < end:
+            k = self._mailbox_at(ado, end)
+            if k >= 0:
+                ok = self._mbx_read(k, ado, end)
+        return out + bytes(n - len(out)), ok
 
-    def _write(self, ado: int, data: bytes) -> None:
+    def _write(self, ado: int, data: bytes) -> int:
+        """1 if the write counts (0: refused by a mailbox)."""
         end = min(ado + len(data), r.MEMORY_SIZE)
         if ado >= end:
-            return
+            return 1
         m = self.mem
         if ado >= r.RAM_START:
+            k = self._mailbox_at(ado, end)
+            if k >= 0:
+                return self._mbx_write(k, ado, end, data)
             if self._sm_allows(ado, end, r.SM_DIR_WRITE):
                 m[ado:end] = data[:end - ado]
                 self._ram_written(ado, end)
-            return
+            return 1
         for a in range(ado, end):
             if _WRITABLE[a]:
                 m[a] = data[a - ado]
@@ -196,6 +220,85 @@ class Esc:
             m[r.RX_ERROR:r.ERROR_COUNTERS_END] = bytes(r.ERROR_COUNTERS_END - r.RX_ERROR)
         if ado <= r.WD_COUNTER_PDI and end > r.WD_COUNTER_PD:
             m[r.WD_COUNTER_PD] = m[r.WD_COUNTER_PDI] = 0
+        return 1
+
+    # --- mailbox --------------------------------------------------------------------------------
+    def _mailbox_at(self, lo: int, hi: int) -> int:
+        """The sync manager that decides an access to [lo, hi) if it is a mailbox, else -1."""
+        for k in range(r.N_SM):
+            start, length, control, _act = self.sm(k)
+            if not length or hi <= start or lo >= start + length:
+                continue
+            return k if control & r.SM_MODE_MASK == r.SM_MODE_MAILBOX else -1
+        return -1
+
+    def _mbx_open(self, k: int, lo: int, hi: int, direction: int) -> bool:
+        start, length, control, act = self.sm(k)
+        return bool(act & r.SM_ENABLE and control & r.SM_DIR_MASK == direction
+                    and self.state != AlState.INIT and start <= lo and hi <= start + length)
+
+    def _mbx_write(self, k: int, lo: int, hi: int, data: bytes) -> int:
+        m, status = self.mem, r.SM0 + k * r.SM_SIZE + r.SM_STATUS
+        if not self._mbx_open(k, lo, hi, r.SM_DIR_WRITE) or m[status] & r.SM_STATUS_FULL:
+            return 0
+        m[lo:hi] = data[:hi - lo]
+        start, length, _c, _a = self.sm(k)
+        if hi == start + length:  # the last byte: the mailbox is full, the PDI's to take
+            m[status] |= r.SM_STATUS_FULL
+            self._mbx_rx = bytes(m[start:start + length])
+            self.mbx_rx_state = 1
+        return 1
+
+    def _mbx_read(self, k: int, lo: int, hi: int) -> int:
+        m, status = self.mem, r.SM0 + k * r.SM_SIZE + r.SM_STATUS
+        if not self._mbx_open(k, lo, hi, r.SM_DIR_READ) or not m[status] & r.SM_STATUS_FULL:
+            return 0
+        start, length, _c, _a = self.sm(k)
+        if hi == start + length:  # the last byte read: empty again
+            m[status] &= ~r.SM_STATUS_FULL & 0xFF
+        return 1
+
+    def _pdi(self) -> None:
+        """The application's side of the mailbox, before a datagram reaches the slave: a
+        taken request frees SM0; a repeat request re-offers SM1's last answer; a posted
+        answer enters an empty SM1."""
+        m = self.mem
+        if self.mbx_rx_state == 2:
+            m[r.SM0 + r.SM_STATUS] &= ~r.SM_STATUS_FULL & 0xFF
+            self.mbx_rx_state = 0
+        b1 = r.SM0 + r.SM_SIZE
+        if m[b1 + 4] & r.SM_MODE_MASK != r.SM_MODE_MAILBOX or self.state == AlState.INIT:
+            return
+        if (m[b1 + 6] ^ m[b1 + r.SM_PDI_CONTROL]) & r.SM_REPEAT:
+            m[b1 + r.SM_PDI_CONTROL] ^= r.SM_REPEAT
+            m[b1 + r.SM_STATUS] |= r.SM_STATUS_FULL
+        start, length, _c, act = self.sm(1)
+        if (self._mbx_tx is not None and act & r.SM_ENABLE and length
+                and not m[b1 + r.SM_STATUS] & r.SM_STATUS_FULL):
+            length = min(length, r.MEMORY_SIZE - start)
+            data = self._mbx_tx[:length]
+            m[start:start + length] = data + bytes(length - len(data))
+            m[b1 + r.SM_STATUS] |= r.SM_STATUS_FULL
+            self._mbx_tx = None
+
+    def take_mailbox(self) -> bytes | None:
+        """The application takes the master's request (SM0's buffer), if one is there."""
+        if self.mbx_rx_state != 1:
+            return None
+        self.mbx_rx_state = 2
+        return self._mbx_rx
+
+    def post_mailbox(self, data: bytes) -> bool:
+        """The application's answer for SM1; False if the previous one has not gone in yet."""
+        if self._mbx_tx is not None:
+            return False
+        self._mbx_tx = bytes(data)
+        return True
+
+    def set_pd_lengths(self, out_bytes: int, in_bytes: int) -> None:
+        """The process-data lengths the application expects from now on (a PDO assignment
+        changed over CoE in PREOP): what SAFEOP's check compares the sync managers with."""
+        self.out_bytes, self.in_bytes = out_bytes, in_bytes
 
     # --- sync managers and FMMUs -----------------------------------------------------------
     def sm(self, k: int) -> tuple[int, int, int, int]:
@@ -224,19 +327,21 @@ class Esc:
 
     def _sm_allows(self, lo: int, hi: int, direction: int) -> bool:
         """May the master access [lo, hi) of RAM this way? Outside every sync manager: yes;
-        inside one: only if it is enabled, points this way and the slave is in SAFEOP/OP."""
+        inside one: only if it is enabled, points this way and the slave is in SAFEOP/OP
+        (never a mailbox's: those are the physical accesses' of :meth:`_mbx_write`)."""
         for start, length, control, act in self._sms():
             if hi <= start or lo >= start + length:
                 continue
             return bool(act & r.SM_ENABLE and (control & r.SM_DIR_MASK) == direction
+                        and control & r.SM_MODE_MASK != r.SM_MODE_MAILBOX
                         and self.state in (AlState.SAFEOP, AlState.OP))
         return True
 
     def _ram_written(self, lo: int, hi: int) -> None:
         """A write that reaches the last byte of the output buffer completes it."""
-        if not self.desc.out_bytes:
+        if not self.out_bytes:
             return
-        start, length, control, _act = self.sm(0)
+        start, length, control, _act = self.sm(self.desc.out_sm)
         if length and lo < start + length <= hi:
             if control & r.SM_WATCHDOG:
                 self.last_output_ns = self.now_ns
@@ -310,6 +415,8 @@ class Esc:
         cur = self.state
         if req != cur and req != AlState.INIT and (cur, req) not in _ALLOWED:
             return self._refuse(AlStatusCode.INVALID_STATE_CHANGE)
+        if cur == AlState.INIT and req == AlState.PREOP and not self._mailbox_config_ok():
+            return self._refuse(AlStatusCode.INVALID_MAILBOX_CONFIG)
         if cur == AlState.PREOP and req == AlState.SAFEOP:
             code = self._check_pd_config()
             if code is not None:
@@ -322,21 +429,37 @@ class Esc:
         if state == AlState.OP and not was_op:
             self.last_output_ns = self.now_ns   # the watchdog starts with OP
             _U16.pack_into(self.mem, r.WD_STATUS_PD, 1)
-        if was_op and state != AlState.OP and self.desc.out_bytes:
-            self._pending = self.safe_outputs
+        if was_op and state != AlState.OP and self.out_bytes:
+            self._pending = bytes(self.out_bytes)
+        if state == AlState.INIT:  # the PDI turns the mailboxes off: both empty
+            for k in (0, 1):
+                self.mem[r.SM0 + k * r.SM_SIZE + r.SM_STATUS] &= ~r.SM_STATUS_FULL & 0xFF
         self._set_al_status()
+
+    def _mailbox_config_ok(self) -> bool:
+        """INIT -> PREOP: are SM0/SM1 the SII's mailboxes (if it has any)?"""
+        if not self.desc.coe:
+            return True
+        for k, want in ((0, r.SM_DIR_WRITE), (1, r.SM_DIR_READ)):
+            sii = self.desc.sms[k]
+            start, length, control, act = self.sm(k)
+            if (start != sii.start or length != sii.length or not act & r.SM_ENABLE
+                    or control & (r.SM_DIR_MASK | r.SM_MODE_MASK) != want | r.SM_MODE_MAILBOX):
+                return False
+        return True
 
     def _check_pd_config(self) -> AlStatusCode | None:
         """PREOP -> SAFEOP: are the process-data sync managers and FMMUs as the SII says?"""
         fmmus = self.fmmus()
-        for k, (want, code, ftype) in enumerate(
+        for k, want_len, (want, code, ftype) in zip(
+                (self.desc.out_sm, self.desc.in_sm), (self.out_bytes, self.in_bytes),
                 ((r.SM_DIR_WRITE, AlStatusCode.INVALID_OUTPUT_CONFIG, r.FMMU_WRITE),
-                 (r.SM_DIR_READ, AlStatusCode.INVALID_INPUT_CONFIG, r.FMMU_READ))):
+                 (r.SM_DIR_READ, AlStatusCode.INVALID_INPUT_CONFIG, r.FMMU_READ)), strict=True):
             sii = self.desc.sms[k]
-            if not sii.length:
+            if not want_len:
                 continue
             start, length, control, act = self.sm(k)
-            if (start != sii.start or length != sii.length or not act & r.SM_ENABLE
+            if (start != sii.start or length != want_len or not act & r.SM_ENABLE
                     or (control & r.SM_DIR_MASK) != want):
                 return code
             covered = sum(max(0, min(ps + ll, start + length) - max(ps, start))
@@ -348,7 +471,7 @@ class Esc:
     # --- the application (PDI) side ------------------------------------------------------------
     def set_inputs(self, data: bytes) -> None:
         """The box's input record into the input sync manager's buffer."""
-        start = self.desc.sms[1].start
+        start = self.desc.sms[self.desc.in_sm].start
         self.mem[start:start + len(data)] = data
 
     def pending_outputs(self) -> bytes | None:
@@ -366,10 +489,10 @@ class Esc:
         """Advance the slave's time; in OP the watchdog trips if the output buffer was not
         written for the watchdog time (outputs safe, SAFEOP + error, code 0x001B)."""
         self.now_ns += dt_ns
-        if self.state != AlState.OP or not self.desc.out_bytes:
+        if self.state != AlState.OP or not self.out_bytes:
             return
         wd = self.watchdog_ns()
-        if not wd or not self.sm(0)[2] & r.SM_WATCHDOG:
+        if not wd or not self.sm(self.desc.out_sm)[2] & r.SM_WATCHDOG:
             return
         quiet = self.now_ns - self.last_output_ns
         if quiet >= wd:

@@ -78,6 +78,15 @@ SM_DIR_READ = 0x00       # ECAT reads (slave inputs)
 SM_DIR_WRITE = 0x04      # ECAT writes (slave outputs)
 SM_WATCHDOG = 0x40       # a write of the buffer retriggers the process-data watchdog
 SM_ENABLE = 0x01         # activate byte bit 0
+# Mailbox sync managers (1-buffer mode): control bits 0..1 = 10; status byte (offset 5) bit
+# 3 = mailbox full; activate byte (offset 6) bit 1 = repeat request (master toggles it after
+# a lost read); PDI control byte (offset 7) bit 1 = repeat acknowledge (the slave's side).
+SM_MODE_MASK = 0x03
+SM_MODE_MAILBOX = 0x02
+SM_STATUS = 5
+SM_PDI_CONTROL = 7
+SM_STATUS_FULL = 0x08
+SM_REPEAT = 0x02
 
 # FMMU type byte (offset 11)
 FMMU_READ = 0x01
@@ -104,6 +113,7 @@ class AlStatusCode(enum.IntEnum):
     INVALID_STATE_CHANGE = 0x0011     # e.g. INIT -> OP
     UNKNOWN_STATE = 0x0012            # not one of 1, 2, 4, 8
     BOOTSTRAP_NOT_SUPPORTED = 0x0013
+    INVALID_MAILBOX_CONFIG = 0x0016   # INIT -> PREOP: mailbox sync managers not as the SII
     SM_WATCHDOG = 0x001B              # process-data watchdog expired in OP
     INVALID_OUTPUT_CONFIG = 0x001D    # output sync manager / FMMU not as in the SII
     INVALID_INPUT_CONFIG = 0x001E     # input sync manager / FMMU not as in the SII

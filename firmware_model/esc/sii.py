@@ -4,8 +4,10 @@ Layout (16-bit words, little endian):
 
 * words 0x00..0x07: ESC configuration area (PDI control, station alias, CRC-8 in word 7);
 * 0x08 vendor id, 0x0A product code, 0x0C revision, 0x0E serial number (u32 each);
-* 0x18..0x1C: mailbox offsets/sizes and protocols, all zero (no mailbox, so no CoE: a
-  master builds the process image from the TxPDO/RxPDO categories below);
+* 0x14..0x17: bootstrap mailbox (none); 0x18/0x19 receive mailbox (master -> slave, SM0)
+  offset and size, 0x1A/0x1B send mailbox (SM1), 0x1C the mailbox protocols (CoE); all zero
+  for a slave without a mailbox (a master then builds the process image from the
+  TxPDO/RxPDO categories below);
 * 0x3E EEPROM size, 0x3F version;
 * from 0x40, categories (type u16, size in words u16, data): Strings (10), General (30),
   FMMU (40), SyncM (41), TxPDO (50), RxPDO (51), end marker 0xFFFF.
@@ -34,6 +36,13 @@ BITS = {"i1": 8, "i2": 16, "i4": 32, "u1": 8, "u2": 16, "u4": 32}
 
 #: FMMU category codes.
 FMMU_OUTPUTS, FMMU_INPUTS = 1, 2
+#: Sync manager types (SyncM category byte 7, object 0x1C00): mailbox out (master ->
+#: slave), mailbox in, process-data outputs, process-data inputs.
+SM_MBX_OUT, SM_MBX_IN, SM_OUTPUTS, SM_INPUTS = 1, 2, 3, 4
+#: Mailbox protocol bits (SII word 0x1C) and CoE details (General category byte 5).
+MBX_PROTO_COE = 0x0004
+COE_SDO, COE_SDO_INFO, COE_PDO_ASSIGN, COE_PDO_CONFIG, COE_UPLOAD, COE_SDO_CA = (
+    0x01, 0x02, 0x04, 0x08, 0x10, 0x20)
 
 
 @dataclass(frozen=True)
@@ -66,6 +75,7 @@ class SyncManager:
     length: int         # bytes
     control: int        # SM control byte
     enable: bool
+    kind: int = 0       # SM_MBX_OUT .. SM_INPUTS (0: not said)
 
 
 @dataclass(frozen=True)
@@ -80,9 +90,21 @@ class SlaveDescription:
     group: str
     rx_pdos: tuple[Pdo, ...]        # outputs (master -> slave)
     tx_pdos: tuple[Pdo, ...]        # inputs (slave -> master)
-    sms: tuple[SyncManager, ...]    # SM0 outputs, SM1 inputs
+    sms: tuple[SyncManager, ...]    # with a mailbox: SM0/SM1 mailbox, SM2 outputs, SM3
+    #                                 inputs; without: SM0 outputs, SM1 inputs
     pdi_control: int = 0x05         # PDI: SPI slave (the ESC talks to the MCU over SPI)
     alias: int = 0
+    coe: bool = False               # a mailbox (SM0/SM1) speaking CoE
+
+    @property
+    def out_sm(self) -> int:
+        """Index of the process-data output sync manager."""
+        return 2 if self.coe else 0
+
+    @property
+    def in_sm(self) -> int:
+        """Index of the process-data input sync manager."""
+        return 3 if self.coe else 1
 
     @property
     def out_bytes(self) -> int:
@@ -136,6 +158,11 @@ def build_image(d: SlaveDescription) -> bytes:
     cfg = struct.pack("<HHHHHHH", d.pdi_control, 0, 0, 0, d.alias, 0, 0)
     head = bytearray(cfg + struct.pack("<H", crc8_config(cfg)))
     head += struct.pack("<IIII", d.vendor_id, d.product_code, d.revision, d.serial)
+    head += bytes(0x18 * 2 - len(head))
+    if d.coe:
+        rx, tx = d.sms[0], d.sms[1]
+        head += struct.pack("<HHHHH", rx.start, rx.length, tx.start, tx.length,
+                            MBX_PROTO_COE)
     head += bytes(0x3E * 2 - len(head))
     head += struct.pack("<HH", 0x000F, 0x0001)  # 16 KiBit - 1 coded as in ETG.2010; version 1
     strings = _Strings()
@@ -148,12 +175,13 @@ def build_image(d: SlaveDescription) -> bytes:
     general[1] = 0                  # image
     general[2] = name_idx           # order
     general[3] = name_idx           # name
-    # bytes 5..9: CoE/FoE/EoE/SoE details: none (no mailbox)
+    # bytes 5..9: CoE/FoE/EoE/SoE details: SDO, PDO assignment, complete access with CoE
+    general[5] = COE_SDO | COE_PDO_ASSIGN | COE_SDO_CA if d.coe else 0
     struct.pack_into("<h", general, 12, 0)  # current on E-bus [mA]: none (MII ports)
     struct.pack_into("<H", general, 16, 0x000F)  # physical ports 0,1: MII; 2,3: none
     fmmu = bytes([FMMU_OUTPUTS, FMMU_INPUTS])
     syncm = b"".join(struct.pack("<HHBBBB", s.start, s.length, s.control, 0,
-                                 1 if s.enable else 0, 0) for s in d.sms)
+                                 1 if s.enable else 0, s.kind) for s in d.sms)
     str_data = bytes([len(strings.items)]) + b"".join(
         bytes([len(s)]) + s for s in strings.items)
     body = (_category(CAT_STRINGS, str_data) + _category(CAT_GENERAL, bytes(general))
@@ -179,6 +207,11 @@ def categories(image: bytes) -> dict[int, bytes]:
         out[kind] = image[pos + 4:pos + 4 + size]
         pos += 4 + size
     return out
+
+
+def mailbox(image: bytes) -> tuple[int, int, int, int, int]:
+    """(receive offset, size, send offset, size, protocols) of an image's mailbox."""
+    return struct.unpack_from("<HHHHH", image, 0x18 * 2)
 
 
 def identity(image: bytes) -> tuple[int, int, int, int]:

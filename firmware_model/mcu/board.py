@@ -57,7 +57,6 @@ class McuBoard:
         self._enabled = [False] * n
         self._clear = [False] * n
         self._x_prev = [0.0] * n
-        self._defaults = [(c.k_pos, c.kp) for c in self.mcu.ctrl]
 
     def apply(self, i: int, mode: str, value: float, enable: bool, clear_fault: bool,
               kp_position: float, kp_force: float, tick: int) -> None:
@@ -73,8 +72,9 @@ class McuBoard:
             view.write("control", 0)
         self._enabled[i], self._clear[i] = enable, clear_fault
         ctrl = self.mcu.ctrl[i]
-        ctrl.k_pos = F32(kp_position) if kp_position > 0 else self._defaults[i][0]
-        ctrl.kp = F32(kp_force) if kp_force > 0 else self._defaults[i][1]
+        own = self.mcu.own_gains[i]
+        ctrl.k_pos = F32(kp_position) if kp_position > 0 else own[0]
+        ctrl.kp = F32(kp_force) if kp_force > 0 else own[1]
         self.mcu.command(i, mode, value, tick)
 
     def step(self, tick: int) -> None:

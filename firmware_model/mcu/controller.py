@@ -96,6 +96,8 @@ class ActuatorController:
         self.k_pos = F32(m["position_kp_n_per_m"])
         length, offset = m["conrod_length_m"], m["conrod_offset_m"]
         self.cos_alpha = F32(math.sqrt(1.0 - (offset / length) ** 2) if length > 0 else 1.0)
+        self.kc = kc
+        self.force_limit, self.pressure_limit = m["force_limit_n"], m["pressure_limit_pa"]
         self.f_lim = F32(min(m["force_limit_n"], kc * m["pressure_limit_pa"]))
         self.p_lim = F32(m["pressure_limit_pa"])
         self.i_lim = F32(m["current_limit_a"])

@@ -19,6 +19,7 @@ import numpy as np
 from firmware_model.calibration import FirmwareCalibration, calibration
 from firmware_model.fpga import layout as B
 from firmware_model.fpga.driver_board import LinkMemory
+from firmware_model.mcu import tunables
 from firmware_model.mcu.controller import (
     LIMIT_CURRENT,
     LIMIT_FORCE,
@@ -96,6 +97,17 @@ class Mcu:
         self.off_ticks = self.timeout_ticks + round(m["safe_off_delay_s"] / tick_s)
         self._seq = 0
         self._crc_seen = [(0, 0)] * n
+        self.tick_s = tick_s
+        #: Per actuator: the firmware's own (position, force) gains, used when the process
+        #: data's gain fields are 0 (tunable over CoE).
+        self.own_gains = [[c.k_pos, c.kp] for c in self.ctrl]
+        self._tuned: list[tuple[int, str, float]] = []
+
+    def tune(self, i: int, key: str, value: float) -> None:
+        """A new value of tunable ``key`` (:mod:`firmware_model.mcu.tunables`) for actuator
+        ``i``, applied at the next :meth:`step`."""
+        tunables.BY_KEY[key]  # (a KeyError now, not at the step)
+        self._tuned.append((i, key, float(value)))
 
     def link_error_counts(self, i: int) -> tuple[int, int]:
         """(downstream words board ``i`` discarded, upstream words this side discarded) as
@@ -128,6 +140,10 @@ class Mcu:
 
     def step(self, tick: int) -> None:
         """One 5 kHz cycle for every actuator."""
+        if self._tuned:
+            for i, key, value in self._tuned:
+                tunables.apply(self, i, key, value)
+            self._tuned.clear()
         self._seq = (self._seq + 1) & 0xFFFF
         for i, link in enumerate(self.links):
             m = self.meas[i]

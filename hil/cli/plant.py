@@ -153,8 +153,9 @@ def cmd_main(args: argparse.Namespace, ctx: Context) -> Outcome:
         ),
         "  With effects on, k_s(x) at mid-stroke (the minimum of Eq. 2.27) sits below the",
         "  average k_s of the model, which lowers the simulated resonance.",
-        "  The ~25 Hz measured resonance is not in the linear model; the thesis attributes",
-        "  it to pump-friction nonlinearity (try: eha-hil plant bode -c hydra_nonlinear).",
+        "  The ~25 Hz measured resonance is not this rigidly held piston's: the thesis held",
+        "  it through the testbed's rod path, whose compliance is in series with k_s",
+        "  (eha-hil run f1-measured; docs/residuals.md).",
         "",
         table(
             ["F2 T-N curve at 18 A", "simulated", "thesis", "band", ""],

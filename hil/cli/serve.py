@@ -527,7 +527,7 @@ def cmd_serve_ethercat(args: argparse.Namespace, cfg, topo) -> Outcome:
     model = args.model or "echo"
     rt = RealtimePlan(args.realtime)
     try:
-        chain = ServedChain(topo, cfg, model, tuple(args.stack_boxes))
+        chain = ServedChain(topo, cfg, model, tuple(args.stack_boxes), coe=args.coe)
         _compute_workers(chain.engine, rt)
         rt.process()
 
@@ -560,6 +560,7 @@ def cmd_serve_ethercat(args: argparse.Namespace, cfg, topo) -> Outcome:
     failures = ethercat_failures(st, args)
     data = {"transport": "ethercat", "interface": args.interface, "topology": topo.name,
             "model": model, "stack_boxes": list(args.stack_boxes), **st.as_dict(),
+            "mailbox": chain.mailboxes.stats(),
             "simulated_s": st.cycles * PERIOD_S,
             "frames_per_s": st.frames_answered / st.wall_s if st.wall_s > 0 else 0.0,
             "overrun_percent": 100 * st.overruns / st.cycles if st.cycles else 0.0,
@@ -665,6 +666,9 @@ def add_parser(sub) -> None:  # noqa: ANN001 - argparse's sub-parsers
     p.add_argument("--stack-box", dest="stack_boxes", type=int_range(0, 255), action="append",
                    default=[], metavar="N",
                    help="ethercat: box N runs the full stack (repeatable; others: --model)")
+    p.add_argument("--no-coe", dest="coe", action="store_false",
+                   help="ethercat: slaves without a mailbox (no CoE; a master maps the "
+                   "process data from the SII alone)")
     p.add_argument("--port",
                    help="serial (required): device path or pyserial URL, or 'pty' for a new "
                    "pseudo-terminal whose path is printed; udp: local port number (default "

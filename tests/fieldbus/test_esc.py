@@ -119,7 +119,15 @@ def test_refused_transitions_set_the_error_bit_and_code(chain):
     # INIT -> OP skips states: refused, INIT + error, 0x0011
     _one(chain, ec.Command.APWR, 0, r.AL_CONTROL, struct.pack("<H", r.AlState.OP))
     assert _al(chain, 0) == (r.AlState.INIT | r.AL_ERROR, r.AlStatusCode.INVALID_STATE_CHANGE)
-    # acknowledged and PREOP; then SAFEOP without any sync manager set: 0x001D
+    # acknowledged, PREOP without the mailbox sync managers: refused, 0x0016
+    _one(chain, ec.Command.APWR, 0, r.AL_CONTROL, struct.pack("<H", 0x12))
+    assert _al(chain, 0) == (r.AlState.INIT | r.AL_ERROR,
+                             r.AlStatusCode.INVALID_MAILBOX_CONFIG)
+    # with SM0/SM1 as the SII's mailboxes, PREOP; then SAFEOP without the process data's
+    # sync managers: 0x001D
+    for k in range(3):
+        syncm = sii.categories(chain.escs[k].sii)[sii.CAT_SYNCM]
+        _one(chain, ec.Command.APWR, (-k) & 0xFFFF, r.SM0, syncm[:16])
     _one(chain, ec.Command.APWR, 0, r.AL_CONTROL, struct.pack("<H", 0x12))
     assert _al(chain, 0) == (r.AlState.PREOP, 0)
     _one(chain, ec.Command.APWR, 0, r.AL_CONTROL, struct.pack("<H", r.AlState.SAFEOP))
@@ -210,3 +218,31 @@ def test_serve_ethercat_mistakes_are_one_line(capsys, argv, says):
     code = main(["serve", "--transport", "ethercat", "--topology", "hydra_full", *argv])
     err = capsys.readouterr().err.strip()
     assert code == 2 and says in err and len(err.splitlines()) == 1, err
+
+
+def test_esi_dictionary_is_the_dictionary_the_boxes_serve(cfg, full):
+    """Every Device's Dictionary lists the objects its boxes answer over CoE, with the
+    identity's values, the assignments' PREOP write restriction and the tunables' ranges."""
+    from firmware_model.mcu.tunables import TUNABLES
+
+    root = ET.fromstring(esi_xml(full, cfg))
+    devices = {int(d.find("Type").get("ProductCode")[2:], 16): d for d in root.iter("Device")}
+    chain = EscChain(full, cfg, "echo")
+    for esc, mb in zip(chain.escs, chain.mailboxes.each, strict=True):
+        dev = devices[esc.desc.product_code]
+        assert dev.find("Mailbox/CoE").get("CompleteAccess") == "1"
+        objs = {int(o.find("Index").text[2:], 16): o
+                for o in dev.findall("Profile/Dictionary/Objects/Object")}
+        assert sorted(objs) == sorted(mb.od.objects)
+        ident = [si.find("Info/DefaultData").text for si in objs[0x1018].findall("Info/SubItem")]
+        assert [int.from_bytes(bytes.fromhex(v), "little") for v in ident[1:]][:3] == [
+            esc.desc.vendor_id, esc.desc.product_code, esc.desc.revision]
+        dt = {d.find("Name").text: d for d in dev.findall("Profile/Dictionary/DataTypes/DataType")}
+        access = dt["DT1C13"].findall("SubItem/Flags/Access")
+        assert {(a.text, a.get("WriteRestrictions")) for a in access} == {("rw", "PREOP")}
+        for p, t in enumerate(TUNABLES):
+            if 0x2000 + p not in mb.od.objects:
+                continue
+            sub = objs[0x2000 + p].findall("Info/SubItem")[1]
+            assert (float(sub.find("Info/MinValue").text), float(sub.find("Info/MaxValue").text),
+                    sub.find("Info/Unit").text) == (t.low, t.high, t.unit)

@@ -2,7 +2,9 @@
 :class:`~firmware_model.esc.esc.Esc` slaves: the same reply bytes, the same memories and
 states, the same outputs handed to the boxes, on random sequences of frames (register,
 SII, logical, broadcast, misaddressed, truncated, not EtherCAT), box inputs and clock
-ticks. And the sync managers' 3-buffers under writers and readers in two threads."""
+ticks, and the mailbox: SM0/SM1 configured as mailboxes, requests written, answers read,
+repeat requests, the application taking requests and posting answers. And the sync
+managers' 3-buffers under writers and readers in two threads."""
 
 from __future__ import annotations
 
@@ -34,7 +36,7 @@ class Both:
         self.arr = cc.EscArrays(describe_all(THREE))
         self.buf = np.zeros(2048, dtype=np.uint8)
         for i, esc in enumerate(self.ref.escs):  # the boxes' first inputs, as the chain's
-            s = esc.desc.sms[1]
+            s = esc.desc.sms[esc.desc.in_sm]
             self.arr.set_inputs(i, bytes(esc.mem[s.start:s.start + esc.desc.in_bytes]))
 
     def handle(self, frame: bytes) -> bytes | None:
@@ -60,6 +62,12 @@ class Both:
         for i, esc in enumerate(self.ref.escs):
             assert self.arr.pending_outputs(i) == esc.pending_outputs()
 
+    def take_mailbox(self, i: int) -> None:
+        assert self.arr.take_mailbox(i) == self.ref.escs[i].take_mailbox()
+
+    def post_mailbox(self, i: int, data: bytes) -> None:
+        assert self.arr.post_mailbox(i, data) == self.ref.escs[i].post_mailbox(data)
+
     def tick(self, dt: int) -> None:
         for esc in self.ref.escs:
             esc.tick(dt)
@@ -70,7 +78,7 @@ class Both:
         for i, esc in enumerate(self.ref.escs):
             # The compiled slave takes new inputs when the next datagram reaches it: compare
             # the memory outside a buffer a box may just have published into.
-            s = esc.desc.sms[1]
+            s = esc.desc.sms[esc.desc.in_sm]
             mem = bytearray(esc.mem)
             got = bytearray(self.arr.mem[i].tobytes())
             if self.arr.iidx[i, cc.B_SHARED] & cc.FRESH:
@@ -86,7 +94,7 @@ _REGS = [r.TYPE, r.STATION_ADDRESS, r.STATION_ALIAS, r.DL_CONTROL, r.DL_STATUS, 
          r.AL_STATUS, r.AL_STATUS_CODE, r.RX_ERROR, r.WD_DIVIDER, r.WD_TIME_PD,
          r.WD_STATUS_PD, r.WD_COUNTER_PD, r.EEP_CONFIG, r.EEP_CONTROL, r.EEP_ADDRESS,
          r.EEP_DATA, r.FMMU0, r.FMMU0 + 16, r.SM0, r.SM0 + 8, r.DC_START, 0x1000, 0x1020,
-         0x1100, 0x1140, 0x1FF8, 0xFFF0]
+         0x1100, 0x1140, 0x1FF8, 0xFFF0, 0x1080, 0x1200, r.SM0 + 5, r.SM0 + 13, r.SM0 + 16]
 
 ado_st = st.one_of(st.sampled_from(_REGS), st.integers(0, 0xFFFF),
                    st.sampled_from(_REGS).flatmap(lambda a: st.integers(a - 4, a + 4)
@@ -105,6 +113,8 @@ def datagram_st(draw):  # noqa: ANN001, ANN201
         lad = draw(st.one_of(st.integers(0, 400), st.integers(0, 0xFFFFFFFF)))
         return ec.Datagram.logical(cmd, lad, data, draw(st.integers(0, 255)),
                                    draw(st.integers(0, 0xFFFF)))
+    if cmd in (ec.Command.APWR, ec.Command.APRD) and draw(st.booleans()):
+        return draw(mailbox_datagram_st(cmd))
     if cmd == ec.Command.FPWR and draw(st.booleans()):  # the AL and EEPROM commands
         ado = draw(st.sampled_from([r.AL_CONTROL, r.EEP_CONTROL]))
         data = struct.pack("<H", draw(st.sampled_from(
@@ -113,6 +123,37 @@ def datagram_st(draw):  # noqa: ANN001, ANN201
     return ec.Datagram(cmd, draw(st.integers(0, 255)), draw(adp_st), draw(ado_st), data,
                        draw(st.integers(0, 0xFFFF)), draw(st.integers(0, 0xFFFF)),
                        draw(st.booleans()))
+
+
+#: The mailbox sync managers as a master programs them (SM0 0x1000 / SM1 0x1080, 128 bytes).
+_MBX_SMS = struct.pack("<HHBBBBHHBBBB", 0x1000, 128, 0x26, 0, 1, 0, 0x1080, 128, 0x22, 0, 1, 0)
+
+
+@st.composite
+def mailbox_datagram_st(draw, cmd):  # noqa: ANN001, ANN201
+    """Position-addressed mailbox traffic: SM0/SM1 set up, a request written whole (or in
+    part, or too long), SM1 read whole or in part, SM status read, repeat request toggled."""
+    adp = (-draw(st.integers(0, 2))) & 0xFFFF
+    if cmd == ec.Command.APRD:
+        ado, n = draw(st.sampled_from([(0x1080, 128), (0x1080, 64), (0x10C0, 64),
+                                       (r.SM0 + 5, 1), (r.SM0 + 13, 3), (0x1000, 128)]))
+        return ec.Datagram(cmd, 1, adp, ado, bytes(n))
+    kind = draw(st.sampled_from(["sms", "sms", "request", "request", "part", "long",
+                                 "repeat", "al"]))
+    if kind == "sms":
+        return ec.Datagram(cmd, 1, adp, r.SM0, _MBX_SMS)
+    if kind == "request":
+        return ec.Datagram(cmd, 1, adp, 0x1000, draw(st.binary(min_size=128, max_size=128)))
+    if kind == "part":
+        off = draw(st.integers(0, 127))
+        return ec.Datagram(cmd, 1, adp, 0x1000 + off,
+                           draw(st.binary(min_size=1, max_size=128 - off)))
+    if kind == "long":
+        return ec.Datagram(cmd, 1, adp, 0x1000, bytes(140))
+    if kind == "repeat":
+        return ec.Datagram(cmd, 1, adp, r.SM0 + 13, bytes([0, draw(st.sampled_from([1, 3]))]))
+    return ec.Datagram(cmd, 1, adp, r.AL_CONTROL, struct.pack("<H", draw(st.sampled_from(
+        [0x11, 0x12, 0x1]))))
 
 
 @st.composite
@@ -138,7 +179,9 @@ op_st = st.one_of(
     frame_st().map(lambda f: ("frame", f)),
     st.tuples(st.just("inputs"), st.integers(0, 2), st.randoms(use_true_random=False)),
     st.tuples(st.just("tick"), st.sampled_from([1_000, 1_000_000, 20_000_000, 120_000_000])),
-    st.just(("outputs",)))
+    st.just(("outputs",)),
+    st.tuples(st.just("take"), st.integers(0, 2)),
+    st.tuples(st.just("post"), st.integers(0, 2), st.binary(max_size=140)))
 
 
 def _run(both: Both, ops: list) -> None:
@@ -150,6 +193,10 @@ def _run(both: Both, ops: list) -> None:
             both.set_inputs(op[1], op[2].randbytes(esc.desc.in_bytes))
         elif op[0] == "tick":
             both.tick(op[1])
+        elif op[0] == "take":
+            both.take_mailbox(op[1])
+        elif op[0] == "post":
+            both.post_mailbox(op[1], op[2])
         else:
             both.outputs()
 
@@ -174,6 +221,52 @@ def test_compiled_path_equals_the_chain_in_op(cfg, ops, cyclic):
         both.outputs()
     _run(both, ops)
     both.outputs()
+
+
+mailbox_op_st = st.one_of(
+    st.lists(st.sampled_from([ec.Command.APWR, ec.Command.APRD, ec.Command.APRD])
+             .flatmap(mailbox_datagram_st), min_size=1, max_size=3)
+    .map(lambda dgs: ("frame", ec.encode_frame(dgs, MAC_DST, MAC_SRC))),
+    st.tuples(st.just("take"), st.integers(0, 2)),
+    st.tuples(st.just("post"), st.integers(0, 2), st.binary(max_size=140)),
+    st.tuples(st.just("frame"), st.integers(0, 2).map(lambda k: ec.encode_frame(
+        [ec.Datagram(ec.Command.APRD, 1, (-k) & 0xFFFF, 0x1080, bytes(128))],
+        MAC_DST, MAC_SRC))),
+    op_st)
+
+
+@given(ops=st.lists(mailbox_op_st, min_size=1, max_size=30))
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+def test_compiled_path_equals_the_chain_in_mailbox_traffic(cfg, ops):
+    """From PREOP with the mailboxes set up (a master's bring-up): requests, answers, partial
+    and refused accesses, repeat requests, state changes, interleaved with random traffic."""
+    both = Both(cfg)
+    EscMaster(both).bring_up(to_op=False)
+    _run(both, ops)
+
+
+def test_mailbox_answers_repeat_and_refusals_equal(cfg):
+    """A long answer, then a shorter one (SM1's rest zeroed), a lost read repeated, a
+    request written while the last is not taken (refused), equal in both paths."""
+    both = Both(cfg)
+    EscMaster(both).bring_up(to_op=False)
+
+    def frame(*dgs: ec.Datagram) -> list[ec.Datagram]:
+        return ec.decode_frame(both.handle(ec.encode_frame(list(dgs), MAC_DST, MAC_SRC)))
+
+    read = ec.Datagram(ec.Command.APRD, 1, 0, 0x1080, bytes(128))
+    write = ec.Datagram(ec.Command.APWR, 1, 0, 0x1000, bytes(range(128)))
+    both.post_mailbox(0, b"\x11" * 100)
+    assert frame(read)[0].wkc == 1
+    assert frame(read)[0].wkc == 0                      # empty now: refused
+    both.post_mailbox(0, b"\x22" * 10)
+    assert frame(read)[0].data == b"\x22" * 10 + bytes(118)
+    frame(ec.Datagram(ec.Command.APWR, 1, 0, r.SM0 + 13, bytes([0, 3])))  # repeat request
+    d = frame(read, ec.Datagram(ec.Command.APRD, 1, 0, r.SM0 + 15, bytes(1)))
+    assert d[0].wkc == 1 and d[0].data[:10] == b"\x22" * 10 and d[1].data[0] & 2
+    assert [d.wkc for d in frame(write, write)] == [1, 0]  # full: the second refused
+    both.take_mailbox(0)
+    assert frame(write)[0].wkc == 1                     # taken: SM0 free again
 
 
 # --- 3-buffer ------------------------------------------------------------------------------------

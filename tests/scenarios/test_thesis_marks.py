@@ -60,3 +60,30 @@ def test_tn_curve_marks_stall_no_load_and_efficiency(saved, tmp_path: Path) -> N
     assert lines["thesis: stall 1700 N"] == [0.0, 1700.0]
     assert lines["thesis: no load 150 mm/s"] == [150.0, 0.0]
     assert lines["thesis: peak 40 %"][2:] == [40.0, 40.0]
+
+
+def _level_lines(fig, db: float) -> list:  # noqa: ANN001
+    """Horizontal lines across the gain axis at ``db``."""
+    gain = fig.axes[0]
+    return [ln for ln in gain.get_lines()
+            if len(set(ln.get_ydata())) == 1 and ln.get_ydata()[0] == db]
+
+
+def test_the_f1_resonance_plot_draws_no_bandwidth_line(saved, tmp_path: Path) -> None:
+    """F1 as measured is a resonance figure: its plot marks the thesis's peaks, and has no
+    -3 dB line (a bandwidth plot, F5/F6, keeps it)."""
+    from hil.scenarios.f1_measured import _plot
+    from hil.scenarios.thesis import _plot_bodes
+
+    f = np.arange(4.0, 72.0, 2.0)
+    res = ScenarioResult("f1-measured", "t",
+                         [Metric("peak, rod end fixed, reinforced beam", 21.7, "Hz",
+                                 thesis=25.0)],
+                         {"bodes": [("rod end, reinforced", f, np.ones(len(f)) + 0j)]})
+    _plot(res, tmp_path / "f1.png")
+    _plot_bodes(dataclasses.replace(res, name="f6"), tmp_path / "f6.png")
+    resonance, bandwidth = saved
+    assert set(_thesis_lines(resonance)) == {"thesis: peak, rod end fixed, reinforced beam "
+                                             "25 Hz"}
+    assert _level_lines(resonance, -3.0) == []
+    assert len(_level_lines(bandwidth, -3.0)) == 1

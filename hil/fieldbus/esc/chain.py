@@ -11,7 +11,8 @@ bad FCS.
 
 Time: :meth:`EscChain.cycle` is one 1 ms bus cycle of the boxes (20 ticks): each slave's
 watchdog advances, outputs the master wrote in OP (or the safe outputs) are applied, the
-box runs, and its inputs go into the slave's input buffer. The project's own master keeps
+box runs, its mailbox side serves CoE (:mod:`hil.fieldbus.esc.mailbox`), and its inputs go
+into the slave's input buffer. The project's own master keeps
 its preconfigured chain (:class:`hil.fieldbus.chain.Chain`, fixed logical windows, no AL
 states), on which the committed logs replay.
 """
@@ -23,6 +24,7 @@ from dataclasses import dataclass
 from firmware_model.esc.esc import Esc
 from hil.fieldbus.boxes import make_box
 from hil.fieldbus.chain import CYCLE_TICKS
+from hil.fieldbus.esc.mailbox import EscPort, Mailboxes
 from hil.fieldbus.esc.slaves import describe_all
 from hil.fieldbus.topology import Topology
 from plant.config import Config
@@ -55,6 +57,8 @@ class EscChain:
                       for b in topo.boxes]
         for esc, box in zip(self.escs, self.boxes, strict=True):
             esc.set_inputs(box.inputs())
+        #: The boxes' mailbox side (CoE), run with the boxes each cycle.
+        self.mailboxes = Mailboxes(described, self.boxes, EscPort(self.escs), cfg)
         self.stats = EscChainStats()
 
     # --- frames -----------------------------------------------------------------------------
@@ -90,10 +94,10 @@ class EscChain:
                            d.circulating)
 
     def _hand_outputs(self) -> None:
-        for esc, box in zip(self.escs, self.boxes, strict=True):
+        for i, (esc, box) in enumerate(zip(self.escs, self.boxes, strict=True)):
             out = esc.pending_outputs()
             if out is not None:
-                box.apply(out)
+                box.apply(self.mailboxes.expand(i, out))
 
     # --- time -------------------------------------------------------------------------------
     def cycle(self) -> None:
@@ -109,12 +113,13 @@ class EscChain:
         """The boxes' side of one cycle: every box one cycle on (no ESC touched)."""
         for box in self.boxes:
             box.advance(CYCLE_TICKS)
+        self.mailboxes.step()
         self.stats.cycles += 1
 
     def publish_inputs(self) -> None:
         """Every box's input record into its ESC's input buffer."""
-        for esc, box in zip(self.escs, self.boxes, strict=True):
-            esc.set_inputs(box.inputs())
+        for i, (esc, box) in enumerate(zip(self.escs, self.boxes, strict=True)):
+            esc.set_inputs(self.mailboxes.select(i, box.inputs()))
 
     def watchdog_report(self) -> list[dict]:
         """Per slave: watchdog time, trips and the delay of the last trip [ms]."""

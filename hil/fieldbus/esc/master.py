@@ -96,7 +96,7 @@ class EscMaster:
             image = self._read_sii(station)
             cats = sii.categories(image)
             syncm = cats[sii.CAT_SYNCM]
-            self.one(ec.Command.FPWR, station, r.SM0, syncm[:16])
+            self.one(ec.Command.FPWR, station, r.SM0, syncm[:8 * r.N_SM])
             sizes.append((station, sii.pdo_bits(image, sii.CAT_RXPDO) // 8,
                           sii.pdo_bits(image, sii.CAT_TXPDO) // 8, syncm))
             self.set_state(station, r.AlState.PREOP)
@@ -106,8 +106,12 @@ class EscMaster:
             outs.append(lad)
             lad += nout
         for (station, nout, nin, syncm), out_lad in zip(sizes, outs, strict=True):
-            o_phys, i_phys = struct.unpack_from("<H", syncm, 0)[0], struct.unpack_from(
-                "<H", syncm, 8)[0]
+            # the process data's sync managers: SyncM entries of type 3 (outputs), 4 (inputs)
+            kinds = [syncm[8 * k + 7] for k in range(len(syncm) // 8)]
+            o_k = kinds.index(sii.SM_OUTPUTS) if sii.SM_OUTPUTS in kinds else 0
+            i_k = kinds.index(sii.SM_INPUTS) if sii.SM_INPUTS in kinds else 1
+            o_phys = struct.unpack_from("<H", syncm, 8 * o_k)[0]
+            i_phys = struct.unpack_from("<H", syncm, 8 * i_k)[0]
             fmmus = struct.pack("<IHBBHBBB3x", out_lad, nout, 0, 7, o_phys, 0,
                                 r.FMMU_WRITE, 1 if nout else 0)
             fmmus += struct.pack("<IHBBHBBB3x", lad, nin, 0, 7, i_phys, 0, r.FMMU_READ, 1)

@@ -12,6 +12,8 @@ runs: ``eha-hil serve --transport ethercat --interface IF --topology hydra_full`
   record: the sync managers' 3-buffers (:mod:`firmware_model.esc.compiled`), so neither
   side ever sees half a record and neither waits for the other. How far simulated time
   fell behind wall time is reported (``lag_max_ms``).
+  After each cycle the boxes' mailbox side (:mod:`hil.fieldbus.esc.mailbox`) serves the
+  CoE requests the ESCs' SM0 handed over and posts answers and emergencies for SM1.
 
 Before the frame path starts, the boxes run :data:`WARMUP_CYCLES` cycles and the frame loop
 is compiled (or loaded): first calls take tens of ms (seconds with a cold cache), which
@@ -34,6 +36,7 @@ from hil.fieldbus.box_clock import BoxClock
 from hil.fieldbus.boxes import box_engine, make_box
 from hil.fieldbus.chain import CYCLE_TICKS
 from hil.fieldbus.esc import frames as esc_frames
+from hil.fieldbus.esc.mailbox import Mailboxes
 from hil.fieldbus.esc.slaves import describe_all
 from hil.fieldbus.topology import Topology
 from hil.sim.cpu_account import steal_during, steal_s
@@ -51,15 +54,19 @@ WATCH_S = 0.5
 class ServedChain:
     """The slaves' memories (:class:`EscArrays`) and the boxes behind them. ``model``:
     echo, stack or robot (every box; the whole-robot engine advances all at once);
-    ``stack_boxes``: boxes that get the full stack whatever ``model`` says."""
+    ``stack_boxes``: boxes that get the full stack whatever ``model`` says; ``coe``: the
+    slaves have their CoE mailbox (False: none, process data on SM0/SM1)."""
 
     def __init__(self, topo: Topology, cfg: Config, model: str = "echo",
-                 stack_boxes: tuple[int, ...] = ()) -> None:
+                 stack_boxes: tuple[int, ...] = (), coe: bool = True) -> None:
         self.topology = topo
         self.model = model
-        self.arrays = EscArrays(describe_all(topo))
+        described = describe_all(topo, coe)
+        self.arrays = EscArrays(described)
         self.boxes = [make_box("stack" if b.id in stack_boxes and model != "robot" else model,
                                b, cfg) for b in topo.boxes]
+        #: The boxes' mailbox side (CoE), run on the box clock after each cycle.
+        self.mailboxes = Mailboxes(described, self.boxes, self.arrays, cfg)
         self.engine = box_engine(model, self.boxes, cfg, overlap=False)
         self.publish_inputs()
 
@@ -68,7 +75,7 @@ class ServedChain:
         for i, box in enumerate(self.boxes):
             out = self.arrays.pending_outputs(i)
             if out is not None:
-                box.apply(out)
+                box.apply(self.mailboxes.expand(i, out))
 
     def advance(self) -> None:
         if self.engine is not None:
@@ -79,12 +86,13 @@ class ServedChain:
 
     def publish_inputs(self) -> None:
         for i, box in enumerate(self.boxes):
-            self.arrays.set_inputs(i, box.inputs())
+            self.arrays.set_inputs(i, self.mailboxes.select(i, box.inputs()))
 
     def cycle(self) -> None:
         """One 1 ms cycle of every box, exchanging process data with the ESCs."""
         self.take_outputs()
         self.advance()
+        self.mailboxes.step()
         self.publish_inputs()
 
     def watchdog_report(self) -> list[dict]:

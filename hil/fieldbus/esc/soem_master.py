@@ -12,6 +12,14 @@ MODE ``rtt N``: as far as OP, every actuator enabled with a force command, N cyc
 histogram (``rtt_hist``, :mod:`hil.fieldbus.reply_times`: memory bounded however long the
 run) with its exact maximum, and the WKC errors; a progress line on stderr every
 PROGRESS_S seconds.
+MODE ``coe BOX N``: in PREOP every slave's identity read by SDO (0x1018:1..4), then box BOX's
+first TxPDO left out of 0x1C13 (complete access write; BOX < 0: no remap), config_map, OP,
+N cycles with force commands on BOX's actuators (100 N per slot number + 1), its last
+inputs recorded; then the master stops
+sending, and after the watchdogs tripped it reads every slave's mailbox: the emergencies.
+Also each abort a probe SDO gets (a missing object, a read-only write, an out-of-range gain).
+MODE ``gain BOX OTHER KP NEWTONS N``: box BOX's force gain written by SDO, then a force step
+on slot 0 of BOX and OTHER (see :func:`gain`).
 """
 
 from __future__ import annotations
@@ -103,8 +111,127 @@ def bring_ups(ifname: str, n: int, image_bytes: int) -> dict:
     return {"bring_ups": n, "bring_ups_ok": ok, "failed": failed}
 
 
+def _abort_of(call) -> int | None:  # noqa: ANN001
+    try:
+        call()
+    except pysoem.SdoError as exc:
+        return exc.abort_code
+    return None
+
+
+def coe(ifname: str, box: int, n: int) -> dict:
+    """MODE coe (see the module's docstring)."""
+    m = pysoem.Master()
+    m.open(ifname)
+    info: dict = {"found": m.config_init()}
+    sdo_us: list[float] = []
+
+    def timed_read(s, k: int) -> int:  # noqa: ANN001
+        t = time.perf_counter()
+        raw = s.sdo_read(0x1018, k)
+        sdo_us.append((time.perf_counter() - t) * 1e6)
+        return struct.unpack("<I", raw)[0]
+
+    info["identity"] = [[timed_read(s, k) for k in range(1, 5)] for s in m.slaves]
+    info["sdo_read_us"] = sdo_us  # wall time of each expedited upload (one box cycle or two)
+    info["sii_identity"] = [[s.man, s.id, s.rev] for s in m.slaves]
+    emcy: list[list] = []
+    for k, s in enumerate(m.slaves):
+        s.add_emergency_callback(
+            lambda e, k=k: emcy.append([k, e.error_code, e.error_reg, e.b1, e.w1, e.w2]))
+    if box >= 0:
+        s = m.slaves[box]
+        raw = s.sdo_read(0x1C13, 0, ca=True)
+        count = raw[0]
+        idx = list(struct.unpack_from(f"<{count}H", raw, 2))
+        info["assigned_before"] = idx
+        s.sdo_write(0x1C13, 0, struct.pack(f"<BB{count - 1}H", count - 1, 0, *idx[1:]), ca=True)
+        raw = s.sdo_read(0x1C13, 0, ca=True)
+        info["assigned_after"] = list(struct.unpack_from(f"<{raw[0]}H", raw, 2))
+    probe = m.slaves[0]
+    info["aborts"] = {
+        "missing_object": _abort_of(lambda: probe.sdo_read(0x3000, 0)),
+        "missing_subindex": _abort_of(lambda: probe.sdo_read(0x1018, 9)),
+        "read_only": _abort_of(lambda: probe.sdo_write(0x1018, 1, b"\0\0\0\0")),
+        "gain_too_high": _abort_of(lambda: probe.sdo_write(0x2000, 1, struct.pack("<f", 1e6))),
+    }
+    info["name"] = probe.sdo_read(0x1008, 0).decode()
+    info["image_bytes"] = m.config_map()
+    info["in_bytes"] = [len(s.input) for s in m.slaves]
+    info["safeop"] = m.state_check(pysoem.SAFEOP_STATE, STATE_TIMEOUT_US)
+    m.state = pysoem.OP_STATE
+    m.send_processdata()
+    m.receive_processdata(RECV_TIMEOUT_US)
+    m.write_state()
+    info["op"] = m.state_check(pysoem.OP_STATE, STATE_TIMEOUT_US)
+    target = m.slaves[max(box, 0)]
+    out = bytearray(target.output)
+    for k in range(len(out) // 10):  # actuator slot k: force mode, enabled, 100 (k + 1) N
+        struct.pack_into("<BBi", out, 10 * k, 1, 1, 10_000 * (k + 1))
+    target.output = bytes(out)
+    info["bad_wkc"], info["bad_wkc_values"] = paced(m, n)
+    info["inputs_last"] = target.input.hex()
+    time.sleep(0.3)  # nothing sent: the MCU command watchdog, then the ESC's, trip
+    for s in m.slaves:  # SM1 holds one message; the box puts the next one a cycle later
+        for _ in range(6):
+            try:
+                s.mbx_receive()
+            except pysoem.Emergency as e:  # (raised when no callback takes it)
+                emcy.append([-1, e.error_code, e.error_reg, e.b1, e.w1, e.w2])
+            time.sleep(0.003)
+    info["emergencies"] = emcy
+    m.read_state()
+    info["after_stop"] = [s.state for s in m.slaves]
+    m.state = pysoem.INIT_STATE
+    m.write_state()
+    m.close()
+    return info
+
+
+def gain(ifname: str, box: int, other: int, kp: float, newtons: float, n: int) -> dict:
+    """MODE gain: in PREOP box BOX's force gain of actuator slot 0 (0x2000:1) written by
+    SDO and read back (and box OTHER's read); OP; slot 0 of both enabled at 0 N for 200
+    cycles, then a NEWTONS step for the rest of N cycles; both f_pressure inputs per cycle."""
+    m = pysoem.Master()
+    m.open(ifname)
+    info: dict = {"found": m.config_init()}
+    a, b = m.slaves[box], m.slaves[other]
+    a.sdo_write(0x2000, 1, struct.pack("<f", kp))
+    info["kp_read"] = struct.unpack("<f", a.sdo_read(0x2000, 1))[0]
+    info["kp_other"] = struct.unpack("<f", b.sdo_read(0x2000, 1))[0]
+    info["image_bytes"] = m.config_map()
+    info["safeop"] = m.state_check(pysoem.SAFEOP_STATE, STATE_TIMEOUT_US)
+    m.state = pysoem.OP_STATE
+    m.send_processdata()
+    m.receive_processdata(RECV_TIMEOUT_US)
+    m.write_state()
+    info["op"] = m.state_check(pysoem.OP_STATE, STATE_TIMEOUT_US)
+    f: dict[int, list[float]] = {box: [], other: []}
+
+    def each(k: int) -> None:
+        for s, key in ((a, box), (b, other)):
+            out = bytearray(s.output)
+            struct.pack_into("<BBi", out, 0, 1, 1, 0 if k < 200 else round(newtons / 0.01))
+            s.output = bytes(out)
+            f[key].append(struct.unpack_from("<h", s.input, 6)[0] * 0.1)
+
+    info["bad_wkc"], info["bad_wkc_values"] = paced(m, n, each)
+    info["f_pressure"] = [f[box], f[other]]
+    m.state = pysoem.INIT_STATE
+    m.write_state()
+    m.close()
+    return info
+
+
 def main(argv: list[str]) -> None:
     ifname, mode = argv[0], argv[1]
+    if mode == "gain":
+        print(json.dumps(gain(ifname, int(argv[2]), int(argv[3]), float(argv[4]),
+                              float(argv[5]), int(argv[6]))))
+        return
+    if mode == "coe":
+        print(json.dumps(coe(ifname, int(argv[2]), int(argv[3]))))
+        return
     if mode == "bringups":
         print(json.dumps(bring_ups(ifname, int(argv[2]), int(argv[3]))))
         return
