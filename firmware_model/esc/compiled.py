@@ -30,7 +30,9 @@ from numba import njit, types
 from numba.core import cgutils
 from numba.extending import intrinsic
 
+from firmware_model.esc import dc_compiled as dcc
 from firmware_model.esc import registers as r
+from firmware_model.esc.dc import DcParams, dc_line
 from firmware_model.esc.esc import _WRITABLE, ESC_TYPE, Esc
 from firmware_model.esc.sii import SlaveDescription
 
@@ -48,7 +50,8 @@ S_SII_LEN, S_IN_START = 13, 14
 # (S_SII0_LEN/S_SII1_LEN: the lengths the application expects, changed by a PDO remap).
 S_OUT_SM, S_IN_SM, S_MBX_RX, S_MBX_TX = 15, 16, 17, 18
 S_MBX0_START, S_MBX0_LEN, S_MBX1_START, S_MBX1_LEN = 19, 20, 21, 22
-N_ST = 23
+# Distributed clocks: columns dcc.DC_BASE (23) .. dcc.DC_END (firmware_model.esc.dc_compiled).
+N_ST = dcc.DC_END
 #: Slots of ``obuf``/``olen`` after the output 3-buffer: the mailbox hand-over buffers.
 MBX_RX, MBX_TX = 3, 4
 N_OSLOTS = 5
@@ -65,10 +68,13 @@ _AL_ERROR = 0x10
 
 class EscArrays:
     """The memories and state of a chain of slaves (``descs``: (description, SII image) in
-    line order), laid out as the compiled frame path reads them."""
+    line order), laid out as the compiled frame path reads them. ``dc``: the slaves' clocks
+    and delays (:func:`firmware_model.esc.dc.dc_line` by default)."""
 
-    def __init__(self, described: list[tuple[SlaveDescription, bytes]]) -> None:
+    def __init__(self, described: list[tuple[SlaveDescription, bytes]],
+                 dc: list[DcParams] | None = None) -> None:
         n = len(described)
+        dc = dc if dc is not None else dc_line(n)
         self.n = n
         self.mem = np.zeros((n, MEM), dtype=np.uint8)
         sii_max = max(len(img) for _d, img in described)
@@ -83,7 +89,7 @@ class EscArrays:
         self.iidx = self.oidx.copy()
         self.scratch = np.zeros(2048, dtype=np.uint8)
         for i, (d, img) in enumerate(described):
-            ref = Esc(d, img, last=i == n - 1)   # the reference's reset state, copied
+            ref = Esc(d, img, last=i == n - 1, dc=dc[i])  # the reference's reset state
             self.mem[i] = np.frombuffer(bytes(ref.mem), dtype=np.uint8)
             self.sii[i, :len(img)] = np.frombuffer(img, dtype=np.uint8)
             st = self.st[i]
@@ -97,6 +103,7 @@ class EscArrays:
             if d.coe:
                 st[S_MBX0_START], st[S_MBX0_LEN] = d.sms[0].start, d.sms[0].length
                 st[S_MBX1_START], st[S_MBX1_LEN] = d.sms[1].start, d.sms[1].length
+            dcc.init_row(self.mem[i], st, dc[i])
         assert self.mem[0, r.TYPE] == ESC_TYPE
 
     def frame_args(self) -> tuple:
@@ -483,6 +490,8 @@ def _write(m, st, sii, wmask, obuf, olen, oidx, ado, src, s0, n):
     if ado <= r.WD_COUNTER_PDI and end > r.WD_COUNTER_PD:
         m[r.WD_COUNTER_PD] = 0
         m[r.WD_COUNTER_PDI] = 0
+    if ado < r.DC_END and end > r.DC_START:
+        dcc.written(m, st, ado, end, src, s0, st[S_NOW])
     return 1
 
 
@@ -562,6 +571,8 @@ def _process(m, st, sii, wmask, obuf, olen, oidx, cmd, adp, ado, buf, d0, n, wkc
         if cmd == 13 or cmd == 14:
             return adp, wkc + _write(m, st, sii, wmask, obuf, olen, oidx, ado, buf, d0, n)
         return adp, wkc
+    if ado < r.DC_END and ado + n > r.DC_START:
+        dcc.before_read(m, st, ado, ado + n, st[S_NOW])
     if cmd == 1 or cmd == 4 or cmd == 7:
         _read_into(m, ado, buf, d0, n, cmd == 7)
         return adp, wkc + _mbx_read(m, st, ado, n)
@@ -670,6 +681,8 @@ def tick(mem, st, obuf, olen, oidx, dt_ns):
             s[S_TRIP_DELAY] = quiet
             _enter(m, s, obuf[i], olen[i], oidx[i], _SAFEOP)
             _refuse(m, s, 0x001B)
+    if mem.shape[0]:
+        dcc.tick(mem, st, st[0, S_NOW])
 
 
 def watchdog_ns(mem_row: np.ndarray) -> int:

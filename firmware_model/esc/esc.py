@@ -34,6 +34,7 @@ from __future__ import annotations
 import struct
 
 from firmware_model.esc import registers as r
+from firmware_model.esc.dc import DcParams, DcUnit
 from firmware_model.esc.registers import AL_ERROR, AlState, AlStatusCode
 from firmware_model.esc.sii import SlaveDescription
 from protocols.ethercat import Command
@@ -80,6 +81,13 @@ def _writable_mask() -> bytearray:
         base = r.SM0 + k * r.SM_SIZE
         allow(base, base + 5)
         allow(base + 6, base + 7)       # status (5) and PDI control (7) are the PDI's
+    # distributed clocks: the registers the master sets as written; 0x0900 (latch), 0x0910
+    # (compare), 0x0981, 0x0990 and 0x09A0 (checked first) go through the DC unit
+    allow(r.DC_SYSTEM_OFFSET, r.DC_SYSTEM_DELAY + 4)
+    allow(r.DC_SPEED_START, r.DC_SPEED_START + 2)
+    allow(r.DC_DIFF_FILTER, r.DC_SPEED_FILTER + 1)
+    allow(r.DC_CYCLIC_CONTROL, r.DC_CYCLIC_CONTROL + 1)
+    allow(r.DC_SYNC1_CYCLE, r.DC_SYNC1_CYCLE + 4)
     allow(r.RAM_START, r.MEMORY_SIZE)
     return m
 
@@ -90,7 +98,8 @@ _WRITABLE = bytes(_writable_mask())
 class Esc:
     """One slave's ESC with its SII image; ``last`` if it closes the line (port 1 open)."""
 
-    def __init__(self, desc: SlaveDescription, image: bytes, last: bool = False) -> None:
+    def __init__(self, desc: SlaveDescription, image: bytes, last: bool = False,
+                 dc: DcParams | None = None) -> None:
         self.desc = desc
         self.sii = image
         self.mem = bytearray(r.MEMORY_SIZE)
@@ -104,7 +113,9 @@ class Esc:
         m[r.SMS_SUPPORTED] = r.N_SM
         m[r.RAM_SIZE] = (r.MEMORY_SIZE - r.RAM_START) // 1024
         m[r.PORT_DESCRIPTOR] = 0x0F            # ports 0 and 1 MII, 2 and 3 not implemented
-        _U16.pack_into(m, r.FEATURES, 0)        # no distributed clocks
+        _U16.pack_into(m, r.FEATURES, r.FEATURE_DC | r.FEATURE_DC64)
+        self.dc = DcUnit(dc)
+        self.dc.reset(m)
         _U16.pack_into(m, r.STATION_ALIAS, desc.alias)
         m[r.PDI_CONTROL] = desc.pdi_control
         # DL status: PDI operational (SII loaded), PDI watchdog fine, port 0 link +
@@ -160,6 +171,8 @@ class Esc:
                 return adp, wkc + self._write(ado, bytes(data))
             return adp, wkc
         n = len(data)
+        if ado < r.DC_END and ado + n > r.DC_START:
+            self.dc.before_read(self.mem, ado, ado + n, self.now_ns)
         if cmd in _READS:
             old, ok = self._read(ado, n)
             if cmd == Command.BRD:
@@ -220,6 +233,8 @@ class Esc:
             m[r.RX_ERROR:r.ERROR_COUNTERS_END] = bytes(r.ERROR_COUNTERS_END - r.RX_ERROR)
         if ado <= r.WD_COUNTER_PDI and end > r.WD_COUNTER_PD:
             m[r.WD_COUNTER_PD] = m[r.WD_COUNTER_PDI] = 0
+        if ado < r.DC_END and end > r.DC_START:
+            self.dc.written(m, ado, end, data, self.now_ns)
         return 1
 
     # --- mailbox --------------------------------------------------------------------------------
@@ -489,6 +504,7 @@ class Esc:
         """Advance the slave's time; in OP the watchdog trips if the output buffer was not
         written for the watchdog time (outputs safe, SAFEOP + error, code 0x001B)."""
         self.now_ns += dt_ns
+        self.dc.tick(self.mem, self.now_ns)
         if self.state != AlState.OP or not self.out_bytes:
             return
         wd = self.watchdog_ns()

@@ -16,7 +16,7 @@ FMMUS_SUPPORTED = 0x0004  # u8
 SMS_SUPPORTED = 0x0005   # u8
 RAM_SIZE = 0x0006        # u8, KiB
 PORT_DESCRIPTOR = 0x0007  # u8, 2 bits per port: 00 none, 01 not configured, 10 EBUS, 11 MII
-FEATURES = 0x0008        # u16, bit 2: distributed clocks (0 here)
+FEATURES = 0x0008        # u16, bit 2: distributed clocks, bit 3: 64-bit DC
 # --- addresses ----------------------------------------------------------------------------
 STATION_ADDRESS = 0x0010  # u16 configured station address (FPxx)
 STATION_ALIAS = 0x0012   # u16 (from SII word 4)
@@ -54,9 +54,29 @@ N_FMMU = 8
 SM0 = 0x0800
 SM_SIZE = 8
 N_SM = 8
-# --- distributed clocks: not implemented; writes accepted (WKC counts), reads return 0 -----------
+# --- distributed clocks (:mod:`firmware_model.esc.dc`) -------------------------------------------
 DC_START = 0x0900
+DC_RECV_TIME_P0 = 0x0900  # u32 x 4: local time a frame reached port 0..3; a write to 0x0900
+#                           latches all four (and 0x0918) for that frame
+DC_RECV_TIME_P1 = 0x0904
+DC_SYSTEM_TIME = 0x0910   # u64 read: system time; write: compared by the time control loop
+DC_RECV_TIME_PU = 0x0918  # u64 local time the latching frame reached the processing unit
+DC_SYSTEM_OFFSET = 0x0920  # u64 system time = local time + offset
+DC_SYSTEM_DELAY = 0x0928  # u32 propagation delay from the reference clock [ns]
+DC_SYSTEM_DIFF = 0x092C   # u32 filtered difference, bit 31: local copy smaller than received
+DC_SPEED_START = 0x0930   # u16 loop bandwidth; a write resets the loop
+DC_SPEED_DIFF = 0x0932    # i16 the loop's frequency correction [0.1 ppm] (this model's unit)
+DC_DIFF_FILTER = 0x0934   # u8 filter depth of the system time difference
+DC_SPEED_FILTER = 0x0935  # u8 filter depth of the speed counter (stored)
+DC_CYCLIC_CONTROL = 0x0980  # u8 bit 0: sync unit assigned to the PDI (then ECAT may not drive it)
+DC_ACTIVATION = 0x0981    # u8 bit 0 cyclic operation, 1 SYNC0, 2 SYNC1, 5 start plausibility check
+DC_ACTIVATION_STATUS = 0x0984  # u8 bit 0 SYNC0 running, bit 2 start time was not in the future
+DC_START_TIME = 0x0990    # u64 write: SYNC0 start (system time); read: next SYNC0 pulse
+DC_SYNC0_CYCLE = 0x09A0   # u32 [ns]; 0: one pulse
+DC_SYNC1_CYCLE = 0x09A4   # u32 [ns] (stored; the box does not use SYNC1)
 DC_END = 0x0A00
+FEATURE_DC = 0x0004
+FEATURE_DC64 = 0x0008
 # --- process-data RAM ---------------------------------------------------------------------
 RAM_START = 0x1000
 MEMORY_SIZE = 0x2000     # registers + 4 KiB RAM

@@ -36,6 +36,10 @@ BITS = {"i1": 8, "i2": 16, "i4": 32, "u1": 8, "u2": 16, "u4": 32}
 
 #: FMMU category codes.
 FMMU_OUTPUTS, FMMU_INPUTS = 1, 2
+#: General category, PhysicalPort: 4 bits per port (0 not used, 1 MII, 3 EBUS).
+PORTS_MII_MII = 0x0011
+#: Word 0x3E: EEPROM size in KiBit, minus 1 (0x000F: 16 KiBit).
+EEPROM_SIZE_CODE = 0x000F
 #: Sync manager types (SyncM category byte 7, object 0x1C00): mailbox out (master ->
 #: slave), mailbox in, process-data outputs, process-data inputs.
 SM_MBX_OUT, SM_MBX_IN, SM_OUTPUTS, SM_INPUTS = 1, 2, 3, 4
@@ -164,7 +168,7 @@ def build_image(d: SlaveDescription) -> bytes:
         head += struct.pack("<HHHHH", rx.start, rx.length, tx.start, tx.length,
                             MBX_PROTO_COE)
     head += bytes(0x3E * 2 - len(head))
-    head += struct.pack("<HH", 0x000F, 0x0001)  # 16 KiBit - 1 coded as in ETG.2010; version 1
+    head += struct.pack("<HH", EEPROM_SIZE_CODE, 0x0001)  # version 1
     strings = _Strings()
     name_idx = strings.add(d.name)  # string 1: the device name
     group_idx = strings.add(d.group)
@@ -178,7 +182,7 @@ def build_image(d: SlaveDescription) -> bytes:
     # bytes 5..9: CoE/FoE/EoE/SoE details: SDO, PDO assignment, complete access with CoE
     general[5] = COE_SDO | COE_PDO_ASSIGN | COE_SDO_CA if d.coe else 0
     struct.pack_into("<h", general, 12, 0)  # current on E-bus [mA]: none (MII ports)
-    struct.pack_into("<H", general, 16, 0x000F)  # physical ports 0,1: MII; 2,3: none
+    struct.pack_into("<H", general, 16, PORTS_MII_MII)  # ports 0,1: MII; 2,3: not used
     fmmu = bytes([FMMU_OUTPUTS, FMMU_INPUTS])
     syncm = b"".join(struct.pack("<HHBBBB", s.start, s.length, s.control, 0,
                                  1 if s.enable else 0, s.kind) for s in d.sms)
@@ -192,7 +196,11 @@ def build_image(d: SlaveDescription) -> bytes:
         body += _category(CAT_RXPDO, rxpdo)
     body += struct.pack("<H", CAT_END)
     image = bytes(head) + body
-    return image + bytes(-len(image) % 8)
+    image += bytes(-len(image) % 8)
+    if len(image) > eeprom_bytes(image):
+        raise ValueError(f"{d.name}: SII image of {len(image)} bytes does not fit the "
+                         f"{eeprom_bytes(image)}-byte EEPROM it declares")
+    return image
 
 
 # --- reading an image back (for the ESI cross-check and the docs) ---------------------------
@@ -207,6 +215,11 @@ def categories(image: bytes) -> dict[int, bytes]:
         out[kind] = image[pos + 4:pos + 4 + size]
         pos += 4 + size
     return out
+
+
+def eeprom_bytes(image: bytes) -> int:
+    """The EEPROM size the image declares (word 0x3E: KiBit - 1), in bytes."""
+    return (struct.unpack_from("<H", image, 0x3E * 2)[0] + 1) * 1024 // 8
 
 
 def mailbox(image: bytes) -> tuple[int, int, int, int, int]:

@@ -56,17 +56,28 @@ def upstream_si(up: np.ndarray, cal: FirmwareCalibration) -> dict[str, np.ndarra
     analog input the rows hold, by its ``si_name``."""
     u = np.asarray(up).astype(np.int64) & 0xFFFF
     iq = u[:, B.U_IQ] - ((u[:, B.U_IQ] & 0x8000) << 1)
-    count = (u[:, B.U_PISTON_HI] << 16) | u[:, B.U_PISTON_LO]
     code = ((u[:, B.U_STRAIN_HI] & 0xFF) << 16) | u[:, B.U_STRAIN_LO]
     out = {"iq": iq * 1e-3,
            "theta_m": _unwrap16(u[:, B.U_ABI]) * (TWO_PI / cal.abi_counts_per_rev),
-           "x_piston": (count - cal.biss_zero_count) * LINEAR_COUNT_M,
+           "x_piston": piston_x(piston_count(u), cal),
            "f_strain_raw": (code - MIDSCALE) * (cal.strain_full_scale_n / MIDSCALE)}
     for a in B.ANALOG_INPUTS:
         if a.register < u.shape[1]:
             v0, mul, div = analog_decoder(a, cal)
             out[a.si_name] = (u[:, a.register] * padc.DEFAULT.lsb_v - v0) * mul / div
     return out
+
+
+def piston_count(up: np.ndarray) -> np.ndarray:
+    """The BiSS piston count (int64) assembled from the two upstream words of memories
+    ``up`` (..., >= ``U_PISTON_HI`` + 1 words), high word first as the MCU reads it."""
+    u = np.asarray(up).astype(np.int64) & 0xFFFF
+    return (u[..., B.U_PISTON_HI] << 16) | u[..., B.U_PISTON_LO]
+
+
+def piston_x(count: np.ndarray, cal: FirmwareCalibration) -> np.ndarray:
+    """Piston position [m] about mid-stroke of BiSS counts ``count`` (float64)."""
+    return (count - cal.biss_zero_count) * LINEAR_COUNT_M
 
 
 def _unwrap16(words: np.ndarray) -> np.ndarray:

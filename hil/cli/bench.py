@@ -225,8 +225,13 @@ def cmd_bench_log(args: argparse.Namespace, ctx: Context) -> Outcome:
     from hil.bench.log import bench_encodings, bench_overhead, format_report
 
     cfg = ctx.config()
+    if args.topology is not None:
+        from hil.cli.bus import _topology
+
+        _topology(args.topology)  # a bad name or file: one line, before any run
     ov = None if args.seconds == 0 else bench_overhead(cfg, args.seconds, args.level,
-                                                       args.pairs)
+                                                       args.pairs, args.topology, args.model,
+                                                       args.compression)
     enc = bench_encodings(args.samples)
     return Outcome(format_report(ov, enc),
                    {"overhead": None if ov is None else asdict(ov),
@@ -244,6 +249,13 @@ def add_log_parser(bsub) -> None:  # noqa: ANN001
                    help="log level of the logged runs")
     p.add_argument("--pairs", type=int_range(1, 50), default=3,
                    help="bare/logged pairs, 1..50")
+    p.add_argument("--model", choices=("stack", "robot"), default="stack",
+                   help="box model: stack (each box on its own) or robot (every box in the "
+                   "whole-robot engine)")
+    p.add_argument("--compression", default="zstd", choices=("zstd", "lz4", "none"),
+                   help="compression of the logged runs' chunks (bus run --log-compression)")
+    p.add_argument("--topology", help="shipped topology name or TOML file (default: "
+                   "bench_one_box for --model stack, hydra_full for --model robot)")
     p.add_argument("--samples", type=int_range(10, 1_000_000), default=5000,
                    help="samples for the encoding comparison")
     command(p, cmd_bench_log)

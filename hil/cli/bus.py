@@ -52,10 +52,20 @@ def _run_bus(args: argparse.Namespace, cfg, topo, cycles: int, model: str, pc, p
     from hil.cli import outputs
 
     labels = dict(STREAMS)
-    with outputs.streaming({d: getattr(args, d, None) for d in labels}, labels,
-                           _READABLE) as tmp:
-        return _run_bus_to(argparse.Namespace(**{**vars(args), **tmp}), cfg, topo, cycles,
-                           model, pc, progress)
+    try:
+        with outputs.streaming({d: getattr(args, d, None) for d in labels}, labels,
+                               _READABLE) as tmp:
+            return _run_bus_to(argparse.Namespace(**{**vars(args), **tmp}), cfg, topo,
+                               cycles, model, pc, progress)
+    finally:
+        can_log = getattr(args, "can_log", None)
+        if can_log and Path(can_log).is_file():
+            # what a CAN log has no place for (topology, model, configuration), beside it
+            from hil.transports.canlog import write_sidecar
+
+            write_sidecar(can_log, {"topology": args.topology or topo.name, "model": model,
+                                    "mode": "lockstep (bus run)",
+                                    "config": json.dumps(cfg.data)})
 
 
 def _readable_traffic(path) -> str:  # noqa: ANN001 - a Path
@@ -96,8 +106,8 @@ def _run_bus_to(args: argparse.Namespace, cfg, topo, cycles: int, model: str, pc
         what = "--log" if args.log else "--foxglove"
         if not backend(args.transport).in_memory:
             raise UsageError(f"{what} records the in-process run; use --transport inproc")
-        if model != "stack":
-            raise UsageError(f"{what} records the MCU model: use --model stack")
+        if model not in ("stack", "robot"):
+            raise UsageError(f"{what} records the MCU model: use --model stack or robot")
         if args.crc_trailer is not None:
             raise UsageError(f"--crc-trailer/--no-crc-trailer: not with {what} (the logged "
                                 "run keeps the in-process default, with the trailer)")
@@ -112,7 +122,8 @@ def _run_bus_to(args: argparse.Namespace, cfg, topo, cycles: int, model: str, pc
             with _live_view(live_addr) as live:
                 rec = run_logged(topo, cfg, cycles, pc, args.log, level=args.level,
                                  progress=progress, faults=faults,
-                                 capture=None if cap is None else cap.tap(tick_ns), live=live)
+                                 capture=None if cap is None else cap.tap(tick_ns), live=live,
+                                 model=model, compression=args.log_compression)
         finally:
             if cap is not None:
                 cap.close()
@@ -263,6 +274,11 @@ def cmd_replay_traffic(args: argparse.Namespace, cfg) -> Outcome:
     if cfg is None:
         cfg = (Config(json.loads(meta["config"]), [f"{args.log} (capture metadata)"])
                if "config" in meta else load_config(None))
+    if not args.topology and not meta.get("topology") and traffic.kind in ("blf", "asc", "log"):
+        from hil.transports.canlog import sidecar_path
+
+        raise UsageError(f"{args.log}: the CAN log names no topology (no "
+                         f"{sidecar_path(args.log).name} beside it): give --topology")
     topo = _topology(args.topology or meta.get("topology", "bench_one_box"))
     model = args.model or meta.get("model") or ("stack" if topo.n_actuators <= 5 else "echo")
     t0 = time.perf_counter()
@@ -416,6 +432,9 @@ def add_parsers(sub, bsub) -> None:  # noqa: ANN001 - argparse's sub-parsers
                    " lost, corrupted, duplicated or delayed frames, LVDS and sensor faults")
     p.add_argument("--log", metavar="FILE.mcap", type=output_file((".mcap",)),
                    help="log MCU inputs/outputs for replay")
+    p.add_argument("--log-compression", default="zstd", choices=("zstd", "lz4", "none"),
+                   help="--log: compression of the log's chunks (default zstd; lz4 costs "
+                   "about half the CPU for ~1.8x the file, docs/framelog.md)")
     p.add_argument("--level", default="mcu", choices=("bus", "mcu", "full"),
                    help="log detail")
     add_wire_options(p)

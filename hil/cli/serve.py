@@ -25,13 +25,14 @@ from __future__ import annotations
 
 import argparse
 import gc
+import math
 import signal
 import sys
 import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
 
-from hil.cli.args import common, float_range, int_range
+from hil.cli.args import common, float_range, int_range, output_file
 from hil.cli.contract import EXIT_FAILED, EXIT_OK, Context, Outcome, UsageError, command
 from hil.fieldbus import reply_times, wire
 from hil.fieldbus.box_clock import BoxClock, ClockedBoxes
@@ -309,21 +310,55 @@ def _status_line(st: ServeStats, errors: int) -> str:
             f"errors {errors}  load {load:.0f}%")
 
 
-def _live_view(args: argparse.Namespace, chain: Chain, cfg):  # noqa: ANN202
-    """``--foxglove``: (live view, boxes sending to it), or (None, [])."""
-    if args.foxglove is None:
+def _live_view(args: argparse.Namespace, chain: Chain, cfg, log=None):  # noqa: ANN001, ANN202
+    """``--foxglove`` and/or ``--log`` (``log``, an open writer): (live view or None, the
+    recorders sending the boxes' decoded signals there and logging them), or (None, [])."""
+    if args.foxglove is None and log is None:
         return None, []
-    from hil.framelog.live import FoxgloveLive, LiveError, parse_address
-    from hil.replay.record import signal_boxes
+    from hil.replay.record import attach_recorders
+
+    live = None
+    if args.foxglove is not None:
+        from hil.framelog.live import FoxgloveLive, LiveError, parse_address
+
+        try:
+            live = FoxgloveLive(*parse_address(args.foxglove))
+        except (ValueError, LiveError) as exc:
+            raise _usage(str(exc)) from None
+    recs = attach_recorders(chain, cfg, log, live, args.level, background=True)
+    if live is not None:
+        print(f"eha-hil serve: foxglove live view at {live.url} (decoded signals of "
+              f"{len(chain.boxes)} box(es), sent every 100 ms)", file=sys.stderr, flush=True)
+    return live, recs
+
+
+def _open_log(args: argparse.Namespace, path: str | None, model: str):  # noqa: ANN202
+    """``--log``: the frame log's writer (None without it); the echo model has no MCU."""
+    if path is None:
+        return None
+    if model == "echo":
+        raise _usage("--log records the MCU's words: use --model stack or robot (the echo "
+                     "model has no MCU)")
+    from hil.framelog import FrameLogWriter
+    from hil.replay.record import FLUSH_CYCLES
+
+    return FrameLogWriter(path, level=args.level, compression=args.log_compression,
+                          flush_every_ns=FLUSH_CYCLES * 1_000_000,
+                          metadata={"mode": "serve (paced to the wall clock)"})
+
+
+def _close_log(log, recs: list, topo, cfg, chain, model: str, cycles: int) -> None:  # noqa: ANN001
+    """Write out the recorders' last blocks and what a replay needs; close the log."""
+    from hil.replay.record import replay_metadata
 
     try:
-        live = FoxgloveLive(*parse_address(args.foxglove))
-    except (ValueError, LiveError) as exc:
-        raise _usage(str(exc)) from None
-    boxes = signal_boxes(chain, cfg, live)
-    print(f"eha-hil serve: foxglove live view at {live.url} ({len(boxes)} box(es) with "
-          "decoded signals, sent every 100 ms)", file=sys.stderr, flush=True)
-    return live, boxes
+        for r in recs:
+            getattr(r, "close", r.flush)()
+    finally:
+        if log is not None:
+            log.add_metadata("eha-hil.replay", replay_metadata(topo, cfg, chain.boxes, model,
+                                                               cycles))
+            log.close()
 
 
 def run_serve(args: argparse.Namespace, ctx: Context) -> Outcome:
@@ -343,12 +378,24 @@ def cmd_serve(args: argparse.Namespace, cfg) -> Outcome:
         return cmd_serve_ethercat(args, cfg, topo)
     from hil.cli import outputs
 
-    # the capture is written under a temporary name, renamed when closed (hil.cli.outputs)
-    with outputs.streaming({"capture": args.capture}, {"capture": "capture"}) as tmp:
-        return _serve(args, cfg, topo, tmp.get("capture"))
+    # capture and log are written under a temporary name, renamed when closed
+    # (hil.cli.outputs)
+    with outputs.streaming({"capture": args.capture, "log": args.log},
+                           {"capture": "capture", "log": "log"}, _LOG_CHECK) as tmp:
+        return _serve(args, cfg, topo, tmp.get("capture"), tmp.get("log"))
 
 
-def _serve(args: argparse.Namespace, cfg, topo, capture: str | None) -> Outcome:
+def _readable_log(path) -> str:  # noqa: ANN001
+    from hil.cli.progress import readable_log
+
+    return readable_log(path)
+
+
+_LOG_CHECK = {"log": _readable_log}
+
+
+def _serve(args: argparse.Namespace, cfg, topo, capture: str | None,
+           log_path: str | None = None) -> Outcome:
     from hil.fieldbus.capture import CaptureError, CaptureWriter
     from hil.sim.cpu_account import steal_during, steal_s
     from hil.sim.realtime import RealtimePlan
@@ -360,7 +407,8 @@ def _serve(args: argparse.Namespace, cfg, topo, capture: str | None) -> Outcome:
     chain = Chain(topo, cfg, model, paced=True, crc_trailer=trailer)
     rt = RealtimePlan(args.realtime)
     _compute_workers(chain.engine, rt)
-    live, live_boxes = _live_view(args, chain, cfg)
+    log = _open_log(args, log_path, model)
+    live, live_boxes = _live_view(args, chain, cfg, log)
     end, where, release = _open_end(args)
     cap = None
     if args.capture:
@@ -416,10 +464,12 @@ def _serve(args: argparse.Namespace, cfg, topo, capture: str | None) -> Outcome:
             release()
         if cap is not None:
             cap.close()
-        if live is not None:
-            for b in live_boxes:
-                b.flush()
-            live.close()
+        try:
+            _close_log(log, live_boxes, topo, cfg, chain, model,
+                       chain.stats.cycles_advanced)
+        finally:
+            if live is not None:
+                live.close()
     if tty and not args.quiet:
         print(file=sys.stderr)
 
@@ -497,6 +547,9 @@ def _serve(args: argparse.Namespace, cfg, topo, capture: str | None) -> Outcome:
     lines = [f"serve {where}: {topo.name}, {model} model", table(["", "value"], rows)]
     if cap is not None:
         lines.append(f"capture: {args.capture}, {cap.frames} frames")
+    if log is not None:
+        lines.append(f"log: {args.log} (eha-hil log info {args.log}; eha-hil replay "
+                     f"{args.log})")
     lines.append("ok" if not failures else "FAILED: " + "; ".join(failures))
     return Outcome("\n".join(lines), data, EXIT_OK if not failures else EXIT_FAILED)
 
@@ -504,10 +557,6 @@ def _serve(args: argparse.Namespace, cfg, topo, capture: str | None) -> Outcome:
 def cmd_serve_ethercat(args: argparse.Namespace, cfg, topo) -> Outcome:
     """``--transport ethercat``: the ESC slaves (:mod:`hil.fieldbus.esc.serve`) on a raw
     Ethernet interface for a real master (docs/ethercat-slaves.md)."""
-    import threading
-
-    from hil.fieldbus.esc.serve import ServedChain, serve
-    from hil.sim.realtime import RealtimePlan
     from hil.transports.rawether import RawEthernet
 
     if not args.interface:
@@ -520,14 +569,42 @@ def cmd_serve_ethercat(args: argparse.Namespace, cfg, topo) -> Outcome:
     bad = [b for b in args.stack_boxes if not 0 <= b < len(topo.boxes)]
     if bad:
         raise _usage(f"--stack-box {bad[0]}: {topo.name} has boxes 0..{len(topo.boxes) - 1}")
-    try:
-        link = RawEthernet(args.interface)
-    except TransportError as exc:
-        raise _usage(str(exc)) from None
+    dc = _dc_line(args, topo)
     model = args.model or "echo"
+    if args.log and model == "echo" and not args.stack_boxes:
+        raise _usage("--log records the MCU's words: use --model stack or robot, or "
+                     "--stack-box N (the echo model has no MCU)")
+    from hil.cli import outputs
+
+    with outputs.streaming({"log": args.log}, {"log": "log"}, _LOG_CHECK) as tmp:
+        try:
+            link = RawEthernet(args.interface)
+        except TransportError as exc:
+            raise _usage(str(exc)) from None
+        return _serve_ethercat(args, cfg, topo, link, model, tmp.get("log"), dc)
+
+
+def _serve_ethercat(args: argparse.Namespace, cfg, topo, link, model: str,  # noqa: ANN001
+                    log_path: str | None, dc) -> Outcome:  # noqa: ANN001
+    import threading
+
+    from hil.fieldbus.chain import CYCLE_TICKS
+    from hil.fieldbus.esc.serve import ServedChain, serve
+    from hil.sim.realtime import RealtimePlan
+
     rt = RealtimePlan(args.realtime)
+    log = recs = None
     try:
-        chain = ServedChain(topo, cfg, model, tuple(args.stack_boxes), coe=args.coe)
+        chain = ServedChain(topo, cfg, model, tuple(args.stack_boxes), coe=args.coe, dc=dc)
+        if log_path is not None:
+            from hil.replay.record import attach_recorders
+
+            log = _open_log(args, log_path, "stack")
+            recs = attach_recorders(chain, cfg, log, None, args.level, background=True)
+            for m in chain.mailboxes.each:  # the slaves' CoE side reads the new boxes
+                if m is not None:
+                    m.box = chain.boxes[m.i]
+            chain.publish_inputs()  # (the recording boxes' own, equal to the replaced)
         _compute_workers(chain.engine, rt)
         rt.process()
 
@@ -556,6 +633,10 @@ def cmd_serve_ethercat(args: argparse.Namespace, cfg, topo) -> Outcome:
                 signal.signal(s, h)
     finally:
         link.close()
+        if log is not None:
+            _close_log(log, recs, topo, cfg, chain, model,
+                       chain.engine.tick // CYCLE_TICKS if chain.engine is not None
+                       else chain.boxes[0].tick // CYCLE_TICKS)
     reply = reply_times.summary(hist, st.reply_max_us)
     failures = ethercat_failures(st, args)
     data = {"transport": "ethercat", "interface": args.interface, "topology": topo.name,
@@ -573,10 +654,36 @@ def cmd_serve_ethercat(args: argparse.Namespace, cfg, topo) -> Outcome:
             "thresholds": {"max_overrun_percent": args.max_overrun_percent,
                            "max_late_percent": args.max_late_percent,
                            "max_lag_ms": args.max_lag_ms, "late_us": args.late_us},
-            "slaves": chain.watchdog_report(), "ok": not failures, "failures": failures}
+            "slaves": chain.watchdog_report(), "dc": chain.dc_report(),
+            "ok": not failures, "failures": failures}
     text = ethercat_table(data) + "\n" + ("ok" if not failures else
                                            "FAILED: " + "; ".join(failures))
+    if log is not None:
+        text += f"\nlog: {args.log} (eha-hil log info {args.log}; eha-hil replay {args.log})"
     return Outcome(text, data, EXIT_OK if not failures else EXIT_FAILED)
+
+
+def _dc_line(args: argparse.Namespace, topo):  # noqa: ANN202 - list[DcParams]
+    """The slaves' clocks from --dc-drift-ppm / --dc-hop-ns (one line naming the mistake)."""
+    from firmware_model.esc.dc import dc_line
+
+    n = len(topo.boxes)
+    drift = args.dc_drift_ppm if len(args.dc_drift_ppm) > 1 else args.dc_drift_ppm[0]
+    try:
+        return dc_line(n, drift, args.dc_hop_ns)
+    except ValueError as exc:
+        raise _usage(f"--dc-drift-ppm: {exc} ({topo.name})") from None
+
+
+def _ppm_list(text: str) -> list[float]:
+    try:
+        out = [float(v) for v in text.split(",")]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number or a comma-separated "
+                                         "list of numbers") from None
+    if not all(math.isfinite(v) and abs(v) <= 500 for v in out):
+        raise argparse.ArgumentTypeError(f"{text!r}: each drift must be within +-500 ppm")
+    return out
 
 
 def _timing_failures(late: int, answered: int, lag_max_ms: float,
@@ -633,6 +740,14 @@ def ethercat_table(d: dict) -> str:
         ["time the hypervisor stole from each CPU", _steal(d["steal_ms"])],
         ["real time", ", ".join(d["realtime"]["applied"]) or "off"],
     ]
+    dc = d.get("dc")
+    if dc and any(s["offset_set"] or s["sync0"] for s in dc["slaves"]):
+        spread = dc["spread_ns"]
+        rows.append(["distributed clocks", f"SYNC0 on {sum(s['sync0'] for s in dc['slaves'])} "
+                     f"of {len(dc['slaves'])} slaves; box cycles at SYNC0 {d['sync0_cycles']}; "
+                     f"system-time spread, last {dc['spread_window_cycles']} cycles "
+                     f"{spread[-1] if spread else 0} ns; out-of-order writes "
+                     f"{sum(s['out_of_order_writes'] for s in dc['slaves'])}"])
     hist = ", ".join(f"{k}: {v}" for k, v in d["reply_histogram_us"].items() if v)
     late = sorted(d["late_replies"], key=lambda e: -e["reply_us"])[:5]
     return (f"serve {d['interface']}: {d['topology']}, {d['model']} model\n"
@@ -666,6 +781,13 @@ def add_parser(sub) -> None:  # noqa: ANN001 - argparse's sub-parsers
     p.add_argument("--stack-box", dest="stack_boxes", type=int_range(0, 255), action="append",
                    default=[], metavar="N",
                    help="ethercat: box N runs the full stack (repeatable; others: --model)")
+    p.add_argument("--dc-drift-ppm", type=_ppm_list, default=[50.0], metavar="PPM",
+                   help="ethercat: crystal error of each slave's distributed clock: one "
+                   "value X for +X, -X, +X, ... along the line (default 50), or one per "
+                   "slave, comma-separated; within +-500")
+    p.add_argument("--dc-hop-ns", type=int_range(0, 100_000, unit="ns"), default=500,
+                   metavar="NS", help="ethercat: simulated propagation delay from one "
+                   "slave to the next, each way, 0..100000 (default 500)")
     p.add_argument("--no-coe", dest="coe", action="store_false",
                    help="ethercat: slaves without a mailbox (no CoE; a master maps the "
                    "process data from the SII alone)")
@@ -708,6 +830,13 @@ def add_parser(sub) -> None:  # noqa: ANN001 - argparse's sub-parsers
     from hil.cli.bus import add_wire_options
 
     add_wire_options(p)
+    p.add_argument("--log", metavar="FILE.mcap", type=output_file((".mcap",)),
+                   help="log what every MCU took in and gave out, and the decoded signals "
+                   "(docs/framelog.md); --model stack or robot")
+    p.add_argument("--level", default="mcu", choices=("bus", "mcu", "full"),
+                   help="--log: level of detail (full: the driver boards' traces too)")
+    p.add_argument("--log-compression", default="zstd", choices=("zstd", "lz4", "none"),
+                   help="--log: compression of the log's chunks")
     p.add_argument("--foxglove", nargs="?", const="", metavar="HOST:PORT",
                    help="stream the boxes' decoded signals to Foxglove Studio (WebSocket; "
                    "default 127.0.0.1:8765, loopback)")
@@ -722,7 +851,8 @@ def _scope_options(p: argparse.ArgumentParser) -> None:
     # (--capture and --foxglove with ethercat are refused by cmd_serve_ethercat, with hints)
     stream = tuple(serve_backends())
     scopes = {"baudrate": ("serial",), "host": ("udp",), "port": stream,
-              "interface": ("ethercat",), "stack_boxes": ("ethercat",)}
+              "interface": ("ethercat",), "stack_boxes": ("ethercat",),
+              "dc_drift_ppm": ("ethercat",), "dc_hop_ns": ("ethercat",)}
     for action in p._actions:
         if action.dest in scopes:
             only_with(action, "transport", *scopes[action.dest])

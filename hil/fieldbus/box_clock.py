@@ -51,6 +51,9 @@ class BoxClockStats:
     compute_s: float = 0.0       # wall time spent in the cycles
     worst_cycle_ms: float = 0.0
     worst_cycle_at: int = 0      # its number
+    sync0_cycles: int = 0        # cycles released at a SYNC0 pulse (DC active)
+    sync0_first_cycle: int = -1  # number of the first of them
+    sync0_start_late_max_us: float = 0.0  # latest start of such a cycle after its pulse
 
 
 class BoxClock(threading.Thread):
@@ -59,13 +62,17 @@ class BoxClock(threading.Thread):
     thread (its scheduling, its CPU)."""
 
     def __init__(self, cycle: Callable[[], None], on_start: Callable[[], None] | None = None,
-                 behind: Callable[[int, float], None] | None = None) -> None:
+                 behind: Callable[[int, float], None] | None = None,
+                 sync0: Callable[[int], int | None] | None = None) -> None:
         super().__init__(name="box-clock", daemon=True)
         self.cycle = cycle
         self.on_start = on_start
         #: behind(cycles, busy): after each cycle, how many whole cycles it is behind
         #: schedule, and the share of the last full BUSY_WINDOW_NS it spent in cycles.
         self.behind = behind
+        #: sync0(after): the next SYNC0 pulse [ns, monotonic] after ``after``, or None
+        #: (then the cycle grid of t0).
+        self.sync0 = sync0
         self.stats = BoxClockStats()
         self.error: BaseException | None = None
         #: Time the thread was runnable but waited for its CPU while on the clock [ns].
@@ -105,25 +112,36 @@ class BoxClock(threading.Thread):
         st, clock, sleep_until = self.stats, time.monotonic_ns, _sleep_until
         t0 = self.t0
         k = 0
+        last = t0 - 1   # the previous cycle's release
         was_late = False
         busy, window0, window_spent = 0.0, t0, 0
         gc.disable()  # a collection inside the loop would be a stall; collected between
         try:
             while not self._stop_ev.is_set():
                 release = t0 + k * PERIOD_NS
+                pulse = self.sync0(last) if self.sync0 is not None else None
+                if pulse is not None:
+                    release = pulse
                 if clock() < release:
                     sleep_until(release)
                     continue
                 begin = clock()
                 self.cycle()
                 done = clock()
+                last = release
+                if pulse is not None:
+                    if st.sync0_first_cycle < 0:
+                        st.sync0_first_cycle = st.cycles
+                    st.sync0_cycles += 1
+                    st.sync0_start_late_max_us = max(st.sync0_start_late_max_us,
+                                                     (begin - pulse) / 1e3)
                 k += 1
                 st.cycles += 1
                 spent = done - begin
                 st.compute_s += spent * 1e-9
                 if spent / 1e6 > st.worst_cycle_ms:
                     st.worst_cycle_ms, st.worst_cycle_at = spent / 1e6, k - 1
-                late = done - (t0 + k * PERIOD_NS)
+                late = done - (release + PERIOD_NS)
                 behind = max(late, 0) // PERIOD_NS
                 if late > 0:
                     st.overruns += 1
@@ -132,6 +150,8 @@ class BoxClock(threading.Thread):
                     if behind > MAX_LAG_CYCLES:
                         t0 += behind * PERIOD_NS
                         st.slipped_cycles += behind
+                        if pulse is not None:   # the missed pulses are skipped too
+                            last = done - PERIOD_NS
                 was_late = late > 0
                 window_spent += spent
                 if done - window0 >= BUSY_WINDOW_NS:

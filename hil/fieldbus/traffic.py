@@ -12,9 +12,15 @@ decodes as an EtherCAT PDU. The UDP checksum is checked where it can be and repo
 not required: a capture taken on the sending host (``dumpcap -i lo``) holds datagrams whose
 checksum was left to the NIC (checksum offload), as Wireshark notes, and a zero checksum
 means none was computed (RFC 768). After the PDU a UDP payload may hold the fieldbus CRC-32
-trailer (``--crc-trailer``), which is checked. Direction: raw Ethernet frames from the
-chain's MAC (:data:`hil.fieldbus.capture.CHAIN_MAC`) are replies; over UDP, datagrams to
-the chain's port (34980, or the port common to every datagram) are requests.
+trailer (``--crc-trailer``), which is checked. Direction of raw Ethernet frames, from the
+frames themselves (:func:`_ethernet_directions`): frames from the chain's MAC
+(:data:`hil.fieldbus.capture.CHAIN_MAC`, our captures) are replies; else, when a source MAC
+comes back with bit 1 of its first octet set (what an ESC does to the frames it returns),
+those are the replies and the master's own MAC the requests; else a frame is paired with
+the one before it that carries the same datagrams (command, index, offset, length: a
+reply's working counter and data differ from its request's, auto-increment addresses too),
+and a frame left without a partner is of unknown direction. Over UDP, datagrams to the
+chain's port (34980, or the port common to every datagram) are requests.
 
 CAN logs: the segments on the master's CAN ID (``base_id``, default 0x100) and the
 chain's (``base_id + 1``) are reassembled (:func:`hil.transports.canlog.reassemble`); a
@@ -188,11 +194,12 @@ def read_capture(path: str | os.PathLike[str]) -> Traffic:
             raise TrafficError(f"{path}: link type {reader.datalink()} is not Ethernet (1); "
                                "capture on an Ethernet or loopback interface")
         udp_frames: list[tuple[int, ec.UdpDatagram]] = []
+        eth_frames: list[tuple[int, bytes]] = []
         try:
             for ts, buf in reader:
                 out.packets += 1
                 ts_ns = int(round(float(ts) * 1e6)) * 1000
-                frame = _read_packet(bytes(buf), ts_ns, out, udp_frames)
+                frame = _read_packet(bytes(buf), ts_ns, out, udp_frames, eth_frames)
                 if frame is not None:
                     out.frames.append(frame)
         except (dpkt.dpkt.Error, ValueError, EOFError, IndexError) as exc:
@@ -211,6 +218,7 @@ def read_capture(path: str | os.PathLike[str]) -> Traffic:
     if kind == "pcapng":
         out.metadata = _pcapng_comment(path)
     _udp_directions(out, udp_frames)
+    _ethernet_directions(out, eth_frames)
     return out
 
 
@@ -247,14 +255,16 @@ def _framing_end(path: str, kind: str) -> int:
 
 
 def _read_packet(buf: bytes, ts_ns: int, out: Traffic,
-                 udp_frames: list[tuple[int, ec.UdpDatagram]]) -> BusFrame | None:
+                 udp_frames: list[tuple[int, ec.UdpDatagram]],
+                 eth_frames: list[tuple[int, bytes]]) -> BusFrame | None:
     try:
         eth = ec.decode_ethernet(buf)
     except CodecError:
         out.other_packets += 1
         return None
     if eth.ethertype == ec.ETHERTYPE_ETHERCAT:
-        direction = "rx" if eth.src == CHAIN_MAC else "tx"
+        direction = None  # set by _ethernet_directions once every frame is read
+        eth_frames.append((len(out.frames), bytes(eth.src)))
         try:
             pdu, dgs, _ = _pdu(eth.payload, exact=False)  # Ethernet pads short frames
             return BusFrame(ts_ns, direction, pdu, tuple(dgs))
@@ -302,21 +312,75 @@ def _udp_directions(out: Traffic, udp_frames: list[tuple[int, ec.UdpDatagram]]) 
                                  f.crc_trailer, f.udp_checksum, f.error)
 
 
+def _ethernet_directions(out: Traffic, eth_frames: list[tuple[int, bytes]]) -> None:
+    """Directions of the raw Ethernet EtherCAT frames (see the module docstring)."""
+    if not eth_frames:
+        return
+    macs = {src for _, src in eth_frames}
+    direction: dict[int, str | None] = {}
+    if CHAIN_MAC in macs:  # our own capture: the chain's MAC replies, all else asks
+        direction = {i: "rx" if src == CHAIN_MAC else "tx" for i, src in eth_frames}
+    else:
+        returned = {m for m in macs if m[0] & 0x02 and bytes([m[0] & ~0x02]) + m[1:] in macs}
+        senders = {bytes([m[0] & ~0x02]) + m[1:] for m in returned}
+        rest = []
+        for i, src in eth_frames:
+            if src in returned:
+                direction[i] = "rx"
+            elif src in senders:
+                direction[i] = "tx"
+            else:
+                rest.append(i)
+        direction.update(_paired_directions(out.frames, rest))
+    unpaired = sum(1 for d in direction.values() if d is None)
+    for i, _ in eth_frames:
+        f = out.frames[i]
+        out.frames[i] = BusFrame(f.ts_ns, direction.get(i), f.pdu, f.datagrams, f.carrier,
+                                 f.crc_trailer, f.udp_checksum, f.error)
+    if unpaired:
+        out.notes.append(f"{unpaired} EtherCAT frame(s) without a request/reply partner: "
+                         "direction unknown")
+
+
+def _paired_directions(frames: list[BusFrame], indexes: list[int]) -> dict[int, str | None]:
+    """Request/reply by pairing: a frame whose datagrams (command, index, register offset,
+    data length) are those of an earlier frame still waiting is that frame's reply."""
+    waiting: dict[tuple, list[int]] = {}
+    out: dict[int, str | None] = {}
+    for i in indexes:
+        f = frames[i]
+        if f.pdu is None:
+            out[i] = None
+            continue
+        sig = tuple((d.cmd, d.idx, d.ado, len(d.data)) for d in f.datagrams)
+        queue = waiting.setdefault(sig, [])
+        if queue:
+            out[queue.pop(0)] = "tx"
+            out[i] = "rx"
+        else:
+            queue.append(i)
+    for queue in waiting.values():
+        for i in queue:
+            out[i] = None
+    return out
+
+
 # --- CAN logs --------------------------------------------------------------------------------
 def read_can_traffic(path: str | os.PathLike[str], base_id: int = 0x100) -> Traffic:
     """The fieldbus frames of a CAN log: segments on ``base_id`` (master -> chain) and
     ``base_id + 1`` reassembled."""
-    from hil.transports.canlog import CanLogError, read_can_log, reassemble
+    from hil.transports.canlog import CanLogError, read_can_log, read_sidecar, reassemble
 
     path = str(path)
     try:
         messages = read_can_log(path)
+        meta = read_sidecar(path)
     except CanLogError as exc:
         raise TrafficError(str(exc)) from None
     from hil.transports.canlog import cut_reason
 
     out = Traffic(path, Path(path).suffix.lower().lstrip("."), packets=len(messages),
-                  cut=cut_reason(path, len(messages)))
+                  cut=cut_reason(path, len(messages)), metadata=meta)
     ids = (base_id, base_id + 1)
     out.other_packets = sum(1 for m in messages if m.arbitration_id not in ids)
     stats: dict = {}
@@ -382,6 +446,13 @@ def summary(t: Traffic) -> dict:
     }
 
 
+def _wall(t_s: float) -> str:
+    import datetime
+
+    return datetime.datetime.fromtimestamp(t_s, datetime.UTC).strftime(
+        "%Y-%m-%d %H:%M:%S.%f UTC")
+
+
 def summary_text(s: dict) -> str:
     lines = [f"{s['file']}: {s['format']}, {s['packets']} packets/messages, "
              f"{s['fieldbus_frames']} EtherCAT frames ({s['requests']} requests, "
@@ -389,7 +460,10 @@ def summary_text(s: dict) -> str:
              + (f", {s['direction_unknown']} of unknown direction" if s["direction_unknown"]
                 else "") + f"), {s['malformed']} malformed"]
     if s["first_s"] is not None:
-        lines.append(f"time: {s['first_s']:.6f} .. {s['last_s']:.6f} s")
+        # relative to the file's first frame (a CAN log or a foreign capture stamps wall
+        # time: epoch seconds say nothing at a glance); where that start is, once
+        lines.append(f"time: 0 .. {s['last_s'] - s['first_s']:.6f} s from the first frame"
+                     + (f" ({_wall(s['first_s'])})" if s["first_s"] > 1e8 else ""))
     rows = [("carriers", s["carriers"]), ("datagrams", s["datagrams"]),
             ("reply working counters", s["reply_wkc"]),
             ("CRC-32 trailers (good)", s["crc_trailers"]),

@@ -31,7 +31,7 @@ class TrafficReplayResult:
     unanswered: int = 0        # requests whose reply is not in the log (lost)
     skipped: int = 0           # malformed frames or frames of unknown direction
     divergence: str | None = None
-    first_s: float | None = None
+    first_s: float | None = None   # times relative to the file's first frame
     last_s: float | None = None
 
     @property
@@ -104,13 +104,15 @@ def replay_traffic(traffic: Traffic, topo: Topology, cfg: Config,
     windows = chain.plan.windows
     res = TrafficReplayResult()
     pending: dict[tuple[int, int], deque[bytes]] = defaultdict(deque)
+    # times relative to the file's first frame (a CAN log stamps wall-clock epoch time)
+    t0 = min((f.ts_ns for f in traffic.frames), default=0)
     for f in traffic.frames:
         if f.pdu is None or f.direction is None:
             res.skipped += 1
             continue
         if res.first_s is None:
-            res.first_s = f.ts_ns / 1e9
-        res.last_s = f.ts_ns / 1e9
+            res.first_s = (f.ts_ns - t0) / 1e9
+        res.last_s = (f.ts_ns - t0) / 1e9
         if f.direction == "tx":
             res.requests += 1
             reply = chain.handle(f.pdu)
@@ -127,7 +129,8 @@ def replay_traffic(traffic: Traffic, topo: Topology, cfg: Config,
         res.compared += 1
         if expected != f.pdu:
             d = ec.decode_pdu(f.pdu, allow_trailing=False)[0]
-            res.divergence = (f"reply at t = {f.ts_ns / 1e9:.6f} s (idx {d.idx}, lad {d.lad}): "
+            res.divergence = (f"reply at t = {(f.ts_ns - t0) / 1e9:.6f} s after the first "
+                              f"frame (idx {d.idx}, lad {d.lad}): "
                               + _difference(f.pdu, expected, windows))
             break
     res.unanswered = sum(len(q) for q in pending.values())

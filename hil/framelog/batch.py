@@ -39,10 +39,24 @@ class _MessageIndex(MessageIndex):
     two ``struct.pack`` per message (the same bytes)."""
 
     def write(self, stream) -> None:  # noqa: ANN001 - mcap's RecordBuilder
+        # ``records`` holds (time, offset) pairs and, from :func:`add_messages`, (n, 2)
+        # arrays of them: one array each run of either, in order
+        parts, pairs = [], []
+        for r in self.records:
+            if isinstance(r, np.ndarray):
+                if pairs:
+                    parts.append(np.asarray(pairs, dtype="<u8").reshape(-1, 2))
+                    pairs = []
+                parts.append(r)
+            else:
+                pairs.append(r)
+        if pairs:
+            parts.append(np.asarray(pairs, dtype="<u8").reshape(-1, 2))
+        data = np.concatenate(parts).astype("<u8") if parts else np.zeros((0, 2), "<u8")
         stream.start_record(Opcode.MESSAGE_INDEX)
         stream.write2(self.channel_id)
-        stream.write4(len(self.records) * 16)
-        stream.write(np.asarray(self.records, dtype="<u8").reshape(-1, 2).tobytes())
+        stream.write4(len(data) * 16)
+        stream.write(data.tobytes())
         stream.finish_record()
 
 
@@ -58,20 +72,27 @@ def supported(w: Writer) -> bool:
             and callable(getattr(w, "_Writer__maybe_finalize_chunk", None)))
 
 
-def add_messages(w: Writer, channel_id: int, times: Sequence[int], data: Sequence[bytes],
-                 seq0: int, fast: bool = True) -> None:
+def add_messages(w: Writer, channel_id: int, times: Sequence[int] | np.ndarray,
+                 data: Sequence[bytes] | np.ndarray, seq0: int, fast: bool = True) -> None:
     """Messages ``data[i]`` at log and publish time ``times[i]``, sequence ``seq0 + i``
-    (mod 2^32), on ``channel_id``; as ``add_message`` for each, in one go."""
+    (mod 2^32), on ``channel_id``; as ``add_message`` for each, in one go. ``data`` may be
+    a (n, size) uint8 array (messages of one length)."""
     n = len(data)
     if not n:
         return
+    if isinstance(data, np.ndarray):
+        if not fast:
+            data = [bytes(d) for d in data]
+        times = np.asarray(times, dtype=np.int64)
     if not fast:
+        times = [int(x) for x in times]
         for i in range(n):
             w.add_message(channel_id, times[i], data[i], times[i], (seq0 + i) & 0xFFFFFFFF)
         return
     stats = w._Writer__statistics  # noqa: SLF001 - see the module docstring
     cb = w._Writer__chunk_builder  # noqa: SLF001
-    t_first, t_last = min(times), max(times)
+    times = np.asarray(times, dtype=np.int64)
+    t_first, t_last = int(times.min()), int(times.max())
     if stats.message_count == 0:
         stats.message_start_time = t_first
     else:
@@ -86,12 +107,12 @@ def add_messages(w: Writer, channel_id: int, times: Sequence[int], data: Sequenc
         cb.message_start_time = min(cb.message_start_time, t_first)
     cb.message_end_time = max(cb.message_end_time, t_last)
     index = cb.message_indices.get(channel_id)
-    if not index:
-        index = cb.message_indices[channel_id] = _MessageIndex(channel_id=channel_id,
-                                                               records=[])
+    if not isinstance(index, _MessageIndex):  # none yet, or the library's own (add_message)
+        index = cb.message_indices[channel_id] = _MessageIndex(
+            channel_id=channel_id, records=list(index.records) if index else [])
     base = cb.record_writer.count
     size = len(data[0])
-    if all(len(d) == size for d in data):
+    if isinstance(data, np.ndarray) or all(len(d) == size for d in data):
         rec = np.zeros(n, np.dtype([("op", "u1"), ("len", "<u8"), ("ch", "<u2"), ("seq", "<u4"),
                                     ("log", "<u8"), ("pub", "<u8"), ("data", "u1", (size,))]))
         rec["op"] = Opcode.MESSAGE
@@ -101,10 +122,13 @@ def add_messages(w: Writer, channel_id: int, times: Sequence[int], data: Sequenc
         t = np.asarray(times, dtype=np.uint64)
         rec["log"] = t
         rec["pub"] = t
-        rec["data"] = np.frombuffer(b"".join(data), np.uint8).reshape(n, size)
+        rec["data"] = (data if isinstance(data, np.ndarray) else
+                       np.frombuffer(b"".join(data), np.uint8).reshape(n, size))
         blob = rec.tobytes()
         step = rec.itemsize
-        offsets = range(base, base + n * step, step)
+        index.records.append(np.stack([t, base + step * np.arange(n, dtype=np.uint64)],
+                                      axis=1))
+        offsets = None
     else:
         parts, offsets, pos = [], [], base
         pack = _HEAD.pack
@@ -112,12 +136,13 @@ def add_messages(w: Writer, channel_id: int, times: Sequence[int], data: Sequenc
         for i in range(n):
             d = data[i]
             parts.append(pack(op, _HEAD.size - 9 + len(d), channel_id,
-                              (seq0 + i) & 0xFFFFFFFF, times[i], times[i]))
+                              (seq0 + i) & 0xFFFFFFFF, int(times[i]), int(times[i])))
             parts.append(d)
             offsets.append(pos)
             pos += _HEAD.size + len(d)
         blob = b"".join(parts)
-    index.records.extend(zip(times, offsets, strict=True))
+    if offsets is not None:
+        index.records.extend(zip(times.tolist(), offsets, strict=True))
     cb.num_messages += n
     cb.record_writer._buffer.write(blob)  # noqa: SLF001
     w._Writer__maybe_finalize_chunk()  # noqa: SLF001

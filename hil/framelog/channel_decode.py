@@ -2,6 +2,9 @@
 
 Chosen per channel, the file's own description first:
 
+0. A raw channel whose frames travel inside protobuf messages (``eha-hil.container`` =
+   ``protobuf``, :mod:`hil.framelog.rawpb`): the reader hands over the frames, decoded as
+   below from 2 on (the wrapper is not what one wants to see).
 1. MCAP message encoding ``protobuf``: the stock protobuf runtime, built from the schema
    stored in the file (``mcap_protobuf``'s decoder factory); every scalar field (nested
    messages flattened as ``a.b``), booleans as 0/1. Units from the channel metadata
@@ -9,8 +12,9 @@ Chosen per channel, the file's own description first:
 2. A decoder registered for the frame encoding (:mod:`hil.framelog.decoders`): it knows
    more than a byte layout can say (an LVDS line word's address, data and CRC check; an
    EtherCAT frame's datagrams).
-3. A schema of encoding ``eha-hil/layout`` with a fixed frame size
-   (:mod:`hil.framelog.layout`): its fields at their offsets, scaled to their units.
+3. A byte layout with a fixed frame size (:mod:`hil.framelog.layout`; channel metadata
+   ``eha-hil.layout``, or the schema of encoding ``eha-hil/layout`` in older logs): its
+   fields at their offsets, scaled to their units.
 4. Nothing known: the frame's ``length``.
 """
 
@@ -23,8 +27,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from hil.framelog import layout as LY
+from hil.framelog import rawpb
 from hil.framelog.decoders import DecodeError, decode, has_decoder
-from hil.framelog.formats import META_UNITS
+from hil.framelog.formats import META_CONTAINER, META_LAYOUT, META_UNITS
 from hil.framelog.reader import ChannelInfo
 
 Values = dict[str, int | float]
@@ -101,18 +106,34 @@ def _layout(ch: ChannelInfo, lay: LY.Layout) -> ChannelDecoder:
     return ChannelDecoder(run, lay.units(), "layout")
 
 
+def is_wrapped(ch: ChannelInfo) -> bool:
+    """True if the channel's frames travel inside protobuf messages (:mod:`rawpb`)."""
+    return ch.metadata.get(META_CONTAINER) == rawpb.CONTAINER
+
+
+def channel_layout(ch: ChannelInfo) -> LY.Layout | None:
+    """The byte layout of one frame of ``ch`` with a fixed size and fields, or None."""
+    data = ch.metadata.get(META_LAYOUT, "").encode()
+    if not data and ch.schema_encoding == LY.SCHEMA_ENCODING:
+        data = ch.schema_data
+    if not data:
+        return None
+    try:
+        lay = LY.parse(data)
+    except ValueError:
+        return None
+    return lay if lay.size and lay.fields else None
+
+
 def channel_decoder(ch: ChannelInfo) -> ChannelDecoder:
     """The decoder of channel ``ch`` (see the module docstring)."""
-    if ch.message_encoding == "protobuf" and ch.schema_encoding == "protobuf":
+    if ch.message_encoding == "protobuf" and ch.schema_encoding == "protobuf" and \
+            not is_wrapped(ch):
         return _protobuf(ch)
     if has_decoder(ch.encoding):
         enc = ch.encoding
         return ChannelDecoder(lambda data: decode(enc, data), {}, "registered")
-    if ch.schema_encoding == LY.SCHEMA_ENCODING and ch.schema_data:
-        try:
-            lay = LY.parse(ch.schema_data)
-        except ValueError:
-            lay = None
-        if lay is not None and lay.size and lay.fields:
-            return _layout(ch, lay)
+    lay = channel_layout(ch)
+    if lay is not None:
+        return _layout(ch, lay)
     return ChannelDecoder(lambda data: {"length": len(data)}, {}, "length")

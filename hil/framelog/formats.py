@@ -32,7 +32,8 @@ META_FRAME_ENCODING = "eha-hil.frame_encoding"
 META_DTYPE = "eha-hil.dtype"              # block channels: numpy dtype name, e.g. "uint16"
 META_WIDTH = "eha-hil.width"              # block channels: elements per frame
 META_UNITS = "eha-hil.units"              # decoded-signal channels: JSON {field: SI unit}
-META_LAYOUT = "eha-hil.layout"            # raw channels: where the byte layout is documented
+META_LAYOUT = "eha-hil.layout"            # raw channels: one frame's byte layout (JSON)
+META_CONTAINER = "eha-hil.container"      # raw channels: "protobuf" = frames wrapped (rawpb)
 
 # --- levels of detail -------------------------------------------------------------------
 #: Link kinds a simulation may log; a level includes the kinds listed for it.

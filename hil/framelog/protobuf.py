@@ -117,15 +117,19 @@ class MessageType:
     def encode(self, columns: Mapping[str, np.ndarray], n: int) -> list[bytes]:
         """``n`` messages from ``columns`` (field -> (n,) array, or a scalar for all);
         a missing field is written as 0. Floats are stored as they come (NaN included)."""
+        buf = self.encode_array(columns, n).tobytes()
+        s = self.size
+        return [buf[i:i + s] for i in range(0, n * s, s)]
+
+    def encode_array(self, columns: Mapping[str, np.ndarray], n: int) -> np.ndarray:
+        """:meth:`encode` as one (n, :attr:`size`) uint8 array, row i the i-th message."""
         rec = np.zeros(n, self.record)
         for number, (f, key) in enumerate(zip(self.fields, self._keys, strict=True), 1):
             rec[f"k{number}"] = key
             v = columns.get(f.name)
             if v is not None:
                 rec[f.name] = np.asarray(v) != 0 if f.kind == "bool" else v
-        buf = rec.tobytes()
-        s = self.size
-        return [buf[i:i + s] for i in range(0, n * s, s)]
+        return rec.view(np.uint8).reshape(n, self.size)
 
     def decode(self, data: bytes | memoryview) -> dict[str, float | int]:
         """One message of exactly our layout (the fast path; any protobuf parser reads it

@@ -29,9 +29,11 @@ import lz4.frame
 import numpy as np
 import zstandard
 
+from hil.framelog import rawpb
 from hil.framelog.formats import (
     BLOCK_HEADER,
     BLOCK_MAGIC,
+    META_CONTAINER,
     META_DTYPE,
     META_FRAME_ENCODING,
     META_FRAMING,
@@ -183,6 +185,19 @@ class LogInfo:
         return d
 
 
+class RawChannel(NamedTuple):
+    """All frames of one topic as stored, for columnar decoding: ``t_ns`` (n,) frame times,
+    ``seq`` (n,) the number of the message each frame came in (file order over the
+    selected channels) and ``row`` its row in that message (ties in time sort by these);
+    ``frames`` (n, width) for a block channel, else ``payloads`` (one frame each)."""
+
+    t_ns: np.ndarray
+    seq: np.ndarray
+    row: np.ndarray
+    frames: np.ndarray | None
+    payloads: list[memoryview] | None
+
+
 class Blocks(NamedTuple):
     """All frames of one topic: ``t_ns`` (n,) int64 and ``frames`` (n, width)."""
 
@@ -198,6 +213,7 @@ class _Chan:
     schema_id: int
     metadata: dict[str, str]
     block: bool = False
+    wrapped: bool = False  # frames inside protobuf messages (rawpb)
     encoding: str = ""
     dtype: np.dtype | None = None
     width: int | None = None
@@ -236,6 +252,7 @@ def _channel_from(cur: _Cursor) -> _Chan:
     ch = _Chan(cid, topic, menc, sid, meta)
     ch.block = meta.get(META_FRAMING) == "block"
     ch.encoding = meta.get(META_FRAME_ENCODING, menc)
+    ch.wrapped = meta.get(META_CONTAINER) == rawpb.CONTAINER
     if ch.block:
         try:
             ch.dtype = np.dtype(meta[META_DTYPE]).newbyteorder("<")
@@ -432,11 +449,18 @@ class FrameLogReader:
             raise _Corrupt(f"message on channel {cid}, which has no Channel record before it")
         data = buf[p + _MSG.size:end]
         if ch.block:
-            if len(data) < BLOCK_HEADER.size:
-                raise _Corrupt(f"{ch.topic}: block shorter than its header")
-            magic, count, _w, _c = BLOCK_HEADER.unpack_from(data)
-            if magic != BLOCK_MAGIC:
-                raise _Corrupt(f"{ch.topic}: block magic {bytes(magic)!r} is not {BLOCK_MAGIC!r}")
+            if ch.wrapped:
+                try:
+                    count = rawpb.block_count(data)
+                except ValueError as exc:
+                    raise _Corrupt(f"{ch.topic}: block message: {exc}") from None
+            else:
+                if len(data) < BLOCK_HEADER.size:
+                    raise _Corrupt(f"{ch.topic}: block shorter than its header")
+                magic, count, _w, _c = BLOCK_HEADER.unpack_from(data)
+                if magic != BLOCK_MAGIC:
+                    raise _Corrupt(f"{ch.topic}: block magic {bytes(magic)!r} is not "
+                                   f"{BLOCK_MAGIC!r}")
             last = pub_ns if count else log_ns
         else:
             count, last = 1, log_ns
@@ -506,12 +530,12 @@ class FrameLogReader:
     def _file_ordered(msgs: Iterator[_Msg]) -> Iterator[tuple[str, int, bytes]]:
         for m in msgs:
             if m.chan.block:
-                t, fr = unpack_block(m.data)
+                t, fr = _block(m)
                 topic = m.chan.topic
                 for i in range(t.shape[0]):
                     yield topic, int(t[i]), fr[i].tobytes()
             else:
-                yield m.chan.topic, m.log_ns, bytes(m.data)
+                yield m.chan.topic, m.log_ns, bytes(_single(m))
 
     @staticmethod
     def _time_ordered(msgs: Iterator[_Msg], path: Path) -> Iterator[tuple[str, int, bytes]]:
@@ -525,14 +549,14 @@ class FrameLogReader:
         b_ref: list[tuple[str, np.ndarray]] = []
         for k, m in enumerate(msgs):
             if m.chan.block:
-                t, fr = unpack_block(m.data)
+                t, fr = _block(m)
                 b_t.append(t)
                 b_seq.append(k)
                 b_ref.append((m.chan.topic, fr))
             else:
                 s_t.append(m.log_ns)
                 s_seq.append(k)
-                s_ref.append((m.chan.topic, bytes(m.data)))
+                s_ref.append((m.chan.topic, bytes(_single(m))))
         sizes = [t.shape[0] for t in b_t]
         times = np.concatenate([_times(s_t, b_t, path), *b_t]) if (s_t or b_t) \
             else np.zeros(0, np.int64)
@@ -550,6 +574,55 @@ class FrameLogReader:
             else:
                 topic, fr = b_ref[s]
                 yield topic, int(times[k]), fr[r].tobytes()
+
+    def raw_channels(self, topics: Iterable[str] | None = None) -> dict[str, RawChannel]:
+        """Every frame of ``topics`` (None: all) grouped by channel, in one pass: blocks as
+        stacked arrays, single frames as a list (see :class:`RawChannel`). What a columnar
+        export decodes a channel at a time."""
+        want = None if topics is None else set(topics)
+        scan = _Scan()
+        t_b: dict[int, list[np.ndarray]] = {}
+        f_b: dict[int, list[np.ndarray]] = {}
+        k_b: dict[int, list[int]] = {}
+        t_s: dict[int, list[int]] = {}
+        k_s: dict[int, list[int]] = {}
+        p_s: dict[int, list[memoryview]] = {}
+        for k, m in enumerate(self._walk(scan, self._selector(want))):
+            cid = m.chan.id
+            if m.chan.block:
+                t, fr = _block(m)
+                if fr.shape[1] != m.chan.width:
+                    raise FrameLogError(f"{self.path}: {m.chan.topic}: a block of "
+                                        f"{fr.shape[1]}-element frames on a channel of "
+                                        f"{m.chan.width}")
+                t_b.setdefault(cid, []).append(t)
+                f_b.setdefault(cid, []).append(fr)
+                k_b.setdefault(cid, []).append(k)
+            else:
+                t_s.setdefault(cid, []).append(m.log_ns)
+                k_s.setdefault(cid, []).append(k)
+                p_s.setdefault(cid, []).append(_single(m))
+        out: dict[str, RawChannel] = {}
+        for ch in sorted(scan.channels.values(), key=lambda c: c.id):
+            if want is not None and ch.topic not in want:
+                continue
+            if ch.block:
+                ts = t_b.get(ch.id, [])
+                sizes = [len(t) for t in ts]
+                assert ch.width is not None and ch.dtype is not None
+                out[ch.topic] = RawChannel(
+                    np.concatenate(ts) if ts else np.zeros(0, np.int64),
+                    np.repeat(np.asarray(k_b.get(ch.id, []), np.int64), sizes),
+                    np.concatenate([np.arange(n, dtype=np.int64) for n in sizes])
+                    if sizes else np.zeros(0, np.int64),
+                    np.concatenate(f_b[ch.id]) if ts else np.zeros((0, ch.width), ch.dtype),
+                    None)
+            else:
+                t = _times(t_s.get(ch.id, []), [], self.path)
+                out[ch.topic] = RawChannel(t, np.asarray(k_s.get(ch.id, []), np.int64),
+                                           np.zeros(len(t), np.int64), None,
+                                           p_s.get(ch.id, []))
+        return out
 
     def blocks(self, topic: str) -> Blocks:
         """All frames of ``topic`` as numpy arrays, for replay: ``t_ns`` (n,) int64 and
@@ -571,7 +644,7 @@ class FrameLogReader:
         for m in self._walk(scan, self._selector(want)):
             cid = m.chan.id
             if m.chan.block:
-                t, fr = unpack_block(m.data)
+                t, fr = _block(m)
                 if fr.shape[1] != m.chan.width or fr.dtype != m.chan.dtype:
                     raise FrameLogError(f"{self.path}: {m.chan.topic}: a block of "
                                         f"{fr.shape[1]} x {fr.dtype} frames on a channel of "
@@ -580,7 +653,7 @@ class FrameLogReader:
                 fs.setdefault(cid, []).append(fr)
             else:
                 singles_t.setdefault(cid, []).append(m.log_ns)
-                singles.setdefault(cid, []).append(m.data)
+                singles.setdefault(cid, []).append(_single(m))
         by_topic = {c.topic: c for c in scan.channels.values()}
         out: dict[str, Blocks] = {}
         for topic in want:
@@ -607,6 +680,27 @@ class FrameLogReader:
             out[topic] = Blocks(times, frames)
         return out
 
+
+
+def _block(m: _Msg) -> tuple[np.ndarray, np.ndarray]:
+    """Times and frames of a block message, either container."""
+    if not m.chan.wrapped:
+        return unpack_block(m.data)
+    try:
+        return rawpb.unpack_block(m.data)
+    except ValueError as exc:
+        raise FrameLogError(f"{m.chan.topic}: block message at t = {m.log_ns} ns: {exc}"
+                            ) from None
+
+
+def _single(m: _Msg) -> memoryview:
+    """The frame of a single message (unwrapped from its protobuf message if wrapped)."""
+    if not m.chan.wrapped:
+        return m.data
+    try:
+        return rawpb.unwrap(m.data)
+    except ValueError as exc:
+        raise FrameLogError(f"{m.chan.topic}: message at t = {m.log_ns} ns: {exc}") from None
 
 
 def _times(singles: list[int], blocks: list[np.ndarray], path: Path) -> np.ndarray:

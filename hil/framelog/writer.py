@@ -34,15 +34,17 @@ import numpy as np
 from mcap.exceptions import UnsupportedCompressionError
 from mcap.writer import CompressionType, Writer
 
-from hil.framelog import batch
+from hil.framelog import batch, rawpb
 from hil.framelog.formats import (
     BLOCK_MESSAGE_ENCODING,
     DTYPE_CODES,
     ENC_JSON,
     LEVELS,
+    META_CONTAINER,
     META_DTYPE,
     META_FRAME_ENCODING,
     META_FRAMING,
+    META_LAYOUT,
     META_UNITS,
     META_WIDTH,
     METADATA_NAME,
@@ -51,6 +53,7 @@ from hil.framelog.formats import (
     level_includes,
     pack_block,
 )
+from hil.framelog.layout import SCHEMA_ENCODING as LAYOUT_SCHEMA_ENCODING
 from hil.framelog.protobuf import MESSAGE_ENCODING as PB_MESSAGE_ENCODING
 from hil.framelog.protobuf import SCHEMA_ENCODING as PB_SCHEMA_ENCODING
 from hil.framelog.protobuf import MessageType
@@ -111,6 +114,8 @@ class _Channel:
     dtype: np.dtype | None = None
     width: int = 0
     json_fields: frozenset[str] | None = None
+    wrap: object = None  # raw single frames: frame bytes -> protobuf message (rawpb)
+    container: str = ""  # block channels: "protobuf" (rawpb) or "" (eha-hil/block)
     last_ns: int = 0
     count: int = 0
 
@@ -219,27 +224,57 @@ class FrameLogWriter:
         self._channels[cid] = ch
         return cid
 
-    def add_channel(self, topic: str, encoding: str, *, schema_name: str,
+    def add_channel(self, topic: str, encoding: str, *, schema_name: str = "",
                     schema_data: bytes = b"", schema_encoding: str = "",
                     metadata: dict[str, str] | None = None) -> int:
         """A channel with one frame per message; returns its id for :meth:`write`.
 
-        ``encoding`` is the MCAP message encoding and names the frame layout (the key of
-        :mod:`hil.framelog.decoders`). ``schema_name`` "" means no schema record.
+        ``encoding`` names the frame layout (the key of :mod:`hil.framelog.decoders`). An
+        encoding that stock MCAP readers know (``json``, ``protobuf``, ...; see
+        :data:`hil.framelog.rawpb.STOCK_MESSAGE_ENCODINGS`) is the MCAP message encoding,
+        with the schema given (``schema_name`` "" means none). Any other (a raw frame) is
+        wrapped in a protobuf message ``eha_hil.raw.<Encoding>`` (:mod:`hil.framelog.rawpb`)
+        that Foxglove and the MCAP libraries decode; an ``eha-hil/layout`` schema given for
+        it goes to the channel metadata ``eha-hil.layout``. Readers get the frame back.
         """
         meta = {**(metadata or {}), META_FRAMING: "single", META_FRAME_ENCODING: encoding}
-        sid = self._schema(schema_name, schema_encoding, schema_data)
-        return self._register(topic, encoding, sid, meta, _Channel(topic, encoding, False))
+        if encoding in rawpb.STOCK_MESSAGE_ENCODINGS:
+            sid = self._schema(schema_name, schema_encoding, schema_data)
+            return self._register(topic, encoding, sid, meta,
+                                  _Channel(topic, encoding, False))
+        meta.update(self._layout_meta(topic, schema_encoding, schema_data))
+        meta[META_CONTAINER] = rawpb.CONTAINER
+        name, data = rawpb.frame_schema(encoding)
+        sid = self._schema(name, PB_SCHEMA_ENCODING, data)
+        return self._register(topic, PB_MESSAGE_ENCODING, sid, meta,
+                              _Channel(topic, encoding, False, wrap=rawpb.wrapper(encoding)))
+
+    @staticmethod
+    def _layout_meta(topic: str, schema_encoding: str, schema_data: bytes) -> dict[str, str]:
+        # A raw channel's own schema is the protobuf wrapper; its byte layout rides along
+        # in the channel metadata.
+        if not schema_data:
+            return {}
+        if schema_encoding != LAYOUT_SCHEMA_ENCODING:
+            raise ValueError(f"{topic}: a raw channel takes an {LAYOUT_SCHEMA_ENCODING} "
+                             f"schema, not {schema_encoding!r}")
+        return {META_LAYOUT: bytes(schema_data).decode()}
 
     def add_block_channel(self, topic: str, encoding: str, *, dtype: np.dtype | str | type,
                           width: int, schema_name: str = "", schema_data: bytes = b"",
                           schema_encoding: str = "",
-                          metadata: dict[str, str] | None = None) -> int:
+                          metadata: dict[str, str] | None = None,
+                          container: str = rawpb.CONTAINER) -> int:
         """A channel of fixed-width frames logged in blocks (:meth:`write_block`).
 
         One frame is ``width`` elements of ``dtype`` (little endian), e.g. an upstream LVDS
-        snapshot is 32 x uint16. The frame encoding goes into the channel metadata; the
-        MCAP message encoding is ``eha-hil/block``.
+        snapshot is 32 x uint16. The frame encoding goes into the channel metadata. Each
+        block is a protobuf message ``eha_hil.raw.<Encoding>Block`` (times, frames as
+        bytes, count, width, dtype; :mod:`hil.framelog.rawpb`) that stock MCAP readers
+        decode; an ``eha-hil/layout`` schema (``schema_*``) goes to the channel metadata
+        ``eha-hil.layout``. ``container="eha-hil/block"`` writes the format of logs before
+        that (message encoding ``eha-hil/block``, the layout as the schema), for tests of
+        old logs; ``schema_name`` is only used then.
         """
         code = dtype_code(dtype)
         if width < 1:
@@ -247,9 +282,20 @@ class FrameLogWriter:
         dt = DTYPE_CODES[code]
         meta = {**(metadata or {}), META_FRAMING: "block", META_FRAME_ENCODING: encoding,
                 META_DTYPE: dt.name, META_WIDTH: str(width)}
-        sid = self._schema(schema_name, schema_encoding, schema_data)
-        return self._register(topic, BLOCK_MESSAGE_ENCODING, sid, meta,
-                              _Channel(topic, encoding, True, dt, width))
+        if container == BLOCK_MESSAGE_ENCODING:
+            sid = self._schema(schema_name, schema_encoding, schema_data)
+            return self._register(topic, BLOCK_MESSAGE_ENCODING, sid, meta,
+                                  _Channel(topic, encoding, True, dt, width))
+        if container != rawpb.CONTAINER:
+            raise ValueError(f"container {container!r} is not {rawpb.CONTAINER!r} or "
+                             f"{BLOCK_MESSAGE_ENCODING!r}")
+        meta.update(self._layout_meta(topic, schema_encoding, schema_data))
+        meta[META_CONTAINER] = rawpb.CONTAINER
+        name, data = rawpb.block_schema(encoding)
+        sid = self._schema(name, PB_SCHEMA_ENCODING, data)
+        return self._register(topic, PB_MESSAGE_ENCODING, sid, meta,
+                              _Channel(topic, encoding, True, dt, width,
+                                       container=rawpb.CONTAINER))
 
     def add_json_channel(self, topic: str, fields: dict[str, str],
                          metadata: dict[str, str] | None = None) -> int:
@@ -315,7 +361,8 @@ class FrameLogWriter:
         if t < 0:
             raise ValueError(f"{ch.topic}: time {t} ns is negative")
         self._advance(ch, t, t)
-        self._writer.add_message(channel_id, t, bytes(data),
+        payload = bytes(data) if ch.wrap is None else ch.wrap(bytes(data))  # type: ignore[operator]
+        self._writer.add_message(channel_id, t, payload,
                                  t if publish_ns is None else int(publish_ns),
                                  ch.count & 0xFFFFFFFF)
         ch.count += 1
@@ -355,27 +402,38 @@ class FrameLogWriter:
             raise ValueError(f"{ch.topic}: block times decrease")
         first, last = int(t[0]), int(t[-1])
         self._advance(ch, first, last)
-        self._writer.add_message(channel_id, first, pack_block(t, f), last,
+        msg = rawpb.pack_block(t, f, ch.dtype) if ch.container else pack_block(t, f)
+        self._writer.add_message(channel_id, first, msg, last,
                                  ch.count & 0xFFFFFFFF)
         ch.count += 1
 
-    def write_messages(self, channel_id: int, t_ns: np.ndarray, messages: list[bytes]) -> None:
+    def write_messages(self, channel_id: int, t_ns: np.ndarray,
+                       messages: list[bytes] | np.ndarray) -> None:
         """Log ``messages[i]`` at ``t_ns[i]`` (int ns, non-decreasing), one MCAP message each,
         on a single-frame channel (e.g. :meth:`add_protobuf_channel`): the same records as
-        :meth:`write` per message, built in one go (:mod:`hil.framelog.batch`)."""
+        :meth:`write` per message, built in one go (:mod:`hil.framelog.batch`).
+        ``messages`` may be a (n, size) uint8 array of messages of one length (e.g.
+        :meth:`~hil.framelog.protobuf.MessageType.encode_array`): no bytes object each."""
         ch = self._channel(channel_id)
         if ch.block:
             raise ValueError(f"{ch.topic} is a block channel: use write_block")
         t = np.asarray(t_ns)
+        if isinstance(messages, np.ndarray) and (messages.ndim != 2
+                                                 or messages.dtype != np.uint8):
+            raise ValueError(f"{ch.topic}: messages as an array must be (n, size) uint8, "
+                             f"got {messages.shape} {messages.dtype}")
         if t.ndim != 1 or t.shape[0] != len(messages) or t.dtype.kind not in "iu":
             raise ValueError(f"{ch.topic}: need (n,) integer times for {len(messages)} "
                              f"messages, got {t.shape} {t.dtype}")
         if not len(messages):
             return
-        times = t.astype(np.int64).tolist()
-        if times[0] < 0 or any(b < a for a, b in zip(times, times[1:], strict=False)):
+        times = t.astype(np.int64)
+        if times[0] < 0 or (len(times) > 1 and bool(np.any(times[1:] < times[:-1]))):
             raise ValueError(f"{ch.topic}: message times must be >= 0 and non-decreasing")
-        self._advance(ch, times[0], times[-1])
+        self._advance(ch, int(times[0]), int(times[-1]))
+        if ch.wrap is not None:
+            wrap = ch.wrap
+            messages = [wrap(bytes(m)) for m in messages]  # type: ignore[operator]
         batch.add_messages(self._writer, channel_id, times, messages, ch.count, self._fast)
         ch.count += len(messages)
 
@@ -384,6 +442,8 @@ class FrameLogWriter:
         # Integer state arrays are int64 in the models: accept any integer array whose
         # values fit, rather than make every caller cast (and risk a silent wrap-around).
         assert ch.dtype is not None
+        if f.dtype == ch.dtype:
+            return f  # (pack_block makes the one copy it needs)
         if f.dtype.kind in "iub" and ch.dtype.kind in "iu":
             info = np.iinfo(ch.dtype)
             if f.size and (int(f.min()) < info.min or int(f.max()) > info.max):

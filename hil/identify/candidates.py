@@ -45,7 +45,7 @@ import numpy as np
 
 from hil.identify import stats
 from hil.identify.experiment import Experiment
-from hil.identify.model import map_threads
+from hil.identify.model import OUTPUT_ONLY, map_threads
 
 ALPHA = 0.01
 #: Retained norm share below which a signature column is collinear with declared terms.
@@ -154,6 +154,7 @@ def test_candidates(
     val_mask: np.ndarray,
     jac_names: list[str],
     judge_at_fit: Callable[[EffectDef], FitJudgement] | None = None,
+    states: Callable[[np.ndarray], np.ndarray] | None = None,
 ) -> list[CandidateTest]:
     """Test every candidate in ``defs`` against ``residual`` (measured - model per channel).
 
@@ -161,9 +162,13 @@ def test_candidates(
     parameters whose sensitivities are projected off each signature, on the estimation
     samples ``est_mask`` and, with the same coefficients, on the validation samples.
     A candidate marked :attr:`EffectDef.judged_at_fit` is judged by ``judge_at_fit(d)``; without
-    it, it is left ``deferred`` for :func:`judge_deferred`.
+    it, it is left ``deferred`` for :func:`judge_deferred`. With ``states(theta)`` (the
+    simulation alone, ``simulate(theta, states)`` mapping it to channels), a parameter that
+    acts on the outputs only (:data:`~hil.identify.model.OUTPUT_ONLY`) is perturbed on the
+    base states, without a simulation of its own.
     """
-    base_out = simulate(theta)
+    base_z = states(theta) if states is not None else None
+    base_out = simulate(theta) if base_z is None else simulate(theta, base_z)
     r_est = _weighted(residual, exp, sigma, est_mask)
     r_val = _weighted(residual, exp, sigma, val_mask)
     n_ch = len(exp.channels)
@@ -179,7 +184,7 @@ def test_candidates(
         p, step = job
         th = theta.copy()
         th[index[p]] += step
-        out = simulate(th)
+        out = simulate(th, base_z) if base_z is not None and p in OUTPUT_ONLY else simulate(th)
         diff = {c: (out[c] - base_out[c]) / step for c in exp.channels}
         return _weighted(diff, exp, sigma, est_mask), _weighted(diff, exp, sigma, val_mask)
 

@@ -176,13 +176,19 @@ def _equal_information_edges(info: np.ndarray, k0: int, parts: int) -> list[int]
 
 def _part_fit(h: np.ndarray, g: np.ndarray, prior: np.ndarray
               ) -> tuple[np.ndarray, np.ndarray] | None:
-    """The step ``(H + P)^-1 g`` and ``(H + P)^-1`` (None if singular)."""
+    """The Gauss-Newton step ``-(H + P)^-1 g`` and ``(H + P)^-1`` (None if singular).
+
+    The fit's Jacobian is that of its residual, measured minus model (``J = -d y_hat/dx``),
+    and ``g = J'r``: the step that lowers ``|r + J s|^2`` is ``-(J'J)^-1 J'r``. With the
+    sign the other way round the test's statistic is the same (it is symmetric in the
+    parts' deviations), but every part's estimate is mirrored about the whole-record value:
+    a damper that falls as the oil warms up was reported rising."""
     a = h + np.diag(prior)
     try:
         inv = np.linalg.inv(a)
     except np.linalg.LinAlgError:
         return None
-    return inv @ g, inv
+    return -(inv @ g), inv
 
 
 def _rows_fit(js: np.ndarray, rs: np.ndarray, prior: np.ndarray
@@ -195,7 +201,7 @@ def _rows_fit(js: np.ndarray, rs: np.ndarray, prior: np.ndarray
     if sol is None:
         return None
     step, inv = sol
-    e = rs - np.einsum("ctp,p->ct", js, step)
+    e = rs + np.einsum("ctp,p->ct", js, step)  # the part's residual after its step
     scores = np.einsum("ctp,ct->tp", js, e)
     lags = stats.nw_lags(e.shape[1], stats.correlation_length(e.sum(axis=0), 400))
     return step, inv @ stats.newey_west(scores, lags) @ inv
@@ -286,7 +292,7 @@ def consistency(fit: FitResult, exp: Experiment, mask: np.ndarray,
                 ses.append(np.nan)
             else:
                 step, inv = sol
-                e = rf[:, a:b] - np.einsum("ckp,p->ck", jf[:, a:b], step)
+                e = rf[:, a:b] + np.einsum("ckp,p->ck", jf[:, a:b], step)
                 scores = np.einsum("ckp,ck->kp", jf[:, a:b].conj(), e).real
                 meat = stats.newey_west(scores, BIN_LAGS)
                 cov = inv @ meat @ inv

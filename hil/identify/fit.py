@@ -33,9 +33,11 @@ from hil.identify.experiment import Experiment, quantum
 from hil.identify.model import (
     IDX,
     NUISANCE,
+    OUTPUT_ONLY,
     PRESSURE_CHANNELS,
     SAT_PRESSURE,
     FastModel,
+    fast_stop,
     map_threads,
 )
 
@@ -167,10 +169,17 @@ class OutputErrorFit:
         """Measured minus model, per channel, full length (NaN where undefined)."""
         return {c: self.exp.measured[c] - outputs[c] for c in self.exp.channels}
 
-    def _stack(self, theta: np.ndarray, sigma: dict[str, float], mask: np.ndarray) -> np.ndarray:
-        self.n_sims += 1
+    def _stack(self, theta: np.ndarray, sigma: dict[str, float], mask: np.ndarray,
+               states: np.ndarray | None = None) -> np.ndarray:
+        """The weighted residual on ``mask``; ``states``: the simulation of ``theta`` when
+        the caller has it (only :data:`OUTPUT_ONLY` parameters differ from the ones that
+        made it)."""
         # the model is causal: samples after the last one compared need no simulation
-        out = self.model.outputs(theta, n_stop=int(np.flatnonzero(mask)[-1]) + 1)
+        n_stop = fast_stop(int(np.flatnonzero(mask)[-1]) + 1, self.exp.n)
+        if states is None:
+            self.n_sims += 1
+            states = self.model.states(theta, n_stop)
+        out = self.model.outputs(theta, states, n_stop=n_stop)
         parts = []
         for c in self.exp.channels:
             e = self.exp.measured[c] - out[c]
@@ -184,22 +193,32 @@ class OutputErrorFit:
     def _problem(self, free: list[str], theta0: np.ndarray, sigma: dict[str, float],
                  mask: np.ndarray):
         """Residual function and its forward-difference Jacobian (columns in parallel)."""
-        cache: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+        cache: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+        n_stop = fast_stop(int(np.flatnonzero(mask)[-1]) + 1, self.exp.n)
 
         def fun(x: np.ndarray) -> np.ndarray:
-            r = self._stack(self._to_theta(x, free, theta0), sigma, mask)
-            cache["last"] = (x.copy(), r)
+            theta = self._to_theta(x, free, theta0)
+            self.n_sims += 1
+            z = self.model.states(theta, n_stop)
+            r = self._stack(theta, sigma, mask, z)
+            cache["last"] = (x.copy(), r, z)
             return r
 
         def jac(x: np.ndarray) -> np.ndarray:
             last = cache.get("last")
-            r0 = last[1] if last is not None and np.array_equal(last[0], x) else fun(x)
+            if last is None or not np.array_equal(last[0], x):
+                fun(x)
+                last = cache["last"]
+            _, r0, z0 = last
             steps = 1e-6 * np.maximum(1.0, np.abs(x))
 
             def column(i: int) -> np.ndarray:
                 xx = x.copy()
                 xx[i] += steps[i]
-                return (self._stack(self._to_theta(xx, free, theta0), sigma, mask) - r0) / steps[i]
+                # an offset, a drift, a lag, a clip: the same states, new outputs
+                z = z0 if free[i] in OUTPUT_ONLY else None
+                return (self._stack(self._to_theta(xx, free, theta0), sigma, mask, z)
+                        - r0) / steps[i]
 
             out = np.empty((r0.size, x.size))
 
@@ -325,6 +344,18 @@ class OutputErrorFit:
         return FitResult(theta, list(free), se, sigma, out, states, n_sims=self.n_sims, cov=cov,
                          jac=j, weights=dict(used))
 
+    def standard_errors(self, theta: np.ndarray, free: list[str], sigma: dict[str, float]
+                        ) -> dict[str, float]:
+        """HAC standard errors of ``free`` at ``theta`` as they stand, from one Jacobian on
+        the estimation samples (no step): the intervals a fit of them would report if it
+        stopped there, at the cost of one simulation per parameter."""
+        self._ref = {n: max(abs(theta[IDX[n]]), 1e-12) for n in free if n in LOG_PARAMS}
+        mask = self.fit_mask()
+        fun, jac = self._problem(free, theta, sigma, mask)
+        x = self._to_x(theta, free)
+        se, _ = self.hac_se(jac(x), fun(x), int(mask.sum()), theta, free)
+        return se
+
     def offenders(self, result: FitResult, names: list[str] | None = None
                   ) -> list[tuple[str, str, float]]:
         """Parameters of ``result`` that are not credible, worst first: (name, why, badness).
@@ -449,7 +480,7 @@ def levenberg_marquardt(
 def guarded_fit(fitter: OutputErrorFit, theta0: np.ndarray, free: list[str],
                 credible: np.ndarray, sigma: dict[str, float] | None = None,
                 passes: int = 2, guard: list[str] | None = None, max_nfev: int = 40,
-                configured: np.ndarray | None = None,
+                configured: np.ndarray | None = None, first: FitResult | None = None,
                 ) -> tuple[FitResult, dict[str, str]]:
     """Fit, then hold every non-credible parameter (of ``guard``, default all free) at its
     last credible value (from ``credible``), worst first, refitting after each hold.
@@ -461,10 +492,13 @@ def guarded_fit(fitter: OutputErrorFit, theta0: np.ndarray, free: list[str],
     once that effect is in, it contradicts the other parameters, the configured value
     does not.
 
+    ``first``: that first fit, when the caller has made it already.
+
     Returns the fit and ``{parameter: why it was held}``.
     """
     free = list(free)
-    result = fitter.fit(theta0, free, sigma=sigma, passes=passes, max_nfev=max_nfev)
+    result = first if first is not None else fitter.fit(theta0, free, sigma=sigma,
+                                                        passes=passes, max_nfev=max_nfev)
     held: dict[str, str] = {}
     for _ in range(len(free)):
         bad = fitter.offenders(result, guard)

@@ -107,8 +107,9 @@ def text(rep: IdentifyReport) -> str:
     for r in rep.rejected:
         out.append(f"  rejected: {r}")
     for j in rep.joint:
-        out.append(f"  tried together: {' + '.join(j['effects'])}: validation cost "
-                   f"{j['validation_cost_change']:+.1%}, {j['outcome']}")
+        change = j["validation_cost_change"]
+        cost = "" if change is None else f"validation cost {change:+.1%}, "
+        out.append(f"  tried together: {' + '.join(j['effects'])}: {cost}{j['outcome']}")
     rows = []
     b, a = rep.residual_before.channels, rep.residual_after.channels
     for c in rep.channels:

@@ -22,6 +22,12 @@ Channels per box ``b`` (blocks of fixed-width frames, times in ns of simulated t
 The Metadata record holds the configuration (JSON), the topology, the box model and each
 board's calibrated angle offset, so a replay needs nothing but the file.
 
+The whole-robot engine (``--model robot``) writes the same channels, frame for frame, through
+:class:`hil.replay.robot_record.RobotRecorder`; :func:`attach_recorders` picks the recorder
+for a chain (``bus run``, ``serve``). A box without an output record has no outputs
+channels; decoded signals leave out what is not measured and flag torn piston reads
+(:mod:`hil.replay.signals`, docs/framelog.md).
+
 Beside these raw channels, the decoded signals of :mod:`hil.replay.signals` (protobuf, SI
 units, one message per sample) go to the log and/or a live view (:class:`SignalOut`):
 ``/signals/actuator/b.k`` each fieldbus cycle (each MCU step at level "full"),
@@ -93,7 +99,6 @@ class RecordingStackBox(StackBox):
         super().__init__(box, cfg)
         self.log = log
         self.tick_ns = cfg.get("sim.tick_ns")
-        b = box.id
         self.traced = log is not None and log.level == "full"
         self.ch_up, self.ch_down = [], []
         self.ch_trace, self.ch_words, self.ch_raw = [], [], []
@@ -107,12 +112,8 @@ class RecordingStackBox(StackBox):
         # MCU step): a fifth of the messages, what keeps the default level's cost low
         full = log is not None and log.level == "full"
         self.every = 1 if full else CYCLE_TICKS // self.period_ticks
-        st = signal_topics(b)
-        self.sig_rec = {d: self.out.add(st[d], SG.record_message(box, d))
-                        for d in ("outputs", "inputs")}
-        self.sig_act = [self.out.add(signal_topics(b, k)["actuator"], SG.ACTUATOR)
-                        for k in range(len(self.stacks))]
-        self.x_last = [float("nan")] * len(self.stacks)
+        self.sig_rec, self.sig_act = add_signal_channels(self.out, box, cfg)
+        self.carry = [SG.PistonCarry.start(1) for _ in self.stacks]
         self._last_out = (np.zeros(0, np.int64),
                           np.zeros((0, max(self.out_dtype.itemsize, 1)), np.uint8))
         self._reset_buffers()
@@ -127,8 +128,9 @@ class RecordingStackBox(StackBox):
                                          schema_encoding=LAYOUT_ENCODING,
                                          schema_data=lay.schema())
 
-        self.ch_out = block(tp["outputs"], LY.process_record(box, "outputs"), np.uint8,
-                            max(self.out_dtype.itemsize, 1))
+        # a box without outputs (sensor boxes) has no outputs channel, not an empty one
+        self.ch_out = (block(tp["outputs"], LY.process_record(box, "outputs"), np.uint8,
+                             self.out_dtype.itemsize) if self.out_dtype.itemsize else None)
         self.ch_in = block(tp["inputs"], LY.process_record(box, "inputs"), np.uint8,
                            self.in_dtype.itemsize)
         for k in range(len(self.stacks)):
@@ -213,7 +215,7 @@ class RecordingStackBox(StackBox):
                 self.log.write_block(ch, t * ns, f)
 
         if self.log is not None:
-            if self.out_dtype.itemsize:
+            if self.ch_out is not None:
                 put(self.ch_out, self.buf_out)
             put(self.ch_in, self.buf_in)
         n = self.n_steps
@@ -247,38 +249,76 @@ class RecordingStackBox(StackBox):
                 len(rows), -1)
             if d == "outputs":
                 out_t, out_f = t, f
-            self.out.write(self.sig_rec[d], t * ns, SG.record_columns(self.box, d, f))
+            if self.sig_rec.get(d) is not None:
+                self.out.write(self.sig_rec[d], t * ns, SG.record_columns(self.box, d, f))
         if out_t is None:  # no output record this block: the last one still stands
             out_t, out_f = self._last_out
         else:
             self._last_out = (out_t[-1:], out_f[-1:])
         n = self.n_steps
-        # each kept step, and the step before it (for the piston speed)
-        keep = np.arange(self.every - 1, n, self.every)
+        t_steps = np.array(self.t_steps, dtype=np.int64)
         for k, slot in enumerate(self.act):
-            if not len(keep):
-                continue
-            t = np.array(self.t_steps, dtype=np.int64)[keep]
             up, down = self._up_down(k)
-            x_prev = self.x_last[k] if self.every == 1 else SG.piston_x(self.cal, up[keep - 1])
-            cols = SG.actuator_columns(self.cal, up[keep], down[keep], x_prev,
-                                       self.period_ticks * ns * 1e-9)
-            self.x_last[k] = float(cols["x_piston_m"][-1])
+            keep, cols = SG.actuator_block(self.cal, up[None], down[None], self.every,
+                                           self.period_ticks * ns * 1e-9, self.carry[k])
+            if not len(keep) or not n:
+                continue
+            t = t_steps[keep]
             cols.update(SG.pc_command_columns(out_t, out_f, self.box, slot, t))
             self.out.write(self.sig_act[k], t * ns, cols)
 
 
-def signal_boxes(chain, cfg: Config, live: object) -> list[RecordingStackBox]:  # noqa: ANN001
-    """Replace the stack boxes of ``chain`` (before it runs) by boxes that send their
-    decoded signals to ``live`` (no log); call :meth:`RecordingStackBox.flush` at the end.
-    Echo boxes stay as they are (they have no MCU to decode)."""
-    out = SignalOut(None, live)
+def add_signal_channels(out: SignalOut, box, cfg: Config) -> tuple[dict, list[int]]:  # noqa: ANN001
+    """The decoded-signal channels of box ``box``: ({"outputs"/"inputs": channel} for its
+    records that have simulated fields, [channel of each actuator]). The actuators'
+    message leaves out the analog inputs whose part the configuration says is not fitted
+    (:func:`hil.replay.signals.unfitted_inputs`)."""
+    st = signal_topics(box.id)
+    rec = {}
+    for d in ("outputs", "inputs"):
+        message = SG.record_message(box, d)
+        if message.fields:
+            rec[d] = out.add(st[d], message)
+    act = SG.actuator_message(SG.unfitted_inputs(cfg.get("sensors")))
+    return rec, [out.add(signal_topics(box.id, k)["actuator"], act)
+                 for k in range(len(box.actuators))]
+
+
+def signal_boxes(chain, cfg: Config, live: object) -> list:  # noqa: ANN001
+    """Make the boxes of ``chain`` (before it runs) send their decoded signals to ``live``
+    (no log); call ``close()`` (or ``flush()``) of each returned recorder at the end."""
+    return attach_recorders(chain, cfg, None, live)
+
+
+def attach_recorders(chain, cfg: Config, log: FrameLogWriter | None, live: object = None,  # noqa: ANN001
+                     level: str = "mcu", background: bool = False) -> list:
+    """Log the MCU boundary of ``chain``'s boxes (a :class:`~hil.fieldbus.chain.Chain` or
+    anything with ``boxes`` and ``engine``, before it runs) to ``log`` and/or send their
+    decoded signals to ``live``: the whole-robot engine's :class:`RobotRecorder`
+    (``background``: written by a thread of its own), else each stack box replaced by a
+    :class:`RecordingStackBox`. Echo boxes have no MCU to log. Returns the recorders: call
+    ``close()`` (a RobotRecorder) or ``flush()`` of each at the end."""
+    out = SignalOut(log, live)
+    engine = getattr(chain, "engine", None)
+    if engine is not None:
+        from hil.replay.robot_record import RobotRecorder
+
+        return [RobotRecorder(engine, chain.boxes, cfg, log, out, level, background)]
     recs = []
     for i, b in enumerate(chain.boxes):
         if isinstance(b, StackBox):
-            chain.boxes[i] = RecordingStackBox(b.box, cfg, None, out)
+            chain.boxes[i] = RecordingStackBox(b.box, cfg, log, out)
             recs.append(chain.boxes[i])
     return recs
+
+
+def replay_metadata(topo: Topology, cfg: Config, boxes: list, model: str,
+                    cycles: int) -> dict[str, str]:
+    """The ``eha-hil.replay`` Metadata record of a log of ``boxes`` (what a replay needs)."""
+    offsets = {f"{b.box.id}.{k}": int(s.board.calibrated_offset)
+               for b in boxes for k, s in enumerate(getattr(b, "stacks", ()))}
+    return {"config": json.dumps(cfg.data), "topology": topo.source, "model": model,
+            "offsets": json.dumps(offsets), "cycles": str(cycles)}
 
 
 class BusSignals:
@@ -329,15 +369,20 @@ def run_logged(topo: Topology, cfg: Config, cycles: int, pc: Callable[[int, Mast
                log_path: str | Path | None, level: str = "mcu",
                progress: Callable[[int, int], None] | None = None,
                faults: object = None, live: object = None,
-               capture: Callable[[int, int, bytes, str], None] | None = None) -> BusRecord:
-    """Run ``cycles`` cycles in-process with the stack model and log them to ``log_path``.
+               capture: Callable[[int, int, bytes, str], None] | None = None,
+               model: str = "stack", compression: str = "zstd") -> BusRecord:
+    """Run ``cycles`` cycles in-process with the box model ``model`` (``stack``: each box
+    on its own, :class:`RecordingStackBox`; ``robot``: every box in the whole-robot engine,
+    :class:`hil.replay.robot_record.RobotRecorder`: the same channels) and log them to
+    ``log_path``.
 
     ``faults``: a fault declaration (:func:`hil.fieldbus.faults.parse_faults`); the log holds
     what the master sent and received and what each MCU took in and gave out, faults and
     all, so the replay reproduces a faulty run too. ``live``: a live view the decoded
     signals also go to (:class:`SignalOut`); ``log_path`` None: only there. ``capture``: a
     further tap that sees every fieldbus frame (e.g.
-    :meth:`hil.fieldbus.capture.CaptureWriter.tap`)."""
+    :meth:`hil.fieldbus.capture.CaptureWriter.tap`). ``compression``: of the log's chunks
+    (zstd, lz4 or none; :class:`~hil.framelog.writer.FrameLogWriter`)."""
     import contextlib
 
     tick_ns = cfg.get("sim.tick_ns")
@@ -345,7 +390,8 @@ def run_logged(topo: Topology, cfg: Config, cycles: int, pc: Callable[[int, Mast
         log = None
         if log_path is not None:
             log = stack.enter_context(FrameLogWriter(
-                log_path, level=level, flush_every_ns=FLUSH_CYCLES * CYCLE_TICKS * tick_ns))
+                log_path, level=level, flush_every_ns=FLUSH_CYCLES * CYCLE_TICKS * tick_ns,
+                compression=compression))
         out = SignalOut(log, live)
         ch_bus = None
         if log is not None:
@@ -380,19 +426,23 @@ def run_logged(topo: Topology, cfg: Config, cycles: int, pc: Callable[[int, Mast
                     flush_frames()
             pc(cycle, m)
 
-        with BusSystem(topo, cfg, "inproc", model="stack", tap=tap) as bs:
+        with BusSystem(topo, cfg, "inproc", model=model, tap=tap) as bs:
             bus_sig = BusSignals(out, bs.master, tick_ns)
-            boxes = [RecordingStackBox(b, cfg, log, out) for b in topo.boxes]
-            bs.chain.boxes = boxes
+            engine = bs.chain.engine
+            if engine is None:
+                boxes = [RecordingStackBox(b, cfg, log, out) for b in topo.boxes]
+                bs.chain.boxes = boxes
+                flushers = boxes
+            else:
+                from hil.replay.robot_record import RobotRecorder
+
+                boxes = bs.chain.boxes
+                flushers = [RobotRecorder(engine, boxes, cfg, log, out, level)]
             if faults is not None:
                 bs._install_faults(faults)  # after the recording boxes replaced the plain ones
-            offsets = {f"{b.box.id}.{k}": int(s.board.calibrated_offset)
-                       for b in boxes for k, s in enumerate(b.stacks)}
             if log is not None:
-                log.add_metadata("eha-hil.replay", {
-                    "config": json.dumps(cfg.data), "topology": topo.source,
-                    "model": "stack", "offsets": json.dumps(offsets),
-                    "cycles": str(cycles)})
+                log.add_metadata("eha-hil.replay",
+                                 replay_metadata(topo, cfg, boxes, model, cycles))
             step = max(cycles // 20, 1)
             rec = None
             done = 0
@@ -408,6 +458,8 @@ def run_logged(topo: Topology, cfg: Config, cycles: int, pc: Callable[[int, Mast
             bus_sig.end_cycle()
             bus_sig.flush()
             flush_frames()
-            for b in boxes:
-                b.flush()
+            if engine is not None:
+                engine.wait()
+            for f in flushers:
+                getattr(f, "close", f.flush)()
         return rec

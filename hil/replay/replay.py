@@ -253,7 +253,7 @@ def replay_mcu(path: str | Path, config_override: Config | None = None) -> Repla
             start = ticks[s] if s < len(ticks) else rbox.tick
             for frame in applied.get(start, ()):
                 rbox.apply(frame)
-            for _ in range(per):
+            for _ in range(per if n_act else 0):  # (a box of sensors has no MCU steps)
                 tick = ticks[s]
                 for k, link in enumerate(links):
                     link.up = up_rows[k][s]

@@ -34,3 +34,20 @@ class SignalOut:
             self.log.write_messages(cid, t_ns, payloads)
         if handle is not None:
             self.live.log(handle, t_ns, payloads)
+
+    def write_split(self, channels: list[int], t_ns: np.ndarray,
+                    columns: dict[str, np.ndarray]) -> None:
+        """The same ``k`` times ``t_ns`` on each of ``channels`` (all of one message type):
+        ``columns`` hold ``len(channels) * k`` samples, channel-major; encoded in one go."""
+        if not channels:
+            return
+        k = len(t_ns)
+        message = self._channels[channels[0]][0]
+        payloads = message.encode_array(columns, len(channels) * k)
+        for j, channel in enumerate(channels):
+            _, cid, handle = self._channels[channel]
+            part = payloads[j * k:(j + 1) * k]
+            if cid is not None:
+                self.log.write_messages(cid, t_ns, part)
+            if handle is not None:
+                self.live.log(handle, t_ns, [bytes(m) for m in part])

@@ -22,11 +22,13 @@ them is :meth:`hil.framelog.protobuf.MessageType.encode`.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
 from firmware_model.calibration import FirmwareCalibration
 from firmware_model.fpga import layout as B
+from firmware_model.mcu import measure
 from firmware_model.mcu.measure import upstream_si
 from hil.fieldbus import pdo
 from hil.fieldbus.topology import Box
@@ -77,7 +79,33 @@ ACTUATOR = MessageType(f"{PACKAGE}.ActuatorSignals", (
     Field("err_link_up", "fixed32", "", "upstream LVDS words the MCU discarded (CRC)"),
     Field("oc_trips", "fixed32", "", "over-current trips"),
     Field("wd_trips", "fixed32", "", "link watchdog trips"),
+    # validity of what the MCU read (appended: the fields above keep their numbers)
+    Field("x_piston_valid", "bool", "",
+          "false: the MCU read the piston position torn between its two 16-bit words "
+          "(docs/framelog.md)"),
+    Field("v_piston_valid", "bool", "",
+          "false: the speed's difference has a torn position at one end"),
 ), "one actuator, each MCU step")
+
+_UNFITTED_SUFFIX = "_no_"
+
+
+def actuator_message(unfitted: tuple[str, ...] = ()) -> MessageType:
+    """:data:`ACTUATOR` without the fields of the analog inputs ``unfitted`` (names of
+    ``ANALOG_INPUTS`` whose part is not mounted: an empty input reads 0 V, which the
+    MCU's formula would turn into a confident value; the signal is left out instead)."""
+    if not unfitted:
+        return ACTUATOR
+    drop = {field for a, field in _ANALOG if a.name in unfitted}
+    return MessageType(ACTUATOR.full_name + "".join(_UNFITTED_SUFFIX + n for n in unfitted),
+                       tuple(f for f in ACTUATOR.fields if f.name not in drop), ACTUATOR.doc)
+
+
+def unfitted_inputs(sensors: dict) -> tuple[str, ...]:
+    """The analog inputs whose part the configuration's ``[sensors]`` table says is not
+    fitted (``sensors.<fitted_key>`` false), in declaration order."""
+    return tuple(a.name for a, _ in _ANALOG
+                 if a.fitted_key is not None and not sensors.get(a.fitted_key, False))
 
 BUS = MessageType(f"{PACKAGE}.BusCycle", (
     Field("cycle", "fixed64", "", "fieldbus cycle number"),
@@ -95,6 +123,11 @@ BUS = MessageType(f"{PACKAGE}.BusCycle", (
 #: The master counters in BUS, in MasterStats' names.
 MASTER_COUNTERS = ("frames_sent", "frames_ok", "wkc_errors", "bad_frames", "stale_frames",
                    "lost_frames")
+
+
+#: Slot kinds whose inputs the simulation fills (the others stay 0 on the bus, see
+#: :mod:`hil.fieldbus.pdo`): their decoded signals are left out, not shown as a confident 0.
+SIMULATED_KINDS = ("actuator",)
 
 
 def _record_fields(fields: tuple[pdo.Field, ...], prefix: str) -> list[Field]:
@@ -117,13 +150,16 @@ def _suffix(unit: str) -> str:
 
 
 def record_message(box: Box, direction: str) -> MessageType:
-    """The message of box ``box``'s ``outputs`` or ``inputs`` record: per slot ``s<k>_``
-    fields in SI units (one type per slot layout, shared by boxes of the same layout)."""
+    """The message of box ``box``'s ``outputs`` or ``inputs`` record: per simulated slot
+    (:data:`SIMULATED_KINDS`) ``s<k>_`` fields in SI units (one type per slot layout,
+    shared by boxes of the same layout). No fields (a box of sensors that are not
+    simulated, or the outputs of a box that has none): the box gets no such channel."""
     which = 0 if direction == "outputs" else 1
     fields = []
     for k, s in enumerate(box.slots):
-        fields += _record_fields(pdo.SLOT_FIELDS[s.kind][which], f"s{k}_")
-    kinds = "_".join(s.kind for s in box.slots) or "empty"
+        if s.kind in SIMULATED_KINDS:
+            fields += _record_fields(pdo.SLOT_FIELDS[s.kind][which], f"s{k}_")
+    kinds = "_".join(s.kind for s in box.slots if s.kind in SIMULATED_KINDS) or "empty"
     return MessageType(f"{PACKAGE}.Box{direction.capitalize()}_{kinds}", fields,
                        f"the {direction} record of a box, each cycle")
 
@@ -156,6 +192,40 @@ def _commands(mode: np.ndarray, command: np.ndarray, prefix: str = "") -> dict[s
     return {f"{prefix}force_command_n": np.where(force, command * pdo.FORCE_CMD_LSB, math.nan),
             f"{prefix}position_command_m": np.where(pos, command * pdo.POSITION_CMD_LSB,
                                                     math.nan)}
+
+
+#: A read of the piston position whose 16-bit words come from either side of a carry
+#: is off by a multiple of this many counts (docs/fpga.md, "Multi-word values").
+TEAR_COUNTS = 1 << 16
+
+
+def piston_counts(up: np.ndarray) -> np.ndarray:
+    """The BiSS piston count (int64) the MCU assembles from its two upstream words."""
+    return measure.piston_count(up)
+
+
+def tear_offsets(counts: np.ndarray, count_before: np.ndarray,
+                 offset_before: np.ndarray) -> np.ndarray:
+    """Per read of the piston position (``counts``, (actuators, n) consecutive MCU steps),
+    how many :data:`TEAR_COUNTS` it is off by (0: a whole read). The two words are read
+    at most one board tick apart, in which the piston moves far less than TEAR_COUNTS, so
+    a torn read is off by exactly one TEAR_COUNTS (plus that motion): a step between two
+    reads that rounds to +-1 TEAR_COUNTS (more than half of it, 0.17 mm in one MCU step,
+    0.87 m/s: beyond any piston speed) is a torn read starting or ending, and these add
+    up. A step of two or more (the link's first words after start, a sensor fault) is a
+    real jump: the count after it is taken as whole. ``count_before``/``offset_before``
+    (actuators,): the read before the first and its offset (from the previous block)."""
+    c = np.asarray(counts, dtype=np.int64)
+    n = c.shape[-1]
+    d = np.diff(c, axis=-1, prepend=np.asarray(count_before, np.int64)[..., None])
+    jumps = np.floor_divide(d + TEAR_COUNTS // 2, TEAR_COUNTS)
+    reset = np.abs(jumps) >= 2
+    total = np.cumsum(np.where(reset, 0, jumps), axis=-1) + np.asarray(
+        offset_before, np.int64)[..., None]
+    # from a real jump on, count from 0 again: less the total at the last one
+    last = np.maximum.accumulate(np.where(reset, np.arange(n), -1), axis=-1)
+    base = np.where(last >= 0, np.take_along_axis(total, np.maximum(last, 0), axis=-1), 0)
+    return total - base
 
 
 def piston_x(cal: FirmwareCalibration, up: np.ndarray) -> np.ndarray:
@@ -204,6 +274,54 @@ def actuator_columns(cal: FirmwareCalibration, up: np.ndarray, down: np.ndarray,
     for (bit, _, _), f in zip(B.STATUS_BITS, _STATUS_FIELDS, strict=True):
         cols[f.name] = (status >> bit) & 1
     return cols
+
+
+@dataclass
+class PistonCarry:
+    """What the decoding of one block of MCU steps leaves for the next, per actuator: the
+    last piston position (m, NaN: none yet), its count, its tear offset and validity."""
+
+    x: np.ndarray
+    count: np.ndarray | None
+    offset: np.ndarray
+    valid: np.ndarray
+
+    @classmethod
+    def start(cls, actuators: int) -> PistonCarry:
+        return cls(np.full(actuators, math.nan), None, np.zeros(actuators, np.int64),
+                   np.ones(actuators, bool))
+
+
+def actuator_block(cal: FirmwareCalibration, up: np.ndarray, down: np.ndarray, every: int,
+                   period_s: float, carry: PistonCarry) -> tuple[np.ndarray,
+                                                                 dict[str, np.ndarray]]:
+    """The decoded signals of ``n`` consecutive MCU steps of ``a`` actuators: ``up``
+    (a, n, 33) the words each MCU read, ``down`` (a, n, >= 13) those it wrote. Every
+    ``every``-th step is kept (the last of each group): returns (the kept steps' indices
+    (k,), columns of a * k samples, actuator-major) and updates ``carry``. The piston
+    speed is the position's change over the step before each kept one; ``x_piston_valid``
+    and ``v_piston_valid`` flag torn reads (:func:`tear_offsets`)."""
+    a, n = up.shape[:2]
+    keep = np.arange(every - 1, n, every)
+    if not n:
+        return keep, {}
+    counts = piston_counts(up)
+    before = counts[:, 0] if carry.count is None else carry.count
+    off = tear_offsets(counts, before, carry.offset)
+    valid = off == 0
+    x = measure.piston_x(counts, cal)
+    x_before = np.concatenate([carry.x[:, None], x], axis=1)[:, keep]
+    valid_before = np.concatenate([carry.valid[:, None], valid], axis=1)[:, keep]
+    k = len(keep)
+    cols = actuator_columns(cal, up[:, keep].reshape(a * k, -1),
+                            down[:, keep].reshape(a * k, -1), x_before.reshape(a * k),
+                            period_s)
+    cols["x_piston_valid"] = valid[:, keep].reshape(a * k)
+    cols["v_piston_valid"] = (cols["x_piston_valid"] & valid_before.reshape(a * k)
+                              & np.isfinite(x_before.reshape(a * k)))
+    carry.x, carry.count = x[:, -1].copy(), counts[:, -1].copy()
+    carry.offset, carry.valid = off[:, -1].copy(), valid[:, -1].copy()
+    return keep, cols
 
 
 def pc_command_columns(out_ticks: np.ndarray, out_records: np.ndarray, box: Box, slot: int,

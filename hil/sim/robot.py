@@ -27,6 +27,7 @@ from __future__ import annotations
 import math
 import threading
 from concurrent.futures import Future, ThreadPoolExecutor
+from typing import Protocol
 
 import llvmlite.binding as llvm
 import numba
@@ -49,8 +50,8 @@ from firmware_model.mcu.c_abi import (
     config_record,
 )
 from hil.fieldbus import pdo
-from hil.sim.actuator import advance_stack
-from hil.sim.stack_rows import SOURCES, McuRows, StackRows
+from hil.sim.actuator import TRACE_WIDTH, advance_stack
+from hil.sim.stack_rows import SOURCES, McuRows, StackRows, TapRows
 from plant import layout as L
 from plant.config import Config, ConfigError
 
@@ -116,15 +117,17 @@ def _claim(typingctx, counter):
 # cache line all compute threads share (~200 ns per actuator tick with one thread, more
 # with two). Reading a field of a bundle is a static tuple index: no count either.
 @njit(cache=True, nogil=True, _nrt=False)
-def advance_robot(counter, n_periods, period, tick0, batched, s, mcu, no_rec, no_trace):
+def advance_robot(counter, n_periods, period, tick0, batched, s, mcu, no_rec, tap):
     """``n_periods`` MCU periods of ``period`` ticks from ``tick0`` for the actuators this
     thread claims (``counter``: the next unclaimed index, shared by every thread of the
     cycle), those with ``batched[i]``: its MCU program (state, input and output record at
     the addresses ``mcu.ptrs[i]``) steps, its downstream words go into its LVDS memory, its
     stack (``s``, a :class:`StackRows`) advances one period, its upstream words and the
     link's CRC count go into its input record. ``mcu.err[i]``: the link error counts the
-    program read at its last step. ``no_rec`` and ``no_trace``: empty record and trace
-    arrays (nothing recorded here). Returns how many actuators this thread advanced."""
+    program read at its last step. ``no_rec``: an empty record array (no plant record
+    here). ``tap`` (a :class:`~hil.sim.stack_rows.TapRows`): the MCU words of each step and
+    the board traces for a frame log, if it has rows. Returns how many actuators this
+    thread advanced."""
     pl, se, bd, lk = s.plant, s.sensors, s.board, s.link
     in16, in32 = mcu.in16, mcu.in32
     done = 0
@@ -145,10 +148,17 @@ def advance_robot(counter, n_periods, period, tick0, batched, s, mcu, no_rec, no
                 mcu.err[i, 1] = in32[i, _IN_CRC]
             for w in range(lk.mcu_down.shape[1]):
                 lk.mcu_down[i, w] = mcu.out16[i, _OUT_DOWN + w]
+            r = tap.row[0] + n
+            if tap.up.shape[1] > 0:  # a frame log: the words the program read and wrote
+                for w in range(B.UP_WORDS):
+                    tap.up[i, r, w] = in16[i, _IN_UP + w]
+                tap.up[i, r, B.UP_WORDS] = in32[i, _IN_CRC]
+                for w in range(tap.down.shape[2]):
+                    tap.down[i, r, w] = mcu.out16[i, _OUT_DOWN + w]
             advance_stack(period, pl.x[i], pl.params[i], pl.u[i], pl.y[i], no_rec, 0, 1, t,
                           pl.rng[i], pl.work[i], se.chips[i], se.raw[i], bd.params[i],
                           bd.state[i], bd.down[i], bd.up[i], lk.mcu_down[i], lk.mcu_up[i],
-                          lk.state[i], no_trace)
+                          lk.state[i], tap.trace[i, r * period:(r + 1) * period])
             for w in range(lk.mcu_up.shape[1]):
                 in16[i, _IN_UP + w] = lk.mcu_up[i, w] & 0xFFFF
             in32[i, _IN_CRC] = lk.state[i, LK.LK_MASTER_CRC]
@@ -296,7 +306,11 @@ class RobotEngine:
         self.tick = self.boxes[0].tick if self.boxes else 0
         self._images()
         self._no_rec = np.zeros((0, L.N_OUTPUTS))
-        self._no_trace = np.zeros((0, 1), dtype=np.int64)
+        #: Copies of each MCU step's words (and board traces) for a frame log, and who
+        #: writes them out (a :class:`hil.replay.robot_record.RobotRecorder` sets both); no
+        #: rows and None: no log.
+        self.log_rows = no_tap(n)
+        self.log: EngineLog | None = None
         self.err = np.zeros((n, 2), dtype=np.int64)
         self._batched = np.ones(n, dtype=bool)
         self.ptrs = np.array([[self.states.ctypes.data + j * size,
@@ -472,7 +486,7 @@ class RobotEngine:
             started.release()
         return advance_robot(self._counter, ticks // self.period, self.period, self.tick,
                              self._batched, self.arrays, self.mcu, self._no_rec,
-                             self._no_trace)
+                             self.log_rows)
 
     def _finish(self, ticks: int) -> None:
         batched = self._batched
@@ -483,23 +497,34 @@ class RobotEngine:
         for b in self.all_boxes:
             b.tick = self.tick
         self._give_inputs(ticks)
+        if self.log is not None:
+            self.log.finished(self.tick, ticks // self.period)
 
     def _advance_external(self, external: list[int], ticks: int) -> None:
         """The stacks under a sensor fault: their own wrapper advances them tick by tick,
         between the same steps of their programs as :func:`advance_robot` makes."""
         size = self.law.state_size
-        for t in range(self.tick, self.tick + ticks, self.period):
+        tap, p = self.log_rows, self.period
+        for n, t in enumerate(range(self.tick, self.tick + ticks, p)):
+            r = int(tap.row[0]) + n
             for j in external:
                 b, i = self.slots[j]
                 self.inp["tick"][j] = t
                 self.law.step_many(self.states[j * size:(j + 1) * size], self.inp[j:j + 1],
                                    self.out[j:j + 1])
                 self.inp["flags"][j] = 0
-                if t + self.period >= self.tick + ticks:
+                if t + p >= self.tick + ticks:
                     self.err[j] = (self.in16[j, _IN_UP + B.U_ERR_LINK_CRC],
                                    self.in32[j, _IN_CRC])
                 self.arrays.link.mcu_down[j] = self.out["down"][j]
-                b.stacks[i].advance(self.period)
+                if tap.up.shape[1]:  # as advance_robot copies them
+                    tap.up[j, r, :B.UP_WORDS] = self.in16[j, _IN_UP:_IN_UP + B.UP_WORDS]
+                    tap.up[j, r, B.UP_WORDS] = self.in32[j, _IN_CRC]
+                    tap.down[j, r] = self.out16[j, _OUT_DOWN:_OUT_DOWN + tap.down.shape[2]]
+                if tap.trace.shape[1]:
+                    b.stacks[i].advance(p, trace=tap.trace[j, r * p:(r + 1) * p])
+                else:
+                    b.stacks[i].advance(p)
             which = np.zeros(self.n, dtype=bool)
             which[external] = True
             self._refresh_inputs(which)
@@ -519,12 +544,32 @@ class RobotEngine:
         self._pending.clear()
         take_outputs(self.out_image, self._out_at, got, self.enabled, self.clear, self.in32,
                      self.inf32, self._cmd_lsb, self._gain_lsb)
+        if self.log is not None:
+            self.log.took_outputs(self.tick)
 
     def _give_inputs(self, ticks: int) -> None:
         """Every box's input record from the programs' last outputs (as McuBoard.report)."""
         give_inputs(self.in_image, self._in_at, self.out32, self.outf32, self.x_prev,
                     ticks * self.tick_s, self.cos_alpha, self.err, self._in_lsb,
                     self._in_bounds)
+
+
+class EngineLog(Protocol):
+    """Who writes a frame log of the engine's run (:mod:`hil.replay.robot_record`): told
+    when the cycle's outputs are taken (``out_image``, ``_got``) and when a cycle has
+    ended (``periods`` MCU steps later, at ``tick``, the ``in_image`` given), it moves
+    ``tap.row`` on and writes the rows out before they run out."""
+
+    def took_outputs(self, tick: int) -> None: ...
+
+    def finished(self, tick: int, periods: int) -> None: ...
+
+
+def no_tap(n: int) -> TapRows:
+    """A :class:`TapRows` with no rows: the kernel copies nothing out."""
+    return TapRows(np.zeros((n, 0, B.UP_WORDS + 1), np.uint32),
+                   np.zeros((n, 0, B.DOWN_WORDS), np.uint16),
+                   np.zeros((n, 0, TRACE_WIDTH), np.int64), np.zeros(1, np.int64))
 
 
 def plant_records(engine: RobotEngine) -> np.ndarray:

@@ -60,6 +60,21 @@ class McuRows(NamedTuple):
     err: np.ndarray    #: link error counts the program read at its last step
 
 
+class TapRows(NamedTuple):
+    """What the robot engine's kernel copies out for a frame log, per actuator and MCU step
+    (row ``r = row[0] + n`` for the call's ``n``-th MCU period): ``up[i, r]`` the 32
+    upstream words the MCU program read at the step and, last, the link's upstream
+    CRC-error count it read with them (uint32, (actuators, rows, 33)); ``down[i, r]`` the
+    16 downstream words it wrote (uint16, (actuators, rows, 16)); ``trace[i, r * period:
+    (r + 1) * period]`` the driver board's trace of the period's ticks
+    (:data:`hil.sim.actuator.TRACE_WIDTH` int64 columns). Rows 0 (``up.shape[1] == 0``):
+    nothing is copied; ``trace`` with no rows: no trace."""
+    up: np.ndarray
+    down: np.ndarray
+    trace: np.ndarray
+    row: np.ndarray  #: (1,) int64: the row of the call's first MCU step
+
+
 #: Where each field of :class:`StackRows` lives on an :class:`~hil.sim.actuator.FpgaStack`:
 #: (object path, attribute), in the bundles' field order.
 SOURCES = (
@@ -73,4 +88,4 @@ SOURCES = (
 
 
 __all__ = ["SOURCES", "BoardRows", "LinkRows", "McuRows", "PlantRows", "SensorRows",
-           "StackRows"]
+           "StackRows", "TapRows"]

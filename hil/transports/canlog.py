@@ -10,6 +10,9 @@ what the interface stamps: wall time of the send (virtual) or the kernel's recei
 (SocketCAN).
 
 :func:`read_can_log` reads such a file back through ``can.LogReader``;
+:func:`write_sidecar` / :func:`read_sidecar`: what the formats have no place for (the
+run's topology, box model and configuration) in ``<log>.eha-hil.json`` beside the log,
+where ``log info`` and ``replay`` find it;
 :func:`reassemble` turns the segments of one CAN ID back into the frames
 (:class:`~hil.transports.canbus.Reassembler`), counting what does not reassemble.
 """
@@ -96,6 +99,43 @@ class CanLogRecorder:
 
 class CanLogError(Exception):
     """A CAN log that cannot be read (one line)."""
+
+
+#: Ending of the metadata file written beside a CAN log (``run.blf.eha-hil.json``).
+SIDECAR_SUFFIX = ".eha-hil.json"
+
+
+def sidecar_path(path: str | os.PathLike[str]) -> Path:
+    """Where the run's metadata of the CAN log ``path`` lives."""
+    return Path(str(path) + SIDECAR_SUFFIX)
+
+
+def write_sidecar(path: str | os.PathLike[str], meta: dict[str, str]) -> Path:
+    """Write ``meta`` (the run's topology, model, configuration: strings) beside the log."""
+    import json
+
+    side = sidecar_path(path)
+    side.write_text(json.dumps({"eha-hil": "bus run", **meta}, indent=1, sort_keys=True)
+                    + "\n")
+    return side
+
+
+def read_sidecar(path: str | os.PathLike[str]) -> dict[str, str]:
+    """The metadata beside the CAN log ``path`` ({} if there is none); CanLogError (one
+    line) if the file is there but is not one."""
+    import json
+
+    side = sidecar_path(path)
+    if not side.is_file():
+        return {}
+    try:
+        data = json.loads(side.read_text())
+    except (OSError, ValueError) as exc:
+        raise CanLogError(f"{side}: not the metadata of a CAN log "
+                          f"({getattr(exc, 'strerror', None) or exc})") from None
+    if not isinstance(data, dict) or "eha-hil" not in data:
+        raise CanLogError(f"{side}: not the metadata of a CAN log (no \"eha-hil\" key)")
+    return {str(k): v if isinstance(v, str) else json.dumps(v) for k, v in data.items()}
 
 
 def read_can_log(path: str | os.PathLike[str]) -> list[can.Message]:

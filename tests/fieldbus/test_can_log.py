@@ -120,3 +120,26 @@ def test_a_channel_name_ending_in_a_large_number_is_logged(tmp_path, suffix):
         rec.close()
     msgs = read_can_log(path)
     assert [(m.arbitration_id, bytes(m.data)) for m in msgs] == [(0x123, bytes(range(12)))]
+
+
+def test_can_log_carries_its_topology_and_replay_refuses_without(tmp_path, capsys):
+    log = tmp_path / "run.asc"
+    assert main(["bus", "run", "--transport", "can", "--topology", "hydra_full", "--seconds",
+                 str(CYCLES / 1000), "--can-log", str(log)]) == 0
+    capsys.readouterr()
+    side = Path(str(log) + ".eha-hil.json")
+    assert json.loads(side.read_text())["topology"] == "hydra_full"
+    # the sidecar gives the topology: no --topology needed, times from the log's start
+    assert main(["replay", str(log)]) == 0
+    assert "20 replies of hydra_full (echo model) match bit for bit" in capsys.readouterr().out
+    assert main(["log", "info", str(log)]) == 0
+    time_line = next(ln for ln in capsys.readouterr().out.splitlines()
+                     if ln.startswith("time:"))
+    first, last = (float(x) for x in time_line.split()[1:4:2])
+    assert first == 0 and 0 < last < 60, time_line  # not epoch seconds
+    # without it: one line asking for --topology, not a replay against a default topology
+    side.unlink()
+    assert main(["replay", str(log)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "give --topology" in err and "names no topology" in err
+    assert main(["replay", str(log), "--topology", "hydra_full"]) == 0

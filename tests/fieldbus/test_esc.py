@@ -77,13 +77,6 @@ def test_armw_reads_at_the_addressed_slave_and_writes_the_others(chain):
     assert [e.mem[r.IRQ_MASK] for e in chain.escs] == [0x00, 0x5A, 0x5A]
 
 
-def test_dc_registers_take_writes_and_read_zero(chain):
-    d = _one(chain, ec.Command.BWR, 0, r.DC_START + 0x30, b"\x00\x10")  # DC speed start
-    assert d.wkc == len(THREE.boxes)
-    d = _one(chain, ec.Command.BRD, 0, r.DC_START + 0x30, bytes(2))
-    assert d.data == bytes(2) and d.wkc == len(THREE.boxes)
-
-
 @pytest.mark.parametrize("cmd", [ec.Command.FPRD, ec.Command.FPWR, ec.Command.FPRW,
                                  ec.Command.APRD])
 def test_datagram_to_nobody_leaves_wkc_and_data(chain, cmd):

@@ -17,6 +17,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from firmware_model.esc import compiled as cc
+from firmware_model.esc import dc_compiled as dcc
 from firmware_model.esc import registers as r
 from hil.fieldbus.esc.chain import EscChain
 from hil.fieldbus.esc.master import EscMaster
@@ -30,10 +31,10 @@ MAC_DST, MAC_SRC = b"\xff" * 6, b"\x01\x01\x01\x01\x01\x01"
 class Both:
     """The reference chain and the compiled arrays fed the same; every step compared."""
 
-    def __init__(self, cfg) -> None:  # noqa: ANN001
-        self.ref = EscChain(THREE, cfg, "echo")
+    def __init__(self, cfg, dc=None) -> None:  # noqa: ANN001
+        self.ref = EscChain(THREE, cfg, "echo", dc=dc)
         self.ref._hand_outputs = lambda: None  # the outputs are compared, not applied
-        self.arr = cc.EscArrays(describe_all(THREE))
+        self.arr = cc.EscArrays(describe_all(THREE), dc)
         self.buf = np.zeros(2048, dtype=np.uint8)
         for i, esc in enumerate(self.ref.escs):  # the boxes' first inputs, as the chain's
             s = esc.desc.sms[esc.desc.in_sm]
@@ -87,14 +88,25 @@ class Both:
             assert got == mem, f"slave {i}: memories differ"
             assert self.arr.state(i) == (int(esc.state), esc.error, int(esc.code))
             assert self.arr.st[i, cc.S_TRIPS] == esc.watchdog_trips
+            dc, row = esc.dc, self.arr.st[i]
+            assert [int(row[c]) for c in _DC_COLUMNS] == [
+                dc.corr_u, dc.l_upd, dc.slew, dc.freq, dc.l_cmp, dc.diff_f, dc.compares,
+                dc.errors, dc.last_error, dc.sync_state, dc.sync_start, dc.sync_cycle,
+                dc.next_sync0], f"slave {i}: DC state differs"
 
+
+_DC_COLUMNS = (dcc.D_CORR_U, dcc.D_L_UPD, dcc.D_SLEW, dcc.D_FREQ, dcc.D_L_CMP, dcc.D_DIFF_F,
+               dcc.D_COMPARES, dcc.D_ERRORS, dcc.D_LAST_ERROR, dcc.D_SYNC_STATE,
+               dcc.D_SYNC_START, dcc.D_SYNC_CYCLE, dcc.D_NEXT_SYNC0)
 
 # --- random traffic -------------------------------------------------------------------------------
 _REGS = [r.TYPE, r.STATION_ADDRESS, r.STATION_ALIAS, r.DL_CONTROL, r.DL_STATUS, r.AL_CONTROL,
          r.AL_STATUS, r.AL_STATUS_CODE, r.RX_ERROR, r.WD_DIVIDER, r.WD_TIME_PD,
          r.WD_STATUS_PD, r.WD_COUNTER_PD, r.EEP_CONFIG, r.EEP_CONTROL, r.EEP_ADDRESS,
          r.EEP_DATA, r.FMMU0, r.FMMU0 + 16, r.SM0, r.SM0 + 8, r.DC_START, 0x1000, 0x1020,
-         0x1100, 0x1140, 0x1FF8, 0xFFF0, 0x1080, 0x1200, r.SM0 + 5, r.SM0 + 13, r.SM0 + 16]
+         0x1100, 0x1140, 0x1FF8, 0xFFF0, 0x1080, 0x1200, r.SM0 + 5, r.SM0 + 13, r.SM0 + 16,
+         r.DC_SYSTEM_TIME, r.DC_RECV_TIME_PU, r.DC_SYSTEM_OFFSET, r.DC_SYSTEM_DELAY,
+         r.DC_SPEED_START, r.DC_ACTIVATION, r.DC_START_TIME, r.DC_SYNC0_CYCLE]
 
 ado_st = st.one_of(st.sampled_from(_REGS), st.integers(0, 0xFFFF),
                    st.sampled_from(_REGS).flatmap(lambda a: st.integers(a - 4, a + 4)
@@ -113,6 +125,8 @@ def datagram_st(draw):  # noqa: ANN001, ANN201
         lad = draw(st.one_of(st.integers(0, 400), st.integers(0, 0xFFFFFFFF)))
         return ec.Datagram.logical(cmd, lad, data, draw(st.integers(0, 255)),
                                    draw(st.integers(0, 0xFFFF)))
+    if draw(st.integers(0, 3)) == 0:  # distributed clocks, as a master sets them up
+        return _dc_datagram(draw)
     if cmd in (ec.Command.APWR, ec.Command.APRD) and draw(st.booleans()):
         return draw(mailbox_datagram_st(cmd))
     if cmd == ec.Command.FPWR and draw(st.booleans()):  # the AL and EEPROM commands
@@ -123,6 +137,40 @@ def datagram_st(draw):  # noqa: ANN001, ANN201
     return ec.Datagram(cmd, draw(st.integers(0, 255)), draw(adp_st), draw(ado_st), data,
                        draw(st.integers(0, 0xFFFF)), draw(st.integers(0, 0xFFFF)),
                        draw(st.booleans()))
+
+
+_SYS = 852_076_800_000_000_000  # a system time a master writes (ns since 2000)
+_dc_value = {
+    r.DC_RECV_TIME_P0: st.just(bytes(4)),
+    r.DC_SYSTEM_TIME: st.one_of(st.integers(-10**6, 10**6).map(lambda v: _SYS + v),
+                                st.integers(-2**63, 2**63 - 1)).map(lambda v: struct.pack("<q", v)),
+    r.DC_SYSTEM_OFFSET: st.one_of(st.integers(-10**6, 10**6).map(lambda v: _SYS + v),
+                                  st.integers(-2**63, 2**63 - 1)).map(
+                                      lambda v: struct.pack("<q", v)),
+    r.DC_SYSTEM_DELAY: st.integers(0, 20_000).map(lambda v: struct.pack("<I", v)),
+    r.DC_SPEED_START: st.sampled_from([0x1000, 0x80, 0x7FFF, 0]).map(
+        lambda v: struct.pack("<H", v)),
+    r.DC_DIFF_FILTER: st.integers(0, 255).map(lambda v: bytes([v])),
+    r.DC_CYCLIC_CONTROL: st.sampled_from([0, 1]).map(lambda v: bytes([v])),
+    r.DC_ACTIVATION: st.sampled_from([0, 3, 1, 0x23, 7, 0xFF]).map(lambda v: bytes([v])),
+    r.DC_START_TIME: st.one_of(
+        st.integers(-10**6, 3 * 10**8).map(lambda v: _SYS + v),
+        st.integers(-2**63, 2**63 - 1)).map(lambda v: struct.pack("<q", v)),
+    r.DC_SYNC0_CYCLE: st.sampled_from([1_000_000, 0, 250_000, 0xFFFFFFFF]).map(
+        lambda v: struct.pack("<I", v)),
+}
+
+
+def _dc_datagram(draw):  # noqa: ANN001, ANN202
+    ado = draw(st.sampled_from(sorted(_dc_value)))
+    data = draw(_dc_value[ado])
+    cut = draw(st.sampled_from([len(data)] * 4 + [1, 4, 7]))
+    data = data[:cut]
+    cmd = draw(st.sampled_from([ec.Command.FPWR, ec.Command.BWR, ec.Command.FRMW,
+                                ec.Command.ARMW, ec.Command.FPRD, ec.Command.BRD,
+                                ec.Command.APRW]))
+    adp = draw(st.sampled_from([0x1001, 0x1002, 0x1003, 0, (-1) & 0xFFFF, (-2) & 0xFFFF]))
+    return ec.Datagram(cmd, draw(st.integers(0, 255)), adp, ado, data)
 
 
 #: The mailbox sync managers as a master programs them (SM0 0x1000 / SM1 0x1080, 128 bytes).
@@ -355,3 +403,25 @@ def test_short_frames_are_not_ethercat_or_dropped(cfg, cut):
     both = Both(cfg)
     frame = ec.encode_frame([ec.Datagram(ec.Command.BRD, 1, 0, 0, bytes(2))], MAC_DST, MAC_SRC)
     assert both.handle(frame[:cut]) is None
+
+
+def test_compiled_distributed_clocks_equal_the_chain_through_set_up_and_cycles(cfg):
+    """A master's whole DC set-up (receive-time latch, offsets, delays, SYNC0 start) and
+    drift compensation (FRMW on the reference's system time every 1 ms) through both: the
+    same replies, registers, loop states and SYNC0 times at every step."""
+    from firmware_model.esc.dc import dc_line
+    from tests.fieldbus.dc_master import config_dc, dcsync0, frmw
+
+    # 40 us per hop: the first corrections are larger than the loop may slew in a cycle
+    both = Both(cfg, dc_line(3, (120.0, -300.0, 45.5), 40_000))
+    master = EscMaster(both)
+    master.bring_up(to_op=False)
+    both.tick(3_000_000)
+    config_dc(master, len(both.ref.escs))
+    for k in range(400):
+        both.tick(1_000_000 + 37 * (k % 5))   # frames not on an exact grid
+        frmw(master)
+        if k == 100:
+            for i in range(len(both.ref.escs)):
+                dcsync0(master, i, 1_000_000)
+    assert all(e.dc.next_sync0 > 0 for e in both.ref.escs)

@@ -12,6 +12,7 @@ import shutil
 import signal
 import struct
 import subprocess
+from collections import Counter
 
 import pytest
 
@@ -27,6 +28,7 @@ from hil.fieldbus.esc.veth import (
     veth_namespace,
 )
 from hil.fieldbus.pdo import slot_sizes
+from hil.fieldbus.traffic import read_capture, summary
 
 CYCLES = 10_000
 FORCE_N = 450.0
@@ -111,6 +113,19 @@ def test_soem_brings_hydra_full_to_op_and_cycles(netns, full, tmp_path):
                             capture_output=True, text=True, check=True)
     messages = {m for line in expert.stdout.splitlines() for m in line.split("|") if m}
     assert messages <= {SOEM_SOURCE_MAC_NOTE}, messages
+    # log info tells requests from replies in this foreign capture as tshark does by the
+    # source MAC's bit 1, and counts the replies' working counters as tshark reads them
+    s = summary(read_capture(pcap))
+    counts = {}
+    for name, filt in (("requests", "ecat && !(eth.src[0] & 2)"),
+                       ("replies", "ecat && (eth.src[0] & 2)")):
+        out = subprocess.run(["tshark", "-r", str(pcap), "-Y", filt, "-T", "fields", "-e",
+                              "ecat.cnt"], capture_output=True, text=True, check=True)
+        counts[name] = out.stdout.split()
+    assert (s["requests"], s["replies"]) == (len(counts["requests"]), len(counts["replies"]))
+    assert s["replies"] > 0
+    assert s["reply_wkc"] == dict(Counter(w for line in counts["replies"]
+                                          for w in line.split(",")))
 
 
 def test_soem_force_command_reaches_the_full_stack(netns, full, cfg):

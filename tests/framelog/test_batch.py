@@ -58,3 +58,31 @@ def test_bench_log_reports_both_encodings() -> None:
     assert enc["json"].message_bytes > enc["protobuf"].message_bytes
     assert all(e.file_bytes > 0 and e.encode_write_us > 0 for e in enc.values())
     assert "protobuf" in format_report(None, list(enc.values()))
+
+
+@pytest.mark.parametrize("chunk_size", [64, 1 << 20])
+def test_messages_as_one_array_make_the_same_file(chunk_size: int) -> None:
+    """A (n, size) array of payloads, and the library's own add_message on the same channel
+    between two batches (its index then holds pairs and arrays of pairs, in order)."""
+    import numpy as np
+
+    payloads = [bytes([i % 251, i // 251, 7]) for i in range(40)]
+    files = []
+    for as_array in (True, False):
+        buf = io.BytesIO()
+        w = Writer(buf, chunk_size=chunk_size, compression=CompressionType.NONE)
+        w.start(profile="t", library="t")
+        a = w.register_channel("/a", "x", w.register_schema("s", "x", b""))
+        data = np.frombuffer(b"".join(payloads), np.uint8).reshape(40, 3)
+        first, second = (data[:20], data[20:]) if as_array else (payloads[:20], payloads[20:])
+        batch.add_messages(w, a, np.arange(20) * 10, first, 0, as_array)
+        w.add_message(a, 195, b"mid", 195, 20)
+        batch.add_messages(w, a, 200 + np.arange(20) * 10, second, 21, as_array)
+        w.finish()
+        files.append(buf.getvalue())
+    if chunk_size > 1000:
+        assert files[0] == files[1]
+    for f in files:
+        msgs = list(make_reader(io.BytesIO(f), validate_crcs=True).iter_messages())
+        assert [m.data for _, _, m in msgs] == payloads[:20] + [b"mid"] + payloads[20:]
+        assert [m.log_time for _, _, m in msgs][19:22] == [190, 195, 200]

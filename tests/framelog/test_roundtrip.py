@@ -12,6 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from mcap.reader import make_reader
 from mcap.stream_reader import StreamReader
+from mcap_protobuf.decoder import DecoderFactory
 
 from hil.framelog.formats import (
     ENC_LVDS_UP,
@@ -117,8 +118,12 @@ def test_mcap_library_reads_it_with_crc_validation(tmp_path: Path) -> None:
         assert meta[0].name == "eha-hil" and meta[0].metadata["level"] == "full"
         for schema, channel, message in msgs:
             if channel.topic == "/lvds/0/up":
-                t, fr = unpack_block(message.data)
-                assert int(t[0]) == message.log_time and fr.shape[1] == 31
+                # a protobuf message the library's stock decoder reads
+                assert channel.message_encoding == "protobuf" and schema.encoding == "protobuf"
+                blk = DecoderFactory().decoder_for("protobuf", schema)(message.data)
+                t = np.frombuffer(blk.frames, np.uint16).reshape(blk.count, blk.width)
+                assert list(blk.t_ns)[0] == message.log_time and blk.width == 31
+                assert blk.dtype == "uint16" and t.shape[0] == len(blk.t_ns)
             if channel.topic == "/signals/motor":
                 assert channel.message_encoding == "json"
                 assert schema is not None and schema.encoding == "jsonschema"

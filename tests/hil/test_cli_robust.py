@@ -37,7 +37,8 @@ UNTYPED_PATHS = {"config": "config", "preset": "config", "topology": "input",
 TEXT = {"set", "effect", "magnitude", "host", "scenario", "topic", "field", "board", "case",
         "can_channel", "foxglove",  # HOST:PORT, hil.framelog.live.parse_address
         "param", "tolerance", "seeds", "dask", "scenario_name", "require",
-        "interface"}  # interface: a network interface name, checked by hil.transports.rawether
+        "interface",  # interface: a network interface name, checked by hil.transports.rawether
+        "dc_drift_ppm"}  # a number or a comma-separated list, hil.cli.serve._ppm_list
 
 #: Extra arguments that keep a verb cheap when the value under test is valid (tiny
 #: durations, --json for no progress lines), and placeholders for required positionals.

@@ -170,7 +170,8 @@ def _scoped() -> list[tuple[str, str, str, tuple[str, ...]]]:
 
 
 VALUES = {"--baudrate": "9600", "--host": "0.0.0.0", "--port": "pty", "--interface": "lo",
-          "--stack-box": "0", "--capture": "c.pcapng", "--foxglove": "127.0.0.1:1"}
+          "--stack-box": "0", "--capture": "c.pcapng", "--foxglove": "127.0.0.1:1",
+          "--dc-drift-ppm": "50", "--dc-hop-ns": "500"}
 
 
 def test_serve_options_are_scoped():
@@ -248,6 +249,9 @@ def test_cut_file_reported_the_same_way(verb, suffix, logs, tmp_path):
     cut = tmp_path / f"cut{suffix}"
     data = whole.read_bytes()
     cut.write_bytes(data[: len(data) * 2 // 5 + 3])  # inside a record, a block, a line
+    side = Path(f"{whole}.eha-hil.json")  # a CAN log's metadata travels with it
+    if side.is_file():
+        Path(f"{cut}.eha-hil.json").write_bytes(side.read_bytes())
     code, out, err = _run([*verb.split(), str(cut)])
     line = _one_line(err)
     m = CUT.match(line)

@@ -34,6 +34,7 @@ RECIPES: dict[tuple[str, str], list[str]] = {
     ("eha-hil bus run", "--capture"): ["bus", "run", "--seconds", "0.02"],
     ("eha-hil bus run", "--can-log"): ["bus", "run", "--transport", "can", "--seconds", "0.02"],
     ("eha-hil serve", "--capture"): ["serve", "--port", "pty", "--seconds", "0.02", "-q"],
+    ("eha-hil serve", "--log"): ["serve", "--port", "pty", "--seconds", "0.02", "-q"],
     ("eha-hil log export", "out"): ["log", "export", "{log}", "{out}"],
     ("eha-hil identify", "--report"): ["identify", "{data}", "--max-effects", "0", "--quiet"],
     ("eha-hil identify-synth", "out"): ["identify-synth", "{out}", "--seconds", "1.01"],
@@ -50,7 +51,8 @@ RECIPES: dict[tuple[str, str], list[str]] = {
 }
 #: Streams: written while the command runs; a failed write stops it (nothing on stdout).
 STREAMS = {("eha-hil bus run", "--log"), ("eha-hil bus run", "--capture"),
-           ("eha-hil bus run", "--can-log"), ("eha-hil serve", "--capture")}
+           ("eha-hil bus run", "--can-log"), ("eha-hil serve", "--capture"),
+           ("eha-hil serve", "--log")}
 #: Long to run (a whole identification): the full-disk case is in the slow set.
 SLOW = {("eha-hil identify", "--report"), ("eha-hil identify-check", "--markdown")}
 

@@ -179,7 +179,7 @@ def test_the_kernel_counts_no_references_through_its_bundles():
     with BusSystem(load_topology("bench_one_box"), cfg, "inproc", model="robot") as bs:
         e = bs.chain.engine
         args = (e._counter, 1, e.period, e.tick, e._batched, e.arrays, e.mcu, e._no_rec,
-                e._no_trace)
+                e.log_rows)
     opts = {k: v for k, v in robot.advance_robot.targetoptions.items()
             if k not in ("cache", "nopython")}
     counts = []

@@ -245,3 +245,43 @@ def test_serve_udp_capture_holds_every_exchange(tmp_path):
     assert s["carriers"] == {"udp": 200} and s["crc_trailers"] == 0
     assert s["metadata"] == {}  # a server's capture names no run to replay
     assert traffic.frames[0].ts_ns > 1_600_000_000 * 10**9  # wall time, not simulated
+
+
+@pytest.mark.slow  # a server process for about two seconds of wall time
+def test_serve_log_of_the_robot_engine_replays_bit_for_bit(tmp_path):
+    """``serve --model robot --log``: the whole-robot engine paced to the wall clock logs
+    what every MCU took in and gave out (its blocks written by a thread of their own); the
+    log replays bit for bit and holds the master's commands."""
+    from hil.framelog import FrameLogReader
+    from hil.replay.replay import replay_mcu
+    from hil.transports import open_transport
+
+    log = tmp_path / "serve.mcap"
+    cmd = [sys.executable, "-m", "hil.cli", "serve", "--transport", "udp", "--port", "0",
+           "--seconds", "2", "--model", "robot", "--log", str(log), "-q", "--json"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    line = proc.stderr.readline()
+    assert "ready on udp 127.0.0.1:" in line, line
+    port = int(line.split("ready on udp 127.0.0.1:")[1].split(";")[0])
+    m = Master(load_topology("bench_one_box"), crc_trailer=False)
+    with open_transport("udp", "master", remote_port=port) as end:
+        for _ in range(100):
+            m.set_actuator(0, "force", FORCE_N, enable=True)
+            for f in m.frames():
+                end.send(f)
+            while not all(m._answered):
+                reply = end.recv(timeout=REPLY_TIMEOUT_S)
+                assert reply is not None
+                m.receive(reply)
+            m.end_cycle()
+            time.sleep(1e-3)
+    out, err = proc.communicate(timeout=120)
+    served = json.loads(out)
+    assert served["frames_served"] == 100, err
+    result = replay_mcu(log)
+    assert result.ok and result.cycles > 100 and result.mcu_steps == 5 * result.cycles
+    t, outs = FrameLogReader(log).blocks("/mcu/0/outputs")
+    force = outs[:, 2:6].copy().view("<i4")[:, 0] * 0.01
+    # a box cycle applies the newest record its master sent (two in one cycle: one; how
+    # many land in one cycle depends on the machine's load)
+    assert 1 <= len(t) <= 100 and (force == FORCE_N).all()

@@ -146,3 +146,53 @@ def test_rig_options_refuse_bad_numbers(capsys, tmp_path, opt, value):
     # tests/hil/test_cli_robust.py)
     assert code == 2 and opt in err.splitlines()[-1]
     assert not (tmp_path / "x.csv").exists()
+
+
+def test_bench_identify_times_the_three_two_effect_records(capsys, monkeypatch):
+    """Without --load or --effect the benchmark times one two-effect record per load and
+    reports CPU beside wall for each (the identification itself is stubbed: its timing is
+    the benchmark's business, not a test's)."""
+    seen = []
+
+    def fake(args, cfg, load, effects, profile):
+        seen.append((load, tuple(effects), profile))
+        return {"samples": 8000, "sample_rate_hz": 5000.0, "load": load, "profile": profile,
+                "effects_in_data": effects, "effects_added": list(effects),
+                "unexplained": False, "wall_s": 2.0, "cpu_s": 3.0 + len(seen),
+                "cpu_ratio_to_budget": (3.0 + len(seen)) / cli.CPU_BUDGET_S,
+                "cpu_per_wall": (3.0 + len(seen)) / 2.0}
+
+    monkeypatch.setattr(cli, "_bench_record", fake)
+    code, out, _ = run(capsys, "bench-identify", "--seconds", "1.5")
+    assert code in (0, None)
+    assert seen == list(cli.BENCH_RECORDS)
+    assert {load for load, _, _ in seen} == {"fixed_piston", "conrod_fixed", "free_piston"}
+    assert all(len(effects) == 2 for _, effects, _ in seen)
+    rows = [ln for ln in out.splitlines() if ln.startswith("  ")]
+    assert len(rows) == 3 and all("CPU" in r and "wall" in r for r in rows), out
+    code, out, _ = run(capsys, "bench-identify", "--seconds", "1.5", "--json")
+    data = json.loads(out)
+    assert [r["load"] for r in data["records"]] == [r[0] for r in cli.BENCH_RECORDS]
+    assert data["cpu_s_max"] == max(r["cpu_s"] for r in data["records"])
+    seen.clear()
+    run(capsys, "bench-identify", "--load", "free_piston", "--effect", "seal_friction",
+        "--profile", "slide")
+    assert seen == [("free_piston", ("seal_friction",), "slide")]
+
+
+def test_bench_identify_refuses_a_profile_the_load_has_not(capsys):
+    code, _, err = run(capsys, "bench-identify", "--load", "fixed_piston", "--profile", "slide")
+    assert code == 2 and "--profile slide" in err and "free_piston" in err
+
+
+@pytest.mark.slow
+def test_bench_identify_one_short_record(capsys):
+    """A real (short) identification timed: CPU and wall both reported, both effects found."""
+    code, out, _ = run(capsys, "bench-identify", "--load", "fixed_piston", "--seconds", "2",
+                       "--json")
+    assert code in (0, None)
+    rec = json.loads(out)["records"][0]
+    assert rec["cpu_s"] > 0 and rec["wall_s"] > 0
+    assert rec["cpu_per_wall"] == pytest.approx(rec["cpu_s"] / rec["wall_s"])
+    assert sorted(e.split("[")[0] for e in rec["effects_added"]) == [
+        "pump_coulomb_friction", "pump_pulsation"]

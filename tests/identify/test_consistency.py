@@ -51,6 +51,12 @@ def test_flags_a_frequency_dependent_stiffness():
     ks = [s for s in c.inconsistent if s.name == "ks"][0]
     assert ks.ratio > 1.03 and ks.p_holm < 1e-3
     assert "k_s" in ks.describe("k_s") and " at " in ks.describe("k_s")
+    # a Maxwell branch is the softer k_s below its corner and k_s + k_m above it: the higher
+    # band asks for the stiffer spring
+    bands = [s for s in c.splits if s.name == "ks" and s.split == "frequency"]
+    if bands:
+        values = [p.value for p in bands[0].parts]
+        assert values[-1] > values[0], bands[0].describe("k_s")
 
 
 @pytest.mark.slow
@@ -64,6 +70,11 @@ def test_flags_a_time_varying_parameter():
     s = max(timed, key=lambda s: s.ratio)
     a, b = (s.parts[i] for i in s.far)
     assert a.ci_high < b.ci_low and s.ratio > 1.03
+    # warmer oil is thinner: every damper the segments disagree on falls over the record
+    for s in timed:
+        if s.name in ("ds", "dp"):
+            first, last = s.parts[0].value, s.parts[-1].value
+            assert last < first, s.describe(s.name)
 
 
 @pytest.mark.slow

@@ -66,3 +66,27 @@ def test_markdown_table_rows_and_tally():
     assert lines[2].startswith("| fixed_piston: pump_coulomb_friction | 1 | force_n 80 / 79.9")
     assert "**no**: added input_delay" in lines[3]
     assert lines[-1].startswith("1 of 2 right")
+
+
+def test_an_absorbed_maxwell_branch_is_judged_by_the_equivalent_spring():
+    """A Maxwell branch with its corner below the band is a stiffer spring wherever the data
+    pin k_s: right is `explained` with k_s at k_s + k_m, not a free pass."""
+    low = [c for c in default_cases() if c.absorbed]
+    assert low and all(c.effects == ("hose_viscoelastic",) for c in low)
+    assert all(dict((k, v) for _, k, v in c.magnitudes)["corner_hz"] < 1.0 for c in low)
+    # the corners of 3 Hz and up keep the strict rule
+    assert any(c.effects == ("hose_viscoelastic",) and not c.absorbed for c in default_cases())
+    from hil.identify.rigcheck import equivalent_parameters
+
+    case = low[0]
+    truth = {"hose_viscoelastic": {"k_m_n_per_m": 1.0e7, "corner_hz": 0.5}}
+    eq = equivalent_parameters(case, truth, {"ks": 2.0e7})
+    assert eq == {"ks": 3.0e7}
+    assert judge(case, truth, {}, False, eq, {"ks": 3.05e7})[0]
+    ok, why, _ = judge(case, truth, {}, False, eq, {"ks": 2.0e7})  # the branch not absorbed
+    assert not ok and "equivalent" in why
+    ok, why, _ = judge(case, truth, {}, True, eq, {"ks": 3.0e7})
+    assert not ok and "unexplained" in why
+    assert not judge(case, truth, {}, False, eq, {})[0]  # k_s held: nothing to compare
+    assert not judge(case, truth, {"pump_coulomb_friction": {"force_n": 5.0}}, False, eq,
+                     {"ks": 3.0e7})[0]

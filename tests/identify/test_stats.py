@@ -75,3 +75,15 @@ def test_predictable_share_of_an_ar1_is_its_explained_variance():
         x[k] = 0.5 * x[k - 1] + e[k]
     # var(x) = 1/(1 - 0.25), the innovation's 1: a quarter of x is predictable
     assert predictable_share(x) == pytest.approx(0.25, abs=0.02)
+
+
+def test_a_joint_refit_that_runs_away_on_the_validation_part_is_named_so():
+    """A joint refit's validation cost as a relative change; a runaway (beyond 10x, or not
+    finite) is 'diverged', with no percentage of it (once printed as +5.9e20 %)."""
+    from hil.identify.pipeline import DIVERGED_RATIO, joint_change
+
+    assert joint_change(100.0, 11.0) == (pytest.approx(-0.89), "")
+    assert joint_change(100.0, 100.0 * DIVERGED_RATIO)[1] == ""
+    for after in (100.0 * DIVERGED_RATIO * 1.01, 5.9e20, float("inf"), float("nan")):
+        change, why = joint_change(100.0, after)
+        assert change is None and why.startswith("diverged on the validation part"), after

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from firmware_model.esc.dc import DcParams, dc_line
 from firmware_model.esc.esc import Esc
 from hil.fieldbus.boxes import make_box
 from hil.fieldbus.chain import CYCLE_TICKS
@@ -45,14 +46,17 @@ class EscChainStats:
 
 class EscChain:
     """ESCs + box models of a topology. ``stack_boxes``: box ids that get the full stack
-    (the others the ``model`` given, echo by default)."""
+    (the others the ``model`` given, echo by default). ``dc``: the slaves' clocks and
+    delays (:func:`firmware_model.esc.dc.dc_line` by default)."""
 
     def __init__(self, topo: Topology, cfg: Config, model: str = "echo",
-                 stack_boxes: tuple[int, ...] = ()) -> None:
+                 stack_boxes: tuple[int, ...] = (), dc: list[DcParams] | None = None) -> None:
         self.topology = topo
         described = describe_all(topo)
         n = len(topo.boxes)
-        self.escs = [Esc(d, img, last=i == n - 1) for i, (d, img) in enumerate(described)]
+        dc = dc if dc is not None else dc_line(n)
+        self.escs = [Esc(d, img, last=i == n - 1, dc=dc[i])
+                     for i, (d, img) in enumerate(described)]
         self.boxes = [make_box("stack" if b.id in stack_boxes else model, b, cfg)
                       for b in topo.boxes]
         for esc, box in zip(self.escs, self.boxes, strict=True):

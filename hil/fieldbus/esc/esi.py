@@ -14,7 +14,7 @@ from __future__ import annotations
 import xml.etree.ElementTree as ET
 
 from firmware_model.calibration import calibration
-from firmware_model.esc import objects
+from firmware_model.esc import objects, sii
 from firmware_model.esc.sii import SlaveDescription
 from hil.fieldbus.esc.mailbox import software_version
 from hil.fieldbus.esc.slaves import VENDOR_ID, describe_all
@@ -149,9 +149,31 @@ def _device(devices: ET.Element, d: SlaveDescription, image: bytes, box: Box,
         _dictionary(profile, od)
         dev.remove(profile)
         dev.insert(3, profile)  # ETG.2000's order: Type, Name, GroupType, Profile, Fmmu, ...
+    _dc_opmodes(dev)  # after Mailbox, before Eeprom
     eep = _sub(dev, "Eeprom")
-    _sub(eep, "ByteSize", str(len(image)))
+    # the EEPROM's size as the image declares it (word 0x3E), not the bytes it fills
+    _sub(eep, "ByteSize", str(sii.eeprom_bytes(image)))
     _sub(eep, "ConfigData", image[:14].hex().upper())
+
+
+#: DC operation modes: (name, description, AssignActivate: the word a master writes to
+#: 0x0980/0x0981 (low byte cyclic unit control, high byte activation), SYNC0 cycle factor).
+DC_OPMODES = (("FreeRun", "Free run: the MCU cycles on its own clock", 0x0000, None),
+              ("DcSync", "DC synchronous: the MCU samples at SYNC0, one pulse per bus cycle",
+               0x0300, 1))
+
+
+def _dc_opmodes(dev: ET.Element) -> None:
+    """The distributed-clock operation modes (firmware_model.esc.dc)."""
+    dc = _sub(dev, "Dc")
+    for name, desc, assign, factor in DC_OPMODES:
+        op = _sub(dc, "OpMode")
+        _sub(op, "Name", name)
+        _sub(op, "Desc", desc)
+        _sub(op, "AssignActivate", _hex(assign, 4))
+        if factor is not None:
+            _sub(op, "CycleTimeSync0", "0", Factor=str(factor))
+            _sub(op, "ShiftTimeSync0", "0")
 
 
 def esi_xml(topo: Topology, cfg: Config | None = None) -> str:

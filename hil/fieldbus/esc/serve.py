@@ -18,6 +18,10 @@ runs: ``eha-hil serve --transport ethercat --interface IF --topology hydra_full`
 Before the frame path starts, the boxes run :data:`WARMUP_CYCLES` cycles and the frame loop
 is compiled (or loaded): first calls take tens of ms (seconds with a cold cache), which
 must not happen while a master reads the slaves' SII.
+
+With distributed clocks active (a master started SYNC0 with a 1 ms cycle), the box clock
+releases each cycle at the next SYNC0 pulse of the first slave that has one, as the MCU's
+SYNC0 interrupt does, instead of its own grid (:meth:`ServedChain.sync0_release`).
 """
 
 from __future__ import annotations
@@ -31,8 +35,10 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from firmware_model.esc import compiled as ec
+from firmware_model.esc import dc_compiled as dcc
 from firmware_model.esc.compiled import EscArrays
-from hil.fieldbus.box_clock import BoxClock
+from firmware_model.esc.dc import DcParams
+from hil.fieldbus.box_clock import PERIOD_NS, BoxClock
 from hil.fieldbus.boxes import box_engine, make_box
 from hil.fieldbus.chain import CYCLE_TICKS
 from hil.fieldbus.esc import frames as esc_frames
@@ -55,14 +61,24 @@ class ServedChain:
     """The slaves' memories (:class:`EscArrays`) and the boxes behind them. ``model``:
     echo, stack or robot (every box; the whole-robot engine advances all at once);
     ``stack_boxes``: boxes that get the full stack whatever ``model`` says; ``coe``: the
-    slaves have their CoE mailbox (False: none, process data on SM0/SM1)."""
+    slaves have their CoE mailbox (False: none, process data on SM0/SM1). ``dc``: the
+    slaves' clocks and delays (:func:`firmware_model.esc.dc.dc_line` by default)."""
+
+    #: Box cycles per window of the DC spread record (:meth:`dc_report`).
+    DC_WINDOW_CYCLES = 100
 
     def __init__(self, topo: Topology, cfg: Config, model: str = "echo",
-                 stack_boxes: tuple[int, ...] = (), coe: bool = True) -> None:
+                 stack_boxes: tuple[int, ...] = (), coe: bool = True,
+                 dc: list[DcParams] | None = None) -> None:
         self.topology = topo
         self.model = model
         described = describe_all(topo, coe)
-        self.arrays = EscArrays(described)
+        self.arrays = EscArrays(described, dc)
+        #: CLOCK_MONOTONIC time [ns] of the slaves' clock zero (set by :func:`serve`).
+        self.t0 = 0
+        #: Largest system-time spread [ns] of the slaves, per window of box cycles.
+        self.dc_spread_ns: list[int] = []
+        self._dc_cycle = 0
         self.boxes = [make_box("stack" if b.id in stack_boxes and model != "robot" else model,
                                b, cfg) for b in topo.boxes]
         #: The boxes' mailbox side (CoE), run on the box clock after each cycle.
@@ -94,6 +110,41 @@ class ServedChain:
         self.advance()
         self.mailboxes.step()
         self.publish_inputs()
+        self._record_dc()
+
+    # --- distributed clocks --------------------------------------------------------------------
+    def sync0_release(self, after_ns: int) -> int | None:
+        """CLOCK_MONOTONIC time [ns] of the first SYNC0 pulse after ``after_ns`` of the first
+        slave running SYNC0 with the boxes' 1 ms cycle, or None (free run)."""
+        st = self.arrays.st
+        for i in range(self.arrays.n):
+            nxt = int(st[i, dcc.D_NEXT_SYNC0])
+            if nxt < 0 or int(st[i, dcc.D_SYNC_CYCLE]) != PERIOD_NS:
+                continue
+            # the frame thread refreshed it at its last wake-up (the pulse after that): the
+            # first pulse after ``after_ns`` is a whole number of cycles of this slave's
+            # clock (its crystal and the loop's frequency correction) from it
+            at = self.t0 + nxt
+            cyc = PERIOD_NS * 1e9 / (1e9 + int(st[i, dcc.D_DRIFT]) + int(st[i, dcc.D_FREQ]))
+            k = (at - after_ns - 1) // cyc
+            return at - round(k * cyc)
+        return None
+
+    def _record_dc(self) -> None:
+        spread = int(self.arrays.st[0, dcc.D_SPREAD])
+        if self._dc_cycle % self.DC_WINDOW_CYCLES == 0:
+            self.dc_spread_ns.append(spread)
+        elif spread > self.dc_spread_ns[-1]:
+            self.dc_spread_ns[-1] = spread
+        self._dc_cycle += 1
+
+    def dc_report(self) -> dict:
+        """Per slave what the master set (offset, delay, SYNC0) beside the simulated clock,
+        the loop's compares, out-of-order writes; the spread record."""
+        a = self.arrays
+        slaves = [{"slave": i, **dcc.slave_report(a.mem[i], a.st[i])} for i in range(a.n)]
+        return {"slaves": slaves, "spread_window_cycles": self.DC_WINDOW_CYCLES,
+                "spread_ns": list(self.dc_spread_ns)}
 
     def watchdog_report(self) -> list[dict]:
         """Per slave: watchdog time, trips and the delay of the last trip [ms], AL status."""
@@ -116,6 +167,9 @@ class EcatServeStats:
     compute_s: float = 0.0
     worst_cycle_ms: float = 0.0
     worst_cycle_at: int = 0
+    sync0_cycles: int = 0
+    sync0_first_cycle: int = -1
+    sync0_start_late_max_us: float = 0.0
     frames_received: int = 0
     frames_answered: int = 0
     frames_late: int = 0
@@ -159,12 +213,13 @@ def serve(chain: ServedChain, link: RawEthernet, seconds: float | None = None,
         chain.cycle()
     esc_frames.warm_up()
     frames = esc_frames.FrameThread(link.sock, chain.arrays, late_us, frame_setup)
-    boxes = BoxClock(chain.cycle, box_setup, box_behind)
+    boxes = BoxClock(chain.cycle, box_setup, box_behind, chain.sync0_release)
     gc.collect()
     gc.freeze()  # what exists now is never collected: no pause scans it
     clock = time.monotonic_ns
     steal0 = steal_s()
     start = clock()
+    chain.t0 = start
     frames.start(start)
     boxes.begin(start)
     ready()
@@ -191,7 +246,9 @@ def serve(chain: ServedChain, link: RawEthernet, seconds: float | None = None,
                         slipped_cycles=b.slipped_cycles, lag_max_ms=b.lag_max_ms,
                         lag_max_at_s=b.lag_max_at_s,
                         compute_s=b.compute_s, worst_cycle_ms=b.worst_cycle_ms,
-                        worst_cycle_at=b.worst_cycle_at,
+                        worst_cycle_at=b.worst_cycle_at, sync0_cycles=b.sync0_cycles,
+                        sync0_first_cycle=b.sync0_first_cycle,
+                        sync0_start_late_max_us=b.sync0_start_late_max_us,
                         frames_received=int(f[esc_frames.F_RECEIVED]),
                         frames_answered=int(f[esc_frames.F_ANSWERED]),
                         frames_late=int(f[esc_frames.F_LATE]),

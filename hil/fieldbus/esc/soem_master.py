@@ -12,6 +12,11 @@ MODE ``rtt N``: as far as OP, every actuator enabled with a force command, N cyc
 histogram (``rtt_hist``, :mod:`hil.fieldbus.reply_times`: memory bounded however long the
 run) with its exact maximum, and the WKC errors; a progress line on stderr every
 PROGRESS_S seconds.
+MODE ``dc N CHECK``: as far as OP with distributed clocks (config_dc after config_map,
+SYNC0 every 1 ms on every slave), N process-data cycles at 1 kHz (SOEM adds its FRMW on
+the reference clock's system time to each); every CHECK cycles, between two of SOEM's
+cycles, one frame of this process's own (raw socket) reads every slave's system time
+(0x0910) and filtered difference (0x092C): their spread and largest magnitude.
 MODE ``coe BOX N``: in PREOP every slave's identity read by SDO (0x1018:1..4), then box BOX's
 first TxPDO left out of 0x1C13 (complete access write; BOX < 0: no remap), config_map, OP,
 N cycles with force commands on BOX's actuators (100 N per slot number + 1), its last
@@ -25,6 +30,7 @@ on slot 0 of BOX and OTHER (see :func:`gain`).
 from __future__ import annotations
 
 import json
+import socket
 import struct
 import sys
 import time
@@ -38,15 +44,21 @@ STATE_TIMEOUT_US = 2_000_000
 PROGRESS_S = 10.0
 #: Cycles right after OP left out of the round-trip figures (not the steady state).
 RTT_WARMUP = 20
+SYNC0_CYCLE_NS = 1_000_000
 
 
-def bring_up(ifname: str) -> tuple[pysoem.Master, dict]:
+def bring_up(ifname: str, dc: bool = False) -> tuple[pysoem.Master, dict]:
+    """To OP; ``dc``: with distributed clocks, SYNC0 every 1 ms on every slave."""
     m = pysoem.Master()
     m.open(ifname)
     n = m.config_init()
     info = {"found": n, "slaves": [{"name": s.name, "man": s.man, "id": s.id, "rev": s.rev}
                                     for s in m.slaves]}
     info["image_bytes"] = m.config_map()
+    if dc:
+        info["dc_found"] = bool(m.config_dc())
+        for s in m.slaves:
+            s.dc_sync(True, SYNC0_CYCLE_NS)
     info["safeop"] = m.state_check(pysoem.SAFEOP_STATE, STATE_TIMEOUT_US)
     info["expected_wkc"] = m.expected_wkc
     m.state = pysoem.OP_STATE
@@ -88,6 +100,54 @@ def paced(m: pysoem.Master, n: int, each=None, rtt=None, progress=None  # noqa: 
         if pause > 0:
             time.sleep(pause)
     return bad, seen
+
+
+def _dc_reader(ifname: str, n: int):  # noqa: ANN202 - a function of no arguments
+    """A reader of every slave's 0x0910 and 0x092C in one frame of FPRDs (indexes from
+    0x80, which SOEM never uses and drops), through a raw socket of this process."""
+    from firmware_model.esc import registers as r
+    from protocols import ethercat as ec
+
+    sock = socket.socket(socket.AF_PACKET, socket.SOCK_RAW, socket.htons(0x88A4))
+    sock.bind((ifname, 0))
+    sock.settimeout(RECV_TIMEOUT_US * 1e-6)
+    dgs = []
+    for i in range(n):
+        station = 0x1001 + i   # SOEM's configured addresses
+        dgs += [ec.Datagram(ec.Command.FPRD, 0x80 + 2 * i, station, r.DC_SYSTEM_TIME, bytes(8)),
+                ec.Datagram(ec.Command.FPRD, 0x81 + 2 * i, station, r.DC_SYSTEM_DIFF, bytes(4))]
+    frame = ec.encode_frame(dgs)
+
+    def read() -> tuple[int, int] | None:
+        sock.setblocking(False)   # SOEM's frames since the last read: not ours
+        try:
+            while True:
+                sock.recv(2048)
+        except BlockingIOError:
+            pass
+        sock.settimeout(RECV_TIMEOUT_US * 1e-6)
+        sock.send(frame)
+        t_end = time.monotonic() + RECV_TIMEOUT_US * 1e-6
+        while time.monotonic() < t_end:
+            try:
+                got = sock.recv(2048)
+            except TimeoutError:
+                return None
+            # a reply (source MAC bit 1 set by the slaves) to this frame (first index 0x80)
+            if len(got) < 18 or not got[6] & 0x02 or got[17] != 0x80:
+                continue
+            try:
+                back = ec.decode_frame(got)
+            except ValueError:
+                continue
+            if back[0].idx != 0x80 or any(d.wkc != 1 for d in back):
+                continue
+            times = [struct.unpack("<q", d.data)[0] for d in back[0::2]]
+            diffs = [struct.unpack("<I", d.data)[0] & 0x7FFFFFFF for d in back[1::2]]
+            return max(times) - min(times), max(diffs)
+        return None
+
+    return read
 
 
 def bring_ups(ifname: str, n: int, image_bytes: int) -> dict:
@@ -235,7 +295,20 @@ def main(argv: list[str]) -> None:
     if mode == "bringups":
         print(json.dumps(bring_ups(ifname, int(argv[2]), int(argv[3]))))
         return
-    m, info = bring_up(ifname)
+    m, info = bring_up(ifname, dc=mode == "dc")
+    if mode == "dc":
+        n, check = int(argv[2]), int(argv[3])
+        read = _dc_reader(ifname, len(m.slaves))
+        checks: list = []
+
+        def between(k: int) -> None:
+            if k and k % check == 0:
+                checks.append((k, read()))
+
+        info["cycles"] = n
+        info["bad_wkc"], info["bad_wkc_values"] = paced(m, n, between)
+        info["dc_checks"] = checks
+        info["dc_time"] = m.dc_time
     if mode == "cycles":
         n, wait = int(argv[2]), float(argv[3])
         info["cycles"] = n

@@ -1,0 +1,174 @@
+"""A channel's frames decoded into columns at once (numpy), for ``eha-hil log export``.
+
+The reader hands over each channel whole (:meth:`FrameLogReader.raw_channels`); a channel
+is then decoded by columns, not frame by frame:
+
+* block channels (register snapshots, traces, records): the stacked (n, width) frames go
+  through the encoding's batch decoder or the byte layout's numpy dtype in one call;
+* protobuf channels whose message holds fixed-width scalars only (every decoded-signal
+  channel of ``bus run``): the messages, all of one length, are one numpy structured array
+  whose field keys are checked against the schema for every row, then read as columns;
+  anything else (a foreign protobuf message with varints, strings, nesting) goes through
+  the stock protobuf runtime message by message;
+* the rest (EtherCAT frames of varying length, JSON): the channel's per-frame decoder.
+
+Each column is an int64 or float64 array with a validity mask (a frame may lack a field:
+an EtherCAT frame with fewer datagrams, a frame that failed to decode).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from google.protobuf import descriptor_pb2
+
+from hil.framelog.channel_decode import channel_decoder, channel_layout
+from hil.framelog.decoders import DecodeError, decode_block, has_decoder
+from hil.framelog.reader import ChannelInfo, RawChannel
+
+_FD = descriptor_pb2.FieldDescriptorProto
+#: protobuf scalar type -> (wire type, numpy dtype of the value) for fixed-width scalars
+_FIXED = {_FD.TYPE_DOUBLE: (1, "<f8"), _FD.TYPE_FLOAT: (5, "<f4"),
+          _FD.TYPE_FIXED64: (1, "<u8"), _FD.TYPE_SFIXED64: (1, "<i8"),
+          _FD.TYPE_FIXED32: (5, "<u4"), _FD.TYPE_SFIXED32: (5, "<i4"),
+          _FD.TYPE_BOOL: (0, "u1")}
+
+
+@dataclass
+class Columns:
+    """One channel decoded: frame times, tie-break keys, columns and their masks (None:
+    every frame has the field), units, per-frame decode errors (None: none failed)."""
+
+    topic: str
+    t_ns: np.ndarray
+    seq: np.ndarray
+    row: np.ndarray
+    columns: dict[str, np.ndarray]
+    valid: dict[str, np.ndarray | None]
+    units: dict[str, str] = field(default_factory=dict)
+    errors: list[str | None] | None = None
+
+    @property
+    def n(self) -> int:
+        return int(self.t_ns.shape[0])
+
+
+def _varint(n: int) -> bytes:
+    out = bytearray()
+    while True:
+        b = n & 0x7F
+        n >>= 7
+        if not n:
+            out.append(b)
+            return bytes(out)
+        out.append(b | 0x80)
+
+
+def _fixed_record(ch: ChannelInfo) -> tuple[np.dtype, list[tuple[str, bytes, bool]]] | None:
+    """The structured dtype of a protobuf message whose fields are all fixed-width scalars
+    written in field-number order (how our signal channels write them), and per field
+    (name, key bytes, is bool); None for any other message."""
+    try:
+        fds = descriptor_pb2.FileDescriptorSet.FromString(ch.schema_data)
+    except Exception:  # noqa: BLE001 - a foreign schema: the runtime path reports it
+        return None
+    for f in fds.file:
+        for m in f.message_type:
+            if (f"{f.package}.{m.name}" if f.package else m.name) != ch.schema_name:
+                continue
+            layout, keys = [], []
+            for fd in sorted(m.field, key=lambda x: x.number):
+                kind = _FIXED.get(fd.type)
+                if kind is None or fd.label == _FD.LABEL_REPEATED:
+                    return None
+                key = _varint(fd.number << 3 | kind[0])
+                layout += [(f"_k{fd.number}", np.uint8, (len(key),)), (fd.name, kind[1])]
+                keys.append((fd.name, key, fd.type == _FD.TYPE_BOOL))
+            return np.dtype(layout), keys
+    return None
+
+
+def _protobuf_fast(ch: ChannelInfo, payloads: list[memoryview]) -> dict[str, np.ndarray] | None:
+    rec = _fixed_record(ch)
+    if rec is None or not payloads:
+        return None
+    dt, keys = rec
+    if any(len(p) != dt.itemsize for p in payloads):
+        return None
+    a = np.frombuffer(b"".join(payloads), dt)
+    for number, (_, key, _) in enumerate(keys):
+        k = a[dt.names[2 * number]]
+        if not np.array_equal(k, np.broadcast_to(np.frombuffer(key, np.uint8), k.shape)):
+            return None  # fields in another order or form: the runtime reads it
+    out = {}
+    for name, _, is_bool in keys:
+        v = a[name]
+        out[name] = (v != 0).astype(np.int64) if is_bool else \
+            (v.astype(np.float64) if v.dtype.kind == "f" else v.astype(np.int64))
+    return out
+
+
+def _from_dicts(rows: list[dict[str, object]]) -> tuple[dict[str, np.ndarray],
+                                                       dict[str, np.ndarray | None]]:
+    names: dict[str, None] = {}
+    for r in rows:
+        names.update(dict.fromkeys(r))
+    cols, valid = {}, {}
+    n = len(rows)
+    for c in names:
+        vals = [r.get(c) for r in rows]
+        mask = np.fromiter((v is not None for v in vals), bool, n)
+        ints = all(isinstance(v, int) for v in vals if v is not None)
+        fill = 0 if ints else np.nan
+        arr = np.array([fill if v is None else v for v in vals],
+                       np.int64 if ints else np.float64)
+        cols[c], valid[c] = arr, None if mask.all() else mask
+    return cols, valid
+
+
+def _dense(cols: dict[str, np.ndarray]) -> tuple[dict[str, np.ndarray],
+                                                 dict[str, np.ndarray | None]]:
+    out = {}
+    for k, v in cols.items():
+        v = np.asarray(v)
+        out[k] = v.astype(np.float64) if v.dtype.kind == "f" else v.astype(np.int64)
+    return out, dict.fromkeys(out)
+
+
+def decode_channel(ch: ChannelInfo, raw: RawChannel) -> Columns:
+    """The columns of one channel's frames (:class:`Columns`). DecodeError if the channel's
+    schema cannot be used at all; a frame that does not decode is an error row."""
+    dec = channel_decoder(ch)
+    res = Columns(ch.topic, raw.t_ns, raw.seq, raw.row, {}, {}, dict(dec.units))
+    n = len(raw.t_ns)
+    if raw.frames is not None:
+        cols = decode_block(ch.encoding, raw.frames) if has_decoder(ch.encoding) else None
+        if cols is None and not has_decoder(ch.encoding):
+            lay = channel_layout(ch)
+            if lay is not None and raw.frames.nbytes == n * lay.size:
+                cols = lay.decode(raw.frames)
+        if cols is not None:
+            res.columns, res.valid = _dense(cols)
+            return res
+        payloads = [r.tobytes() for r in raw.frames]
+    else:
+        payloads = raw.payloads or []
+        if dec.how == "protobuf":
+            cols = _protobuf_fast(ch, payloads)
+            if cols is not None:
+                res.columns, res.valid = _dense(cols)
+                return res
+    rows: list[dict[str, object]] = []
+    errors: list[str | None] = []
+    for p in payloads:
+        try:
+            rows.append(dict(dec.decode(bytes(p))))
+            errors.append(None)
+        except DecodeError as exc:
+            rows.append({})
+            errors.append(str(exc))
+    res.columns, res.valid = _from_dicts(rows)
+    if any(e is not None for e in errors):
+        res.errors = errors
+    return res

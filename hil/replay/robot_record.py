@@ -1,0 +1,287 @@
+"""The frame log of a run of the whole-robot engine (:class:`hil.sim.robot.RobotEngine`):
+the same channels, layouts and decoded signals as the per-actuator path's
+(:class:`hil.replay.record.RecordingStackBox`, the module doc of :mod:`hil.replay.record`),
+so ``eha-hil replay`` and ``log export`` read either.
+
+The engine's compiled kernel copies each MCU step's words (the 32 upstream words and the
+CRC-error count the program read, the 16 downstream words it wrote) and, at level
+``full``, the driver boards' trace of every tick into block arrays
+(:class:`hil.sim.stack_rows.TapRows`, actuator-major); this recorder is told when a
+cycle's outputs are taken and when a cycle ends (one array copy of every box's process
+record each), and every :data:`BLOCK_CYCLES` cycles writes the block: one message per raw
+channel, and the decoded signals of all actuators computed and encoded as whole arrays
+(:func:`hil.replay.signals.actuator_block`). No Python runs per tick or per actuator step.
+"""
+
+from __future__ import annotations
+
+from concurrent.futures import Future, ThreadPoolExecutor
+from dataclasses import dataclass
+
+import numpy as np
+
+from firmware_model.calibration import calibration
+from firmware_model.fpga import layout as B
+from firmware_model.lvds import link as LK
+from hil.framelog import FrameLogWriter
+from hil.framelog.layout import SCHEMA_ENCODING as LAYOUT_ENCODING
+from hil.framelog.layout import Layout
+from hil.replay import layouts as LY
+from hil.replay import signals as SG
+from hil.replay.record import FLUSH_CYCLES, UP_WIDTH, add_signal_channels, topics
+from hil.replay.signal_out import SignalOut
+from hil.sim.actuator import TRACE_WIDTH, TRACE_WORDS
+from hil.sim.robot import RobotEngine
+from hil.sim.stack_rows import TapRows
+from plant.config import Config
+
+#: Cycles per written block: the per-actuator path's (100 ms), fewer at level "full",
+#: whose traces take ~640 bytes per actuator tick.
+BLOCK_CYCLES = {"full": 10}
+
+
+class RobotRecorder:
+    """Logs the run of ``engine`` (whose boxes are ``boxes``, the chain's, in order) to
+    ``log`` (None: only the decoded signals, to ``out``'s live view). Attach before the
+    run; :meth:`close` after it. ``background``: blocks are written by a thread of their
+    own (a chain paced by the wall clock, ``serve``: a cycle must not wait for a block's
+    writing; the thread takes the interpreter lock while it encodes)."""
+
+    def __init__(self, engine: RobotEngine, boxes: list, cfg: Config,
+                 log: FrameLogWriter | None, out: SignalOut, level: str = "mcu",
+                 background: bool = False) -> None:
+        self.engine = engine
+        if getattr(engine, "lanes", False) and not getattr(engine, "lanes_log_rows", False):
+            # a kernel that does not fill the tap would leave the log's words at 0; the
+            # scalar kernel gives the same bits per actuator
+            engine.lanes = False
+        self.log = log
+        self.out = out
+        self.cfg = cfg
+        self.ns = cfg.get("sim.tick_ns")
+        self.period = engine.period
+        self.cal = calibration(cfg)
+        self.full = level == "full"
+        per_cycle = engine.cycle_ticks // self.period
+        self.every = 1 if self.full else per_cycle
+        self.cycles = BLOCK_CYCLES.get(level, FLUSH_CYCLES)
+        n, rows = engine.n, self.cycles * per_cycle
+        self.tap = TapRows(np.zeros((n, rows, UP_WIDTH), np.uint32),
+                           np.zeros((n, rows, B.DOWN_WORDS), np.uint16),
+                           np.zeros((n, rows * self.period if self.full else 0, TRACE_WIDTH),
+                                    np.int64), np.zeros(1, np.int64))
+        self.boxes = boxes
+        where = {id(b): k for k, b in enumerate(engine.boxes)}
+        #: per chain box: its index among the engine's boxes (None: it has no MCU board)
+        self.engine_box = [where.get(id(b)) for b in boxes]
+        self.out_span = engine._out_span
+        lo = np.cumsum([0] + [b.in_dtype.itemsize for b in engine.boxes])
+        self.in_span = list(zip(lo[:-1], lo[1:], strict=True))
+        self.others = [b for b in boxes if id(b) not in where]
+        # one row per cycle of the block
+        c = self.cycles
+        self.out_rows = np.zeros((c, len(engine.out_image)), np.uint8)
+        self.out_got = np.zeros((c, len(engine.boxes)), bool)
+        self.out_t = np.zeros(c, np.int64)
+        self.in_rows = np.zeros((c, len(engine.in_image)), np.uint8)
+        self.other_in = [np.zeros((c, b.in_dtype.itemsize), np.uint8) for b in self.others]
+        self.in_t = np.zeros(c, np.int64)
+        self.n_cycles = 0
+        self._taken = False  # outputs taken for a cycle that has not ended (yet)
+        self._last_out = [(np.zeros(0, np.int64), np.zeros((0, b.out_dtype.itemsize), np.uint8))
+                          for b in engine.boxes]
+        self.carry = SG.PistonCarry.start(n)
+        self._pool = (ThreadPoolExecutor(1, thread_name_prefix="robot-log")
+                      if background else None)
+        self._jobs: list[Future] = []
+        self._channels(log)
+        engine.log_rows = self.tap
+        engine.log = self
+
+    # --- channels ------------------------------------------------------------------------
+    def _channels(self, log: FrameLogWriter | None) -> None:
+        def block(topic: str, lay: Layout, dtype: type, width: int) -> int:
+            return log.add_block_channel(topic, lay.encoding, dtype=dtype, width=width,
+                                         schema_name=lay.encoding,
+                                         schema_encoding=LAYOUT_ENCODING,
+                                         schema_data=lay.schema())
+
+        self.ch_out: list[int | None] = []
+        self.ch_in: list[int] = []
+        self.ch_up, self.ch_down, self.ch_trace, self.ch_raw, self.ch_words = [], [], [], [], []
+        self.sig_rec: list[dict] = []
+        self.sig_act: list[int] = []
+        for b in self.boxes:
+            box = b.box
+            if log is not None:
+                tp = topics(box.id)
+                self.ch_out.append(block(tp["outputs"], LY.process_record(box, "outputs"),
+                                         np.uint8, b.out_dtype.itemsize)
+                                   if b.out_dtype.itemsize else None)
+                self.ch_in.append(block(tp["inputs"], LY.process_record(box, "inputs"),
+                                        np.uint8, b.in_dtype.itemsize))
+                for k in range(len(box.actuators)):
+                    tk = topics(box.id, k)
+                    self.ch_up.append(block(tk["up"], LY.mcu_up(), np.uint32, UP_WIDTH))
+                    self.ch_down.append(block(tk["down"], LY.mcu_down(), np.uint16,
+                                              B.DOWN_WORDS))
+                    if self.full:
+                        self.ch_trace.append(block(tk["trace"], LY.fpga_trace(), np.int64,
+                                                   TRACE_WIDTH))
+                        self.ch_words.append(tuple(
+                            block(f"/lvds/{box.id}.{k}/{d}_words", LY.lvds_word(), np.uint64, 1)
+                            for d in ("down", "up")))
+                        self.ch_raw.append(block(f"/sensors/{box.id}.{k}/raw", LY.sensor_raw(),
+                                                 np.uint32, B.N_RAW))
+            rec, act = add_signal_channels(self.out, box, self.cfg)
+            self.sig_rec.append(rec)
+            self.sig_act += act
+
+    # --- the engine's hooks (hil.sim.robot.EngineLog) -------------------------------------
+    def took_outputs(self, tick: int) -> None:
+        e, c = self.engine, self.n_cycles
+        self.out_rows[c] = e.out_image
+        self.out_got[c] = e._got[e._first[:-1]]
+        self.out_t[c] = tick
+        self._taken = True
+
+    def finished(self, tick: int, periods: int) -> None:
+        c = self.n_cycles
+        self.in_rows[c] = self.engine.in_image
+        for rows, b in zip(self.other_in, self.others, strict=True):
+            rows[c] = np.frombuffer(b.inputs(), np.uint8)
+        self.in_t[c] = tick
+        self._taken = False
+        self.n_cycles = c + 1
+        self.tap.row[0] += periods
+        room = self.tap.up.shape[1] - int(self.tap.row[0])
+        if self.n_cycles == self.cycles or room < self.engine.cycle_ticks // self.period:
+            self.flush()
+
+    # --- writing a block -----------------------------------------------------------------
+    def flush(self) -> None:
+        """Write the buffered cycles and steps: one block per raw channel, the decoded
+        signals of every box and actuator (in the background with ``background``: the
+        block is copied and the engine's next cycle does not wait for the writing)."""
+        c, r = self.n_cycles, int(self.tap.row[0])
+        c_out = c + self._taken  # the run's last outputs, taken for a cycle never run
+        self.n_cycles = 0
+        self._taken = False
+        self.tap.row[0] = 0
+        if not c_out and not r:
+            return
+        end = int(self.in_t[c - 1]) if c else self.engine.tick
+        tap = self.tap
+        block = _Block(c, c_out, end - self.period * np.arange(r, 0, -1, dtype=np.int64),
+                       self.out_t[:c_out], self.out_rows[:c_out], self.out_got[:c_out],
+                       self.in_t[:c], self.in_rows[:c], [o[:c] for o in self.other_in],
+                       tap.up[:, :r], tap.down[:, :r], tap.trace[:, :r * self.period])
+        if self._pool is None:
+            self._write(block)
+            return
+        block = block.copy()
+        self._jobs.append(self._pool.submit(self._write, block))
+        while self._jobs and self._jobs[0].done():
+            self._jobs.pop(0).result()  # a failed write ends the run here
+
+    def close(self) -> None:
+        """The last block written; with ``background``, once every block is."""
+        self.flush()
+        if self._pool is not None:
+            for job in self._jobs:
+                job.result()
+            self._jobs.clear()
+            self._pool.shutdown()
+
+    def _write(self, k: _Block) -> None:
+        c = k.cycles
+        ns, log = self.ns, self.log
+        period_s = self.period * ns * 1e-9
+        others = iter(k.other_in)
+        box_out: list[tuple[np.ndarray, np.ndarray]] = []
+        for n_box, b in enumerate(self.boxes):
+            e = self.engine_box[n_box]
+            if e is None:
+                ins = next(others)
+                outs = None
+            else:
+                lo, hi = self.in_span[e]
+                ins = k.in_rows[:, lo:hi]
+                got = k.out_got[:, e]
+                olo, ohi = self.out_span[e]
+                outs = (k.out_t[got], k.out_rows[got, olo:ohi])
+                if len(outs[0]):
+                    self._last_out[e] = (outs[0][-1:], outs[1][-1:])
+                    box_out.append(outs)
+                else:
+                    box_out.append(self._last_out[e])
+            if log is not None:
+                if c:
+                    log.write_block(self.ch_in[n_box], k.in_t * ns, ins)
+                if outs is not None and len(outs[0]) and self.ch_out[n_box] is not None:
+                    log.write_block(self.ch_out[n_box], outs[0] * ns, outs[1])
+            sig = self.sig_rec[n_box]
+            if "inputs" in sig and c:
+                self.out.write(sig["inputs"], k.in_t * ns,
+                               SG.record_columns(b.box, "inputs", ins))
+            if "outputs" in sig and outs is not None and len(outs[0]):
+                self.out.write(sig["outputs"], outs[0] * ns,
+                               SG.record_columns(b.box, "outputs", outs[1]))
+        if len(k.t_steps):
+            self._write_steps(k, box_out, period_s)
+
+    def _write_steps(self, k: _Block, box_out: list, period_s: float) -> None:
+        ns, log, n = self.ns, self.log, self.engine.n
+        t_steps, up, down = k.t_steps, k.up, k.down
+        r = len(t_steps)
+        if log is not None:
+            t = t_steps * ns
+            for j in range(n):
+                log.write_block(self.ch_up[j], t, up[j])
+                log.write_block(self.ch_down[j], t, down[j])
+            if self.full:
+                tt = (t_steps[0] + np.arange(r * self.period, dtype=np.int64)) * ns
+                for j in range(n):
+                    tr = k.trace[j]
+                    log.write_block(self.ch_trace[j], tt, tr)
+                    log.write_block(self.ch_raw[j], tt, tr[:, :B.N_RAW])
+                    for d, ch in enumerate(self.ch_words[j]):
+                        tw, words = LK.line_words(tr[:, TRACE_WORDS + d * LK.WORDS_W:], tt)
+                        if len(tw):
+                            log.write_block(ch, tw, words[:, None])
+        keep, cols = SG.actuator_block(self.cal, up, down, self.every, period_s, self.carry)
+        if not len(keep):
+            return
+        t = t_steps[keep]
+        pc = []
+        for e, b in enumerate(self.engine.boxes):
+            out_t, out_f = box_out[e]
+            for slot in b.act:
+                pc.append(SG.pc_command_columns(out_t, out_f, b.box, slot, t))
+        for name in pc[0]:
+            cols[name] = np.concatenate([p[name] for p in pc])
+        self.out.write_split(self.sig_act, t * ns, cols)
+
+
+@dataclass
+class _Block:
+    """One block of the run as :meth:`RobotRecorder._write` takes it."""
+
+    cycles: int
+    cycles_out: int
+    t_steps: np.ndarray
+    out_t: np.ndarray
+    out_rows: np.ndarray
+    out_got: np.ndarray
+    in_t: np.ndarray
+    in_rows: np.ndarray
+    other_in: list[np.ndarray]
+    up: np.ndarray
+    down: np.ndarray
+    trace: np.ndarray
+
+    def copy(self) -> _Block:
+        return _Block(self.cycles, self.cycles_out, *(
+            [a.copy() for a in v] if isinstance(v, list) else v.copy()
+            for v in (self.t_steps, self.out_t, self.out_rows, self.out_got, self.in_t,
+                      self.in_rows, self.other_in, self.up, self.down, self.trace)))

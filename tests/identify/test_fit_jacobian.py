@@ -1,0 +1,65 @@
+"""The fit's Jacobian: columns of parameters that act on the outputs only reuse the states.
+
+An offset, a gauge's drift, the sensors' lags and the clips never enter the simulation
+(:data:`hil.identify.model.OUTPUT_ONLY`), so their Jacobian columns map the base states to
+new outputs instead of simulating again. That shortcut must give the very same Jacobian as
+simulating every column, and a parameter the simulation reads must never be in the set."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from hil.identify.experiment import prepare
+from hil.identify.fit import OutputErrorFit
+from hil.identify.model import IDX, OUTPUT_ONLY, PARAM_NAMES, FastModel
+from hil.identify.rig import generate_rig
+from plant.config import load_config
+
+
+def _model() -> FastModel:
+    rig = generate_rig("conrod_fixed", ["strain_thermal_drift"], seconds=0.8, seed=2)
+    return FastModel(prepare(rig.data, load_config("hydra_default"), "bl"))
+
+
+def test_output_only_parameters_leave_the_states_alone():
+    """Each of them moved, with the simulation's effects on: the states bit for bit the
+    same; the simulation's own parameters (a control) move them."""
+    model = _model()
+    theta = model.start_vector()
+    for name, value in (("pc_force_n", 40.0), ("sf_coulomb_n", 10.0), ("sf_static_n", 15.0),
+                        ("visc_coeff_per_c", 0.03), ("puls1_flow_s", 0.01)):
+        theta[IDX[name]] = value
+    base = model.states(theta)
+    control = ("gain_n_per_a", "ks", "k_rod", "skew_s", "pc_force_n", "sf_coulomb_n")
+    assert OUTPUT_ONLY <= set(PARAM_NAMES)
+    for name in sorted(OUTPUT_ONLY) + list(control):
+        th = theta.copy()
+        th[IDX[name]] += 1e-3 * (abs(th[IDX[name]]) or 1.0)
+        assert np.array_equal(model.states(th), base) == (name in OUTPUT_ONLY), name
+
+
+def test_the_shortcut_gives_the_jacobian_of_a_simulation_per_column(monkeypatch):
+    model = _model()
+    theta = model.start_vector()
+    theta[IDX["lag_pressure_s"]] = 6e-5
+    theta[IDX["lag_strain_s"]] = 1.5e-4
+    theta[IDX["drift_n_per_c"]] = 1.0
+    free = ["gain_n_per_a", "ks", "strain_offset_n", "lag_pressure_s", "lag_strain_s",
+            "drift_n_per_c"]
+    assert set(free) & OUTPUT_ONLY
+    fitter = OutputErrorFit(model)
+    fitter._ref = {n: max(abs(theta[IDX[n]]), 1e-12) for n in free if n in ("gain_n_per_a", "ks")}
+    sigma = {c: 1.0 for c in model.exp.channels}
+    mask = fitter.fit_mask()
+    x = fitter._to_x(theta, free)
+    _, jac = fitter._problem(free, theta, sigma, mask)
+    fast = jac(x)
+    sims_fast = fitter.n_sims
+    import hil.identify.fit as fit_module
+
+    monkeypatch.setattr(fit_module, "OUTPUT_ONLY", frozenset())
+    _, jac_all = fitter._problem(free, theta, sigma, mask)
+    slow = jac_all(x)
+    assert np.array_equal(fast, slow)
+    assert fitter.n_sims - sims_fast == len(free) + 1  # every column simulated, and the base
+    assert sims_fast == len(free) + 1 - len(set(free) & OUTPUT_ONLY)
