@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 
 from hil.cli.args import common, float_range, int_range
 from hil.cli.contract import Context, Outcome, UsageError, command
@@ -34,6 +35,9 @@ def add_parsers(sub, bsub) -> None:  # noqa: ANN001 - argparse's sub-parsers
                    help="--wire: wall seconds of 1 kHz cycles (default 60)")
     p.add_argument("--bring-ups", type=int_range(0, 1000), default=25,
                    help="--wire: bring-ups to OP counted first (default 25)")
+    p.add_argument("--busy-cpu", type=int_range(0, 4095), metavar="CPU",
+                   help="--wire: a process of the benchmark's own keeps CPU busy during the "
+                   "cycles (the figures with one core held busy)")
     command(p, _cmd_bench)
 
 
@@ -59,8 +63,19 @@ def _cmd_bench(args: argparse.Namespace, ctx: Context) -> Outcome:
             import pysoem  # noqa: F401
         except ImportError:
             raise UsageError("--wire: needs pysoem (pip install pysoem)") from None
+        if args.busy_cpu is not None:
+            import os
+
+            if args.busy_cpu not in os.sched_getaffinity(0):
+                raise UsageError(f"--busy-cpu {args.busy_cpu}: not a CPU of this machine "
+                                 f"({sorted(os.sched_getaffinity(0))})")
+
+        def progress(line: str) -> None:
+            print(f"eha-hil bench ethercat: {line}", file=sys.stderr, flush=True)
+
         try:
-            res = bench_wire(args.model, args.seconds, args.bring_ups)
+            res = bench_wire(args.model, args.seconds, args.bring_ups, args.busy_cpu,
+                             progress)
         except NamespaceError as exc:
             raise UsageError(f"--wire: {exc}") from None
         return Outcome(format_wire(res), res)

@@ -7,16 +7,18 @@ trailer on serial and without on udp by default: :mod:`hil.fieldbus.wire`) on a 
 EtherCAT code, or another program such as :class:`hil.fieldbus.master.Master` in another
 process) closes the loop in real time.
 
-Pacing (:class:`PacedServer`): cycle ``k`` of the boxes (20 ticks, 1 ms of simulated time)
-is released at ``t0 + k * 1 ms`` of ``time.perf_counter`` and must be finished by
-``t0 + (k + 1) * 1 ms``; the schedule is computed from ``t0``, never from the previous
-wake-up, so no drift accumulates. Between releases the loop waits on the transport and
-answers every frame at once with the inputs as they stand (the chain runs in paced mode:
-frames never move time; their ``idx`` only discards a frame older than the newest one).
-A cycle finished after its deadline is an *overrun* (counted, worst lateness kept); a late
-loop catches up by running cycles back to back, serving frames between them, and if it
-falls more than :data:`MAX_LAG_CYCLES` behind, the schedule is moved forward and the
-skipped cycles are counted as *slipped* (simulated time then lags the wall clock).
+Two clocks, as on the hardware (:class:`PacedServer`, docs/ethercat-slaves.md "Timing"):
+the frames are the master's, answered in this thread as they arrive from the boxes'
+latest published process data; the boxes keep their own 1 ms clock in a thread of their
+own (:mod:`hil.fieldbus.box_clock`: cycle ``k`` released at ``t0 + k * 1 ms``, absolute
+deadlines, no drift), exchanging process data with the frames through 3-buffers, so a
+frame never waits for a box step and a box step never for a frame. A cycle finished after
+its deadline is an *overrun* (counted, worst lateness kept); a late box clock catches up
+by running cycles back to back, and if it falls more than
+:data:`~hil.fieldbus.box_clock.MAX_LAG_CYCLES` behind, the schedule is moved forward and
+the skipped cycles are counted as *slipped* (simulated time then lags the wall clock).
+The chain runs in paced mode: frames never move time; their ``idx`` only discards a frame
+older than the newest one.
 """
 
 from __future__ import annotations
@@ -24,7 +26,6 @@ from __future__ import annotations
 import argparse
 import gc
 import math
-import os
 import signal
 import sys
 import time
@@ -34,6 +35,7 @@ from dataclasses import asdict, dataclass
 from hil.cli.args import common, float_range, int_range, output_file
 from hil.cli.contract import EXIT_FAILED, EXIT_OK, Context, Outcome, UsageError, command
 from hil.fieldbus import reply_times, wire
+from hil.fieldbus.box_clock import BoxClock, ClockedBoxes
 from hil.fieldbus.chain import Chain
 from hil.fieldbus.reply_times import ReplyTimes
 from hil.transports import TransportError
@@ -41,8 +43,6 @@ from protocols import ethercat as ec
 
 #: One fieldbus cycle of wall time [s].
 PERIOD_S = 1e-3
-#: A loop more than this many cycles behind moves its schedule forward (slipped cycles).
-MAX_LAG_CYCLES = 50
 #: Cycles run before the clock starts (first-call set-up of the models takes ~10 ms).
 WARMUP_CYCLES = 3
 #: A pause longer than this [s] between two frames starts a new master session: the
@@ -54,6 +54,10 @@ DEFAULT_MAX_OVERRUN_PERCENT = 1.0
 DEFAULT_MAX_LATE_PERCENT = 0.1
 #: Default allowance of simulated time behind wall time [ms] (the slaves' watchdog time).
 DEFAULT_MAX_LAG_MS = 100.0
+#: The frame loop looks at its stop conditions and progress at least this often [s].
+WATCH_S = 0.1
+#: The interpreter's switch interval while serving [s] (see PacedServer.run).
+SWITCH_INTERVAL_S = 2e-4
 
 
 @dataclass
@@ -185,57 +189,60 @@ class PacedServer:
     # --- the loop -------------------------------------------------------------------------
     def run(self, seconds: float | None = None, stop: Callable[[], bool] = lambda: False,
             progress: Callable[[ServeStats], None] | None = None,
-            progress_every_s: float = 1.0) -> ServeStats:
-        chain, st, period, clock = self.chain, self.stats, self.period, self.clock
+            progress_every_s: float = 1.0, box_setup: Callable[[], None] | None = None,
+            box_behind: Callable[[int], None] | None = None) -> ServeStats:
+        """Serve frames in this thread while the boxes run on their own clock in another
+        (:class:`~hil.fieldbus.box_clock.BoxClock`); ``box_setup`` / ``box_behind``: the
+        box thread's real-time hooks (:class:`hil.sim.realtime.RealtimePlan`)."""
+        st, clock = self.stats, self.clock
+        boxes = ClockedBoxes(self.chain)
         for _ in range(WARMUP_CYCLES):
-            chain.advance()
+            boxes.cycle()
+        box_clock = BoxClock(boxes.cycle, box_setup, box_behind)
         gc.collect()
         gc.freeze()  # long-lived objects out of the collector's way: shorter pauses
-        t0 = start = clock()
+        # A box model's Python holds the interpreter lock between its compiled parts; a
+        # frame waiting for the lock gets it after this long, not after the default 5 ms.
+        switch = sys.getswitchinterval()
+        sys.setswitchinterval(SWITCH_INTERVAL_S)
+        start = clock()
+        box_clock.begin(time.monotonic_ns())
         end = None if seconds is None else start + seconds  # wall seconds, whatever the lag
-        next_report = start + progress_every_s
-        k = 0  # cycles run on the clock
-        was_late = False
+        # (no progress callback: no report is ever due)
+        next_report = start + (progress_every_s if progress is not None else float("inf"))
         try:
-            while not stop() and (end is None or clock() < end) and self.error is None:
+            while (not stop() and self.error is None and box_clock.is_alive()
+                   and (end is None or clock() < end)):
                 now = clock()
-                release = t0 + k * period
-                if now >= release:
-                    chain.advance()
-                    done = clock()
-                    k += 1
-                    st.cycles = k
-                    spent = done - now
-                    st.advance_s += spent
-                    st.worst_advance_s = max(st.worst_advance_s, spent)
-                    late = done - (t0 + k * period)
-                    if late > 0:
-                        if not was_late:
-                            st.stalls += 1
-                        st.overruns += 1
-                        st.worst_late_s = max(st.worst_late_s, late)
-                        behind = int(late / period)
-                        if behind > MAX_LAG_CYCLES:
-                            t0 += behind * period
-                            st.slipped_cycles += behind
-                    was_late = late > 0
-                    st.lag_max_s = max(st.lag_max_s, done - start - k * period)
+                wait = min(WATCH_S, next_report - now) if end is None else \
+                    min(WATCH_S, next_report - now, end - now)
+                frame = self.end.recv(timeout=max(wait, 0.0))
+                if frame is not None:
+                    self._serve(frame)
                     self._drain()
-                else:
-                    wait = release - now if end is None else min(release, end) - now
-                    frame = self.end.recv(timeout=max(wait, 0.0))
-                    if frame is not None:
-                        self._serve(frame)
-                if progress is not None and now >= next_report:
-                    st.wall_s = now - start
+                if progress is not None and clock() >= next_report:
+                    self._box_stats(box_clock.stats)
+                    st.wall_s = clock() - start
                     progress(st)
                     next_report += progress_every_s
         except TransportError as exc:
             self.error = str(exc)
         finally:
+            box_clock.stop()
+            sys.setswitchinterval(switch)
             gc.unfreeze()
             st.wall_s = clock() - start
+            self._box_stats(box_clock.stats)
+        if box_clock.error is not None:
+            raise box_clock.error
         return st
+
+    def _box_stats(self, b) -> None:  # noqa: ANN001 - BoxClockStats
+        st = self.stats
+        st.cycles, st.overruns, st.stalls = b.cycles, b.overruns, b.stalls
+        st.worst_late_s, st.slipped_cycles = b.worst_late_ms / 1e3, b.slipped_cycles
+        st.advance_s, st.worst_advance_s = b.compute_s, b.worst_cycle_ms / 1e3
+        st.lag_max_s = max(b.lag_max_ms, 0.0) / 1e3
 
     def transport_errors(self) -> int:
         """Frames the transport dropped as damaged (CRC, framing, oversize)."""
@@ -276,14 +283,24 @@ def _open_end(args: argparse.Namespace):
     return listening.end, listening.where, listening.close
 
 
-def _realtime_priority(priority: int = 50) -> None:
-    """SCHED_FIFO for this process (like ``chrt -f 50``); a warning if not permitted. The
-    loop sleeps between cycles, and the kernel's RT throttling keeps 5% for the rest."""
-    try:
-        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
-    except (AttributeError, OSError) as exc:
-        print(f"eha-hil serve: warning: no real-time priority ({exc}); running as is",
-              file=sys.stderr)
+def _compute_workers(engine, rt) -> None:  # noqa: ANN001 - RobotEngine, RealtimePlan
+    """The whole-robot engine computes on the CPUs the frames leave it: one worker per
+    compute CPU (the frame thread keeps a CPU of its own; on two CPUs: one worker)."""
+    if engine is None:
+        return
+    from hil.sim.realtime import compute_cpu_count
+
+    engine.workers = max(1, min(compute_cpu_count(rt), engine._workers()))
+
+
+def _realtime_note(rt) -> str:  # noqa: ANN001 - RealtimePlan
+    return "; real time: " + ", ".join(rt.applied) if rt.applied else ""
+
+
+def _realtime_warnings(rt) -> None:  # noqa: ANN001 - RealtimePlan
+    for w in rt.warnings:
+        print(f"eha-hil serve: warning: --realtime: {w}; running without it",
+              file=sys.stderr, flush=True)
 
 
 def _status_line(st: ServeStats, errors: int) -> str:
@@ -380,16 +397,18 @@ _LOG_CHECK = {"log": _readable_log}
 def _serve(args: argparse.Namespace, cfg, topo, capture: str | None,
            log_path: str | None = None) -> Outcome:
     from hil.fieldbus.capture import CaptureError, CaptureWriter
+    from hil.sim.cpu_account import steal_during, steal_s
+    from hil.sim.realtime import RealtimePlan
     from hil.transports import backend
 
     model = args.model or ("stack" if topo.n_actuators <= 5 else "echo")
     trailer = (backend(args.transport).crc_trailer_by_default if args.crc_trailer is None
                else args.crc_trailer)
     chain = Chain(topo, cfg, model, paced=True, crc_trailer=trailer)
+    rt = RealtimePlan(args.realtime)
+    _compute_workers(chain.engine, rt)
     log = _open_log(args, log_path, model)
     live, live_boxes = _live_view(args, chain, cfg, log)
-    if args.realtime:
-        _realtime_priority()
     end, where, release = _open_end(args)
     cap = None
     if args.capture:
@@ -409,9 +428,13 @@ def _serve(args: argparse.Namespace, cfg, topo, capture: str | None,
                          late_us=args.late_us)
     frames = [{"lad": lad, "length": n, "wkc": wkc} for lad, n, wkc in chain.plan.frames]
     plan = ", ".join(f"LRW lad {f['lad']} len {f['length']} WKC {f['wkc']}" for f in frames)
+    rt.process()
+    rt.frame_thread()  # this thread answers the frames
     print(f"eha-hil serve: ready on {where}; {topo.name}, {model} model, "
           f"{len(frames)} frame(s) per 1 ms cycle: {plan}; "
-          f"{'with' if trailer else 'without'} CRC-32 trailer", file=sys.stderr, flush=True)
+          f"{'with' if trailer else 'without'} CRC-32 trailer"
+          + _realtime_note(rt), file=sys.stderr, flush=True)
+    _realtime_warnings(rt)
 
     tty = sys.stderr.isatty()
 
@@ -426,9 +449,11 @@ def _serve(args: argparse.Namespace, cfg, topo, capture: str | None,
         stopping.append(signum)
 
     old = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+    steal0 = steal_s()
     try:
         st = server.run(args.seconds, stop=lambda: bool(stopping),
-                        progress=None if args.quiet else progress)
+                        progress=None if args.quiet else progress,
+                        box_setup=rt.box_thread, box_behind=rt.box_behind)
     finally:
         for s, h in old.items():
             signal.signal(s, h)
@@ -483,6 +508,9 @@ def _serve(args: argparse.Namespace, cfg, topo, capture: str | None,
             "reply_us": reply_times.summary(server.replies.hist, server.replies.max_us),
             "reply_histogram_us": reply_times.decades(server.replies.hist),
             "max_late_percent": args.max_late_percent, "max_lag_ms": args.max_lag_ms,
+            "steal_ms": steal_during(steal0, steal_s()),
+            "realtime": {"applied": rt.applied, "refused": rt.warnings,
+                         "box_thread_demotions": rt.demotions},
             "chain": {k: v for k, v in chain.stats.__dict__.items() if k != "extra"},
             "ok": not failures, "failures": failures}
     # the report for people (the root prints ``data`` instead under --json)
@@ -513,6 +541,8 @@ def _serve(args: argparse.Namespace, cfg, topo, capture: str | None,
         ["master cycles missed / incomplete", f"{st.missed_cycles} / "
          f"{st.incomplete_cycles}"],
         ["master sessions", st.sessions],
+        ["time the hypervisor stole from each CPU", _steal(data["steal_ms"])],
+        ["real time", ", ".join(rt.applied) or "off"],
     ]
     lines = [f"serve {where}: {topo.name}, {model} model", table(["", "value"], rows)]
     if cap is not None:
@@ -575,19 +605,15 @@ def _serve_ethercat(args: argparse.Namespace, cfg, topo, link, model: str,  # no
                 if m is not None:
                     m.box = chain.boxes[m.i]
             chain.publish_inputs()  # (the recording boxes' own, equal to the replaced)
-        if chain.engine is not None and rt.compute_cpus is not None:
-            chain.engine.workers = min(len(rt.compute_cpus), chain.engine._workers())
+        _compute_workers(chain.engine, rt)
         rt.process()
 
         def ready() -> None:
             print(f"eha-hil serve: ready on {args.interface} (EtherType 0x88a4); {topo.name}, "
                   f"{len(topo.boxes)} slaves, {model} model"
                   + (f", full stack behind box(es) {args.stack_boxes}" if args.stack_boxes
-                     else "") + ("; real time: " + ", ".join(rt.applied) if rt.applied
-                                 else ""), file=sys.stderr, flush=True)
-            for w in rt.warnings:
-                print(f"eha-hil serve: warning: --realtime: {w}; running without it",
-                      file=sys.stderr, flush=True)
+                     else "") + _realtime_note(rt), file=sys.stderr, flush=True)
+            _realtime_warnings(rt)
 
         stopping = []
         wake = threading.Event()
@@ -617,6 +643,7 @@ def _serve_ethercat(args: argparse.Namespace, cfg, topo, link, model: str,  # no
             "model": model, "stack_boxes": list(args.stack_boxes), **st.as_dict(),
             "mailbox": chain.mailboxes.stats(),
             "simulated_s": st.cycles * PERIOD_S,
+            "frames_per_s": st.frames_answered / st.wall_s if st.wall_s > 0 else 0.0,
             "overrun_percent": 100 * st.overruns / st.cycles if st.cycles else 0.0,
             "late_percent": (100 * st.frames_late / st.frames_answered
                              if st.frames_answered else 0.0),
@@ -700,12 +727,17 @@ def ethercat_table(d: dict) -> str:
         ["slipped cycles", d["slipped_cycles"]],
         ["lag of simulated behind wall time, max",
          f"{d['lag_max_ms']:.2f} ms (allowed {d['thresholds']['max_lag_ms']:g} ms)"],
-        ["frames received / answered", f"{d['frames_received']} / {d['frames_answered']}"],
+        ["frames received / answered", f"{d['frames_received']} / {d['frames_answered']}"
+         f" ({d['frames_per_s']:.0f} per s; the boxes take the newest outputs once per "
+         "1 ms cycle)"],
         ["reply p50 / p99 / p99.9 / max", reply_times.line(d["reply_us"])],
         [f"replies later than {d['late_us']:g} us", f"{d['frames_late']} "
          f"({d['late_percent']:.3f}%, allowed {d['thresholds']['max_late_percent']:g}%)"],
         ["frames dropped (bad) / not EtherCAT", f"{d['dropped_frames']} / "
          f"{d['other_frames']}"],
+        ["frame thread: longest absence past its 1 ms poll / longest work",
+         f"{d['frame_gap_max_us']:.0f} / {d['frame_work_max_us']:.0f} us"],
+        ["time the hypervisor stole from each CPU", _steal(d["steal_ms"])],
         ["real time", ", ".join(d["realtime"]["applied"]) or "off"],
     ]
     dc = d.get("dc")
@@ -717,8 +749,21 @@ def ethercat_table(d: dict) -> str:
                      f"{spread[-1] if spread else 0} ns; out-of-order writes "
                      f"{sum(s['out_of_order_writes'] for s in dc['slaves'])}"])
     hist = ", ".join(f"{k}: {v}" for k, v in d["reply_histogram_us"].items() if v)
+    late = sorted(d["late_replies"], key=lambda e: -e["reply_us"])[:5]
     return (f"serve {d['interface']}: {d['topology']}, {d['model']} model\n"
-            + table(["", "value"], rows) + f"\nreply times: {hist or 'none'}")
+            + table(["", "value"], rows) + f"\nreply times: {hist or 'none'}"
+            + ("\nlate replies, worst: " + "; ".join(
+                f"at {e['at_s']:.3f} s {e['reply_us']:.0f} us (woke {e['wake_us']:.0f} us "
+                f"after the frame arrived, then {e['work_us']:.0f} us to its send)"
+                for e in late) if late else ""))
+
+
+def _steal(per_cpu: dict | None) -> str:
+    """Stolen time per CPU [ms] (a virtual machine's CPU not run by its host: every
+    thread here stops, whatever its priority)."""
+    if per_cpu is None:
+        return "unknown (no /proc/stat)"
+    return ", ".join(f"{c} {v:.0f} ms" for c, v in per_cpu.items())
 
 
 def add_parser(sub) -> None:  # noqa: ANN001 - argparse's sub-parsers
@@ -777,8 +822,9 @@ def add_parser(sub) -> None:  # noqa: ANN001 - argparse's sub-parsers
                    help="exit 1 if the boxes' simulated time fell more than MS behind "
                    "the wall clock")
     p.add_argument("--realtime", action="store_true",
-                   help="run with SCHED_FIFO priority 50 (like chrt -f 50; needs root or "
-                   "CAP_SYS_NICE): far fewer overruns on a busy machine")
+                   help="real-time hygiene (root or CAP_SYS_NICE/CAP_IPC_LOCK): frames at "
+                   "SCHED_FIFO 50 on the last CPU, boxes at SCHED_FIFO 20 on the others "
+                   "while on schedule, memory locked (docs/ethercat-slaves.md, 'Timing')")
     p.add_argument("-q", "--quiet", action="store_true",
                    help="no status line on stderr (the ready line is still printed)")
     from hil.cli.bus import add_wire_options

@@ -6,10 +6,11 @@
   which would otherwise stall every real-time task for the rest of the second;
 * the box thread runs SCHED_FIFO below it (:data:`BOX_PRIORITY`, below a master's usual
   40 too) while it keeps its schedule: it sleeps to each cycle's absolute deadline, so its
-  share of the CPU is its compute time. Once it falls :data:`DEMOTE_BEHIND_CYCLES` cycles
-  behind it would run back to back, so it drops to SCHED_OTHER until it has caught up:
-  a box model slower than real time falls behind (reported as lag) instead of running
-  into the RT throttle and starving the machine;
+  share of the CPU is its compute time. Once it computed :data:`DEMOTE_BUSY` of the last
+  quarter second (a model slower than real time, running back to back) it drops to
+  SCHED_OTHER until it is on schedule again: such a model falls behind (reported as lag)
+  instead of running into the RT throttle and starving the machine, while a short stall
+  (a few ms, caught up in tens of ms) is caught up at real-time priority;
 * CPU affinity: with more than one CPU, the frame thread gets the last CPU and the box
   threads the others, so a compute burst never shares a core with a frame;
 * ``mlockall``: every page of the process stays in memory (no page fault mid-frame);
@@ -27,7 +28,9 @@ import os
 
 FRAME_PRIORITY = 50
 BOX_PRIORITY = 20
-DEMOTE_BEHIND_CYCLES = 20
+#: The box thread drops to SCHED_OTHER when it was busy this share of the last quarter
+#: second (a model slower than real time, catching up back to back).
+DEMOTE_BUSY = 0.9
 MCL_CURRENT, MCL_FUTURE = 1, 2
 
 
@@ -41,6 +44,14 @@ def split_cpus() -> tuple[set[int] | None, set[int] | None]:
     if len(c) < 2:
         return None, None
     return {c[-1]}, set(c[:-1])
+
+
+def compute_cpu_count(plan: RealtimePlan | None = None) -> int:
+    """CPUs for the boxes' compute: the plan's compute CPUs, else all but one (the frames
+    keep one), at least one."""
+    if plan is not None and plan.compute_cpus is not None:
+        return len(plan.compute_cpus)
+    return max(1, len(cpus()) - 1)
 
 
 def mlockall() -> str | None:
@@ -114,16 +125,16 @@ class RealtimePlan:
         self._note(pin(self.compute_cpus),
                    f"box threads on CPU {sorted(self.compute_cpus or [])}")
 
-    def box_behind(self, cycles: int) -> None:
-        """Called by the box thread after each cycle with how many cycles it is behind."""
+    def box_behind(self, cycles: int, busy: float) -> None:
+        """Called by the box thread after each cycle with how many cycles it is behind and
+        its busy share of the last quarter second."""
         if not self.enabled or not getattr(self, "_box_fifo", False):
             return
-        behind = cycles >= DEMOTE_BEHIND_CYCLES
-        if behind and not self._demoted:
+        if busy >= DEMOTE_BUSY and not self._demoted:
             other()
             self._demoted = True
             self.demotions += 1
-        elif not behind and self._demoted and cycles == 0:
+        elif busy < DEMOTE_BUSY and self._demoted and cycles == 0:
             fifo(BOX_PRIORITY)
             self._demoted = False
 

@@ -22,7 +22,8 @@ from hil.fieldbus.esc.veth import (
     veth_namespace,
 )
 
-#: A master that sends one BRD frame per ms for ``seconds`` and counts the replies.
+#: A master that sends one BRD frame per ms (or back to back: "flood") for ``seconds`` and
+#: counts the replies.
 RAW_MASTER = """
 import socket, sys, time
 s = socket.socket(socket.AF_PACKET, socket.SOCK_RAW, socket.htons(0x88A4))
@@ -38,7 +39,8 @@ while time.monotonic() < end:
         got += 1
     except TimeoutError:
         pass
-    time.sleep(0.001)
+    if sys.argv[3] == "paced":
+        time.sleep(0.001)
 print(got)
 """
 
@@ -52,9 +54,11 @@ def netns():
         pytest.skip(str(exc))
 
 
-def _serve(ns: str, *args: str, master_s: float | None = None) -> tuple[int, dict, float]:
+def _serve(ns: str, *args: str, master_s: float | None = None,
+           flood: bool = False) -> tuple[int, dict, float]:
     """serve --transport ethercat on ecs with ``args``; the raw master on ecm for
-    ``master_s`` seconds if given; (exit code, JSON report, wall seconds of the process)."""
+    ``master_s`` seconds if given (``flood``: without pausing between frames); (exit code,
+    JSON report, wall seconds of the process)."""
     t0 = time.monotonic()
     p = subprocess.Popen(in_ns(ns, sys.executable, "-m", "hil.cli", "serve", "--transport",
                                "ethercat", "--interface", SLAVE_IF, "--topology",
@@ -64,7 +68,8 @@ def _serve(ns: str, *args: str, master_s: float | None = None) -> tuple[int, dic
         for line in p.stderr:
             if "ready on" in line:
                 break
-        subprocess.run(in_ns(ns, sys.executable, "-c", RAW_MASTER, MASTER_IF, str(master_s)),
+        subprocess.run(in_ns(ns, sys.executable, "-c", RAW_MASTER, MASTER_IF, str(master_s),
+                             "flood" if flood else "paced"),
                        check=True, capture_output=True, timeout=120)
     out, err = p.communicate(timeout=300)
     return p.returncode, json.loads(out), time.monotonic() - t0
@@ -134,3 +139,75 @@ def test_an_interface_that_is_down_is_one_line(netns):
     assert p.stderr.strip().splitlines()[-1].endswith(
         f"--interface {SLAVE_IF}: the interface is down (ip link set {SLAVE_IF} up)")
     assert "Traceback" not in p.stderr
+
+
+def test_no_permission_for_raw_sockets_is_one_line():
+    """Without CAP_NET_RAW (dropped from root's bounding set, or not root at all) the socket
+    is refused: one line naming the interface and what it needs, exit 2."""
+    import os
+
+    cmd = [sys.executable, "-m", "hil.cli", "serve", "--transport", "ethercat",
+           "--interface", "lo", "--seconds", "1"]
+    if hasattr(os, "geteuid") and os.geteuid() == 0:
+        if shutil.which("setpriv") is None:
+            pytest.skip("needs setpriv (util-linux) to drop CAP_NET_RAW as root")
+        cmd = ["setpriv", "--bounding-set=-net_raw", "--inh-caps=-net_raw", *cmd]
+    p = subprocess.run(cmd, capture_output=True, text=True, timeout=120, env=_env())
+    assert p.returncode == 2, p.stderr
+    lines = p.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("eha-hil serve: --interface lo: raw "
+                                                   "sockets need root"), p.stderr
+
+
+def test_a_master_faster_than_the_boxes_is_answered_and_reported(netns):
+    """A master flooding frames back to back (far above the boxes' 1 kHz) gets every frame
+    answered, the boxes keep their clock (never ahead of it; behind only by counted, slipped
+    cycles), and the report gives the master's frame rate beside the boxes' cycle rate."""
+    code, rep, _ = _serve(netns, "--seconds", "3", "--max-lag-ms", "1e6",
+                          "--max-overrun-percent", "100", "--max-late-percent", "100",
+                          master_s=1.0, flood=True)
+    assert rep["frames_answered"] == rep["frames_received"] > 2000, rep
+    assert rep["cycles"] <= rep["wall_s"] * 1000 + 1
+    assert rep["cycles"] + rep["slipped_cycles"] >= 0.8 * rep["wall_s"] * 1000
+    assert rep["frames_per_s"] == pytest.approx(rep["frames_answered"] / rep["wall_s"])
+    assert rep["frames_per_s"] > 1000  # faster than the boxes, and said so
+
+
+@pytest.mark.slow  # a server process with the whole-robot engine, ~10 s at load
+def test_udp_serve_runs_the_whole_robot_on_its_own_clock():
+    """``serve --transport udp --model robot``: the whole-robot engine behind the 16 boxes of
+    hydra_full on the box clock; a master's enable and force command cross the 3-buffers
+    (actuator 0's board reports enabled) and every frame comes back with the plan's WKC."""
+    from firmware_model.mcu.mcu import BOARD_ENABLED
+    from hil.fieldbus.master import Master
+    from hil.fieldbus.topology import load_topology
+    from hil.transports import open_transport
+
+    p = subprocess.Popen([sys.executable, "-m", "hil.cli", "serve", "--transport", "udp",
+                          "--port", "0", "--topology", "hydra_full", "--model", "robot",
+                          "--seconds", "4", "--json", "-q", "--max-lag-ms", "1e6",
+                          "--max-overrun-percent", "100", "--max-late-percent", "100"],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=_env())
+    line = p.stderr.readline()
+    assert "ready on udp 127.0.0.1:" in line and "robot model" in line, line
+    port = int(line.split("ready on udp 127.0.0.1:")[1].split(";")[0])
+    m = Master(load_topology("hydra_full"), crc_trailer=False)
+    status = 0
+    with open_transport("udp", "master", remote_port=port) as end:
+        for _ in range(300):
+            m.set_actuator(0, "force", 200.0, enable=True)
+            for f in m.frames():
+                end.send(f)
+            while not all(m._answered):
+                reply = end.recv(timeout=5.0)
+                assert reply is not None
+                m.receive(reply)
+            status = m.actuator_inputs(0)["status"]
+            m.end_cycle()
+            time.sleep(1e-3)
+    out, err = p.communicate(timeout=120)
+    rep = json.loads(out)
+    assert rep["model"] == "robot" and p.returncode == 0, rep["failures"]
+    assert m.stats.frames_ok == 600 and m.stats.wkc_errors == 0
+    assert rep["frames_served"] == 600 and rep["cycles"] > 300
+    assert status & BOARD_ENABLED

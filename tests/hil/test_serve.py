@@ -174,8 +174,14 @@ def test_serve_closes_the_loop_over_a_pty(pty):
     assert summary["cycles"] + summary["slipped_cycles"] >= 0.8 * SECONDS / PERIOD_S
     assert isinstance(summary["overruns"], int) and summary["overruns"] >= 0
     assert summary["worst_late_ms"] >= 0.0
-    assert summary["ok"] == (not summary["overrun_limit_exceeded"]), summary["failures"]
-    assert proc.returncode == (1 if summary["overrun_limit_exceeded"] else 0), err
+    # exit 1 may only come from timing on a busy machine: overruns, late replies, lag (the
+    # thresholds have their own tests), and then the summary says which
+    timing = ("overruns", "replies later than", "behind wall time")
+    assert all(any(t in f for t in timing) for f in summary["failures"]), summary["failures"]
+    assert summary["overrun_limit_exceeded"] == any("overruns" in f
+                                                    for f in summary["failures"])
+    assert summary["ok"] == (not summary["failures"])
+    assert proc.returncode == (1 if summary["failures"] else 0), err
     assert "ready on serial" in err and "serve:" in err  # ready line + status lines
     print(f"serve test: {elapsed:.1f} s; server overruns {summary['overruns']} "
           f"(worst {summary['worst_late_ms']:.2f} ms), load {100 * summary['load']:.1f}%, "

@@ -22,6 +22,7 @@ from numba import njit, types
 
 from firmware_model.esc.compiled import DROPPED, NOT_ETHERCAT, EscArrays, handle_frame, tick
 from hil.fieldbus.reply_times import HIST_US
+from hil.sim.cpu_account import run_delay_ns
 
 POLL_MS = 1
 SIOCGSTAMPNS = 0x8907
@@ -33,8 +34,11 @@ MSG_DONTWAIT = 0x40
 C_STOP, C_T0, C_LATE_NS = 0, 1, 2
 N_CTL = 3
 (F_RECEIVED, F_ANSWERED, F_OTHER, F_DROPPED, F_LATE, F_SEND_ERRORS, F_MAX_NS,
- F_RECV_ERRORS, F_NO_STAMP, F_ERRNO) = range(10)
-N_STATS = 10
+ F_RECV_ERRORS, F_NO_STAMP, F_ERRNO, F_MAX_GAP_NS, F_MAX_WORK_NS) = range(12)
+N_STATS = 12
+#: Late replies logged (the first ones), each (L_AT, L_REPLY, L_WAKE, L_WORK) in ns.
+LATE_LOG = 256
+L_AT, L_REPLY, L_WAKE, L_WORK = range(4)
 
 # The C library's functions, linked by name (cacheable, unlike ctypes pointers); pointers
 # pass as intp (arrays hand their address).
@@ -54,9 +58,15 @@ def _now(ts, clock):
 
 
 @njit(cache=True, nogil=True)
-def frame_loop(fd, ctl, stats, hist, buf, mem, sii, st, wmask, obuf, olen, oidx, ibuf, ilen,
-               iidx, scratch):
-    """Serve frames on socket ``fd`` until ``ctl[C_STOP]`` is set (by another thread)."""
+def frame_loop(fd, ctl, stats, hist, late_log, buf, mem, sii, st, wmask, obuf, olen, oidx,
+               ibuf, ilen, iidx, scratch):
+    """Serve frames on socket ``fd`` until ``ctl[C_STOP]`` is set (by another thread).
+
+    Besides the reply times: the longest gap between two returns of ``poll`` beyond its
+    timeout (``F_MAX_GAP_NS``: the thread did not run), the longest work on one wake-up
+    (``F_MAX_WORK_NS``), and per late reply (the first ``late_log.shape[0]``) when its
+    frame arrived (CLOCK_MONOTONIC), its reply time, how long after its arrival the thread
+    woke, and how long that wake-up's work took up to its send."""
     pfd = np.zeros(2, dtype=np.int32)
     pfd[0] = fd
     pfd[1] = 1  # events: POLLIN
@@ -64,14 +74,19 @@ def frame_loop(fd, ctl, stats, hist, buf, mem, sii, st, wmask, obuf, olen, oidx,
     stamp = np.zeros(2, dtype=np.int64)
     last = ctl[C_T0]
     nbins = hist.shape[0]
+    nlog = late_log.shape[0]
     while ctl[C_STOP] == 0:
         ready = _poll(pfd.ctypes.data, 1, POLL_MS)
         now = _now(ts, CLOCK_MONOTONIC)
+        if now - last - POLL_MS * 1_000_000 > stats[F_MAX_GAP_NS]:
+            stats[F_MAX_GAP_NS] = now - last - POLL_MS * 1_000_000
         if now > last:
             tick(mem, st, obuf, olen, oidx, now - last)
             last = now
         if ready <= 0:
             continue
+        # CLOCK_REALTIME (the kernel's receive stamps) minus CLOCK_MONOTONIC, this wake-up
+        mono_off = _now(ts, CLOCK_REALTIME) - now
         while True:
             n = _recv(fd, buf.ctypes.data, 2048, MSG_DONTWAIT)
             if n < 0:
@@ -93,11 +108,21 @@ def frame_loop(fd, ctl, stats, hist, buf, mem, sii, st, wmask, obuf, olen, oidx,
             if _send(fd, buf.ctypes.data, out, 0) != out:
                 stats[F_SEND_ERRORS] += 1
                 continue
-            lat = _now(ts, CLOCK_REALTIME) - t_rx
+            sent = _now(ts, CLOCK_REALTIME)
+            lat = sent - t_rx
             stats[F_ANSWERED] += 1
             if lat > stats[F_MAX_NS]:
                 stats[F_MAX_NS] = lat
+            work = sent - mono_off - now
+            if work > stats[F_MAX_WORK_NS]:
+                stats[F_MAX_WORK_NS] = work
             if lat > ctl[C_LATE_NS]:
+                k = stats[F_LATE]
+                if k < nlog:
+                    late_log[k, L_AT] = t_rx - mono_off
+                    late_log[k, L_REPLY] = lat
+                    late_log[k, L_WAKE] = now + mono_off - t_rx
+                    late_log[k, L_WORK] = work
                 stats[F_LATE] += 1
             b = max(lat, 0) // 1000
             hist[min(b, nbins - 1)] += 1
@@ -121,9 +146,12 @@ class FrameThread:
         self.ctl[C_LATE_NS] = int(late_us * 1e3)
         self.stats = np.zeros(N_STATS, dtype=np.int64)
         self.hist = np.zeros(HIST_US + 1, dtype=np.int64)
+        self.late_log = np.zeros((LATE_LOG, 4), dtype=np.int64)
         self.buf = np.zeros(2048, dtype=np.uint8)
         self.on_start = on_start
         self.error: BaseException | None = None
+        #: Time the thread was runnable but waited for its CPU while serving [ns].
+        self.run_delay_ns: int | None = None
         self._thread = threading.Thread(target=self._run, name="esc-frames", daemon=True)
         self._set_up = threading.Event()
 
@@ -141,14 +169,27 @@ class FrameThread:
                     self.on_start()
             finally:
                 self._set_up.set()
-            frame_loop(self.sock.fileno(), self.ctl, self.stats, self.hist, self.buf,
-                       *self.arrays.frame_args())
+            d0 = run_delay_ns()
+            frame_loop(self.sock.fileno(), self.ctl, self.stats, self.hist, self.late_log,
+                       self.buf, *self.arrays.frame_args())
+            d1 = run_delay_ns()
+            if d0 is not None and d1 is not None:
+                self.run_delay_ns = d1 - d0
         except BaseException as exc:  # reported by the owner
             self.error = exc
 
     def stop(self) -> None:
         self.ctl[C_STOP] = 1
         self._thread.join()
+
+    def late_replies(self, t0_ns: int) -> list[dict]:
+        """The logged late replies: when [s after ``t0_ns``], reply time, how long the
+        thread took to wake after the frame arrived, and its work up to the send [us]."""
+        n = min(int(self.stats[F_LATE]), self.late_log.shape[0])
+        return [{"at_s": round((int(r[L_AT]) - t0_ns) * 1e-9, 4),
+                 "reply_us": round(int(r[L_REPLY]) / 1e3, 1),
+                 "wake_us": round(int(r[L_WAKE]) / 1e3, 1),
+                 "work_us": round(int(r[L_WORK]) / 1e3, 1)} for r in self.late_log[:n]]
 
     def alive(self) -> bool:
         return self._thread.is_alive()
@@ -164,7 +205,8 @@ def warm_up() -> None:
         ctl = np.zeros(N_CTL, dtype=np.int64)
         ctl[C_STOP] = 1
         frame_loop(a.fileno(), ctl, np.zeros(N_STATS, dtype=np.int64),
-                   np.zeros(2, dtype=np.int64), np.zeros(2048, dtype=np.uint8),
+                   np.zeros(2, dtype=np.int64), np.zeros((1, 4), dtype=np.int64),
+                   np.zeros(2048, dtype=np.uint8),
                    *arrays.frame_args())
     finally:
         a.close()

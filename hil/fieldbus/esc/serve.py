@@ -5,15 +5,13 @@ runs: ``eha-hil serve --transport ethercat --interface IF --topology hydra_full`
   slaves' memories (registers, SII, sync-manager buffers, FMMUs) in compiled code that holds
   no interpreter lock, and runs the slaves' own clock (process-data watchdogs) on the wall
   clock. It never waits for a box.
-* The **box clock** (:class:`BoxClock`) advances the boxes behind the slaves (echo models,
-  the full stack, or the whole-robot engine) one 1 ms cycle at a time in a thread of its
-  own: cycle ``k`` is released at the absolute deadline ``t0 + k * 1 ms`` (never from the
-  previous wake-up, so no drift). At the start of a cycle each box takes the newest output
-  record its ESC holds, at its end it publishes its input record: the sync managers'
-  3-buffers (:mod:`firmware_model.esc.compiled`), so neither side ever sees half a record
-  and neither waits for the other. Behind its schedule, the box clock runs cycles back to
-  back; more than :data:`MAX_LAG_CYCLES` behind, it moves the schedule forward (slipped
-  cycles). How far simulated time fell behind wall time is reported (``lag_max_ms``).
+* The **box clock** (:class:`hil.fieldbus.box_clock.BoxClock`) advances the boxes behind
+  the slaves (echo models, the full stack, or the whole-robot engine) one 1 ms cycle at a
+  time in a thread of its own, released at absolute deadlines. At the start of a cycle
+  each box takes the newest output record its ESC holds, at its end it publishes its input
+  record: the sync managers' 3-buffers (:mod:`firmware_model.esc.compiled`), so neither
+  side ever sees half a record and neither waits for the other. How far simulated time
+  fell behind wall time is reported (``lag_max_ms``).
   After each cycle the boxes' mailbox side (:mod:`hil.fieldbus.esc.mailbox`) serves the
   CoE requests the ESCs' SM0 handed over and posts answers and emergencies for SM1.
 
@@ -32,7 +30,7 @@ import gc
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
@@ -40,17 +38,17 @@ from firmware_model.esc import compiled as ec
 from firmware_model.esc import dc_compiled as dcc
 from firmware_model.esc.compiled import EscArrays
 from firmware_model.esc.dc import DcParams
+from hil.fieldbus.box_clock import PERIOD_NS, BoxClock
 from hil.fieldbus.boxes import box_engine, make_box
 from hil.fieldbus.chain import CYCLE_TICKS
 from hil.fieldbus.esc import frames as esc_frames
 from hil.fieldbus.esc.mailbox import Mailboxes
 from hil.fieldbus.esc.slaves import describe_all
 from hil.fieldbus.topology import Topology
+from hil.sim.cpu_account import steal_during, steal_s
 from hil.transports.rawether import RawEthernet
 from plant.config import Config
 
-PERIOD_NS = 1_000_000
-MAX_LAG_CYCLES = 50
 WARMUP_CYCLES = 3
 #: A reply later than this [us] after its frame arrived counts as late (SOEM's stock
 #: receive timeout is 2000 us; one cycle is 1000 us).
@@ -158,137 +156,6 @@ class ServedChain:
                  "al_status_code": int(a.mem[i, 0x134]) | int(a.mem[i, 0x135]) << 8}
                 for i in range(a.n)]
 
-
-@dataclass
-class BoxClockStats:
-    cycles: int = 0              # box cycles run (1 ms simulated each)
-    overruns: int = 0            # cycles finished after their deadline
-    slipped_cycles: int = 0      # cycles skipped when more than MAX_LAG_CYCLES behind
-    lag_max_ms: float = 0.0      # largest lag of simulated behind wall time
-    compute_s: float = 0.0       # wall time spent in the cycles
-    worst_cycle_ms: float = 0.0
-    worst_cycle_at: int = 0      # its number
-    sync0_cycles: int = 0        # cycles released at a SYNC0 pulse (DC active)
-    sync0_first_cycle: int = -1  # number of the first of them
-    sync0_start_late_max_us: float = 0.0  # latest start of such a cycle after its pulse
-
-
-class BoxClock(threading.Thread):
-    """Runs ``cycle()`` every :data:`PERIOD_NS` of the monotonic clock from ``t0_ns``,
-    sleeping to absolute deadlines, until :meth:`stop`. ``on_start``: run first inside the
-    thread (its scheduling, its CPU)."""
-
-    def __init__(self, cycle: Callable[[], None], on_start: Callable[[], None] | None = None,
-                 behind: Callable[[int], None] | None = None,
-                 sync0: Callable[[int], int | None] | None = None) -> None:
-        super().__init__(name="box-clock", daemon=True)
-        self.cycle = cycle
-        self.on_start = on_start
-        #: behind(cycles): after each cycle, how many whole cycles it is behind schedule.
-        self.behind = behind
-        #: sync0(after): the next SYNC0 pulse [ns, monotonic] after ``after``, or None
-        #: (then the cycle grid of t0).
-        self.sync0 = sync0
-        self.stats = BoxClockStats()
-        self.error: BaseException | None = None
-        self._stop_ev = threading.Event()
-        self._set_up = threading.Event()
-        self.t0 = 0
-
-    def begin(self, t0_ns: int) -> None:
-        """Start (returns once the thread set itself up) with cycle 0 released at t0_ns."""
-        self.t0 = t0_ns
-        self.start()
-        self._set_up.wait()
-
-    def stop(self) -> None:
-        self._stop_ev.set()
-        self.join()
-
-    def run(self) -> None:
-        try:
-            try:
-                if self.on_start is not None:
-                    self.on_start()
-            finally:
-                self._set_up.set()
-            self._run()
-        except BaseException as exc:  # reported by the owner, never lost with the thread
-            self.error = exc
-
-    def _run(self) -> None:
-        st, clock, sleep_until = self.stats, time.monotonic_ns, _sleep_until
-        t0 = self.t0
-        k = 0
-        last = t0 - 1   # the previous cycle's release
-        gc.disable()  # a collection inside the loop would be a stall; collected between
-        try:
-            while not self._stop_ev.is_set():
-                release = t0 + k * PERIOD_NS
-                pulse = self.sync0(last) if self.sync0 is not None else None
-                if pulse is not None:
-                    release = pulse
-                if clock() < release:
-                    sleep_until(release)
-                    continue
-                begin = clock()
-                self.cycle()
-                done = clock()
-                last = release
-                if pulse is not None:
-                    if st.sync0_first_cycle < 0:
-                        st.sync0_first_cycle = st.cycles
-                    st.sync0_cycles += 1
-                    st.sync0_start_late_max_us = max(st.sync0_start_late_max_us,
-                                                     (begin - pulse) / 1e3)
-                k += 1
-                st.cycles += 1
-                spent = done - begin
-                st.compute_s += spent * 1e-9
-                if spent / 1e6 > st.worst_cycle_ms:
-                    st.worst_cycle_ms, st.worst_cycle_at = spent / 1e6, k - 1
-                late = done - (release + PERIOD_NS)
-                behind = max(late, 0) // PERIOD_NS
-                if late > 0:
-                    st.overruns += 1
-                    if behind > MAX_LAG_CYCLES:
-                        t0 += behind * PERIOD_NS
-                        st.slipped_cycles += behind
-                        if pulse is not None:   # the missed pulses are skipped too
-                            last = done - PERIOD_NS
-                if self.behind is not None:
-                    self.behind(behind)
-                lag = done - self.t0 - st.cycles * PERIOD_NS
-                st.lag_max_ms = max(st.lag_max_ms, lag / 1e6)
-        finally:
-            gc.enable()
-
-
-def _sleep_until(deadline_ns: int) -> None:
-    """Sleep to an absolute CLOCK_MONOTONIC deadline (clock_nanosleep, TIMER_ABSTIME)."""
-    _rt.sleep_until(deadline_ns)
-
-
-class _Rt:
-    def __init__(self) -> None:
-        import ctypes
-
-        libc = ctypes.CDLL(None, use_errno=True)
-        self._ts = (ctypes.c_long * 2)()
-        f = libc.clock_nanosleep
-        f.restype, f.argtypes = ctypes.c_int, [ctypes.c_int, ctypes.c_int, ctypes.c_void_p,
-                                               ctypes.c_void_p]
-        self._f = f
-
-    def sleep_until(self, deadline_ns: int) -> None:
-        ts = self._ts
-        ts[0], ts[1] = divmod(deadline_ns, 1_000_000_000)
-        self._f(1, 1, ts, None)  # CLOCK_MONOTONIC, TIMER_ABSTIME (ctypes drops the GIL)
-
-
-_rt = _Rt()
-
-
 @dataclass
 class EcatServeStats:
     wall_s: float = 0.0
@@ -296,6 +163,7 @@ class EcatServeStats:
     overruns: int = 0
     slipped_cycles: int = 0
     lag_max_ms: float = 0.0
+    lag_max_at_s: float = 0.0
     compute_s: float = 0.0
     worst_cycle_ms: float = 0.0
     worst_cycle_at: int = 0
@@ -310,6 +178,19 @@ class EcatServeStats:
     send_errors: int = 0
     late_us: float = DEFAULT_LATE_US
     reply_max_us: float = 0.0
+    #: Longest the frame thread did not run past its 1 ms poll, and its longest wake-up.
+    frame_gap_max_us: float = 0.0
+    frame_work_max_us: float = 0.0
+    #: Time the frame / box thread was runnable but waited for its CPU [ms] (None: unknown).
+    frame_run_delay_ms: float | None = None
+    box_run_delay_ms: float | None = None
+    #: Per CPU: time the hypervisor did not run it during the serving [ms] (None: unknown).
+    steal_ms: dict | None = None
+    #: The first late replies: when, how long, wake-up and work (FrameThread.late_replies).
+    late_replies: list = field(default_factory=list)
+    #: CLOCK_MONOTONIC at the start [s], the origin of the times above (to find them in a
+    #: system trace, e.g. ftrace with trace_clock mono).
+    start_monotonic_s: float = 0.0
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -336,6 +217,7 @@ def serve(chain: ServedChain, link: RawEthernet, seconds: float | None = None,
     gc.collect()
     gc.freeze()  # what exists now is never collected: no pause scans it
     clock = time.monotonic_ns
+    steal0 = steal_s()
     start = clock()
     chain.t0 = start
     frames.start(start)
@@ -354,6 +236,7 @@ def serve(chain: ServedChain, link: RawEthernet, seconds: float | None = None,
         frames.stop()
         boxes.stop()
         wall = (clock() - start) * 1e-9
+        steal1 = steal_s()
         gc.unfreeze()
     for err in (frames.error, boxes.error):
         if err is not None:
@@ -361,6 +244,7 @@ def serve(chain: ServedChain, link: RawEthernet, seconds: float | None = None,
     f, b = frames.stats, boxes.stats
     st = EcatServeStats(wall_s=wall, cycles=b.cycles, overruns=b.overruns,
                         slipped_cycles=b.slipped_cycles, lag_max_ms=b.lag_max_ms,
+                        lag_max_at_s=b.lag_max_at_s,
                         compute_s=b.compute_s, worst_cycle_ms=b.worst_cycle_ms,
                         worst_cycle_at=b.worst_cycle_at, sync0_cycles=b.sync0_cycles,
                         sync0_first_cycle=b.sync0_first_cycle,
@@ -371,5 +255,16 @@ def serve(chain: ServedChain, link: RawEthernet, seconds: float | None = None,
                         other_frames=int(f[esc_frames.F_OTHER]),
                         dropped_frames=int(f[esc_frames.F_DROPPED]),
                         send_errors=int(f[esc_frames.F_SEND_ERRORS]), late_us=late_us,
-                        reply_max_us=int(f[esc_frames.F_MAX_NS]) / 1e3)
+                        reply_max_us=int(f[esc_frames.F_MAX_NS]) / 1e3,
+                        frame_gap_max_us=max(int(f[esc_frames.F_MAX_GAP_NS]), 0) / 1e3,
+                        frame_work_max_us=int(f[esc_frames.F_MAX_WORK_NS]) / 1e3,
+                        frame_run_delay_ms=_ms(frames.run_delay_ns),
+                        box_run_delay_ms=_ms(boxes.run_delay_ns),
+                        steal_ms=steal_during(steal0, steal1),
+                        late_replies=frames.late_replies(start),
+                        start_monotonic_s=start * 1e-9)
     return st, frames.hist.copy()
+
+
+def _ms(ns: int | None) -> float | None:
+    return None if ns is None else round(ns / 1e6, 3)

@@ -8,7 +8,10 @@ MODE ``force BOX SLOT NEWTONS N``: as far as OP, then N cycles commanding a forc
 actuator (mode 1, enable), and reports that actuator's f_pressure input over the cycles.
 MODE ``bringups K IMAGE_BYTES``: K bring-ups to OP, each from a fresh master, counted.
 MODE ``rtt N``: as far as OP, every actuator enabled with a force command, N cycles at
-1 kHz; the wall time of each cycle's send + receive (the frames' round trip) in us.
+1 kHz; the wall time of each cycle's send + receive (the frames' round trip) as a 1 us
+histogram (``rtt_hist``, :mod:`hil.fieldbus.reply_times`: memory bounded however long the
+run) with its exact maximum, and the WKC errors; a progress line on stderr every
+PROGRESS_S seconds.
 MODE ``dc N CHECK``: as far as OP with distributed clocks (config_dc after config_map,
 SYNC0 every 1 ms on every slave), N process-data cycles at 1 kHz (SOEM adds its FRMW on
 the reference clock's system time to each); every CHECK cycles, between two of SOEM's
@@ -38,6 +41,9 @@ import pysoem
 #: cycle's working counter comes short) and EC_TIMEOUTSTATE (a state change).
 RECV_TIMEOUT_US = 2_000
 STATE_TIMEOUT_US = 2_000_000
+PROGRESS_S = 10.0
+#: Cycles right after OP left out of the round-trip figures (not the steady state).
+RTT_WARMUP = 20
 SYNC0_CYCLE_NS = 1_000_000
 
 
@@ -65,20 +71,26 @@ def bring_up(ifname: str, dc: bool = False) -> tuple[pysoem.Master, dict]:
     return m, info
 
 
-def paced(m: pysoem.Master, n: int, each=None, rtt: list | None = None
-          ) -> tuple[int, list[int]]:
+def paced(m: pysoem.Master, n: int, each=None, rtt=None, progress=None  # noqa: ANN001
+           ) -> tuple[int, list[int]]:
     """n cycles at 1 kHz; (cycles with a WKC other than expected, the first few WKCs).
-    ``rtt``: its last element (the start time ``each`` appended) becomes the cycle's
-    send + receive time in us."""
+    ``rtt(us)``: called with each cycle's send + receive time; ``progress(k, bad)``: every
+    PROGRESS_S seconds."""
     bad, seen = 0, []
-    t_next = time.perf_counter()
+    clock = time.perf_counter
+    t_next = clock()
+    next_progress = t_next + PROGRESS_S
     for k in range(n):
         if each is not None:
             each(k)
+        t0 = clock()
         m.send_processdata()
         wkc = m.receive_processdata(RECV_TIMEOUT_US)
         if rtt is not None:
-            rtt[-1] = (time.perf_counter() - rtt[-1]) * 1e6
+            rtt((clock() - t0) * 1e6)
+        if progress is not None and t0 >= next_progress:
+            progress(k, bad)
+            next_progress += PROGRESS_S
         if wkc != m.expected_wkc:
             bad += 1
             if len(seen) < 10:
@@ -311,14 +323,25 @@ def main(argv: list[str]) -> None:
             for k in range(len(out) // 10):
                 struct.pack_into("<BBi", out, 10 * k, 1, 1, 10_000)
             s.output = bytes(out)
-        rtt: list[float] = []
-        clock = time.perf_counter
+        from hil.fieldbus.reply_times import ReplyTimes
 
-        def timed(_k: int) -> None:
-            rtt.append(clock())
+        rtt = ReplyTimes(late_us=RECV_TIMEOUT_US)
+        skip = [RTT_WARMUP]
 
-        info["bad_wkc"], info["bad_wkc_values"] = paced(m, n, timed, rtt)
-        info["rtt_us"] = rtt
+        def timed(us: float) -> None:
+            if skip[0]:  # the first cycles after OP are not the steady state
+                skip[0] -= 1
+            else:
+                rtt.add(us)
+
+        def progress(k: int, bad: int) -> None:
+            print(f"master: {k / 1000:.0f} of {n / 1000:.0f} s, wrong WKC {bad}, round trip "
+                  f"max so far {rtt.max_us:.0f} us", file=sys.stderr, flush=True)
+
+        info["bad_wkc"], info["bad_wkc_values"] = paced(m, n, rtt=timed, progress=progress)
+        info["rtt_hist"] = {str(i): int(c) for i, c in enumerate(rtt.hist) if c}
+        info["rtt_max_us"] = rtt.max_us
+        info["rtt_cycles"] = int(rtt.hist.sum())
     elif mode == "force":
         box, slot, newtons, n = int(argv[2]), int(argv[3]), float(argv[4]), int(argv[5])
         s = m.slaves[box]

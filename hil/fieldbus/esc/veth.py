@@ -14,6 +14,7 @@ import shutil
 import signal
 import subprocess
 import sys
+import threading
 import uuid
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -111,12 +112,30 @@ def master_cpu() -> list[str]:
     return ["taskset", "-c", ",".join(map(str, sorted(frame_cpus)))]
 
 
-def run_master(ns: str, *args: str) -> dict:
+def run_master(ns: str, *args: str, timeout_s: float = 300.0, progress=None) -> dict:  # noqa: ANN001
     """:mod:`hil.fieldbus.esc.soem_master` on ``ecm`` at real-time priority (below the
-    frame thread's), on the frame thread's CPU; its JSON."""
-    r = subprocess.run(in_ns(ns, *master_cpu(), "chrt", "-f", "40", sys.executable, "-m",
-                             "hil.fieldbus.esc.soem_master", MASTER_IF, *args),
-                       capture_output=True, text=True, timeout=300, env=_env())
-    if r.returncode:
-        raise RuntimeError(f"SOEM master failed: {r.stderr.strip()[-500:]}")
-    return json.loads(r.stdout)
+    frame thread's), on the frame thread's CPU; its JSON. ``progress(line)``: each of its
+    progress lines as it prints them."""
+    p = subprocess.Popen(in_ns(ns, *master_cpu(), "chrt", "-f", "40", sys.executable, "-m",
+                               "hil.fieldbus.esc.soem_master", MASTER_IF, *args),
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                         env=_env())
+    err: list[str] = []
+    out: list[str] = []
+    reader = threading.Thread(target=lambda: out.append(p.stdout.read()), daemon=True)
+    reader.start()
+    timer = threading.Timer(timeout_s, p.kill)
+    timer.start()
+    try:
+        for line in p.stderr:
+            if line.startswith("master: ") and progress is not None:
+                progress(line.rstrip())
+            else:
+                err.append(line)
+        reader.join()
+        p.wait()
+    finally:
+        timer.cancel()
+    if p.returncode:
+        raise RuntimeError(f"SOEM master failed ({p.returncode}): {''.join(err).strip()[-500:]}")
+    return json.loads(out[0])
