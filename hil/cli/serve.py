@@ -229,6 +229,7 @@ class PacedServer:
             self.error = str(exc)
         finally:
             box_clock.stop()
+            boxes.release()
             sys.setswitchinterval(switch)
             gc.unfreeze()
             st.wall_s = clock() - start

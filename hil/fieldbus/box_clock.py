@@ -235,6 +235,11 @@ class ClockedBoxes:
         chain.boxes = [_Port(self, i) for i in range(n)]
         chain.engine = None
 
+    def release(self) -> None:
+        """Hand the boxes back to the chain once their clock has stopped (what follows the
+        serving, e.g. a log's replay metadata, reads the boxes themselves, not the ports)."""
+        self.chain.boxes, self.chain.engine = self.boxes, self.engine
+
     def take_outputs(self) -> None:
         for i, box in enumerate(self.boxes):
             k = take(self.oidx[i])

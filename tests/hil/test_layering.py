@@ -219,6 +219,11 @@ ALLOWED = {
     ("hil/sim/robot.py", "kernel"):
         "the whole robot's compiled wiring loop: calls the stack's and the MCU law's compiled "
         "steps per actuator, and copies process-data bytes",
+    ("hil/sim/robot.py", "plant.lanes.LW"):
+        "the lane width: how many actuators one batch of the vector lanes holds (a size)",
+    ("hil/bench/robot_stages.py", "kernel"):
+        "times each stage of the robot engine alone: calls the parts' compiled steps in a "
+        "loop, computes nothing of its own",
     ("hil/fieldbus/hip_box.py", "kernel"):
         "the hip box's compiled wiring loop: both stacks and the thigh's coupling tick by tick",
     ("hil/fieldbus/esc/frames.py", "kernel"):
