@@ -482,7 +482,9 @@ class RobotEngine:
         ``box`` becomes ``value`` at its program's next step: put into the program state
         when the next cycle's outputs are taken, before its compute starts (never while a
         compiled call runs)."""
-        n_box = next(k for k, b in enumerate(self.boxes) if b is box)
+        n_box = next((k for k, b in enumerate(self.boxes) if b is box), None)
+        if n_box is None:
+            raise ValueError("the box is not one this engine advances")
         if not 0 <= slot < len(box.stacks):
             raise IndexError(f"slot {slot}: the box has {len(box.stacks)} actuators")
         self.tunables.tune(int(self._first[n_box]) + slot, key, value)
