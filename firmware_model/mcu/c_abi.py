@@ -54,12 +54,23 @@ OUTPUT = np.dtype([("down", "<u2", B.DOWN_WORDS), ("status", "<u4"),
                    *((name, "<f4") for name in MEASURED_FLOATS)])
 
 
+#: The head of ``mcu_state``: its configuration, then the force and position gains in use
+#: (a PC override or the configuration's). Nothing else in the state is written from here.
+STATE_HEAD = np.dtype([("cfg", CONFIG), ("kp", "<f4"), ("k_pos", "<f4")])
+
+
 def config_record(cal: FirmwareCalibration) -> np.ndarray:
     """The ``mcu_config`` for ``cal``: each constant read from the Python model built from
     ``cal`` (the float32 it holds), so the C and the model share one set of numbers."""
     cal = calibration(cal)
-    link = LinkMemory(cal)
-    mcu = Mcu(cal, [link])
+    return model_config(Mcu(cal, [LinkMemory(cal)]))
+
+
+def model_config(mcu: Mcu) -> np.ndarray:
+    """The ``mcu_config`` of actuator 0 of the Python program ``mcu`` as it stands (its
+    tunables as written, :mod:`firmware_model.mcu.tunables`); ``down_init``: its link's
+    downstream words (a program that has not stepped: the board's reset words)."""
+    link = mcu.links[0]
     ctrl = mcu.ctrl[0]
     scales = mcu.meas[0].scales()
     c = np.zeros((), dtype=CONFIG)

@@ -80,6 +80,9 @@ class ActuatorController:
         dt = m["period_ticks"] * cal.tick_ns * 1e-9
         kt = cal.kt_nm_per_a
         self.dt = F32(dt)
+        #: The period as the calibration gives it [s] (float64): a tunable's coefficient
+        #: (:mod:`firmware_model.mcu.tunables`) is computed from it as at construction.
+        self.dt_s = dt
         self.velocity_based = m["controller"] == "velocity"
         self.feedback = m["force_feedback"]
         self.kt_eq = F32(cal.kt_eq_n_per_a)

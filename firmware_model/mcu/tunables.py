@@ -57,7 +57,7 @@ def in_range(key: str, value: float) -> int:
 def apply(mcu, i: int, key: str, value: float) -> None:  # noqa: ANN001 (Mcu: no cycle)
     """Set tunable ``key`` of actuator ``i`` of program ``mcu`` (between two steps)."""
     c = mcu.ctrl[i]
-    dt = float(c.dt)
+    dt = c.dt_s  # (not the float32 dt: the coefficient as a calibration with value gives it)
     if key == "kp_force":
         mcu.own_gains[i][1] = c.kp = F32(value)
     elif key == "kd_force_s":

@@ -52,6 +52,7 @@ from firmware_model.mcu.c_abi import (
 )
 from hil.fieldbus import pdo
 from hil.sim.actuator import TRACE_WIDTH, TRACE_WORDS, _trace_row, advance_stack, drive_plant
+from hil.sim.robot_tunables import EngineTunables
 from hil.sim.stack_rows import SOURCES, McuRows, StackRows, TapRows
 from plant import kernel
 from plant import lanes as lanes_mod
@@ -364,6 +365,8 @@ class RobotEngine:
         self.states = np.zeros(n * size, dtype=np.uint8)
         for j in range(n):
             self.law.init_at(self.states.ctypes.data + j * size, config)
+        #: The MCU tunables written to the actuators (:meth:`tune`).
+        self.tunables = EngineTunables(cfg, self.states, size, n)
         self.inp = np.zeros(n, dtype=INPUT)
         self.out = np.zeros(n, dtype=OUTPUT)
         self.in16 = self.inp.view(np.uint16).reshape(n, _IN_U16)
@@ -473,6 +476,18 @@ class RobotEngine:
         link = self.arrays.link
         self.inp["up"][which] = link.mcu_up[which] & 0xFFFF
         self.inp["up_crc_errors"][which] = link.state[which, LK.LK_MASTER_CRC]
+
+    def tune(self, box: object, slot: int, key: str, value: float) -> None:
+        """MCU tunable ``key`` (:mod:`firmware_model.mcu.tunables`) of actuator ``slot`` of
+        ``box`` becomes ``value`` at its program's next step: put into the program state
+        when the next cycle's outputs are taken, before its compute starts (never while a
+        compiled call runs)."""
+        n_box = next((k for k, b in enumerate(self.boxes) if b is box), None)
+        if n_box is None:
+            raise ValueError("the box is not one this engine advances")
+        if not 0 <= slot < len(box.stacks):
+            raise IndexError(f"slot {slot}: the box has {len(box.stacks)} actuators")
+        self.tunables.tune(int(self._first[n_box]) + slot, key, value)
 
     # --- one fieldbus cycle ----------------------------------------------------------------
     def applied(self, box: object) -> None:
@@ -671,6 +686,7 @@ class RobotEngine:
 
     def _take_outputs(self) -> None:
         """The process data the boxes received since the last cycle, as program inputs."""
+        self.tunables.apply()  # (no compute runs now: see applied and advance)
         got = self._got
         got[:] = False
         for n_box, b in enumerate(self.boxes):

@@ -130,11 +130,16 @@ def _predicted(box, cfg, n: int) -> list[float]:  # noqa: ANN001
     return out
 
 
-def test_force_gain_written_by_soem_changes_that_box_only(netns, full, cfg):  # noqa: F811
+SERVED = {"stack": ("--stack-box", "0", "--stack-box", "1"), "robot": ("--model", "robot")}
+
+
+@pytest.mark.parametrize("model", list(SERVED))
+def test_force_gain_written_by_soem_changes_that_box_only(netns, full, cfg, model):  # noqa: F811
     """Box 0's Kp written by pysoem (0.5 instead of the calibration's 2): its force step
     rises as slowly as the box model with Kp 0.5 predicts; box 1 (same type, untouched)
-    as fast as the calibration's. (The F5 bandwidth these gains give: docs.)"""
-    serve = start_serve(netns, "--stack-box", "0", "--stack-box", "1")
+    as fast as the calibration's; on the stack boxes (Python MCU) and on the whole-robot
+    engine (the MCU law's C build). (The F5 bandwidth these gains give: docs.)"""
+    serve = start_serve(netns, *SERVED[model])
     try:
         res = run_master(netns, "gain", "0", "1", str(KP), str(STEP_N), "400")
     finally:

@@ -4,10 +4,12 @@ behind it, run once per box cycle on the box's clock (never in the frame path).
 
 * requests the ESC's SM0 handed over are served, answers and emergencies go to SM1;
 * a tunable written (0x2000 + p) goes to the box's MCU (:meth:`Mcu.tune
-  <firmware_model.mcu.mcu.Mcu.tune>`, applied at its next step); a box model that does not
-  run that part of the MCU (echo: only the command timeout; the compiled robot engine:
-  none) refuses it with the general error, so a master is never told a value was taken
-  that changes nothing;
+  <firmware_model.mcu.mcu.Mcu.tune>`, applied at its next step), or on the compiled robot
+  engine to that actuator's C program (:meth:`RobotEngine.tune
+  <hil.sim.robot.RobotEngine.tune>`: the same float32 constants, put into its state
+  between two engine steps); a box model that does not run that part of the MCU (echo:
+  only the command timeout) refuses it with the general error, so a master is never told
+  a value was taken that changes nothing;
 * a PDO assignment written in PREOP (0x1C12 / 0x1C13) makes the box exchange the smaller
   records: :meth:`Mailboxes.expand` and :meth:`Mailboxes.select` cut its full records to
   the assigned PDOs, and the ESC checks the master's sync managers against the new
@@ -105,8 +107,12 @@ class BoxMailbox:
         slot = entry.sub - 1
         key = entry.tunable
         box = self.box
+        engine = getattr(box, "engine", None)
+        if engine is not None:  # the compiled robot engine: that actuator's C program
+            engine.tune(box, slot, key, value)
+            return
         board = getattr(box, "board", None)
-        if board is not None and getattr(box, "engine", None) is None:
+        if board is not None:
             board.mcu.tune(slot, key, value)
             return
         model = getattr(box, "model", None)
