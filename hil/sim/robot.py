@@ -117,6 +117,26 @@ def _claim(typingctx, counter):
     return types.int64(counter), codegen
 
 
+@njit(cache=True, nogil=True, _nrt=False, inline="always")
+def _log_words(log, i, r, in16, in32, out16):
+    """Row ``r`` of actuator ``i`` in the frame log's copies (a
+    :class:`~hil.sim.stack_rows.TapRows`): the upstream words and CRC-error count the MCU
+    program read at this step, the downstream words it wrote."""
+    for w in range(B.UP_WORDS):
+        log.up[i, r, w] = in16[i, _IN_UP + w]
+    log.up[i, r, B.UP_WORDS] = in32[i, _IN_CRC]
+    for w in range(log.down.shape[2]):
+        log.down[i, r, w] = out16[i, _OUT_DOWN + w]
+
+
+@njit(cache=True, nogil=True, _nrt=False, inline="always")
+def _word_log(trace, at, lk):
+    """The LVDS link's word log of the tick (``lk``: the link's state, after its upstream
+    sweep) into the trace row ``at``, as :func:`advance_stack` traces it."""
+    for w in range(2 * LK.WORDS_W):
+        trace[at, TRACE_WORDS + w] = lk[LK.LK_DOWN_WORDLOG + w]
+
+
 # No reference counting (``_nrt=False``, as the parts' tick functions): every row view
 # below would otherwise increment and decrement the parent array's count, an atomic on a
 # cache line all compute threads share (~200 ns per actuator tick with one thread, more
@@ -155,11 +175,7 @@ def advance_robot(counter, n_periods, period, tick0, batched, s, mcu, no_rec, ta
                 lk.mcu_down[i, w] = mcu.out16[i, _OUT_DOWN + w]
             r = tap.row[0] + n
             if tap.up.shape[1] > 0:  # a frame log: the words the program read and wrote
-                for w in range(B.UP_WORDS):
-                    tap.up[i, r, w] = in16[i, _IN_UP + w]
-                tap.up[i, r, B.UP_WORDS] = in32[i, _IN_CRC]
-                for w in range(tap.down.shape[2]):
-                    tap.down[i, r, w] = mcu.out16[i, _OUT_DOWN + w]
+                _log_words(tap, i, r, in16, in32, mcu.out16)
             advance_stack(period, pl.x[i], pl.params[i], pl.u[i], pl.y[i], no_rec, 0, 1, t,
                           pl.rng[i], pl.work[i], se.chips[i], se.raw[i], bd.params[i],
                           bd.state[i], bd.down[i], bd.up[i], lk.mcu_down[i], lk.mcu_up[i],
@@ -171,7 +187,7 @@ def advance_robot(counter, n_periods, period, tick0, batched, s, mcu, no_rec, ta
 
 @njit(cache=True, nogil=True, _nrt=False)
 def advance_robot_lanes(counter, n_periods, period, tick0, blocks, sizes, n_sub_max, s, mcu,
-                        buf, tap_y, tap_trace):
+                        buf, tap_y, tap_trace, log):
     """:func:`advance_robot` with the plants in lanes: this thread claims whole batches
     (``blocks[b, :sizes[b]]``: up to :data:`plant.lanes.LW` actuator rows, counted by
     ``counter``) and runs their MCU periods together. Per tick every actuator of the
@@ -182,8 +198,9 @@ def advance_robot_lanes(counter, n_periods, period, tick0, blocks, sizes, n_sub_
     :func:`advance_stack` in its order: the batch only interleaves independent actuators.
     ``tap_y`` (actuators, ticks, outputs) and ``tap_trace`` (actuators, ticks,
     ``TRACE_WIDTH``): where given (not empty), every tick's plant outputs and board trace
-    row (:func:`advance_stack`'s) of every actuator (:attr:`RobotEngine.tap`).
-    Returns how many actuators this thread advanced."""
+    row (:func:`advance_stack`'s) of every actuator (:attr:`RobotEngine.tap`). ``log`` (a
+    :class:`~hil.sim.stack_rows.TapRows`): the frame log's copies, filled as
+    :func:`advance_robot` fills them. Returns how many actuators this thread advanced."""
     pl, se, bd, lk = s.plant, s.sensors, s.board, s.link
     in16, in32 = mcu.in16, mcu.in32
     done = 0
@@ -197,6 +214,9 @@ def advance_robot_lanes(counter, n_periods, period, tick0, blocks, sizes, n_sub_
         lanes_mod.load_params(buf, pl.params, rows, m)
         for n in range(n_periods):
             t = tick0 + n * period
+            r = log.row[0] + n
+            # advance_stack traces only into a slice with a row for every tick of the period
+            logging_trace = log.trace.shape[1] >= (r + 1) * period
             for j in range(m):
                 i = rows[j]
                 in32[i, _IN_TICK] = t
@@ -207,8 +227,11 @@ def advance_robot_lanes(counter, n_periods, period, tick0, blocks, sizes, n_sub_
                     mcu.err[i, 1] = in32[i, _IN_CRC]
                 for w in range(lk.mcu_down.shape[1]):
                     lk.mcu_down[i, w] = mcu.out16[i, _OUT_DOWN + w]
+                if log.up.shape[1] > 0:
+                    _log_words(log, i, r, in16, in32, mcu.out16)
             for k in range(period):
                 at = n * period + k
+                lt = r * period + k  # the log trace's row (advance_stack's k-th)
                 for j in range(m):
                     i = rows[j]
                     st = bd.state[i]
@@ -219,11 +242,14 @@ def advance_robot_lanes(counter, n_periods, period, tick0, blocks, sizes, n_sub_
                     if tap_trace.shape[0] > 0:
                         _trace_row(tap_trace[i], at, se.raw[i], bd.down[i], since, crc,
                                    bd.up[i], on, st)
+                    if logging_trace:
+                        _trace_row(log.trace[i], lt, se.raw[i], bd.down[i], since, crc,
+                                   bd.up[i], on, st)
                     LK.sweep_up(lk.state[i], bd.up[i], lk.mcu_up[i])
                     if tap_trace.shape[0] > 0:
-                        for w in range(2 * LK.WORDS_W):
-                            tap_trace[i, at, TRACE_WORDS + w] = lk.state[i, LK.LK_DOWN_WORDLOG
-                                                                         + w]
+                        _word_log(tap_trace[i], at, lk.state[i])
+                    if logging_trace:
+                        _word_log(log.trace[i], lt, lk.state[i])
                     drive_plant(on, st, 1.0 / bd.params[i, B.C_PWM_TOP], pl.u[i], pl.x[i])
                 lanes_mod.load_states(buf, pl.x, pl.u, rows, m)
                 lanes_mod.rk4_lanes(buf, n_sub_max)
@@ -400,6 +426,8 @@ class RobotEngine:
         #: rows and None: no log.
         self.log_rows = no_tap(n)
         self.log: EngineLog | None = None
+        #: Both kernels fill :attr:`log_rows` (a logged run keeps the lanes).
+        self.lanes_log_rows = True
         self.err = np.zeros((n, 2), dtype=np.int64)
         self._batched = np.ones(n, dtype=bool)
         self.ptrs = np.array([[self.states.ctypes.data + j * size,
@@ -618,7 +646,7 @@ class RobotEngine:
             return advance_robot_lanes(self._counter, ticks // self.period, self.period,
                                        self.tick, self._blocks, self._sizes,
                                        self._n_sub_max, self.arrays, self.mcu, buf,
-                                       *self._taps(ticks))
+                                       *self._taps(ticks), self.log_rows)
         return advance_robot(self._counter, ticks // self.period, self.period, self.tick,
                              self._batched, self.arrays, self.mcu, self._no_rec,
                              self.log_rows)

@@ -5,6 +5,7 @@ flagged, a box of sensors that are not simulated has no empty channels."""
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import math
 
@@ -19,6 +20,7 @@ from hil.replay import signals as SG
 from hil.replay.record import run_logged
 from hil.replay.replay import replay_mcu as replay
 from hil.sim.pc import demo_pc
+from hil.sim.robot import RobotEngine
 from plant.config import load_config
 
 #: Two actuators in box 0, an IMU box (inputs only, not simulated), one actuator in box 2.
@@ -44,17 +46,38 @@ def topo(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def logs(topo, tmp_path_factory) -> dict[tuple[str, str], object]:
-    """(model, level) -> log of the same run: 0.2 s at mcu, 0.02 s at full."""
+    """(model, level) -> log of the same run: 0.2 s at mcu, 0.02 s at full. Models:
+    ``stack`` (per actuator), ``robot`` (the engine's default kernel, the plants in lanes)
+    and ``robot-scalar`` (its kernel that runs one actuator at a time)."""
     d = tmp_path_factory.mktemp("robot_logs")
     cfg = load_config(None)
     out = {}
     for level, cycles in (("mcu", 200), ("full", 20)):
-        for model in ("stack", "robot"):
+        for model in ("stack", "robot", "robot-scalar"):
             path = d / f"{model}-{level}.mcap"
-            run_logged(topo, cfg, cycles, demo_pc(400.0, 20.0), path, level=level,
-                       model=model)
+            with _kernel(lanes=model == "robot") as engines:
+                run_logged(topo, cfg, cycles, demo_pc(400.0, 20.0), path, level=level,
+                           model=model.split("-")[0])
+            # the recorder kept the kernel the run was given
+            assert [e.lanes for e in engines] == ([] if model == "stack"
+                                                  else [model == "robot"])
             out[model, level] = path
     return out
+
+
+@contextlib.contextmanager
+def _kernel(lanes: bool):
+    """Robot engines made meanwhile run the plants in lanes or not; yields them."""
+    made = []
+    init = RobotEngine.__init__
+
+    def make(self, *args, **kwargs):
+        init(self, *args, **{**kwargs, "lanes": lanes})
+        made.append(self)
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(RobotEngine, "__init__", make)
+        yield made
 
 
 def _frames(path) -> dict[str, tuple[np.ndarray, np.ndarray]]:
@@ -64,11 +87,13 @@ def _frames(path) -> dict[str, tuple[np.ndarray, np.ndarray]]:
                                                   strict=True)}
 
 
+@pytest.mark.parametrize("model", ["robot", "robot-scalar"])
 @pytest.mark.parametrize("level", ["mcu", "full"])
-def test_the_robot_engine_logs_what_the_per_actuator_path_logs(logs, level):
-    """Every channel of the engine's log holds the per-actuator path's frames, bit for bit
-    (the raw words, the traces at level full, and the decoded signals)."""
-    robot, stack = _frames(logs["robot", level]), _frames(logs["stack", level])
+def test_the_robot_engine_logs_what_the_per_actuator_path_logs(logs, level, model):
+    """Every channel of the engine's log (either kernel) holds the per-actuator path's
+    frames, bit for bit (the raw words, the traces at level full, and the decoded
+    signals)."""
+    robot, stack = _frames(logs[model, level]), _frames(logs["stack", level])
     assert set(robot) == set(stack)
     assert {"/lvds/0.1/up", "/lvds/2.0/down", "/signals/actuator/2.0"} <= set(robot)
     if level == "full":
