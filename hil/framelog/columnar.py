@@ -25,6 +25,7 @@ from google.protobuf import descriptor_pb2
 
 from hil.framelog.channel_decode import channel_decoder, channel_layout
 from hil.framelog.decoders import DecodeError, decode_block, has_decoder
+from hil.framelog.rawpb import _varint
 from hil.framelog.reader import ChannelInfo, RawChannel
 
 _FD = descriptor_pb2.FieldDescriptorProto
@@ -54,15 +55,6 @@ class Columns:
         return int(self.t_ns.shape[0])
 
 
-def _varint(n: int) -> bytes:
-    out = bytearray()
-    while True:
-        b = n & 0x7F
-        n >>= 7
-        if not n:
-            out.append(b)
-            return bytes(out)
-        out.append(b | 0x80)
 
 
 def _fixed_record(ch: ChannelInfo) -> tuple[np.dtype, list[tuple[str, bytes, bool]]] | None:
