@@ -212,6 +212,16 @@ class _Port:
         return o.ibuf[i, k, :o.ilen[i, k]].tobytes()
 
 
+def advance_boxes(engine, boxes: list) -> None:  # noqa: ANN001 (RobotEngine | None)
+    """One 1 ms cycle of every box: the whole-robot engine's one step when there is one,
+    else each box's own."""
+    if engine is not None:
+        engine.advance(CYCLE_TICKS)
+    else:
+        for box in boxes:
+            box.advance(CYCLE_TICKS)
+
+
 class ClockedBoxes:
     """The boxes of a paced ``chain`` taken off its frame path onto their own clock:
     afterwards ``chain.handle`` answers from the 3-buffers and :meth:`cycle` (one 1 ms step
@@ -247,11 +257,7 @@ class ClockedBoxes:
                 box.apply(self.obuf[i, k, :self.olen[i, k]].tobytes())
 
     def advance(self) -> None:
-        if self.engine is not None:
-            self.engine.advance(CYCLE_TICKS)
-        else:
-            for box in self.boxes:
-                box.advance(CYCLE_TICKS)
+        advance_boxes(self.engine, self.boxes)
 
     def publish_inputs(self) -> None:
         for i, box in enumerate(self.boxes):

@@ -38,9 +38,8 @@ from firmware_model.esc import compiled as ec
 from firmware_model.esc import dc_compiled as dcc
 from firmware_model.esc.compiled import EscArrays
 from firmware_model.esc.dc import DcParams
-from hil.fieldbus.box_clock import PERIOD_NS, BoxClock
+from hil.fieldbus.box_clock import PERIOD_NS, BoxClock, advance_boxes
 from hil.fieldbus.boxes import box_engine, make_box
-from hil.fieldbus.chain import CYCLE_TICKS
 from hil.fieldbus.esc import frames as esc_frames
 from hil.fieldbus.esc.mailbox import Mailboxes
 from hil.fieldbus.esc.slaves import describe_all
@@ -94,11 +93,7 @@ class ServedChain:
                 box.apply(self.mailboxes.expand(i, out))
 
     def advance(self) -> None:
-        if self.engine is not None:
-            self.engine.advance(CYCLE_TICKS)
-        else:
-            for box in self.boxes:
-                box.advance(CYCLE_TICKS)
+        advance_boxes(self.engine, self.boxes)
 
     def publish_inputs(self) -> None:
         for i, box in enumerate(self.boxes):
