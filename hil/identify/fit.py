@@ -223,13 +223,15 @@ class OutputErrorFit:
                 return (self._stack(self._to_theta(xx, free, theta0), sigma, mask, z)
                         - r0) / steps[i]
 
-            out = np.empty((r0.size, x.size))
+            # one row per column, then one transposing copy: writing each column into
+            # the (rows x columns) array strides across all of it once per column
+            out_t = np.empty((x.size, r0.size))
 
             def fill(i: int) -> None:
-                out[:, i] = column(i)
+                out_t[i] = column(i)
 
             list(map_threads(fill, range(x.size)))
-            return out
+            return np.ascontiguousarray(out_t.T)
 
         return fun, jac
 

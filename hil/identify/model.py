@@ -358,12 +358,15 @@ def sensor_lags(ys: list[np.ndarray], tau: float, dt: float, n_valid: int | None
     transform (the four pressure sensors share theirs: a third of a simulation's cost)."""
     size = ys[0].size
     n = size if n_valid is None else max(2, min(n_valid, size))
-    heads = np.stack([y[:n] for y in ys])
-    if not np.all(np.isfinite(heads)):
+    ext = np.empty((len(ys), 2 * n))
+    for i, y in enumerate(ys):
+        ext[i, :n] = y[:n]
+        ext[i, n:] = ext[i, n - 1::-1]
+    if not np.all(np.isfinite(ext[:, :n])):
         return [_sensor_lag_foh(y, tau, dt) for y in ys]
-    ext = np.concatenate([heads, heads[:, ::-1]], axis=1)
-    filtered = np.fft.irfft(np.fft.rfft(ext, axis=1) * _lag_response(ext.shape[1], tau, dt),
-                            ext.shape[1], axis=1)
+    spec = np.fft.rfft(ext, axis=1)
+    spec *= _lag_response(ext.shape[1], tau, dt)
+    filtered = np.fft.irfft(spec, ext.shape[1], axis=1)
     out = []
     for i, y in enumerate(ys):
         if n == size:  # the whole signal filtered (a head handed over as such)
@@ -539,7 +542,14 @@ class FastModel:
         def side(force: np.ndarray, sign: float) -> np.ndarray:
             key = (id(force), sign)
             if key not in sides:
-                sides[key] = pre + np.maximum(sign * force, 0.0) / c.kc
+                # pre + max(sign force, 0) / k_c, in one array (a simulation's outputs are a
+                # fifth of its time)
+                y = np.maximum(force, 0.0) if sign > 0 else np.negative(force)
+                if sign < 0:
+                    np.maximum(y, 0.0, out=y)
+                y /= c.kc
+                y += pre
+                sides[key] = y
             return sides[key]
 
         for ch in exp.channels:
