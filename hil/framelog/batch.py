@@ -69,6 +69,7 @@ def supported(w: Writer) -> bool:
             and hasattr(stats, "channel_message_counts") and hasattr(stats, "message_count")
             and isinstance(getattr(cb, "message_indices", None), dict)
             and hasattr(cb, "num_messages") and hasattr(getattr(rw, "_buffer", None), "write")
+            and isinstance(getattr(w, "_Writer__chunk_size", None), int)
             and callable(getattr(w, "_Writer__maybe_finalize_chunk", None)))
 
 
@@ -146,3 +147,54 @@ def add_messages(w: Writer, channel_id: int, times: Sequence[int] | np.ndarray,
     cb.num_messages += n
     cb.record_writer._buffer.write(blob)  # noqa: SLF001
     w._Writer__maybe_finalize_chunk()  # noqa: SLF001
+
+
+#: The MCAP Message record's head as numpy fields: what :func:`add_records` fills in
+#: front of the payload fields of a record array.
+HEAD_FIELDS = [("op", "u1"), ("len", "<u8"), ("ch", "<u2"), ("seq", "<u4"), ("log", "<u8"),
+               ("pub", "<u8")]
+
+
+def add_records(w: Writer, channel_ids: Sequence[int], log_ns: int, publish_ns: int,
+                seqs: Sequence[int], rec: np.ndarray) -> None:
+    """One message on each channel of ``channel_ids``, all at ``log_ns`` / ``publish_ns``,
+    with sequence ``seqs[i]``: ``rec[i]`` is the whole record, a structured array whose
+    fields start with :data:`HEAD_FIELDS` (filled here) and go on with the payload (filled
+    by the caller, e.g. :func:`hil.framelog.rawpb.pack_blocks`). As ``add_message`` per
+    channel, with no bytes object per message: the records go into the chunk buffer
+    straight from the array, in slices that keep a chunk near its size."""
+    n = len(channel_ids)
+    if not n:
+        return
+    rec["op"] = Opcode.MESSAGE
+    rec["len"] = rec.dtype.itemsize - 9
+    rec["ch"] = channel_ids
+    rec["seq"] = np.asarray(seqs, dtype=np.int64) & 0xFFFFFFFF
+    rec["log"] = log_ns
+    rec["pub"] = publish_ns
+    stats = w._Writer__statistics  # noqa: SLF001 - see the module docstring
+    cb = w._Writer__chunk_builder  # noqa: SLF001
+    if stats.message_count == 0:
+        stats.message_start_time = log_ns
+    else:
+        stats.message_start_time = min(log_ns, stats.message_start_time)
+    stats.message_end_time = max(log_ns, stats.message_end_time)
+    stats.message_count += n
+    per = max(1, w._Writer__chunk_size // rec.dtype.itemsize)  # noqa: SLF001
+    for lo in range(0, n, per):
+        part = rec[lo:lo + per]
+        if cb.num_messages == 0:
+            cb.message_start_time = log_ns
+        else:
+            cb.message_start_time = min(cb.message_start_time, log_ns)
+        cb.message_end_time = max(cb.message_end_time, log_ns)
+        base = cb.record_writer.count
+        for j, cid in enumerate(channel_ids[lo:lo + per]):
+            stats.channel_message_counts[cid] += 1
+            index = cb.message_indices.get(cid)
+            if index is None:
+                index = cb.message_indices[cid] = _MessageIndex(channel_id=cid, records=[])
+            index.records.append((log_ns, base + j * rec.dtype.itemsize))
+        cb.num_messages += len(part)
+        cb.record_writer._buffer.write(part.view(np.uint8))  # noqa: SLF001
+        w._Writer__maybe_finalize_chunk()  # noqa: SLF001
