@@ -32,6 +32,7 @@ from mcap.records import MessageIndex, Opcode
 from mcap.writer import Writer
 
 _HEAD = struct.Struct("<BQHIQQ")  # opcode, record length, channel, sequence, log, publish
+_INDEX_HEAD = struct.Struct("<BQHI")  # opcode, record length, channel, bytes of entries
 
 
 class _MessageIndex(MessageIndex):
@@ -40,7 +41,8 @@ class _MessageIndex(MessageIndex):
 
     def write(self, stream) -> None:  # noqa: ANN001 - mcap's RecordBuilder
         # ``records`` holds (time, offset) pairs and, from :func:`add_messages`, (n, 2)
-        # arrays of them: one array each run of either, in order
+        # arrays of them: one array each run of either, in order; the record goes out in
+        # one write (the library's start/finish_record seek back to patch the length)
         parts, pairs = [], []
         for r in self.records:
             if isinstance(r, np.ndarray):
@@ -52,12 +54,10 @@ class _MessageIndex(MessageIndex):
                 pairs.append(r)
         if pairs:
             parts.append(np.asarray(pairs, dtype="<u8").reshape(-1, 2))
-        data = np.concatenate(parts).astype("<u8") if parts else np.zeros((0, 2), "<u8")
-        stream.start_record(Opcode.MESSAGE_INDEX)
-        stream.write2(self.channel_id)
-        stream.write4(len(data) * 16)
-        stream.write(data.tobytes())
-        stream.finish_record()
+        body = (np.concatenate(parts).astype("<u8", copy=False).tobytes() if len(parts) > 1
+                else parts[0].astype("<u8", copy=False).tobytes() if parts else b"")
+        stream.write(_INDEX_HEAD.pack(Opcode.MESSAGE_INDEX, 6 + len(body), self.channel_id,
+                                      len(body)) + body)
 
 
 def supported(w: Writer) -> bool:
@@ -155,46 +155,60 @@ HEAD_FIELDS = [("op", "u1"), ("len", "<u8"), ("ch", "<u2"), ("seq", "<u4"), ("lo
                ("pub", "<u8")]
 
 
-def add_records(w: Writer, channel_ids: Sequence[int], log_ns: int, publish_ns: int,
-                seqs: Sequence[int], rec: np.ndarray) -> None:
-    """One message on each channel of ``channel_ids``, all at ``log_ns`` / ``publish_ns``,
-    with sequence ``seqs[i]``: ``rec[i]`` is the whole record, a structured array whose
-    fields start with :data:`HEAD_FIELDS` (filled here) and go on with the payload (filled
-    by the caller, e.g. :func:`hil.framelog.rawpb.pack_blocks`). As ``add_message`` per
-    channel, with no bytes object per message: the records go into the chunk buffer
-    straight from the array, in slices that keep a chunk near its size."""
-    n = len(channel_ids)
-    if not n:
+def add_records(w: Writer, channel_ids: Sequence[int], log_ns: np.ndarray,
+                publish_ns: np.ndarray, seqs: Sequence[int], rec: np.ndarray) -> None:
+    """``k`` messages on each channel of ``channel_ids`` (``c`` of them), channel-major:
+    ``rec`` ((c * k,) structured, fields starting with :data:`HEAD_FIELDS`, filled here;
+    the payload after them filled by the caller, e.g.
+    :func:`hil.framelog.rawpb.pack_blocks`) holds channel ``j``'s records at
+    ``[j * k, (j + 1) * k)``, at log times ``log_ns`` and publish times ``publish_ns``
+    ((k,) each, the same for every channel), sequences from ``seqs[j]`` on. As
+    ``add_message`` per message, with no bytes object each: the records go into the chunk
+    buffer straight from the array, a slice of channels at a time that keeps a chunk near
+    its size."""
+    c = len(channel_ids)
+    if not c:
         return
+    k = len(rec) // c
+    log = np.asarray(log_ns, dtype=np.int64)
+    pub = np.asarray(publish_ns, dtype=np.int64)
+    size = rec.dtype.itemsize
     rec["op"] = Opcode.MESSAGE
-    rec["len"] = rec.dtype.itemsize - 9
-    rec["ch"] = channel_ids
-    rec["seq"] = np.asarray(seqs, dtype=np.int64) & 0xFFFFFFFF
-    rec["log"] = log_ns
-    rec["pub"] = publish_ns
+    rec["len"] = size - 9
+    recs = rec.reshape(c, k)
+    recs["ch"] = np.asarray(channel_ids)[:, None]
+    recs["seq"] = (np.asarray(seqs, dtype=np.int64)[:, None] + np.arange(k)) & 0xFFFFFFFF
+    recs["log"] = log
+    recs["pub"] = pub
+    t_first, t_last = int(log.min()), int(log.max())
     stats = w._Writer__statistics  # noqa: SLF001 - see the module docstring
     cb = w._Writer__chunk_builder  # noqa: SLF001
     if stats.message_count == 0:
-        stats.message_start_time = log_ns
+        stats.message_start_time = t_first
     else:
-        stats.message_start_time = min(log_ns, stats.message_start_time)
-    stats.message_end_time = max(log_ns, stats.message_end_time)
-    stats.message_count += n
-    per = max(1, w._Writer__chunk_size // rec.dtype.itemsize)  # noqa: SLF001
-    for lo in range(0, n, per):
-        part = rec[lo:lo + per]
+        stats.message_start_time = min(t_first, stats.message_start_time)
+    stats.message_end_time = max(t_last, stats.message_end_time)
+    stats.message_count += c * k
+    step = np.arange(k, dtype=np.uint64) * size
+    times = log.astype(np.uint64)
+    per = max(1, w._Writer__chunk_size // (size * k))  # noqa: SLF001 - channels a slice
+    for lo in range(0, c, per):
+        part = rec[lo * k:(lo + per) * k]
         if cb.num_messages == 0:
-            cb.message_start_time = log_ns
+            cb.message_start_time = t_first
         else:
-            cb.message_start_time = min(cb.message_start_time, log_ns)
-        cb.message_end_time = max(cb.message_end_time, log_ns)
+            cb.message_start_time = min(cb.message_start_time, t_first)
+        cb.message_end_time = max(cb.message_end_time, t_last)
         base = cb.record_writer.count
         for j, cid in enumerate(channel_ids[lo:lo + per]):
-            stats.channel_message_counts[cid] += 1
+            stats.channel_message_counts[cid] += k
             index = cb.message_indices.get(cid)
-            if index is None:
-                index = cb.message_indices[cid] = _MessageIndex(channel_id=cid, records=[])
-            index.records.append((log_ns, base + j * rec.dtype.itemsize))
+            if not isinstance(index, _MessageIndex):  # none yet, or the library's own
+                index = cb.message_indices[cid] = _MessageIndex(
+                    channel_id=cid, records=list(index.records) if index else [])
+            at = base + j * k * size
+            index.records.append((int(log[0]), at) if k == 1 else
+                                 np.stack([times, at + step], axis=1))
         cb.num_messages += len(part)
         cb.record_writer._buffer.write(part.view(np.uint8))  # noqa: SLF001
         w._Writer__maybe_finalize_chunk()  # noqa: SLF001

@@ -459,10 +459,46 @@ class FrameLogWriter:
         for c in sorted(chs, key=lambda c: -c.last_ns):  # a channel that would raise first
             self._advance(c, first, last)
         rec = rawpb.pack_blocks(t, f, ch0.dtype, batch.HEAD_FIELDS)
-        batch.add_records(self._writer, channel_ids, first, last, [c.count for c in chs],
+        batch.add_records(self._writer, channel_ids, t[:1], t[-1:], [c.count for c in chs],
                           rec)
         for c in chs:
             c.count += 1
+
+    def write_messages_many(self, channel_ids: list[int], t_ns: np.ndarray,
+                            messages: np.ndarray) -> None:
+        """:meth:`write_messages` of ``messages[j]`` ((k, size) uint8: messages of one
+        length) on ``channel_ids[j]`` for every ``j``, all at the times ``t_ns`` (k,): e.g.
+        every actuator's decoded signals of a block. The same messages, built as one
+        record array and put into the chunk from it (:func:`batch.add_records`)."""
+        chs = [self._channel(c) for c in channel_ids]
+        m = np.asarray(messages)
+        if m.ndim != 3 or m.dtype != np.uint8 or len(m) != len(chs):
+            raise ValueError(f"need messages (channels, n, size) uint8 for {len(chs)} "
+                             f"channels, got {m.shape} {m.dtype}")
+        if any(c.block or c.wrap is not None for c in chs) or not self._fast:
+            for c, part in zip(channel_ids, m, strict=True):
+                self.write_messages(c, t_ns, part)
+            return
+        t = np.asarray(t_ns)
+        if t.ndim != 1 or t.shape[0] != m.shape[1] or t.dtype.kind not in "iu":
+            raise ValueError(f"{chs[0].topic}...: need (n,) integer times for "
+                             f"{m.shape[1]} messages, got {t.shape} {t.dtype}")
+        if not len(t) or not chs:
+            return
+        times = t.astype(np.int64)
+        if times[0] < 0 or (len(times) > 1 and bool(np.any(times[1:] < times[:-1]))):
+            raise ValueError(f"{chs[0].topic}: message times must be >= 0 and "
+                             "non-decreasing")
+        first, last = int(times[0]), int(times[-1])
+        for c in sorted(chs, key=lambda c: -c.last_ns):  # a channel that would raise first
+            self._advance(c, first, last)
+        c_n, k, size = m.shape
+        rec = np.zeros(c_n * k, np.dtype([*batch.HEAD_FIELDS, ("data", "u1", (size,))]))
+        rec["data"] = m.reshape(c_n * k, size)
+        batch.add_records(self._writer, channel_ids, times, times, [c.count for c in chs],
+                          rec)
+        for c in chs:
+            c.count += k
 
     def write_messages(self, channel_id: int, t_ns: np.ndarray,
                        messages: list[bytes] | np.ndarray) -> None:

@@ -126,3 +126,39 @@ def test_blocks_of_many_channels_make_the_same_file(tmp_path, chunk_size: int) -
         c = w.add_block_channel("/u", "eha-hil/mcu-up", dtype=np.uint16, width=34)
         with pytest.raises(ValueError, match="fit"):
             w.write_blocks([c], t[0], np.full((1, 20, 34), 70000))
+
+
+@pytest.mark.parametrize("chunk_size", [500, 1 << 20])
+def test_messages_of_many_channels_make_the_same_file(tmp_path, chunk_size: int) -> None:  # noqa: ANN001
+    """FrameLogWriter.write_messages_many writes what write_messages writes one channel at
+    a time (the very file when no chunk closes inside a batch)."""
+    import numpy as np
+
+    from hil.framelog import FrameLogWriter
+    from hil.framelog.protobuf import Field, MessageType
+
+    msg = MessageType("t.M", [Field("a", "double"), Field("b", "fixed32")])
+    rng = np.random.default_rng(2)
+    blocks = [(np.sort(rng.integers(0, 50, 6)) + 100 * blk,
+               msg.encode_array({"a": rng.normal(size=24), "b": rng.integers(0, 9, 24)},
+                                24).reshape(4, 6, -1)) for blk in range(3)]
+    files = []
+    for many in (True, False):
+        path = tmp_path / f"{many}.mcap"
+        with FrameLogWriter(path, chunk_size=chunk_size, compression="none") as w:
+            chs = [w.add_protobuf_channel(f"/s{i}", msg) for i in range(4)]
+            for t, m in blocks:
+                if many:
+                    w.write_messages_many(chs, t, m)
+                else:
+                    for i, c in enumerate(chs):
+                        w.write_messages(c, t, m[i])
+        files.append(path.read_bytes())
+    if chunk_size > 1000:
+        assert files[0] == files[1]
+    got = []
+    for f in files:
+        reader = make_reader(io.BytesIO(f), validate_crcs=True)
+        got.append(sorted((c.topic, m.log_time, m.sequence, m.data)
+                          for _, c, m in reader.iter_messages()))
+    assert got[0] == got[1] and len(got[0]) == 72
