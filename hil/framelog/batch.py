@@ -33,6 +33,7 @@ from mcap.writer import Writer
 
 _HEAD = struct.Struct("<BQHIQQ")  # opcode, record length, channel, sequence, log, publish
 _INDEX_HEAD = struct.Struct("<BQHI")  # opcode, record length, channel, bytes of entries
+_PAIR = struct.Struct("<QQ")  # an index entry: log time, offset in the chunk
 
 
 class _MessageIndex(MessageIndex):
@@ -43,8 +44,16 @@ class _MessageIndex(MessageIndex):
         # ``records`` holds (time, offset) pairs and, from :func:`add_messages`, (n, 2)
         # arrays of them: one array each run of either, in order; the record goes out in
         # one write (the library's start/finish_record seek back to patch the length)
+        recs = self.records
+        if len(recs) == 1:  # the common case: a channel's one block or batch in a chunk
+            r = recs[0]
+            body = _PAIR.pack(*r) if isinstance(r, tuple) else \
+                r.astype("<u8", copy=False).tobytes()
+            stream.write(_INDEX_HEAD.pack(Opcode.MESSAGE_INDEX, 6 + len(body),
+                                          self.channel_id, len(body)) + body)
+            return
         parts, pairs = [], []
-        for r in self.records:
+        for r in recs:
             if isinstance(r, np.ndarray):
                 if pairs:
                     parts.append(np.asarray(pairs, dtype="<u8").reshape(-1, 2))
