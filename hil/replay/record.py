@@ -448,17 +448,19 @@ def run_logged(topo: Topology, cfg: Config, cycles: int, pc: Callable[[int, Mast
                 log.add_metadata("eha-hil.replay",
                                  replay_metadata(topo, cfg, boxes, model, cycles))
             step = max(cycles // 20, 1)
-            rec = None
+            parts: list[BusRecord] = []
             done = 0
             while done < cycles:
                 n = min(step, cycles - done)
-                part = bs.run(n, pc_signals)
-                rec = part if rec is None else BusRecord(
-                    np.concatenate([rec.inputs, part.inputs]), part.master, part.chain,
-                    part.transport, part.faults)
+                parts.append(bs.run(n, pc_signals))
                 done += n
                 if progress:
                     progress(done, cycles)
+            rec = None
+            if parts:  # the input images of every part, joined once
+                last = parts[-1]
+                rec = BusRecord(np.concatenate([p.inputs for p in parts]), last.master,
+                                last.chain, last.transport, last.faults)
             bus_sig.end_cycle()
             bus_sig.flush()
             flush_frames()
