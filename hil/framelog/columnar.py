@@ -147,45 +147,59 @@ def _dense(cols: dict[str, np.ndarray]) -> tuple[dict[str, np.ndarray],
     out = {}
     for k, v in cols.items():
         v = np.asarray(v)
-        out[k] = v.astype(np.float64) if v.dtype.kind == "f" else v.astype(np.int64)
+        out[k] = v.astype(np.float64 if v.dtype.kind == "f" else np.int64, copy=False)
     return out, dict.fromkeys(out)
 
 
-def decode_channel(ch: ChannelInfo, raw: RawChannel) -> Columns:
-    """The columns of one channel's frames (:class:`Columns`). DecodeError if the channel's
+class ChannelDecoding:
+    """How one channel's frames become columns, set up once (its decoder, its byte
+    layout, its protobuf record) for any number of batches of its frames: calling it
+    with a :class:`RawChannel` gives their :class:`Columns`. DecodeError if the channel's
     schema cannot be used at all; a frame that does not decode is an error row."""
-    dec = channel_decoder(ch)
-    res = Columns(ch.topic, raw.t_ns, raw.seq, raw.row, {}, {}, dict(dec.units))
-    n = len(raw.t_ns)
-    if raw.frames is not None:
-        cols = decode_block(ch.encoding, raw.frames) if has_decoder(ch.encoding) else None
-        if cols is None and not has_decoder(ch.encoding):
-            lay = channel_layout(ch)
-            if lay is not None and raw.frames.nbytes == n * lay.size:
+
+    def __init__(self, ch: ChannelInfo) -> None:
+        self.ch = ch
+        self.dec = channel_decoder(ch)
+        self.registered = has_decoder(ch.encoding)
+        self.layout = None if self.registered else channel_layout(ch)
+
+    def __call__(self, raw: RawChannel) -> Columns:
+        ch, dec = self.ch, self.dec
+        res = Columns(ch.topic, raw.t_ns, raw.seq, raw.row, {}, {}, dict(dec.units))
+        n = len(raw.t_ns)
+        if raw.frames is not None:
+            cols = decode_block(ch.encoding, raw.frames) if self.registered else None
+            lay = self.layout
+            if cols is None and lay is not None and raw.frames.nbytes == n * lay.size:
                 cols = lay.decode(raw.frames)
-        if cols is not None:
-            res.columns, res.valid = _dense(cols)
-            res.fixed = True
-            return res
-        payloads = [r.tobytes() for r in raw.frames]
-    else:
-        payloads = raw.payloads or []
-        if dec.how == "protobuf":
-            cols = _protobuf_fast(ch, payloads)
             if cols is not None:
                 res.columns, res.valid = _dense(cols)
                 res.fixed = True
                 return res
-    rows: list[dict[str, object]] = []
-    errors: list[str | None] = []
-    for p in payloads:
-        try:
-            rows.append(dict(dec.decode(bytes(p))))
-            errors.append(None)
-        except DecodeError as exc:
-            rows.append({})
-            errors.append(str(exc))
-    res.columns, res.valid = _from_dicts(rows)
-    if any(e is not None for e in errors):
-        res.errors = errors
-    return res
+            payloads = [r.tobytes() for r in raw.frames]
+        else:
+            payloads = raw.payloads or []
+            if dec.how == "protobuf":
+                cols = _protobuf_fast(ch, payloads)
+                if cols is not None:
+                    res.columns, res.valid = _dense(cols)
+                    res.fixed = True
+                    return res
+        rows: list[dict[str, object]] = []
+        errors: list[str | None] = []
+        for p in payloads:
+            try:
+                rows.append(dict(dec.decode(bytes(p))))
+                errors.append(None)
+            except DecodeError as exc:
+                rows.append({})
+                errors.append(str(exc))
+        res.columns, res.valid = _from_dicts(rows)
+        if any(e is not None for e in errors):
+            res.errors = errors
+        return res
+
+
+def decode_channel(ch: ChannelInfo, raw: RawChannel) -> Columns:
+    """The columns of one channel's frames (:class:`Columns`, :class:`ChannelDecoding`)."""
+    return ChannelDecoding(ch)(raw)

@@ -33,14 +33,14 @@ from collections.abc import Iterator, Sequence
 
 import numpy as np
 
-from hil.framelog.columnar import Columns, decode_channel
+from hil.framelog.columnar import ChannelDecoding, Columns
 from hil.framelog.decoders import DecodeError
 from hil.framelog.reader import ChannelInfo, FrameLogError, FrameLogReader, LogInfo, RawChannel
 
 #: Frame bytes read per batch: bounds what one batch holds (raw and decoded).
 BATCH_BYTES = 16 << 20
 #: Rows that wait before a window is handed on (fewer, larger windows cost fewer calls).
-WINDOW_ROWS = 1 << 16
+WINDOW_ROWS = 1 << 18
 _INT64_MAX = (1 << 63) - 1
 _NONE = (1 << 64, 0)
 
@@ -67,6 +67,8 @@ class Plan:
         self.selected = list(dict.fromkeys(topics)) if topics else None
         self.stream = True
         self.big = False  # known after the planning pass: times as uint64 then
+        self._decoding: dict[str, ChannelDecoding] = {}
+        self._keys: dict[str, tuple] = {}
         first: dict[str, tuple[int, int]] = {}
         cols: dict[str, dict[str, str]] = {}
         units: dict[str, dict[str, str]] = {}
@@ -135,6 +137,16 @@ class Plan:
         self.topics = order
         self.index = {t: i for i, t in enumerate(order)}
 
+    def key_of(self, c: Columns) -> tuple:
+        """A channel's columns as ((position, dtype kind), ...): channels with the same
+        key are written as one group (a fixed channel's is made once)."""
+        key = self._keys.get(c.topic) if c.fixed else None
+        if key is None:
+            key = tuple(sorted((self.where[k], v.dtype.kind) for k, v in c.columns.items()))
+            if c.fixed:
+                self._keys[c.topic] = key
+        return key
+
     def names(self) -> list[str]:
         return [*self.columns] + (["decode_error"] if self.errors else [])
 
@@ -142,7 +154,10 @@ class Plan:
         """One batch of one channel's frames as columns (only frames with one of the
         selected fields, and those columns, if fields were given)."""
         try:
-            c = decode_channel(self.infos[topic], raw)
+            how = self._decoding.get(topic)
+            if how is None or how.ch is not self.infos[topic]:
+                how = self._decoding[topic] = ChannelDecoding(self.infos[topic])
+            c = how(raw)
         except DecodeError as exc:
             raise FrameLogError(f"{self.log_path}: {exc}") from None
         if self.big and c.t_ns.dtype != np.uint64:
@@ -184,13 +199,33 @@ class Plan:
                 continue
             open_ = [b for b, g, m in zip(bound, got, total, strict=True)
                      if g < m and b is not None]
-            w = self._release(pending, min(open_) if open_ else None)
+            for cut in self._cuts(pending, min(open_) if open_ else None):
+                w = self._release(pending, cut)
+                if w is not None:
+                    waiting -= w.frames
+                    yield w
+        for cut in self._cuts(pending, None) if self.stream else [None]:
+            w = self._release(pending, cut)
             if w is not None:
-                waiting -= w.frames
                 yield w
-        w = self._release(pending, None)
-        if w is not None:
-            yield w
+
+    @staticmethod
+    def _cuts(pending: list[list[RawChannel]], upto: int | None) -> list[int | None]:
+        """Times that split the pending frames up to ``upto`` (None: all) into windows of
+        about :data:`WINDOW_ROWS` frames (a slow channel may hold back many), from every
+        16th frame's time; the last is ``upto``."""
+        every = 16
+        ts = []
+        for parts in pending:
+            for r in parts:
+                k = len(r.t_ns) if upto is None else int(np.searchsorted(r.t_ns, upto, "right"))
+                ts.append(r.t_ns[:k:every])
+        if not ts:
+            return [upto]
+        sample = np.sort(np.concatenate(ts))
+        step = max(WINDOW_ROWS // every, 1)
+        cuts = np.unique(sample[step::step]).tolist()
+        return [c for c in cuts if upto is None or c < upto] + [upto]
 
     def _check_planned(self, c: Columns) -> None:
         for k, v in c.columns.items():
@@ -204,20 +239,22 @@ class Plan:
         out: list[tuple[int, Columns]] = []
         frames = 0
         for i, parts in enumerate(pending):
-            if not parts:
+            take: list[RawChannel] = []
+            while parts:  # whole parts, then the one the time falls in (views, no copy)
+                r = parts[0]
+                n = len(r.t_ns)
+                k = n if upto is None else int(np.searchsorted(r.t_ns, upto, side="right"))
+                if k == n:
+                    take.append(parts.pop(0))
+                    continue
+                if k:
+                    take.append(_raw_slice(r, slice(0, k)))
+                    parts[0] = _raw_slice(r, slice(k, None))
+                break
+            if not take:
                 continue
-            raw = _raw_concat(parts)
-            n = len(raw.t_ns)
-            k = n if upto is None else int(np.searchsorted(raw.t_ns, upto, side="right"))
-            if not k:
-                parts[:] = [raw]
-                continue
-            if k == n:
-                parts.clear()
-            else:
-                parts[:] = [_raw_slice(raw, slice(k, None))]
-                raw = _raw_slice(raw, slice(0, k))
-            frames += k
+            raw = _raw_concat(take)
+            frames += len(raw.t_ns)
             c = self.decode(self.topics[i], raw)
             self._check_planned(c)
             if c.n:
@@ -251,10 +288,9 @@ class Window:
 
     def __init__(self, plan: Plan, parts: list[tuple[int, Columns]], frames: int) -> None:
         self.frames = frames  # frames read, with those left out by a field selection
-        where = plan.where
         keys: dict[tuple, list[tuple[int, Columns]]] = {}
         for i, c in parts:
-            key = tuple(sorted((where[k], v.dtype.kind) for k, v in c.columns.items()))
+            key = plan.key_of(c)
             keys.setdefault(key, []).append((i, c))
         self.groups: list[Group] = []
         start = 0
