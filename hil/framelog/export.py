@@ -26,6 +26,8 @@ _MAX_META_SHOWN = 60
 #: Rows per Parquet row group / per batch of CSV text: bounds the memory of the output;
 #: smaller costs more calls per group and column.
 _SLICE_ROWS = 1 << 15
+#: Rows per Parquet row group: the writer's work per column chunk is paid per group
+_PARQUET_ROWS = 1 << 16
 
 
 def _fmt_s(t_ns: int | None) -> str:
@@ -133,17 +135,21 @@ def _group_lines(plan: Plan, win: Window, g: Group, r: np.ndarray, topics):  # n
     return line if tail is not None else pc.binary_join_element_wise(line, "", "\n")
 
 
-def _parquet_batches(plan: Plan, win: Window, schema, topics, size: int = _SLICE_ROWS):  # noqa: ANN001, ANN202
-    """The Parquet record batches of ``win``, a slice of rows each. A column is built from
-    the groups that have it, straight into Arrow's buffers (values and validity bitmap):
-    a group's rows share one bitmap, so each column costs a fill and a scatter of the
-    values it has, not a pass per group and row."""
+def _parquet_batches(plan: Plan, win: Window, schema, topics,  # noqa: ANN001, ANN202
+                     scratch: np.ndarray | None = None, size: int = _PARQUET_ROWS):
+    """The Parquet record batches of ``win``, a slice of rows each, each to be written
+    before the next is asked for. A column is built from the groups that have it, straight
+    into Arrow's buffers: its values scattered into a row of ``scratch`` ((columns, size)
+    int64, reused from slice to slice: fresh memory each time costs a page fault per 4
+    kB), its validity a bitmap shared by the columns of the same groups."""
     import pyarrow as pa
 
     by_col: dict[str, list[int]] = {}
     for i, g in enumerate(win.groups):
         for k in g.columns:
             by_col.setdefault(k, []).append(i)
+    if scratch is None or scratch.shape[1] < size:
+        scratch = np.empty((len(plan.columns), size), np.int64)
     for idx, pos, rows in win.parts(size):
         m = len(idx)
         t_ns = win.t_ns[idx]
@@ -151,14 +157,16 @@ def _parquet_batches(plan: Plan, win: Window, schema, topics, size: int = _SLICE
                   pa.array(t_ns.astype(np.float64) / 1e9, pa.float64()),
                   pa.DictionaryArray.from_arrays(pa.array(win.src[idx], pa.int32()), topics)]
         bitmaps: dict[tuple[int, ...], tuple[object, int]] = {}
-        for name in plan.columns:
+        for j, name in enumerate(plan.columns):
             have = tuple(i for i in by_col.get(name, ()) if len(pos[i]))
             floating = name in plan.floats
             typ = pa.float64() if floating else pa.int64()
             if not have:
                 arrays.append(pa.nulls(m, typ))
                 continue
-            vals = np.zeros(m, np.float64 if floating else np.int64)
+            # a row of the scratch buffer: the writer has encoded the last slice when
+            # this one is filled; what stays under a null is never read
+            vals = scratch[j, :m].view(np.float64) if floating else scratch[j, :m]
             own = any(win.groups[i].valid[name] is not None for i in have)
             ok = np.zeros(m, bool) if own else None
             for i in have:
@@ -285,8 +293,9 @@ def export_parquet(log_path: str | os.PathLike[str], out_path: str | os.PathLike
     ``t_s`` (float64), ``topic`` (dictionary), then one per field (int64 or float64, null
     where a frame has no such field); each field's unit in its column metadata (``unit``),
     the log's path in the file metadata (``eha-hil.source``). One row group per slice of
-    rows; LZ4-compressed pages, dictionary encoding for ``topic`` only (the fields' values
-    rarely repeat enough to pay for it). Returns the number of rows."""
+    rows; Snappy-compressed pages, dictionary encoding for ``topic`` only (the fields' values
+    rarely repeat enough to pay for it), statistics for the time and topic columns only
+    (what a reader filters row groups by). Returns the number of rows."""
     import pyarrow as pa
     import pyarrow.parquet as pq
 
@@ -308,10 +317,12 @@ def export_parquet(log_path: str | os.PathLike[str], out_path: str | os.PathLike
         names = pa.array(plan.topics, pa.string())
         rows = 0
         try:
-            with pq.ParquetWriter(out_path, schema, compression="lz4",
-                                  use_dictionary=["topic"]) as w:
+            scratch = np.empty((len(plan.columns), _PARQUET_ROWS), np.int64)
+            with pq.ParquetWriter(out_path, schema, compression="snappy",
+                                  use_dictionary=["topic"],
+                                  write_statistics=["t_ns", "t_s", "topic"]) as w:
                 for win in plan.windows():
-                    for batch in _parquet_batches(plan, win, schema, names):
+                    for batch in _parquet_batches(plan, win, schema, names, scratch):
                         w.write_batch(batch)
                     rows += win.rows
                 if not rows:
