@@ -85,7 +85,17 @@ ACTUATOR = MessageType(f"{PACKAGE}.ActuatorSignals", (
           "(docs/framelog.md)"),
     Field("v_piston_valid", "bool", "",
           "false: the speed's difference has a torn position at one end"),
+    Field("upstream_valid", "bool", "",
+          "false: no upstream sweep of the board has reached the MCU yet (its words all 0): "
+          "the values read from the board are NaN"),
 ), "one actuator, each MCU step")
+
+#: The fields of :data:`ACTUATOR` read from the board (upstream words) as doubles: NaN
+#: while no upstream sweep has reached the MCU (0 V through the MCU's formulas is not a
+#: measurement: -3 MPa, -20.5 degC, the piston 42 mm off).
+UPSTREAM_DOUBLES = (*(f for _, f in _ANALOG), "f_pressure_n", "f_strain_n", "x_piston_m",
+                    "v_piston_m_s", "omega_m_rad_s", "iq_a", "id_a", "ia_a", "ib_a", "vd_v",
+                    "vq_v")
 
 _UNFITTED_SUFFIX = "_no_"
 
@@ -279,17 +289,19 @@ def actuator_columns(cal: FirmwareCalibration, up: np.ndarray, down: np.ndarray,
 @dataclass
 class PistonCarry:
     """What the decoding of one block of MCU steps leaves for the next, per actuator: the
-    last piston position (m, NaN: none yet), its count, its tear offset and validity."""
+    last piston position (m, NaN: none yet), its count, its tear offset and validity, and
+    whether an upstream sweep of the board has reached the MCU."""
 
     x: np.ndarray
     count: np.ndarray | None
     offset: np.ndarray
     valid: np.ndarray
+    started: np.ndarray
 
     @classmethod
     def start(cls, actuators: int) -> PistonCarry:
         return cls(np.full(actuators, math.nan), None, np.zeros(actuators, np.int64),
-                   np.ones(actuators, bool))
+                   np.ones(actuators, bool), np.zeros(actuators, bool))
 
 
 def actuator_block(cal: FirmwareCalibration, up: np.ndarray, down: np.ndarray, every: int,
@@ -308,8 +320,12 @@ def actuator_block(cal: FirmwareCalibration, up: np.ndarray, down: np.ndarray, e
     counts = piston_counts(up)
     before = counts[:, 0] if carry.count is None else carry.count
     off = tear_offsets(counts, before, carry.offset)
-    valid = off == 0
-    x = measure.piston_x(counts, cal)
+    # the MCU's memory is 0 until the board's first upstream sweep reaches it; the sweep
+    # ends with the board's tick counter, then non-zero (and the piston read after it is
+    # a real jump from 0, not a tear)
+    started = carry.started[:, None] | (np.cumsum(up[:, :, B.U_TICK] != 0, axis=1) > 0)
+    valid = (off == 0) & started
+    x = np.where(started, measure.piston_x(counts, cal), math.nan)
     x_before = np.concatenate([carry.x[:, None], x], axis=1)[:, keep]
     valid_before = np.concatenate([carry.valid[:, None], valid], axis=1)[:, keep]
     k = len(keep)
@@ -319,8 +335,15 @@ def actuator_block(cal: FirmwareCalibration, up: np.ndarray, down: np.ndarray, e
     cols["x_piston_valid"] = valid[:, keep].reshape(a * k)
     cols["v_piston_valid"] = (cols["x_piston_valid"] & valid_before.reshape(a * k)
                               & np.isfinite(x_before.reshape(a * k)))
+    up_ok = started[:, keep].reshape(a * k)
+    cols["upstream_valid"] = up_ok
+    if not up_ok.all():
+        for name in UPSTREAM_DOUBLES:
+            if name in cols:
+                cols[name] = np.where(up_ok, cols[name], math.nan)
     carry.x, carry.count = x[:, -1].copy(), counts[:, -1].copy()
     carry.offset, carry.valid = off[:, -1].copy(), valid[:, -1].copy()
+    carry.started = started[:, -1].copy()
     return keep, cols
 
 

@@ -158,11 +158,13 @@ def test_the_validity_flags_reach_the_csv_export(logs, tmp_path):
 
 
 def _up_rows(counts: list[int]) -> np.ndarray:
-    """Upstream frames (1, n, 33) whose piston words hold ``counts`` (hi, lo)."""
+    """Upstream frames (1, n, 33) whose piston words hold ``counts`` (hi, lo), each after
+    an upstream sweep of the board (its tick counter non-zero)."""
     up = np.zeros((1, len(counts), B.UP_WORDS + 1), np.uint32)
     c = np.asarray(counts, np.int64)
     up[0, :, B.U_PISTON_LO] = c & 0xFFFF
     up[0, :, B.U_PISTON_HI] = (c >> 16) & 0xFFFF
+    up[0, :, B.U_TICK] = np.arange(1, len(counts) + 1)  # the board's sweeps have arrived
     return up
 
 
@@ -298,3 +300,30 @@ def test_the_export_of_a_robot_log_holds_what_the_stock_decoder_reads(logs, tmp_
             word -= (word & 0x8000) << 1
         np.testing.assert_array_equal(rows[name].to_numpy(np.int64), word, name)
         np.testing.assert_array_equal(dc.loc[rows.index, name].to_numpy(np.int64), word)
+
+
+def test_steps_before_the_first_upstream_sweep_read_nothing():
+    """Until the board's first upstream sweep reaches the MCU its memory reads 0: 0 V
+    through the MCU's formulas (-3 MPa, the piston 42 mm off) and a speed of ~200 m/s
+    into the first real read. Those steps are marked and their board values NaN; the
+    speed into the first real read is not valid; from then on all is valid."""
+    cal = calibration(load_config(None))
+    up = _up_rows([0, 0, 0x800000, 0x800004, 0x800008])
+    up[0, :2, B.U_TICK] = 0  # steps 0 and 1: nothing arrived yet
+    carry = SG.PistonCarry.start(1)
+    _, cols = SG.actuator_block(cal, up, np.zeros((1, 5, 16), np.uint16), 1, 200e-6, carry)
+    assert cols["upstream_valid"].tolist() == [False, False, True, True, True]
+    assert cols["x_piston_valid"].tolist() == [False, False, True, True, True]
+    assert cols["v_piston_valid"].tolist() == [False, False, False, True, True]
+    for name in ("p_cyl_a_pa", "x_piston_m", "v_piston_m_s", "iq_a"):
+        assert np.isnan(cols[name][:2]).all() and np.isfinite(cols[name][3:]).all(), name
+    assert abs(cols["v_piston_m_s"][3]) < 0.001  # 4 counts in 200 us: 0.1 mm/s
+
+
+def test_the_first_step_of_a_full_level_log_is_marked(logs):
+    """At level ``full`` the actuator channel has every MCU step, the first one read
+    before any upstream sweep arrived."""
+    msgs = _decoded(logs["robot", "full"], "/signals/actuator/0.0")
+    assert not msgs[0].upstream_valid and math.isnan(msgs[0].p_cyl_a_pa)
+    assert all(m.upstream_valid and math.isfinite(m.p_cyl_a_pa) for m in msgs[1:])
+    assert all(m.x_piston_valid for m in msgs[1:]) and not msgs[1].v_piston_valid
