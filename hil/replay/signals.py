@@ -170,13 +170,29 @@ def record_message(box: Box, direction: str) -> MessageType:
     for k, s in enumerate(box.slots):
         if s.kind in SIMULATED_KINDS:
             fields += _record_fields(pdo.SLOT_FIELDS[s.kind][which], f"s{k}_")
+    if direction == "inputs":  # appended: the fields above keep their numbers
+        for k in _actuator_slots(box):
+            fields += [Field(f"s{k}_x_piston_valid", "bool", "",
+                             "false: the MCU read this piston position torn between its two "
+                             "16-bit words (docs/framelog.md)"),
+                       Field(f"s{k}_v_piston_valid", "bool", "",
+                             "false: this speed's difference has a torn position at one end, "
+                             "or no record before it")]
     kinds = "_".join(s.kind for s in box.slots if s.kind in SIMULATED_KINDS) or "empty"
     return MessageType(f"{PACKAGE}.Box{direction.capitalize()}_{kinds}", fields,
                        f"the {direction} record of a box, each cycle")
 
 
-def record_columns(box: Box, direction: str, records: np.ndarray) -> dict[str, np.ndarray]:
-    """SI columns of ``records`` ((n, bytes) uint8 rows of the box's record)."""
+def _actuator_slots(box: Box) -> list[int]:
+    return [k for k, s in enumerate(box.slots) if s.kind == "actuator"]
+
+
+def record_columns(box: Box, direction: str, records: np.ndarray,
+                   piston: tuple[np.ndarray, np.ndarray] | None = None
+                   ) -> dict[str, np.ndarray]:
+    """SI columns of ``records`` ((n, bytes) uint8 rows of the box's record); for the
+    inputs, ``piston`` = (x valid, v valid), each (actuator slots, n) bool
+    (:func:`report_flags`), gives the validity flags of each actuator slot's piston."""
     which = 0 if direction == "outputs" else 1
     cols: dict[str, np.ndarray] = {}
     off = 0
@@ -194,7 +210,31 @@ def record_columns(box: Box, direction: str, records: np.ndarray) -> dict[str, n
                 cols[f"s{k}_{f.name}_{_suffix(f.unit)}"] = rec[f.name] * f.lsb
             else:
                 cols[f"s{k}_{f.name}"] = rec[f.name]
+    if direction == "inputs" and _actuator_slots(box):
+        if piston is None:
+            raise ValueError("the inputs of a box with actuators need their piston flags")
+        for i, k in enumerate(_actuator_slots(box)):
+            cols[f"s{k}_x_piston_valid"] = piston[0][i]
+            cols[f"s{k}_v_piston_valid"] = piston[1][i]
     return cols
+
+
+def report_flags(carry: PistonCarry, t_steps: np.ndarray, in_t: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """Per actuator and cycle ((a, c) each): whether the piston position a box reports at
+    the end of each cycle (ticks ``in_t``) is whole -- it is the MCU's read at the last MCU
+    step before the end, whose validity the last :func:`actuator_block` of the steps
+    ``t_steps`` (ticks) left in ``carry`` -- and whether the speed it reports, the
+    difference to the previous report's position, has whole reads at both ends."""
+    sv = carry.step_valid if carry.step_valid is not None else \
+        np.zeros((len(carry.report_valid), 0), bool)
+    both = np.concatenate([carry.valid_in[:, None], sv], axis=1)
+    idx = np.searchsorted(np.asarray(t_steps), np.asarray(in_t), side="left")
+    x_ok = both[:, np.minimum(idx, both.shape[1] - 1)]
+    v_ok = x_ok & np.concatenate([carry.report_valid[:, None], x_ok[:, :-1]], axis=1)
+    if x_ok.shape[1]:
+        carry.report_valid = x_ok[:, -1].copy()
+    return x_ok, v_ok
 
 
 def _commands(mode: np.ndarray, command: np.ndarray, prefix: str = "") -> dict[str, np.ndarray]:
@@ -299,11 +339,17 @@ class PistonCarry:
     offset: np.ndarray
     valid: np.ndarray
     started: np.ndarray
+    #: of the last block: the validity of the read before it and of each of its reads
+    #: ((a, n)); whether the last box report's position was whole (False: none yet)
+    valid_in: np.ndarray
+    step_valid: np.ndarray | None
+    report_valid: np.ndarray
 
     @classmethod
     def start(cls, actuators: int) -> PistonCarry:
         return cls(np.full(actuators, math.nan), None, np.zeros(actuators, np.int64),
-                   np.ones(actuators, bool), np.zeros(actuators, bool))
+                   np.ones(actuators, bool), np.zeros(actuators, bool),
+                   np.ones(actuators, bool), None, np.zeros(actuators, bool))
 
 
 def actuator_block(cal: FirmwareCalibration, up: np.ndarray, down: np.ndarray, every: int,
@@ -319,6 +365,7 @@ def actuator_block(cal: FirmwareCalibration, up: np.ndarray, down: np.ndarray, e
     a, n = up.shape[:2]
     keep = np.arange(every - 1, n, every)
     if not n:
+        carry.valid_in, carry.step_valid = carry.valid, np.zeros((a, 0), bool)
         return keep, {}
     counts = piston_counts(up)
     before = counts[:, 0] if carry.count is None else carry.count
@@ -344,6 +391,7 @@ def actuator_block(cal: FirmwareCalibration, up: np.ndarray, down: np.ndarray, e
         for name in UPSTREAM_DOUBLES:
             if name in cols:
                 cols[name] = np.where(up_ok, cols[name], math.nan)
+    carry.valid_in, carry.step_valid = carry.valid, valid
     carry.x, carry.count = x[:, -1].copy(), counts[:, -1].copy()
     carry.offset, carry.valid = off[:, -1].copy(), valid[:, -1].copy()
     carry.started = started[:, -1].copy()

@@ -354,3 +354,33 @@ def test_the_upstream_crc_count_is_a_u32_at_byte_64(topo, tmp_path):
     assert not other[:, 32:].any()  # the healthy link counts nothing
     r = replay(path)
     assert r.ok, r.divergence
+
+
+def test_a_torn_read_flags_the_box_record_that_reports_it():
+    """The box's input record reports the position of each cycle's last MCU step and the
+    speed over the cycle: a tear in that step flags the record's position and the speeds
+    into and out of it; the first record's speed has no record before it."""
+    cal = calibration(load_config(None))
+    step = 0x20
+    true = [0x2FEE0 + step * i for i in range(15)]  # crosses a carry at step 9
+    torn = list(true)
+    torn[9] = (true[8] & ~0xFFFF) | (true[9] & 0xFFFF)  # the second cycle's last read
+    assert torn[9] != true[9]
+    up = _up_rows(torn)
+    down = np.zeros((1, 15, 16), np.uint16)
+    t_steps = np.arange(15) * 20  # MCU steps every 20 ticks, cycles of 100 ticks
+    carry = SG.PistonCarry.start(1)
+    SG.actuator_block(cal, up[:, :10], down[:, :10], 5, 200e-6, carry)
+    x_ok, v_ok = SG.report_flags(carry, t_steps[:10], np.array([100, 200]))
+    assert x_ok.tolist() == [[True, False]] and v_ok.tolist() == [[False, False]]
+    SG.actuator_block(cal, up[:, 10:], down[:, 10:], 5, 200e-6, carry)
+    x_ok, v_ok = SG.report_flags(carry, t_steps[10:], np.array([300]))
+    assert x_ok.tolist() == [[True]] and v_ok.tolist() == [[False]]  # from the torn one
+
+
+def test_the_box_records_carry_piston_flags(logs):
+    for model in ("robot", "stack"):
+        msgs = _decoded(logs[model, "mcu"], "/signals/box/0/inputs")
+        for k in (0, 1):
+            assert all(getattr(m, f"s{k}_x_piston_valid") for m in msgs)
+            assert [getattr(m, f"s{k}_v_piston_valid") for m in msgs[:3]] == [False, True, True]
