@@ -15,7 +15,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from hil.fieldbus import pdo, wire
+from hil.fieldbus import lrw, pdo, wire
 from hil.fieldbus.chain import CyclePlan
 from hil.fieldbus.topology import Topology
 from protocols import ethercat as ec
@@ -67,6 +67,16 @@ class Master:
         self.fresh = [False] * len(self.plan.frames)
         self._answered = [False] * len(self.plan.frames)
         self._frame_of_actuator = [self._frame_index(i) for _, i in self.act_offsets]
+        #: The plan's frames as templates (hil.fieldbus.lrw): built and read by slices.
+        self._templates = lrw.templates(self.plan.frames, crc_trailer)
+        self._built = [t for k, t in sorted(
+            (kt for kts in self._templates.values() for kt in kts), key=lambda kt: kt[0])]
+        #: Per frame of the plan: the input windows it carries whole, as (image start,
+        #: image end, start in the datagram's data).
+        self._inputs_of = [[(w.lad + w.out_len, w.end, w.lad + w.out_len - lad)
+                            for w in self.plan.windows
+                            if lad <= w.lad + w.out_len and w.end <= lad + n and w.in_len]
+                           for lad, n, _ in self.plan.frames]
 
     def _frame_index(self, offset: int) -> int:
         for k, (lad, n, _) in enumerate(self.plan.frames):
@@ -133,15 +143,20 @@ class Master:
         self.fresh = [False] * len(self.plan.frames)
         self._answered = [False] * len(self.plan.frames)
         idx = self.cycle & 0xFF
-        out = []
-        for lad, n, _ in self.plan.frames:
-            d = ec.Datagram.logical(ec.Command.LRW, lad, bytes(self.image[lad:lad + n]), idx=idx)
-            out.append(wire.seal(ec.encode_pdu([d]), self.crc_trailer))
+        # the bytes of wire.seal(ec.encode_pdu([ec.Datagram.logical(LRW, lad, data, idx)]))
+        out = [t.build(idx, self.image) for t in self._built]
         self.stats.frames_sent += len(out)
         return out
 
     def receive(self, frame: bytes) -> bool:
         """Check one reply; apply its inputs if it is good. True if applied."""
+        known = lrw.find(self._templates, frame)
+        if known is not None:  # exactly one of the plan's frames: read it by slices
+            k, t = known
+            if frame[lrw.IDX_AT] != self.cycle & 0xFF:
+                self.stats.stale_frames += 1
+                return False
+            return self._apply_reply(k, t.wkc(frame), frame, lrw.DATA_AT)
         dgs = wire.open_frame(frame, self.crc_trailer)
         if dgs is None or len(dgs) != 1 or dgs[0].cmd != ec.Command.LRW:
             self.stats.bad_frames += 1
@@ -156,17 +171,22 @@ class Master:
         else:
             self.stats.bad_frames += 1
             return False
+        return self._apply_reply(k, d.wkc, d.data, 0)
+
+    def _apply_reply(self, k: int, wkc: int, buf: bytes, at: int) -> bool:
+        """The reply to plan frame ``k`` of this cycle (its working counter ``wkc``, its
+        data at ``buf[at:]``): counted, and its inputs applied if it is the first and its
+        working counter is the plan's."""
         if self._answered[k]:
             self.stats.stale_frames += 1  # a duplicate of a reply already seen
             return False
         self._answered[k] = True
-        if d.wkc != wkc:
+        if wkc != self.plan.frames[k][2]:
             self.stats.wkc_errors += 1
             return False
-        for w in self.plan.windows:
-            i0 = w.lad + w.out_len
-            if lad <= i0 and w.end <= lad + n and w.in_len:
-                self.image[i0:w.end] = d.data[i0 - lad:w.end - lad]
+        image = self.image
+        for i0, end, o in self._inputs_of[k]:
+            image[i0:end] = buf[at + o:at + o + end - i0]
         self.fresh[k] = True
         self.stats.frames_ok += 1
         return True
