@@ -85,6 +85,7 @@ def test_the_chain_and_the_master_answer_the_same_through_the_templates():
     fast = (Master(TOPO), Chain(TOPO, cfg, "echo"))
     slow = (_general(Master(TOPO)), _general(Chain(TOPO, cfg, "echo")))
     late: list[bytes] = []
+    late_replies: list[bytes] = []
     for cycle in range(40):
         values = rng.normal(0.0, 500.0, TOPO.n_actuators)
         replies, built = [], []
@@ -111,9 +112,12 @@ def test_the_chain_and_the_master_answer_the_same_through_the_templates():
                         m.receive(r)                              # a duplicated reply
             if cycle % 3 == 0:
                 m.receive(wire.seal(b"\x01\x10junk", True))       # garbage
+            if cycle % 4 == 1 and late_replies:
+                m.receive(late_replies[0])                        # a late reply
             m.end_cycle()
             replies.append(out)
         late = built[0]
+        late_replies = [r for r in replies[0] if r is not None]
         assert built[0] == built[1] and replies[0] == replies[1]
         assert fast[0].image == slow[0].image
         assert fast[0].stats == slow[0].stats and fast[0].fresh == slow[0].fresh
