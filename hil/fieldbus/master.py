@@ -17,6 +17,7 @@ import numpy as np
 
 from hil.fieldbus import lrw, pdo, wire
 from hil.fieldbus.chain import CyclePlan
+from hil.fieldbus.pdo_compiled import put_commands
 from hil.fieldbus.topology import Topology
 from protocols import ethercat as ec
 
@@ -62,7 +63,8 @@ class Master:
                     self.act_offsets.append((o, i))
                 o += so
                 i += si
-        self._out_index: np.ndarray | None = None  # image bytes of each output record
+        self._out_starts: np.ndarray | None = None  # image byte of each output record
+        self._image_u8: np.ndarray | None = None
         #: Per frame of the plan: did its inputs arrive this cycle?
         self.fresh = [False] * len(self.plan.frames)
         self._answered = [False] * len(self.plan.frames)
@@ -103,7 +105,7 @@ class Master:
     def set_actuators(self, mode: str, values: np.ndarray, enable: bool = True) -> None:
         """Output records of every actuator at once, as :meth:`set_actuator` writes each
         (``values[j]`` for actuator ``j``, same rounding and saturation; no gains sent):
-        one array operation instead of a Python call per actuator, for PC loops that
+        one compiled call instead of a Python call per actuator, for PC loops that
         command the whole robot every cycle."""
         if mode not in pdo.MODE_CODES:
             raise ValueError(f"unknown mode {mode!r}")
@@ -111,19 +113,15 @@ class Master:
         n = len(self.act_offsets)
         if values.shape != (n,):
             raise ValueError(f"values: expected {n} actuator commands, got shape {values.shape}")
-        if not np.all(np.isfinite(values)):
-            raise ValueError("values: a command is not finite")
-        if self._out_index is None:
-            size = pdo.ACTUATOR_OUT_DTYPE.itemsize
-            starts = np.array([o for o, _ in self.act_offsets], dtype=np.intp)
-            self._out_index = starts[:, None] + np.arange(size)
+        if self._out_starts is None:
+            self._out_starts = np.array([o for o, _ in self.act_offsets], dtype=np.intp)
+            self._image_u8 = np.frombuffer(self.image, dtype=np.uint8)  # (never resized)
         lsb = pdo.POSITION_CMD_LSB if mode == "position" else pdo.FORCE_CMD_LSB
-        rec = np.zeros(n, dtype=pdo.ACTUATOR_OUT_DTYPE)
-        rec["mode"] = pdo.MODE_CODES[mode]
-        rec["flags"] = pdo.FLAG_ENABLE if enable else 0
-        rec["command"] = pdo.to_counts_array(values, lsb, "i4")
-        np.frombuffer(self.image, dtype=np.uint8)[self._out_index] = rec.view(np.uint8).reshape(
-            n, -1)
+        lo, hi = pdo.I4_BOUNDS
+        # one compiled call: pdo.to_counts of each value, the record's bytes in the image
+        if not put_commands(self._image_u8, self._out_starts, pdo.MODE_CODES[mode],
+                            pdo.FLAG_ENABLE if enable else 0, values, lsb, lo, hi):
+            raise ValueError("values: a command is not finite")
 
     # --- inputs ---------------------------------------------------------------------------
     def actuator_inputs(self, j: int) -> dict[str, float]:
