@@ -25,7 +25,6 @@ Same results as the per-actuator path, bit for bit (``tests/hil/test_robot.py``)
 from __future__ import annotations
 
 import itertools
-import math
 import threading
 from concurrent.futures import Future, ThreadPoolExecutor
 from typing import Protocol
@@ -52,6 +51,9 @@ from firmware_model.mcu.c_abi import (
     config_record,
 )
 from hil.fieldbus import pdo
+from hil.fieldbus.pdo_compiled import counts as _counts
+from hil.fieldbus.pdo_compiled import le as _le
+from hil.fieldbus.pdo_compiled import put as _put
 from hil.sim.actuator import TRACE_WIDTH, TRACE_WORDS, _trace_row, advance_stack, drive_plant
 from hil.sim.robot_tunables import EngineTunables
 from hil.sim.stack_rows import SOURCES, McuRows, StackRows, TapRows
@@ -266,32 +268,6 @@ def advance_robot_lanes(counter, n_periods, period, tick0, blocks, sizes, n_sub_
                 for w in range(lk.mcu_up.shape[1]):
                     in16[i, _IN_UP + w] = lk.mcu_up[i, w] & 0xFFFF
                 in32[i, _IN_CRC] = lk.state[i, LK.LK_MASTER_CRC]
-
-
-@njit(cache=True)
-def _le(image, at, n_bytes, signed):
-    """The little-endian integer of ``n_bytes`` at ``image[at]``."""
-    v = 0
-    for b in range(n_bytes):
-        v |= np.int64(image[at + b]) << (8 * b)
-    if signed and v >= np.int64(1) << (8 * n_bytes - 1):
-        v -= np.int64(1) << (8 * n_bytes)
-    return v
-
-
-@njit(cache=True)
-def _put(image, at, n_bytes, v):
-    for b in range(n_bytes):
-        image[at + b] = (v >> (8 * b)) & 0xFF
-
-
-@njit(cache=True)
-def _counts(value, lsb, lo, hi):
-    """:func:`hil.fieldbus.pdo.to_counts` (the same float64 steps): rounded half away from
-    zero, saturated to [lo, hi]."""
-    c = value / lsb
-    r = math.trunc(c + 0.5) if c >= 0 else -math.trunc(-c + 0.5)
-    return np.int64(min(max(r, lo), hi))
 
 
 @njit(cache=True)
