@@ -28,7 +28,7 @@ def test_a_built_frame_is_the_codecs(lad, n, idx, wkc, crc, data):
     assert t.build(idx, image, wkc) == wire.seal(ec.encode_pdu([d]), crc)
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=100, deadline=None)
 @given(crc=st.booleans(), data=st.data())
 def test_a_matched_frame_reads_as_the_codec_reads_it(crc, data):
     """Damaged, shortened, lengthened frames and frames of other datagrams: whatever the
