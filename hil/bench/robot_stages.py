@@ -8,7 +8,8 @@ actuator's whole stage, one after the other; or, for the lane-wise engine, each 
 all actuators at once). A stage alone keeps its working set in cache as it would inside the
 engine, and its inputs are those the engine left (a running robot), so the figures add up
 to the compiled call's cost to within the calls' overhead (``total`` row: the engine's
-compiled call itself over the same cycles)."""
+compiled call itself over the same cycles). The last row is the per-cycle Python around that
+call (:mod:`hil.bench.robot_cycle`), per actuator tick for comparison."""
 
 from __future__ import annotations
 
@@ -20,6 +21,7 @@ from numba import njit
 
 from firmware_model.fpga.tick import control_tick
 from firmware_model.lvds import link as LK
+from hil.bench.robot_cycle import python_per_cycle
 from plant import kernel, lanes
 from plant import layout as L
 from plant.config import Config
@@ -144,6 +146,8 @@ def stage_costs(cfg: Config, ticks: int = 2000, warm_s: float = 0.2,
             rows.append((f"total: the engine's compiled call, "
                          f"{'plants in lanes' if use_lanes else 'one actuator at a time'}",
                          (time.thread_time() - c0) * 1e9 / (n * cycles * eng.cycle_ticks)))
+        rows.append(("outside the compiled call: master, PC loop, chain frames, hand-offs",
+                     python_per_cycle(bs, pc, 2 * cycles) * 1e9 / (n * eng.cycle_ticks)))
     return StageCosts(n, ticks, rows)
 
 

@@ -24,7 +24,7 @@ Same results as the per-actuator path, bit for bit (``tests/hil/test_robot.py``)
 
 from __future__ import annotations
 
-import math
+import itertools
 import threading
 from concurrent.futures import Future, ThreadPoolExecutor
 from typing import Protocol
@@ -51,6 +51,9 @@ from firmware_model.mcu.c_abi import (
     config_record,
 )
 from hil.fieldbus import pdo
+from hil.fieldbus.pdo_compiled import counts as _counts
+from hil.fieldbus.pdo_compiled import le as _le
+from hil.fieldbus.pdo_compiled import put as _put
 from hil.sim.actuator import TRACE_WIDTH, TRACE_WORDS, _trace_row, advance_stack, drive_plant
 from hil.sim.robot_tunables import EngineTunables
 from hil.sim.stack_rows import SOURCES, McuRows, StackRows, TapRows
@@ -271,32 +274,6 @@ def advance_robot_lanes(counter, n_periods, period, tick0, blocks, sizes, n_sub_
 
 
 @njit(cache=True)
-def _le(image, at, n_bytes, signed):
-    """The little-endian integer of ``n_bytes`` at ``image[at]``."""
-    v = 0
-    for b in range(n_bytes):
-        v |= np.int64(image[at + b]) << (8 * b)
-    if signed and v >= np.int64(1) << (8 * n_bytes - 1):
-        v -= np.int64(1) << (8 * n_bytes)
-    return v
-
-
-@njit(cache=True)
-def _put(image, at, n_bytes, v):
-    for b in range(n_bytes):
-        image[at + b] = (v >> (8 * b)) & 0xFF
-
-
-@njit(cache=True)
-def _counts(value, lsb, lo, hi):
-    """:func:`hil.fieldbus.pdo.to_counts` (the same float64 steps): rounded half away from
-    zero, saturated to [lo, hi]."""
-    c = value / lsb
-    r = math.trunc(c + 0.5) if c >= 0 else -math.trunc(-c + 0.5)
-    return np.int64(min(max(r, lo), hi))
-
-
-@njit(cache=True)
 def take_outputs(image, at, got, enabled, clear, in32, inf32, cmd_lsb, gain_lsb):
     """What :meth:`McuBoard.apply` does with each actuator's output record (at byte
     ``at[i]`` of ``image``) for the actuators ``got[i]``: the program's input flags (a fresh
@@ -439,7 +416,6 @@ class RobotEngine:
                              dtype=np.int64).reshape(n, 3)
         self.mcu = McuRows(self.ptrs, self.in16, self.in32, self.out16, self.err)
         for b in self.boxes:
-            b.pending = None
             b.engine = self
         #: Start a cycle's compute in a background thread as soon as every box has its
         #: outputs (:meth:`applied`), overlapping it with the master and the PC loop.
@@ -451,8 +427,15 @@ class RobotEngine:
         self._jobs: list[Future] = []
         self._started = threading.Semaphore(0)
         self._ready: list[int] | None = None  # prepared, with stacks under sensor faults
-        self._pending: set[int] = set()
-        self._used: dict[int, bytes] = {}
+        #: Per box: its outputs of this cycle are in :attr:`out_image` (not yet taken).
+        self._box_got = np.zeros(len(self.boxes), dtype=bool)
+        self._box_number = {id(b): k for k, b in enumerate(self.boxes)}
+        #: Made when the boxes' stacks change (faults wrap them): the stacks under a sensor
+        #: fault, the wrapped ones, the plants the kernel advances (see _prepare).
+        self._stacks_seen: tuple = ()
+        self._external: list[int] = []
+        self._wrapped: list = []
+        self._batched_plants: list = []
         self._blocks = np.zeros((0, lanes_mod.LW), dtype=np.int64)
         self._sizes = np.zeros(0, dtype=np.int64)
         self._blocks_for: bytes = b""
@@ -474,14 +457,16 @@ class RobotEngine:
         self.out_image = np.zeros(out_lo[-1], dtype=np.uint8)
         self.in_image = np.zeros(in_lo[-1], dtype=np.uint8)
         self._out_span = list(zip(out_lo[:-1], out_lo[1:], strict=True))
-        for b, (lo, hi) in zip(self.boxes, zip(in_lo[:-1], in_lo[1:], strict=True),
-                               strict=True):
+        self._in_span = list(zip(in_lo[:-1], in_lo[1:], strict=True))
+        for b, (lo, hi) in zip(self.boxes, self._in_span, strict=True):
             self.in_image[lo:hi] = np.frombuffer(bytes(b._in_buf), dtype=np.uint8)
             b._in_buf = self.in_image[lo:hi]
         self._out_at = np.array(out_at, dtype=np.int64)
         self._in_at = np.array(in_at, dtype=np.int64)
         self._got = np.zeros(self.n, dtype=bool)
         self._first = np.cumsum([0] + [len(b.stacks) for b in self.boxes])
+        #: The box (engine's number) of each actuator.
+        self._box_of = np.repeat(np.arange(len(self.boxes)), np.diff(self._first))
 
     def _bind_arrays(self) -> None:
         """Stack the stacks' arrays into :attr:`arrays` (a :class:`StackRows`) and rebind
@@ -521,20 +506,40 @@ class RobotEngine:
         self.tunables.tune(int(self._first[n_box]) + slot, key, value)
 
     # --- one fieldbus cycle ----------------------------------------------------------------
-    def applied(self, box: object) -> None:
-        """``box`` has taken this cycle's outputs (``box.pending``). Once every box has,
-        the next cycle's compute starts in the background (``overlap``): it needs nothing
-        that arrives later, since the chain applies a cycle's outputs before the frame of
-        the next cycle triggers :meth:`advance`, which then only waits for it."""
+    def spans(self, box: object) -> tuple[int, tuple[int, int], tuple[int, int]] | None:
+        """The engine's number of ``box`` and its records' spans [lo, hi) in
+        :attr:`out_image` and :attr:`in_image` (its input buffer is that slice); None if
+        the engine does not advance it."""
+        n_box = self._box_number.get(id(box))
+        if n_box is None or self.boxes[n_box] is not box:
+            return None
+        return n_box, self._out_span[n_box], self._in_span[n_box]
+
+    def applied(self, box: object, data: bytes) -> None:
+        """``box`` has taken this cycle's outputs ``data`` (its output record). Once every
+        box has, the next cycle's compute starts in the background (``overlap``): it needs
+        nothing that arrives later, since the chain applies a cycle's outputs before the
+        frame of the next cycle triggers :meth:`advance`, which then only waits for it."""
+        n_box = self._box_number[id(box)]
+        lo, hi = self._out_span[n_box]
+        self.applied_image(np.frombuffer(data, dtype=np.uint8),
+                           np.arange(len(data)), np.arange(lo, hi), n_box)
+
+    def applied_image(self, data: np.ndarray, at: np.ndarray, to: np.ndarray,
+                      boxes: object) -> None:
+        """:meth:`applied` for several boxes at once (their records in one frame's data):
+        the bytes ``data[at]`` are the outputs of the boxes ``boxes`` (engine numbers: an
+        int or an index array), at ``out_image[to]``."""
         if self._jobs or self._ready is not None:
             # A duplicate of a frame already applied: the reference path would apply the
             # same bytes again, which changes nothing; anything else cannot be undone.
-            if box.pending != self._used.get(id(box)):
+            if not np.array_equal(self.out_image[to], data[at]):
                 raise RuntimeError("box outputs changed after the cycle's compute started")
-            box.pending = None
             return
-        self._pending.add(id(box))
-        if self.overlap and len(self._pending) == len(self.boxes):
+        self.out_image[to] = data[at]
+        got = self._box_got
+        got[boxes] = True
+        if self.overlap and got.all():
             self._take_outputs()
             external = self._prepare()
             if external:  # Python per tick: no gain from a thread, run it at advance
@@ -578,18 +583,22 @@ class RobotEngine:
     def _prepare(self) -> list[int]:
         """Which stacks the kernel advances (not those under a sensor fault, returned) and
         the LVDS faults of this cycle switched."""
-        wrapped = [(j, s) for j, (b, i) in enumerate(self.slots)
-                   if hasattr(s := b.stacks[i], "sensors")]
-        external = [j for j, s in wrapped if s.sensors]
-        batched = self._batched
-        batched[:] = True
-        batched[external] = False
-        for _, s in wrapped:  # LVDS faults switch at cycle boundaries (FaultyStack)
-            if not s.sensors:
-                s._switch_lvds(self.tick // self.cycle_ticks)
-        if self.lanes and batched.tobytes() != self._blocks_for:
+        stacks = tuple(itertools.chain.from_iterable(b.stacks for b in self.boxes))
+        if stacks != self._stacks_seen:  # faults wrapped some (by identity, per cycle)
+            wrapped = [(j, s) for j, s in enumerate(stacks) if hasattr(s, "sensors")]
+            self._external = [j for j, s in wrapped if s.sensors]
+            self._wrapped = [s for _, s in wrapped if not s.sensors]
+            batched = self._batched
+            batched[:] = True
+            batched[self._external] = False
+            self._batched_plants = [self._inner(s).plant for j, s in enumerate(stacks)
+                                    if batched[j]]
+            self._stacks_seen = stacks
+        for s in self._wrapped:  # LVDS faults switch at cycle boundaries (FaultyStack)
+            s._switch_lvds(self.tick // self.cycle_ticks)
+        if self.lanes and self._batched.tobytes() != self._blocks_for:
             self._make_blocks()
-        return external
+        return list(self._external)
 
     def _make_blocks(self) -> None:
         """The batches of :func:`advance_robot_lanes`: the batched actuators in chain
@@ -673,10 +682,8 @@ class RobotEngine:
         return self.tap_y, self.tap_trace
 
     def _finish(self, ticks: int) -> None:
-        batched = self._batched
-        for j, (b, i) in enumerate(self.slots):
-            if batched[j]:
-                self._inner(b.stacks[i]).plant.tick += ticks
+        for plant in self._batched_plants:
+            plant.tick += ticks
         if self.on_cycle is not None:
             self.on_cycle(self.tick)
         self.tick += ticks
@@ -720,16 +727,8 @@ class RobotEngine:
         """The process data the boxes received since the last cycle, as program inputs."""
         self.tunables.apply()  # (no compute runs now: see applied and advance)
         got = self._got
-        got[:] = False
-        for n_box, b in enumerate(self.boxes):
-            if b.pending is None:
-                continue
-            lo, hi = self._out_span[n_box]
-            self.out_image[lo:hi] = np.frombuffer(b.pending, dtype=np.uint8)
-            got[self._first[n_box]:self._first[n_box + 1]] = True
-            self._used[id(b)] = b.pending
-            b.pending = None
-        self._pending.clear()
+        np.take(self._box_got, self._box_of, out=got)  # (out_image holds them already)
+        self._box_got[:] = False
         take_outputs(self.out_image, self._out_at, got, self.enabled, self.clear, self.in32,
                      self.inf32, self._cmd_lsb, self._gain_lsb)
         if self.log is not None:
