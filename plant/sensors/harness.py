@@ -54,6 +54,8 @@ def _analog_rows() -> np.ndarray:
 
     sources: dict[str, int] = {}
     for info in pkgutil.iter_modules(plant.sensors.__path__):
+        if info.name == "lanes":  # this harness's lane-wise twin (it imports this), no part
+            continue
         part = importlib.import_module(f"plant.sensors.{info.name}")
         for name, row in getattr(part, "ANALOG_SOURCES", {}).items():
             if name in sources:
