@@ -52,7 +52,7 @@ def outputs(draw):
     return y
 
 
-@settings(max_examples=60, deadline=None)
+@settings(max_examples=25, deadline=None)
 @given(data=st.data(), ks=st.lists(chips(), min_size=1, max_size=LW),
        extra=st.integers(0, 3), tick0=st.one_of(st.integers(0, 3), st.integers(0, 1 << 36)),
        ticks=st.integers(1, 4), seed=st.integers(0, 2**32))
