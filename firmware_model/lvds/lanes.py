@@ -107,10 +107,11 @@ def _book(lb, o, size, hist):
         lb[_ix(o + _PTR, j)] = (p0 + n) % size
         lb[_ix(o + _WORDS, j)] += n
         lb[_ix(wl, j)] = n if n < LK.MAX_WORDS_TICK else LK.MAX_WORDS_TICK
-    for k in range(LK.MAX_WORDS_TICK):
-        for j in range(LW):
-            on = k < lb[_ix(o + _N, j)]
-            a = (lb[_ix(o + _P0, j)] + k) % size
+        # the word log's slots (inside the loop over the lanes: as a loop of its own
+        # around it, LLVM left it scalar)
+        for k in range(LK.MAX_WORDS_TICK):
+            on = k < n
+            a = (p0 + k) % size
             lb[_ix(wl + 1 + 3 * k, j)] = a if on else lb[_ix(wl + 1 + 3 * k, j)]
             lb[_ix(wl + 3 + 3 * k, j)] = LK.WORD_OK if on else lb[_ix(wl + 3 + 3 * k, j)]
 
@@ -149,8 +150,12 @@ def _sweep_lane(lb, o, j, lk, mem, dest, size, mask):
     if n <= size:
         end = p0 + n
         first = end if end < size else size
-        _copy_words(lb, wl, j, lk, src, dest, p0, first, 0, mask)
-        _copy_words(lb, wl, j, lk, src, dest, 0, end - first, first - p0, mask)
+        if src == wrow:  # no delay: the ring row just written is the memory itself
+            _copy_words(lb, wl, j, mem, 0, dest, p0, first, 0, mask)
+            _copy_words(lb, wl, j, mem, 0, dest, 0, end - first, first - p0, mask)
+        else:
+            _copy_words(lb, wl, j, lk, src, dest, p0, first, 0, mask)
+            _copy_words(lb, wl, j, lk, src, dest, 0, end - first, first - p0, mask)
     else:  # more words than the memory holds (a bit rate far above the real one)
         a = p0
         for k in range(n):

@@ -156,10 +156,10 @@ def _codes(sb, tick):
             _SECTOR)
         s = _mod6(np.int64(np.floor(h)))
         sb[_ix(RO + _C_HALL, j)] = np.float64((HALL_PACKED >> (3 * s)) & 7)
-    # chips.analog_code of each analog input
-    for q in range(N_ANALOG):
-        b = KO + K.K_ANALOG + 4 * q
-        for j in range(LW):
+        # chips.analog_code of each analog input (inside the loop over the lanes: as a
+        # loop of its own around it, LLVM left it scalar)
+        for q in range(N_ANALOG):
+            b = KO + K.K_ANALOG + 4 * q
             v = sb[_ix(b, j)] + sb[_ix(YO + _Y_ANALOG + q, j)] * sb[_ix(b + 1, j)] / sb[
                 _ix(b + 2, j)]
             code = _adc_code(v / sb[_ix(KO + K.K_ADC_LSB, j)], sb[_ix(KO + K.K_ADC_MAX, j)])
