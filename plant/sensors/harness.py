@@ -73,7 +73,7 @@ def _analog_rows() -> np.ndarray:
 ANALOG_ROWS = _analog_rows()
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)  # no reference counts on the rows (firmware_model.lvds.link)
 def digitise(y, k, tick, raw):
     """Fill the raw sensor words (``firmware_model.fpga.layout.R_*``) from plant outputs
     ``y`` at ``tick``. Every link delivers a valid frame unless an encoder is marked dead
