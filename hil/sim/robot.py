@@ -39,6 +39,7 @@ from numba.extending import intrinsic
 
 from firmware_model.fpga import layout as B
 from firmware_model.fpga.tick import control_tick
+from firmware_model.lvds import lanes as link_lanes
 from firmware_model.lvds import link as LK
 from firmware_model.mcu.c_abi import (
     IN_CLEAR_FAULT,
@@ -56,12 +57,12 @@ from hil.fieldbus.pdo_compiled import le as _le
 from hil.fieldbus.pdo_compiled import put as _put
 from hil.sim.actuator import TRACE_WIDTH, TRACE_WORDS, _trace_row, advance_stack, drive_plant
 from hil.sim.robot_tunables import EngineTunables
-from hil.sim.stack_rows import SOURCES, McuRows, StackRows, TapRows
+from hil.sim.stack_rows import SOURCES, LinkSensorLanes, McuRows, StackRows, TapRows
 from plant import kernel
 from plant import lanes as lanes_mod
 from plant import layout as L
 from plant.config import Config, ConfigError
-from plant.sensors.harness import digitise
+from plant.sensors import lanes as sensor_lanes
 
 #: Offsets of the input record's fields, in 16-bit words (the kernel writes through a view).
 _IN_U16 = INPUT.itemsize // 2
@@ -135,14 +136,6 @@ def _log_words(log, i, r, in16, in32, out16):
         log.down[i, r, w] = out16[i, _OUT_DOWN + w]
 
 
-@njit(cache=True, nogil=True, _nrt=False, inline="always")
-def _word_log(trace, at, lk):
-    """The LVDS link's word log of the tick (``lk``: the link's state, after its upstream
-    sweep) into the trace row ``at``, as :func:`advance_stack` traces it."""
-    for w in range(2 * LK.WORDS_W):
-        trace[at, TRACE_WORDS + w] = lk[LK.LK_DOWN_WORDLOG + w]
-
-
 # No reference counting (``_nrt=False``, as the parts' tick functions): every row view
 # below would otherwise increment and decrement the parent array's count, an atomic on a
 # cache line all compute threads share (~200 ns per actuator tick with one thread, more
@@ -193,14 +186,18 @@ def advance_robot(counter, n_periods, period, tick0, batched, s, mcu, no_rec, ta
 
 @njit(cache=True, nogil=True, _nrt=False)
 def advance_robot_lanes(counter, n_periods, period, tick0, blocks, sizes, n_sub_max, s, mcu,
-                        buf, tap_y, tap_trace, log):
+                        buf, ls, tap_y, tap_trace, log):
     """:func:`advance_robot` with the plants in lanes: this thread claims whole batches
     (``blocks[b, :sizes[b]]``: up to :data:`plant.lanes.LW` actuator rows, counted by
-    ``counter``) and runs their MCU periods together. Per tick every actuator of the
-    batch goes through its sensor chips, LVDS link and board tick (one after the other,
-    the calls :func:`advance_stack` makes), then all their plants take the tick's RK4 step
-    in one pass over the lanes (:func:`plant.lanes.rk4_lanes`, in ``buf``, this thread's
-    lane buffer), then each plant's outputs. Each actuator sees the operations of
+    ``counter``) and runs their MCU periods together. Per tick the batch's sensor chips
+    (:func:`plant.sensors.lanes.digitise_lanes`) and downstream LVDS sweeps
+    (:func:`firmware_model.lvds.lanes.sweep_down_lanes`) in lanes, each actuator's board
+    tick, the batch's upstream sweeps in lanes, then all their plants take the tick's RK4
+    step in one pass over the lanes (:func:`plant.lanes.rk4_lanes`, in ``buf``, this
+    thread's lane buffer), then each plant's outputs. ``ls`` (a
+    :class:`~hil.sim.stack_rows.LinkSensorLanes`): this thread's lane buffers of the links'
+    counters and word logs (loaded when a batch is claimed, stored back at its end) and of
+    the chips' parameters. Each actuator sees the operations of
     :func:`advance_stack` in its order: the batch only interleaves independent actuators.
     ``tap_y`` (actuators, ticks, outputs) and ``tap_trace`` (actuators, ticks,
     ``TRACE_WIDTH``): where given (not empty), every tick's plant outputs and board trace
@@ -218,6 +215,8 @@ def advance_robot_lanes(counter, n_periods, period, tick0, blocks, sizes, n_sub_
         rows = blocks[b]
         done += m
         lanes_mod.load_params(buf, pl.params, rows, m)
+        sensor_lanes.load_chips(ls.chips, se.chips, rows, m)
+        link_lanes.load_link(ls.link, lk.state, rows, m)
         for n in range(n_periods):
             t = tick0 + n * period
             r = log.row[0] + n
@@ -238,11 +237,12 @@ def advance_robot_lanes(counter, n_periods, period, tick0, blocks, sizes, n_sub_
             for k in range(period):
                 at = n * period + k
                 lt = r * period + k  # the log trace's row (advance_stack's k-th)
+                sensor_lanes.digitise_lanes(ls.chips, pl.y, se.chips, rows, m, t + k, se.raw)
+                link_lanes.sweep_down_lanes(ls.link, lk.state, lk.mcu_down, bd.state,
+                                            bd.down, rows, m)
                 for j in range(m):
                     i = rows[j]
                     st = bd.state[i]
-                    digitise(pl.y[i], se.chips[i], t + k, se.raw[i])
-                    LK.sweep_down(lk.state[i], lk.mcu_down[i], st, bd.down[i])
                     since, crc = st[B.F_SINCE_VALID], st[B.F_ERR_LINK_CRC]
                     on = control_tick(bd.params[i], st, bd.down[i], bd.up[i], se.raw[i])
                     if tap_trace.shape[0] > 0:
@@ -251,12 +251,16 @@ def advance_robot_lanes(counter, n_periods, period, tick0, blocks, sizes, n_sub_
                     if logging_trace:
                         _trace_row(log.trace[i], lt, se.raw[i], bd.down[i], since, crc,
                                    bd.up[i], on, st)
-                    LK.sweep_up(lk.state[i], bd.up[i], lk.mcu_up[i])
+                link_lanes.sweep_up_lanes(ls.link, lk.state, bd.up, lk.mcu_up, rows, m)
+                for j in range(m):
+                    i = rows[j]
+                    st = bd.state[i]
                     if tap_trace.shape[0] > 0:
-                        _word_log(tap_trace[i], at, lk.state[i])
+                        link_lanes.word_log(tap_trace[i], at, TRACE_WORDS, ls.link, j)
                     if logging_trace:
-                        _word_log(log.trace[i], lt, lk.state[i])
-                    drive_plant(on, st, 1.0 / bd.params[i, B.C_PWM_TOP], pl.u[i], pl.x[i])
+                        link_lanes.word_log(log.trace[i], lt, TRACE_WORDS, ls.link, j)
+                    drive_plant(st[B.F_PWM_ON], st, 1.0 / bd.params[i, B.C_PWM_TOP], pl.u[i],
+                                pl.x[i])
                 lanes_mod.load_states(buf, pl.x, pl.u, rows, m)
                 lanes_mod.rk4_lanes(buf, n_sub_max)
                 lanes_mod.store_states(buf, pl.x, rows, m)
@@ -271,6 +275,7 @@ def advance_robot_lanes(counter, n_periods, period, tick0, blocks, sizes, n_sub_
                 for w in range(lk.mcu_up.shape[1]):
                     in16[i, _IN_UP + w] = lk.mcu_up[i, w] & 0xFFFF
                 in32[i, _IN_CRC] = lk.state[i, LK.LK_MASTER_CRC]
+        link_lanes.store_link(ls.link, lk.state, rows, m)
 
 
 @njit(cache=True)
@@ -440,6 +445,8 @@ class RobotEngine:
         self._sizes = np.zeros(0, dtype=np.int64)
         self._blocks_for: bytes = b""
         self._lane_bufs: list[np.ndarray] = []
+        #: Each thread's lane buffers of the link's counters and the sensor chips.
+        self._link_sensor_bufs: list[LinkSensorLanes] = []
         #: Called with the first tick of each cycle once it is computed (:meth:`tap`).
         self.on_cycle = None
         self.tap(False, False)
@@ -651,13 +658,16 @@ class RobotEngine:
         if self.lanes:
             while len(self._lane_bufs) <= slot:
                 self._lane_bufs.append(lanes_mod.lane_buffer())
+                self._link_sensor_bufs.append(LinkSensorLanes(
+                    link_lanes.link_lane_buffer(), sensor_lanes.sensor_lane_buffer()))
             buf = self._lane_bufs[slot]
+            ls = self._link_sensor_bufs[slot]
         if started is not None:
             started.release()
         if self.lanes:
             return advance_robot_lanes(self._counter, ticks // self.period, self.period,
                                        self.tick, self._blocks, self._sizes,
-                                       self._n_sub_max, self.arrays, self.mcu, buf,
+                                       self._n_sub_max, self.arrays, self.mcu, buf, ls,
                                        *self._taps(ticks), self.log_rows)
         return advance_robot(self._counter, ticks // self.period, self.period, self.tick,
                              self._batched, self.arrays, self.mcu, self._no_rec,
