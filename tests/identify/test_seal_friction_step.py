@@ -67,10 +67,10 @@ def test_seal_friction_at_the_rigs_parameters_leaves_the_sensor_noise(load):
     assert ratio < 1.4, f"{load}: residual {ratio:.2f} x the pressure sensors' noise"
 
 
-@pytest.mark.parametrize("vs,degenerate", [(4.7e-5, True), (1.9e-3, True), (2.1e-3, False),
+@pytest.mark.parametrize("vs,degenerate", [(4.7e-5, True), (4.9e-4, True), (1.97e-3, False),
                                            (3.6e-3, False)])
 def test_a_stribeck_velocity_below_the_regularisation_is_held(vs, degenerate):
-    """v_s below eps hides the dip inside the linear zone of the sign law, where a static
+    """v_s far below eps hides the dip inside the linear zone of the sign law, where a static
     level of any size sits in a band no sample reaches (the slide profile, rig seed 2, ran
     to v_s 47 um/s, F_s 1e12 N): held at its start and the refit made again."""
     from types import SimpleNamespace
