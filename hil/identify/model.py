@@ -13,10 +13,9 @@ exactly (zero-order hold, matrix exponential) over ``n_sub`` sub-steps per sampl
 stiff modes (leakage ``k_s/d_s``, the piston on ``k_s`` near 1.4 kHz) cost nothing in
 accuracy. The effect terms enter through ``f_pump``, ``q_rate``, ``f_piston``, evaluated
 from the state at the start of each sub-step; the Coulomb frictions are solved implicitly
-(a scalar root per friction), so a small regularisation velocity does not chatter: the
-pump's for the end-of-sub-step velocity, the seal's for the mid-sub-step one (second order:
-the piston held by a rod sits in the seal's Stribeck dip and rings there). Output-side
-effects (strain drift, sensor saturation) and the input delay act outside the loop.
+for the end-of-sub-step velocity (a scalar root per friction), so a small regularisation
+velocity does not chatter. Output-side effects (strain drift, sensor saturation) and the
+input delay act outside the loop.
 
 Parameters live in one flat vector addressed by :data:`PARAM_NAMES`; all effect parameters
 at zero is the linear model.
@@ -221,7 +220,7 @@ def _solve_friction(v_free, b, level_c, level_s, vs, eps, w, f_last):
 
 @njit(cache=True, nogil=True, fastmath=_FAST)
 def _simulate(ad, bd, z0, tau_p, ks, ds, dp, dc, eff, angle, has_angle, xs, has_x, temp,
-              has_temp, t_ref, n_sub, fixed, out, adh, bdh):
+              has_temp, t_ref, n_sub, fixed, out):
     """Run the model over ``out.shape[0]`` samples; ``out[k]`` gets the state at sample ``k``.
 
     ``tau_p`` holds one value per sub-step; ``angle``, ``xs``, ``temp`` one per sample. The
@@ -229,9 +228,6 @@ def _simulate(ad, bd, z0, tau_p, ks, ds, dp, dc, eff, angle, has_angle, xs, has_
     angle with the first-order gain ``alpha`` per sample. With the piston fixed only the
     first three states move, and only they are propagated. The harmonics n = 1..8 of the
     rotor angle come from one sine and cosine by the angle-addition recurrence.
-
-    ``adh, bdh``: the linear part over half a sub-step, where the seal friction is solved
-    (implicit midpoint; the pump friction is solved at the sub-step's end).
     """
     n = out.shape[0]
     ns = 3 if fixed else 5
@@ -330,21 +326,7 @@ def _simulate(ad, bd, z0, tau_p, ks, ds, dp, dc, eff, angle, has_angle, xs, has_
                 for i in range(ns):
                     zn[i] -= bd[i, 1] * fp
             if sf_on:
-                # The seal's force held over the sub-step is its law's value at the
-                # sub-step's middle (implicit midpoint: second order), not at its end
-                # (implicit Euler: first order). With the piston held by the rod its speed
-                # stays in the Stribeck dip and the stiff stuck zone while it rings at
-                # ~1.4 kHz on k_s + k_rod; the end value left the rig's own parameters 3x
-                # the pressure sensors' noise there (the fitted levels 20 % high), the
-                # middle's leaves the noise, as 64 sub-steps do. The stuck piston's stiff
-                # mode (F_s/eps against J_c: ~4x the sub-step's rate) still decays
-                # (factor (1 - x/2)/(1 + x/2) a sub-step).
-                vmid = -bdh[4, 1] * fp
-                for m in range(ns):
-                    vmid += adh[4, m] * z[m]
-                for m in range(4):
-                    vmid += bdh[4, m] * u[m]
-                vnew, fs = _solve_friction(vmid, bdh[4, 3], sf_c, sf_s, eff[_E_SF_VS],
+                vnew, fs = _solve_friction(zn[4], bd[4, 3], sf_c, sf_s, eff[_E_SF_VS],
                                            eff[_E_SF_EPS], eff[_E_SF_SHAPE], fs)
                 for i in range(ns):
                     zn[i] -= bd[i, 3] * fs
@@ -444,7 +426,7 @@ class FastModel:
         self.n_sub = n_sub
         self._iq_sub0 = np.repeat(exp.iq, n_sub)
         self._input_cache: dict[tuple[str, float], np.ndarray] = {}
-        self._disc_cache: dict[tuple[float, ...], tuple[np.ndarray, ...]] = {}
+        self._disc_cache: dict[tuple[float, ...], tuple[np.ndarray, np.ndarray]] = {}
         self._empty = np.zeros(1)
 
     def start_vector(self) -> np.ndarray:
@@ -482,8 +464,8 @@ class FastModel:
         if hit is None:
             if len(self._disc_cache) > 64:
                 self._disc_cache.clear()
-            hit = self._disc_cache[key] = discretise(a, b, h) + discretise(a, b, 0.5 * h)
-        ad, bd, adh, bdh = hit
+            hit = self._disc_cache[key] = discretise(a, b, h)
+        ad, bd = hit
         gain = theta[IDX["gain_n_per_a"]]
         tau_p = gain * self.applied_current(theta[IDX["delay_s"]] + theta[IDX["skew_s"]])
         u0 = np.array([tau_p[0], 0.0, 0.0, 0.0])
@@ -514,8 +496,7 @@ class FastModel:
                   exp.angle if exp.angle is not None else e, exp.angle is not None,
                   exp.position if exp.position is not None else e, exp.position is not None,
                   exp.temperature if exp.temperature is not None else e,
-                  exp.temperature is not None, exp.t_ref, self.n_sub, exp.load == "fixed", sim,
-                  adh, bdh)
+                  exp.temperature is not None, exp.t_ref, self.n_sub, exp.load == "fixed", sim)
         return out
 
     def outputs(self, theta: np.ndarray, z: np.ndarray | None = None,
