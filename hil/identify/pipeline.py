@@ -620,9 +620,15 @@ class _Loop:
         self.say(f"refit with {', '.join(retry)} free again")
         first = fitter.fit(current.theta, current.free + retry, sigma=current.sigma, passes=1,
                            max_nfev=9)
-        if set(retry) <= {n for n, _, _ in fitter.offenders(first)}:
+        bad = fitter.offenders(first)
+        if set(retry) <= {n for n, _, _ in bad}:
             # not one of them credible at the refit: the guard would hold them again one at
             # a time, a refit each, and come back to the fit there is
+            return
+        if bad and bad[0][0] in current.free:
+            # the guard's first hold would be of a parameter the fit there is has free, and
+            # a refit that holds one of those is not kept, whatever the guard's further
+            # holds (a refit each) do
             return
         again, held_again = guarded_fit(fitter, current.theta, current.free + retry,
                                         current.theta, sigma=current.sigma, passes=1,
