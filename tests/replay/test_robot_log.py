@@ -264,8 +264,8 @@ def test_the_export_of_a_robot_log_holds_what_the_stock_decoder_reads(logs, tmp_
     from hil.framelog import export as E
     from hil.framelog import export_plan as P
 
-    monkeypatch.setattr(P, "WINDOW_ROWS", 2000)
-    monkeypatch.setattr(P, "BATCH_BYTES", 1 << 15)
+    monkeypatch.setattr(P, "WINDOW_ROWS", 3000)
+    monkeypatch.setattr(P, "BATCH_BYTES", 1 << 16)
     path = logs["robot", "mcu"]
     E.export_parquet(path, tmp_path / "x.parquet")
     E.export_csv(path, tmp_path / "x.csv")
