@@ -240,7 +240,7 @@ def test_the_upstream_crc_count_is_a_u32_at_byte_64(topo, tmp_path):
     faults = {"fault": [{"link": "lvds.up", "kind": "bitflip", "rate": 0.02, "box": 0,
                          "slot": 0}]}
     path = tmp_path / "crc.mcap"
-    run_logged(topo, load_config(None), 60, demo_pc(400.0, 20.0), path, faults=faults,
+    run_logged(topo, load_config(None), 30, demo_pc(400.0, 20.0), path, faults=faults,
                model="robot")
     reader = FrameLogReader(path)
     info = reader.info().channel("/lvds/0.0/up")
