@@ -23,11 +23,13 @@ from firmware_model.lvds import link as LK
 from plant import kernel, lanes
 from plant import layout as L
 from plant.config import Config
+from plant.lane_outputs import outputs_lanes
 from plant.sensors.harness import digitise
 
 #: Stage names, in the order of one tick.
 STAGES = ("plant RK4 + effects", "plant outputs + noise", "sensor chips", "driver board",
-          "LVDS link", "MCU law (C build)", "plant RK4 + effects, in lanes")
+          "LVDS link", "MCU law (C build)", "plant RK4 + effects, in lanes",
+          "plant outputs + noise, in lanes")
 
 
 @njit(cache=True, nogil=True)
@@ -59,6 +61,18 @@ def _rk4_in_lanes(n_ticks, x, p, u, blocks, sizes, n_sub_max, buf):
             lanes.load_states(buf, x, u, blocks[b], sizes[b])
             lanes.rk4_lanes(buf, n_sub_max)
             lanes.store_states(buf, x, blocks[b], sizes[b])
+
+
+@njit(cache=True, nogil=True)
+def _outputs_in_lanes(n_ticks, x, p, u, y, rng, blocks, sizes, buf):
+    """``n_ticks`` ticks of every actuator's outputs and noise, batch by batch in lanes,
+    from the states in the lane buffer (the engine computes them right after the RK4 step,
+    with no move in)."""
+    for b in range(blocks.shape[0]):
+        lanes.load_params(buf, p, blocks[b], sizes[b])
+        lanes.load_states(buf, x, u, blocks[b], sizes[b])
+        for _ in range(n_ticks):
+            outputs_lanes(buf, y, rng, blocks[b], sizes[b])
 
 
 @dataclass
@@ -129,6 +143,14 @@ def stage_costs(cfg: Config, ticks: int = 2000, warm_s: float = 0.2,
                 _rk4_in_lanes(ticks, x, snap[1], snap[2], eng._blocks, eng._sizes, n_sub, buf)
                 best = min(best, time.thread_time() - c0)
             rows.append((STAGES[6], best * 1e9 / (n * ticks)))
+            x, p, u, y, rng = (a.copy() for a in snap[:5])
+            _outputs_in_lanes(1, x, p, u, y, rng, eng._blocks, eng._sizes, buf)
+            best = np.inf
+            for _ in range(3):
+                c0 = time.thread_time()
+                _outputs_in_lanes(ticks, x, p, u, y, rng, eng._blocks, eng._sizes, buf)
+                best = min(best, time.thread_time() - c0)
+            rows.append((STAGES[7], best * 1e9 / (n * ticks)))
         # The engine's compiled call as a whole (every stage, 1 thread), same ticks, with
         # the plants one actuator at a time and (where the recipe allows) in lanes.
         cycles = max(1, ticks // eng.cycle_ticks)
