@@ -66,7 +66,7 @@ class RobotRecorder:
         self.every = 1 if self.full else per_cycle
         self.cycles = BLOCK_CYCLES.get(level, FLUSH_CYCLES)
         n, rows = engine.n, self.cycles * per_cycle
-        self.tap = TapRows(np.zeros((n, rows, UP_WIDTH), np.uint32),
+        self.tap = TapRows(np.zeros((n, rows, UP_WIDTH), np.uint16),
                            np.zeros((n, rows, B.DOWN_WORDS), np.uint16),
                            np.zeros((n, rows * self.period if self.full else 0, TRACE_WIDTH),
                                     np.int64), np.zeros(1, np.int64))
@@ -91,6 +91,8 @@ class RobotRecorder:
         self._last_out = [(np.zeros(0, np.int64), np.zeros((0, b.out_dtype.itemsize), np.uint8))
                           for b in engine.boxes]
         self.carry = SG.PistonCarry.start(n)
+        #: per engine box: the index of its first actuator in the engine's order
+        self.first_act = np.cumsum([0] + [len(b.act) for b in engine.boxes])[:-1].tolist()
         self._pool = (ThreadPoolExecutor(1, thread_name_prefix="robot-log")
                       if background else None)
         self._jobs: list[Future] = []
@@ -122,7 +124,7 @@ class RobotRecorder:
                                         np.uint8, b.in_dtype.itemsize))
                 for k in range(len(box.actuators)):
                     tk = topics(box.id, k)
-                    self.ch_up.append(block(tk["up"], LY.mcu_up(), np.uint32, UP_WIDTH))
+                    self.ch_up.append(block(tk["up"], LY.mcu_up(), np.uint16, UP_WIDTH))
                     self.ch_down.append(block(tk["down"], LY.mcu_down(), np.uint16,
                                               B.DOWN_WORDS))
                     if self.full:
@@ -195,12 +197,16 @@ class RobotRecorder:
 
     def _write(self, k: _Block) -> None:
         c = k.cycles
-        ns, log = self.ns, self.log
-        period_s = self.period * ns * 1e-9
+        period_s = self.period * self.ns * 1e-9
         others = iter(k.other_in)
         box_out: list[tuple[np.ndarray, np.ndarray]] = []
+        # boxes of one slot layout (and, for outputs, the same cycles' records) are
+        # written together: one block message array, one decoding and encoding for all
+        groups: dict[tuple, list[tuple[int, np.ndarray]]] = {}
+        times: dict[tuple, np.ndarray] = {}
         for n_box, b in enumerate(self.boxes):
             e = self.engine_box[n_box]
+            layout = tuple(s.kind for s in b.box.slots)
             if e is None:
                 ins = next(others)
                 outs = None
@@ -215,30 +221,56 @@ class RobotRecorder:
                     box_out.append(outs)
                 else:
                     box_out.append(self._last_out[e])
-            if log is not None:
-                if c:
-                    log.write_block(self.ch_in[n_box], k.in_t * ns, ins)
-                if outs is not None and len(outs[0]) and self.ch_out[n_box] is not None:
-                    log.write_block(self.ch_out[n_box], outs[0] * ns, outs[1])
-            sig = self.sig_rec[n_box]
-            if "inputs" in sig and c:
-                self.out.write(sig["inputs"], k.in_t * ns,
-                               SG.record_columns(b.box, "inputs", ins))
-            if "outputs" in sig and outs is not None and len(outs[0]):
-                self.out.write(sig["outputs"], outs[0] * ns,
-                               SG.record_columns(b.box, "outputs", outs[1]))
+            if c:
+                groups.setdefault(("inputs", layout), []).append((n_box, ins))
+                times[("inputs", layout)] = k.in_t
+            if outs is not None and len(outs[0]):
+                key = ("outputs", layout, outs[0].tobytes())
+                groups.setdefault(key, []).append((n_box, outs[1]))
+                times[key] = outs[0]
+        # the steps first: their reads' validity is the box reports' piston flags
+        steps = SG.actuator_block(self.cal, k.up, k.down, self.every, period_s, self.carry)
+        flags = SG.report_flags(self.carry, k.t_steps, k.in_t) if c else None
+        for key, members in groups.items():
+            self._write_records(key[0], times[key], members, flags)
         if len(k.t_steps):
-            self._write_steps(k, box_out, period_s)
+            self._write_steps(k, box_out, steps)
 
-    def _write_steps(self, k: _Block, box_out: list, period_s: float) -> None:
+    def _write_records(self, d: str, t: np.ndarray, members: list[tuple[int, np.ndarray]],
+                       flags: tuple[np.ndarray, np.ndarray] | None) -> None:
+        """The ``d`` records (``outputs``/``inputs``) of boxes of one slot layout at the
+        same times ``t`` (ticks): ``members`` (chain index, (n, bytes) rows) each;
+        ``flags``: every actuator's piston flags of the block's cycles
+        (:func:`hil.replay.signals.report_flags`)."""
+        rows = np.stack([r for _, r in members])
+        boxes = [n for n, _ in members]
+        t_ns = t * self.ns
+        if self.log is not None:
+            chs = self.ch_in if d == "inputs" else self.ch_out
+            if chs[boxes[0]] is not None:
+                self.log.write_blocks([chs[n] for n in boxes], t_ns, rows)
+        sig = [self.sig_rec[n].get(d) for n in boxes]
+        if sig[0] is not None:
+            piston = None
+            if d == "inputs" and flags is not None:
+                # per member box its actuators' rows, stacked box-major as the records
+                js = [self.first_act[self.engine_box[n]] for n in boxes]
+                m = len(self.engine.boxes[self.engine_box[boxes[0]]].act)
+                piston = tuple(np.stack([f[j:j + m] for j in js], axis=1).reshape(m, -1)
+                               for f in flags)
+            cols = SG.record_columns(self.boxes[boxes[0]].box, d,
+                                     rows.reshape(-1, rows.shape[2]), piston)
+            self.out.write_split(sig, t_ns, cols)
+
+    def _write_steps(self, k: _Block, box_out: list,
+                     steps: tuple[np.ndarray, dict[str, np.ndarray]]) -> None:
         ns, log, n = self.ns, self.log, self.engine.n
         t_steps, up, down = k.t_steps, k.up, k.down
         r = len(t_steps)
         if log is not None:
             t = t_steps * ns
-            for j in range(n):
-                log.write_block(self.ch_up[j], t, up[j])
-                log.write_block(self.ch_down[j], t, down[j])
+            log.write_blocks(self.ch_up, t, up)  # one record array for every actuator
+            log.write_blocks(self.ch_down, t, down)
             if self.full:
                 tt = (t_steps[0] + np.arange(r * self.period, dtype=np.int64)) * ns
                 for j in range(n):
@@ -249,7 +281,7 @@ class RobotRecorder:
                         tw, words = LK.line_words(tr[:, TRACE_WORDS + d * LK.WORDS_W:], tt)
                         if len(tw):
                             log.write_block(ch, tw, words[:, None])
-        keep, cols = SG.actuator_block(self.cal, up, down, self.every, period_s, self.carry)
+        keep, cols = steps
         if not len(keep):
             return
         t = t_steps[keep]

@@ -64,7 +64,8 @@ class TapRows(NamedTuple):
     """What the robot engine's kernel copies out for a frame log, per actuator and MCU step
     (row ``r = row[0] + n`` for the call's ``n``-th MCU period): ``up[i, r]`` the 32
     upstream words the MCU program read at the step and, last, the link's upstream
-    CRC-error count it read with them (uint32, (actuators, rows, 33)); ``down[i, r]`` the
+    CRC-error count it read with them as a u32 in two words, low half first (uint16,
+    (actuators, rows, 34): the frame log's ``eha-hil/mcu-up``); ``down[i, r]`` the
     16 downstream words it wrote (uint16, (actuators, rows, 16)); ``trace[i, r * period:
     (r + 1) * period]`` the driver board's trace of the period's ticks
     (:data:`hil.sim.actuator.TRACE_WIDTH` int64 columns). Rows 0 (``up.shape[1] == 0``):
@@ -73,6 +74,15 @@ class TapRows(NamedTuple):
     down: np.ndarray
     trace: np.ndarray
     row: np.ndarray  #: (1,) int64: the row of the call's first MCU step
+
+
+class LinkSensorLanes(NamedTuple):
+    """One compute thread's lane buffers (:func:`hil.sim.robot.advance_robot_lanes`): the
+    LVDS links' counters and word logs of the batch it holds
+    (:func:`firmware_model.lvds.lanes.link_lane_buffer`) and its sensor chips' parameters
+    and codes (:func:`plant.sensors.lanes.sensor_lane_buffer`)."""
+    link: np.ndarray
+    chips: np.ndarray
 
 
 #: Where each field of :class:`StackRows` lives on an :class:`~hil.sim.actuator.FpgaStack`:
@@ -87,5 +97,5 @@ SOURCES = (
 )
 
 
-__all__ = ["SOURCES", "BoardRows", "LinkRows", "McuRows", "PlantRows", "SensorRows",
-           "StackRows", "TapRows"]
+__all__ = ["SOURCES", "BoardRows", "LinkRows", "LinkSensorLanes", "McuRows", "PlantRows",
+           "SensorRows", "StackRows", "TapRows"]
