@@ -26,7 +26,7 @@ DEFAULT_PRESET = "hydra_default"
 #: The newest of the plant kernel's arithmetic recipes (``sim.plant_numerics``, docs/plant.md).
 #: A recipe changes rounding and the noise realisation, never the model; a run keeps the
 #: recipe it was recorded with, so its log replays bit for bit.
-PLANT_NUMERICS = 3
+PLANT_NUMERICS = 4
 #: Values of keys that a configuration recorded before the key existed ran with.
 RECORDED_BEFORE: dict[str, Any] = {
     "sim.plant_numerics": 1,

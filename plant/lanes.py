@@ -44,7 +44,10 @@ K2 = K1 + L.N_STATES * LW
 K3 = K2 + L.N_STATES * LW
 K4 = K3 + L.N_STATES * LW
 XT = K4 + L.N_STATES * LW
-SIZE = XT + L.N_STATES * LW
+YO = XT + L.N_STATES * LW           #: plant outputs (N_OUTPUTS rows; plant.lane_outputs)
+GO = YO + L.N_OUTPUTS * LW          #: the tick's seven standard normal noise samples
+RG = GO + 7 * LW                    #: the noise streams' xorshift64* states (their bits)
+SIZE = RG + LW
 
 
 @njit(cache=True, inline="always")
@@ -61,16 +64,47 @@ def _p(B, k, i, at=PO):
     return B[_ix(at, k, i)]
 
 
+@njit(cache=True, inline="always")
+def viscosity_lane(B, i, t_oil):
+    """:func:`plant.blocks.thermal.viscosity_ratio` of lane ``i`` (recipe 3's exp)."""
+    visc = exp3(-_p(B, L.P_VISC_COEFF, i) * (t_oil - _p(B, L.P_T_REF, i)))
+    return visc if _p(B, L.P_TEMP_ON, i) > 0.5 else 1.0
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def line_stiffness_lane(B, i, x_c, tq):
+    """:func:`plant.blocks.hydraulics.line_stiffness` of lane ``i`` (series or aerated, k_s
+    at x_c or the average), both sides computed and selected."""
+    kc = _p(B, L.P_KC, i)
+    k_pipe = _p(B, L.P_KS_PIPE, i)
+    ksx = _p(B, L.P_KSX_ON, i) > 0.5
+    v1 = _p(B, L.P_SIDE_V0, i) + kc * (_p(B, L.P_HALF_STROKE, i) + x_c)
+    v2 = _p(B, L.P_SIDE_V0, i) + kc * (_p(B, L.P_HALF_STROKE, i) - x_c)
+    gain = _p(B, L.P_KS_FLUID_GAIN, i)
+    k_fluid = gain * (1.0 / v1 + 1.0 / v2)
+    ks_series = k_fluid * k_pipe / (k_fluid + k_pipe) if ksx else _p(B, L.P_KS_AVG, i)
+    dpa = tq / kc
+    p_low = _p(B, L.P_PRECHARGE, i) + P_ATM_PA
+    p1 = p_low + (dpa if dpa > 0.0 else 0.0)
+    p2 = p_low + (-dpa if dpa < 0.0 else 0.0)
+    soft1 = 1.0 + _p(B, L.P_AIR_A, i) / (p1 * p1)
+    soft2 = 1.0 + _p(B, L.P_AIR_A, i) / (p2 * p2)
+    kf_x = gain * (1.0 / (v1 * soft1) + 1.0 / (v2 * soft2))
+    k_side = 0.5 / (1.0 / _p(B, L.P_KS_AVG, i) - 1.0 / k_pipe)
+    kf_avg = k_side / soft1 + k_side / soft2
+    kf_air = kf_x if ksx else kf_avg
+    ks_air = kf_air * k_pipe / (kf_air + k_pipe)
+    return ks_air if _p(B, L.P_AIR_ON, i) > 0.5 else ks_series
+
+
 @njit(cache=True, inline="always", error_model="numpy")
 def derivatives_lanes(B, xo, do):
     """:func:`plant.kernel.derivatives` for every lane of the lane buffer ``B``: the
     states at ``xo``, the derivatives into ``do`` (offsets of :data:`X`, :data:`K1` ...)."""
     for i in range(LW):
-        # thermal.viscosity_ratio
         temp_on = _p(B, L.P_TEMP_ON, i) > 0.5
         t_oil = _p(B, L.S_TOIL, i, xo)
-        visc = exp3(-_p(B, L.P_VISC_COEFF, i) * (t_oil - _p(B, L.P_T_REF, i)))
-        r = visc if temp_on else 1.0
+        r = viscosity_lane(B, i, t_oil)
         dp = _p(B, L.P_DP, i) * r
         ds = _p(B, L.P_DS, i) * r
         dc = _p(B, L.P_DC, i) * r
@@ -139,28 +173,9 @@ def derivatives_lanes(B, xo, do):
         # pump.pump
         B[_ix(do, L.S_THP, i)] = vp
         B[_ix(do, L.S_VP, i)] = (tau_p - dp * vp - f_cp - g * tq) / _p(B, L.P_JP, i)
-        # hydraulics.pressure_force (line_stiffness: series or aerated)
+        # hydraulics.pressure_force
         x_c = _p(B, L.S_THC, i, xo)
-        kc = _p(B, L.P_KC, i)
-        k_pipe = _p(B, L.P_KS_PIPE, i)
-        ksx = _p(B, L.P_KSX_ON, i) > 0.5
-        v1 = _p(B, L.P_SIDE_V0, i) + kc * (_p(B, L.P_HALF_STROKE, i) + x_c)
-        v2 = _p(B, L.P_SIDE_V0, i) + kc * (_p(B, L.P_HALF_STROKE, i) - x_c)
-        gain = _p(B, L.P_KS_FLUID_GAIN, i)
-        k_fluid = gain * (1.0 / v1 + 1.0 / v2)
-        ks_series = k_fluid * k_pipe / (k_fluid + k_pipe) if ksx else _p(B, L.P_KS_AVG, i)
-        dpa = tq / kc
-        p_low = _p(B, L.P_PRECHARGE, i) + P_ATM_PA
-        p1 = p_low + (dpa if dpa > 0.0 else 0.0)
-        p2 = p_low + (-dpa if dpa < 0.0 else 0.0)
-        soft1 = 1.0 + _p(B, L.P_AIR_A, i) / (p1 * p1)
-        soft2 = 1.0 + _p(B, L.P_AIR_A, i) / (p2 * p2)
-        kf_x = gain * (1.0 / (v1 * soft1) + 1.0 / (v2 * soft2))
-        k_side = 0.5 / (1.0 / _p(B, L.P_KS_AVG, i) - 1.0 / k_pipe)
-        kf_avg = k_side / soft1 + k_side / soft2
-        kf_air = kf_x if ksx else kf_avg
-        ks_air = kf_air * k_pipe / (kf_air + k_pipe)
-        ks = ks_air if _p(B, L.P_AIR_ON, i) > 0.5 else ks_series
+        ks = line_stiffness_lane(B, i, x_c, tq)
         B[_ix(do, L.S_TQ, i)] = ks * (g * vp - tq / ds - vc)
         # load.piston_and_load (seal_friction, rod_force)
         kind = _p(B, L.P_LOAD_KIND, i)
@@ -286,5 +301,5 @@ def lane_buffer() -> np.ndarray:
     return np.zeros(SIZE)
 
 
-__all__ = ["LANES", "LW", "derivatives_lanes", "lane_buffer", "load_params", "load_states",
-           "rk4_lanes", "store_states"]
+__all__ = ["LANES", "LW", "derivatives_lanes", "lane_buffer", "line_stiffness_lane",
+           "load_params", "load_states", "rk4_lanes", "store_states", "viscosity_lane"]

@@ -26,13 +26,15 @@ from hil.bench.robot_cycle import python_per_cycle
 from plant import kernel, lanes
 from plant import layout as L
 from plant.config import Config
+from plant.lane_outputs import outputs_lanes
 from plant.sensors import lanes as sensor_lanes
 from plant.sensors.harness import digitise
 
 #: Stage names, in the order of one tick.
 STAGES = ("plant RK4 + effects", "plant outputs + noise", "sensor chips", "driver board",
           "LVDS link", "MCU law (C build)", "plant RK4 + effects, in lanes",
-          "sensor chips, in lanes", "LVDS link, in lanes")
+          "sensor chips, in lanes", "LVDS link, in lanes",
+          "plant outputs + noise, in lanes")
 
 
 @njit(cache=True, nogil=True)
@@ -84,6 +86,18 @@ def _link_sensors_in_lanes(which, n_ticks, tick0, blocks, sizes, y, k, raw, st, 
                 link_lanes.sweep_down_lanes(lb, lk, mdown, st, down, rows, m)
                 link_lanes.sweep_up_lanes(lb, lk, up, mup, rows, m)
             link_lanes.store_link(lb, lk, rows, m)
+
+
+@njit(cache=True, nogil=True)
+def _outputs_in_lanes(n_ticks, x, p, u, y, rng, blocks, sizes, buf):
+    """``n_ticks`` ticks of every actuator's outputs and noise, batch by batch in lanes,
+    from the states in the lane buffer (the engine computes them right after the RK4 step,
+    with no move in)."""
+    for b in range(blocks.shape[0]):
+        lanes.load_params(buf, p, blocks[b], sizes[b])
+        lanes.load_states(buf, x, u, blocks[b], sizes[b])
+        for _ in range(n_ticks):
+            outputs_lanes(buf, y, rng, blocks[b], sizes[b])
 
 
 @dataclass
@@ -169,6 +183,14 @@ def stage_costs(cfg: Config, ticks: int = 2000, warm_s: float = 0.2,
                     run(ticks, arrays)
                     best = min(best, time.thread_time() - c0)
                 rows.append((STAGES[7 + which], best * 1e9 / (n * ticks)))
+            x, p, u, y, rng = (a.copy() for a in snap[:5])
+            _outputs_in_lanes(1, x, p, u, y, rng, eng._blocks, eng._sizes, buf)
+            best = np.inf
+            for _ in range(3):
+                c0 = time.thread_time()
+                _outputs_in_lanes(ticks, x, p, u, y, rng, eng._blocks, eng._sizes, buf)
+                best = min(best, time.thread_time() - c0)
+            rows.append((STAGES[9], best * 1e9 / (n * ticks)))
         # The engine's compiled call as a whole (every stage, 1 thread), same ticks, with
         # the plants one actuator at a time and (where the recipe allows) in lanes.
         cycles = max(1, ticks // eng.cycle_ticks)

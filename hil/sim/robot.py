@@ -58,10 +58,10 @@ from hil.fieldbus.pdo_compiled import put as _put
 from hil.sim.actuator import TRACE_WIDTH, TRACE_WORDS, _trace_row, advance_stack, drive_plant
 from hil.sim.robot_tunables import EngineTunables
 from hil.sim.stack_rows import SOURCES, LinkSensorLanes, McuRows, StackRows, TapRows
-from plant import kernel
 from plant import lanes as lanes_mod
 from plant import layout as L
 from plant.config import Config, ConfigError
+from plant.lane_outputs import outputs_lanes
 from plant.sensors import lanes as sensor_lanes
 
 #: Offsets of the input record's fields, in 16-bit words (the kernel writes through a view).
@@ -194,7 +194,8 @@ def advance_robot_lanes(counter, n_periods, period, tick0, blocks, sizes, n_sub_
     (:func:`firmware_model.lvds.lanes.sweep_down_lanes`) in lanes, each actuator's board
     tick, the batch's upstream sweeps in lanes, then all their plants take the tick's RK4
     step in one pass over the lanes (:func:`plant.lanes.rk4_lanes`, in ``buf``, this
-    thread's lane buffer), then each plant's outputs. ``ls`` (a
+    thread's lane buffer), then their outputs and noise
+    (:func:`plant.lane_outputs.outputs_lanes`, from the same buffer). ``ls`` (a
     :class:`~hil.sim.stack_rows.LinkSensorLanes`): this thread's lane buffers of the links'
     counters and word logs (loaded when a batch is claimed, stored back at its end) and of
     the chips' parameters. Each actuator sees the operations of
@@ -264,10 +265,10 @@ def advance_robot_lanes(counter, n_periods, period, tick0, blocks, sizes, n_sub_
                 lanes_mod.load_states(buf, pl.x, pl.u, rows, m)
                 lanes_mod.rk4_lanes(buf, n_sub_max)
                 lanes_mod.store_states(buf, pl.x, rows, m)
-                for j in range(m):
-                    i = rows[j]
-                    kernel.outputs(pl.x[i], pl.params[i], pl.u[i], pl.rng[i], pl.y[i])
-                    if tap_y.shape[0] > 0:
+                outputs_lanes(buf, pl.y, pl.rng, rows, m)
+                if tap_y.shape[0] > 0:
+                    for j in range(m):
+                        i = rows[j]
                         for w in range(pl.y.shape[1]):
                             tap_y[i, at, w] = pl.y[i, w]
             for j in range(m):

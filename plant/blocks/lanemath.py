@@ -1,7 +1,8 @@
-"""exp, sin/cos and tanh of the plant's arithmetic recipe 3 (``sim.plant_numerics = 3``):
-written out in additions, multiplications, divisions, ``floor`` and integer bit moves, so
-that a loop over actuators compiles to vector instructions (four doubles at a time with
-AVX2) and every lane gives the same bits as the scalar call. libm's functions are calls
+"""exp, sin/cos and tanh of the plant's arithmetic recipe 3 (``sim.plant_numerics = 3``),
+and the natural log recipe 4 adds for its sensor noise (:func:`log4`): written out in
+additions, multiplications, divisions, ``floor`` and integer bit moves, so that a loop over
+actuators compiles to vector instructions (four doubles at a time with AVX2) and every
+lane gives the same bits as the scalar call. libm's functions are calls
 the compiler cannot widen; a vector math library (SVML) would widen them but round
 differently from libm and from each other, so the recipe owns its functions instead.
 
@@ -152,6 +153,41 @@ def tanh3(x):
     return small if a < _TANH_SMALL else big
 
 
+# log: x = 2**k (1 + f), 1 + f in [sqrt(2)/2, sqrt(2)); s = f / (2 + f); fdlibm's __ieee754_log
+# polynomial in s**2 (Lg1..Lg7).
+_LG1 = 6.666666666666735130e-01
+_LG2 = 3.999999999940941908e-01
+_LG3 = 2.857142874366239149e-01
+_LG4 = 2.222219843214978396e-01
+_LG5 = 1.818357216161805012e-01
+_LG6 = 1.531383769920937332e-01
+_LG7 = 1.479819860511658591e-01
+#: The bits of a double just below sqrt(2)/2 (its high 32 bits; the low ones zero), and what
+#: moves them to 1.0's: adding it carries into the exponent exactly when the mantissa is at
+#: least sqrt(2)/2's, which picks k so that 1 + f lands in [sqrt(2)/2, sqrt(2)).
+_HALF_SQRT2_BITS = 0x3FE6A09E00000000
+_TO_ONE = 0x3FF0000000000000 - _HALF_SQRT2_BITS
+_MANTISSA = 0x000FFFFFFFFFFFFF
+
+
+@njit(**MATH)
+def log4(x):
+    """ln x (recipe 4) for a positive normal double x (the noise's uniforms: 2**-52 .. 1);
+    within about one ulp of libm's. Not for 0, negative, subnormal, inf or nan."""
+    t = _bits(x) + _TO_ONE
+    k = (t >> 52) - 1023
+    f = _from_bits((t & _MANTISSA) + _HALF_SQRT2_BITS) - 1.0
+    hfsq = 0.5 * f * f
+    s = f / (2.0 + f)
+    z = s * s
+    w = z * z
+    t1 = w * (_LG2 + w * (_LG4 + w * _LG6))
+    t2 = z * (_LG1 + w * (_LG3 + w * (_LG5 + w * _LG7)))
+    r = t2 + t1
+    dk = _from_bits(k + _bits(_SHIFTER)) - _SHIFTER  # k as a double, exactly (|k| < 2**51)
+    return s * (hfsq + r) + dk * _LN2_LO - hfsq + f + dk * _LN2_HI
+
+
 # --- the recipe's choice, for the scalar blocks ---------------------------------------------
 @njit(cache=True, inline="always")
 def exp_r(x, numerics):
@@ -171,4 +207,4 @@ def tanh_r(x, numerics):
     return tanh3(x) if numerics >= 3.0 else math.tanh(x)
 
 
-__all__ = ["exp3", "exp_r", "sin3", "sin_r", "sincos3", "tanh3", "tanh_r"]
+__all__ = ["exp3", "exp_r", "log4", "sin3", "sin_r", "sincos3", "tanh3", "tanh_r"]

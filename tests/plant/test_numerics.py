@@ -76,7 +76,7 @@ def _run(numerics: int, noise: bool, ticks: int = 4000) -> np.ndarray:
     return rec
 
 
-@pytest.mark.parametrize("other", [2, 3])
+@pytest.mark.parametrize("other", [2, 3, 4])
 def test_the_recipes_give_the_same_physics(other):
     """Without noise recipes 2 and 3 agree with 1 to roundings; the phase currents, which
     use the turned angles (and recipe 3's own sin/cos), included."""
@@ -104,26 +104,28 @@ def test_the_recipes_draw_noise_of_the_same_size():
     size under both recipes, uncorrelated with the other channels' (a channel that lost,
     doubled or shared its noise would show)."""
     cfg = load_config(None)
-    one, two = _noise_run(1, True), _noise_run(2, True)
+    one, two, four = _noise_run(1, True), _noise_run(2, True), _noise_run(4, True)
     quiet = _noise_run(2, False)
     assert not np.array_equal(one[:, Y_P_CYL_A], two[:, Y_P_CYL_A])
+    assert not np.array_equal(four[:, Y_P_CYL_A], two[:, Y_P_CYL_A])
     sigma_p = cfg.get("effects.sensor_noise.pressure_pa")
     sigmas = {Y_P_ACC: sigma_p, Y_P_PUMP_A: sigma_p, Y_P_CYL_A: sigma_p,
               Y_F_STRAIN: cfg.get("effects.sensor_noise.strain_n"),
               Y_TEMP: cfg.get("effects.sensor_noise.temperature_c")}
     for col, sigma in sigmas.items():
         assert quiet[:, col].min() > 5 * sigma or col in (Y_F_STRAIN, Y_TEMP)
-        for rec in (one, two):
+        for rec in (one, two, four):
             assert np.std(rec[:, col] - quiet[:, col]) == pytest.approx(sigma, rel=0.15), col
-    for rec in (one, two):  # and every channel draws its own samples
+    for rec in (one, two, four):  # and every channel draws its own samples
         noise = (rec - quiet)[:, list(sigmas)]
         corr = np.corrcoef(noise.T) - np.eye(len(sigmas))
         assert np.max(np.abs(corr)) < 0.1, corr
 
 
 def test_a_log_without_the_key_ran_recipe_one():
-    assert PLANT_NUMERICS == 3 and load_config(None).get("sim.plant_numerics") == 3
+    assert PLANT_NUMERICS == 4 and load_config(None).get("sim.plant_numerics") == 3
     assert as_recorded({"sim.seed": 3})["sim.plant_numerics"] == RECORDED_BEFORE[
         "sim.plant_numerics"] == 1
     assert as_recorded({"sim.plant_numerics": 2})["sim.plant_numerics"] == 2
     assert as_recorded({"sim.plant_numerics": 3})["sim.plant_numerics"] == 3
+    assert as_recorded({"sim.plant_numerics": 4})["sim.plant_numerics"] == 4
