@@ -85,9 +85,9 @@ def test_replay_of_a_capture_matches_and_sees_a_change(tmp_path, capsys):
     assert "30 replies of bench_one_box (stack model) match bit for bit" in \
         capsys.readouterr().out
     assert main(["replay", str(cap), "--set", "mcu.kp_force=2.1"]) == 1
-    assert ("first divergence at reply at t = 0.001000 s after the first frame (idx 1, lad 0): "
+    assert ("first divergence at reply at t = 0.003000 s after the first frame (idx 3, lad 0): "
             "datagram 0 logical "
-            "address 22 (box 0 inputs byte 12)") in capsys.readouterr().out
+            "address 20 (box 0 inputs byte 10)") in capsys.readouterr().out
 
 
 def test_capture_usage_errors_are_one_line(tmp_path, capsys):

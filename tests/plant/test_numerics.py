@@ -123,7 +123,7 @@ def test_the_recipes_draw_noise_of_the_same_size():
 
 
 def test_a_log_without_the_key_ran_recipe_one():
-    assert PLANT_NUMERICS == 4 and load_config(None).get("sim.plant_numerics") == 3
+    assert PLANT_NUMERICS == 4 and load_config(None).get("sim.plant_numerics") == 4
     assert as_recorded({"sim.seed": 3})["sim.plant_numerics"] == RECORDED_BEFORE[
         "sim.plant_numerics"] == 1
     assert as_recorded({"sim.plant_numerics": 2})["sim.plant_numerics"] == 2
