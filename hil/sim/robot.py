@@ -37,8 +37,8 @@ from numba import njit, types
 from numba.core import cgutils
 from numba.extending import intrinsic
 
+from firmware_model.fpga import lanes as fpl
 from firmware_model.fpga import layout as B
-from firmware_model.fpga.tick import control_tick
 from firmware_model.lvds import link as LK
 from firmware_model.mcu.c_abi import (
     IN_CLEAR_FAULT,
@@ -51,7 +51,13 @@ from firmware_model.mcu.c_abi import (
     config_record,
 )
 from hil.fieldbus import pdo
-from hil.sim.actuator import TRACE_WIDTH, TRACE_WORDS, _trace_row, advance_stack, drive_plant
+from hil.sim.actuator import (
+    TRACE_WIDTH,
+    TRACE_WORDS,
+    advance_stack,
+    drive_lanes,
+    trace_row_lanes,
+)
 from hil.sim.robot_tunables import EngineTunables
 from hil.sim.stack_rows import SOURCES, McuRows, StackRows, TapRows
 from plant import kernel
@@ -92,6 +98,7 @@ assert [f.name for f in pdo.ACTUATOR_IN] == [
 assert [f.name for f in pdo.ACTUATOR_OUT] == ["mode", "flags", "command", "kp_position",
                                               "kp_force"]
 assert all(OUTPUT.fields[n][1] % 4 == 0 for n in OUTPUT.names)
+assert fpl.LW == lanes_mod.LW, "a batch's boards and plants share the lanes"
 
 
 #: The MCU law's host build, linked by name (the library is loaded by :class:`RobotEngine`
@@ -187,15 +194,19 @@ def advance_robot(counter, n_periods, period, tick0, batched, s, mcu, no_rec, ta
 
 @njit(cache=True, nogil=True, _nrt=False)
 def advance_robot_lanes(counter, n_periods, period, tick0, blocks, sizes, n_sub_max, s, mcu,
-                        buf, tap_y, tap_trace, log):
+                        buf, fb, tap_y, tap_trace, log):
     """:func:`advance_robot` with the plants in lanes: this thread claims whole batches
     (``blocks[b, :sizes[b]]``: up to :data:`plant.lanes.LW` actuator rows, counted by
     ``counter``) and runs their MCU periods together. Per tick every actuator of the
-    batch goes through its sensor chips, LVDS link and board tick (one after the other,
-    the calls :func:`advance_stack` makes), then all their plants take the tick's RK4 step
-    in one pass over the lanes (:func:`plant.lanes.rk4_lanes`, in ``buf``, this thread's
-    lane buffer), then each plant's outputs. Each actuator sees the operations of
-    :func:`advance_stack` in its order: the batch only interleaves independent actuators.
+    batch goes through its sensor chips and downstream LVDS sweep (one after the other,
+    the calls :func:`advance_stack` makes), then all their boards take the tick in one
+    pass over the lanes (:func:`firmware_model.fpga.lanes.board_tick`, their state in
+    ``fb``, this thread's board lane buffer, from the batch's claim to its end), then each
+    actuator's trace rows and upstream sweep, then the inverters drive the plants and all
+    plants take the tick's RK4 step in one pass over the lanes (:func:`plant.lanes.
+    rk4_lanes`, in ``buf``, this thread's plant lane buffer), then each plant's outputs.
+    Each actuator sees the operations of :func:`advance_stack` in its order: the batch
+    only interleaves independent actuators.
     ``tap_y`` (actuators, ticks, outputs) and ``tap_trace`` (actuators, ticks,
     ``TRACE_WIDTH``): where given (not empty), every tick's plant outputs and board trace
     row (:func:`advance_stack`'s) of every actuator (:attr:`RobotEngine.tap`). ``log`` (a
@@ -212,6 +223,7 @@ def advance_robot_lanes(counter, n_periods, period, tick0, blocks, sizes, n_sub_
         rows = blocks[b]
         done += m
         lanes_mod.load_params(buf, pl.params, rows, m)
+        fpl.load_board(fb, bd.params, bd.state, rows, m)
         for n in range(n_periods):
             t = tick0 + n * period
             r = log.row[0] + n
@@ -234,23 +246,23 @@ def advance_robot_lanes(counter, n_periods, period, tick0, blocks, sizes, n_sub_
                 lt = r * period + k  # the log trace's row (advance_stack's k-th)
                 for j in range(m):
                     i = rows[j]
-                    st = bd.state[i]
                     digitise(pl.y[i], se.chips[i], t + k, se.raw[i])
-                    LK.sweep_down(lk.state[i], lk.mcu_down[i], st, bd.down[i])
-                    since, crc = st[B.F_SINCE_VALID], st[B.F_ERR_LINK_CRC]
-                    on = control_tick(bd.params[i], st, bd.down[i], bd.up[i], se.raw[i])
+                    LK.sweep_down(lk.state[i], lk.mcu_down[i], bd.state[i], bd.down[i])
+                fpl.board_tick(fb, rows, m, se.raw, bd.down, bd.state, bd.up, bd.params)
+                for j in range(m):
+                    i = rows[j]
                     if tap_trace.shape[0] > 0:
-                        _trace_row(tap_trace[i], at, se.raw[i], bd.down[i], since, crc,
-                                   bd.up[i], on, st)
+                        trace_row_lanes(tap_trace[i], at, fb, j, se.raw[i], bd.down[i],
+                                        bd.up[i])
                     if logging_trace:
-                        _trace_row(log.trace[i], lt, se.raw[i], bd.down[i], since, crc,
-                                   bd.up[i], on, st)
+                        trace_row_lanes(log.trace[i], lt, fb, j, se.raw[i], bd.down[i],
+                                        bd.up[i])
                     LK.sweep_up(lk.state[i], bd.up[i], lk.mcu_up[i])
                     if tap_trace.shape[0] > 0:
                         _word_log(tap_trace[i], at, lk.state[i])
                     if logging_trace:
                         _word_log(log.trace[i], lt, lk.state[i])
-                    drive_plant(on, st, 1.0 / bd.params[i, B.C_PWM_TOP], pl.u[i], pl.x[i])
+                drive_lanes(fb, rows, m, bd.params, pl.u, pl.x)
                 lanes_mod.load_states(buf, pl.x, pl.u, rows, m)
                 lanes_mod.rk4_lanes(buf, n_sub_max)
                 lanes_mod.store_states(buf, pl.x, rows, m)
@@ -265,6 +277,7 @@ def advance_robot_lanes(counter, n_periods, period, tick0, blocks, sizes, n_sub_
                 for w in range(lk.mcu_up.shape[1]):
                     in16[i, _IN_UP + w] = lk.mcu_up[i, w] & 0xFFFF
                 in32[i, _IN_CRC] = lk.state[i, LK.LK_MASTER_CRC]
+        fpl.store_board(fb, bd.state, rows, m)
 
 
 @njit(cache=True)
@@ -453,7 +466,7 @@ class RobotEngine:
         self._blocks = np.zeros((0, lanes_mod.LW), dtype=np.int64)
         self._sizes = np.zeros(0, dtype=np.int64)
         self._blocks_for: bytes = b""
-        self._lane_bufs: list[np.ndarray] = []
+        self._lane_bufs: list[tuple[np.ndarray, np.ndarray]] = []
         #: Called with the first tick of each cycle once it is computed (:meth:`tap`).
         self.on_cycle = None
         self.tap(False, False)
@@ -638,14 +651,14 @@ class RobotEngine:
         calling thread, k: the k-th helper)."""
         if self.lanes:
             while len(self._lane_bufs) <= slot:
-                self._lane_bufs.append(lanes_mod.lane_buffer())
-            buf = self._lane_bufs[slot]
+                self._lane_bufs.append((lanes_mod.lane_buffer(), fpl.board_buffer()))
+            buf, fb = self._lane_bufs[slot]
         if started is not None:
             started.release()
         if self.lanes:
             return advance_robot_lanes(self._counter, ticks // self.period, self.period,
                                        self.tick, self._blocks, self._sizes,
-                                       self._n_sub_max, self.arrays, self.mcu, buf,
+                                       self._n_sub_max, self.arrays, self.mcu, buf, fb,
                                        *self._taps(ticks), self.log_rows)
         return advance_robot(self._counter, ticks // self.period, self.period, self.tick,
                              self._batched, self.arrays, self.mcu, self._no_rec,
