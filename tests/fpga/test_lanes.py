@@ -5,7 +5,11 @@ faults, sensor errors, another calibration's parameters, a speed ring just reset
 
 from __future__ import annotations
 
+import re
+
+import numba
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from numba import cfunc, njit, types
@@ -228,3 +232,22 @@ def _isqrt16(n):
        | st.sampled_from([0, 1, 2, 3, 4, (1 << 32) - 1, 1 << 30, (1 << 30) - 1]))
 def test_the_fixed_16_step_root_is_the_hardware_root(n):
     assert _isqrt16(n) == isqrt(n)
+
+
+@pytest.mark.slow
+def test_the_board_tick_in_lanes_compiles_to_vector_instructions():
+    """The generated machine code of the lane loop: its integer arithmetic is on full
+    vector registers (ymm with AVX2, zmm with AVX-512) and it calls nothing (every helper
+    inlined, no branch left that would stop the vectoriser: then the count drops to the
+    handful of scalar moves)."""
+    import llvmlite.binding as llvm
+
+    if "+avx2" not in llvm.get_host_cpu_features().flatten():
+        pytest.skip("no AVX2 on this CPU: nothing to check the lanes against")
+    opts = {k: v for k, v in fpl.LANES.items() if k != "cache"}
+    f = numba.njit(**opts)(fpl.tick_lanes.py_func)
+    f(fpl.board_buffer())
+    asm = next(iter(f.inspect_asm().values()))
+    body = asm[:asm.index(".Lfunc_end0")]
+    assert len(re.findall(r"\bvp\w+\s[^\n]*%[yz]mm", body)) > 200
+    assert "call" not in body
