@@ -80,7 +80,7 @@ def _trace_row(tr, j, raw, down, link_since, link_crc, up, on, st):
                 st[B.F_DUTY_B], st[B.F_DUTY_C])
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def trace_row_lanes(tr, j, fb, lane, raw, down, up):
     """:func:`_trace_row` of the board in lane ``lane`` of the board lanes ``fb``
     (:mod:`firmware_model.fpga.lanes`, after its :func:`~firmware_model.fpga.lanes.
@@ -111,7 +111,7 @@ def drive_plant(on, st, inv_top, u, x):
     _drive(on, st[B.F_DUTY_A], st[B.F_DUTY_B], st[B.F_DUTY_C], inv_top, u, x)
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def drive_lanes(fb, rows, m, c, u, x):
     """:func:`drive_plant` for the boards ``rows[:m]`` in the board lanes ``fb`` (after
     their :func:`~firmware_model.fpga.lanes.board_tick`): the plants' input rows ``u``
