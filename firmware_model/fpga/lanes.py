@@ -48,7 +48,7 @@ from numba import njit
 
 from firmware_model.fpga import foc
 from firmware_model.fpga import layout as B
-from firmware_model.fpga.fixed import clamp, mul_shift, sat_s, sat_u, wrap_s, wrap_u
+from firmware_model.fpga.fixed import clamp, mul_shift, sat_s, wrap_s, wrap_u
 from firmware_model.fpga.tick import control_tick
 
 #: Compile options of the lane loops: cached, no runtime, no checks.
@@ -165,7 +165,10 @@ def sin_cos_lanes(theta_e):
 
 @njit(cache=True, inline="always")
 def _count(v):
-    return sat_u(v + 1, 16)
+    """:func:`~firmware_model.fpga.protections.count` (``sat_u(v + 1, 16)``) as a min and a
+    max: the same value for every int64, and no branch (whose merge made LLVM store the
+    counters with scatters)."""
+    return max(0, min(v + 1, 0xFFFF))
 
 
 @njit(**LANES)
