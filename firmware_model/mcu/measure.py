@@ -71,8 +71,9 @@ def upstream_si(up: np.ndarray, cal: FirmwareCalibration) -> dict[str, np.ndarra
 def piston_count(up: np.ndarray) -> np.ndarray:
     """The BiSS piston count (int64) assembled from the two upstream words of memories
     ``up`` (..., >= ``U_PISTON_HI`` + 1 words), high word first as the MCU reads it."""
-    u = np.asarray(up).astype(np.int64) & 0xFFFF
-    return (u[..., B.U_PISTON_HI] << 16) | u[..., B.U_PISTON_LO]
+    u = np.asarray(up)  # the two words only: a block of frames is large
+    hi = u[..., B.U_PISTON_HI].astype(np.int64) & 0xFFFF
+    return (hi << 16) | (u[..., B.U_PISTON_LO].astype(np.int64) & 0xFFFF)
 
 
 def piston_x(count: np.ndarray, cal: FirmwareCalibration) -> np.ndarray:

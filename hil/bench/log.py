@@ -160,7 +160,8 @@ def format_report(ov: Overhead | None, enc: list[EncodingCost]) -> str:
             f"{ov.pairs} pairs, medians):",
             f"  bare:   CPU {ov.bare_cpu_s:.3f} s, wall {ov.bare_wall_s:.3f} s",
             f"  logged: CPU {ov.logged_cpu_s:.3f} s, wall {ov.logged_wall_s:.3f} s, "
-            f"log {ov.log_bytes / 1e3:.0f} kB",
+            f"log {ov.log_bytes / 1e3:.0f} kB ({ov.log_bytes / ov.seconds / 1e6:.1f} MB per "
+            "simulated second)",
             f"  logged / bare: CPU {ov.cpu_ratio:.3f}, wall {ov.wall_ratio:.3f} "
             f"(target <= {TARGET[ov.topology.endswith('robot model')]:.2f}); fastest logged "
             f"/ fastest bare, CPU {ov.cpu_ratio_min:.3f}",

@@ -32,6 +32,8 @@ from mcap.records import MessageIndex, Opcode
 from mcap.writer import Writer
 
 _HEAD = struct.Struct("<BQHIQQ")  # opcode, record length, channel, sequence, log, publish
+_INDEX_HEAD = struct.Struct("<BQHI")  # opcode, record length, channel, bytes of entries
+_PAIR = struct.Struct("<QQ")  # an index entry: log time, offset in the chunk
 
 
 class _MessageIndex(MessageIndex):
@@ -40,9 +42,18 @@ class _MessageIndex(MessageIndex):
 
     def write(self, stream) -> None:  # noqa: ANN001 - mcap's RecordBuilder
         # ``records`` holds (time, offset) pairs and, from :func:`add_messages`, (n, 2)
-        # arrays of them: one array each run of either, in order
+        # arrays of them: one array each run of either, in order; the record goes out in
+        # one write (the library's start/finish_record seek back to patch the length)
+        recs = self.records
+        if len(recs) == 1:  # the common case: a channel's one block or batch in a chunk
+            r = recs[0]
+            body = _PAIR.pack(*r) if isinstance(r, tuple) else \
+                r.astype("<u8", copy=False).tobytes()
+            stream.write(_INDEX_HEAD.pack(Opcode.MESSAGE_INDEX, 6 + len(body),
+                                          self.channel_id, len(body)) + body)
+            return
         parts, pairs = [], []
-        for r in self.records:
+        for r in recs:
             if isinstance(r, np.ndarray):
                 if pairs:
                     parts.append(np.asarray(pairs, dtype="<u8").reshape(-1, 2))
@@ -52,12 +63,10 @@ class _MessageIndex(MessageIndex):
                 pairs.append(r)
         if pairs:
             parts.append(np.asarray(pairs, dtype="<u8").reshape(-1, 2))
-        data = np.concatenate(parts).astype("<u8") if parts else np.zeros((0, 2), "<u8")
-        stream.start_record(Opcode.MESSAGE_INDEX)
-        stream.write2(self.channel_id)
-        stream.write4(len(data) * 16)
-        stream.write(data.tobytes())
-        stream.finish_record()
+        body = (np.concatenate(parts).astype("<u8", copy=False).tobytes() if len(parts) > 1
+                else parts[0].astype("<u8", copy=False).tobytes() if parts else b"")
+        stream.write(_INDEX_HEAD.pack(Opcode.MESSAGE_INDEX, 6 + len(body), self.channel_id,
+                                      len(body)) + body)
 
 
 def supported(w: Writer) -> bool:
@@ -69,6 +78,7 @@ def supported(w: Writer) -> bool:
             and hasattr(stats, "channel_message_counts") and hasattr(stats, "message_count")
             and isinstance(getattr(cb, "message_indices", None), dict)
             and hasattr(cb, "num_messages") and hasattr(getattr(rw, "_buffer", None), "write")
+            and isinstance(getattr(w, "_Writer__chunk_size", None), int)
             and callable(getattr(w, "_Writer__maybe_finalize_chunk", None)))
 
 
@@ -146,3 +156,68 @@ def add_messages(w: Writer, channel_id: int, times: Sequence[int] | np.ndarray,
     cb.num_messages += n
     cb.record_writer._buffer.write(blob)  # noqa: SLF001
     w._Writer__maybe_finalize_chunk()  # noqa: SLF001
+
+
+#: The MCAP Message record's head as numpy fields: what :func:`add_records` fills in
+#: front of the payload fields of a record array.
+HEAD_FIELDS = [("op", "u1"), ("len", "<u8"), ("ch", "<u2"), ("seq", "<u4"), ("log", "<u8"),
+               ("pub", "<u8")]
+
+
+def add_records(w: Writer, channel_ids: Sequence[int], log_ns: np.ndarray,
+                publish_ns: np.ndarray, seqs: Sequence[int], rec: np.ndarray) -> None:
+    """``k`` messages on each channel of ``channel_ids`` (``c`` of them), channel-major:
+    ``rec`` ((c * k,) structured, fields starting with :data:`HEAD_FIELDS`, filled here;
+    the payload after them filled by the caller, e.g.
+    :func:`hil.framelog.rawpb.pack_blocks`) holds channel ``j``'s records at
+    ``[j * k, (j + 1) * k)``, at log times ``log_ns`` and publish times ``publish_ns``
+    ((k,) each, the same for every channel), sequences from ``seqs[j]`` on. As
+    ``add_message`` per message, with no bytes object each: the records go into the chunk
+    buffer straight from the array, a slice of channels at a time that keeps a chunk near
+    its size."""
+    c = len(channel_ids)
+    if not c:
+        return
+    k = len(rec) // c
+    log = np.asarray(log_ns, dtype=np.int64)
+    pub = np.asarray(publish_ns, dtype=np.int64)
+    size = rec.dtype.itemsize
+    rec["op"] = Opcode.MESSAGE
+    rec["len"] = size - 9
+    recs = rec.reshape(c, k)
+    recs["ch"] = np.asarray(channel_ids)[:, None]
+    recs["seq"] = (np.asarray(seqs, dtype=np.int64)[:, None] + np.arange(k)) & 0xFFFFFFFF
+    recs["log"] = log
+    recs["pub"] = pub
+    t_first, t_last = int(log.min()), int(log.max())
+    stats = w._Writer__statistics  # noqa: SLF001 - see the module docstring
+    cb = w._Writer__chunk_builder  # noqa: SLF001
+    if stats.message_count == 0:
+        stats.message_start_time = t_first
+    else:
+        stats.message_start_time = min(t_first, stats.message_start_time)
+    stats.message_end_time = max(t_last, stats.message_end_time)
+    stats.message_count += c * k
+    step = np.arange(k, dtype=np.uint64) * size
+    times = log.astype(np.uint64)
+    per = max(1, w._Writer__chunk_size // (size * k))  # noqa: SLF001 - channels a slice
+    for lo in range(0, c, per):
+        part = rec[lo * k:(lo + per) * k]
+        if cb.num_messages == 0:
+            cb.message_start_time = t_first
+        else:
+            cb.message_start_time = min(cb.message_start_time, t_first)
+        cb.message_end_time = max(cb.message_end_time, t_last)
+        base = cb.record_writer.count
+        for j, cid in enumerate(channel_ids[lo:lo + per]):
+            stats.channel_message_counts[cid] += k
+            index = cb.message_indices.get(cid)
+            if not isinstance(index, _MessageIndex):  # none yet, or the library's own
+                index = cb.message_indices[cid] = _MessageIndex(
+                    channel_id=cid, records=list(index.records) if index else [])
+            at = base + j * k * size
+            index.records.append((int(log[0]), at) if k == 1 else
+                                 np.stack([times, at + step], axis=1))
+        cb.num_messages += len(part)
+        cb.record_writer._buffer.write(part.view(np.uint8))  # noqa: SLF001
+        w._Writer__maybe_finalize_chunk()  # noqa: SLF001

@@ -23,6 +23,15 @@ ENC_ETHERCAT = "eha-hil/ethercat"
 ENC_ETHERCAT_FCS = "eha-hil/ethercat-fcs"  # an EtherCAT PDU + its Ethernet FCS (bus run)
 ENC_SENSOR_RAW = "eha-hil/sensor-raw"
 ENC_JSON = "json"
+#: What one MCU step read from a driver board (``bus run --log``): the 32 upstream words
+#: and the MCU side's upstream CRC-error count. Written as uint16 x 34 (the words, then
+#: the count as one little-endian u32, low half first: 68 bytes); logs before that hold
+#: uint32 x 33 (each word in a u32, then the count: 132 bytes). :func:`split_mcu_up`
+#: reads either.
+ENC_MCU_UP = "eha-hil/mcu-up"
+MCU_UP_WORDS = 32
+MCU_UP_WIDTH = MCU_UP_WORDS + 2     # uint16 elements per frame
+MCU_UP_WIDTH_U32 = MCU_UP_WORDS + 1  # uint32 elements per frame (logs before)
 
 #: MCAP message encoding of a block channel; the frame encoding is in the channel metadata.
 BLOCK_MESSAGE_ENCODING = "eha-hil/block"
@@ -138,3 +147,21 @@ def unpack_block(data: bytes | memoryview) -> tuple[np.ndarray, np.ndarray]:
     t = np.frombuffer(data, _TIMES, count, BLOCK_HEADER.size)
     frames = np.frombuffer(data, dt, count * width, BLOCK_HEADER.size + count * 8)
     return t, frames.reshape(count, width)
+
+
+def split_mcu_up(frames: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(words (..., 32) int64, crc_errors (...) int64)`` of ``eha-hil/mcu-up`` frames
+    ``(..., 34)`` uint16 (this layout) or ``(..., 33)`` uint32 (logs before it).
+    ValueError for any other shape."""
+    f = np.asarray(frames)
+    width = f.shape[-1] if f.ndim else 0
+    if width == MCU_UP_WIDTH and f.dtype.itemsize == 2:
+        crc = f[..., MCU_UP_WORDS].astype(np.int64) | (
+            f[..., MCU_UP_WORDS + 1].astype(np.int64) << 16)
+    elif width == MCU_UP_WIDTH_U32 and f.dtype.itemsize == 4:
+        crc = f[..., MCU_UP_WORDS].astype(np.int64)
+    else:
+        raise ValueError(f"{ENC_MCU_UP} frames are {MCU_UP_WIDTH} x uint16 (or "
+                         f"{MCU_UP_WIDTH_U32} x uint32 in older logs), not {width} x "
+                         f"{f.dtype}")
+    return f[..., :MCU_UP_WORDS].astype(np.int64), crc

@@ -5,7 +5,8 @@ board's upstream register memory (``UP_REGISTERS`` of ``firmware_model/fpga/layo
 which every MCU-level log carries once per MCU step:
 
 * ``/lvds/<b>.<k>/up``, encoding ``eha-hil/mcu-up`` (``eha-hil bus run --log``: the link's
-  upstream words + the MCU side's CRC-error count, uint32), or
+  upstream words + the MCU side's CRC-error count, uint16 x 34; uint32 x 33 in older
+  logs), or
 * ``/lvds/<board>/up``, encoding ``eha-hil/lvds-up`` (one u16 per register, the documented
   snapshot).
 
@@ -40,11 +41,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from firmware_model.fpga import layout as B
+from hil.framelog.formats import ENC_MCU_UP, MCU_UP_WIDTH, MCU_UP_WIDTH_U32
 from hil.framelog.reader import FrameLogError, FrameLogReader, LogInfo
 
 #: Frame encodings that carry a board's upstream registers, and the words each frame has.
-UP_ENCODINGS: dict[str, int] = {"eha-hil/mcu-up": B.UP_WORDS + 1, "eha-hil/lvds-up":
-                                len(B.UP_REGISTERS)}
+UP_ENCODINGS: dict[str, tuple[int, ...]] = {
+    ENC_MCU_UP: (MCU_UP_WIDTH, MCU_UP_WIDTH_U32), "eha-hil/lvds-up": (len(B.UP_REGISTERS),)}
 #: Plant load kind -> identification load case (``hil.identify.csvdata.LOAD_CASES``).
 LOAD_CASE_OF_KIND: dict[str, str] = {"fixed": "fixed_piston", "free": "free_piston",
                                      "conrod": "conrod_fixed"}
@@ -167,9 +169,10 @@ def export_identify(log_path: str | os.PathLike[str], out_path: str | os.PathLik
     period_ns = cfg.get("mcu.period_ticks") * cfg.get("sim.tick_ns")
     fs = 1e9 / period_ns
     t_ns, frames = reader.blocks(topic)
-    if frames.ndim != 2 or frames.shape[1] != UP_ENCODINGS[encoding]:
+    if frames.ndim != 2 or frames.shape[1] not in UP_ENCODINGS[encoding]:
         raise FrameLogError(f"{path}: {topic}: frames of {frames.shape[-1]} words, "
-                            f"{encoding} has {UP_ENCODINGS[encoding]}")
+                            f"{encoding} has "
+                            f"{' or '.join(map(str, UP_ENCODINGS[encoding]))}")
     if len(t_ns) < 2:
         raise FrameLogError(f"{path}: {topic}: {len(t_ns)} frame(s): nothing to identify")
     steps = np.unique(np.diff(t_ns.astype(np.int64)))

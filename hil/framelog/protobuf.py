@@ -123,13 +123,22 @@ class MessageType:
 
     def encode_array(self, columns: Mapping[str, np.ndarray], n: int) -> np.ndarray:
         """:meth:`encode` as one (n, :attr:`size`) uint8 array, row i the i-th message."""
-        rec = np.zeros(n, self.record)
-        for number, (f, key) in enumerate(zip(self.fields, self._keys, strict=True), 1):
-            rec[f"k{number}"] = key
+        rec = np.empty(n, self.record)
+        out = rec.view(np.uint8).reshape(n, self.size)
+        out[:] = self._blank  # every key, every value 0: one byte copy, not a field loop
+        for f in self.fields:
             v = columns.get(f.name)
             if v is not None:
                 rec[f.name] = np.asarray(v) != 0 if f.kind == "bool" else v
-        return rec.view(np.uint8).reshape(n, self.size)
+        return out
+
+    @cached_property
+    def _blank(self) -> np.ndarray:
+        """The bytes of one message with its keys and all values 0."""
+        rec = np.zeros(1, self.record)
+        for number, key in enumerate(self._keys, 1):
+            rec[f"k{number}"] = key
+        return rec.view(np.uint8)
 
     def decode(self, data: bytes | memoryview) -> dict[str, float | int]:
         """One message of exactly our layout (the fast path; any protobuf parser reads it

@@ -102,6 +102,31 @@ def pack_block(t_ns: np.ndarray, frames: np.ndarray, dtype: np.dtype) -> bytes:
                      b"\x0a", _varint(len(t)), t, b"\x12", _varint(len(f)), f))
 
 
+def pack_blocks(t_ns: np.ndarray, frames: np.ndarray, dtype: np.dtype,
+                head: list[tuple] = ()) -> np.ndarray:
+    """The block messages of ``k`` channels at once, frames ``(k, count, width)`` at the
+    same times ``t_ns`` (count,): a (k,) structured array whose row ``i`` holds, after
+    the fields ``head`` (left 0, e.g. :data:`hil.framelog.batch.HEAD_FIELDS`), the bytes
+    :func:`pack_block` makes of ``frames[i]`` (one copy of the frames, no bytes object)."""
+    k, count, width = frames.shape
+    dt = np.dtype(dtype).newbyteorder("<")
+    name = np.dtype(dtype).name.encode()
+    tl, fl, nl = _varint(8 * count), _varint(count * width * dt.itemsize), _varint(len(name))
+    rec = np.zeros(k, np.dtype([*head, ("k3", "u1"), ("count", "<u4"), ("k4", "u1"),
+                                ("width", "<u4"), ("k5", "u1"), ("nl", "u1", (len(nl),)),
+                                ("name", "u1", (len(name),)), ("k1", "u1"),
+                                ("tl", "u1", (len(tl),)), ("t", _T_NS, (count,)),
+                                ("k2", "u1"), ("fl", "u1", (len(fl),)),
+                                ("f", dt, (count * width,))]))
+    rec["k3"], rec["count"], rec["k4"], rec["width"] = 0x1D, count, 0x25, width
+    rec["k5"], rec["nl"], rec["name"] = 0x2A, np.frombuffer(nl, np.uint8), np.frombuffer(
+        name, np.uint8)
+    rec["k1"], rec["tl"], rec["t"] = 0x0A, np.frombuffer(tl, np.uint8), t_ns
+    rec["k2"], rec["fl"] = 0x12, np.frombuffer(fl, np.uint8)
+    rec["f"] = frames.reshape(k, count * width)
+    return rec
+
+
 def _fields(data: memoryview | bytes) -> dict[int, object]:
     """Top-level fields of a protobuf message: number -> int (varint, fixed) or memoryview
     (length-delimited); the last occurrence wins. ValueError for bytes that are not one."""
@@ -217,6 +242,41 @@ def wrapper(encoding: str) -> Callable[[bytes], bytes]:
     return lambda data: b"\x0a" + _varint(len(data)) + data + head(data)
 
 
+#: Many frames of one length at once: (frames (k, length) uint8) -> their messages
+#: (k, size) uint8, or None where the group needs the per-frame :func:`wrapper`.
+Many = Callable[[np.ndarray], np.ndarray | None]
+_MANY: dict[str, Many] = {}
+
+
+def wrap_many(encoding: str, frames: list[bytes]) -> list[bytes] | np.ndarray:
+    """The messages of ``frames`` (as :func:`wrapper` makes each): frames of one length
+    are wrapped as one array where the encoding has a vectorised header (EtherCAT: a
+    bus run's frames repeat the cycle plan's few lengths and datagram layouts). Returns
+    an (n, size) uint8 array when all messages have one size, else a list of bytes."""
+    wrap = wrapper(encoding)
+    many = _MANY.get(encoding)
+    if many is None or len(frames) < 2:
+        return [wrap(bytes(f)) for f in frames]
+    by_len: dict[int, list[int]] = {}
+    for i, f in enumerate(frames):
+        by_len.setdefault(len(f), []).append(i)
+    out: list[bytes] = [b""] * len(frames)
+    for idx in by_len.values():
+        got = many(np.frombuffer(b"".join(frames[i] for i in idx), np.uint8)
+                   .reshape(len(idx), -1)) if len(idx) > 1 else None
+        if got is not None and len(by_len) == 1:
+            return got  # one message size: the batch goes in as one array
+        if got is None:
+            for i in idx:
+                out[i] = wrap(bytes(frames[i]))
+        else:
+            blob = got.tobytes()
+            size = got.shape[1]
+            for j, i in enumerate(idx):
+                out[i] = blob[j * size:(j + 1) * size]
+    return out
+
+
 def unwrap(data: memoryview | bytes) -> memoryview:
     """The frame of a single-frame message (field 1); ValueError if it is not one."""
     mv = memoryview(data)
@@ -268,9 +328,74 @@ def _ethercat_fcs_header(data: bytes) -> bytes:
                      *(_packed32(5 + i, list(c)) for i, c in enumerate(cols))))
 
 
+def _ethercat_walk(pdu: bytes) -> tuple[bool, list[int], list[int]]:
+    """(parsed whole, offset of each datagram :func:`_ethercat_pdu_header` returns, the
+    byte offsets its walk depends on): a frame of the same length with the same bytes
+    at those offsets parses into datagrams at the same offsets."""
+    dgs: list[int] = []
+    used = [0, 1]
+    if len(pdu) < 2:
+        return False, dgs, []
+    end = min(len(pdu), 2 + (int.from_bytes(pdu[0:2], "little") & 0x7FF))
+    p = 2
+    while p + 12 <= end:
+        used += [p + 6, p + 7]
+        lf = int.from_bytes(pdu[p + 6:p + 8], "little")
+        ln = lf & 0x7FF
+        if p + 10 + ln + 2 > end:
+            return False, dgs, used
+        dgs.append(p)
+        p += 12 + ln
+        if not lf & 0x8000:
+            return p == end, dgs, used
+    return False, dgs, used
+
+
+def _ethercat_fcs_many(frames: np.ndarray) -> np.ndarray | None:
+    """The messages of frames of one length (:func:`wrap_many`): the datagram layout of
+    the first, taken for every frame whose layout bytes agree (None if one does not)."""
+    k, size = frames.shape
+    if size < 6:
+        return None
+    whole, dgs, used = _ethercat_walk(frames[0, :-4].tobytes())
+    if used and not bool((frames[:, used] == frames[0, used]).all()):
+        return None
+    pdu = frames[:, :-4]
+    crc = np.fromiter((zlib.crc32(r) for r in pdu), np.uint32, k)
+    fcs_ok = crc == np.ascontiguousarray(frames[:, -4:]).view("<u4")[:, 0]
+    n = len(dgs)
+
+    def u16(col: int) -> np.ndarray:
+        return pdu[:, col].astype(np.uint32) | pdu[:, col + 1].astype(np.uint32) << 8
+
+    lengths = [int(u16(p + 6)[0]) & 0x7FF for p in dgs]
+    cols = [[pdu[:, p] for p in dgs], [pdu[:, p + 1] for p in dgs],
+            [u16(p + 2) | u16(p + 4) << 16 for p in dgs], [np.full(k, ln) for ln in lengths],
+            [u16(p + 10 + ln) for p, ln in zip(dgs, lengths, strict=True)]]
+    fl = _varint(size)
+    layout = [("k1", "u1"), ("flen", "u1", (len(fl),)), ("frame", "u1", (size,)),
+              ("k2", "u1"), ("fcs", "u1"), ("k3", "u1"), ("pdu", "u1"), ("k4", "u1"),
+              ("n", "<u4")]
+    vl = _varint(4 * n)
+    if n:
+        for c in range(5):
+            layout += [(f"key{c}", "u1"), (f"len{c}", "u1", (len(vl),)),
+                       (f"v{c}", "<u4", (n,))]
+    rec = np.zeros(k, np.dtype(layout))
+    rec["k1"], rec["flen"], rec["frame"] = 0x0A, np.frombuffer(fl, np.uint8), frames
+    rec["k2"], rec["fcs"], rec["k3"], rec["pdu"] = 0x10, fcs_ok, 0x18, whole
+    rec["k4"], rec["n"] = 0x25, n
+    for c in range(5 if n else 0):
+        rec[f"key{c}"] = (5 + c) << 3 | 2
+        rec[f"len{c}"] = np.frombuffer(vl, np.uint8)
+        rec[f"v{c}"] = np.stack(cols[c], axis=1)
+    return rec.view(np.uint8).reshape(k, -1)
+
+
 _ECAT_FIELDS = [("fcs_ok", 2, _FD.TYPE_BOOL, False), ("pdu_ok", 3, _FD.TYPE_BOOL, False),
                 ("datagrams", 4, _FD.TYPE_FIXED32, False),
                 ("cmd", 5, _FD.TYPE_FIXED32, True), ("idx", 6, _FD.TYPE_FIXED32, True),
                 ("address", 7, _FD.TYPE_FIXED32, True), ("length", 8, _FD.TYPE_FIXED32, True),
                 ("wkc", 9, _FD.TYPE_FIXED32, True)]
 register_header("eha-hil/ethercat-fcs", _ECAT_FIELDS, _ethercat_fcs_header)
+_MANY["eha-hil/ethercat-fcs"] = _ethercat_fcs_many

@@ -34,7 +34,7 @@ import numpy as np
 from mcap.exceptions import UnsupportedCompressionError
 from mcap.writer import CompressionType, Writer
 
-from hil.framelog import batch, rawpb
+from hil.framelog import batch, chunk, rawpb
 from hil.framelog.formats import (
     BLOCK_MESSAGE_ENCODING,
     DTYPE_CODES,
@@ -61,6 +61,8 @@ from hil.framelog.protobuf import MessageType
 Compression = Literal["zstd", "lz4", "none"]
 _COMPRESSION = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4,
                 "none": CompressionType.NONE}
+#: Compression levels the codecs take (zstd's negative levels trade ratio for speed).
+_LEVELS = {"zstd": (-7, 22), "lz4": (0, 16)}
 _JSON_TYPES = ("number", "integer")
 #: Keys of the "eha-hil" metadata record that the writer sets itself.
 RESERVED_METADATA = ("level", "version", "time")
@@ -131,7 +133,9 @@ class FrameLogWriter:
     ``flush_every_ns`` also closes the chunk when that much simulated time has passed since
     the last one (None: by size only). ``compression``: ``zstd`` (default), ``lz4`` or
     ``none``; the mcap library depends on ``zstandard`` and ``lz4``, so all three work out
-    of the box.
+    of the box. ``compression_level``: the codec's level (None: zstd
+    :data:`hil.framelog.chunk.ZSTD_LEVEL`, lz4 its default); chunks are closed by
+    :mod:`hil.framelog.chunk` (one compressor per file, no copy of the chunk).
 
     Times must be integers >= 0 (ns of simulated time) and non-decreasing per channel, so
     that each channel reads back in time order.
@@ -147,11 +151,19 @@ class FrameLogWriter:
         chunk_size: int = 1 << 20,
         compression: Compression = "zstd",
         flush_every_ns: int | None = None,
+        compression_level: int | None = None,
     ) -> None:
         if level not in LEVELS:
             raise ValueError(f"unknown log level {level!r} (use {', '.join(LEVELS)})")
         if compression not in _COMPRESSION:
             raise ValueError(f"compression {compression!r} is not one of zstd, lz4, none")
+        if compression_level is not None and not (
+                compression in _LEVELS and
+                _LEVELS[compression][0] <= compression_level <= _LEVELS[compression][1]):
+            if compression not in _LEVELS:
+                raise ValueError(f"compression {compression!r} takes no level")
+            lo, hi = _LEVELS[compression]
+            raise ValueError(f"{compression} level {compression_level} is outside {lo}..{hi}")
         if chunk_size < 1:
             raise ValueError(f"chunk_size must be >= 1 byte, got {chunk_size}")
         if flush_every_ns is not None and flush_every_ns <= 0:
@@ -175,6 +187,8 @@ class FrameLogWriter:
             self._file.close()
             raise ValueError(f"compression {compression!r} unavailable ({exc}); "
                              "use compression='none'") from None
+        if compression != "none":
+            chunk.install(self._writer, compression, compression_level)
         try:
             self._writer.start(profile=profile, library=f"eha-hil/{package_version()}")
             self._fast = batch.supported(self._writer)
@@ -407,6 +421,85 @@ class FrameLogWriter:
                                  ch.count & 0xFFFFFFFF)
         ch.count += 1
 
+    def write_blocks(self, channel_ids: list[int], t_ns: np.ndarray,
+                     frames: np.ndarray) -> None:
+        """:meth:`write_block` of ``frames[i]`` on ``channel_ids[i]`` for every ``i``, all
+        at the times ``t_ns``: frames ``(k, n, width)``, the channels' one dtype and width
+        (e.g. every actuator's upstream words of a block of MCU steps). The same messages
+        as one :meth:`write_block` each, built as one array (:func:`rawpb.pack_blocks`)
+        and put into the chunk from it (:func:`batch.add_records`)."""
+        chs = [self._channel(c) for c in channel_ids]
+        f = np.asarray(frames)
+        if not chs or any(not c.block or c.container != rawpb.CONTAINER
+                          or c.dtype != chs[0].dtype or c.width != chs[0].width for c in chs) \
+                or f.ndim != 3 or len(f) != len(chs) or not self._fast:
+            if f.ndim != 3 or len(f) != len(chs):
+                raise ValueError(f"need frames (channels, n, width) for {len(chs)} "
+                                 f"channels, got {f.shape}")
+            for c, fr in zip(channel_ids, f, strict=True):
+                self.write_block(c, t_ns, fr)
+            return
+        ch0 = chs[0]
+        t = np.asarray(t_ns)
+        if t.ndim != 1 or f.shape[1:] != (t.shape[0], ch0.width):
+            raise ValueError(f"{ch0.topic}...: need t_ns (n,) and frames (k, n, "
+                             f"{ch0.width}), got {t.shape} and {f.shape}")
+        if t.dtype.kind not in "iu":
+            raise ValueError(f"{ch0.topic}: t_ns must be integer ns, got dtype {t.dtype}")
+        if f.dtype != ch0.dtype:
+            f = self._cast(ch0, f)
+        if t.shape[0] == 0:
+            return
+        t = t.astype(np.int64, copy=False)
+        if t[0] < 0:
+            raise ValueError(f"{ch0.topic}: time {int(t[0])} ns is negative")
+        if len(t) > 1 and bool(np.any(t[1:] < t[:-1])):
+            raise ValueError(f"{ch0.topic}: block times decrease")
+        first, last = int(t[0]), int(t[-1])
+        for c in sorted(chs, key=lambda c: -c.last_ns):  # a channel that would raise first
+            self._advance(c, first, last)
+        rec = rawpb.pack_blocks(t, f, ch0.dtype, batch.HEAD_FIELDS)
+        batch.add_records(self._writer, channel_ids, t[:1], t[-1:], [c.count for c in chs],
+                          rec)
+        for c in chs:
+            c.count += 1
+
+    def write_messages_many(self, channel_ids: list[int], t_ns: np.ndarray,
+                            messages: np.ndarray) -> None:
+        """:meth:`write_messages` of ``messages[j]`` ((k, size) uint8: messages of one
+        length) on ``channel_ids[j]`` for every ``j``, all at the times ``t_ns`` (k,): e.g.
+        every actuator's decoded signals of a block. The same messages, built as one
+        record array and put into the chunk from it (:func:`batch.add_records`)."""
+        chs = [self._channel(c) for c in channel_ids]
+        m = np.asarray(messages)
+        if m.ndim != 3 or m.dtype != np.uint8 or len(m) != len(chs):
+            raise ValueError(f"need messages (channels, n, size) uint8 for {len(chs)} "
+                             f"channels, got {m.shape} {m.dtype}")
+        if any(c.block or c.wrap is not None for c in chs) or not self._fast:
+            for c, part in zip(channel_ids, m, strict=True):
+                self.write_messages(c, t_ns, part)
+            return
+        t = np.asarray(t_ns)
+        if t.ndim != 1 or t.shape[0] != m.shape[1] or t.dtype.kind not in "iu":
+            raise ValueError(f"{chs[0].topic}...: need (n,) integer times for "
+                             f"{m.shape[1]} messages, got {t.shape} {t.dtype}")
+        if not len(t) or not chs:
+            return
+        times = t.astype(np.int64)
+        if times[0] < 0 or (len(times) > 1 and bool(np.any(times[1:] < times[:-1]))):
+            raise ValueError(f"{chs[0].topic}: message times must be >= 0 and "
+                             "non-decreasing")
+        first, last = int(times[0]), int(times[-1])
+        for c in sorted(chs, key=lambda c: -c.last_ns):  # a channel that would raise first
+            self._advance(c, first, last)
+        c_n, k, size = m.shape
+        rec = np.zeros(c_n * k, np.dtype([*batch.HEAD_FIELDS, ("data", "u1", (size,))]))
+        rec["data"] = m.reshape(c_n * k, size)
+        batch.add_records(self._writer, channel_ids, times, times, [c.count for c in chs],
+                          rec)
+        for c in chs:
+            c.count += k
+
     def write_messages(self, channel_id: int, t_ns: np.ndarray,
                        messages: list[bytes] | np.ndarray) -> None:
         """Log ``messages[i]`` at ``t_ns[i]`` (int ns, non-decreasing), one MCAP message each,
@@ -432,8 +525,7 @@ class FrameLogWriter:
             raise ValueError(f"{ch.topic}: message times must be >= 0 and non-decreasing")
         self._advance(ch, int(times[0]), int(times[-1]))
         if ch.wrap is not None:
-            wrap = ch.wrap
-            messages = [wrap(bytes(m)) for m in messages]  # type: ignore[operator]
+            messages = rawpb.wrap_many(ch.encoding, [bytes(m) for m in messages])
         batch.add_messages(self._writer, channel_id, times, messages, ch.count, self._fast)
         ch.count += len(messages)
 

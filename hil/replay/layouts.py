@@ -13,6 +13,7 @@ from firmware_model.fpga import layout as B
 from firmware_model.lvds import link as LK
 from hil.fieldbus import pdo
 from hil.fieldbus.topology import Box
+from hil.framelog.formats import ENC_MCU_UP, MCU_UP_WIDTH, MCU_UP_WIDTH_U32
 from hil.framelog.layout import Layout, LayoutField, words
 from hil.sim.actuator import (
     TRACE_DOWN,
@@ -24,7 +25,6 @@ from hil.sim.actuator import (
     TRACE_WORDS,
 )
 
-ENC_MCU_UP = "eha-hil/mcu-up"        # 31 upstream words + CRC-error count, uint32
 ENC_MCU_DOWN = "eha-hil/lvds-down-registers"  # 13 downstream registers, uint16
 ENC_RECORD = "eha-hil/process-record"  # a box's fieldbus record, bytes
 ENC_TRACE = "eha-hil/fpga-trace"
@@ -37,8 +37,15 @@ _PDO_TYPES = {"u1": "u8", "u2": "u16", "i2": "s16", "i4": "i32"}
 
 
 def mcu_up() -> Layout:
-    """31 upstream registers as read by the MCU, then its upstream CRC-error count (u32)."""
-    return words(ENC_MCU_UP, _UP, 4, [("up_crc_errors", "u32")], B.UP_WORDS + 1)
+    """The 32 upstream registers as read by the MCU (u16 or s16 each), then its upstream
+    CRC-error count (u32 at byte 64): 68 bytes, written as uint16 x 34."""
+    return words(ENC_MCU_UP, _UP, 2, [("up_crc_errors", "u32")], MCU_UP_WIDTH)
+
+
+def mcu_up_u32() -> Layout:
+    """The layout of logs before :func:`mcu_up`: each register in a u32 (read from its low
+    half), then the CRC-error count: 132 bytes, uint32 x 33 (tests write such logs)."""
+    return words(ENC_MCU_UP, _UP, 4, [("up_crc_errors", "u32")], MCU_UP_WIDTH_U32)
 
 
 def mcu_down() -> Layout:

@@ -4,8 +4,9 @@ Channels per box ``b`` (blocks of fixed-width frames, times in ns of simulated t
 
 * ``/mcu/b/outputs``  uint8 x out_bytes: the box's fieldbus output record, each cycle;
 * ``/mcu/b/inputs``   uint8 x in_bytes: the input record the box gave back, each cycle;
-* ``/lvds/b.k/up``    uint32 x 33: board k's upstream memory (the link's 32 words) + the MCU side's
-  upstream CRC-error count, before each MCU step;
+* ``/lvds/b.k/up``    uint16 x 34: board k's upstream memory (the link's 32 words) + the MCU side's
+  upstream CRC-error count (a u32 in the last two), before each MCU step (logs before
+  that: uint32 x 33; :func:`hil.framelog.formats.split_mcu_up` reads either);
 * ``/lvds/b.k/down``  uint16 x 13: board k's downstream registers after each MCU step;
 * ``/fieldbus/frames`` (level "bus" and up): every frame as sent/received, single messages;
 * ``/fpga/b.k/trace`` (level "full"): int64 x TRACE_WIDTH per tick: board k's raw sensor
@@ -54,6 +55,7 @@ from hil.fieldbus.master import Master
 from hil.fieldbus.system import BusRecord, BusSystem
 from hil.fieldbus.topology import Topology
 from hil.framelog import FrameLogWriter
+from hil.framelog.formats import MCU_UP_WIDTH
 from hil.framelog.layout import SCHEMA_ENCODING as LAYOUT_ENCODING
 from hil.framelog.layout import Layout
 from hil.replay import layouts as LY
@@ -62,7 +64,7 @@ from hil.replay.signal_out import SignalOut
 from hil.sim.actuator import TRACE_WIDTH, TRACE_WORDS
 from plant.config import Config
 
-UP_WIDTH = B.UP_WORDS + 1
+UP_WIDTH = MCU_UP_WIDTH  # uint16 elements of an upstream frame (32 words, the count in 2)
 ENC_MCU_UP = LY.ENC_MCU_UP
 ENC_MCU_DOWN = LY.ENC_MCU_DOWN
 ENC_RECORD = LY.ENC_RECORD
@@ -135,7 +137,7 @@ class RecordingStackBox(StackBox):
                            self.in_dtype.itemsize)
         for k in range(len(self.stacks)):
             tk = topics(b, k)
-            self.ch_up.append(block(tk["up"], LY.mcu_up(), np.uint32, UP_WIDTH))
+            self.ch_up.append(block(tk["up"], LY.mcu_up(), np.uint16, UP_WIDTH))
             self.ch_down.append(block(tk["down"], LY.mcu_down(), np.uint16, B.DOWN_WORDS))
             if self.traced:
                 self.ch_trace.append(block(tk["trace"], LY.fpga_trace(), np.int64,
@@ -179,13 +181,15 @@ class RecordingStackBox(StackBox):
         self.n_steps = i + 1
 
     def _up_down(self, k: int) -> tuple[np.ndarray, np.ndarray]:
-        """Board ``k``'s upstream frames (n, 33: 32 words + CRC-error count, uint32) and
-        downstream registers (n, 16, uint16) of the buffered MCU steps."""
+        """Board ``k``'s upstream frames (n, 34: 32 words + CRC-error count as a u32,
+        uint16) and downstream registers (n, 16, uint16) of the buffered MCU steps."""
         n = self.n_steps
         u, d = dpram.up_base(k), dpram.down_base(k)
-        up = np.empty((n, UP_WIDTH), np.uint32)
+        up = np.empty((n, UP_WIDTH), np.uint16)
         up[:, :B.UP_WORDS] = self.ram_rows[:n, u:u + B.UP_WORDS]
-        up[:, B.UP_WORDS] = [r[k] for r in self.crc_rows]
+        crc = np.array([r[k] for r in self.crc_rows], np.uint32)
+        up[:, B.UP_WORDS] = crc & 0xFFFF  # the count as a u32, low half first
+        up[:, B.UP_WORDS + 1] = crc >> 16
         return up, self.ram_rows[:n, d:d + B.DOWN_WORDS].astype(np.uint16)
 
     def _advance_stacks(self, n_ticks: int) -> None:
@@ -444,17 +448,19 @@ def run_logged(topo: Topology, cfg: Config, cycles: int, pc: Callable[[int, Mast
                 log.add_metadata("eha-hil.replay",
                                  replay_metadata(topo, cfg, boxes, model, cycles))
             step = max(cycles // 20, 1)
-            rec = None
+            parts: list[BusRecord] = []
             done = 0
             while done < cycles:
                 n = min(step, cycles - done)
-                part = bs.run(n, pc_signals)
-                rec = part if rec is None else BusRecord(
-                    np.concatenate([rec.inputs, part.inputs]), part.master, part.chain,
-                    part.transport, part.faults)
+                parts.append(bs.run(n, pc_signals))
                 done += n
                 if progress:
                     progress(done, cycles)
+            rec = None
+            if parts:  # the input images of every part, joined once
+                last = parts[-1]
+                rec = BusRecord(np.concatenate([p.inputs for p in parts]), last.master,
+                                last.chain, last.transport, last.faults)
             bus_sig.end_cycle()
             bus_sig.flush()
             flush_frames()

@@ -27,9 +27,10 @@ from hil.fieldbus.boxes import McuBox
 from hil.fieldbus.chain import CYCLE_TICKS
 from hil.fieldbus.topology import Topology, TopologyError, load_topology
 from hil.framelog import FrameLogError, FrameLogReader
+from hil.framelog.formats import split_mcu_up
 from hil.framelog.reader import LogInfo
 from hil.replay.fpga_replay import column_name, current_trace, replay_board_detail
-from hil.replay.record import UP_WIDTH, topics
+from hil.replay.record import topics
 from hil.sim.actuator import TRACE_WIDTH
 from plant.config import (
     DECLARED,
@@ -167,6 +168,14 @@ def _check_width(path: str | Path, topic: str, frames: np.ndarray, width: int) -
                           f"needs {width} (a log of another version?)")
 
 
+def _check_up(path: str | Path, topic: str, frames: np.ndarray) -> None:
+    # upstream frames: uint16 x 34, or uint32 x 33 in logs written before that
+    try:
+        split_mcu_up(frames[:0])
+    except ValueError as exc:
+        raise ReplayError(f"{path}: {topic}: {exc} (a log of another version?)") from None
+
+
 def replay_mcu(path: str | Path, config_override: Config | None = None) -> ReplayResult:
     """Replay every box of a log; the first divergence, or none.
 
@@ -212,7 +221,7 @@ def replay_mcu(path: str | Path, config_override: Config | None = None) -> Repla
         if outs is not None:
             _check_width(path, tp["outputs"], outs.frames, rbox.out_dtype.itemsize)
         for k in range(n_act):
-            _check_width(path, topics(box.id, k)["up"], ups[k].frames, UP_WIDTH)
+            _check_up(path, topics(box.id, k)["up"], ups[k].frames)
             _check_width(path, topics(box.id, k)["down"], downs[k].frames, B.DOWN_WORDS)
             if topics(box.id, k)["trace"] in blk:
                 tr = blk[topics(box.id, k)["trace"]]
@@ -239,8 +248,9 @@ def replay_mcu(path: str | Path, config_override: Config | None = None) -> Repla
         s = 0
         # Per-step data as plain Python objects / row views: the loop runs 5000x per s.
         ticks = (ups[0].t_ns // tick_ns).tolist() if n_act else []
-        up_rows = [u.frames[:, :-1].astype(np.int64) for u in ups]
-        up_crc = [u.frames[:, -1].tolist() for u in ups]
+        up_split = [split_mcu_up(u.frames) for u in ups]
+        up_rows = [w for w, _ in up_split]
+        up_crc = [c.tolist() for _, c in up_split]
         down_exp = [d.frames.tolist() for d in downs]
         links = rbox.links
         # Outputs by the tick they were applied at: a cycle whose frame was lost applied

@@ -66,7 +66,7 @@ class RobotRecorder:
         self.every = 1 if self.full else per_cycle
         self.cycles = BLOCK_CYCLES.get(level, FLUSH_CYCLES)
         n, rows = engine.n, self.cycles * per_cycle
-        self.tap = TapRows(np.zeros((n, rows, UP_WIDTH), np.uint32),
+        self.tap = TapRows(np.zeros((n, rows, UP_WIDTH), np.uint16),
                            np.zeros((n, rows, B.DOWN_WORDS), np.uint16),
                            np.zeros((n, rows * self.period if self.full else 0, TRACE_WIDTH),
                                     np.int64), np.zeros(1, np.int64))
@@ -122,7 +122,7 @@ class RobotRecorder:
                                         np.uint8, b.in_dtype.itemsize))
                 for k in range(len(box.actuators)):
                     tk = topics(box.id, k)
-                    self.ch_up.append(block(tk["up"], LY.mcu_up(), np.uint32, UP_WIDTH))
+                    self.ch_up.append(block(tk["up"], LY.mcu_up(), np.uint16, UP_WIDTH))
                     self.ch_down.append(block(tk["down"], LY.mcu_down(), np.uint16,
                                               B.DOWN_WORDS))
                     if self.full:
@@ -195,12 +195,16 @@ class RobotRecorder:
 
     def _write(self, k: _Block) -> None:
         c = k.cycles
-        ns, log = self.ns, self.log
-        period_s = self.period * ns * 1e-9
+        period_s = self.period * self.ns * 1e-9
         others = iter(k.other_in)
         box_out: list[tuple[np.ndarray, np.ndarray]] = []
+        # boxes of one slot layout (and, for outputs, the same cycles' records) are
+        # written together: one block message array, one decoding and encoding for all
+        groups: dict[tuple, list[tuple[int, np.ndarray]]] = {}
+        times: dict[tuple, np.ndarray] = {}
         for n_box, b in enumerate(self.boxes):
             e = self.engine_box[n_box]
+            layout = tuple(s.kind for s in b.box.slots)
             if e is None:
                 ins = next(others)
                 outs = None
@@ -215,20 +219,34 @@ class RobotRecorder:
                     box_out.append(outs)
                 else:
                     box_out.append(self._last_out[e])
-            if log is not None:
-                if c:
-                    log.write_block(self.ch_in[n_box], k.in_t * ns, ins)
-                if outs is not None and len(outs[0]) and self.ch_out[n_box] is not None:
-                    log.write_block(self.ch_out[n_box], outs[0] * ns, outs[1])
-            sig = self.sig_rec[n_box]
-            if "inputs" in sig and c:
-                self.out.write(sig["inputs"], k.in_t * ns,
-                               SG.record_columns(b.box, "inputs", ins))
-            if "outputs" in sig and outs is not None and len(outs[0]):
-                self.out.write(sig["outputs"], outs[0] * ns,
-                               SG.record_columns(b.box, "outputs", outs[1]))
+            if c:
+                groups.setdefault(("inputs", layout), []).append((n_box, ins))
+                times[("inputs", layout)] = k.in_t
+            if outs is not None and len(outs[0]):
+                key = ("outputs", layout, outs[0].tobytes())
+                groups.setdefault(key, []).append((n_box, outs[1]))
+                times[key] = outs[0]
+        for key, members in groups.items():
+            self._write_records(key[0], times[key], members)
         if len(k.t_steps):
             self._write_steps(k, box_out, period_s)
+
+    def _write_records(self, d: str, t: np.ndarray, members: list[tuple[int, np.ndarray]]
+                       ) -> None:
+        """The ``d`` records (``outputs``/``inputs``) of boxes of one slot layout at the
+        same times ``t`` (ticks): ``members`` (chain index, (n, bytes) rows) each."""
+        rows = np.stack([r for _, r in members])
+        boxes = [n for n, _ in members]
+        t_ns = t * self.ns
+        if self.log is not None:
+            chs = self.ch_in if d == "inputs" else self.ch_out
+            if chs[boxes[0]] is not None:
+                self.log.write_blocks([chs[n] for n in boxes], t_ns, rows)
+        sig = [self.sig_rec[n].get(d) for n in boxes]
+        if sig[0] is not None:
+            cols = SG.record_columns(self.boxes[boxes[0]].box, d,
+                                     rows.reshape(-1, rows.shape[2]))
+            self.out.write_split(sig, t_ns, cols)
 
     def _write_steps(self, k: _Block, box_out: list, period_s: float) -> None:
         ns, log, n = self.ns, self.log, self.engine.n
@@ -236,9 +254,8 @@ class RobotRecorder:
         r = len(t_steps)
         if log is not None:
             t = t_steps * ns
-            for j in range(n):
-                log.write_block(self.ch_up[j], t, up[j])
-                log.write_block(self.ch_down[j], t, down[j])
+            log.write_blocks(self.ch_up, t, up)  # one record array for every actuator
+            log.write_blocks(self.ch_down, t, down)
             if self.full:
                 tt = (t_steps[0] + np.arange(r * self.period, dtype=np.int64)) * ns
                 for j in range(n):

@@ -29,11 +29,11 @@ class SignalOut:
         n = len(t_ns)
         if not n:
             return
-        payloads = message.encode(columns, n)
+        payloads = message.encode_array(columns, n)  # (n, size): no bytes object each
         if cid is not None:
             self.log.write_messages(cid, t_ns, payloads)
         if handle is not None:
-            self.live.log(handle, t_ns, payloads)
+            self.live.log(handle, t_ns, [bytes(m) for m in payloads])
 
     def write_split(self, channels: list[int], t_ns: np.ndarray,
                     columns: dict[str, np.ndarray]) -> None:
@@ -42,12 +42,14 @@ class SignalOut:
         if not channels:
             return
         k = len(t_ns)
+        if not k:
+            return
         message = self._channels[channels[0]][0]
         payloads = message.encode_array(columns, len(channels) * k)
+        if self.log is not None:  # one record array for all channels
+            self.log.write_messages_many([self._channels[c][1] for c in channels], t_ns,
+                                         payloads.reshape(len(channels), k, -1))
         for j, channel in enumerate(channels):
-            _, cid, handle = self._channels[channel]
-            part = payloads[j * k:(j + 1) * k]
-            if cid is not None:
-                self.log.write_messages(cid, t_ns, part)
+            handle = self._channels[channel][2]
             if handle is not None:
-                self.live.log(handle, t_ns, [bytes(m) for m in part])
+                self.live.log(handle, t_ns, [bytes(m) for m in payloads[j * k:(j + 1) * k]])

@@ -32,6 +32,7 @@ from firmware_model.mcu import measure
 from firmware_model.mcu.measure import upstream_si
 from hil.fieldbus import pdo
 from hil.fieldbus.topology import Box
+from hil.framelog.formats import split_mcu_up
 from hil.framelog.protobuf import Field, MessageType
 
 PACKAGE = "eha_hil"
@@ -235,11 +236,12 @@ def piston_x(cal: FirmwareCalibration, up: np.ndarray) -> np.ndarray:
 
 def actuator_columns(cal: FirmwareCalibration, up: np.ndarray, down: np.ndarray,
                      x_before: float | np.ndarray, period_s: float) -> dict[str, np.ndarray]:
-    """SI columns of ``n`` MCU steps of one board: ``up`` (n, 33) the words the MCU read
-    (32 words + its upstream CRC-error count), ``down`` (n, 16) the registers it wrote.
+    """SI columns of ``n`` MCU steps of one board: ``up`` the words the MCU read (32 words +
+    its upstream CRC-error count: (n, 34) uint16 or, from older logs, (n, 33) uint32;
+    :func:`~hil.framelog.formats.split_mcu_up`), ``down`` (n, 16) the registers it wrote.
     ``x_before``: the piston position one MCU step (``period_s``) before each sample, (n,);
     or, for consecutive steps, a float: the position before the first (NaN: unknown)."""
-    u = np.asarray(up).astype(np.int64)
+    u, crc_up = split_mcu_up(up)
     d = np.asarray(down).astype(np.int64) & 0xFFFF
 
     def s16(a: np.ndarray) -> np.ndarray:
@@ -266,7 +268,7 @@ def actuator_columns(cal: FirmwareCalibration, up: np.ndarray, down: np.ndarray,
         "status": status, "state": u[:, B.U_STATE] & 0xFFFF,
         "err_ssi": u[:, B.U_ERR_SSI], "err_biss": u[:, B.U_ERR_BISS],
         "err_strain": u[:, B.U_ERR_STRAIN], "err_link_down": u[:, B.U_ERR_LINK_CRC],
-        "err_link_up": u[:, B.UP_WORDS], "oc_trips": u[:, B.U_OC_TRIPS],
+        "err_link_up": crc_up, "oc_trips": u[:, B.U_OC_TRIPS],
         "wd_trips": u[:, B.U_WD_TRIPS],
     }
     for a, field in _ANALOG:
@@ -296,9 +298,10 @@ def actuator_block(cal: FirmwareCalibration, up: np.ndarray, down: np.ndarray, e
                    period_s: float, carry: PistonCarry) -> tuple[np.ndarray,
                                                                  dict[str, np.ndarray]]:
     """The decoded signals of ``n`` consecutive MCU steps of ``a`` actuators: ``up``
-    (a, n, 33) the words each MCU read, ``down`` (a, n, >= 13) those it wrote. Every
-    ``every``-th step is kept (the last of each group): returns (the kept steps' indices
-    (k,), columns of a * k samples, actuator-major) and updates ``carry``. The piston
+    (a, n, 34) uint16 the words each MCU read (or (a, n, 33) uint32), ``down`` (a, n,
+    >= 13) those it wrote. Every ``every``-th step is kept (the last of each group):
+    returns (the kept steps' indices (k,), columns of a * k samples, actuator-major) and
+    updates ``carry``. The piston
     speed is the position's change over the step before each kept one; ``x_piston_valid``
     and ``v_piston_valid`` flag torn reads (:func:`tear_offsets`)."""
     a, n = up.shape[:2]

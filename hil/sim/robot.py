@@ -128,10 +128,13 @@ def _claim(typingctx, counter):
 def _log_words(log, i, r, in16, in32, out16):
     """Row ``r`` of actuator ``i`` in the frame log's copies (a
     :class:`~hil.sim.stack_rows.TapRows`): the upstream words and CRC-error count the MCU
-    program read at this step, the downstream words it wrote."""
+    program read at this step (the count as a u32 in two u16, low half first), the
+    downstream words it wrote."""
     for w in range(B.UP_WORDS):
         log.up[i, r, w] = in16[i, _IN_UP + w]
-    log.up[i, r, B.UP_WORDS] = in32[i, _IN_CRC]
+    crc = in32[i, _IN_CRC]
+    log.up[i, r, B.UP_WORDS] = crc & 0xFFFF
+    log.up[i, r, B.UP_WORDS + 1] = crc >> 16
     for w in range(log.down.shape[2]):
         log.down[i, r, w] = out16[i, _OUT_DOWN + w]
 
@@ -715,7 +718,8 @@ class RobotEngine:
                 self.arrays.link.mcu_down[j] = self.out["down"][j]
                 if tap.up.shape[1]:  # as advance_robot copies them
                     tap.up[j, r, :B.UP_WORDS] = self.in16[j, _IN_UP:_IN_UP + B.UP_WORDS]
-                    tap.up[j, r, B.UP_WORDS] = self.in32[j, _IN_CRC]
+                    crc = int(self.in32[j, _IN_CRC])
+                    tap.up[j, r, B.UP_WORDS:] = (crc & 0xFFFF, crc >> 16)
                     tap.down[j, r] = self.out16[j, _OUT_DOWN:_OUT_DOWN + tap.down.shape[2]]
                 if tap.trace.shape[1]:
                     b.stacks[i].advance(p, trace=tap.trace[j, r * p:(r + 1) * p])
@@ -764,7 +768,7 @@ class EngineLog(Protocol):
 
 def no_tap(n: int) -> TapRows:
     """A :class:`TapRows` with no rows: the kernel copies nothing out."""
-    return TapRows(np.zeros((n, 0, B.UP_WORDS + 1), np.uint32),
+    return TapRows(np.zeros((n, 0, B.UP_WORDS + 2), np.uint16),
                    np.zeros((n, 0, B.DOWN_WORDS), np.uint16),
                    np.zeros((n, 0, TRACE_WIDTH), np.int64), np.zeros(1, np.int64))
 

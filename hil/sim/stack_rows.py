@@ -64,7 +64,8 @@ class TapRows(NamedTuple):
     """What the robot engine's kernel copies out for a frame log, per actuator and MCU step
     (row ``r = row[0] + n`` for the call's ``n``-th MCU period): ``up[i, r]`` the 32
     upstream words the MCU program read at the step and, last, the link's upstream
-    CRC-error count it read with them (uint32, (actuators, rows, 33)); ``down[i, r]`` the
+    CRC-error count it read with them as a u32 in two words, low half first (uint16,
+    (actuators, rows, 34): the frame log's ``eha-hil/mcu-up``); ``down[i, r]`` the
     16 downstream words it wrote (uint16, (actuators, rows, 16)); ``trace[i, r * period:
     (r + 1) * period]`` the driver board's trace of the period's ticks
     (:data:`hil.sim.actuator.TRACE_WIDTH` int64 columns). Rows 0 (``up.shape[1] == 0``):

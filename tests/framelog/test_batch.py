@@ -86,3 +86,79 @@ def test_messages_as_one_array_make_the_same_file(chunk_size: int) -> None:
         msgs = list(make_reader(io.BytesIO(f), validate_crcs=True).iter_messages())
         assert [m.data for _, _, m in msgs] == payloads[:20] + [b"mid"] + payloads[20:]
         assert [m.log_time for _, _, m in msgs][19:22] == [190, 195, 200]
+
+
+@pytest.mark.parametrize("chunk_size", [700, 1 << 20])
+def test_blocks_of_many_channels_make_the_same_file(tmp_path, chunk_size: int) -> None:  # noqa: ANN001
+    """FrameLogWriter.write_blocks (one record array for all channels) writes the messages
+    write_block writes one channel at a time; with chunks larger than a batch, the same
+    file byte for byte."""
+    import numpy as np
+
+    from hil.framelog import FrameLogReader, FrameLogWriter
+
+    rng = np.random.default_rng(7)
+    t = [np.arange(k * 20, k * 20 + 20, dtype=np.int64) * 1000 for k in range(5)]
+    frames = rng.integers(0, 2**16, (5, 3, 20, 34)).astype(np.uint16)
+    files = []
+    for many in (True, False):
+        path = tmp_path / f"{many}.mcap"
+        with FrameLogWriter(path, chunk_size=chunk_size, compression="none") as w:
+            chs = [w.add_block_channel(f"/u{i}", "eha-hil/mcu-up", dtype=np.uint16, width=34)
+                   for i in range(3)]
+            other = w.add_block_channel("/o", "eha-hil/x", dtype=np.uint8, width=2)
+            for k in range(5):
+                if many:
+                    w.write_blocks(chs, t[k], frames[k].astype(np.int64))  # cast checked
+                else:
+                    for i, c in enumerate(chs):
+                        w.write_block(c, t[k], frames[k, i])
+                w.write_block(other, t[k][:1], np.zeros((1, 2), np.uint8))
+        files.append(path.read_bytes())
+        r = FrameLogReader(path)
+        for i in range(3):
+            b = r.blocks(f"/u{i}")
+            assert np.array_equal(b.frames, frames[:, i].reshape(-1, 34))
+            assert np.array_equal(b.t_ns, np.concatenate(t))
+    if chunk_size > 1000:
+        assert files[0] == files[1]
+    with FrameLogWriter(tmp_path / "bad.mcap") as w:
+        c = w.add_block_channel("/u", "eha-hil/mcu-up", dtype=np.uint16, width=34)
+        with pytest.raises(ValueError, match="fit"):
+            w.write_blocks([c], t[0], np.full((1, 20, 34), 70000))
+
+
+@pytest.mark.parametrize("chunk_size", [500, 1 << 20])
+def test_messages_of_many_channels_make_the_same_file(tmp_path, chunk_size: int) -> None:  # noqa: ANN001
+    """FrameLogWriter.write_messages_many writes what write_messages writes one channel at
+    a time (the very file when no chunk closes inside a batch)."""
+    import numpy as np
+
+    from hil.framelog import FrameLogWriter
+    from hil.framelog.protobuf import Field, MessageType
+
+    msg = MessageType("t.M", [Field("a", "double"), Field("b", "fixed32")])
+    rng = np.random.default_rng(2)
+    blocks = [(np.sort(rng.integers(0, 50, 6)) + 100 * blk,
+               msg.encode_array({"a": rng.normal(size=24), "b": rng.integers(0, 9, 24)},
+                                24).reshape(4, 6, -1)) for blk in range(3)]
+    files = []
+    for many in (True, False):
+        path = tmp_path / f"{many}.mcap"
+        with FrameLogWriter(path, chunk_size=chunk_size, compression="none") as w:
+            chs = [w.add_protobuf_channel(f"/s{i}", msg) for i in range(4)]
+            for t, m in blocks:
+                if many:
+                    w.write_messages_many(chs, t, m)
+                else:
+                    for i, c in enumerate(chs):
+                        w.write_messages(c, t, m[i])
+        files.append(path.read_bytes())
+    if chunk_size > 1000:
+        assert files[0] == files[1]
+    got = []
+    for f in files:
+        reader = make_reader(io.BytesIO(f), validate_crcs=True)
+        got.append(sorted((c.topic, m.log_time, m.sequence, m.data)
+                          for _, c, m in reader.iter_messages()))
+    assert got[0] == got[1] and len(got[0]) == 72

@@ -210,3 +210,24 @@ def test_bus_run_log_through_identify(tmp_path, capsys):
     rep = json.loads(out)
     assert rep["load"] == "fixed_piston" and rep["samples"] > 5000
     assert {c["channel"] for c in rep["channels"]} >= {"p_pump_a", "p_pump_b", "f_strain"}
+
+
+def test_log_with_32_bit_upstream_words_still_exports(capsys, tmp_path):
+    """A log written before the upstream words went to 16 bits (uint32 x 33 per MCU step,
+    the committed replay log) exports as identification input from the same words."""
+    from hil.framelog.formats import split_mcu_up
+    from hil.framelog.identify_export import _config, signals
+
+    old = Path(__file__).resolve().parents[1] / "data" / "replay" / "before_layout.mcap"
+    t_ns, frames = FrameLogReader(old).blocks("/lvds/0.0/up")
+    assert frames.dtype == np.uint32 and frames.shape[1] == 33
+    out = tmp_path / "old.csv"
+    code, _, err = _log_cli(capsys, "export", str(old), str(out), "--format", "identify")
+    assert code == 0, err
+    d = read_measured(out)
+    words, _ = split_mcu_up(frames)
+    first = int(np.flatnonzero(words[:, B.U_TICK] != 0)[0])  # the board's first sweep
+    assert d.n == len(words) - first > 0
+    cfg = _config(str(old), FrameLogReader(old).info())
+    for col in ("iq", "x_piston", "p_cyl_a"):
+        np.testing.assert_allclose(d.col(col), signals(words[first:], cfg)[col])

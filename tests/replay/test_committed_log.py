@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from hil.framelog import FrameLogReader
+from hil.framelog.formats import MCU_UP_WIDTH_U32, split_mcu_up
 from hil.replay.fpga_replay import current_trace
 from hil.replay.record import run_logged, topics
 from hil.replay.replay import _metadata, replay_mcu
@@ -70,9 +71,14 @@ def test_same_run_today_writes_the_same_frames(tmp_path):
 
 def _today(topic, frames, width):
     """Old frames in today's layout: raw words appended since (sensors added, none fitted
-    on this actuator) read 0, in the sensor frames and in the board trace."""
+    on this actuator) read 0, in the sensor frames and in the board trace; the upstream
+    words in 16 bits."""
     if topic.endswith("/trace"):
         return current_trace(frames)
+    if topic.endswith("/up") and frames.shape[1] == MCU_UP_WIDTH_U32:
+        # upstream words: uint32 x 33 then, uint16 x 34 now (the count in two halves)
+        words, crc = split_mcu_up(frames)
+        return np.column_stack([words, crc & 0xFFFF, crc >> 16]).astype(np.uint16)
     if topic.endswith("/raw") and frames.shape[1] < width:
         return np.pad(frames, ((0, 0), (0, width - frames.shape[1])))
     return frames

@@ -227,3 +227,32 @@ def test_a_robot_engine_log_of_a_faulty_bus_replays_bit_for_bit(topo, tmp_path):
     assert r.ok, r.divergence
     t, _ = FrameLogReader(path).blocks("/mcu/0/outputs")
     assert 150 < len(t) < 200  # some cycles' outputs were lost
+
+
+def test_the_upstream_crc_count_is_a_u32_at_byte_64(topo, tmp_path):
+    """An LVDS link that corrupts upstream words: the MCU's CRC-error count, logged in the
+    last two 16-bit words of each upstream frame, reads as the layout states it (a
+    little-endian u32 at byte 64, as any reader of eha-hil.layout takes it), counting up
+    from 0; the log replays bit for bit."""
+    import json
+    import struct
+
+    faults = {"fault": [{"link": "lvds.up", "kind": "bitflip", "rate": 0.02, "box": 0,
+                         "slot": 0}]}
+    path = tmp_path / "crc.mcap"
+    run_logged(topo, load_config(None), 60, demo_pc(400.0, 20.0), path, faults=faults,
+               model="robot")
+    reader = FrameLogReader(path)
+    info = reader.info().channel("/lvds/0.0/up")
+    lay = json.loads(info.metadata["eha-hil.layout"])
+    crc_field = next(f for f in lay["fields"] if f["name"] == "up_crc_errors")
+    assert (lay["size"], crc_field["offset"], crc_field["type"]) == (68, 64, "u32")
+    _, frames = reader.blocks("/lvds/0.0/up")
+    assert frames.dtype == np.uint16 and frames.shape[1] == 34
+    counts = [struct.unpack_from("<I", f.tobytes(), 64)[0] for f in frames]
+    assert counts[0] == 0 and 10 < counts[-1] < len(counts)  # words lost to the CRC
+    assert all(b - a in (0, 1, 2) for a, b in zip(counts, counts[1:], strict=False))
+    _, other = reader.blocks("/lvds/0.1/up")
+    assert not other[:, 32:].any()  # the healthy link counts nothing
+    r = replay(path)
+    assert r.ok, r.divergence
