@@ -68,9 +68,14 @@ N_LINK_STATE = LK_UP_WORDLOG + WORDS_W
 WORD_OK, WORD_CRC_BAD, WORD_DROPPED = 0, 1, 2
 WORD_BITS = lvds.WORD_BITS
 _WORD_DEN = WORD_BITS * 1_000_000_000
+# The per-tick kernels below take rows of larger arrays and allocate nothing: compiled
+# without numba's runtime (``_nrt=False``) they count no references on those views. Left
+# to the default, they were compiled with or without it depending on which caller compiled
+# them first (numba's callees inherit the flag) and the cache kept that: the same sweeps
+# took ~160 or ~95 ns per actuator tick depending on the install's history.
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def receive_word(st, down, addr, data, crc_ok):
     """LVDS endpoint, downstream side: store one received word or discard it.
 
@@ -167,7 +172,7 @@ def _clean_sweep(lk, ptr_index, log_base, src, n, size, dest, dest_words, mask):
     lk[ptr_index] = addr
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def sweep_down(lk, master_down, st, down):
     """Downstream words of one tick: MCU memory -> driver endpoint (value level)."""
     n = _words_this_tick(lk, LK_DOWN_ACC)
@@ -200,7 +205,7 @@ def sweep_down(lk, master_down, st, down):
         receive_word(st, down, addr, data, not bad)
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def sweep_up(lk, up, master_up):
     """Upstream words of one tick: driver memory -> MCU memory (value level)."""
     n = _words_this_tick(lk, LK_UP_ACC)

@@ -8,7 +8,8 @@ actuator's whole stage, one after the other; or, for the lane-wise engine, each 
 all actuators at once). A stage alone keeps its working set in cache as it would inside the
 engine, and its inputs are those the engine left (a running robot), so the figures add up
 to the compiled call's cost to within the calls' overhead (``total`` row: the engine's
-compiled call itself over the same cycles)."""
+compiled call itself over the same cycles). The last row is the per-cycle Python around that
+call (:mod:`hil.bench.robot_cycle`), per actuator tick for comparison."""
 
 from __future__ import annotations
 
@@ -20,16 +21,19 @@ from numba import njit
 
 from firmware_model.fpga import lanes as fpl
 from firmware_model.fpga.tick import control_tick
+from firmware_model.lvds import lanes as link_lanes
 from firmware_model.lvds import link as LK
+from hil.bench.robot_cycle import python_per_cycle
 from plant import kernel, lanes
 from plant import layout as L
 from plant.config import Config
+from plant.sensors import lanes as sensor_lanes
 from plant.sensors.harness import digitise
 
 #: Stage names, in the order of one tick.
 STAGES = ("plant RK4 + effects", "plant outputs + noise", "sensor chips", "driver board",
           "LVDS link", "MCU law (C build)", "plant RK4 + effects, in lanes",
-          "driver board, in lanes")
+          "sensor chips, in lanes", "LVDS link, in lanes", "driver board, in lanes")
 
 
 @njit(cache=True, nogil=True)
@@ -61,6 +65,26 @@ def _rk4_in_lanes(n_ticks, x, p, u, blocks, sizes, n_sub_max, buf):
             lanes.load_states(buf, x, u, blocks[b], sizes[b])
             lanes.rk4_lanes(buf, n_sub_max)
             lanes.store_states(buf, x, blocks[b], sizes[b])
+
+
+@njit(cache=True, nogil=True)
+def _link_sensors_in_lanes(which, n_ticks, tick0, blocks, sizes, y, k, raw, st, down, up,
+                           mdown, mup, lk, lb, sb):
+    """``n_ticks`` ticks of the sensor chips (``which`` 0) or of both LVDS sweeps (1) of
+    every actuator, batch by batch in lanes, with the loads at each batch's claim and the
+    link's store at its end, as the engine makes them."""
+    for b in range(blocks.shape[0]):
+        rows, m = blocks[b], sizes[b]
+        if which == 0:
+            sensor_lanes.load_chips(sb, k, rows, m)
+            for j in range(n_ticks):
+                sensor_lanes.digitise_lanes(sb, y, k, rows, m, tick0 + j, raw)
+        else:
+            link_lanes.load_link(lb, lk, rows, m)
+            for _ in range(n_ticks):
+                link_lanes.sweep_down_lanes(lb, lk, mdown, st, down, rows, m)
+                link_lanes.sweep_up_lanes(lb, lk, up, mup, rows, m)
+            link_lanes.store_link(lb, lk, rows, m)
 
 
 @njit(cache=True, nogil=True)
@@ -143,6 +167,21 @@ def stage_costs(cfg: Config, ticks: int = 2000, warm_s: float = 0.2,
                 _rk4_in_lanes(ticks, x, snap[1], snap[2], eng._blocks, eng._sizes, n_sub, buf)
                 best = min(best, time.thread_time() - c0)
             rows.append((STAGES[6], best * 1e9 / (n * ticks)))
+            lb, sb = link_lanes.link_lane_buffer(), sensor_lanes.sensor_lane_buffer()
+            for which in (0, 1):
+                def run(n_ticks, arrays, which=which):
+                    (_, _, _, y, _, _, k, raw, _, st, down, up, mdown, mup, lk) = arrays
+                    _link_sensors_in_lanes(which, n_ticks, eng.tick, eng._blocks, eng._sizes,
+                                           y, k, raw, st, down, up, mdown, mup, lk, lb, sb)
+
+                run(1, [a.copy() for a in snap])  # compile outside the timing
+                best = np.inf
+                for _ in range(3):
+                    arrays = [a.copy() for a in snap]
+                    c0 = time.thread_time()
+                    run(ticks, arrays)
+                    best = min(best, time.thread_time() - c0)
+                rows.append((STAGES[7 + which], best * 1e9 / (n * ticks)))
             fb = fpl.board_buffer()
             board = (snap[8], snap[9].copy(), snap[10], snap[11].copy(), snap[7])
             _board_in_lanes(1, *board, eng._blocks, eng._sizes, fb)
@@ -152,7 +191,7 @@ def stage_costs(cfg: Config, ticks: int = 2000, warm_s: float = 0.2,
                 c0 = time.thread_time()
                 _board_in_lanes(ticks, *board, eng._blocks, eng._sizes, fb)
                 best = min(best, time.thread_time() - c0)
-            rows.append((STAGES[7], best * 1e9 / (n * ticks)))
+            rows.append((STAGES[9], best * 1e9 / (n * ticks)))
         # The engine's compiled call as a whole (every stage, 1 thread), same ticks, with
         # the plants one actuator at a time and (where the recipe allows) in lanes.
         cycles = max(1, ticks // eng.cycle_ticks)
@@ -168,6 +207,8 @@ def stage_costs(cfg: Config, ticks: int = 2000, warm_s: float = 0.2,
             rows.append((f"total: the engine's compiled call, "
                          f"{'plants in lanes' if use_lanes else 'one actuator at a time'}",
                          (time.thread_time() - c0) * 1e9 / (n * cycles * eng.cycle_ticks)))
+        rows.append(("outside the compiled call: master, PC loop, chain frames, hand-offs",
+                     python_per_cycle(bs, pc, 2 * cycles) * 1e9 / (n * eng.cycle_ticks)))
     return StageCosts(n, ticks, rows)
 
 

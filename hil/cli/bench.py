@@ -222,7 +222,8 @@ def add_parsers(bsub) -> None:  # noqa: ANN001 - argparse's sub-parsers of ``ben
                    "each per number of workers; or one of them on the configured recipe")
     p.add_argument("--stages", action="store_true",
                    help="instead: CPU ns per actuator tick of each stage of the per-tick "
-                   "work (plant, sensors, board, link, MCU law), each timed alone")
+                   "work (plant, sensors, board, link, MCU law), each timed alone, and the "
+                   "per-cycle Python around the compiled call")
     command(p, cmd_bench_robot)
     p = bsub.add_parser("codecs", parents=[common(plot=False, config=False)],
                         help="encode+decode throughput of every protocol codec")

@@ -109,8 +109,8 @@ def _export(args: argparse.Namespace) -> Outcome:
                                     "writes its own columns; choose the board with --board)")
     elif args.board:
         raise FrameLogError("--board: only with --format identify")
-    info = FrameLogReader(args.log).info()
     if fmt == "identify":
+        info = FrameLogReader(args.log).info()
         from hil.framelog.identify_export import export_identify
 
         got: list = []
@@ -130,10 +130,11 @@ def _export(args: argparse.Namespace) -> Outcome:
     else:
         export = export_csv
     rows: list[int] = []
+    read: list[LogInfo] = []  # the export's planning pass summarises the log too
     if not _written(args.out, lambda o: rows.append(export(
-            args.log, o, topics=args.topic, fields=args.field, info=info))):
-        return _truncated(info, None)
-    return _truncated(info, None if args.out == "-" else f"wrote {rows[0]} rows to {args.out}")
+            args.log, o, topics=args.topic, fields=args.field, summary=read))):
+        return _truncated(read[0] if read else FrameLogReader(args.log).info(), None)
+    return _truncated(read[0], None if args.out == "-" else f"wrote {rows[0]} rows to {args.out}")
 
 
 def _written(out: str, fn) -> bool:  # noqa: ANN001 - fn(path) writes the export

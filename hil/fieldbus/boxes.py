@@ -157,10 +157,9 @@ class StackBox(McuBox):
         self.stacks: list[BoardStack] = [FpgaStack(cfg) for _ in box.actuators]
         super().__init__(box, cfg, [s.mcu_link for s in self.stacks],
                          [s.board.calibrated_offset for s in self.stacks])
-        #: The whole-robot engine that advances this box with all others (hil.sim.robot), and
-        #: the process data it has yet to decode; None on the per-actuator path.
+        #: The whole-robot engine that advances this box with all others (hil.sim.robot);
+        #: None on the per-actuator path.
         self.engine = None
-        self.pending: bytes | None = None
         self._group = _Stacks(self, cfg.get("sim.tick_ns"))
         self.sched = Scheduler(self._group, record_every=0)
         if self.board is not None:
@@ -170,8 +169,7 @@ class StackBox(McuBox):
     def apply(self, data: bytes) -> None:
         """Outputs of this cycle (kept for the engine to decode with every box's, if any)."""
         if self.engine is not None:
-            self.pending = data
-            self.engine.applied(self)
+            self.engine.applied(self, data)
             return
         super().apply(data)
 

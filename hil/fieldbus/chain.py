@@ -23,7 +23,9 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-from hil.fieldbus import wire
+import numpy as np
+
+from hil.fieldbus import lrw, wire
 from hil.fieldbus.boxes import box_engine, make_box
 from hil.fieldbus.topology import Topology
 from plant.config import Config
@@ -112,30 +114,53 @@ class Chain:
         #: own state, which a lost reply hides from the master; lockstep mode advances
         #: the cycles a lost frame skipped when the next one arrives).
         self.on_advance: Callable[[], None] | None = None
+        #: Made from :attr:`plan` (again when it is replaced): its frames as templates
+        #: (hil.fieldbus.lrw), read and answered by slices, and what a datagram covering
+        #: the logical bytes [lo, hi) does, by (lo, hi).
+        self._plan_of_caches: CyclePlan | None = None
+        self._boxes_of_caches: list = []
+        self._templates: dict = {}
+        self._windows_of: dict[tuple[int, int], _Cover] = {}
 
     def handle(self, frame: bytes) -> bytes | None:
         """Process one frame; the reply, or None if the frame was discarded."""
+        if self.plan is not self._plan_of_caches or self.boxes != self._boxes_of_caches:
+            self._plan_of_caches, self._boxes_of_caches = self.plan, list(self.boxes)
+            self._templates = lrw.templates(self.plan.frames, self.crc_trailer)
+            self._windows_of = {}
+        known = lrw.find(self._templates, frame)
+        if known is not None:  # exactly one of the plan's frames (what a master sends)
+            self.stats.frames += 1
+            if not self._time(frame[lrw.IDX_AT]):
+                return None
+            return self._answer(known[1], frame)
         dgs = wire.open_frame(frame, self.crc_trailer)
         if dgs is None:
             self.stats.bad_frames += 1
             return None
         self.stats.frames += 1
-        idx = dgs[0].idx
+        if not self._time(dgs[0].idx):
+            return None
+        out = [self._process(d) for d in dgs]
+        return wire.seal(ec.encode_pdu(out), self.crc_trailer)
+
+    def _time(self, idx: int) -> bool:
+        """Time as the frame's ``idx`` says (see the module's docstring); False: the frame
+        is from an older cycle, discarded."""
         if self.paced:
             if self.started and (idx - self.last_idx) & 0xFF >= 128:
                 self.stats.stale_frames += 1
-                return None
+                return False
             self.last_idx = idx
         elif self.started:
             ahead = (idx - self.cycle) & 0xFF
             if ahead >= 128:
                 self.stats.stale_frames += 1
-                return None
+                return False
             for _ in range(ahead):
                 self._advance()
         self.started = True
-        out = [self._process(d) for d in dgs]
-        return wire.seal(ec.encode_pdu(out), self.crc_trailer)
+        return True
 
     def advance(self) -> None:
         """Paced mode: move every box on by one fieldbus cycle (20 ticks)."""
@@ -156,21 +181,120 @@ class Chain:
         if d.cmd != ec.Command.LRW:
             # Not addressed to any box: passes unchanged (no WKC).
             return d
-        lo, data = d.lad, bytearray(d.data)
-        hi = lo + len(data)
-        wkc = d.wkc
-        for w, box in zip(self.plan.windows, self.boxes, strict=True):
+        data = bytearray(d.data)
+        wkc = self._serve(self._cover(d.lad, d.lad + len(data)), data, 0, d.wkc)
+        return ec.Datagram(d.cmd, d.idx, d.adp, d.ado, bytes(data), wkc, d.irq,
+                           d.circulating)
+
+    def _answer(self, t: lrw.LrwTemplate, frame: bytes) -> bytes:
+        """The reply to a frame that is exactly plan frame ``t`` (the general path's bytes:
+        the frame with the boxes' inputs and the working counter put in, sealed again)."""
+        pdu = bytearray(memoryview(frame)[:t.pdu_size])
+        wkc = self._serve(self._cover(t.lad, t.lad + t.n), pdu, lrw.DATA_AT, t.wkc(frame))
+        pdu[t.wkc_at:t.wkc_at + 2] = wkc.to_bytes(2, "little")
+        return wire.seal(bytes(pdu), self.crc_trailer)
+
+    def _cover(self, lo: int, hi: int) -> _Cover:
+        """What an LRW datagram over the logical bytes [lo, hi) does (cached): per box it
+        reaches, the outputs it carries whole (to apply) and the inputs it has whole room
+        for (to fill), each as an offset in the data; the working counter it adds (2 per
+        box with outputs it reaches, 1 per box with inputs, whole or not). The boxes the
+        robot engine advances (and that apply and give their records as a StackBox does)
+        become index arrays: their records move between the data and the engine's images
+        in one array operation each way (:meth:`RobotEngine.applied_image`)."""
+        cover = self._windows_of.get((lo, hi))
+        if cover is not None:
+            return cover
+        ops, wkc = [], 0
+        eng: dict[str, list] = {"boxes": [], "out_at": [], "out_to": [], "in_at": [],
+                                "in_from": []}
+        for n_box, w in enumerate(self.plan.windows):
             if w.end <= lo or w.lad >= hi:
                 continue
             o = w.lad - lo
+            out = in_at = None
             if w.out_len:
                 if o >= 0 and w.lad + w.out_len <= hi:
-                    box.apply(bytes(data[o:o + w.out_len]))
+                    out = (o, o + w.out_len)
                 wkc += 2
             if w.in_len:
                 i0 = w.lad + w.out_len
                 if i0 >= lo and w.end <= hi:
-                    data[i0 - lo:w.end - lo] = box.inputs()
+                    in_at = (i0 - lo, w.end - lo)
                 wkc += 1
-        return ec.Datagram(d.cmd, d.idx, d.adp, d.ado, bytes(data), wkc & 0xFFFF, d.irq,
-                           d.circulating)
+            spans = self._engine_spans(self.boxes[n_box], w)
+            if spans is None:
+                ops.append((n_box, out, in_at))
+                continue
+            n_eng, (o_lo, o_hi), (i_lo, i_hi) = spans
+            if out is not None:
+                eng["boxes"].append(n_eng)
+                eng["out_at"] += range(*out)
+                eng["out_to"] += range(o_lo, o_hi)
+            if in_at is not None:
+                eng["in_at"] += range(*in_at)
+                eng["in_from"] += range(i_lo, i_hi)
+        arrays = {k: np.array(v, dtype=np.intp) for k, v in eng.items()}
+        cover = self._windows_of[(lo, hi)] = _Cover(tuple(ops), wkc, **arrays)
+        return cover
+
+    def _engine_spans(self, box: object, w: Window
+                      ) -> tuple[int, tuple[int, int], tuple[int, int]] | None:
+        """The robot engine's number of ``box`` and its records' spans in the engine's
+        images, if the engine advances it and it is a plain StackBox (no wrapper of its
+        apply or inputs: a recording box keeps its own path)."""
+        from hil.fieldbus.boxes import StackBox, _BoxBase
+
+        if self.engine is None or getattr(box, "engine", None) is not self.engine:
+            return None
+        if getattr(getattr(box, "apply", None), "__func__", None) is not StackBox.apply or \
+                getattr(getattr(box, "inputs", None), "__func__", None) is not _BoxBase.inputs:
+            return None
+        spans = self.engine.spans(box)
+        if spans is None or spans[1][1] - spans[1][0] != w.out_len or \
+                spans[2][1] - spans[2][0] != w.in_len:
+            return None
+        return spans
+
+    def _serve(self, cover: _Cover, data: bytearray, at: int, wkc: int) -> int:
+        """Each box of ``cover`` takes its outputs from and puts its inputs into the
+        datagram data at ``data[at:]``, in chain order (the robot engine's boxes first,
+        together: no box's inputs depend on another's outputs within a frame); the
+        working counter after it."""
+        boxes = self.boxes
+        if len(boxes) != len(self.plan.windows):
+            raise ValueError(f"{len(boxes)} boxes for the plan's {len(self.plan.windows)} "
+                             "windows")
+        if cover.boxes.size or cover.in_at.size:
+            view = np.frombuffer(data, dtype=np.uint8)[at:]
+            if cover.boxes.size:
+                self.engine.applied_image(view, cover.out_at, cover.out_to, cover.boxes)
+        for n_box, out, in_at in cover.ops:
+            box = boxes[n_box]
+            if out is not None:
+                box.apply(bytes(data[at + out[0]:at + out[1]]))
+            if in_at is not None:
+                data[at + in_at[0]:at + in_at[1]] = box.inputs()
+        if cover.in_at.size:
+            view[cover.in_at] = self.engine.in_image[cover.in_from]
+            del view  # (the bytearray may be resized again)
+        return (wkc + cover.wkc) & 0xFFFF
+
+
+@dataclass(frozen=True, eq=False)
+class _Cover:
+    """What a datagram over some logical bytes does: per box it reaches (chain order),
+    ``(box index, (start, end) of its outputs or None, (start, end) of its inputs or None)``
+    in the datagram's data, and the working counter it adds; for the boxes of the robot
+    engine instead: their engine numbers (``boxes``, those whose outputs it carries), where
+    their outputs are in the data and go in the engine's output image (``out_at``,
+    ``out_to``), where their inputs go in the data and come from in its input image
+    (``in_at``, ``in_from``)."""
+
+    ops: tuple[tuple[int, tuple[int, int] | None, tuple[int, int] | None], ...]
+    wkc: int
+    boxes: np.ndarray
+    out_at: np.ndarray
+    out_to: np.ndarray
+    in_at: np.ndarray
+    in_from: np.ndarray

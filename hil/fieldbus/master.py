@@ -15,8 +15,9 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from hil.fieldbus import pdo, wire
+from hil.fieldbus import lrw, pdo, wire
 from hil.fieldbus.chain import CyclePlan
+from hil.fieldbus.pdo_compiled import put_commands
 from hil.fieldbus.topology import Topology
 from protocols import ethercat as ec
 
@@ -62,11 +63,22 @@ class Master:
                     self.act_offsets.append((o, i))
                 o += so
                 i += si
-        self._out_index: np.ndarray | None = None  # image bytes of each output record
+        self._out_starts: np.ndarray | None = None  # image byte of each output record
+        self._image_u8: np.ndarray | None = None
         #: Per frame of the plan: did its inputs arrive this cycle?
         self.fresh = [False] * len(self.plan.frames)
         self._answered = [False] * len(self.plan.frames)
         self._frame_of_actuator = [self._frame_index(i) for _, i in self.act_offsets]
+        #: The plan's frames as templates (hil.fieldbus.lrw): built and read by slices.
+        self._templates = lrw.templates(self.plan.frames, crc_trailer)
+        self._built = [t for k, t in sorted(
+            (kt for kts in self._templates.values() for kt in kts), key=lambda kt: kt[0])]
+        #: Per frame of the plan: the input windows it carries whole, as (image start,
+        #: image end, start in the datagram's data).
+        self._inputs_of = [[(w.lad + w.out_len, w.end, w.lad + w.out_len - lad)
+                            for w in self.plan.windows
+                            if lad <= w.lad + w.out_len and w.end <= lad + n and w.in_len]
+                           for lad, n, _ in self.plan.frames]
 
     def _frame_index(self, offset: int) -> int:
         for k, (lad, n, _) in enumerate(self.plan.frames):
@@ -93,7 +105,7 @@ class Master:
     def set_actuators(self, mode: str, values: np.ndarray, enable: bool = True) -> None:
         """Output records of every actuator at once, as :meth:`set_actuator` writes each
         (``values[j]`` for actuator ``j``, same rounding and saturation; no gains sent):
-        one array operation instead of a Python call per actuator, for PC loops that
+        one compiled call instead of a Python call per actuator, for PC loops that
         command the whole robot every cycle."""
         if mode not in pdo.MODE_CODES:
             raise ValueError(f"unknown mode {mode!r}")
@@ -101,19 +113,15 @@ class Master:
         n = len(self.act_offsets)
         if values.shape != (n,):
             raise ValueError(f"values: expected {n} actuator commands, got shape {values.shape}")
-        if not np.all(np.isfinite(values)):
-            raise ValueError("values: a command is not finite")
-        if self._out_index is None:
-            size = pdo.ACTUATOR_OUT_DTYPE.itemsize
-            starts = np.array([o for o, _ in self.act_offsets], dtype=np.intp)
-            self._out_index = starts[:, None] + np.arange(size)
+        if self._out_starts is None:
+            self._out_starts = np.array([o for o, _ in self.act_offsets], dtype=np.intp)
+            self._image_u8 = np.frombuffer(self.image, dtype=np.uint8)  # (never resized)
         lsb = pdo.POSITION_CMD_LSB if mode == "position" else pdo.FORCE_CMD_LSB
-        rec = np.zeros(n, dtype=pdo.ACTUATOR_OUT_DTYPE)
-        rec["mode"] = pdo.MODE_CODES[mode]
-        rec["flags"] = pdo.FLAG_ENABLE if enable else 0
-        rec["command"] = pdo.to_counts_array(values, lsb, "i4")
-        np.frombuffer(self.image, dtype=np.uint8)[self._out_index] = rec.view(np.uint8).reshape(
-            n, -1)
+        lo, hi = pdo.I4_BOUNDS
+        # one compiled call: pdo.to_counts of each value, the record's bytes in the image
+        if not put_commands(self._image_u8, self._out_starts, pdo.MODE_CODES[mode],
+                            pdo.FLAG_ENABLE if enable else 0, values, lsb, lo, hi):
+            raise ValueError("values: a command is not finite")
 
     # --- inputs ---------------------------------------------------------------------------
     def actuator_inputs(self, j: int) -> dict[str, float]:
@@ -133,15 +141,20 @@ class Master:
         self.fresh = [False] * len(self.plan.frames)
         self._answered = [False] * len(self.plan.frames)
         idx = self.cycle & 0xFF
-        out = []
-        for lad, n, _ in self.plan.frames:
-            d = ec.Datagram.logical(ec.Command.LRW, lad, bytes(self.image[lad:lad + n]), idx=idx)
-            out.append(wire.seal(ec.encode_pdu([d]), self.crc_trailer))
+        # the bytes of wire.seal(ec.encode_pdu([ec.Datagram.logical(LRW, lad, data, idx)]))
+        out = [t.build(idx, self.image) for t in self._built]
         self.stats.frames_sent += len(out)
         return out
 
     def receive(self, frame: bytes) -> bool:
         """Check one reply; apply its inputs if it is good. True if applied."""
+        known = lrw.find(self._templates, frame)
+        if known is not None:  # exactly one of the plan's frames: read it by slices
+            k, t = known
+            if frame[lrw.IDX_AT] != self.cycle & 0xFF:
+                self.stats.stale_frames += 1
+                return False
+            return self._apply_reply(k, t.wkc(frame), frame, lrw.DATA_AT)
         dgs = wire.open_frame(frame, self.crc_trailer)
         if dgs is None or len(dgs) != 1 or dgs[0].cmd != ec.Command.LRW:
             self.stats.bad_frames += 1
@@ -156,17 +169,22 @@ class Master:
         else:
             self.stats.bad_frames += 1
             return False
+        return self._apply_reply(k, d.wkc, d.data, 0)
+
+    def _apply_reply(self, k: int, wkc: int, buf: bytes, at: int) -> bool:
+        """The reply to plan frame ``k`` of this cycle (its working counter ``wkc``, its
+        data at ``buf[at:]``): counted, and its inputs applied if it is the first and its
+        working counter is the plan's."""
         if self._answered[k]:
             self.stats.stale_frames += 1  # a duplicate of a reply already seen
             return False
         self._answered[k] = True
-        if d.wkc != wkc:
+        if wkc != self.plan.frames[k][2]:
             self.stats.wkc_errors += 1
             return False
-        for w in self.plan.windows:
-            i0 = w.lad + w.out_len
-            if lad <= i0 and w.end <= lad + n and w.in_len:
-                self.image[i0:w.end] = d.data[i0 - lad:w.end - lad]
+        image = self.image
+        for i0, end, o in self._inputs_of[k]:
+            image[i0:end] = buf[at + o:at + o + end - i0]
         self.fresh[k] = True
         self.stats.frames_ok += 1
         return True

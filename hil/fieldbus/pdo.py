@@ -109,20 +109,16 @@ def _bounds(dtype: str) -> tuple[int, int]:
     return bounds
 
 
+#: (min, max) of the 32-bit commands.
+I4_BOUNDS = _bounds("i4")
+
+
 def to_counts(value: float, lsb: float, dtype: str) -> int:
     """SI value -> integer count, rounded half away from zero and saturated to ``dtype``."""
     bounds = _bounds(dtype)
     c = value / lsb
     c = int(c + 0.5) if c >= 0 else -int(-c + 0.5)
     return min(max(c, bounds[0]), bounds[1])
-
-
-def to_counts_array(values: np.ndarray, lsb: float, dtype: str) -> np.ndarray:
-    """:func:`to_counts` of every element (the same float64 steps), as int64."""
-    lo, hi = _bounds(dtype)
-    c = np.asarray(values, dtype=np.float64) / lsb
-    r = np.where(c >= 0, np.trunc(c + 0.5), -np.trunc(-c + 0.5))
-    return np.clip(r, lo, hi).astype(np.int64)
 
 
 def markdown_table(fields: tuple[Field, ...]) -> str:

@@ -18,7 +18,9 @@ an EtherCAT frame with fewer datagrams, a frame that failed to decode).
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 from google.protobuf import descriptor_pb2
@@ -39,7 +41,9 @@ _FIXED = {_FD.TYPE_DOUBLE: (1, "<f8"), _FD.TYPE_FLOAT: (5, "<f4"),
 @dataclass
 class Columns:
     """One channel decoded: frame times, tie-break keys, columns and their masks (None:
-    every frame has the field), units, per-frame decode errors (None: none failed)."""
+    every frame has the field), units, per-frame decode errors (None: none failed).
+    ``fixed``: decoded by a whole-array path (a block decoder, a byte layout, fixed-width
+    protobuf), so any other part of the channel decodes into the same columns."""
 
     topic: str
     t_ns: np.ndarray
@@ -49,35 +53,54 @@ class Columns:
     valid: dict[str, np.ndarray | None]
     units: dict[str, str] = field(default_factory=dict)
     errors: list[str | None] | None = None
+    fixed: bool = False
 
     @property
     def n(self) -> int:
         return int(self.t_ns.shape[0])
 
 
+class _Fixed(NamedTuple):
+    """A protobuf message of fixed-width scalars only, as a numpy record: its dtype, per
+    field (name, is bool), and where the record holds its key bytes and their values."""
+
+    dtype: np.dtype
+    fields: list[tuple[str, bool]]
+    key_at: np.ndarray
+    key_bytes: np.ndarray
 
 
-def _fixed_record(ch: ChannelInfo) -> tuple[np.dtype, list[tuple[str, bytes, bool]]] | None:
-    """The structured dtype of a protobuf message whose fields are all fixed-width scalars
-    written in field-number order (how our signal channels write them), and per field
-    (name, key bytes, is bool); None for any other message."""
+def _fixed_record(ch: ChannelInfo) -> _Fixed | None:
+    """The record of a protobuf message whose fields are all fixed-width scalars written
+    in field-number order (how our signal channels write them); None for any other."""
+    return _fixed_record_of(ch.schema_name, ch.schema_data)
+
+
+@functools.lru_cache(maxsize=256)
+def _fixed_record_of(schema_name: str, schema_data: bytes) -> _Fixed | None:
     try:
-        fds = descriptor_pb2.FileDescriptorSet.FromString(ch.schema_data)
+        fds = descriptor_pb2.FileDescriptorSet.FromString(schema_data)
     except Exception:  # noqa: BLE001 - a foreign schema: the runtime path reports it
         return None
     for f in fds.file:
         for m in f.message_type:
-            if (f"{f.package}.{m.name}" if f.package else m.name) != ch.schema_name:
+            if (f"{f.package}.{m.name}" if f.package else m.name) != schema_name:
                 continue
-            layout, keys = [], []
+            layout, fields, key = [], [], b""
+            at: list[int] = []
             for fd in sorted(m.field, key=lambda x: x.number):
                 kind = _FIXED.get(fd.type)
                 if kind is None or fd.label == _FD.LABEL_REPEATED:
                     return None
-                key = _varint(fd.number << 3 | kind[0])
-                layout += [(f"_k{fd.number}", np.uint8, (len(key),)), (fd.name, kind[1])]
-                keys.append((fd.name, key, fd.type == _FD.TYPE_BOOL))
-            return np.dtype(layout), keys
+                k = _varint(fd.number << 3 | kind[0])
+                here = sum(np.dtype(x[1]).itemsize * (x[2][0] if len(x) > 2 else 1)
+                           for x in layout)
+                at += range(here, here + len(k))
+                key += k
+                layout += [(f"_k{fd.number}", np.uint8, (len(k),)), (fd.name, kind[1])]
+                fields.append((fd.name, fd.type == _FD.TYPE_BOOL))
+            return _Fixed(np.dtype(layout), fields, np.asarray(at, np.intp),
+                          np.frombuffer(key, np.uint8))
     return None
 
 
@@ -85,16 +108,16 @@ def _protobuf_fast(ch: ChannelInfo, payloads: list[memoryview]) -> dict[str, np.
     rec = _fixed_record(ch)
     if rec is None or not payloads:
         return None
-    dt, keys = rec
-    if any(len(p) != dt.itemsize for p in payloads):
+    size = rec.dtype.itemsize
+    if any(len(p) != size for p in payloads):
         return None
-    a = np.frombuffer(b"".join(payloads), dt)
-    for number, (_, key, _) in enumerate(keys):
-        k = a[dt.names[2 * number]]
-        if not np.array_equal(k, np.broadcast_to(np.frombuffer(key, np.uint8), k.shape)):
-            return None  # fields in another order or form: the runtime reads it
+    buf = b"".join(payloads)
+    raw = np.frombuffer(buf, np.uint8).reshape(len(payloads), size)
+    if not (raw[:, rec.key_at] == rec.key_bytes).all():
+        return None  # fields in another order or form: the runtime reads it
+    a = np.frombuffer(buf, rec.dtype)
     out = {}
-    for name, _, is_bool in keys:
+    for name, is_bool in rec.fields:
         v = a[name]
         out[name] = (v != 0).astype(np.int64) if is_bool else \
             (v.astype(np.float64) if v.dtype.kind == "f" else v.astype(np.int64))
@@ -124,43 +147,59 @@ def _dense(cols: dict[str, np.ndarray]) -> tuple[dict[str, np.ndarray],
     out = {}
     for k, v in cols.items():
         v = np.asarray(v)
-        out[k] = v.astype(np.float64) if v.dtype.kind == "f" else v.astype(np.int64)
+        out[k] = v.astype(np.float64 if v.dtype.kind == "f" else np.int64, copy=False)
     return out, dict.fromkeys(out)
 
 
-def decode_channel(ch: ChannelInfo, raw: RawChannel) -> Columns:
-    """The columns of one channel's frames (:class:`Columns`). DecodeError if the channel's
+class ChannelDecoding:
+    """How one channel's frames become columns, set up once (its decoder, its byte
+    layout, its protobuf record) for any number of batches of its frames: calling it
+    with a :class:`RawChannel` gives their :class:`Columns`. DecodeError if the channel's
     schema cannot be used at all; a frame that does not decode is an error row."""
-    dec = channel_decoder(ch)
-    res = Columns(ch.topic, raw.t_ns, raw.seq, raw.row, {}, {}, dict(dec.units))
-    n = len(raw.t_ns)
-    if raw.frames is not None:
-        cols = decode_block(ch.encoding, raw.frames) if has_decoder(ch.encoding) else None
-        if cols is None and not has_decoder(ch.encoding):
-            lay = channel_layout(ch)
-            if lay is not None and raw.frames.nbytes == n * lay.size:
+
+    def __init__(self, ch: ChannelInfo) -> None:
+        self.ch = ch
+        self.dec = channel_decoder(ch)
+        self.registered = has_decoder(ch.encoding)
+        self.layout = None if self.registered else channel_layout(ch)
+
+    def __call__(self, raw: RawChannel) -> Columns:
+        ch, dec = self.ch, self.dec
+        res = Columns(ch.topic, raw.t_ns, raw.seq, raw.row, {}, {}, dict(dec.units))
+        n = len(raw.t_ns)
+        if raw.frames is not None:
+            cols = decode_block(ch.encoding, raw.frames) if self.registered else None
+            lay = self.layout
+            if cols is None and lay is not None and raw.frames.nbytes == n * lay.size:
                 cols = lay.decode(raw.frames)
-        if cols is not None:
-            res.columns, res.valid = _dense(cols)
-            return res
-        payloads = [r.tobytes() for r in raw.frames]
-    else:
-        payloads = raw.payloads or []
-        if dec.how == "protobuf":
-            cols = _protobuf_fast(ch, payloads)
             if cols is not None:
                 res.columns, res.valid = _dense(cols)
+                res.fixed = True
                 return res
-    rows: list[dict[str, object]] = []
-    errors: list[str | None] = []
-    for p in payloads:
-        try:
-            rows.append(dict(dec.decode(bytes(p))))
-            errors.append(None)
-        except DecodeError as exc:
-            rows.append({})
-            errors.append(str(exc))
-    res.columns, res.valid = _from_dicts(rows)
-    if any(e is not None for e in errors):
-        res.errors = errors
-    return res
+            payloads = [r.tobytes() for r in raw.frames]
+        else:
+            payloads = raw.payloads or []
+            if dec.how == "protobuf":
+                cols = _protobuf_fast(ch, payloads)
+                if cols is not None:
+                    res.columns, res.valid = _dense(cols)
+                    res.fixed = True
+                    return res
+        rows: list[dict[str, object]] = []
+        errors: list[str | None] = []
+        for p in payloads:
+            try:
+                rows.append(dict(dec.decode(bytes(p))))
+                errors.append(None)
+            except DecodeError as exc:
+                rows.append({})
+                errors.append(str(exc))
+        res.columns, res.valid = _from_dicts(rows)
+        if any(e is not None for e in errors):
+            res.errors = errors
+        return res
+
+
+def decode_channel(ch: ChannelInfo, raw: RawChannel) -> Columns:
+    """The columns of one channel's frames (:class:`Columns`, :class:`ChannelDecoding`)."""
+    return ChannelDecoding(ch)(raw)

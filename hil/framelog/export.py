@@ -18,16 +18,16 @@ from collections.abc import Iterator, Sequence
 
 import numpy as np
 
-from hil.framelog.columnar import Columns, decode_channel
-from hil.framelog.decoders import DecodeError
-from hil.framelog.reader import FrameLogError, FrameLogReader, LogInfo
+from hil.framelog.export_plan import Group, Plan, Replan, Window
+from hil.framelog.reader import LogInfo
 from hil.output.tables import table
 
 _MAX_META_SHOWN = 60
-#: Rows per Parquet row group / per batch of CSV text: bounds the memory of the output
-#: (the decoded columns are held whole); smaller costs more calls per group and column.
-_SLICE_ROWS = 1 << 17
-_CSV_SLICE_ROWS = 1 << 17
+#: Rows per Parquet row group / per batch of CSV text: bounds the memory of the output;
+#: smaller costs more calls per group and column.
+_SLICE_ROWS = 1 << 15
+#: Rows per Parquet row group: the writer's work per column chunk is paid per group
+_PARQUET_ROWS = 1 << 16
 
 
 def _fmt_s(t_ns: int | None) -> str:
@@ -80,180 +80,127 @@ def summary_text(info: LogInfo) -> str:
     return "\n".join(lines)
 
 
-class _Plan:
-    """The decoded channels of an export and the order of their frames: ``order`` indexes
-    the concatenated frames of ``chans`` in simulated-time order, ties in file order."""
+def _csv_lines(plan: Plan, win: Window, topics, size: int = _SLICE_ROWS  # noqa: ANN001
+               ) -> Iterator[memoryview]:
+    """The CSV rows of ``win``, a slice at a time, as bytes. Each group's rows are built
+    from its columns only (Arrow casts them to text and joins them, a run of commas
+    standing for the columns it lacks), then the slice's rows are put in time order: the
+    work is in proportion to the values, not to rows x columns."""
+    import pyarrow as pa
 
-    def __init__(self, log_path: str | os.PathLike[str], topics: Sequence[str] | None,
-                 fields: Sequence[str] | None, info: LogInfo | None) -> None:
-        reader = FrameLogReader(log_path)
-        if info is None:
-            info = reader.info()
-        if topics:
-            for t in topics:
-                info.channel(t)  # FrameLogError naming the topics present
-        selected = list(topics) if topics else [c.topic for c in info.channels]
-        raws = reader.raw_channels(selected)
-        chans: list[Columns] = []
-        for c in info.channels:
-            if c.topic in selected and c.topic in raws:
-                try:
-                    chans.append(decode_channel(c, raws.pop(c.topic)))
-                except DecodeError as exc:
-                    raise FrameLogError(f"{log_path}: {exc}") from None
-        if fields:
-            chans = [_keep_fields(c, fields) for c in chans]
-            present = {k for c in chans if c.n for k in c.columns}
-            missing = [f for f in fields if f not in present]
-            if missing:
-                raise FrameLogError(f"{log_path}: field {missing[0]!r} occurs in no frame "
-                                    f"of {', '.join(selected)}")
-        # columns in order of first appearance: channels by their first frame
-        chans.sort(key=lambda c: (int(c.t_ns[0]), int(c.seq[0])) if c.n else (1 << 64, 0))
-        names: dict[str, None] = {}
-        units: dict[str, str] = {}
-        floats: set[str] = set()
-        for c in chans:
-            for k, v in c.columns.items():
-                names.setdefault(k, None)
-                if k in c.units:
-                    units.setdefault(k, c.units[k])
-                if v.dtype.kind == "f":
-                    floats.add(k)
-        self.columns = list(fields) if fields else list(names)
-        self.units = units
-        self.floats = floats
-        self.errors = any(c.errors is not None for c in chans)
-        self.log_path = log_path
-        # Channels with the same columns (every board's register channel, ...) form a
-        # group, stored one after the other: a group's columns are single arrays, so a
-        # slice of rows is filled a group at a time, not a channel at a time.
-        where = {name: j for j, name in enumerate(self.columns)}
-        keys: dict[tuple, list[Columns]] = {}
-        for c in chans:
-            keys.setdefault(tuple(sorted((where[k], v.dtype.kind) for k, v in
-                                         c.columns.items() if k in where)), []).append(c)
-        self.chans = [c for members in keys.values() for c in members]
-        self.groups = []
-        start = first = 0
-        for key, members in keys.items():
-            self.groups.append(_Group(key, members, start, self.columns, first))
-            start += sum(c.n for c in members)
-            first += len(members)
-        self.rows = start
-        ts = [c.t_ns for c in self.chans]
-        if any(t.dtype == np.uint64 for t in ts):
-            ts = [t.astype(np.uint64) for t in ts]
-        self.t_ns = np.concatenate(ts) if ts else np.zeros(0, np.int64)
-        self.src = np.concatenate([g.which for g in self.groups]) if self.groups \
-            else np.zeros(0, np.int32)
-        self.group_of = np.repeat(np.arange(len(self.groups), dtype=np.int32),
-                                  [g.n for g in self.groups])
-        seq = np.concatenate([c.seq for c in self.chans]) if chans else np.zeros(0, np.int64)
-        row = np.concatenate([c.row for c in self.chans]) if chans else np.zeros(0, np.int64)
-        self.order = np.lexsort((row, seq, self.t_ns))
-        for c in chans:  # the groups hold the values now
-            c.columns, c.valid, c.errors = {}, {}, None
+    for _idx, pos, rows in win.parts(size):
+        parts, places = [], []
+        for g, p, r in zip(win.groups, pos, rows, strict=True):
+            if len(p):
+                parts.append(_group_lines(plan, win, g, r, topics))
+                places.append(p)
+        lines = pa.chunked_array(parts).take(pa.array(np.argsort(np.concatenate(places))))
+        lines = lines.combine_chunks() if lines.num_chunks != 1 else lines.chunk(0)
+        offsets = np.frombuffer(lines.buffers()[1], np.int32)
+        data = lines.buffers()[2]
+        yield memoryview(data)[offsets[lines.offset]:offsets[lines.offset + len(lines)]]
 
-    def parts(self, size: int) -> Iterator[tuple[np.ndarray, list[np.ndarray],
-                                                  list[np.ndarray]]]:
-        """Per ``size`` rows in time order: their indexes into the concatenated frames,
-        and per group where its rows go in the slice and which of its rows they are."""
-        for start in range(0, self.rows, size):
-            idx = self.order[start:start + size]
-            grp = self.group_of[idx]
-            sort = np.argsort(grp, kind="stable")
-            bounds = np.searchsorted(grp[sort], np.arange(len(self.groups) + 1))
-            pos = [sort[bounds[i]:bounds[i + 1]] for i in range(len(self.groups))]
-            yield idx, pos, [idx[p] - g.start for p, g in zip(pos, self.groups, strict=True)]
 
-    def csv_lines(self, size: int = _CSV_SLICE_ROWS) -> Iterator[memoryview]:
-        """The CSV rows, a slice at a time, as bytes. Each group's rows are built from its
-        columns only (Arrow casts them to text and joins them, a run of commas standing
-        for the columns it lacks), then the slice's rows are put in time order: the work
-        is in proportion to the values, not to rows x columns."""
-        import pyarrow as pa
-        import pyarrow.compute as pc
+def _group_lines(plan: Plan, win: Window, g: Group, r: np.ndarray, topics):  # noqa: ANN001, ANN202
+    """CSV lines (with their newline) of the rows ``r`` of group ``g``."""
+    import pyarrow as pa
+    import pyarrow.compute as pc
 
-        topics = pa.array([_csv_text(c.topic) for c in self.chans], pa.string())
-        for _idx, pos, rows in self.parts(size):
-            parts, places = [], []
-            for g, p, r in zip(self.groups, pos, rows, strict=True):
-                if len(p):
-                    parts.append(self._group_lines(g, r, topics, pa, pc))
-                    places.append(p)
-            lines = pa.chunked_array(parts).take(pa.array(np.argsort(np.concatenate(places))))
-            lines = lines.combine_chunks() if lines.num_chunks != 1 else lines.chunk(0)
-            offsets = np.frombuffer(lines.buffers()[1], np.int32)
-            data = lines.buffers()[2]
-            yield memoryview(data)[offsets[lines.offset]:offsets[lines.offset + len(lines)]]
+    width = len(plan.columns)
+    args: list = [_seconds_text(win.t_ns[g.start + r], pa, pc),
+                  topics.take(pa.array(g.which[r]))]
+    at = 0
+    for j, _kind in g.key:
+        name = plan.columns[j]
+        if j > at:
+            args.append(pa.scalar("," * (j - at - 1)))
+        ok = g.valid[name]
+        args.append(pa.array(g.columns[name][r], mask=None if ok is None else ~ok[r]
+                             ).cast(pa.string()))
+        at = j + 1
+    if plan.errors:
+        if width > at:
+            args.append(pa.scalar("," * (width - at - 1)))
+        errs = [None] * len(r) if g.errors is None else \
+            [None if (e := g.errors[k]) is None else _csv_text(e) for k in r.tolist()]
+        args.append(pa.array(errs, pa.string()))
+        tail = None
+    elif width > at:  # the trailing commas and the newline in one
+        args.append(pa.scalar("," * (width - at - 1) + "\n"))
+        tail = ""
+    else:
+        tail = None
+    line = pc.binary_join_element_wise(*args, ",", null_handling="replace",
+                                       null_replacement="")
+    return line if tail is not None else pc.binary_join_element_wise(line, "", "\n")
 
-    def _group_lines(self, g: _Group, r: np.ndarray, topics, pa, pc):  # noqa: ANN001
-        """CSV lines (with their newline) of the rows ``r`` of group ``g``."""
-        width = len(self.columns)
-        args: list = [_seconds_text(self.t_ns[g.start + r], pa, pc),
-                      topics.take(pa.array(g.which[r]))]
-        at = 0
-        for j, _kind in g.key:
-            name = self.columns[j]
-            if j > at:
-                args.append(pa.scalar("," * (j - at - 1)))
-            ok = g.valid[name]
-            args.append(pa.array(g.columns[name][r], mask=None if ok is None else ~ok[r]
-                                 ).cast(pa.string()))
-            at = j + 1
-        if self.errors:
-            if width > at:
-                args.append(pa.scalar("," * (width - at - 1)))
-            errs = [None] * len(r) if g.errors is None else \
-                [None if (e := g.errors[k]) is None else _csv_text(e) for k in r.tolist()]
-            args.append(pa.array(errs, pa.string()))
-            tail = None
-        elif width > at:  # the trailing commas and the newline in one
-            args.append(pa.scalar("," * (width - at - 1) + "\n"))
-            tail = ""
-        else:
-            tail = None
-        line = pc.binary_join_element_wise(*args, ",", null_handling="replace",
-                                           null_replacement="")
-        return line if tail is not None else pc.binary_join_element_wise(line, "", "\n")
 
-    def slices(self, size: int = _SLICE_ROWS) -> Iterator[tuple[np.ndarray, dict[str, object],
-                                                              np.ndarray]]:
-        """Per ``size`` rows in time order: their times, ``{column: (values, valid)}``
-        (and ``decode_error``: a list of str/None) filled a group at a time, and their
-        channel numbers."""
-        by_col: dict[str, list[int]] = {}
-        for i, g in enumerate(self.groups):
-            for k in g.columns:
-                by_col.setdefault(k, []).append(i)
-        for idx, pos, rows in self.parts(size):
-            m = len(idx)
-            out: dict[str, object] = {}
-            for name in self.columns:
-                vals = np.empty(m, np.float64 if name in self.floats else np.int64)
-                ok = np.zeros(m, bool)
-                for i in by_col.get(name, ()):
-                    if len(pos[i]):
-                        g = self.groups[i]
-                        vals[pos[i]] = g.columns[name][rows[i]]
-                        v = g.valid[name]
-                        ok[pos[i]] = True if v is None else v[rows[i]]
-                out[name] = (vals, ok)
-            if self.errors:
-                err: list[str | None] = [None] * m
-                for g, p, r in zip(self.groups, pos, rows, strict=True):
-                    if g.errors is not None:
-                        for k, j in zip(p.tolist(), r.tolist(), strict=True):
-                            err[k] = g.errors[j]
-                out["decode_error"] = err
-            yield self.t_ns[idx], out, self.src[idx]
+def _parquet_batches(plan: Plan, win: Window, schema, topics,  # noqa: ANN001, ANN202
+                     scratch: np.ndarray | None = None, size: int = _PARQUET_ROWS):
+    """The Parquet record batches of ``win``, a slice of rows each, each to be written
+    before the next is asked for. A column is built from the groups that have it, straight
+    into Arrow's buffers: its values scattered into a row of ``scratch`` ((columns, size)
+    int64, reused from slice to slice: fresh memory each time costs a page fault per 4
+    kB), its validity a bitmap shared by the columns of the same groups."""
+    import pyarrow as pa
 
-    def topics(self) -> list[str]:
-        return [c.topic for c in self.chans]
+    by_col: dict[str, list[int]] = {}
+    for i, g in enumerate(win.groups):
+        for k in g.columns:
+            by_col.setdefault(k, []).append(i)
+    if scratch is None or scratch.shape[1] < size:
+        scratch = np.empty((len(plan.columns), size), np.int64)
+    for idx, pos, rows in win.parts(size):
+        m = len(idx)
+        t_ns = win.t_ns[idx]
+        arrays = [pa.array(t_ns, pa.uint64() if t_ns.dtype == np.uint64 else pa.int64()),
+                  pa.array(t_ns.astype(np.float64) / 1e9, pa.float64()),
+                  pa.DictionaryArray.from_arrays(pa.array(win.src[idx], pa.int32()), topics)]
+        bitmaps: dict[tuple[int, ...], tuple[object, int]] = {}
+        for j, name in enumerate(plan.columns):
+            have = tuple(i for i in by_col.get(name, ()) if len(pos[i]))
+            floating = name in plan.floats
+            typ = pa.float64() if floating else pa.int64()
+            if not have:
+                arrays.append(pa.nulls(m, typ))
+                continue
+            # a row of the scratch buffer: the writer has encoded the last slice when
+            # this one is filled; what stays under a null is never read
+            vals = scratch[j, :m].view(np.float64) if floating else scratch[j, :m]
+            own = any(win.groups[i].valid[name] is not None for i in have)
+            ok = np.zeros(m, bool) if own else None
+            for i in have:
+                g = win.groups[i]
+                vals[pos[i]] = g.columns[name][rows[i]]
+                if ok is not None:
+                    v = g.valid[name]
+                    ok[pos[i]] = True if v is None else v[rows[i]]
+            if ok is None:
+                if have not in bitmaps:
+                    okg = np.zeros(m, bool)
+                    for i in have:
+                        okg[pos[i]] = True
+                    bitmaps[have] = _bitmap(okg)
+                bits, nulls = bitmaps[have]
+            else:
+                bits, nulls = _bitmap(ok)
+            arrays.append(pa.Array.from_buffers(typ, m, [bits, pa.py_buffer(vals)], nulls))
+        if plan.errors:
+            err: list[str | None] = [None] * m
+            for g, p, r in zip(win.groups, pos, rows, strict=True):
+                if g.errors is not None:
+                    for k, j in zip(p.tolist(), r.tolist(), strict=True):
+                        err[k] = g.errors[j]
+            arrays.append(pa.array(err, pa.string()))
+        yield pa.RecordBatch.from_arrays(arrays, schema=schema)
 
-    def names(self) -> list[str]:
-        return [*self.columns] + (["decode_error"] if self.errors else [])
+
+def _bitmap(ok: np.ndarray) -> tuple[object, int]:
+    """Arrow validity bitmap of ``ok`` (None if all valid) and the null count."""
+    import pyarrow as pa
+
+    nulls = len(ok) - int(np.count_nonzero(ok))
+    return (None if not nulls else pa.py_buffer(np.packbits(ok, bitorder="little"))), nulls
 
 
 def _seconds_text(t_ns: np.ndarray, pa, pc):  # noqa: ANN001, ANN202 - pyarrow modules
@@ -276,63 +223,11 @@ def _seconds_text(t_ns: np.ndarray, pa, pc):  # noqa: ANN001, ANN202 - pyarrow m
     return pc.replace_with_mask(text, pa.array(small), fix)
 
 
-class _Group:
-    """Channels with the same columns, their values concatenated (channel after channel):
-    ``key`` ((column position, dtype kind) pairs), ``start`` (first row in the export's
-    concatenation), ``which`` (channel number per row), columns, masks, errors."""
-
-    def __init__(self, key: tuple, members: list[Columns], start: int, names: list[str],
-                 first_channel: int) -> None:
-        self.key = key
-        self.start = start
-        self.n = sum(c.n for c in members)
-        self.which = np.repeat(np.arange(first_channel, first_channel + len(members),
-                                         dtype=np.int32), [c.n for c in members])
-        self.columns = {names[j]: np.concatenate([c.columns[names[j]] for c in members])
-                        for j, _ in key}
-        self.valid: dict[str, np.ndarray | None] = {}
-        for j, _ in key:
-            masks = [c.valid[names[j]] for c in members]
-            self.valid[names[j]] = None if all(m is None for m in masks) else np.concatenate(
-                [np.ones(c.n, bool) if m is None else m for c, m in
-                 zip(members, masks, strict=True)])
-        self.errors = None if all(c.errors is None for c in members) else \
-            [e for c in members for e in (c.errors or [None] * c.n)]
-
-
-def _keep_fields(c: Columns, fields: Sequence[str]) -> Columns:
-    """Only the frames of ``c`` that have one of ``fields``, and only those columns."""
-    keep = np.zeros(c.n, bool)
-    for f in fields:
-        if f in c.columns:
-            v = c.valid[f]
-            keep |= True if v is None else v
-    cols = {f: c.columns[f][keep] for f in fields if f in c.columns}
-    valid = {f: (None if c.valid[f] is None else c.valid[f][keep]) for f in cols}
-    return Columns(c.topic, c.t_ns[keep], c.seq[keep], c.row[keep], cols, valid, c.units,
-                   None)
-
-
-def _arrays(plan: _Plan, t_ns: np.ndarray, cols: dict[str, object], src: np.ndarray) -> list:
-    """The Parquet columns of one slice."""
-    import pyarrow as pa
-
-    topic = pa.DictionaryArray.from_arrays(pa.array(src, pa.int32()),
-                                           pa.array(plan.topics(), pa.string()))
-    arrays = [pa.array(t_ns, pa.uint64() if t_ns.dtype == np.uint64 else pa.int64()),
-              pa.array(t_ns.astype(np.float64) / 1e9, pa.float64()), topic]
-    for name in plan.columns:
-        vals, ok = cols[name]  # type: ignore[misc]
-        arrays.append(pa.array(vals, pa.float64() if name in plan.floats else pa.int64(),
-                               mask=None if ok.all() else ~ok))
-    if plan.errors:
-        arrays.append(pa.array(cols["decode_error"], pa.string()))
-    return arrays
-
 
 def export_csv(log_path: str | os.PathLike[str], out_path: str | os.PathLike[str],
                topics: Sequence[str] | None = None,
-               fields: Sequence[str] | None = None, info: LogInfo | None = None) -> int:
+               fields: Sequence[str] | None = None, info: LogInfo | None = None,
+               summary: list[LogInfo] | None = None) -> int:
     """Write the decoded frames of ``log_path`` to the CSV ``out_path`` ("-": stdout).
 
     ``topics``: only these (default all); FrameLogError for a topic not in the log.
@@ -341,26 +236,48 @@ def export_csv(log_path: str | os.PathLike[str], out_path: str | os.PathLike[str
     FrameLogError if a field occurs in no selected frame. A column whose field has an SI
     unit is headed ``field [unit]``. Each channel is decoded as
     :func:`hil.framelog.channel_decode.channel_decoder` says (its schema first), by
-    columns (:mod:`hil.framelog.columnar`), and written with pyarrow's CSV writer in
-    slices of rows. Returns the number of data rows written. A truncated log exports what
-    is readable. ``info``: the log's :meth:`FrameLogReader.info` if the caller has it
-    already (saves a pass over the file).
+    columns (:mod:`hil.framelog.columnar`), a batch of frames at a time, and the rows go
+    out in time order a window at a time (:mod:`hil.framelog.export_plan`: memory bounded
+    whatever the log's length). Returns the number of data rows written. A truncated log
+    exports what is readable. ``info``: the log's :meth:`FrameLogReader.info` if the
+    caller has it; else the planning pass gives it, appended to ``summary`` if given.
     """
-    plan = _Plan(log_path, topics, fields, info)
-    header = ["t_s", "topic"] + [f"{c} [{plan.units[c]}]" if c in plan.units else c
-                                 for c in plan.names()]
-    line = ",".join(_csv_text(h) for h in header) + "\n"
-    if str(out_path) == "-":
-        # stdout takes text (it may be a wrapper without a byte buffer)
-        sys.stdout.write(line)
-        for chunk in plan.csv_lines():
-            sys.stdout.write(bytes(chunk).decode())
-        return plan.rows
-    with open(out_path, "wb") as out:
-        out.write(line.encode())
-        for chunk in plan.csv_lines():
-            out.write(chunk)
-    return plan.rows
+    import pyarrow as pa
+
+    to_stdout = str(out_path) == "-"
+    plan = Plan(log_path, topics, fields, info, thorough=to_stdout)  # stdout cannot rewind
+    if summary is not None:
+        summary.append(plan.info)
+    while True:
+        header = ["t_s", "topic"] + [f"{c} [{plan.units[c]}]" if c in plan.units else c
+                                     for c in plan.names()]
+        line = ",".join(_csv_text(h) for h in header) + "\n"
+        names = pa.array([_csv_text(t) for t in plan.topics], pa.string())
+        rows = 0
+        try:
+            if to_stdout:
+                # stdout takes text (it may be a wrapper without a byte buffer)
+                raw = getattr(sys.stdout, "buffer", None)
+                sys.stdout.write(line)
+                if raw is not None:
+                    sys.stdout.flush()
+                for win in plan.windows():
+                    for chunk in _csv_lines(plan, win, names):
+                        if raw is not None:
+                            raw.write(chunk)
+                        else:
+                            sys.stdout.write(bytes(chunk).decode())
+                    rows += win.rows
+                return rows
+            with open(out_path, "wb") as out:
+                out.write(line.encode())
+                for win in plan.windows():
+                    for chunk in _csv_lines(plan, win, names):
+                        out.write(chunk)
+                    rows += win.rows
+            return rows
+        except Replan:
+            plan = Plan(log_path, topics, fields, info, thorough=True)
 
 
 def _csv_text(s: str) -> str:
@@ -370,30 +287,46 @@ def _csv_text(s: str) -> str:
 
 def export_parquet(log_path: str | os.PathLike[str], out_path: str | os.PathLike[str],
                    topics: Sequence[str] | None = None,
-                   fields: Sequence[str] | None = None, info: LogInfo | None = None) -> int:
+                   fields: Sequence[str] | None = None, info: LogInfo | None = None,
+                   summary: list[LogInfo] | None = None) -> int:
     """As :func:`export_csv`, to a Parquet file (pyarrow): columns ``t_ns`` (int64, exact),
     ``t_s`` (float64), ``topic`` (dictionary), then one per field (int64 or float64, null
     where a frame has no such field); each field's unit in its column metadata (``unit``),
     the log's path in the file metadata (``eha-hil.source``). One row group per slice of
-    rows. Returns the number of rows."""
+    rows; Snappy-compressed pages, dictionary encoding for ``topic`` only (the fields' values
+    rarely repeat enough to pay for it), statistics for the time and topic columns only
+    (what a reader filters row groups by). Returns the number of rows."""
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    plan = _Plan(log_path, topics, fields, info)
-    t_type = pa.uint64() if plan.t_ns.dtype == np.uint64 else pa.int64()
-    fields_ = [pa.field("t_ns", t_type, metadata={"unit": "ns"}),
-               pa.field("t_s", pa.float64(), metadata={"unit": "s"}),
-               pa.field("topic", pa.dictionary(pa.int32(), pa.string()))]
-    for c in plan.columns:
-        fields_.append(pa.field(c, pa.float64() if c in plan.floats else pa.int64(),
-                                metadata={"unit": plan.units[c]} if c in plan.units else None))
-    if plan.errors:
-        fields_.append(pa.field("decode_error", pa.string()))
-    schema = pa.schema(fields_, metadata={"eha-hil.source": str(log_path)})
-    with pq.ParquetWriter(out_path, schema) as w:
-        for t_ns, cols, src in plan.slices():
-            w.write_batch(pa.RecordBatch.from_arrays(_arrays(plan, t_ns, cols, src),
-                                                     schema=schema))
-        if not plan.rows:
-            w.write_table(schema.empty_table())
-    return plan.rows
+    plan = Plan(log_path, topics, fields, info)
+    if summary is not None:
+        summary.append(plan.info)
+    while True:
+        t_type = pa.uint64() if plan.big else pa.int64()
+        fields_ = [pa.field("t_ns", t_type, metadata={"unit": "ns"}),
+                   pa.field("t_s", pa.float64(), metadata={"unit": "s"}),
+                   pa.field("topic", pa.dictionary(pa.int32(), pa.string()))]
+        for c in plan.columns:
+            fields_.append(pa.field(c, pa.float64() if c in plan.floats else pa.int64(),
+                                    metadata={"unit": plan.units[c]} if c in plan.units
+                                    else None))
+        if plan.errors:
+            fields_.append(pa.field("decode_error", pa.string()))
+        schema = pa.schema(fields_, metadata={"eha-hil.source": str(log_path)})
+        names = pa.array(plan.topics, pa.string())
+        rows = 0
+        try:
+            scratch = np.empty((len(plan.columns), _PARQUET_ROWS), np.int64)
+            with pq.ParquetWriter(out_path, schema, compression="snappy",
+                                  use_dictionary=["topic"],
+                                  write_statistics=["t_ns", "t_s", "topic"]) as w:
+                for win in plan.windows():
+                    for batch in _parquet_batches(plan, win, schema, names, scratch):
+                        w.write_batch(batch)
+                    rows += win.rows
+                if not rows:
+                    w.write_table(schema.empty_table())
+            return rows
+        except Replan:
+            plan = Plan(log_path, topics, fields, info, thorough=True)

@@ -51,9 +51,14 @@ class Layout:
                           sort_keys=True, separators=(",", ":")).encode()
 
     def dtype(self) -> np.dtype:
-        return np.dtype({"names": [f.name for f in self.fields],
-                         "formats": [TYPES[f.type] for f in self.fields],
-                         "offsets": [f.offset for f in self.fields], "itemsize": self.size})
+        """The numpy record of one frame (made once per layout: decoded often)."""
+        dt = self.__dict__.get("_dtype")
+        if dt is None:
+            dt = np.dtype({"names": [f.name for f in self.fields],
+                           "formats": [TYPES[f.type] for f in self.fields],
+                           "offsets": [f.offset for f in self.fields], "itemsize": self.size})
+            object.__setattr__(self, "_dtype", dt)  # a cache, not a field
+        return dt
 
     def units(self) -> dict[str, str]:
         return {f.name: f.unit for f in self.fields if f.unit}
@@ -66,8 +71,9 @@ class Layout:
         if raw.nbytes != n * self.size:
             raise ValueError(f"{self.encoding}: frames of {raw.nbytes // max(n, 1)} bytes, "
                              f"the layout has {self.size}")
-        rec = raw.view(np.uint8).reshape(n, self.size).view(self.dtype())[:, 0] if n else \
-            np.zeros(0, self.dtype())
+        dt = self.dtype()
+        rec = raw.view(np.uint8).reshape(n, self.size).view(dt)[:, 0] if n else \
+            np.zeros(0, dt)
         out = {}
         for f in self.fields:
             v = rec[f.name]

@@ -490,14 +490,11 @@ class FrameLogReader:
         scan = _Scan()
         for _ in self._walk(scan, lambda ch: False):
             pass
-        chans = []
-        for ch in sorted(scan.channels.values(), key=lambda c: c.id):
-            sname, senc, sdata = scan.schemas.get(ch.schema_id, ("", "", b""))
-            chans.append(ChannelInfo(
-                ch.id, ch.topic, ch.encoding, ch.message_encoding,
-                "block" if ch.block else "single", sname, senc, dict(ch.metadata),
-                None if ch.dtype is None else ch.dtype.name, ch.width,
-                ch.messages, ch.frames, ch.first_ns, ch.last_ns, sdata))
+        return self._info(scan)
+
+    def _info(self, scan: _Scan) -> LogInfo:
+        chans = [_channel_info(ch, scan) for ch in sorted(scan.channels.values(),
+                                                          key=lambda c: c.id)]
         firsts = [c.first_ns for c in chans if c.first_ns is not None]
         lasts = [c.last_ns for c in chans if c.last_ns is not None]
         return LogInfo(
@@ -577,52 +574,24 @@ class FrameLogReader:
 
     def raw_channels(self, topics: Iterable[str] | None = None) -> dict[str, RawChannel]:
         """Every frame of ``topics`` (None: all) grouped by channel, in one pass: blocks as
-        stacked arrays, single frames as a list (see :class:`RawChannel`). What a columnar
-        export decodes a channel at a time."""
+        stacked arrays, single frames as a list (see :class:`RawChannel`); a selected
+        channel without frames is there, empty."""
         want = None if topics is None else set(topics)
         scan = _Scan()
-        t_b: dict[int, list[np.ndarray]] = {}
-        f_b: dict[int, list[np.ndarray]] = {}
-        k_b: dict[int, list[int]] = {}
-        t_s: dict[int, list[int]] = {}
-        k_s: dict[int, list[int]] = {}
-        p_s: dict[int, list[memoryview]] = {}
+        acc = _RawAccum(self.path)
         for k, m in enumerate(self._walk(scan, self._selector(want))):
-            cid = m.chan.id
-            if m.chan.block:
-                t, fr = _block(m)
-                if fr.shape[1] != m.chan.width:
-                    raise FrameLogError(f"{self.path}: {m.chan.topic}: a block of "
-                                        f"{fr.shape[1]}-element frames on a channel of "
-                                        f"{m.chan.width}")
-                t_b.setdefault(cid, []).append(t)
-                f_b.setdefault(cid, []).append(fr)
-                k_b.setdefault(cid, []).append(k)
-            else:
-                t_s.setdefault(cid, []).append(m.log_ns)
-                k_s.setdefault(cid, []).append(k)
-                p_s.setdefault(cid, []).append(_single(m))
-        out: dict[str, RawChannel] = {}
-        for ch in sorted(scan.channels.values(), key=lambda c: c.id):
-            if want is not None and ch.topic not in want:
-                continue
-            if ch.block:
-                ts = t_b.get(ch.id, [])
-                sizes = [len(t) for t in ts]
-                assert ch.width is not None and ch.dtype is not None
-                out[ch.topic] = RawChannel(
-                    np.concatenate(ts) if ts else np.zeros(0, np.int64),
-                    np.repeat(np.asarray(k_b.get(ch.id, []), np.int64), sizes),
-                    np.concatenate([np.arange(n, dtype=np.int64) for n in sizes])
-                    if sizes else np.zeros(0, np.int64),
-                    np.concatenate(f_b[ch.id]) if ts else np.zeros((0, ch.width), ch.dtype),
-                    None)
-            else:
-                t = _times(t_s.get(ch.id, []), [], self.path)
-                out[ch.topic] = RawChannel(t, np.asarray(k_s.get(ch.id, []), np.int64),
-                                           np.zeros(len(t), np.int64), None,
-                                           p_s.get(ch.id, []))
-        return out
+            acc.add(k, m)
+        return acc.take([ch for ch in sorted(scan.channels.values(), key=lambda c: c.id)
+                         if want is None or ch.topic in want])
+
+    def raw_batches(self, topics: Iterable[str] | None = None,
+                    batch_bytes: int = 16 << 20) -> RawBatches:
+        """The frames of :meth:`raw_channels` a batch at a time, in file order: each batch
+        holds the frames of the messages read since the last one (about ``batch_bytes`` of
+        frame data), per channel that has any, with ``seq`` numbered over the whole file
+        as in :meth:`raw_channels`. What a streaming export decodes, in bounded memory;
+        the returned iterable also describes what it has read (:class:`RawBatches`)."""
+        return RawBatches(self, topics, batch_bytes)
 
     def blocks(self, topic: str) -> Blocks:
         """All frames of ``topic`` as numpy arrays, for replay: ``t_ns`` (n,) int64 and
@@ -680,6 +649,115 @@ class FrameLogReader:
             out[topic] = Blocks(times, frames)
         return out
 
+
+
+def _channel_info(ch: _Chan, scan: _Scan) -> ChannelInfo:
+    sname, senc, sdata = scan.schemas.get(ch.schema_id, ("", "", b""))
+    return ChannelInfo(ch.id, ch.topic, ch.encoding, ch.message_encoding,
+                       "block" if ch.block else "single", sname, senc, dict(ch.metadata),
+                       None if ch.dtype is None else ch.dtype.name, ch.width,
+                       ch.messages, ch.frames, ch.first_ns, ch.last_ns, sdata)
+
+
+class RawBatches:
+    """The batches of :meth:`FrameLogReader.raw_batches` (iterate once); meanwhile
+    :meth:`channel` describes a channel as far as read (its schema, its first message's
+    time), and :meth:`info` is the log's :meth:`FrameLogReader.info` once the batches are
+    exhausted (one pass over the file serves both)."""
+
+    def __init__(self, reader: FrameLogReader, topics: Iterable[str] | None,
+                 batch_bytes: int) -> None:
+        self.reader = reader
+        self.want = None if topics is None else set(topics)
+        self.batch_bytes = batch_bytes
+        self.scan = _Scan()
+        self._done = False
+
+    def __iter__(self) -> Iterator[dict[str, RawChannel]]:
+        acc = _RawAccum(self.reader.path)
+        size = 0
+        walk = self.reader._walk(self.scan, self.reader._selector(self.want))
+        for k, m in enumerate(walk):
+            size += acc.add(k, m)
+            if size >= self.batch_bytes:
+                yield acc.take(list(acc.chans.values()))
+                size = 0
+        if acc.chans:
+            yield acc.take(list(acc.chans.values()))
+        self._done = True
+
+    def channel(self, topic: str) -> ChannelInfo:
+        """What has been read of ``topic``'s channel (KeyError: none of it yet)."""
+        for ch in self.scan.channels.values():
+            if ch.topic == topic:
+                return _channel_info(ch, self.scan)
+        raise KeyError(topic)
+
+    def info(self) -> LogInfo:
+        """The log's summary, as :meth:`FrameLogReader.info` (after the last batch)."""
+        if not self._done:
+            raise RuntimeError("RawBatches.info() before the batches are exhausted")
+        return self.reader._info(self.scan)
+
+
+class _RawAccum:
+    """Frames of the messages added so far, per channel, until :meth:`take`."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self._reset()
+
+    def _reset(self) -> None:
+        self.chans: dict[int, _Chan] = {}
+        self.t_b: dict[int, list[np.ndarray]] = {}
+        self.f_b: dict[int, list[np.ndarray]] = {}
+        self.k_b: dict[int, list[int]] = {}
+        self.t_s: dict[int, list[int]] = {}
+        self.k_s: dict[int, list[int]] = {}
+        self.p_s: dict[int, list[memoryview]] = {}
+
+    def add(self, k: int, m: _Msg) -> int:
+        """Message number ``k`` of the walk; returns its frame bytes."""
+        cid = m.chan.id
+        self.chans.setdefault(cid, m.chan)
+        if m.chan.block:
+            t, fr = _block(m)
+            if fr.shape[1] != m.chan.width:
+                raise FrameLogError(f"{self.path}: {m.chan.topic}: a block of "
+                                    f"{fr.shape[1]}-element frames on a channel of "
+                                    f"{m.chan.width}")
+            self.t_b.setdefault(cid, []).append(t)
+            self.f_b.setdefault(cid, []).append(fr)
+            self.k_b.setdefault(cid, []).append(k)
+            return fr.nbytes
+        data = _single(m)
+        self.t_s.setdefault(cid, []).append(m.log_ns)
+        self.k_s.setdefault(cid, []).append(k)
+        self.p_s.setdefault(cid, []).append(data)
+        return len(data)
+
+    def take(self, chans: list[_Chan]) -> dict[str, RawChannel]:
+        """The frames of ``chans`` as :class:`RawChannel` (by topic); then start afresh."""
+        out: dict[str, RawChannel] = {}
+        for ch in chans:
+            if ch.block:
+                ts = self.t_b.get(ch.id, [])
+                sizes = [len(t) for t in ts]
+                assert ch.width is not None and ch.dtype is not None
+                out[ch.topic] = RawChannel(
+                    np.concatenate(ts) if ts else np.zeros(0, np.int64),
+                    np.repeat(np.asarray(self.k_b.get(ch.id, []), np.int64), sizes),
+                    np.concatenate([np.arange(n, dtype=np.int64) for n in sizes])
+                    if sizes else np.zeros(0, np.int64),
+                    np.concatenate(self.f_b[ch.id]) if ts else
+                    np.zeros((0, ch.width), ch.dtype), None)
+            else:
+                t = _times(self.t_s.get(ch.id, []), [], self.path)
+                out[ch.topic] = RawChannel(t, np.asarray(self.k_s.get(ch.id, []), np.int64),
+                                           np.zeros(len(t), np.int64), None,
+                                           self.p_s.get(ch.id, []))
+        self._reset()
+        return out
 
 
 def _block(m: _Msg) -> tuple[np.ndarray, np.ndarray]:

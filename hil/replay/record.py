@@ -244,6 +244,14 @@ class RecordingStackBox(StackBox):
 
     def _write_signals(self) -> None:
         ns = self.tick_ns
+        n = self.n_steps
+        t_steps = np.array(self.t_steps, dtype=np.int64)
+        # the steps first: their reads' validity is the box reports' piston flags
+        steps = []
+        for k in range(len(self.act)):
+            up, down = self._up_down(k)
+            steps.append(SG.actuator_block(self.cal, up[None], down[None], self.every,
+                                           self.period_ticks * ns * 1e-9, self.carry[k]))
         out_t = out_f = None
         for d, rows in (("outputs", self.buf_out), ("inputs", self.buf_in)):
             if not rows or (d == "outputs" and not self.out_dtype.itemsize):
@@ -254,17 +262,19 @@ class RecordingStackBox(StackBox):
             if d == "outputs":
                 out_t, out_f = t, f
             if self.sig_rec.get(d) is not None:
-                self.out.write(self.sig_rec[d], t * ns, SG.record_columns(self.box, d, f))
+                piston = None
+                if d == "inputs":
+                    flags = [SG.report_flags(c, t_steps, t) for c in self.carry]
+                    piston = (np.concatenate([x for x, _ in flags]),
+                              np.concatenate([v for _, v in flags]))
+                self.out.write(self.sig_rec[d], t * ns,
+                               SG.record_columns(self.box, d, f, piston))
         if out_t is None:  # no output record this block: the last one still stands
             out_t, out_f = self._last_out
         else:
             self._last_out = (out_t[-1:], out_f[-1:])
-        n = self.n_steps
-        t_steps = np.array(self.t_steps, dtype=np.int64)
         for k, slot in enumerate(self.act):
-            up, down = self._up_down(k)
-            keep, cols = SG.actuator_block(self.cal, up[None], down[None], self.every,
-                                           self.period_ticks * ns * 1e-9, self.carry[k])
+            keep, cols = steps[k]
             if not len(keep) or not n:
                 continue
             t = t_steps[keep]

@@ -91,6 +91,8 @@ class RobotRecorder:
         self._last_out = [(np.zeros(0, np.int64), np.zeros((0, b.out_dtype.itemsize), np.uint8))
                           for b in engine.boxes]
         self.carry = SG.PistonCarry.start(n)
+        #: per engine box: the index of its first actuator in the engine's order
+        self.first_act = np.cumsum([0] + [len(b.act) for b in engine.boxes])[:-1].tolist()
         self._pool = (ThreadPoolExecutor(1, thread_name_prefix="robot-log")
                       if background else None)
         self._jobs: list[Future] = []
@@ -226,15 +228,20 @@ class RobotRecorder:
                 key = ("outputs", layout, outs[0].tobytes())
                 groups.setdefault(key, []).append((n_box, outs[1]))
                 times[key] = outs[0]
+        # the steps first: their reads' validity is the box reports' piston flags
+        steps = SG.actuator_block(self.cal, k.up, k.down, self.every, period_s, self.carry)
+        flags = SG.report_flags(self.carry, k.t_steps, k.in_t) if c else None
         for key, members in groups.items():
-            self._write_records(key[0], times[key], members)
+            self._write_records(key[0], times[key], members, flags)
         if len(k.t_steps):
-            self._write_steps(k, box_out, period_s)
+            self._write_steps(k, box_out, steps)
 
-    def _write_records(self, d: str, t: np.ndarray, members: list[tuple[int, np.ndarray]]
-                       ) -> None:
+    def _write_records(self, d: str, t: np.ndarray, members: list[tuple[int, np.ndarray]],
+                       flags: tuple[np.ndarray, np.ndarray] | None) -> None:
         """The ``d`` records (``outputs``/``inputs``) of boxes of one slot layout at the
-        same times ``t`` (ticks): ``members`` (chain index, (n, bytes) rows) each."""
+        same times ``t`` (ticks): ``members`` (chain index, (n, bytes) rows) each;
+        ``flags``: every actuator's piston flags of the block's cycles
+        (:func:`hil.replay.signals.report_flags`)."""
         rows = np.stack([r for _, r in members])
         boxes = [n for n, _ in members]
         t_ns = t * self.ns
@@ -244,11 +251,19 @@ class RobotRecorder:
                 self.log.write_blocks([chs[n] for n in boxes], t_ns, rows)
         sig = [self.sig_rec[n].get(d) for n in boxes]
         if sig[0] is not None:
+            piston = None
+            if d == "inputs" and flags is not None:
+                # per member box its actuators' rows, stacked box-major as the records
+                js = [self.first_act[self.engine_box[n]] for n in boxes]
+                m = len(self.engine.boxes[self.engine_box[boxes[0]]].act)
+                piston = tuple(np.stack([f[j:j + m] for j in js], axis=1).reshape(m, -1)
+                               for f in flags)
             cols = SG.record_columns(self.boxes[boxes[0]].box, d,
-                                     rows.reshape(-1, rows.shape[2]))
+                                     rows.reshape(-1, rows.shape[2]), piston)
             self.out.write_split(sig, t_ns, cols)
 
-    def _write_steps(self, k: _Block, box_out: list, period_s: float) -> None:
+    def _write_steps(self, k: _Block, box_out: list,
+                     steps: tuple[np.ndarray, dict[str, np.ndarray]]) -> None:
         ns, log, n = self.ns, self.log, self.engine.n
         t_steps, up, down = k.t_steps, k.up, k.down
         r = len(t_steps)
@@ -266,7 +281,7 @@ class RobotRecorder:
                         tw, words = LK.line_words(tr[:, TRACE_WORDS + d * LK.WORDS_W:], tt)
                         if len(tw):
                             log.write_block(ch, tw, words[:, None])
-        keep, cols = SG.actuator_block(self.cal, up, down, self.every, period_s, self.carry)
+        keep, cols = steps
         if not len(keep):
             return
         t = t_steps[keep]

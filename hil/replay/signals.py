@@ -86,7 +86,17 @@ ACTUATOR = MessageType(f"{PACKAGE}.ActuatorSignals", (
           "(docs/framelog.md)"),
     Field("v_piston_valid", "bool", "",
           "false: the speed's difference has a torn position at one end"),
+    Field("upstream_valid", "bool", "",
+          "false: no upstream sweep of the board has reached the MCU yet (its words all 0): "
+          "the values read from the board are NaN"),
 ), "one actuator, each MCU step")
+
+#: The fields of :data:`ACTUATOR` read from the board (upstream words) as doubles: NaN
+#: while no upstream sweep has reached the MCU (0 V through the MCU's formulas is not a
+#: measurement: -3 MPa, -20.5 degC, the piston 42 mm off).
+UPSTREAM_DOUBLES = (*(f for _, f in _ANALOG), "f_pressure_n", "f_strain_n", "x_piston_m",
+                    "v_piston_m_s", "omega_m_rad_s", "iq_a", "id_a", "ia_a", "ib_a", "vd_v",
+                    "vq_v")
 
 _UNFITTED_SUFFIX = "_no_"
 
@@ -160,13 +170,29 @@ def record_message(box: Box, direction: str) -> MessageType:
     for k, s in enumerate(box.slots):
         if s.kind in SIMULATED_KINDS:
             fields += _record_fields(pdo.SLOT_FIELDS[s.kind][which], f"s{k}_")
+    if direction == "inputs":  # appended: the fields above keep their numbers
+        for k in _actuator_slots(box):
+            fields += [Field(f"s{k}_x_piston_valid", "bool", "",
+                             "false: the MCU read this piston position torn between its two "
+                             "16-bit words (docs/framelog.md)"),
+                       Field(f"s{k}_v_piston_valid", "bool", "",
+                             "false: this speed's difference has a torn position at one end, "
+                             "or no record before it")]
     kinds = "_".join(s.kind for s in box.slots if s.kind in SIMULATED_KINDS) or "empty"
     return MessageType(f"{PACKAGE}.Box{direction.capitalize()}_{kinds}", fields,
                        f"the {direction} record of a box, each cycle")
 
 
-def record_columns(box: Box, direction: str, records: np.ndarray) -> dict[str, np.ndarray]:
-    """SI columns of ``records`` ((n, bytes) uint8 rows of the box's record)."""
+def _actuator_slots(box: Box) -> list[int]:
+    return [k for k, s in enumerate(box.slots) if s.kind == "actuator"]
+
+
+def record_columns(box: Box, direction: str, records: np.ndarray,
+                   piston: tuple[np.ndarray, np.ndarray] | None = None
+                   ) -> dict[str, np.ndarray]:
+    """SI columns of ``records`` ((n, bytes) uint8 rows of the box's record); for the
+    inputs, ``piston`` = (x valid, v valid), each (actuator slots, n) bool
+    (:func:`report_flags`), gives the validity flags of each actuator slot's piston."""
     which = 0 if direction == "outputs" else 1
     cols: dict[str, np.ndarray] = {}
     off = 0
@@ -184,7 +210,31 @@ def record_columns(box: Box, direction: str, records: np.ndarray) -> dict[str, n
                 cols[f"s{k}_{f.name}_{_suffix(f.unit)}"] = rec[f.name] * f.lsb
             else:
                 cols[f"s{k}_{f.name}"] = rec[f.name]
+    if direction == "inputs" and _actuator_slots(box):
+        if piston is None:
+            raise ValueError("the inputs of a box with actuators need their piston flags")
+        for i, k in enumerate(_actuator_slots(box)):
+            cols[f"s{k}_x_piston_valid"] = piston[0][i]
+            cols[f"s{k}_v_piston_valid"] = piston[1][i]
     return cols
+
+
+def report_flags(carry: PistonCarry, t_steps: np.ndarray, in_t: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """Per actuator and cycle ((a, c) each): whether the piston position a box reports at
+    the end of each cycle (ticks ``in_t``) is whole -- it is the MCU's read at the last MCU
+    step before the end, whose validity the last :func:`actuator_block` of the steps
+    ``t_steps`` (ticks) left in ``carry`` -- and whether the speed it reports, the
+    difference to the previous report's position, has whole reads at both ends."""
+    sv = carry.step_valid if carry.step_valid is not None else \
+        np.zeros((len(carry.report_valid), 0), bool)
+    both = np.concatenate([carry.valid_in[:, None], sv], axis=1)
+    idx = np.searchsorted(np.asarray(t_steps), np.asarray(in_t), side="left")
+    x_ok = both[:, np.minimum(idx, both.shape[1] - 1)]
+    v_ok = x_ok & np.concatenate([carry.report_valid[:, None], x_ok[:, :-1]], axis=1)
+    if x_ok.shape[1]:
+        carry.report_valid = x_ok[:, -1].copy()
+    return x_ok, v_ok
 
 
 def _commands(mode: np.ndarray, command: np.ndarray, prefix: str = "") -> dict[str, np.ndarray]:
@@ -281,17 +331,25 @@ def actuator_columns(cal: FirmwareCalibration, up: np.ndarray, down: np.ndarray,
 @dataclass
 class PistonCarry:
     """What the decoding of one block of MCU steps leaves for the next, per actuator: the
-    last piston position (m, NaN: none yet), its count, its tear offset and validity."""
+    last piston position (m, NaN: none yet), its count, its tear offset and validity, and
+    whether an upstream sweep of the board has reached the MCU."""
 
     x: np.ndarray
     count: np.ndarray | None
     offset: np.ndarray
     valid: np.ndarray
+    started: np.ndarray
+    #: of the last block: the validity of the read before it and of each of its reads
+    #: ((a, n)); whether the last box report's position was whole (False: none yet)
+    valid_in: np.ndarray
+    step_valid: np.ndarray | None
+    report_valid: np.ndarray
 
     @classmethod
     def start(cls, actuators: int) -> PistonCarry:
         return cls(np.full(actuators, math.nan), None, np.zeros(actuators, np.int64),
-                   np.ones(actuators, bool))
+                   np.ones(actuators, bool), np.zeros(actuators, bool),
+                   np.ones(actuators, bool), None, np.zeros(actuators, bool))
 
 
 def actuator_block(cal: FirmwareCalibration, up: np.ndarray, down: np.ndarray, every: int,
@@ -307,12 +365,17 @@ def actuator_block(cal: FirmwareCalibration, up: np.ndarray, down: np.ndarray, e
     a, n = up.shape[:2]
     keep = np.arange(every - 1, n, every)
     if not n:
+        carry.valid_in, carry.step_valid = carry.valid, np.zeros((a, 0), bool)
         return keep, {}
     counts = piston_counts(up)
     before = counts[:, 0] if carry.count is None else carry.count
     off = tear_offsets(counts, before, carry.offset)
-    valid = off == 0
-    x = measure.piston_x(counts, cal)
+    # the MCU's memory is 0 until the board's first upstream sweep reaches it; the sweep
+    # ends with the board's tick counter, then non-zero (and the piston read after it is
+    # a real jump from 0, not a tear)
+    started = carry.started[:, None] | (np.cumsum(up[:, :, B.U_TICK] != 0, axis=1) > 0)
+    valid = (off == 0) & started
+    x = np.where(started, measure.piston_x(counts, cal), math.nan)
     x_before = np.concatenate([carry.x[:, None], x], axis=1)[:, keep]
     valid_before = np.concatenate([carry.valid[:, None], valid], axis=1)[:, keep]
     k = len(keep)
@@ -322,8 +385,16 @@ def actuator_block(cal: FirmwareCalibration, up: np.ndarray, down: np.ndarray, e
     cols["x_piston_valid"] = valid[:, keep].reshape(a * k)
     cols["v_piston_valid"] = (cols["x_piston_valid"] & valid_before.reshape(a * k)
                               & np.isfinite(x_before.reshape(a * k)))
+    up_ok = started[:, keep].reshape(a * k)
+    cols["upstream_valid"] = up_ok
+    if not up_ok.all():
+        for name in UPSTREAM_DOUBLES:
+            if name in cols:
+                cols[name] = np.where(up_ok, cols[name], math.nan)
+    carry.valid_in, carry.step_valid = carry.valid, valid
     carry.x, carry.count = x[:, -1].copy(), counts[:, -1].copy()
     carry.offset, carry.valid = off[:, -1].copy(), valid[:, -1].copy()
+    carry.started = started[:, -1].copy()
     return keep, cols
 
 

@@ -24,7 +24,7 @@ Same results as the per-actuator path, bit for bit (``tests/hil/test_robot.py``)
 
 from __future__ import annotations
 
-import math
+import itertools
 import threading
 from concurrent.futures import Future, ThreadPoolExecutor
 from typing import Protocol
@@ -39,6 +39,7 @@ from numba.extending import intrinsic
 
 from firmware_model.fpga import lanes as fpl
 from firmware_model.fpga import layout as B
+from firmware_model.lvds import lanes as link_lanes
 from firmware_model.lvds import link as LK
 from firmware_model.mcu.c_abi import (
     IN_CLEAR_FAULT,
@@ -51,6 +52,9 @@ from firmware_model.mcu.c_abi import (
     config_record,
 )
 from hil.fieldbus import pdo
+from hil.fieldbus.pdo_compiled import counts as _counts
+from hil.fieldbus.pdo_compiled import le as _le
+from hil.fieldbus.pdo_compiled import put as _put
 from hil.sim.actuator import (
     TRACE_WIDTH,
     TRACE_WORDS,
@@ -59,12 +63,12 @@ from hil.sim.actuator import (
     trace_row_lanes,
 )
 from hil.sim.robot_tunables import EngineTunables
-from hil.sim.stack_rows import SOURCES, McuRows, StackRows, TapRows
+from hil.sim.stack_rows import SOURCES, LinkSensorLanes, McuRows, StackRows, TapRows
 from plant import kernel
 from plant import lanes as lanes_mod
 from plant import layout as L
 from plant.config import Config, ConfigError
-from plant.sensors.harness import digitise
+from plant.sensors import lanes as sensor_lanes
 
 #: Offsets of the input record's fields, in 16-bit words (the kernel writes through a view).
 _IN_U16 = INPUT.itemsize // 2
@@ -139,14 +143,6 @@ def _log_words(log, i, r, in16, in32, out16):
         log.down[i, r, w] = out16[i, _OUT_DOWN + w]
 
 
-@njit(cache=True, nogil=True, _nrt=False, inline="always")
-def _word_log(trace, at, lk):
-    """The LVDS link's word log of the tick (``lk``: the link's state, after its upstream
-    sweep) into the trace row ``at``, as :func:`advance_stack` traces it."""
-    for w in range(2 * LK.WORDS_W):
-        trace[at, TRACE_WORDS + w] = lk[LK.LK_DOWN_WORDLOG + w]
-
-
 # No reference counting (``_nrt=False``, as the parts' tick functions): every row view
 # below would otherwise increment and decrement the parent array's count, an atomic on a
 # cache line all compute threads share (~200 ns per actuator tick with one thread, more
@@ -197,19 +193,22 @@ def advance_robot(counter, n_periods, period, tick0, batched, s, mcu, no_rec, ta
 
 @njit(cache=True, nogil=True, _nrt=False)
 def advance_robot_lanes(counter, n_periods, period, tick0, blocks, sizes, n_sub_max, s, mcu,
-                        buf, fb, tap_y, tap_trace, log):
+                        buf, fb, ls, tap_y, tap_trace, log):
     """:func:`advance_robot` with the plants in lanes: this thread claims whole batches
     (``blocks[b, :sizes[b]]``: up to :data:`plant.lanes.LW` actuator rows, counted by
-    ``counter``) and runs their MCU periods together. Per tick every actuator of the
-    batch goes through its sensor chips and downstream LVDS sweep (one after the other,
-    the calls :func:`advance_stack` makes), then all their boards take the tick in one
-    pass over the lanes (:func:`firmware_model.fpga.lanes.board_tick`, their state in
-    ``fb``, this thread's board lane buffer, from the batch's claim to its end), then each
-    actuator's trace rows and upstream sweep, then the inverters drive the plants and all
-    plants take the tick's RK4 step in one pass over the lanes (:func:`plant.lanes.
-    rk4_lanes`, in ``buf``, this thread's plant lane buffer), then each plant's outputs.
-    Each actuator sees the operations of :func:`advance_stack` in its order: the batch
-    only interleaves independent actuators.
+    ``counter``) and runs their MCU periods together. Per tick the batch's sensor chips
+    (:func:`plant.sensors.lanes.digitise_lanes`) and downstream LVDS sweeps
+    (:func:`firmware_model.lvds.lanes.sweep_down_lanes`) in lanes, the batch's boards in one
+    pass over the lanes (:func:`firmware_model.fpga.lanes.board_tick`), the batch's
+    upstream sweeps in lanes, the inverters (:func:`~hil.sim.actuator.drive_lanes`), then
+    all their plants take the tick's RK4 step in one pass over the lanes
+    (:func:`plant.lanes.rk4_lanes`, in ``buf``, this thread's lane buffer), then each
+    plant's outputs. ``fb``: this thread's board lane buffer (the boards' state, loaded
+    when a batch is claimed, stored back at its end). ``ls`` (a
+    :class:`~hil.sim.stack_rows.LinkSensorLanes`): this thread's lane buffers of the links'
+    counters and word logs (loaded when a batch is claimed, stored back at its end) and of
+    the chips' parameters. Each actuator sees the operations of
+    :func:`advance_stack` in its order: the batch only interleaves independent actuators.
     ``tap_y`` (actuators, ticks, outputs) and ``tap_trace`` (actuators, ticks,
     ``TRACE_WIDTH``): where given (not empty), every tick's plant outputs and board trace
     row (:func:`advance_stack`'s) of every actuator (:attr:`RobotEngine.tap`). ``log`` (a
@@ -227,6 +226,8 @@ def advance_robot_lanes(counter, n_periods, period, tick0, blocks, sizes, n_sub_
         done += m
         lanes_mod.load_params(buf, pl.params, rows, m)
         fpl.load_board(fb, bd.params, bd.state, rows, m)
+        sensor_lanes.load_chips(ls.chips, se.chips, rows, m)
+        link_lanes.load_link(ls.link, lk.state, rows, m)
         for n in range(n_periods):
             t = tick0 + n * period
             r = log.row[0] + n
@@ -247,10 +248,9 @@ def advance_robot_lanes(counter, n_periods, period, tick0, blocks, sizes, n_sub_
             for k in range(period):
                 at = n * period + k
                 lt = r * period + k  # the log trace's row (advance_stack's k-th)
-                for j in range(m):
-                    i = rows[j]
-                    digitise(pl.y[i], se.chips[i], t + k, se.raw[i])
-                    LK.sweep_down(lk.state[i], lk.mcu_down[i], bd.state[i], bd.down[i])
+                sensor_lanes.digitise_lanes(ls.chips, pl.y, se.chips, rows, m, t + k, se.raw)
+                link_lanes.sweep_down_lanes(ls.link, lk.state, lk.mcu_down, bd.state,
+                                            bd.down, rows, m)
                 fpl.board_tick(fb, rows, m, se.raw, bd.down, bd.state, bd.up, bd.params)
                 for j in range(m):
                     i = rows[j]
@@ -260,11 +260,13 @@ def advance_robot_lanes(counter, n_periods, period, tick0, blocks, sizes, n_sub_
                     if logging_trace:
                         trace_row_lanes(log.trace[i], lt, fb, j, se.raw[i], bd.down[i],
                                         bd.up[i])
-                    LK.sweep_up(lk.state[i], bd.up[i], lk.mcu_up[i])
+                link_lanes.sweep_up_lanes(ls.link, lk.state, bd.up, lk.mcu_up, rows, m)
+                for j in range(m):
+                    i = rows[j]
                     if tap_trace.shape[0] > 0:
-                        _word_log(tap_trace[i], at, lk.state[i])
+                        link_lanes.word_log(tap_trace[i], at, TRACE_WORDS, ls.link, j)
                     if logging_trace:
-                        _word_log(log.trace[i], lt, lk.state[i])
+                        link_lanes.word_log(log.trace[i], lt, TRACE_WORDS, ls.link, j)
                 drive_lanes(fb, rows, m, bd.params, pl.u, pl.x)
                 lanes_mod.load_states(buf, pl.x, pl.u, rows, m)
                 lanes_mod.rk4_lanes(buf, n_sub_max)
@@ -281,32 +283,7 @@ def advance_robot_lanes(counter, n_periods, period, tick0, blocks, sizes, n_sub_
                     in16[i, _IN_UP + w] = lk.mcu_up[i, w] & 0xFFFF
                 in32[i, _IN_CRC] = lk.state[i, LK.LK_MASTER_CRC]
         fpl.store_board(fb, bd.state, rows, m)
-
-
-@njit(cache=True)
-def _le(image, at, n_bytes, signed):
-    """The little-endian integer of ``n_bytes`` at ``image[at]``."""
-    v = 0
-    for b in range(n_bytes):
-        v |= np.int64(image[at + b]) << (8 * b)
-    if signed and v >= np.int64(1) << (8 * n_bytes - 1):
-        v -= np.int64(1) << (8 * n_bytes)
-    return v
-
-
-@njit(cache=True)
-def _put(image, at, n_bytes, v):
-    for b in range(n_bytes):
-        image[at + b] = (v >> (8 * b)) & 0xFF
-
-
-@njit(cache=True)
-def _counts(value, lsb, lo, hi):
-    """:func:`hil.fieldbus.pdo.to_counts` (the same float64 steps): rounded half away from
-    zero, saturated to [lo, hi]."""
-    c = value / lsb
-    r = math.trunc(c + 0.5) if c >= 0 else -math.trunc(-c + 0.5)
-    return np.int64(min(max(r, lo), hi))
+        link_lanes.store_link(ls.link, lk.state, rows, m)
 
 
 @njit(cache=True)
@@ -452,7 +429,6 @@ class RobotEngine:
                              dtype=np.int64).reshape(n, 3)
         self.mcu = McuRows(self.ptrs, self.in16, self.in32, self.out16, self.err)
         for b in self.boxes:
-            b.pending = None
             b.engine = self
         #: Start a cycle's compute in a background thread as soon as every box has its
         #: outputs (:meth:`applied`), overlapping it with the master and the PC loop.
@@ -464,12 +440,21 @@ class RobotEngine:
         self._jobs: list[Future] = []
         self._started = threading.Semaphore(0)
         self._ready: list[int] | None = None  # prepared, with stacks under sensor faults
-        self._pending: set[int] = set()
-        self._used: dict[int, bytes] = {}
+        #: Per box: its outputs of this cycle are in :attr:`out_image` (not yet taken).
+        self._box_got = np.zeros(len(self.boxes), dtype=bool)
+        self._box_number = {id(b): k for k, b in enumerate(self.boxes)}
+        #: Made when the boxes' stacks change (faults wrap them): the stacks under a sensor
+        #: fault, the wrapped ones, the plants the kernel advances (see _prepare).
+        self._stacks_seen: tuple = ()
+        self._external: list[int] = []
+        self._wrapped: list = []
+        self._batched_plants: list = []
         self._blocks = np.zeros((0, lanes_mod.LW), dtype=np.int64)
         self._sizes = np.zeros(0, dtype=np.int64)
         self._blocks_for: bytes = b""
         self._lane_bufs: list[tuple[np.ndarray, np.ndarray]] = []
+        #: Each thread's lane buffers of the link's counters and the sensor chips.
+        self._link_sensor_bufs: list[LinkSensorLanes] = []
         #: Called with the first tick of each cycle once it is computed (:meth:`tap`).
         self.on_cycle = None
         self.tap(False, False)
@@ -487,14 +472,16 @@ class RobotEngine:
         self.out_image = np.zeros(out_lo[-1], dtype=np.uint8)
         self.in_image = np.zeros(in_lo[-1], dtype=np.uint8)
         self._out_span = list(zip(out_lo[:-1], out_lo[1:], strict=True))
-        for b, (lo, hi) in zip(self.boxes, zip(in_lo[:-1], in_lo[1:], strict=True),
-                               strict=True):
+        self._in_span = list(zip(in_lo[:-1], in_lo[1:], strict=True))
+        for b, (lo, hi) in zip(self.boxes, self._in_span, strict=True):
             self.in_image[lo:hi] = np.frombuffer(bytes(b._in_buf), dtype=np.uint8)
             b._in_buf = self.in_image[lo:hi]
         self._out_at = np.array(out_at, dtype=np.int64)
         self._in_at = np.array(in_at, dtype=np.int64)
         self._got = np.zeros(self.n, dtype=bool)
         self._first = np.cumsum([0] + [len(b.stacks) for b in self.boxes])
+        #: The box (engine's number) of each actuator.
+        self._box_of = np.repeat(np.arange(len(self.boxes)), np.diff(self._first))
 
     def _bind_arrays(self) -> None:
         """Stack the stacks' arrays into :attr:`arrays` (a :class:`StackRows`) and rebind
@@ -534,20 +521,40 @@ class RobotEngine:
         self.tunables.tune(int(self._first[n_box]) + slot, key, value)
 
     # --- one fieldbus cycle ----------------------------------------------------------------
-    def applied(self, box: object) -> None:
-        """``box`` has taken this cycle's outputs (``box.pending``). Once every box has,
-        the next cycle's compute starts in the background (``overlap``): it needs nothing
-        that arrives later, since the chain applies a cycle's outputs before the frame of
-        the next cycle triggers :meth:`advance`, which then only waits for it."""
+    def spans(self, box: object) -> tuple[int, tuple[int, int], tuple[int, int]] | None:
+        """The engine's number of ``box`` and its records' spans [lo, hi) in
+        :attr:`out_image` and :attr:`in_image` (its input buffer is that slice); None if
+        the engine does not advance it."""
+        n_box = self._box_number.get(id(box))
+        if n_box is None or self.boxes[n_box] is not box:
+            return None
+        return n_box, self._out_span[n_box], self._in_span[n_box]
+
+    def applied(self, box: object, data: bytes) -> None:
+        """``box`` has taken this cycle's outputs ``data`` (its output record). Once every
+        box has, the next cycle's compute starts in the background (``overlap``): it needs
+        nothing that arrives later, since the chain applies a cycle's outputs before the
+        frame of the next cycle triggers :meth:`advance`, which then only waits for it."""
+        n_box = self._box_number[id(box)]
+        lo, hi = self._out_span[n_box]
+        self.applied_image(np.frombuffer(data, dtype=np.uint8),
+                           np.arange(len(data)), np.arange(lo, hi), n_box)
+
+    def applied_image(self, data: np.ndarray, at: np.ndarray, to: np.ndarray,
+                      boxes: object) -> None:
+        """:meth:`applied` for several boxes at once (their records in one frame's data):
+        the bytes ``data[at]`` are the outputs of the boxes ``boxes`` (engine numbers: an
+        int or an index array), at ``out_image[to]``."""
         if self._jobs or self._ready is not None:
             # A duplicate of a frame already applied: the reference path would apply the
             # same bytes again, which changes nothing; anything else cannot be undone.
-            if box.pending != self._used.get(id(box)):
+            if not np.array_equal(self.out_image[to], data[at]):
                 raise RuntimeError("box outputs changed after the cycle's compute started")
-            box.pending = None
             return
-        self._pending.add(id(box))
-        if self.overlap and len(self._pending) == len(self.boxes):
+        self.out_image[to] = data[at]
+        got = self._box_got
+        got[boxes] = True
+        if self.overlap and got.all():
             self._take_outputs()
             external = self._prepare()
             if external:  # Python per tick: no gain from a thread, run it at advance
@@ -591,18 +598,22 @@ class RobotEngine:
     def _prepare(self) -> list[int]:
         """Which stacks the kernel advances (not those under a sensor fault, returned) and
         the LVDS faults of this cycle switched."""
-        wrapped = [(j, s) for j, (b, i) in enumerate(self.slots)
-                   if hasattr(s := b.stacks[i], "sensors")]
-        external = [j for j, s in wrapped if s.sensors]
-        batched = self._batched
-        batched[:] = True
-        batched[external] = False
-        for _, s in wrapped:  # LVDS faults switch at cycle boundaries (FaultyStack)
-            if not s.sensors:
-                s._switch_lvds(self.tick // self.cycle_ticks)
-        if self.lanes and batched.tobytes() != self._blocks_for:
+        stacks = tuple(itertools.chain.from_iterable(b.stacks for b in self.boxes))
+        if stacks != self._stacks_seen:  # faults wrapped some (by identity, per cycle)
+            wrapped = [(j, s) for j, s in enumerate(stacks) if hasattr(s, "sensors")]
+            self._external = [j for j, s in wrapped if s.sensors]
+            self._wrapped = [s for _, s in wrapped if not s.sensors]
+            batched = self._batched
+            batched[:] = True
+            batched[self._external] = False
+            self._batched_plants = [self._inner(s).plant for j, s in enumerate(stacks)
+                                    if batched[j]]
+            self._stacks_seen = stacks
+        for s in self._wrapped:  # LVDS faults switch at cycle boundaries (FaultyStack)
+            s._switch_lvds(self.tick // self.cycle_ticks)
+        if self.lanes and self._batched.tobytes() != self._blocks_for:
             self._make_blocks()
-        return external
+        return list(self._external)
 
     def _make_blocks(self) -> None:
         """The batches of :func:`advance_robot_lanes`: the batched actuators in chain
@@ -655,13 +666,16 @@ class RobotEngine:
         if self.lanes:
             while len(self._lane_bufs) <= slot:
                 self._lane_bufs.append((lanes_mod.lane_buffer(), fpl.board_buffer()))
+                self._link_sensor_bufs.append(LinkSensorLanes(
+                    link_lanes.link_lane_buffer(), sensor_lanes.sensor_lane_buffer()))
             buf, fb = self._lane_bufs[slot]
+            ls = self._link_sensor_bufs[slot]
         if started is not None:
             started.release()
         if self.lanes:
             return advance_robot_lanes(self._counter, ticks // self.period, self.period,
                                        self.tick, self._blocks, self._sizes,
-                                       self._n_sub_max, self.arrays, self.mcu, buf, fb,
+                                       self._n_sub_max, self.arrays, self.mcu, buf, fb, ls,
                                        *self._taps(ticks), self.log_rows)
         return advance_robot(self._counter, ticks // self.period, self.period, self.tick,
                              self._batched, self.arrays, self.mcu, self._no_rec,
@@ -686,10 +700,8 @@ class RobotEngine:
         return self.tap_y, self.tap_trace
 
     def _finish(self, ticks: int) -> None:
-        batched = self._batched
-        for j, (b, i) in enumerate(self.slots):
-            if batched[j]:
-                self._inner(b.stacks[i]).plant.tick += ticks
+        for plant in self._batched_plants:
+            plant.tick += ticks
         if self.on_cycle is not None:
             self.on_cycle(self.tick)
         self.tick += ticks
@@ -733,16 +745,8 @@ class RobotEngine:
         """The process data the boxes received since the last cycle, as program inputs."""
         self.tunables.apply()  # (no compute runs now: see applied and advance)
         got = self._got
-        got[:] = False
-        for n_box, b in enumerate(self.boxes):
-            if b.pending is None:
-                continue
-            lo, hi = self._out_span[n_box]
-            self.out_image[lo:hi] = np.frombuffer(b.pending, dtype=np.uint8)
-            got[self._first[n_box]:self._first[n_box + 1]] = True
-            self._used[id(b)] = b.pending
-            b.pending = None
-        self._pending.clear()
+        np.take(self._box_got, self._box_of, out=got)  # (out_image holds them already)
+        self._box_got[:] = False
         take_outputs(self.out_image, self._out_at, got, self.enabled, self.clear, self.in32,
                      self.inf32, self._cmd_lsb, self._gain_lsb)
         if self.log is not None:

@@ -76,6 +76,15 @@ class TapRows(NamedTuple):
     row: np.ndarray  #: (1,) int64: the row of the call's first MCU step
 
 
+class LinkSensorLanes(NamedTuple):
+    """One compute thread's lane buffers (:func:`hil.sim.robot.advance_robot_lanes`): the
+    LVDS links' counters and word logs of the batch it holds
+    (:func:`firmware_model.lvds.lanes.link_lane_buffer`) and its sensor chips' parameters
+    and codes (:func:`plant.sensors.lanes.sensor_lane_buffer`)."""
+    link: np.ndarray
+    chips: np.ndarray
+
+
 #: Where each field of :class:`StackRows` lives on an :class:`~hil.sim.actuator.FpgaStack`:
 #: (object path, attribute), in the bundles' field order.
 SOURCES = (
@@ -88,5 +97,5 @@ SOURCES = (
 )
 
 
-__all__ = ["SOURCES", "BoardRows", "LinkRows", "McuRows", "PlantRows", "SensorRows",
-           "StackRows", "TapRows"]
+__all__ = ["SOURCES", "BoardRows", "LinkRows", "LinkSensorLanes", "McuRows", "PlantRows",
+           "SensorRows", "StackRows", "TapRows"]

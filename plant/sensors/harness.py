@@ -54,6 +54,8 @@ def _analog_rows() -> np.ndarray:
 
     sources: dict[str, int] = {}
     for info in pkgutil.iter_modules(plant.sensors.__path__):
+        if info.name == "lanes":  # this harness's lane-wise twin (it imports this), no part
+            continue
         part = importlib.import_module(f"plant.sensors.{info.name}")
         for name, row in getattr(part, "ANALOG_SOURCES", {}).items():
             if name in sources:
@@ -71,7 +73,7 @@ def _analog_rows() -> np.ndarray:
 ANALOG_ROWS = _analog_rows()
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)  # no reference counts on the rows (firmware_model.lvds.link)
 def digitise(y, k, tick, raw):
     """Fill the raw sensor words (``firmware_model.fpga.layout.R_*``) from plant outputs
     ``y`` at ``tick``. Every link delivers a valid frame unless an encoder is marked dead

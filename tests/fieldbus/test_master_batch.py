@@ -18,7 +18,7 @@ VALUE = st.one_of(st.floats(-3e7, 3e7, allow_nan=False),
                   st.sampled_from([0.0, -0.0, 0.005, -0.005, 2.2e7, -2.2e7, 1e10, -1e10]))
 
 
-@settings(max_examples=60, deadline=None)
+@settings(max_examples=30, deadline=None)
 @given(values=st.lists(VALUE, min_size=N, max_size=N),
        mode=st.sampled_from(["off", "force", "position"]), enable=st.booleans())
 def test_set_actuators_writes_what_set_actuator_writes(values, mode, enable):

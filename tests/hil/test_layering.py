@@ -224,6 +224,12 @@ ALLOWED = {
     ("hil/bench/robot_stages.py", "kernel"):
         "times each stage of the robot engine alone: calls the parts' compiled steps in a "
         "loop, computes nothing of its own",
+    ("hil/fieldbus/pdo_compiled.py", "kernel"):
+        "the process data's conversions (hil.fieldbus.pdo's, same steps) compiled for the "
+        "per-cycle path: counts and little-endian bytes, no part's arithmetic",
+    ("hil/sim/pc.py", "kernel"):
+        "the demo PC loop's stimulus (a force sine per actuator) compiled for the per-cycle "
+        "path: a test signal, not the PC's joint loop (firmware_model/pc)",
     ("hil/fieldbus/hip_box.py", "kernel"):
         "the hip box's compiled wiring loop: both stacks and the thigh's coupling tick by tick",
     ("hil/fieldbus/esc/frames.py", "kernel"):

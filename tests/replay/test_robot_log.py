@@ -158,11 +158,13 @@ def test_the_validity_flags_reach_the_csv_export(logs, tmp_path):
 
 
 def _up_rows(counts: list[int]) -> np.ndarray:
-    """Upstream frames (1, n, 33) whose piston words hold ``counts`` (hi, lo)."""
+    """Upstream frames (1, n, 33) whose piston words hold ``counts`` (hi, lo), each after
+    an upstream sweep of the board (its tick counter non-zero)."""
     up = np.zeros((1, len(counts), B.UP_WORDS + 1), np.uint32)
     c = np.asarray(counts, np.int64)
     up[0, :, B.U_PISTON_LO] = c & 0xFFFF
     up[0, :, B.U_PISTON_HI] = (c >> 16) & 0xFFFF
+    up[0, :, B.U_TICK] = np.arange(1, len(counts) + 1)  # the board's sweeps have arrived
     return up
 
 
@@ -229,6 +231,102 @@ def test_a_robot_engine_log_of_a_faulty_bus_replays_bit_for_bit(topo, tmp_path):
     assert 150 < len(t) < 200  # some cycles' outputs were lost
 
 
+def _stock(path) -> dict[str, list[tuple[int, object]]]:
+    """Every message of every channel, decoded by the mcap library's stock protobuf
+    decoder (no project code), in file order: topic -> [(log time, message)]."""
+    from mcap.reader import make_reader
+    from mcap_protobuf.decoder import DecoderFactory
+
+    out: dict[str, list] = {}
+    with open(path, "rb") as f:
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        for _, ch, msg, dec in reader.iter_decoded_messages(log_time_order=False):
+            out.setdefault(ch.topic, []).append((msg.log_time, dec))
+    return out
+
+
+def _frames_of(msgs) -> tuple[np.ndarray, np.ndarray]:
+    """Times and (n, width) frames of a raw block channel's stock-decoded messages."""
+    t = np.concatenate([np.asarray(m.t_ns, np.int64) for _, m in msgs])
+    f = np.concatenate([np.frombuffer(m.frames, np.dtype(m.dtype).newbyteorder("<"))
+                        .reshape(m.count, m.width) for _, m in msgs])
+    return t, f
+
+
+def test_the_export_of_a_robot_log_holds_what_the_stock_decoder_reads(logs, tmp_path,
+                                                                     monkeypatch):
+    """``log export`` of the engine's log, streamed in many small batches and windows (as
+    a long log is), read back with pandas from Parquet and CSV, against the mcap library's
+    stock protobuf decoding of the same file: one row per frame in time order, every
+    field of an actuator's and a box's signal messages, a board's upstream words."""
+    import pandas as pd
+
+    from hil.framelog import export as E
+    from hil.framelog import export_plan as P
+
+    monkeypatch.setattr(P, "WINDOW_ROWS", 2000)
+    monkeypatch.setattr(P, "BATCH_BYTES", 1 << 15)
+    path = logs["robot", "mcu"]
+    E.export_parquet(path, tmp_path / "x.parquet")
+    E.export_csv(path, tmp_path / "x.csv")
+    df = pd.read_parquet(tmp_path / "x.parquet")
+    dc = pd.read_csv(tmp_path / "x.csv")
+    dc.columns = [c.split(" [")[0] for c in dc.columns]
+    stock = _stock(path)
+
+    frames = {t: (sum(m.count for _, m in ms) if hasattr(ms[0][1], "count") else len(ms))
+              for t, ms in stock.items()}
+    assert len(df) == len(dc) == sum(frames.values())
+    assert df["topic"].astype(str).value_counts().to_dict() == frames
+    assert (np.diff(df["t_ns"].to_numpy()) >= 0).all()
+    assert (dc["t_s"].to_numpy() == df["t_ns"].to_numpy() / 1e9).all()
+    assert (dc["topic"] == df["topic"].astype(str)).all()
+
+    for topic in ("/signals/actuator/0.1", "/signals/box/2/inputs", "/signals/bus"):
+        msgs = stock[topic]
+        rows = df[df["topic"] == topic]
+        assert rows["t_ns"].tolist() == [t for t, _ in msgs]
+        for fd in msgs[0][1].DESCRIPTOR.fields:
+            want = np.array([float(getattr(m, fd.name)) for _, m in msgs])
+            for got in (rows[fd.name], dc.loc[rows.index, fd.name]):
+                np.testing.assert_array_equal(got.to_numpy(np.float64), want, topic + fd.name)
+
+    t, up = _frames_of(stock["/lvds/2.0/up"])
+    rows = df[df["topic"] == "/lvds/2.0/up"]
+    assert rows["t_ns"].tolist() == t.tolist()
+    for addr, name, kind, *_ in B.UP_REGISTERS:
+        word = up[:, addr].astype(np.int64) & 0xFFFF
+        if kind == "s16":
+            word -= (word & 0x8000) << 1
+        np.testing.assert_array_equal(rows[name].to_numpy(np.int64), word, name)
+        np.testing.assert_array_equal(dc.loc[rows.index, name].to_numpy(np.int64), word)
+
+
+def test_steps_before_the_first_upstream_sweep_read_nothing():
+    """Until the board's first upstream sweep reaches the MCU its memory reads 0: 0 V
+    through the MCU's formulas (-3 MPa, the piston 42 mm off) and a speed of ~200 m/s
+    into the first real read. Those steps are marked and their board values NaN; the
+    speed into the first real read is not valid; from then on all is valid."""
+    cal = calibration(load_config(None))
+    up = _up_rows([0, 0, 0x800000, 0x800004, 0x800008])
+    up[0, :2, B.U_TICK] = 0  # steps 0 and 1: nothing arrived yet
+    carry = SG.PistonCarry.start(1)
+    _, cols = SG.actuator_block(cal, up, np.zeros((1, 5, 16), np.uint16), 1, 200e-6, carry)
+    assert cols["upstream_valid"].tolist() == [False, False, True, True, True]
+    assert cols["x_piston_valid"].tolist() == [False, False, True, True, True]
+    assert cols["v_piston_valid"].tolist() == [False, False, False, True, True]
+    for name in ("p_cyl_a_pa", "x_piston_m", "v_piston_m_s", "iq_a"):
+        assert np.isnan(cols[name][:2]).all() and np.isfinite(cols[name][3:]).all(), name
+    assert abs(cols["v_piston_m_s"][3]) < 0.001  # 4 counts in 200 us: 0.1 mm/s
+
+
+def test_the_first_step_of_a_full_level_log_is_marked(logs):
+    """At level ``full`` the actuator channel has every MCU step, the first one read
+    before any upstream sweep arrived."""
+    msgs = _decoded(logs["robot", "full"], "/signals/actuator/0.0")
+    assert not msgs[0].upstream_valid and math.isnan(msgs[0].p_cyl_a_pa)
+    assert all(m.upstream_valid and math.isfinite(m.p_cyl_a_pa) for m in msgs[1:])
+    assert all(m.x_piston_valid for m in msgs[1:]) and not msgs[1].v_piston_valid
 def test_the_upstream_crc_count_is_a_u32_at_byte_64(topo, tmp_path):
     """An LVDS link that corrupts upstream words: the MCU's CRC-error count, logged in the
     last two 16-bit words of each upstream frame, reads as the layout states it (a
@@ -256,3 +354,33 @@ def test_the_upstream_crc_count_is_a_u32_at_byte_64(topo, tmp_path):
     assert not other[:, 32:].any()  # the healthy link counts nothing
     r = replay(path)
     assert r.ok, r.divergence
+
+
+def test_a_torn_read_flags_the_box_record_that_reports_it():
+    """The box's input record reports the position of each cycle's last MCU step and the
+    speed over the cycle: a tear in that step flags the record's position and the speeds
+    into and out of it; the first record's speed has no record before it."""
+    cal = calibration(load_config(None))
+    step = 0x20
+    true = [0x2FEE0 + step * i for i in range(15)]  # crosses a carry at step 9
+    torn = list(true)
+    torn[9] = (true[8] & ~0xFFFF) | (true[9] & 0xFFFF)  # the second cycle's last read
+    assert torn[9] != true[9]
+    up = _up_rows(torn)
+    down = np.zeros((1, 15, 16), np.uint16)
+    t_steps = np.arange(15) * 20  # MCU steps every 20 ticks, cycles of 100 ticks
+    carry = SG.PistonCarry.start(1)
+    SG.actuator_block(cal, up[:, :10], down[:, :10], 5, 200e-6, carry)
+    x_ok, v_ok = SG.report_flags(carry, t_steps[:10], np.array([100, 200]))
+    assert x_ok.tolist() == [[True, False]] and v_ok.tolist() == [[False, False]]
+    SG.actuator_block(cal, up[:, 10:], down[:, 10:], 5, 200e-6, carry)
+    x_ok, v_ok = SG.report_flags(carry, t_steps[10:], np.array([300]))
+    assert x_ok.tolist() == [[True]] and v_ok.tolist() == [[False]]  # from the torn one
+
+
+def test_the_box_records_carry_piston_flags(logs):
+    for model in ("robot", "stack"):
+        msgs = _decoded(logs[model, "mcu"], "/signals/box/0/inputs")
+        for k in (0, 1):
+            assert all(getattr(m, f"s{k}_x_piston_valid") for m in msgs)
+            assert [getattr(m, f"s{k}_v_piston_valid") for m in msgs[:3]] == [False, True, True]
