@@ -139,7 +139,11 @@ def _pinv(a: np.ndarray) -> np.ndarray:
 
 def _weighted(outputs: dict[str, np.ndarray], exp: Experiment, sigma: dict[str, float],
               mask: np.ndarray) -> np.ndarray:
-    return np.concatenate([np.nan_to_num(outputs[c][mask] / sigma[c]) for c in exp.channels])
+    parts = []
+    for c in exp.channels:
+        x = outputs[c][mask] / sigma[c]
+        parts.append(x if np.isfinite(x).all() else np.nan_to_num(x))
+    return np.concatenate(parts)
 
 
 def test_candidates(

@@ -102,6 +102,12 @@ class Effect:
         back to) and its ``free`` parameters, in place, once this effect is in; ``fitted``:
         the parameters the fit without it had free."""
 
+    def implausible(self, fit: FitResult, exp: Experiment) -> dict[str, str]:
+        """Shape parameters of this effect (of its ``refit_extra``) at which the refit ``fit``
+        left the effect's physical law for a degenerate one: {parameter: why}. They are held
+        at their starting values and the refit is made again."""
+        return {}
+
     def describe(self, d: EffectDef, fit: FitResult, exp: Experiment
                  ) -> dict[str, ParamEstimate]:
         """The physical parameters of the added instance ``d`` with 95 % intervals."""
@@ -163,6 +169,13 @@ class PumpCoulombFriction(Effect):
         return out
 
 
+#: A seal's Stribeck velocity below this share of its regularisation velocity is a
+#: degenerate law (:meth:`SealFriction.implausible`). The runaways seen went to 2-3 % of it;
+#: a fit near it (0.98 of it: free piston, both frictions, slide, seed 1) is a law whose dip
+#: and regularisation overlap, which the data may well ask for.
+VS_FLOOR_OF_EPS = 0.25
+
+
 class SealFriction(Effect):
     name = "seal_friction"
     description = ("rod-seal Coulomb + Stribeck friction on the piston; v_s and the sign "
@@ -176,6 +189,22 @@ class SealFriction(Effect):
                                        if exp.load == "fixed" else None),
                           refit_extra=(("sf_vs_m_per_s", lambda exp: exp.const.vs_seal),
                                        ("sf_shape", lambda exp: FRICTION_SHAPE_START)))]
+
+    def implausible(self, fit: FitResult, exp: Experiment) -> dict[str, str]:
+        """A Stribeck velocity far below the regularisation velocity puts the dip inside the
+        zone where the sign law is still linear: a bump of a static level that can run to
+        any size in a band no sample reaches (the free piston under the ``slide`` profile,
+        rig seed 2: v_s 63 um/s, F_s 1.3e12 N, an interval of zero width since no sample
+        sees it), not a Stribeck curve."""
+        if "sf_vs_m_per_s" not in fit.free:
+            return {}
+        vs = fit.value("sf_vs_m_per_s")
+        eps = exp.const.eps_seal
+        if vs < VS_FLOOR_OF_EPS * eps:
+            return {"sf_vs_m_per_s": (f"the Stribeck velocity ran to {vs:.3g} m/s, far below "
+                                      f"the regularisation velocity {eps:.3g} m/s (a "
+                                      "degenerate law); held at its start")}
+        return {}
 
     def describe(self, d: EffectDef, fit: FitResult, exp: Experiment
                  ) -> dict[str, ParamEstimate]:

@@ -179,15 +179,18 @@ class OutputErrorFit:
         if states is None:
             self.n_sims += 1
             states = self.model.states(theta, n_stop)
+        # the outputs of the samples up to n_stop only (the mask has none after them)
         out = self.model.outputs(theta, states, n_stop=n_stop)
+        n = next(iter(out.values())).size
+        head = mask[:n]
         parts = []
         for c in self.exp.channels:
-            e = self.exp.measured[c] - out[c]
+            e = self.exp.measured[c][:n] - out[c]
             clipped = self._clipped.get(c)
             if clipped is not None and theta[IDX[f"sat_{c}"]] == 0.0 and (
                     c not in PRESSURE_CHANNELS or theta[IDX[SAT_PRESSURE]] == 0.0):
-                e = np.where(clipped, np.maximum(e, 0.0), e)
-            parts.append(np.nan_to_num(e[mask] / sigma[c]))
+                e = np.where(clipped[:n], np.maximum(e, 0.0), e)
+            parts.append(_finite(e[head] / sigma[c]))
         return np.concatenate(parts)
 
     def _problem(self, free: list[str], theta0: np.ndarray, sigma: dict[str, float],
@@ -220,13 +223,15 @@ class OutputErrorFit:
                 return (self._stack(self._to_theta(xx, free, theta0), sigma, mask, z)
                         - r0) / steps[i]
 
-            out = np.empty((r0.size, x.size))
+            # one row per column, then one transposing copy: writing each column into
+            # the (rows x columns) array strides across all of it once per column
+            out_t = np.empty((x.size, r0.size))
 
             def fill(i: int) -> None:
-                out[:, i] = column(i)
+                out_t[i] = column(i)
 
             list(map_threads(fill, range(x.size)))
-            return out
+            return np.ascontiguousarray(out_t.T)
 
         return fun, jac
 
@@ -400,6 +405,11 @@ class OutputErrorFit:
         cov = cov_x * np.outer(d, d)
         se = {n: float(np.sqrt(max(cov[i, i], 0.0))) for i, n in enumerate(free)}
         return se, cov
+
+
+def _finite(x: np.ndarray) -> np.ndarray:
+    """``np.nan_to_num(x)``, without its passes over an array that is finite already."""
+    return x if np.isfinite(x).all() else np.nan_to_num(x)
 
 
 def levenberg_marquardt(

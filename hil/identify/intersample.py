@@ -69,13 +69,17 @@ def _bandlimited(u: np.ndarray, dt: float, n_sub: int, delay_s: float) -> np.nda
     n = u.size
     h = dt / n_sub
     key = (hash(u.tobytes()), n, dt, n_sub)
-    hit = _BL_CACHE.get("last")  # one tuple, swapped whole: safe from the fit's threads
-    if hit is None or hit[0] != key:  # a fit asks for many delays of the same input
+    # a fit asks for many delays of the same input, and the candidates' tests for them at
+    # half the sub-steps: a few slots (each entry set whole: safe from the fit's threads)
+    hit = _BL_CACHE.get(key)
+    if hit is None:
         ext = np.concatenate([u, u[::-1]])
         f = np.fft.rfftfreq(ext.size, dt)
-        hit = (key, np.fft.rfft(ext) * np.sinc(f * h), f, ext.size)
-        _BL_CACHE["last"] = hit
-    _, spec, f, size = hit
+        hit = (np.fft.rfft(ext) * np.sinc(f * h), f, ext.size)
+        if len(_BL_CACHE) >= _BL_SLOTS:
+            _BL_CACHE.clear()
+        _BL_CACHE[key] = hit
+    spec, f, size = hit
     out = np.empty((n, n_sub))
     for j in range(n_sub):
         shift = (j + 0.5) * h - delay_s  # value at t_k + shift
@@ -83,8 +87,9 @@ def _bandlimited(u: np.ndarray, dt: float, n_sub: int, delay_s: float) -> np.nda
     return out.ravel()
 
 
-#: The last input's even-extension spectrum times the sub-step box filter (one slot).
-_BL_CACHE: dict[str, tuple] = {}
+#: The last inputs' even-extension spectra times the sub-step box filter.
+_BL_CACHE: dict[tuple, tuple] = {}
+_BL_SLOTS = 4
 
 
 __all__ = ["MODES", "substep_average"]

@@ -358,14 +358,20 @@ def sensor_lags(ys: list[np.ndarray], tau: float, dt: float, n_valid: int | None
     transform (the four pressure sensors share theirs: a third of a simulation's cost)."""
     size = ys[0].size
     n = size if n_valid is None else max(2, min(n_valid, size))
-    heads = np.stack([y[:n] for y in ys])
-    if not np.all(np.isfinite(heads)):
+    ext = np.empty((len(ys), 2 * n))
+    for i, y in enumerate(ys):
+        ext[i, :n] = y[:n]
+        ext[i, n:] = ext[i, n - 1::-1]
+    if not np.all(np.isfinite(ext[:, :n])):
         return [_sensor_lag_foh(y, tau, dt) for y in ys]
-    ext = np.concatenate([heads, heads[:, ::-1]], axis=1)
-    filtered = np.fft.irfft(np.fft.rfft(ext, axis=1) * _lag_response(ext.shape[1], tau, dt),
-                            ext.shape[1], axis=1)
+    spec = np.fft.rfft(ext, axis=1)
+    spec *= _lag_response(ext.shape[1], tau, dt)
+    filtered = np.fft.irfft(spec, ext.shape[1], axis=1)
     out = []
     for i, y in enumerate(ys):
+        if n == size:  # the whole signal filtered (a head handed over as such)
+            out.append(filtered[i, :n])
+            continue
         o = y.copy()
         o[:n] = filtered[i, :n]
         out.append(o)
@@ -502,18 +508,24 @@ class FastModel:
     def outputs(self, theta: np.ndarray, z: np.ndarray | None = None,
                 n_stop: int | None = None) -> dict[str, np.ndarray]:
         """Model channels (same names and units as :attr:`Experiment.measured`); with
-        ``n_stop``, valid for the first ``n_stop`` samples only."""
+        ``n_stop``, only the first :func:`fast_stop` ``(n_stop)`` samples (the arrays have
+        that length: a fit's iterations compare a head of the record, and every output is
+        causal in the states, so the head's values are those of the whole record's)."""
         exp = self.exp
+        n = exp.n
         if n_stop is not None:
             n_stop = fast_stop(n_stop, exp.n)
+            n = max(2, min(n_stop, exp.n))
         if z is None:
             z = self.states(theta, n_stop)
+        z = z[:n]
+        temperature = exp.temperature[:n] if exp.temperature is not None else None
         c = exp.const
         tq = z[:, 2]
         vc = z[:, 4]
         dc = theta[IDX["dc"]]
-        if exp.temperature is not None and theta[IDX["visc_coeff_per_c"]] != 0.0:
-            dc = dc * np.exp(-theta[IDX["visc_coeff_per_c"]] * (exp.temperature - exp.t_ref))
+        if temperature is not None and theta[IDX["visc_coeff_per_c"]] != 0.0:
+            dc = dc * np.exp(-theta[IDX["visc_coeff_per_c"]] * (temperature - exp.t_ref))
         # with the piston held the cylinder sees the pump's pressures: the same arrays, which
         # the sensor lag below then filters once
         f_cyl = tq if exp.load == "fixed" else tq - dc * vc
@@ -530,7 +542,14 @@ class FastModel:
         def side(force: np.ndarray, sign: float) -> np.ndarray:
             key = (id(force), sign)
             if key not in sides:
-                sides[key] = pre + np.maximum(sign * force, 0.0) / c.kc
+                # pre + max(sign force, 0) / k_c, in one array (a simulation's outputs are a
+                # fifth of its time)
+                y = np.maximum(force, 0.0) if sign > 0 else np.negative(force)
+                if sign < 0:
+                    np.maximum(y, 0.0, out=y)
+                y /= c.kc
+                y += pre
+                sides[key] = y
             return sides[key]
 
         for ch in exp.channels:
@@ -545,10 +564,10 @@ class FastModel:
             elif ch == "f_strain":
                 y = f_rod + theta[IDX["strain_offset_n"]]
                 drift = theta[IDX["drift_n_per_c"]]
-                if drift != 0.0 and exp.temperature is not None:
+                if drift != 0.0 and temperature is not None:
                     # the gauge drifts with temperature: against the logged covariate,
                     # whatever its shape over time
-                    y = y + drift * (exp.temperature - exp.t_ref)
+                    y = y + drift * (temperature - exp.t_ref)
             elif ch == "omega_m":
                 y = exp.window_diff(z[:, 0] * c.rotor_per_m)
             elif ch == "v_piston":

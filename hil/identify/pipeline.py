@@ -394,8 +394,17 @@ class _Loop:
         scales = {p: nom for e in ds_ for p, nom in zip(e.params, e.nominal, strict=True)}
         refitter = OutputErrorFit(self.model, {**NUISANCE_SCALES(exp.dt),
                                                **_all_scales(self.defs_all), **scales})
-        return guarded_fit(refitter, theta0, new_free, credible, sigma=current.sigma,
-                           configured=configured)
+        new, held_now = guarded_fit(refitter, theta0, new_free, credible, sigma=current.sigma,
+                                    configured=configured)
+        # a shape parameter that took the effect's law to a degenerate one: held at its
+        # start (the guard's interval test cannot see it: no sample informs the
+        # degenerate part, so its interval is as narrow as the arithmetic makes it)
+        odd = {p: why for e in ds_ for p, why in EFFECTS[e.name].implausible(new, exp).items()}
+        if odd:
+            new, again = guarded_fit(refitter, theta0, [p for p in new_free if p not in odd],
+                                     credible, sigma=current.sigma, configured=configured)
+            held_now = {**again, **odd}
+        return new, held_now
 
     def verdict_on(self, ds_: list[EffectDef], new: FitResult, held_now: dict[str, str]
                    ) -> str:
@@ -620,9 +629,15 @@ class _Loop:
         self.say(f"refit with {', '.join(retry)} free again")
         first = fitter.fit(current.theta, current.free + retry, sigma=current.sigma, passes=1,
                            max_nfev=9)
-        if set(retry) <= {n for n, _, _ in fitter.offenders(first)}:
+        bad = fitter.offenders(first)
+        if set(retry) <= {n for n, _, _ in bad}:
             # not one of them credible at the refit: the guard would hold them again one at
             # a time, a refit each, and come back to the fit there is
+            return
+        if bad and bad[0][0] in current.free:
+            # the guard's first hold would be of a parameter the fit there is has free, and
+            # a refit that holds one of those is not kept, whatever the guard's further
+            # holds (a refit each) do
             return
         again, held_again = guarded_fit(fitter, current.theta, current.free + retry,
                                         current.theta, sigma=current.sigma, passes=1,

@@ -134,10 +134,32 @@ def _binned(x: np.ndarray, r: np.ndarray, corr_len: int, bins: int = 16,
 def order_spectrum(r: np.ndarray, angle: np.ndarray, orders: np.ndarray = ORDERS) -> np.ndarray:
     """Amplitude ``2/N |sum r exp(-i n angle)|`` at each order ``n`` of the rotor angle."""
     r = r - r.mean()
+    basis = _order_basis(angle, orders) if angle.size * orders.size <= BASIS_MAX else None
     out = np.empty(orders.size)
     for i, o in enumerate(orders):
-        out[i] = 2.0 / r.size * abs(np.sum(r * np.exp(-1j * o * angle)))
+        e = basis[i] if basis is not None else np.exp(-1j * o * angle)
+        out[i] = 2.0 / r.size * abs(np.sum(r * e))
     return out
+
+
+#: Most complex values of the kept order basis (64 MB; a 16 s record's validation part at
+#: 5 kHz takes a third of it; longer records compute it channel by channel).
+BASIS_MAX = 4_000_000
+
+
+def _order_basis(angle: np.ndarray, orders: np.ndarray) -> np.ndarray:
+    """``exp(-i n angle)`` for every order: one record's channels and analyses share one
+    angle, and the complex exponentials were most of the spectrum's time (the last one is
+    kept)."""
+    key = (angle.size, hash(angle.tobytes()), orders.tobytes())
+    hit = _BASIS.get("last")  # one tuple, swapped whole
+    if hit is None or hit[0] != key:
+        hit = (key, np.stack([np.exp(-1j * o * angle) for o in orders]))
+        _BASIS["last"] = hit
+    return hit[1]
+
+
+_BASIS: dict[str, tuple] = {}
 
 
 def _nperseg(n: int, fs: float) -> int:

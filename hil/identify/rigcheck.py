@@ -157,8 +157,8 @@ def equivalent_parameters(case: Case, effects: dict[str, dict[str, float]],
 
 
 def combined_cases() -> list[Case]:
-    """Two and three effects at once: frictions together, friction with pulsation, drift
-    with viscosity."""
+    """Two and three effects at once, on each load: frictions together, friction with
+    pulsation, drift with viscosity."""
     return [Case("free_piston", ("pump_coulomb_friction", "seal_friction"), profile="slide"),
             Case("conrod_fixed", ("pump_coulomb_friction", "seal_friction")),
             Case("conrod_fixed", ("pump_coulomb_friction", "pump_pulsation")),
@@ -167,6 +167,8 @@ def combined_cases() -> list[Case]:
             Case("fixed_piston", ("strain_thermal_drift", "viscosity_temperature")),
             Case("fixed_piston", ("pump_coulomb_friction", "pump_pulsation",
                                   "viscosity_temperature")),
+            Case("free_piston", ("pump_coulomb_friction", "pump_pulsation",
+                                 "viscosity_temperature")),
             Case("conrod_fixed", ("pump_coulomb_friction", "seal_friction",
                                   "pump_pulsation"))]
 

@@ -285,13 +285,9 @@ class RobotRecorder:
         if not len(keep):
             return
         t = t_steps[keep]
-        pc = []
-        for e, b in enumerate(self.engine.boxes):
-            out_t, out_f = box_out[e]
-            for slot in b.act:
-                pc.append(SG.pc_command_columns(out_t, out_f, b.box, slot, t))
-        for name in pc[0]:
-            cols[name] = np.concatenate([p[name] for p in pc])
+        cols.update(SG.pc_command_block(
+            [(*box_out[e], b.box, slot) for e, b in enumerate(self.engine.boxes)
+             for slot in b.act], t))
         self.out.write_split(self.sig_act, t * ns, cols)
 
 

@@ -219,6 +219,39 @@ def record_columns(box: Box, direction: str, records: np.ndarray,
     return cols
 
 
+def pc_command_block(parts: list[tuple[np.ndarray, np.ndarray, Box, int]],
+                     step_ticks: np.ndarray) -> dict[str, np.ndarray]:
+    """:func:`pc_command_columns` of each ``(out_ticks, out_records, box, slot)`` of
+    ``parts`` at the same ``step_ticks``, concatenated part-major: the parts whose output
+    records have the same times (every box of a chain, mostly) looked up together."""
+    n = len(step_ticks)
+    dt = pdo.ACTUATOR_OUT_DTYPE
+    mode = np.zeros((len(parts), n), np.int64)
+    flags = np.zeros((len(parts), n), np.int64)
+    command = np.zeros((len(parts), n), np.int64)
+    have = np.zeros((len(parts), n), bool)
+    groups: dict[bytes, tuple[np.ndarray, list[tuple[int, np.ndarray]]]] = {}
+    for a, (out_t, out_f, box, slot) in enumerate(parts):
+        if len(out_t):
+            off = sum(s.sizes[0] for s in box.slots[:slot])
+            groups.setdefault(np.asarray(out_t).tobytes(), (out_t, []))[1].append(
+                (a, out_f[:, off:off + dt.itemsize]))
+    for out_t, members in groups.values():
+        i = np.searchsorted(out_t, step_ticks, side="right") - 1
+        h = i >= 0
+        rows = [a for a, _ in members]
+        rec = np.ascontiguousarray(np.stack([f for _, f in members])).view(dt)[..., 0]
+        r = rec[:, np.maximum(i, 0)]
+        have[rows] = h
+        mode[rows] = np.where(h, r["mode"], 0)
+        flags[rows] = r["flags"]
+        command[rows] = r["command"]
+    mode, command = mode.reshape(-1), command.reshape(-1)
+    return {"pc_mode": mode,
+            "pc_enable": (have & ((flags & pdo.FLAG_ENABLE) != 0)).reshape(-1),
+            **_commands(mode, command)}
+
+
 def report_flags(carry: PistonCarry, t_steps: np.ndarray, in_t: np.ndarray
                  ) -> tuple[np.ndarray, np.ndarray]:
     """Per actuator and cycle ((a, c) each): whether the piston position a box reports at

@@ -53,6 +53,17 @@ def test_matrix_covers_what_must_be_shown():
     assert any(len(c.effects) == 2 for c in cases)  # two at once
     assert {c.load for c in cases if not c.effects} == {"fixed_piston", "free_piston",
                                                          "conrod_fixed"}  # null on each load
+    loads = {"fixed_piston", "free_piston", "conrod_fixed"}
+    for n in (2, 3):  # two and three effects at once on each load
+        assert {c.load for c in cases if len(c.effects) == n} == loads, n
+    # rigs 0.25x-4x off the preset on each load, with and without a library effect
+    for with_effect in (False, True):
+        assert {c.load for c in cases if c.scale and bool(c.effects) == with_effect} == loads
+    assert {f for c in cases for _, f in c.scale} >= {0.25, 4.0}
+    # Maxwell corners from 0.5 to 30 Hz (30 Hz: the rig's default)
+    corners = {dict((k, v) for _, k, v in c.magnitudes).get("corner_hz", 30.0)
+               for c in cases if c.effects == ("hose_viscoelastic",)}
+    assert min(corners) <= 0.5 and max(corners) >= 30.0
 
 
 def test_markdown_table_rows_and_tally():

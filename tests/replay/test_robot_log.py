@@ -264,8 +264,8 @@ def test_the_export_of_a_robot_log_holds_what_the_stock_decoder_reads(logs, tmp_
     from hil.framelog import export as E
     from hil.framelog import export_plan as P
 
-    monkeypatch.setattr(P, "WINDOW_ROWS", 2000)
-    monkeypatch.setattr(P, "BATCH_BYTES", 1 << 15)
+    monkeypatch.setattr(P, "WINDOW_ROWS", 3000)
+    monkeypatch.setattr(P, "BATCH_BYTES", 1 << 16)
     path = logs["robot", "mcu"]
     E.export_parquet(path, tmp_path / "x.parquet")
     E.export_csv(path, tmp_path / "x.csv")
@@ -338,7 +338,7 @@ def test_the_upstream_crc_count_is_a_u32_at_byte_64(topo, tmp_path):
     faults = {"fault": [{"link": "lvds.up", "kind": "bitflip", "rate": 0.02, "box": 0,
                          "slot": 0}]}
     path = tmp_path / "crc.mcap"
-    run_logged(topo, load_config(None), 60, demo_pc(400.0, 20.0), path, faults=faults,
+    run_logged(topo, load_config(None), 30, demo_pc(400.0, 20.0), path, faults=faults,
                model="robot")
     reader = FrameLogReader(path)
     info = reader.info().channel("/lvds/0.0/up")
@@ -354,6 +354,36 @@ def test_the_upstream_crc_count_is_a_u32_at_byte_64(topo, tmp_path):
     assert not other[:, 32:].any()  # the healthy link counts nothing
     r = replay(path)
     assert r.ok, r.divergence
+
+
+def test_pc_commands_of_many_actuators_at_once_equal_one_at_a_time():
+    """SG.pc_command_block (what the robot recorder uses) gives each actuator slot the
+    columns SG.pc_command_columns gives it alone: output records at shared and at own
+    times, and a box with none yet."""
+    from hil.fieldbus import pdo
+
+    topo = load_topology("hydra_full")
+    boxes = [b for b in topo.boxes if b.actuators][:3]
+    rng = np.random.default_rng(4)
+    steps = np.arange(5, 500, 5)
+    shared = np.arange(0, 480, 20)
+    parts = []
+    for n_box, box in enumerate(boxes):
+        width = sum(s.sizes[0] for s in box.slots)
+        t = shared if n_box != 1 else np.arange(13, 480, 20)
+        if n_box == 2:
+            t = t[:0]
+        rec = rng.integers(0, 256, (len(t), width), dtype=np.uint8)
+        for slot, s in enumerate(box.slots):
+            if s.kind == "actuator":
+                rec[:, sum(x.sizes[0] for x in box.slots[:slot])] = rng.integers(0, 3, len(t))
+                parts.append((t, rec, box, slot))
+    assert len({id(p[0]) for p in parts}) == 3 and pdo.ACTUATOR_OUT_DTYPE.itemsize
+    got = SG.pc_command_block(parts, steps)
+    one = [SG.pc_command_columns(*p, steps) for p in parts]
+    for name in one[0]:
+        np.testing.assert_array_equal(got[name], np.concatenate([o[name] for o in one]))
+    assert np.isfinite(got["force_command_n"]).any() and got["pc_enable"].any()
 
 
 def test_a_torn_read_flags_the_box_record_that_reports_it():
