@@ -30,6 +30,7 @@ from collections.abc import Callable
 import numpy as np
 from numba import njit
 
+from firmware_model.fpga import lanes as fpl
 from firmware_model.fpga import layout as B
 from firmware_model.fpga.driver_board import DriverBoard, LinkMemory
 from firmware_model.fpga.tick import control_tick
@@ -57,8 +58,8 @@ TRACE_WORDS = TRACE_DUTY + 3           # the link's word logs of the tick: down,
 TRACE_WIDTH = TRACE_WORDS + 2 * LK.WORDS_W
 
 
-@njit(cache=True)
-def _trace_row(tr, j, raw, down, link_since, link_crc, up, on, st):
+@njit(cache=True, inline="always")
+def _trace_cols(tr, j, raw, down, link_since, link_crc, up, on, d_a, d_b, d_c):
     for i in range(raw.shape[0]):
         tr[j, TRACE_RAW + i] = raw[i]
     for i in range(down.shape[0]):
@@ -68,24 +69,58 @@ def _trace_row(tr, j, raw, down, link_since, link_crc, up, on, st):
     for i in range(up.shape[0]):
         tr[j, TRACE_UP + i] = up[i]
     tr[j, TRACE_ON] = on
-    tr[j, TRACE_DUTY] = st[B.F_DUTY_A]
-    tr[j, TRACE_DUTY + 1] = st[B.F_DUTY_B]
-    tr[j, TRACE_DUTY + 2] = st[B.F_DUTY_C]
+    tr[j, TRACE_DUTY] = d_a
+    tr[j, TRACE_DUTY + 1] = d_b
+    tr[j, TRACE_DUTY + 2] = d_c
+
+
+@njit(cache=True)
+def _trace_row(tr, j, raw, down, link_since, link_crc, up, on, st):
+    _trace_cols(tr, j, raw, down, link_since, link_crc, up, on, st[B.F_DUTY_A],
+                st[B.F_DUTY_B], st[B.F_DUTY_C])
+
+
+@njit(cache=True, _nrt=False)
+def trace_row_lanes(tr, j, fb, lane, raw, down, up):
+    """:func:`_trace_row` of the board in lane ``lane`` of the board lanes ``fb``
+    (:mod:`firmware_model.fpga.lanes`, after its :func:`~firmware_model.fpga.lanes.
+    board_tick`): the counts and compare values from the lanes, the words from the rows."""
+    _trace_cols(tr, j, raw, down, fpl.lane(fb, fpl.XO, fpl.X_SINCE, lane),
+                fpl.lane(fb, fpl.XO, fpl.X_CRC, lane), up,
+                fpl.lane(fb, fpl.SO, B.F_PWM_ON, lane), fpl.lane(fb, fpl.SO, B.F_DUTY_A, lane),
+                fpl.lane(fb, fpl.SO, B.F_DUTY_B, lane), fpl.lane(fb, fpl.SO, B.F_DUTY_C, lane))
+
+
+@njit(cache=True, inline="always")
+def _drive(on, d_a, d_b, d_c, inv_top, u, x):
+    if on != 0:
+        u[L.IN_MODE] = L.DriveMode.DUTY.value
+        u[L.IN_DA] = d_a * inv_top
+        u[L.IN_DB] = d_b * inv_top
+        u[L.IN_DC] = d_c * inv_top
+    else:
+        if int(u[L.IN_MODE]) != L.DriveMode.OFF:
+            u[L.IN_MODE] = L.DriveMode.OFF.value
+            kernel.gates_off(x)
 
 
 @njit(cache=True, inline="always")
 def drive_plant(on, st, inv_top, u, x):
     """The inverter's gates as the board's tick left them (``on``: PWM running) into the
     plant's inputs: duties = compare counts / top, or gates off (currents zero at once)."""
-    if on != 0:
-        u[L.IN_MODE] = L.DriveMode.DUTY.value
-        u[L.IN_DA] = st[B.F_DUTY_A] * inv_top
-        u[L.IN_DB] = st[B.F_DUTY_B] * inv_top
-        u[L.IN_DC] = st[B.F_DUTY_C] * inv_top
-    else:
-        if int(u[L.IN_MODE]) != L.DriveMode.OFF:
-            u[L.IN_MODE] = L.DriveMode.OFF.value
-            kernel.gates_off(x)
+    _drive(on, st[B.F_DUTY_A], st[B.F_DUTY_B], st[B.F_DUTY_C], inv_top, u, x)
+
+
+@njit(cache=True, _nrt=False)
+def drive_lanes(fb, rows, m, c, u, x):
+    """:func:`drive_plant` for the boards ``rows[:m]`` in the board lanes ``fb`` (after
+    their :func:`~firmware_model.fpga.lanes.board_tick`): the plants' input rows ``u``
+    (and ``x``, gates off), the board parameters ``c`` for the carrier's top."""
+    for j in range(m):
+        r = rows[j]
+        _drive(fpl.lane(fb, fpl.SO, B.F_PWM_ON, j), fpl.lane(fb, fpl.SO, B.F_DUTY_A, j),
+               fpl.lane(fb, fpl.SO, B.F_DUTY_B, j), fpl.lane(fb, fpl.SO, B.F_DUTY_C, j),
+               1.0 / c[r, B.C_PWM_TOP], u[r], x[r])
 
 
 @njit(cache=True)

@@ -37,8 +37,8 @@ from numba import njit, types
 from numba.core import cgutils
 from numba.extending import intrinsic
 
+from firmware_model.fpga import lanes as fpl
 from firmware_model.fpga import layout as B
-from firmware_model.fpga.tick import control_tick
 from firmware_model.lvds import lanes as link_lanes
 from firmware_model.lvds import link as LK
 from firmware_model.mcu.c_abi import (
@@ -55,7 +55,13 @@ from hil.fieldbus import pdo
 from hil.fieldbus.pdo_compiled import counts as _counts
 from hil.fieldbus.pdo_compiled import le as _le
 from hil.fieldbus.pdo_compiled import put as _put
-from hil.sim.actuator import TRACE_WIDTH, TRACE_WORDS, _trace_row, advance_stack, drive_plant
+from hil.sim.actuator import (
+    TRACE_WIDTH,
+    TRACE_WORDS,
+    advance_stack,
+    drive_lanes,
+    trace_row_lanes,
+)
 from hil.sim.robot_tunables import EngineTunables
 from hil.sim.stack_rows import SOURCES, LinkSensorLanes, McuRows, StackRows, TapRows
 from plant import lanes as lanes_mod
@@ -96,6 +102,7 @@ assert [f.name for f in pdo.ACTUATOR_IN] == [
 assert [f.name for f in pdo.ACTUATOR_OUT] == ["mode", "flags", "command", "kp_position",
                                               "kp_force"]
 assert all(OUTPUT.fields[n][1] % 4 == 0 for n in OUTPUT.names)
+assert fpl.LW == lanes_mod.LW, "a batch's boards and plants share the lanes"
 
 
 #: The MCU law's host build, linked by name (the library is loaded by :class:`RobotEngine`
@@ -186,16 +193,19 @@ def advance_robot(counter, n_periods, period, tick0, batched, s, mcu, no_rec, ta
 
 @njit(cache=True, nogil=True, _nrt=False)
 def advance_robot_lanes(counter, n_periods, period, tick0, blocks, sizes, n_sub_max, s, mcu,
-                        buf, ls, tap_y, tap_trace, log):
+                        buf, fb, ls, tap_y, tap_trace, log):
     """:func:`advance_robot` with the plants in lanes: this thread claims whole batches
     (``blocks[b, :sizes[b]]``: up to :data:`plant.lanes.LW` actuator rows, counted by
     ``counter``) and runs their MCU periods together. Per tick the batch's sensor chips
     (:func:`plant.sensors.lanes.digitise_lanes`) and downstream LVDS sweeps
-    (:func:`firmware_model.lvds.lanes.sweep_down_lanes`) in lanes, each actuator's board
-    tick, the batch's upstream sweeps in lanes, then all their plants take the tick's RK4
-    step in one pass over the lanes (:func:`plant.lanes.rk4_lanes`, in ``buf``, this
-    thread's lane buffer), then their outputs and noise
-    (:func:`plant.lane_outputs.outputs_lanes`, from the same buffer). ``ls`` (a
+    (:func:`firmware_model.lvds.lanes.sweep_down_lanes`) in lanes, the batch's boards in one
+    pass over the lanes (:func:`firmware_model.fpga.lanes.board_tick`), the batch's
+    upstream sweeps in lanes, the inverters (:func:`~hil.sim.actuator.drive_lanes`), then
+    all their plants take the tick's RK4 step in one pass over the lanes
+    (:func:`plant.lanes.rk4_lanes`, in ``buf``, this thread's lane buffer), then their
+    outputs and noise (:func:`plant.lane_outputs.outputs_lanes`, from the same buffer).
+    ``fb``: this thread's board lane buffer (the boards' state, loaded when a batch is
+    claimed, stored back at its end). ``ls`` (a
     :class:`~hil.sim.stack_rows.LinkSensorLanes`): this thread's lane buffers of the links'
     counters and word logs (loaded when a batch is claimed, stored back at its end) and of
     the chips' parameters. Each actuator sees the operations of
@@ -216,6 +226,7 @@ def advance_robot_lanes(counter, n_periods, period, tick0, blocks, sizes, n_sub_
         rows = blocks[b]
         done += m
         lanes_mod.load_params(buf, pl.params, rows, m)
+        fpl.load_board(fb, bd.params, bd.state, rows, m)
         sensor_lanes.load_chips(ls.chips, se.chips, rows, m)
         link_lanes.load_link(ls.link, lk.state, rows, m)
         for n in range(n_periods):
@@ -241,27 +252,23 @@ def advance_robot_lanes(counter, n_periods, period, tick0, blocks, sizes, n_sub_
                 sensor_lanes.digitise_lanes(ls.chips, pl.y, se.chips, rows, m, t + k, se.raw)
                 link_lanes.sweep_down_lanes(ls.link, lk.state, lk.mcu_down, bd.state,
                                             bd.down, rows, m)
+                fpl.board_tick(fb, rows, m, se.raw, bd.down, bd.state, bd.up, bd.params)
                 for j in range(m):
                     i = rows[j]
-                    st = bd.state[i]
-                    since, crc = st[B.F_SINCE_VALID], st[B.F_ERR_LINK_CRC]
-                    on = control_tick(bd.params[i], st, bd.down[i], bd.up[i], se.raw[i])
                     if tap_trace.shape[0] > 0:
-                        _trace_row(tap_trace[i], at, se.raw[i], bd.down[i], since, crc,
-                                   bd.up[i], on, st)
+                        trace_row_lanes(tap_trace[i], at, fb, j, se.raw[i], bd.down[i],
+                                        bd.up[i])
                     if logging_trace:
-                        _trace_row(log.trace[i], lt, se.raw[i], bd.down[i], since, crc,
-                                   bd.up[i], on, st)
+                        trace_row_lanes(log.trace[i], lt, fb, j, se.raw[i], bd.down[i],
+                                        bd.up[i])
                 link_lanes.sweep_up_lanes(ls.link, lk.state, bd.up, lk.mcu_up, rows, m)
                 for j in range(m):
                     i = rows[j]
-                    st = bd.state[i]
                     if tap_trace.shape[0] > 0:
                         link_lanes.word_log(tap_trace[i], at, TRACE_WORDS, ls.link, j)
                     if logging_trace:
                         link_lanes.word_log(log.trace[i], lt, TRACE_WORDS, ls.link, j)
-                    drive_plant(st[B.F_PWM_ON], st, 1.0 / bd.params[i, B.C_PWM_TOP], pl.u[i],
-                                pl.x[i])
+                drive_lanes(fb, rows, m, bd.params, pl.u, pl.x)
                 lanes_mod.load_states(buf, pl.x, pl.u, rows, m)
                 lanes_mod.rk4_lanes(buf, n_sub_max)
                 lanes_mod.store_states(buf, pl.x, rows, m)
@@ -276,6 +283,7 @@ def advance_robot_lanes(counter, n_periods, period, tick0, blocks, sizes, n_sub_
                 for w in range(lk.mcu_up.shape[1]):
                     in16[i, _IN_UP + w] = lk.mcu_up[i, w] & 0xFFFF
                 in32[i, _IN_CRC] = lk.state[i, LK.LK_MASTER_CRC]
+        fpl.store_board(fb, bd.state, rows, m)
         link_lanes.store_link(ls.link, lk.state, rows, m)
 
 
@@ -445,7 +453,7 @@ class RobotEngine:
         self._blocks = np.zeros((0, lanes_mod.LW), dtype=np.int64)
         self._sizes = np.zeros(0, dtype=np.int64)
         self._blocks_for: bytes = b""
-        self._lane_bufs: list[np.ndarray] = []
+        self._lane_bufs: list[tuple[np.ndarray, np.ndarray]] = []
         #: Each thread's lane buffers of the link's counters and the sensor chips.
         self._link_sensor_bufs: list[LinkSensorLanes] = []
         #: Called with the first tick of each cycle once it is computed (:meth:`tap`).
@@ -658,17 +666,17 @@ class RobotEngine:
         calling thread, k: the k-th helper)."""
         if self.lanes:
             while len(self._lane_bufs) <= slot:
-                self._lane_bufs.append(lanes_mod.lane_buffer())
+                self._lane_bufs.append((lanes_mod.lane_buffer(), fpl.board_buffer()))
                 self._link_sensor_bufs.append(LinkSensorLanes(
                     link_lanes.link_lane_buffer(), sensor_lanes.sensor_lane_buffer()))
-            buf = self._lane_bufs[slot]
+            buf, fb = self._lane_bufs[slot]
             ls = self._link_sensor_bufs[slot]
         if started is not None:
             started.release()
         if self.lanes:
             return advance_robot_lanes(self._counter, ticks // self.period, self.period,
                                        self.tick, self._blocks, self._sizes,
-                                       self._n_sub_max, self.arrays, self.mcu, buf, ls,
+                                       self._n_sub_max, self.arrays, self.mcu, buf, fb, ls,
                                        *self._taps(ticks), self.log_rows)
         return advance_robot(self._counter, ticks // self.period, self.period, self.tick,
                              self._batched, self.arrays, self.mcu, self._no_rec,
