@@ -41,8 +41,8 @@ import numpy as np
 from numba import njit
 
 from firmware_model.fpga import layout as B
-from firmware_model.lvds import link as LK
 from firmware_model.fpga.lanes import LANES, LW
+from firmware_model.lvds import link as LK
 
 #: Rows of the lane buffer per direction (offset ``D`` for downstream, ``U`` upstream).
 (_ACC, _PTR, _T, _WORDS, _STOP, _DELAY, _SCALAR, _P0, _N, _SRC, _WROW) = range(11)
