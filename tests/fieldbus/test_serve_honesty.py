@@ -82,6 +82,7 @@ def test_seconds_are_wall_seconds_and_no_master_fails(netns):
     assert "no EtherCAT frame arrived from a master" in rep["failures"]
 
 
+@pytest.mark.slow  # ~9 s: a pysoem master on a veth pair
 def test_a_threshold_exceeded_exits_1_and_says_which(netns):
     loose = ("--max-lag-ms", "1e6", "--max-overrun-percent", "100", "--max-late-percent",
              "100")

@@ -208,6 +208,7 @@ def test_a_reader_that_goes_away_is_quiet():
     assert proc.wait(timeout=120) == 0 and err == ""
 
 
+@pytest.mark.slow  # ~6 s each: a logged run in a subprocess, signalled mid-run
 @pytest.mark.parametrize("sig,code", [(signal.SIGTERM, 143), (signal.SIGHUP, 129)])
 def test_sigterm_and_sighup_end_a_logged_run_like_ctrl_c(tmp_path, sig, code):
     log = tmp_path / "run.mcap"
