@@ -409,11 +409,7 @@ class FrameLogWriter:
         n = t.shape[0]
         if n == 0:
             return
-        t = t.astype(np.int64, copy=False)
-        if t[0] < 0:
-            raise ValueError(f"{ch.topic}: time {int(t[0])} ns is negative")
-        if n > 1 and bool(np.any(t[1:] < t[:-1])):
-            raise ValueError(f"{ch.topic}: block times decrease")
+        t = _block_times(ch.topic, t)
         first, last = int(t[0]), int(t[-1])
         self._advance(ch, first, last)
         msg = rawpb.pack_block(t, f, ch.dtype) if ch.container else pack_block(t, f)
@@ -450,11 +446,7 @@ class FrameLogWriter:
             f = self._cast(ch0, f)
         if t.shape[0] == 0:
             return
-        t = t.astype(np.int64, copy=False)
-        if t[0] < 0:
-            raise ValueError(f"{ch0.topic}: time {int(t[0])} ns is negative")
-        if len(t) > 1 and bool(np.any(t[1:] < t[:-1])):
-            raise ValueError(f"{ch0.topic}: block times decrease")
+        t = _block_times(ch0.topic, t)
         first, last = int(t[0]), int(t[-1])
         for c in sorted(chs, key=lambda c: -c.last_ns):  # a channel that would raise first
             self._advance(c, first, last)
@@ -586,3 +578,14 @@ class FrameLogWriter:
     def _check_open(self) -> None:
         if self._closed:
             raise ValueError(f"frame log {self.path} is closed")
+
+
+def _block_times(topic: str, t: np.ndarray) -> np.ndarray:
+    """A block's frame times ``t`` (integer ns, at least one) as int64, refused in one line
+    (naming ``topic``) if negative or decreasing."""
+    t = t.astype(np.int64, copy=False)
+    if t[0] < 0:
+        raise ValueError(f"{topic}: time {int(t[0])} ns is negative")
+    if len(t) > 1 and bool(np.any(t[1:] < t[:-1])):
+        raise ValueError(f"{topic}: block times decrease")
+    return t

@@ -143,32 +143,34 @@ def _quantise(v, lsb):
 
 
 @njit(cache=True, inline="always")
+def _add_noise(p, y, sp, g0, g1, g2, g3, g4, g5, g6):
+    """Add a tick's seven unit normal samples to the output row ``y``: ``sp`` [Pa] times
+    g0-g4 to the five pressures, the strain force's and the temperature's sizes times g5
+    and g6 (recipes 2-4; recipe 1 draws its samples one by one, in this order)."""
+    y[Y_P_ACC] += sp * g0
+    y[Y_P_PUMP_A] += sp * g1
+    y[Y_P_PUMP_B] += sp * g2
+    y[Y_P_CYL_A] += sp * g3
+    y[Y_P_CYL_B] += sp * g4
+    y[Y_F_STRAIN] += p[P_NOISE_F] * g5
+    y[Y_TEMP] += p[P_NOISE_T] * g6
+
+
+@njit(cache=True, inline="always")
 def sense(p, rng, y):
     """Turn the physical values in the output row ``y`` into what the sensors read."""
     if p[P_NOISE_ON] > 0.5 and p[P_NUMERICS] >= 4.0:
         sp = p[P_NOISE_P]
         s, g0, g1, g2, g3, g4, g5, g6 = gauss7_4(rng[0])
         rng[0] = s
-        y[Y_P_ACC] += sp * g0
-        y[Y_P_PUMP_A] += sp * g1
-        y[Y_P_PUMP_B] += sp * g2
-        y[Y_P_CYL_A] += sp * g3
-        y[Y_P_CYL_B] += sp * g4
-        y[Y_F_STRAIN] += p[P_NOISE_F] * g5
-        y[Y_TEMP] += p[P_NOISE_T] * g6
+        _add_noise(p, y, sp, g0, g1, g2, g3, g4, g5, g6)
     elif p[P_NOISE_ON] > 0.5 and p[P_NUMERICS] >= 2.0:
         sp = p[P_NOISE_P]
         g0, g1 = _gauss_pair(rng)
         g2, g3 = _gauss_pair(rng)
         g4, g5 = _gauss_pair(rng)
         g6, _ = _gauss_pair(rng)
-        y[Y_P_ACC] += sp * g0
-        y[Y_P_PUMP_A] += sp * g1
-        y[Y_P_PUMP_B] += sp * g2
-        y[Y_P_CYL_A] += sp * g3
-        y[Y_P_CYL_B] += sp * g4
-        y[Y_F_STRAIN] += p[P_NOISE_F] * g5
-        y[Y_TEMP] += p[P_NOISE_T] * g6
+        _add_noise(p, y, sp, g0, g1, g2, g3, g4, g5, g6)
     elif p[P_NOISE_ON] > 0.5:
         sp = p[P_NOISE_P]
         y[Y_P_ACC] += sp * _gauss(rng)
