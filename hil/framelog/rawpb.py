@@ -127,6 +127,21 @@ def pack_blocks(t_ns: np.ndarray, frames: np.ndarray, dtype: np.dtype,
     return rec
 
 
+def _read_varint(mv: memoryview, p: int, n: int, what: str) -> tuple[int, int]:
+    """The varint at ``mv[p]`` (of ``n`` bytes) and the position after it; ValueError
+    "message ends inside a <what>" if the bytes end first."""
+    v = shift = 0
+    while True:
+        if p >= n:
+            raise ValueError(f"message ends inside a {what}")
+        b = mv[p]
+        p += 1
+        v |= (b & 0x7F) << shift
+        shift += 7
+        if not b & 0x80:
+            return v, p
+
+
 def _fields(data: memoryview | bytes) -> dict[int, object]:
     """Top-level fields of a protobuf message: number -> int (varint, fixed) or memoryview
     (length-delimited); the last occurrence wins. ValueError for bytes that are not one."""
@@ -134,29 +149,10 @@ def _fields(data: memoryview | bytes) -> dict[int, object]:
     out: dict[int, object] = {}
     p, n = 0, len(mv)
     while p < n:
-        key = shift = 0
-        while True:
-            if p >= n:
-                raise ValueError("message ends inside a field key")
-            b = mv[p]
-            p += 1
-            key |= (b & 0x7F) << shift
-            shift += 7
-            if not b & 0x80:
-                break
+        key, p = _read_varint(mv, p, n, "field key")
         number, wire = key >> 3, key & 7
         if wire == 0:
-            v = shift = 0
-            while True:
-                if p >= n:
-                    raise ValueError("message ends inside a varint")
-                b = mv[p]
-                p += 1
-                v |= (b & 0x7F) << shift
-                shift += 7
-                if not b & 0x80:
-                    break
-            out[number] = v
+            out[number], p = _read_varint(mv, p, n, "varint")
         elif wire in (1, 5):
             size = 8 if wire == 1 else 4
             if p + size > n:
@@ -164,16 +160,7 @@ def _fields(data: memoryview | bytes) -> dict[int, object]:
             out[number] = int.from_bytes(mv[p:p + size], "little")
             p += size
         elif wire == 2:
-            ln = shift = 0
-            while True:
-                if p >= n:
-                    raise ValueError("message ends inside a length")
-                b = mv[p]
-                p += 1
-                ln |= (b & 0x7F) << shift
-                shift += 7
-                if not b & 0x80:
-                    break
+            ln, p = _read_varint(mv, p, n, "length")
             if p + ln > n:
                 raise ValueError(f"field {number} claims {ln} bytes, {n - p} follow")
             out[number] = mv[p:p + ln]
