@@ -85,8 +85,10 @@ ANGLE_CROSSOVER_HZ = 10.0
 #: or infinity (the friction solve's bracket tests rely on them).
 _FAST = {"contract", "arcp", "nsz", "reassoc"}
 
-#: Simulations a model keeps for a repeated parameter vector (3.2 MB each for 16 s at 5 kHz).
+#: Simulations a model keeps for a repeated parameter vector, and the memory they may take
+#: (a run of 16 s at 5 kHz is 3.2 MB; of a million samples 40 MB, and only one is kept).
 RUNS_KEPT = 6
+RUNS_BYTES = 64 << 20
 
 _T = TypeVar("_T")
 _R = TypeVar("_R")
@@ -540,7 +542,9 @@ class FastModel:
         out.setflags(write=False)
         with self._runs_lock:
             self._runs[key] = (n_run, out)
-            while len(self._runs) > RUNS_KEPT:
+            while len(self._runs) > 1 and (
+                    len(self._runs) > RUNS_KEPT
+                    or sum(r[1].nbytes for r in self._runs.values()) > RUNS_BYTES):
                 del self._runs[next(iter(self._runs))]
         return out
 
