@@ -20,7 +20,7 @@ def _log(path: Path, compression: str, level: int | None, ours: bool) -> bytes:
     try:
         rng = np.random.default_rng(5)
         with FrameLogWriter(path, compression=compression, compression_level=level,
-                            chunk_size=3000) as w:
+                            chunk_size=1500) as w:
             blk = w.add_block_channel("/b", "eha-hil/test", dtype=np.uint16, width=5)
             one = w.add_channel("/one", "eha-hil/test-frame")
             for k in range(12):
