@@ -31,6 +31,8 @@ import numpy as np
 from mcap.records import MessageIndex, Opcode
 from mcap.writer import Writer
 
+from hil.framelog.chunk import ChunkBuffer
+
 _HEAD = struct.Struct("<BQHIQQ")  # opcode, record length, channel, sequence, log, publish
 _INDEX_HEAD = struct.Struct("<BQHI")  # opcode, record length, channel, bytes of entries
 _PAIR = struct.Struct("<QQ")  # an index entry: log time, offset in the chunk
@@ -164,17 +166,43 @@ HEAD_FIELDS = [("op", "u1"), ("len", "<u8"), ("ch", "<u2"), ("seq", "<u4"), ("lo
                ("pub", "<u8")]
 
 
+def records(w: Writer, dtype: np.dtype, n: int) -> tuple[np.ndarray, int | None]:
+    """``n`` uninitialised records of ``dtype`` (fields starting with :data:`HEAD_FIELDS`)
+    to fill and pass to :func:`add_records`, and where they lie: in the open chunk's
+    :class:`~hil.framelog.chunk.ChunkBuffer` at that offset (the chunk closed first if it
+    holds messages and they would take it over its size), so that they go into the chunk
+    without a copy; or (None) a new array, when the Writer has no such buffer."""
+    cb = w._Writer__chunk_builder  # noqa: SLF001 - see the module docstring
+    buf = cb.record_writer._buffer  # noqa: SLF001
+    if not isinstance(buf, ChunkBuffer):
+        return np.empty(n, dtype), None
+    size = n * dtype.itemsize
+    if cb.num_messages and buf.tell() + size > w._Writer__chunk_size:  # noqa: SLF001
+        w._Writer__finalize_chunk()  # noqa: SLF001
+    at = buf.tell()
+    return buf.reserve(size).view(dtype), at
+
+
+def drop(w: Writer, at: int | None) -> None:
+    """Take records reserved by :func:`records` at ``at`` out of the chunk again (their
+    filling failed); nothing for None."""
+    if at is not None:
+        w._Writer__chunk_builder.record_writer._buffer.drop(at)  # noqa: SLF001
+
+
 def add_records(w: Writer, channel_ids: Sequence[int], log_ns: np.ndarray,
-                publish_ns: np.ndarray, seqs: Sequence[int], rec: np.ndarray) -> None:
+                publish_ns: np.ndarray, seqs: Sequence[int], rec: np.ndarray,
+                at: int | None = None) -> None:
     """``k`` messages on each channel of ``channel_ids`` (``c`` of them), channel-major:
     ``rec`` ((c * k,) structured, fields starting with :data:`HEAD_FIELDS`, filled here;
     the payload after them filled by the caller, e.g.
     :func:`hil.framelog.rawpb.pack_blocks`) holds channel ``j``'s records at
     ``[j * k, (j + 1) * k)``, at log times ``log_ns`` and publish times ``publish_ns``
     ((k,) each, the same for every channel), sequences from ``seqs[j]`` on. As
-    ``add_message`` per message, with no bytes object each: the records go into the chunk
-    buffer straight from the array, a slice of channels at a time that keeps a chunk near
-    its size."""
+    ``add_message`` per message, with no bytes object each: ``rec`` made by
+    :func:`records` lies in the chunk at ``at`` already; any other array goes into the
+    chunk buffer straight from the array, a slice of channels at a time that keeps a chunk
+    near its size."""
     c = len(channel_ids)
     if not c:
         return
@@ -200,7 +228,7 @@ def add_records(w: Writer, channel_ids: Sequence[int], log_ns: np.ndarray,
     stats.message_count += c * k
     step = np.arange(k, dtype=np.uint64) * size
     times = log.astype(np.uint64)
-    per = max(1, w._Writer__chunk_size // (size * k))  # noqa: SLF001 - channels a slice
+    per = c if at is not None else max(1, w._Writer__chunk_size // (size * k))  # noqa: SLF001
     for lo in range(0, c, per):
         part = rec[lo * k:(lo + per) * k]
         if cb.num_messages == 0:
@@ -208,7 +236,7 @@ def add_records(w: Writer, channel_ids: Sequence[int], log_ns: np.ndarray,
         else:
             cb.message_start_time = min(cb.message_start_time, t_first)
         cb.message_end_time = max(cb.message_end_time, t_last)
-        base = cb.record_writer.count
+        base = cb.record_writer.count if at is None else at
         for j, cid in enumerate(channel_ids[lo:lo + per]):
             stats.channel_message_counts[cid] += k
             index = cb.message_indices.get(cid)
@@ -219,5 +247,6 @@ def add_records(w: Writer, channel_ids: Sequence[int], log_ns: np.ndarray,
             index.records.append((int(log[0]), at) if k == 1 else
                                  np.stack([times, at + step], axis=1))
         cb.num_messages += len(part)
-        cb.record_writer._buffer.write(part.view(np.uint8))  # noqa: SLF001
+        if at is None:
+            cb.record_writer._buffer.write(part.view(np.uint8))  # noqa: SLF001
         w._Writer__maybe_finalize_chunk()  # noqa: SLF001

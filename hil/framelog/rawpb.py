@@ -116,13 +116,15 @@ def even_spacing(t_ns: np.ndarray) -> int | None:
 
 
 def pack_blocks(t_ns: np.ndarray, frames: np.ndarray, dtype: np.dtype,
-                head: list[tuple] = (), byte_planes: bool = True) -> np.ndarray:
+                head: list[tuple] = (), byte_planes: bool = True,
+                alloc: Callable[[np.dtype, int], np.ndarray] | None = None) -> np.ndarray:
     """The block messages of ``k`` channels at once, frames ``(k, count, width)`` at the
     same times ``t_ns`` (count,): a (k,) structured array whose row ``i`` holds, after
     the fields ``head`` (left 0, e.g. :data:`hil.framelog.batch.HEAD_FIELDS`), the block
     message of ``frames[i]`` (one copy of the frames, no bytes object): ``t0_ns`` and
     ``dt_ns`` if the times are evenly spaced, else ``t_ns``; the frames as byte planes
-    (``byte_planes`` False: row by row, as logs before wrote them)."""
+    (``byte_planes`` False: row by row, as logs before wrote them). ``alloc(dtype, k)``
+    gives the array to fill (every byte is written; default a new one)."""
     k, count, width = frames.shape
     dt = np.dtype(dtype).newbyteorder("<")
     name = np.dtype(dtype).name.encode()
@@ -136,11 +138,11 @@ def pack_blocks(t_ns: np.ndarray, frames: np.ndarray, dtype: np.dtype,
     else:
         times = [("k6", "u1"), ("t0", _T_NS), ("k7", "u1"), ("dt", _T_NS)]
     planes = [("k8", "u1"), ("planes", "u1")] if byte_planes else []
-    rec = np.zeros(k, np.dtype([*head, ("k3", "u1"), ("count", "<u4"), ("k4", "u1"),
-                                ("width", "<u4"), ("k5", "u1"), ("nl", "u1", (len(nl),)),
-                                ("name", "u1", (len(name),)), *times, *planes,
-                                ("k2", "u1"), ("fl", "u1", (len(fl),)),
-                                ("f", "u1", (size,))]))
+    layout = np.dtype([*head, ("k3", "u1"), ("count", "<u4"), ("k4", "u1"), ("width", "<u4"),
+                       ("k5", "u1"), ("nl", "u1", (len(nl),)), ("name", "u1", (len(name),)),
+                       *times, *planes, ("k2", "u1"), ("fl", "u1", (len(fl),)),
+                       ("f", "u1", (size,))])
+    rec = np.zeros(k, layout) if alloc is None else alloc(layout, k)
     rec["k3"], rec["count"], rec["k4"], rec["width"] = 0x1D, count, 0x25, width
     rec["k5"], rec["nl"], rec["name"] = 0x2A, np.frombuffer(nl, np.uint8), np.frombuffer(
         name, np.uint8)

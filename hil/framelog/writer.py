@@ -187,8 +187,7 @@ class FrameLogWriter:
             self._file.close()
             raise ValueError(f"compression {compression!r} unavailable ({exc}); "
                              "use compression='none'") from None
-        if compression != "none":
-            chunk.install(self._writer, compression, compression_level)
+        chunk.install(self._writer, compression, compression_level, chunk_size)
         try:
             self._writer.start(profile=profile, library=f"eha-hil/{package_version()}")
             self._fast = batch.supported(self._writer)
@@ -450,9 +449,19 @@ class FrameLogWriter:
         first, last = int(t[0]), int(t[-1])
         for c in sorted(chs, key=lambda c: -c.last_ns):  # a channel that would raise first
             self._advance(c, first, last)
-        rec = rawpb.pack_blocks(t, f, ch0.dtype, batch.HEAD_FIELDS)
+        at: list[int | None] = [None]
+
+        def alloc(dtype: np.dtype, k: int) -> np.ndarray:
+            rec, at[0] = batch.records(self._writer, dtype, k)
+            return rec
+
+        try:
+            rec = rawpb.pack_blocks(t, f, ch0.dtype, batch.HEAD_FIELDS, alloc=alloc)
+        except BaseException:
+            batch.drop(self._writer, at[0])  # no half-filled records left in the chunk
+            raise
         batch.add_records(self._writer, channel_ids, t[:1], t[-1:], [c.count for c in chs],
-                          rec)
+                          rec, at[0])
         for c in chs:
             c.count += 1
 
@@ -485,10 +494,15 @@ class FrameLogWriter:
         for c in sorted(chs, key=lambda c: -c.last_ns):  # a channel that would raise first
             self._advance(c, first, last)
         c_n, k, size = m.shape
-        rec = np.zeros(c_n * k, np.dtype([*batch.HEAD_FIELDS, ("data", "u1", (size,))]))
-        rec["data"] = m.reshape(c_n * k, size)
+        rec, at = batch.records(self._writer, np.dtype([*batch.HEAD_FIELDS,
+                                                        ("data", "u1", (size,))]), c_n * k)
+        try:
+            rec["data"] = m.reshape(c_n * k, size)
+        except BaseException:
+            batch.drop(self._writer, at)
+            raise
         batch.add_records(self._writer, channel_ids, times, times, [c.count for c in chs],
-                          rec)
+                          rec, at)
         for c in chs:
             c.count += k
 
