@@ -226,9 +226,15 @@ def add_records(w: Writer, channel_ids: Sequence[int], log_ns: np.ndarray,
         stats.message_start_time = min(t_first, stats.message_start_time)
     stats.message_end_time = max(t_last, stats.message_end_time)
     stats.message_count += c * k
-    step = np.arange(k, dtype=np.uint64) * size
-    times = log.astype(np.uint64)
     per = c if at is not None else max(1, w._Writer__chunk_size // (size * k))  # noqa: SLF001
+    if k > 1:  # every channel's index entries (log time, offset in the chunk) at once
+        pairs = np.empty((c, k, 2), np.uint64)
+        pairs[:, :, 0] = log.astype(np.uint64)
+        within = (np.arange(min(per, c), dtype=np.uint64)[:, None] * k
+                  + np.arange(k, dtype=np.uint64)) * np.uint64(size)
+    t0 = int(log[0])
+    counts = stats.channel_message_counts
+    indices = cb.message_indices
     for lo in range(0, c, per):
         part = rec[lo * k:(lo + per) * k]
         if cb.num_messages == 0:
@@ -237,15 +243,16 @@ def add_records(w: Writer, channel_ids: Sequence[int], log_ns: np.ndarray,
             cb.message_start_time = min(cb.message_start_time, t_first)
         cb.message_end_time = max(cb.message_end_time, t_last)
         base = cb.record_writer.count if at is None else at
+        if k > 1:
+            n = min(per, c - lo)
+            pairs[lo:lo + n, :, 1] = within[:n] + np.uint64(base)
         for j, cid in enumerate(channel_ids[lo:lo + per]):
-            stats.channel_message_counts[cid] += k
-            index = cb.message_indices.get(cid)
-            if not isinstance(index, _MessageIndex):  # none yet, or the library's own
-                index = cb.message_indices[cid] = _MessageIndex(
+            counts[cid] += k
+            index = indices.get(cid)
+            if type(index) is not _MessageIndex:  # none yet, or the library's own
+                index = indices[cid] = _MessageIndex(
                     channel_id=cid, records=list(index.records) if index else [])
-            at = base + j * k * size
-            index.records.append((int(log[0]), at) if k == 1 else
-                                 np.stack([times, at + step], axis=1))
+            index.records.append((t0, base + j * k * size) if k == 1 else pairs[lo + j])
         cb.num_messages += len(part)
         if at is None:
             cb.record_writer._buffer.write(part.view(np.uint8))  # noqa: SLF001

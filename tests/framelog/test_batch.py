@@ -88,14 +88,20 @@ def test_messages_as_one_array_make_the_same_file(chunk_size: int) -> None:
         assert [m.log_time for _, _, m in msgs][19:22] == [190, 195, 200]
 
 
+@pytest.mark.parametrize("library_chunks", [False, True])
 @pytest.mark.parametrize("chunk_size", [700, 1 << 20])
-def test_blocks_of_many_channels_make_the_same_file(tmp_path, chunk_size: int) -> None:  # noqa: ANN001
-    """FrameLogWriter.write_blocks (one record array for all channels) writes the messages
-    write_block writes one channel at a time; with chunks larger than a batch, the same
-    file byte for byte."""
+def test_blocks_of_many_channels_make_the_same_file(tmp_path, chunk_size: int,  # noqa: ANN001
+                                                    library_chunks: bool, monkeypatch) -> None:  # noqa: ANN001
+    """FrameLogWriter.write_blocks (one record array for all channels, built in the chunk
+    buffer, or with the library's own chunks copied into its buffer a slice of channels at
+    a time) writes the messages write_block writes one channel at a time; with chunks
+    larger than a batch, the same file byte for byte."""
     import numpy as np
 
-    from hil.framelog import FrameLogReader, FrameLogWriter
+    from hil.framelog import FrameLogReader, FrameLogWriter, chunk
+
+    if library_chunks:
+        monkeypatch.setattr(chunk, "install", lambda *a: False)
 
     rng = np.random.default_rng(7)
     t = [np.arange(k * 20, k * 20 + 20, dtype=np.int64) * 1000 for k in range(5)]
@@ -128,13 +134,19 @@ def test_blocks_of_many_channels_make_the_same_file(tmp_path, chunk_size: int) -
             w.write_blocks([c], t[0], np.full((1, 20, 34), 70000))
 
 
+@pytest.mark.parametrize("library_chunks", [False, True])
 @pytest.mark.parametrize("chunk_size", [500, 1 << 20])
-def test_messages_of_many_channels_make_the_same_file(tmp_path, chunk_size: int) -> None:  # noqa: ANN001
+def test_messages_of_many_channels_make_the_same_file(tmp_path, chunk_size: int,  # noqa: ANN001
+                                                      library_chunks: bool, monkeypatch) -> None:  # noqa: ANN001
     """FrameLogWriter.write_messages_many writes what write_messages writes one channel at
-    a time (the very file when no chunk closes inside a batch)."""
+    a time (the very file when no chunk closes inside a batch), in our chunk buffer or the
+    library's."""
     import numpy as np
 
-    from hil.framelog import FrameLogWriter
+    from hil.framelog import FrameLogWriter, chunk
+
+    if library_chunks:
+        monkeypatch.setattr(chunk, "install", lambda *a: False)
     from hil.framelog.protobuf import Field, MessageType
 
     msg = MessageType("t.M", [Field("a", "double"), Field("b", "fixed32")])
