@@ -141,20 +141,26 @@ def add_messages(w: Writer, channel_id: int, times: Sequence[int] | np.ndarray,
         index.records.append(np.stack([t, base + step * np.arange(n, dtype=np.uint64)],
                                       axis=1))
         offsets = None
-    else:
-        parts, offsets, pos = [], [], base
-        pack = _HEAD.pack
-        op = Opcode.MESSAGE
-        for i in range(n):
-            d = data[i]
-            parts.append(pack(op, _HEAD.size - 9 + len(d), channel_id,
-                              (seq0 + i) & 0xFFFFFFFF, int(times[i]), int(times[i])))
-            parts.append(d)
-            offsets.append(pos)
-            pos += _HEAD.size + len(d)
+    else:  # the record heads as one array, each message's bytes between them
+        lens = np.fromiter(map(len, data), np.int64, n)
+        heads = np.zeros(n, np.dtype(HEAD_FIELDS))
+        heads["op"] = Opcode.MESSAGE
+        heads["len"] = _HEAD.size - 9 + lens
+        heads["ch"] = channel_id
+        heads["seq"] = (np.arange(n, dtype=np.int64) + seq0) & 0xFFFFFFFF
+        heads["log"] = times
+        heads["pub"] = times
+        hb = heads.tobytes()
+        h = _HEAD.size
+        parts: list = [None] * (2 * n)
+        parts[0::2] = [hb[i:i + h] for i in range(0, n * h, h)]
+        parts[1::2] = data
         blob = b"".join(parts)
+        ends = np.cumsum(lens + h)
+        offsets = np.stack([times.astype(np.uint64),
+                            (base + ends - (lens + h)).astype(np.uint64)], axis=1)
     if offsets is not None:
-        index.records.extend(zip(times.tolist(), offsets, strict=True))
+        index.records.append(offsets)
     cb.num_messages += n
     cb.record_writer._buffer.write(blob)  # noqa: SLF001
     w._Writer__maybe_finalize_chunk()  # noqa: SLF001
