@@ -6,12 +6,13 @@ updates one at a time, and two more ``struct.pack`` per message for its index en
 chunk closes; measured by ``eha-hil bench log``). A ``bus run`` log has
 thousands of small messages per simulated second (one decoded-signal sample per
 actuator and MCU step, two fieldbus frames per cycle), and that alone would cost about
-half of the run's own time. :func:`add_messages` builds the records of a whole batch with
-one ``struct.pack`` per message (or a numpy structured array when every payload has the
-same length) and makes exactly the updates ``add_message`` would: statistics (count,
-start and end time, per-channel counts), the chunk builder's message index, count and
-time range, then the chunk-size check; the index of a channel written this way writes its
-entries with one numpy call.
+half of the run's own time. :func:`add_messages` builds the record heads of a whole batch
+as one numpy structured array (with the payloads in it when they all have one length) and
+makes exactly the updates ``add_message`` would: statistics (count, start and end time,
+per-channel counts), the chunk builder's message index, count and time range, then the
+chunk-size check; a channel's index entries are numpy arrays, written with one call
+(:func:`hil.framelog.chunk.write_indexes`). :func:`records` and :func:`add_records`:
+the records of many channels built in place in the chunk's buffer.
 
 These are the Writer's private attributes (mcap 1.x). :func:`supported` checks that they
 are there and have the expected types; if not, :func:`add_messages` falls back to
@@ -31,44 +32,19 @@ import numpy as np
 from mcap.records import MessageIndex, Opcode
 from mcap.writer import Writer
 
-from hil.framelog.chunk import ChunkBuffer
+from hil.framelog.chunk import ChunkBuffer, write_indexes
 
 _HEAD = struct.Struct("<BQHIQQ")  # opcode, record length, channel, sequence, log, publish
-_INDEX_HEAD = struct.Struct("<BQHI")  # opcode, record length, channel, bytes of entries
-_PAIR = struct.Struct("<QQ")  # an index entry: log time, offset in the chunk
 
 
 class _MessageIndex(MessageIndex):
-    """A MessageIndex that writes its (time, offset) pairs with one numpy call instead of
-    two ``struct.pack`` per message (the same bytes)."""
+    """A MessageIndex whose ``records`` may also hold (n, 2) arrays of (time, offset)
+    pairs (from :func:`add_messages` and :func:`add_records`); written in one go, the
+    bytes of the library's record (:func:`hil.framelog.chunk.write_indexes`, which also
+    writes a chunk's indexes when our chunk closing is installed)."""
 
     def write(self, stream) -> None:  # noqa: ANN001 - mcap's RecordBuilder
-        # ``records`` holds (time, offset) pairs and, from :func:`add_messages`, (n, 2)
-        # arrays of them: one array each run of either, in order; the record goes out in
-        # one write (the library's start/finish_record seek back to patch the length)
-        recs = self.records
-        if len(recs) == 1:  # the common case: a channel's one block or batch in a chunk
-            r = recs[0]
-            body = _PAIR.pack(*r) if isinstance(r, tuple) else \
-                r.astype("<u8", copy=False).tobytes()
-            stream.write(_INDEX_HEAD.pack(Opcode.MESSAGE_INDEX, 6 + len(body),
-                                          self.channel_id, len(body)) + body)
-            return
-        parts, pairs = [], []
-        for r in recs:
-            if isinstance(r, np.ndarray):
-                if pairs:
-                    parts.append(np.asarray(pairs, dtype="<u8").reshape(-1, 2))
-                    pairs = []
-                parts.append(r)
-            else:
-                pairs.append(r)
-        if pairs:
-            parts.append(np.asarray(pairs, dtype="<u8").reshape(-1, 2))
-        body = (np.concatenate(parts).astype("<u8", copy=False).tobytes() if len(parts) > 1
-                else parts[0].astype("<u8", copy=False).tobytes() if parts else b"")
-        stream.write(_INDEX_HEAD.pack(Opcode.MESSAGE_INDEX, 6 + len(body), self.channel_id,
-                                      len(body)) + body)
+        write_indexes({self.channel_id: self}, stream, 0, {})
 
 
 def supported(w: Writer) -> bool:

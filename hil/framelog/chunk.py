@@ -192,9 +192,7 @@ def _finalize(w: Writer, compress: Callable[[memoryview], bytes] | None, name: b
     rb = w._Writer__record_builder  # noqa: SLF001
     at = stream.tell()
     if w._Writer__index_types & IndexType.MESSAGE:  # noqa: SLF001
-        for cid, mi in cb.message_indices.items():
-            index.message_index_offsets[cid] = at + rb.count
-            mi.write(rb)
+        write_indexes(cb.message_indices, rb, at + rb.count, index.message_index_offsets)
     index.message_index_length = rb.count
     w._Writer__flush()  # noqa: SLF001
     w._Writer__chunk_indices.append(index)  # noqa: SLF001
@@ -203,3 +201,45 @@ def _finalize(w: Writer, compress: Callable[[memoryview], bytes] | None, name: b
     cb.message_indices.clear()
     cb.message_start_time = 0
     cb.num_messages = 0
+
+
+#: A MessageIndex record of one entry (a channel with one message in the chunk: a block).
+_ONE_INDEX = np.dtype([("op", "u1"), ("len", "<u8"), ("ch", "<u2"), ("n", "<u4"),
+                       ("t", "<u8"), ("off", "<u8")])
+_INDEX_HEAD = struct.Struct("<BQHI")  # opcode, record length, channel, bytes of entries
+_MESSAGE_INDEX_OPCODE = 0x07
+
+
+def write_indexes(indices: dict, rb: object, at: int, offsets: dict[int, int]) -> None:
+    """The chunk's MessageIndex records, in the order of ``indices`` (channel -> an index
+    whose ``records`` are (log time, offset) pairs and (n, 2) arrays of them), as one write
+    to ``rb`` starting at file offset ``at``; ``offsets[channel]`` set to each record's.
+    The bytes the library's ``MessageIndex.write`` makes, one by one; the records of one
+    entry (most: a block channel's one message) built as one array."""
+    items = list(indices.items())
+    one = [i for i, (_, mi) in enumerate(items)
+           if len(mi.records) == 1 and isinstance(mi.records[0], tuple)]
+    ones: dict[int, bytes] = {}
+    if one:
+        arr = np.zeros(len(one), _ONE_INDEX)
+        arr["op"] = _MESSAGE_INDEX_OPCODE
+        arr["len"] = _ONE_INDEX.itemsize - 9
+        arr["ch"] = [items[i][0] for i in one]
+        arr["n"] = 16
+        arr[["t", "off"]] = [items[i][1].records[0] for i in one]
+        blob = arr.tobytes()
+        size = _ONE_INDEX.itemsize
+        ones = {i: blob[j * size:(j + 1) * size] for j, i in enumerate(one)}
+    parts = []
+    pos = at
+    for i, (cid, mi) in enumerate(items):
+        rec = ones.get(i)
+        if rec is None:
+            pairs = [np.asarray(r, dtype="<u8").reshape(-1, 2) for r in mi.records]
+            body = (np.concatenate(pairs) if len(pairs) > 1 else pairs[0] if pairs
+                    else np.zeros((0, 2), "<u8")).astype("<u8", copy=False).tobytes()
+            rec = _INDEX_HEAD.pack(_MESSAGE_INDEX_OPCODE, 6 + len(body), cid, len(body)) + body
+        offsets[cid] = pos
+        parts.append(rec)
+        pos += len(rec)
+    rb.write(b"".join(parts))  # type: ignore[attr-defined]

@@ -9,8 +9,18 @@ from pathlib import Path
 import numpy as np
 import pytest
 import zstandard
+from mcap.data_stream import RecordBuilder
 from mcap.reader import make_reader
-from mcap.records import Chunk, ChunkIndex, DataEnd, Footer, MetadataIndex, SummaryOffset
+from mcap.records import (
+    Chunk,
+    ChunkIndex,
+    DataEnd,
+    Footer,
+    Message,
+    MessageIndex,
+    MetadataIndex,
+    SummaryOffset,
+)
 from mcap.stream_reader import StreamReader, breakup_chunk
 
 from hil.framelog import FrameLogWriter, chunk
@@ -93,3 +103,55 @@ def test_bad_level_is_one_line(tmp_path: Path, compression: str, level: int) -> 
     with pytest.raises(ValueError, match="level|takes no"):
         FrameLogWriter(tmp_path / "x.mcap", compression=compression,  # type: ignore[arg-type]
                        compression_level=level)
+
+
+@pytest.mark.parametrize("compression", ["zstd", "none"])
+def test_every_message_index_entry_points_at_its_message(tmp_path: Path,
+                                                         compression: str) -> None:
+    """The chunk's message indexes (one entry for a channel's one block, many for a
+    channel of single messages), checked record by record with the mcap library: each
+    entry's offset is a Message record of that channel at that log time."""
+    path = tmp_path / "i.mcap"
+    with FrameLogWriter(path, compression=compression, chunk_size=4000,  # type: ignore[arg-type]
+                        flush_every_ns=400) as w:
+        blocks = [w.add_block_channel(f"/b{i}", "eha-hil/x", dtype=np.uint16, width=3)
+                  for i in range(5)]
+        one = w.add_channel("/one", "eha-hil/y")
+        for k in range(6):
+            t = 500 * k + np.arange(4)
+            w.write_blocks(blocks, t, np.full((5, 4, 3), k))
+            for j in range(3):
+                w.write(one, int(t[-1]) + j, bytes([k, j]))
+    records = list(StreamReader(io.BytesIO(path.read_bytes()), emit_chunks=True).records)
+    chunks = {}
+    pos = 0
+    for rec in records:  # chunk records in file order, then the indexes that follow each
+        if isinstance(rec, Chunk):
+            pos += 1
+            chunks[pos] = breakup_chunk(rec, validate_crc=True), []
+        elif isinstance(rec, MessageIndex):
+            chunks[pos][1].append(rec)
+    entries = 0
+    for inner, indexes in chunks.values():
+        offsets, at = {}, 0
+        for r in inner:  # each record's offset inside the uncompressed chunk
+            offsets[at] = r
+            at += _record_length(r)
+        assert {ix.channel_id for ix in indexes} == {r.channel_id for r in inner
+                                                     if isinstance(r, Message)}
+        for ix in indexes:
+            for t, off in ix.records:
+                m = offsets[off]
+                assert isinstance(m, Message) and m.channel_id == ix.channel_id
+                assert m.log_time == t
+                entries += 1
+    assert entries == 6 * 5 + 6 * 3 and len(chunks) >= 6
+    # most channels had one message in a chunk: the one-entry records were written
+    assert sum(len(ix.records) == 1 for _, ixs in chunks.values() for ix in ixs) >= 25
+
+
+def _record_length(r: object) -> int:
+    """Bytes of the record ``r`` as the library writes it (opcode and length included)."""
+    rb = RecordBuilder()
+    r.write(rb)  # type: ignore[attr-defined]
+    return len(rb.end())
