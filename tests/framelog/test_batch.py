@@ -174,3 +174,39 @@ def test_messages_of_many_channels_make_the_same_file(tmp_path, chunk_size: int,
         got.append(sorted((c.topic, m.log_time, m.sequence, m.data)
                           for _, c, m in reader.iter_messages()))
     assert got[0] == got[1] and len(got[0]) == 72
+
+
+def test_messages_filled_in_place_are_the_messages_of_the_array(tmp_path) -> None:  # noqa: ANN001
+    """write_messages_filled (the producer writes the messages into their records) gives
+    the file write_messages_many gives; a fill that raises leaves nothing behind."""
+    import numpy as np
+
+    from hil.framelog import FrameLogReader, FrameLogWriter
+
+    rng = np.random.default_rng(4)
+    m = rng.integers(0, 256, (3, 5, 9)).astype(np.uint8)
+    t = np.arange(5) * 10
+    files = []
+    for filled in (True, False):
+        path = tmp_path / f"{filled}.mcap"
+        with FrameLogWriter(path, compression="none") as w:
+            chs = [w.add_channel(f"/s{i}", "json") for i in range(3)]
+            if filled:
+                def boom(out: np.ndarray) -> None:
+                    out[0] = 1
+                    raise RuntimeError("encoder failed")
+
+                with pytest.raises(RuntimeError, match="encoder"):
+                    w.write_messages_filled(chs, t, 9, boom)
+
+                def fill(out: np.ndarray) -> None:
+                    assert out.shape == (3, 5, 9)
+                    out[...] = m
+
+                w.write_messages_filled(chs, t, 9, fill)
+            else:
+                w.write_messages_many(chs, t, m)
+        files.append(path.read_bytes())
+    assert files[0] == files[1]
+    got = FrameLogReader(tmp_path / "True.mcap")
+    assert [bytes(d) for _, _, d in got.frames(topics=["/s2"])] == [bytes(r) for r in m[2]]
