@@ -218,7 +218,7 @@ def write_indexes(indices: dict, rb: object, at: int, offsets: dict[int, int]) -
     entry (most: a block channel's one message) built as one array."""
     items = list(indices.items())
     one = [i for i, (_, mi) in enumerate(items)
-           if len(mi.records) == 1 and isinstance(mi.records[0], tuple)]
+           if len(mi.records) == 1 and type(mi.records[0]) is tuple]
     ones: dict[int, bytes] = {}
     if one:
         arr = np.zeros(len(one), _ONE_INDEX)
@@ -226,7 +226,8 @@ def write_indexes(indices: dict, rb: object, at: int, offsets: dict[int, int]) -
         arr["len"] = _ONE_INDEX.itemsize - 9
         arr["ch"] = [items[i][0] for i in one]
         arr["n"] = 16
-        arr[["t", "off"]] = [items[i][1].records[0] for i in one]
+        arr["t"] = [items[i][1].records[0][0] for i in one]
+        arr["off"] = [items[i][1].records[0][1] for i in one]
         blob = arr.tobytes()
         size = _ONE_INDEX.itemsize
         ones = {i: blob[j * size:(j + 1) * size] for j, i in enumerate(one)}
@@ -235,9 +236,24 @@ def write_indexes(indices: dict, rb: object, at: int, offsets: dict[int, int]) -
     for i, (cid, mi) in enumerate(items):
         rec = ones.get(i)
         if rec is None:
-            pairs = [np.asarray(r, dtype="<u8").reshape(-1, 2) for r in mi.records]
-            body = (np.concatenate(pairs) if len(pairs) > 1 else pairs[0] if pairs
-                    else np.zeros((0, 2), "<u8")).astype("<u8", copy=False).tobytes()
+            recs = mi.records
+            if len(recs) == 1 and isinstance(recs[0], np.ndarray):  # a batch's entries
+                body = recs[0].astype("<u8", copy=False).tobytes()
+            else:  # runs of single pairs (add_message) as one array each, in order
+                parts_of: list[np.ndarray] = []
+                run: list[tuple[int, int]] = []
+                for r in recs:
+                    if type(r) is tuple:
+                        run.append(r)
+                        continue
+                    if run:
+                        parts_of.append(np.asarray(run, dtype="<u8"))
+                        run = []
+                    parts_of.append(np.asarray(r, dtype="<u8"))
+                if run:
+                    parts_of.append(np.asarray(run, dtype="<u8"))
+                body = (np.concatenate(parts_of) if parts_of else np.zeros((0, 2), "<u8")
+                        ).astype("<u8", copy=False).tobytes()
             rec = _INDEX_HEAD.pack(_MESSAGE_INDEX_OPCODE, 6 + len(body), cid, len(body)) + body
         offsets[cid] = pos
         parts.append(rec)
