@@ -151,18 +151,15 @@ HEAD_FIELDS = [("op", "u1"), ("len", "<u8"), ("ch", "<u2"), ("seq", "<u4"), ("lo
 def records(w: Writer, dtype: np.dtype, n: int) -> tuple[np.ndarray, int | None]:
     """``n`` uninitialised records of ``dtype`` (fields starting with :data:`HEAD_FIELDS`)
     to fill and pass to :func:`add_records`, and where they lie: in the open chunk's
-    :class:`~hil.framelog.chunk.ChunkBuffer` at that offset (the chunk closed first if it
-    holds messages and they would take it over its size), so that they go into the chunk
-    without a copy; or (None) a new array, when the Writer has no such buffer."""
+    :class:`~hil.framelog.chunk.ChunkBuffer` at that offset, so that they go into the chunk
+    without a copy (the chunk closes after them if it is then over its size, as after
+    ``add_message``); or (None) a new array, when the Writer has no such buffer."""
     cb = w._Writer__chunk_builder  # noqa: SLF001 - see the module docstring
     buf = cb.record_writer._buffer  # noqa: SLF001
     if not isinstance(buf, ChunkBuffer):
         return np.empty(n, dtype), None
-    size = n * dtype.itemsize
-    if cb.num_messages and buf.tell() + size > w._Writer__chunk_size:  # noqa: SLF001
-        w._Writer__finalize_chunk()  # noqa: SLF001
     at = buf.tell()
-    return buf.reserve(size).view(dtype), at
+    return buf.reserve(n * dtype.itemsize).view(dtype), at
 
 
 def drop(w: Writer, at: int | None) -> None:

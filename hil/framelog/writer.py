@@ -188,7 +188,9 @@ class FrameLogWriter:
             self._file.close()
             raise ValueError(f"compression {compression!r} unavailable ({exc}); "
                              "use compression='none'") from None
-        chunk.install(self._writer, compression, compression_level, chunk_size)
+        #: records built in place in the chunk (hil.framelog.chunk's buffer installed)
+        self._in_place = chunk.install(self._writer, compression, compression_level,
+                                       chunk_size)
         try:
             self._writer.start(profile=profile, library=f"eha-hil/{package_version()}")
             self._fast = batch.supported(self._writer)
@@ -410,6 +412,9 @@ class FrameLogWriter:
         if n == 0:
             return
         t = _block_times(ch.topic, t)
+        if ch.container and self._fast and self._in_place:  # in the chunk, as write_blocks
+            self._write_block_records([channel_id], [ch], t, f[None])
+            return
         first, last = int(t[0]), int(t[-1])
         self._advance(ch, first, last)
         msg = rawpb.pack_block(t, f, ch.dtype) if ch.container else pack_block(t, f)
@@ -446,7 +451,13 @@ class FrameLogWriter:
             f = self._cast(ch0, f)
         if t.shape[0] == 0:
             return
-        t = _block_times(ch0.topic, t)
+        self._write_block_records(channel_ids, chs, _block_times(ch0.topic, t), f)
+
+    def _write_block_records(self, channel_ids: list[int], chs: list[_Channel],
+                             t: np.ndarray, f: np.ndarray) -> None:
+        """The block messages of ``f[i]`` on ``channel_ids[i]`` (protobuf containers of
+        one dtype and width, checked) at the times ``t`` (checked), built in place in the
+        chunk (:func:`batch.records`, :func:`rawpb.pack_blocks`)."""
         first, last = int(t[0]), int(t[-1])
         for c in sorted(chs, key=lambda c: -c.last_ns):  # a channel that would raise first
             self._advance(c, first, last)
@@ -457,7 +468,7 @@ class FrameLogWriter:
             return rec
 
         try:
-            rec = rawpb.pack_blocks(t, f, ch0.dtype, batch.HEAD_FIELDS, alloc=alloc)
+            rec = rawpb.pack_blocks(t, f, chs[0].dtype, batch.HEAD_FIELDS, alloc=alloc)
         except BaseException:
             batch.drop(self._writer, at[0])  # no half-filled records left in the chunk
             raise

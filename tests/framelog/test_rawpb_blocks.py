@@ -67,3 +67,12 @@ def test_a_block_without_times_is_refused() -> None:
     m.ClearField("t0_ns")
     with pytest.raises(ValueError, match="no t0_ns"):
         rawpb.unpack_block(m.SerializeToString())
+
+
+@pytest.mark.parametrize("width", [1, 4])
+def test_packing_leaves_the_frames_alone(width: int) -> None:
+    frames = np.arange(6 * width, dtype=np.uint32).reshape(1, 6, width) * 0x01010101
+    kept = frames.copy()
+    rec = rawpb.pack_blocks(np.arange(6), frames, np.dtype(np.uint32))
+    assert np.array_equal(frames, kept)
+    assert np.array_equal(rawpb.unpack_block(rec[0].tobytes())[1], kept[0])
