@@ -135,8 +135,9 @@ class FrameLogWriter:
     the last one (None: by size only). ``compression``: ``zstd`` (default), ``lz4`` or
     ``none``; the mcap library depends on ``zstandard`` and ``lz4``, so all three work out
     of the box. ``compression_level``: the codec's level (None: zstd
-    :data:`hil.framelog.chunk.ZSTD_LEVEL`, lz4 its default); chunks are closed by
-    :mod:`hil.framelog.chunk` (one compressor per file, no copy of the chunk).
+    :data:`hil.framelog.chunk.ZSTD_LEVEL`, lz4 its default); chunks are built in one
+    buffer kept for the file and closed by :mod:`hil.framelog.chunk` (one compressor per
+    file, no copy of the chunk; zstd chunks carry zstd's checksum instead of a CRC).
 
     Times must be integers >= 0 (ns of simulated time) and non-decreasing per channel, so
     that each channel reads back in time order.
@@ -459,6 +460,7 @@ class FrameLogWriter:
         one dtype and width, checked) at the times ``t`` (checked), built in place in the
         chunk (:func:`batch.records`, :func:`rawpb.pack_blocks`)."""
         first, last = int(t[0]), int(t[-1])
+        before = [c.last_ns for c in chs]
         for c in sorted(chs, key=lambda c: -c.last_ns):  # a channel that would raise first
             self._advance(c, first, last)
         at: list[int | None] = [None]
@@ -471,6 +473,8 @@ class FrameLogWriter:
             rec = rawpb.pack_blocks(t, f, chs[0].dtype, batch.HEAD_FIELDS, alloc=alloc)
         except BaseException:
             batch.drop(self._writer, at[0])  # no half-filled records left in the chunk
+            for c, t_last in zip(chs, before, strict=True):
+                c.last_ns = t_last
             raise
         batch.add_records(self._writer, channel_ids, t[:1], t[-1:], [c.count for c in chs],
                           rec, at[0])
