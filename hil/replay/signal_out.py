@@ -24,6 +24,10 @@ class SignalOut:
         self._channels.append((message, cid, handle))
         return len(self._channels) - 1
 
+    def message(self, channel: int) -> MessageType:
+        """The message type of ``channel``."""
+        return self._channels[channel][0]
+
     def write(self, channel: int, t_ns: np.ndarray, columns: dict[str, np.ndarray]) -> None:
         message, cid, handle = self._channels[channel]
         n = len(t_ns)
@@ -45,7 +49,15 @@ class SignalOut:
         if not k:
             return
         message = self._channels[channels[0]][0]
-        payloads = message.encode_array(columns, len(channels) * k)
+        self.write_encoded(channels, t_ns, message.encode_array(columns, len(channels) * k))
+
+    def write_encoded(self, channels: list[int], t_ns: np.ndarray,
+                      payloads: np.ndarray) -> None:
+        """:meth:`write_split` of messages already encoded: ``payloads``
+        (``len(channels) * k``, size) uint8, channel-major."""
+        k = len(t_ns)
+        if not channels or not k:
+            return
         if self.log is not None:  # one record array for all channels
             self.log.write_messages_many([self._channels[c][1] for c in channels], t_ns,
                                          payloads.reshape(len(channels), k, -1))
