@@ -89,6 +89,13 @@ class RobotRecorder:
         self.in_t = np.zeros(c, np.int64)
         self.n_cycles = 0
         self._taken = False  # outputs taken for a cycle that has not ended (yet)
+        # per cycle (1 kHz): what the two hooks below read, looked up once
+        self._box_first = np.asarray(engine._first[:-1], np.intp)
+        self._other_inputs = [(r, b.inputs) for r, b in zip(self.other_in, self.others,
+                                                             strict=True)]
+        self._rows = 0  # the tap's rows filled (tap.row[0], as a Python int)
+        #: the last row at which a cycle's steps still fit the tap
+        self._last_row_start = rows - engine.cycle_ticks // self.period
         self.carry = SG.PistonCarry.start(n)
         #: per engine box: the index of its first actuator in the engine's order
         self.first_act = np.cumsum([0] + [len(b.act) for b in engine.boxes])[:-1].tolist()
@@ -155,21 +162,21 @@ class RobotRecorder:
     def took_outputs(self, tick: int) -> None:
         e, c = self.engine, self.n_cycles
         self.out_rows[c] = e.out_image
-        self.out_got[c] = e._got[e._first[:-1]]
+        np.take(e._got, self._box_first, out=self.out_got[c])
         self.out_t[c] = tick
         self._taken = True
 
     def finished(self, tick: int, periods: int) -> None:
         c = self.n_cycles
         self.in_rows[c] = self.engine.in_image
-        for rows, b in zip(self.other_in, self.others, strict=True):
-            rows[c] = np.frombuffer(b.inputs(), np.uint8)
+        for rows, inputs in self._other_inputs:
+            rows[c] = np.frombuffer(inputs(), np.uint8)
         self.in_t[c] = tick
         self._taken = False
         self.n_cycles = c + 1
-        self.tap.row[0] += periods
-        room = self.tap.up.shape[1] - int(self.tap.row[0])
-        if self.n_cycles == self.cycles or room < self.engine.cycle_ticks // self.period:
+        self._rows += periods
+        self.tap.row[0] = self._rows
+        if self.n_cycles == self.cycles or self._rows > self._last_row_start:
             self.flush()
 
     # --- writing a block -----------------------------------------------------------------
@@ -181,7 +188,7 @@ class RobotRecorder:
         c_out = c + self._taken  # the run's last outputs, taken for a cycle never run
         self.n_cycles = 0
         self._taken = False
-        self.tap.row[0] = 0
+        self.tap.row[0] = self._rows = 0
         if not c_out and not r:
             return
         end = int(self.in_t[c - 1]) if c else self.engine.tick
