@@ -241,15 +241,10 @@ class RobotRecorder:
                 groups.setdefault(key, []).append((n_box, outs[1]))
                 times[key] = outs[0]
         # the steps first: their reads' validity is the box reports' piston flags
-        steps = None
-        if self.encoder is not None:
-            steps = self.encoder.encode(k.up, k.down, self.carry, k.t_steps, k.out_t,
-                                        k.out_rows, k.out_got)
+        self._write_steps(k)
         flags = SG.report_flags(self.carry, k.t_steps, k.in_t) if c else None
         for key, members in groups.items():
             self._write_records(key[0], times[key], members, flags)
-        if len(k.t_steps):
-            self._write_steps(k, steps)
 
     def _write_records(self, d: str, t: np.ndarray, members: list[tuple[int, np.ndarray]],
                        flags: tuple[np.ndarray, np.ndarray] | None) -> None:
@@ -277,11 +272,14 @@ class RobotRecorder:
                                      rows.reshape(-1, rows.shape[2]), piston)
             self.out.write_split(sig, t_ns, cols)
 
-    def _write_steps(self, k: _Block, steps: tuple[np.ndarray, np.ndarray] | None) -> None:
+    def _write_steps(self, k: _Block) -> None:
+        """The block's MCU steps: their raw words (and traces), and every actuator's
+        decoded signals, encoded into their places in the log (this moves
+        :attr:`carry` on, also when no step of the block is kept)."""
         ns, log, n = self.ns, self.log, self.engine.n
         t_steps, up, down = k.t_steps, k.up, k.down
         r = len(t_steps)
-        if log is not None:
+        if log is not None and r:
             t = t_steps * ns
             log.write_blocks(self.ch_up, t, up)  # one record array for every actuator
             log.write_blocks(self.ch_down, t, down)
@@ -295,10 +293,18 @@ class RobotRecorder:
                         tw, words = LK.line_words(tr[:, TRACE_WORDS + d * LK.WORDS_W:], tt)
                         if len(tw):
                             log.write_block(ch, tw, words[:, None])
-        if steps is None or not len(steps[0]):
+        enc = self.encoder
+        if enc is None:
             return
-        keep, messages = steps
-        self.out.write_encoded(self.sig_act, t_steps[keep] * ns, messages)
+
+        def encode(out: np.ndarray | None = None) -> None:
+            enc.encode(up, down, self.carry, t_steps, k.out_t, k.out_rows, k.out_got, out)
+
+        keep = enc.kept(r)
+        if len(keep):
+            self.out.write_filled(self.sig_act, t_steps[keep] * ns, enc.message.size, encode)
+        else:
+            encode()
 
 
 @dataclass

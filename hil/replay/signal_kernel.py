@@ -84,41 +84,42 @@ if sys.byteorder != "little":  # the stores below write the machine's own byte o
 
 
 @intrinsic
-def _store(typingctx, buf, at, value):
-    """``value`` (a float64 or integer scalar) stored in its own byte width at byte ``at``
-    of the contiguous uint8 array ``buf``, unaligned: one store where a byte loop would
-    take eight (a protobuf value follows its one-byte key, so it is never aligned)."""
-    if not (isinstance(buf, types.Array) and buf.dtype == types.uint8
+def _store(typingctx, buf, row, at, value):
+    """``value`` (a float64 or integer scalar) stored in its own byte width at
+    ``buf[row, at]`` (``buf`` a 2-D uint8 array, rows of any stride), unaligned: one store
+    where a byte loop would take eight (a protobuf value follows its one-byte key, so it
+    is never aligned)."""
+    if not (isinstance(buf, types.Array) and buf.dtype == types.uint8 and buf.ndim == 2
             and isinstance(value, (types.Float, types.Integer))):
         return None
 
     def codegen(context, builder, signature, args):
         aryty = signature.args[0]
         ary = context.make_array(aryty)(context, builder, args[0])
-        ptr = cgutils.get_item_pointer(context, builder, aryty, ary, [args[1]])
-        vty = context.get_value_type(signature.args[2])
-        builder.store(args[2], builder.bitcast(ptr, vty.as_pointer()), align=1)
+        ptr = cgutils.get_item_pointer(context, builder, aryty, ary, [args[1], args[2]])
+        vty = context.get_value_type(signature.args[3])
+        builder.store(args[3], builder.bitcast(ptr, vty.as_pointer()), align=1)
         return context.get_dummy_value()
 
-    return types.void(buf, at, value), codegen
+    return types.void(buf, row, at, value), codegen
 
 
 @njit(cache=True, inline="always")
-def _f8(out, at, off, x):
+def _f8(out, row, off, x):
     if off >= 0:
-        _store(out, at + off, np.float64(x))
+        _store(out, row, off, np.float64(x))
 
 
 @njit(cache=True, inline="always")
-def _u4(out, at, off, v):
+def _u4(out, row, off, v):
     if off >= 0:
-        _store(out, at + off, np.uint32(v & 0xFFFFFFFF))
+        _store(out, row, off, np.uint32(v & 0xFFFFFFFF))
 
 
 @njit(cache=True, inline="always")
-def _b1(out, at, off, v):
+def _b1(out, row, off, v):
     if off >= 0:
-        out[at + off] = 1 if v else 0
+        out[row, off] = 1 if v else 0
 
 
 @njit(cache=True, inline="always")
@@ -134,7 +135,7 @@ def _count(up, j, i):
 
 
 @njit(cache=True, nogil=True)
-def _encode(up, down, every, out, stride, base, off, upstream, areg, av0, amul, adiv,
+def _encode(up, down, every, out, off, upstream, areg, av0, amul, adiv,
             fk, ik, carry_x, carry_count, carry_off, carry_valid, carry_started, step_valid,
             tick_keep, out_t, out_rows, out_got, box_of, slot_off, last_have, last_t,
             last_img, box_lo, box_hi):
@@ -205,29 +206,28 @@ def _encode(up, down, every, out, stride, base, off, upstream, areg, av0, amul, 
             command = np.int64(np.int32(np.uint32(rec[o + 2]) | (np.uint32(rec[o + 3]) << 8)
                                         | (np.uint32(rec[o + 4]) << 16)
                                         | (np.uint32(rec[o + 5]) << 24)))
-            at = row * stride + base
-            _u4(out, at, off[F_PC_MODE], mode)
-            _b1(out, at, off[F_PC_ENABLE], have and (flags & ik[2]) != 0)
-            _f8(out, at, off[F_FORCE],
+            _u4(out, row, off[F_PC_MODE], mode)
+            _b1(out, row, off[F_PC_ENABLE], have and (flags & ik[2]) != 0)
+            _f8(out, row, off[F_FORCE],
                 np.float64(command) * fk[6] if mode == ik[3] else math.nan)
-            _f8(out, at, off[F_POSITION],
+            _f8(out, row, off[F_POSITION],
                 np.float64(command) * fk[7] if mode == ik[4] else math.nan)
             # what the MCU wrote
-            _f8(out, at, off[F_IQ_REF], _s16(np.int64(down[j, i, B.D_IQ_REF])) * 1e-3)
-            _f8(out, at, off[F_ID_REF], _s16(np.int64(down[j, i, B.D_ID_REF])) * 1e-3)
-            _f8(out, at, off[F_VQ_FF], _s16(np.int64(down[j, i, B.D_VQ_FF])) * 1e-3)
-            _u4(out, at, off[F_BOARD_MODE], np.int64(down[j, i, B.D_MODE]) & 0xFFFF)
-            _u4(out, at, off[F_BOARD_CONTROL],
+            _f8(out, row, off[F_IQ_REF], _s16(np.int64(down[j, i, B.D_IQ_REF])) * 1e-3)
+            _f8(out, row, off[F_ID_REF], _s16(np.int64(down[j, i, B.D_ID_REF])) * 1e-3)
+            _f8(out, row, off[F_VQ_FF], _s16(np.int64(down[j, i, B.D_VQ_FF])) * 1e-3)
+            _u4(out, row, off[F_BOARD_MODE], np.int64(down[j, i, B.D_MODE]) & 0xFFFF)
+            _u4(out, row, off[F_BOARD_CONTROL],
                 np.int64(down[j, i, B.D_CONTROL]) & 0xFFFF)
             # what it read (measure.upstream_si, signals.actuator_columns)
             for q in range(na):
                 w = np.int64(up[j, i, areg[q]]) & 0xFFFF
                 si[q] = (w * fk[0] - av0[q]) * amul[q] / adiv[q]
-                _f8(out, at, off[F_ANALOG + q], si[q])
-            _f8(out, at, off[F_F_PRESSURE], fk[1] * (si[ik[5]] - si[ik[6]]))
+                _f8(out, row, off[F_ANALOG + q], si[q])
+            _f8(out, row, off[F_F_PRESSURE], fk[1] * (si[ik[5]] - si[ik[6]]))
             code = ((np.int64(up[j, i, B.U_STRAIN_HI]) & 0xFF) << 16) | (
                 np.int64(up[j, i, B.U_STRAIN_LO]) & 0xFFFF)
-            _f8(out, at, off[F_F_STRAIN], (code - ik[0]) * fk[2])
+            _f8(out, row, off[F_F_STRAIN], (code - ik[0]) * fk[2])
             x = x_all[i]
             if i == 0:
                 xb = carry_x[j]
@@ -235,39 +235,39 @@ def _encode(up, down, every, out, stride, base, off, upstream, areg, av0, amul, 
             else:
                 xb = x_all[i - 1]
                 vb = step_valid[j, i - 1]
-            _f8(out, at, off[F_X], x)
-            _f8(out, at, off[F_V], (x - xb) / fk[5])
-            _f8(out, at, off[F_OMEGA], _s16(np.int64(up[j, i, B.U_SPEED])) * fk[4])
-            _f8(out, at, off[F_IQ], _s16(np.int64(up[j, i, B.U_IQ])) * 1e-3)
-            _f8(out, at, off[F_ID], _s16(np.int64(up[j, i, B.U_ID])) * 1e-3)
-            _f8(out, at, off[F_IA], _s16(np.int64(up[j, i, B.U_IA])) * 1e-3)
-            _f8(out, at, off[F_IB], _s16(np.int64(up[j, i, B.U_IB])) * 1e-3)
-            _f8(out, at, off[F_VD], _s16(np.int64(up[j, i, B.U_VD_OUT])) * 1e-3)
-            _f8(out, at, off[F_VQ], _s16(np.int64(up[j, i, B.U_VQ_OUT])) * 1e-3)
+            _f8(out, row, off[F_X], x)
+            _f8(out, row, off[F_V], (x - xb) / fk[5])
+            _f8(out, row, off[F_OMEGA], _s16(np.int64(up[j, i, B.U_SPEED])) * fk[4])
+            _f8(out, row, off[F_IQ], _s16(np.int64(up[j, i, B.U_IQ])) * 1e-3)
+            _f8(out, row, off[F_ID], _s16(np.int64(up[j, i, B.U_ID])) * 1e-3)
+            _f8(out, row, off[F_IA], _s16(np.int64(up[j, i, B.U_IA])) * 1e-3)
+            _f8(out, row, off[F_IB], _s16(np.int64(up[j, i, B.U_IB])) * 1e-3)
+            _f8(out, row, off[F_VD], _s16(np.int64(up[j, i, B.U_VD_OUT])) * 1e-3)
+            _f8(out, row, off[F_VQ], _s16(np.int64(up[j, i, B.U_VQ_OUT])) * 1e-3)
             status = np.int64(up[j, i, B.U_STATUS]) & 0xFFFF
-            _u4(out, at, off[F_STATUS], status)
-            _u4(out, at, off[F_STATE], np.int64(up[j, i, B.U_STATE]) & 0xFFFF)
+            _u4(out, row, off[F_STATUS], status)
+            _u4(out, row, off[F_STATE], np.int64(up[j, i, B.U_STATE]) & 0xFFFF)
             for q in range(_N_STATUS):
-                _b1(out, at, off[F_STATUS_BITS + q], (status >> q) & 1)
-            _u4(out, at, off[F_ERR_SSI], np.int64(up[j, i, B.U_ERR_SSI]) & 0xFFFF)
-            _u4(out, at, off[F_ERR_BISS], np.int64(up[j, i, B.U_ERR_BISS]) & 0xFFFF)
-            _u4(out, at, off[F_ERR_STRAIN],
+                _b1(out, row, off[F_STATUS_BITS + q], (status >> q) & 1)
+            _u4(out, row, off[F_ERR_SSI], np.int64(up[j, i, B.U_ERR_SSI]) & 0xFFFF)
+            _u4(out, row, off[F_ERR_BISS], np.int64(up[j, i, B.U_ERR_BISS]) & 0xFFFF)
+            _u4(out, row, off[F_ERR_STRAIN],
                 np.int64(up[j, i, B.U_ERR_STRAIN]) & 0xFFFF)
-            _u4(out, at, off[F_ERR_LINK_DOWN],
+            _u4(out, row, off[F_ERR_LINK_DOWN],
                 np.int64(up[j, i, B.U_ERR_LINK_CRC]) & 0xFFFF)
-            _u4(out, at, off[F_ERR_LINK_UP],
+            _u4(out, row, off[F_ERR_LINK_UP],
                 (np.int64(up[j, i, B.UP_WORDS]) & 0xFFFF)
                 | ((np.int64(up[j, i, B.UP_WORDS + 1]) & 0xFFFF) << 16))
-            _u4(out, at, off[F_OC_TRIPS], np.int64(up[j, i, B.U_OC_TRIPS]) & 0xFFFF)
-            _u4(out, at, off[F_WD_TRIPS], np.int64(up[j, i, B.U_WD_TRIPS]) & 0xFFFF)
+            _u4(out, row, off[F_OC_TRIPS], np.int64(up[j, i, B.U_OC_TRIPS]) & 0xFFFF)
+            _u4(out, row, off[F_WD_TRIPS], np.int64(up[j, i, B.U_WD_TRIPS]) & 0xFFFF)
             xv = step_valid[j, i]
-            _b1(out, at, off[F_X_VALID], xv)
-            _b1(out, at, off[F_V_VALID], xv and vb and np.isfinite(xb))
+            _b1(out, row, off[F_X_VALID], xv)
+            _b1(out, row, off[F_V_VALID], xv and vb and np.isfinite(xb))
             up_ok = x == x  # the sweeps had started at this step: x is a number then
-            _b1(out, at, off[F_UP_VALID], up_ok)
+            _b1(out, row, off[F_UP_VALID], up_ok)
             if not up_ok:
                 for q in range(upstream.shape[0]):
-                    _f8(out, at, off[upstream[q]], math.nan)
+                    _f8(out, row, off[upstream[q]], math.nan)
         carry_x[j] = x_all[n - 1]
         carry_valid[j] = step_valid[j, n - 1]
     # the boxes' last output records, for the next block
@@ -327,27 +327,31 @@ class ActuatorEncoder:
         self.last_t = np.zeros(nb, np.int64)
         self.last_img = np.zeros(max(image_bytes, 6), np.uint8)
 
+    def kept(self, n: int) -> np.ndarray:
+        """Which of ``n`` steps :meth:`encode` keeps (the last of every ``every``)."""
+        return np.arange(self.every - 1, n, self.every)
+
     def encode(self, up: np.ndarray, down: np.ndarray, carry: SG.PistonCarry,
                step_ticks: np.ndarray, out_t: np.ndarray, out_rows: np.ndarray,
-               out_got: np.ndarray, out: np.ndarray | None = None, base: int = 0
+               out_got: np.ndarray, out: np.ndarray | None = None
                ) -> tuple[np.ndarray, np.ndarray]:
         """The messages of ``n`` consecutive MCU steps (ticks ``step_ticks``) of every
         actuator: ``up`` (a, n, 34) uint16, ``down`` (a, n, >= 13) uint16; the cycles'
         output images ``out_rows`` (c, image bytes) taken at ticks ``out_t`` (c,), which
         boxes received theirs ``out_got`` (c, boxes). Returns (the kept steps' indices (k,),
         the messages (a * k, size) uint8, actuator-major) and updates ``carry``. ``out``
-        (a * k, >= base + size) uint8: write each message at ``base`` of its row there
-        (e.g. behind an MCAP record head) and return it."""
+        (a * k, size) uint8, rows of any stride (e.g. the messages' places in their MCAP
+        records, :meth:`~hil.framelog.writer.FrameLogWriter.write_messages_filled`): the
+        messages are written there, every byte, and it is returned."""
         a, n = up.shape[:2]
         every = self.every
-        keep = np.arange(every - 1, n, every)
+        keep = self.kept(n)
         k = len(keep)
         size = len(self.blank)
         if out is None:
             out = np.empty((a * k, size), np.uint8)
-        if not out.flags.c_contiguous or out.shape[0] != a * k or out.shape[1] < base + size:
-            raise ValueError(f"need out ({a * k}, >= {base + size}) contiguous, "
-                             f"got {out.shape}")
+        if out.shape != (a * k, size) or out.dtype != np.uint8 or out.strides[1] != 1:
+            raise ValueError(f"need out ({a * k}, {size}) uint8, got {out.shape} {out.dtype}")
         if not n:
             carry.valid_in, carry.step_valid = carry.valid, np.zeros((a, 0), bool)
             return keep, out
@@ -355,8 +359,8 @@ class ActuatorEncoder:
             carry.count = measure.piston_count(up[:, 0])
         carry.valid_in = carry.valid.copy()
         step_valid = np.empty((a, n), bool)
-        out[:, base:base + size] = self.blank  # every key; the kernel writes every value
-        _encode(up, down, every, out.reshape(-1), out.shape[1], base, self.off,
+        out[:] = self.blank  # every key; the kernel writes every value
+        _encode(up, down, every, out, self.off,
                 _UPSTREAM, self.areg, self.av0, self.amul, self.adiv, self.fk, self.ik,
                 carry.x, carry.count, carry.offset, carry.valid, carry.started, step_valid,
                 np.ascontiguousarray(step_ticks[keep], np.int64),
@@ -374,6 +378,8 @@ def warm_up(cal: FirmwareCalibration) -> None:
     down = np.zeros((1, 2, B.DOWN_WORDS), np.uint16)
     enc = ActuatorEncoder(cal, SG.ACTUATOR, 200e-6, 1, [0], [0], [(0, _OUT.itemsize)],
                           _OUT.itemsize)
-    enc.encode(room[:, :1], down[:, :1], SG.PistonCarry.start(1), np.zeros(1, np.int64),
-               np.zeros(1, np.int64), np.zeros((1, _OUT.itemsize), np.uint8),
-               np.ones((1, 1), bool))
+    records = np.zeros((1, SG.ACTUATOR.size + 1), np.uint8)
+    for out in (None, records[:, 1:]):  # an array of its own; places in records
+        enc.encode(room[:, :1], down[:, :1], SG.PistonCarry.start(1), np.zeros(1, np.int64),
+                   np.zeros(1, np.int64), np.zeros((1, _OUT.itemsize), np.uint8),
+                   np.ones((1, 1), bool), out)

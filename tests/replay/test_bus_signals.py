@@ -12,7 +12,7 @@ def test_frames_and_wkc_per_cycle_equal_a_frame_by_frame_count():
     rng = np.random.default_rng(2)
     frames, rx, ends = [], [], []
     want_frames, want_wkc = [], []
-    for cycle in range(40):
+    for _ in range(40):
         sent = wkc = 0
         for _ in range(int(rng.integers(0, 5))):  # some cycles have no frame at all
             is_rx = bool(rng.integers(0, 2))

@@ -64,7 +64,9 @@ def test_the_compiled_signals_are_the_reference_byte_for_byte(unfitted, every):
     msg = SG.actuator_message(unfitted)
     a, n = 3, 50
     enc = ActuatorEncoder(cal, msg, 200e-6, every, BOX_OF, SLOT_OFF, SPANS, 3 * SLOT)
+    own = ActuatorEncoder(cal, msg, 200e-6, every, BOX_OF, SLOT_OFF, SPANS, 3 * SLOT)
     ref_carry, carry = SG.PistonCarry.start(a), SG.PistonCarry.start(a)
+    own_carry = SG.PistonCarry.start(a)
     last = [(np.zeros(0, np.int64), np.zeros((0, hi - lo), np.uint8)) for lo, hi in SPANS]
     rng = np.random.default_rng(5)
     tick0 = 0
@@ -84,13 +86,16 @@ def test_the_compiled_signals_are_the_reference_byte_for_byte(unfitted, every):
         cols.update(SG.pc_command_block([(*box_out[0], _Box, 0), (*box_out[0], _Box, 1),
                                          (*box_out[1], _Box, 0)], t_steps[keep]))
         want = msg.encode_array(cols, a * len(keep))
-        # behind a 7-byte head in rows of 9 more bytes, as behind an MCAP record head
+        # behind a 7-byte head in rows of 9 more bytes, as in their MCAP records
         rows = np.full((a * len(keep), 7 + msg.size + 2), 0xEE, np.uint8)
         got_keep, got = enc.encode(up, down, carry, t_steps, out_t, out_rows, out_got,
-                                   out=rows, base=7)
+                                   out=rows[:, 7:7 + msg.size])
         assert got_keep.tolist() == keep.tolist()
-        assert np.array_equal(got[:, 7:7 + msg.size], want), blk
-        assert (got[:, :7] == 0xEE).all() and (got[:, -2:] == 0xEE).all()
+        assert np.array_equal(got, want) and np.array_equal(rows[:, 7:7 + msg.size], want)
+        assert (rows[:, :7] == 0xEE).all() and (rows[:, -2:] == 0xEE).all()
+        # into an array of its own (a second encoder in step with the first)
+        assert np.array_equal(own.encode(up, down, own_carry, t_steps, out_t, out_rows,
+                                         out_got)[1], want)
         for name in ("x", "count", "offset", "valid", "started", "valid_in", "step_valid"):
             assert np.array_equal(getattr(carry, name), getattr(ref_carry, name),
                                   equal_nan=True), (blk, name)
