@@ -337,8 +337,8 @@ def replay_metadata(topo: Topology, cfg: Config, boxes: list, model: str,
 
 class BusSignals:
     """``/signals/bus``: the master's counters and the WKC of each cycle, from the frames
-    the run's tap keeps for the log (:attr:`frames`, :attr:`rx`: appended per frame, a
-    block's worth at a time), counted a block at a time in :meth:`flush`."""
+    the run's tap keeps for the log (:attr:`frames`, appended per frame, a block's worth
+    at a time), counted a block at a time in :meth:`flush`."""
 
     def __init__(self, out: SignalOut, master: Master, tick_ns: int) -> None:
         self.out = out
@@ -347,9 +347,8 @@ class BusSignals:
         self.ch = out.add(BUS_SIGNAL_TOPIC, SG.BUS)
         self.wkc_expected = sum(w for _, _, w in master.plan.frames)
         self.rows: list[tuple[int, ...]] = []
-        #: the block's frames and whether each is a reply, as the tap saw them
+        #: the block's frames, as the tap saw them
         self.frames: list[bytes] = []
-        self.rx: list[bool] = []
 
     def end_cycle(self) -> None:
         """Called at the start of each cycle but the first, and once after the last."""
@@ -358,11 +357,11 @@ class BusSignals:
         self.rows.append((m.cycle - 1, len(self.frames), st.frames_sent, st.frames_ok,
                           st.wkc_errors, st.bad_frames, st.stale_frames, st.lost_frames))
 
-    def flush(self) -> None:
-        """Write the block's cycles and forget its frames."""
+    def flush(self, rx: np.ndarray) -> None:
+        """Write the block's cycles and forget its frames (``rx``: which are replies)."""
         if self.rows:
             a = np.array(self.rows, dtype=np.int64)
-            frames, wkc = _frames_and_wkc(self.frames, self.rx, a[:, 1])
+            frames, wkc = _frames_and_wkc(self.frames, rx, a[:, 1])
             cols = {"cycle": a[:, 0], "frames": frames, "wkc": wkc,
                     "wkc_expected": self.wkc_expected,
                     **{name: a[:, 2 + i] for i, name in enumerate(SG.MASTER_COUNTERS)}}
@@ -370,10 +369,9 @@ class BusSignals:
             self.out.write(self.ch, (a[:, 0] + 1) * CYCLE_TICKS * self.tick_ns - 1, cols)
             self.rows = []
         self.frames.clear()
-        self.rx.clear()
 
 
-def _frames_and_wkc(frames: list[bytes], rx: list[bool], ends: np.ndarray
+def _frames_and_wkc(frames: list[bytes], rx: np.ndarray | list[bool], ends: np.ndarray
                     ) -> tuple[np.ndarray, np.ndarray]:
     """Per cycle (its frames end at index ``ends[i]`` of ``frames``): the frames sent, and
     the sum of its replies' working counters, the 2 bytes before the FCS (the master
@@ -428,22 +426,20 @@ def run_logged(topo: Topology, cfg: Config, cycles: int, pc: Callable[[int, Mast
         bus_sig: BusSignals | None = None
         # the frames of the last cycles, kept for /signals/bus and the log and written
         # once per FLUSH_CYCLES (a message at a time costs ~9 us, see hil.framelog.batch)
-        bus_t: list[int] = []
+        bus_t: list[int] = []  # a reply 1 ns after its cycle's tick (as in the log)
         bus_frames: list[bytes] = []
-        bus_rx: list[bool] = []
 
         def tap(cycle: int, tick: int, frame: bytes, direction: str) -> None:
-            rx = direction == "rx"
-            bus_t.append(tick * tick_ns + rx)
+            bus_t.append(tick * tick_ns + (direction == "rx"))
             bus_frames.append(bytes(frame))
-            bus_rx.append(rx)
             if capture is not None:
                 capture(cycle, tick, frame, direction)
 
         def flush_block() -> None:
+            t = np.array(bus_t, dtype=np.int64)
             if bus_frames and ch_bus is not None:
-                log.write_messages(ch_bus, np.array(bus_t, dtype=np.int64), bus_frames)
-            bus_sig.flush()  # (clears bus_frames and bus_rx)
+                log.write_messages(ch_bus, t, bus_frames)
+            bus_sig.flush(t % tick_ns != 0)  # (clears bus_frames)
             bus_t.clear()
 
         def pc_signals(cycle: int, m: Master) -> None:
@@ -455,7 +451,7 @@ def run_logged(topo: Topology, cfg: Config, cycles: int, pc: Callable[[int, Mast
 
         with BusSystem(topo, cfg, "inproc", model=model, tap=tap) as bs:
             bus_sig = BusSignals(out, bs.master, tick_ns)
-            bus_sig.frames, bus_sig.rx = bus_frames, bus_rx  # the tap's lists
+            bus_sig.frames = bus_frames  # the tap's
             engine = bs.chain.engine
             if engine is None:
                 boxes = [RecordingStackBox(b, cfg, log, out) for b in topo.boxes]
