@@ -51,7 +51,8 @@ class SignalOut:
         if not k:
             return
         message = self._channels[channels[0]][0]
-        self.write_encoded(channels, t_ns, message.encode_array(columns, len(channels) * k))
+        self.write_filled(channels, t_ns, message.size,
+                          lambda out: message.encode_into(columns, out))
 
     def write_filled(self, channels: list[int], t_ns: np.ndarray, size: int,
                      fill: Callable[[np.ndarray], None]) -> None:
