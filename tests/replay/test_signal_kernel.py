@@ -117,3 +117,28 @@ def test_a_message_type_with_foreign_fields_is_refused():
     other = MessageType("eha_hil.Other", (Field("speed", "double"),))
     with pytest.raises(ValueError, match="speed"):
         ActuatorEncoder(calibration(load_config(None)), other, 200e-6, 5, [], [], [], 0)
+
+
+def test_messages_encoded_into_records_are_the_stock_decoders_messages():
+    """``MessageType.encode_into`` rows of a wider array (as the messages' places in their
+    MCAP records): the protobuf runtime parses each row back to the values, and the bytes
+    around the rows are left alone."""
+    from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
+
+    rng = np.random.default_rng(4)
+    msg = SG.BUS
+    n = 6
+    cols = {f.name: rng.integers(0, 1000, n) for f in msg.fields}
+    room = np.full((n, msg.size + 11), 0xEE, np.uint8)
+    msg.encode_into(cols, room[:, 5:5 + msg.size])
+    assert (room[:, :5] == 0xEE).all() and (room[:, 5 + msg.size:] == 0xEE).all()
+    pool = descriptor_pool.DescriptorPool()
+    for fd in descriptor_pb2.FileDescriptorSet.FromString(msg.schema).file:
+        pool.Add(fd)
+    cls = message_factory.GetMessageClass(pool.FindMessageTypeByName(msg.full_name))
+    for i in range(n):
+        parsed = cls.FromString(room[i, 5:5 + msg.size].tobytes())
+        assert [getattr(parsed, f.name) for f in msg.fields] == \
+            [int(cols[f.name][i]) for f in msg.fields]
+    with pytest.raises(ValueError, match="rows"):
+        msg.encode_into(cols, np.zeros((n, msg.size + 1), np.uint8))
