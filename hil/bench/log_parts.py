@@ -45,6 +45,12 @@ PARTS: tuple[tuple[str, str, str], ...] = (
     ("hil.replay.robot_record", "RobotRecorder.finished", "producer"),
     ("hil.replay.robot_record", "RobotRecorder._write_records", "producer"),
     ("hil.replay.robot_record", "RobotRecorder._write_steps", "producer"),
+    ("hil.replay.robot_record", "RobotRecorder._write", "producer"),
+    ("hil.replay.signal_kernel", "ActuatorEncoder.encode", "producer"),
+    ("hil.replay.signal_out", "SignalOut.write_split", "producer"),
+    ("hil.replay.signal_out", "SignalOut.write_filled", "producer"),
+    ("hil.replay.record", "BusSignals.end_cycle", "producer"),
+    ("hil.replay.record", "BusSignals.flush", "producer"),
 )
 
 
