@@ -24,6 +24,7 @@ import ctypes
 import ctypes.util
 import platform
 import threading
+import time
 import weakref
 from collections.abc import Callable, Sequence
 
@@ -49,9 +50,14 @@ _CTL_WORDS = 32
 #: A posted job: two int64 values the helpers read after :func:`await_post`.
 JOB_A, JOB_B = 0, 1
 
-#: Spins before a waiting thread sleeps: ~1-3 us on this machine's cores, about what a
-#: futex sleep and wake-up costs, so a hand-off that comes that soon costs no system call.
-SPINS = 200
+#: Spins (the CPU's pause: ~25 ns each on the project's AMD EPYC cores) before a waiting
+#: thread sleeps. A helper waits for the next cycle, which in a lockstep run comes after
+#: the master's and the PC loop's Python (~50 us) and paced by the wall clock after up to
+#: a millisecond: spinning for that long would cost more CPU than the sleep and wake-up
+#: (a few us), so it hardly spins. The joiner waits for the helpers' last batch, often a
+#: few us away: it spins ~2.5 us first.
+SPINS_WAIT = 20
+SPINS_JOIN = 100
 
 if _SYS_FUTEX is not None:
     _libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
@@ -196,14 +202,14 @@ class ComputeThreads:
     :meth:`close`. :meth:`post` starts a cycle on all of them, :meth:`join` waits for it.
     Closed when garbage collected too (the threads are daemons holding only ``args``)."""
 
-    def __init__(self, serve: Callable, args: Sequence[tuple], spins: int = SPINS,
-                 name: str = "compute") -> None:
+    def __init__(self, serve: Callable, args: Sequence[tuple], spins: int = SPINS_WAIT,
+                 join_spins: int = SPINS_JOIN, name: str = "compute") -> None:
         if _SYS_FUTEX is None:
             raise RuntimeError(f"compute threads need Linux futexes on x86_64 or aarch64, "
                                f"not {platform.machine()}")
         self.ctl = np.zeros(_CTL_WORDS, dtype=np.int32)
         self.job = np.zeros(2, dtype=np.int64)
-        self.spins = spins
+        self.join_spins = join_spins
         self.helpers = len(args)
         self._timeout = np.array([0, 100_000_000], dtype=np.int64)  # 0.1 s: look, wait on
         self._pending = False
@@ -229,16 +235,22 @@ class ComputeThreads:
         self._pending = True
         post(self.ctl, self.job, a, b)
 
-    def join(self) -> None:
-        """Wait until every helper has finished the posted cycle (none posted: return)."""
+    def join(self, timeout_s: float | None = None) -> bool:
+        """Wait until every helper has finished the posted cycle (none posted: at once):
+        True; False if ``timeout_s`` (None: no limit) passed first (the cycle stays
+        posted). Raises if a helper ended (its exception, if any, as the cause)."""
         if not self._pending:
-            return
-        while not join(self.ctl, self._target, self.spins, self._timeout.ctypes.data):
+            return True
+        end = None if timeout_s is None else time.monotonic() + timeout_s
+        while not join(self.ctl, self._target, self.join_spins, self._timeout.ctypes.data):
             if self._errors or not all(t.is_alive() for t in self.threads):
                 self._pending = False
                 raise RuntimeError("a compute thread ended during a cycle") from (
                     self._errors[0] if self._errors else None)
+            if end is not None and time.monotonic() >= end:
+                return False
         self._pending = False
+        return True
 
     def close(self) -> None:
         """Let a posted cycle finish, then stop the helpers and wait for them."""

@@ -640,10 +640,11 @@ class RobotEngine:
         posted, self._posted = self._posted, False
         ready, self._ready = self._ready, None
         if posted:
+            threads = self._threads  # (made again if its arguments changed since: joined)
             try:  # this thread joins the helpers (nothing is left if wait() joined them)
                 self._compute(self.cycle_ticks)
             finally:
-                self._threads.join()
+                threads.join()
         elif ready is not None:
             self._run_cycle(self.cycle_ticks)
             if ready:
