@@ -53,7 +53,7 @@ def test_every_cycle_runs_once_on_every_helper_and_its_writes_are_seen():
 def test_a_helper_asleep_in_the_futex_is_woken():
     th, out = _threads(2, spins=0, join_spins=0)  # no spinning: every wait sleeps
     try:
-        for cycle in range(5):
+        for _ in range(5):
             time.sleep(0.01)  # the helpers sleep in the futex by now
             th.post(3, 1)
             assert th.join(timeout_s=5.0), "a posted cycle did not wake the helpers"
