@@ -119,7 +119,7 @@ def _board_in_lanes(n_ticks, c, st, down, up, raw, blocks, sizes, fb, buf):
         fpl.load_board(fb, c, st, raw, down, blocks[b], sizes[b])
         for _ in range(n_ticks):
             fpl.board_tick(fb, blocks[b], sizes[b], raw, down, st, up, c)
-            drive_lanes(fb, buf)
+            drive_lanes(fb, buf, blocks[b])
         fpl.store_board(fb, st, raw, down, blocks[b], sizes[b])
 
 

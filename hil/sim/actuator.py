@@ -128,28 +128,34 @@ def _pix(at, k, j):
 
 _DUTY = float(L.DriveMode.DUTY.value)
 _OFF = float(L.DriveMode.OFF.value)
+_OFF_MODE = np.int64(L.DriveMode.OFF.value)
 
 
 @njit(**lanes_mod.LANES)
-def drive_lanes(fb, pb):
-    """:func:`drive_plant` for every lane: from the board lanes ``fb``
-    (:mod:`firmware_model.fpga.lanes`, after their
-    :func:`~firmware_model.fpga.lanes.board_tick`) into the plant lanes ``pb``
+def drive_lanes(fb, pb, rows):
+    """:func:`drive_plant` for every lane of the batch ``rows`` (its ``LW`` entries, the
+    free lanes too): from the board lanes ``fb`` (:mod:`firmware_model.fpga.lanes`, after
+    their :func:`~firmware_model.fpga.lanes.board_tick`) into the plant lanes ``pb``
     (:mod:`plant.lanes`: inputs, and the currents of a plant whose gates go off), its
-    branches as selects (one pass over the lanes, no actuator row)."""
-    for j in range(fpl.LW):
+    branches as selects, no actuator row. The trip count is ``rows``' length, not the
+    constant ``LW``: a loop this small with a known count is unrolled before the loop
+    vectoriser sees it, and the unrolled moves between two buffers stay scalar (nothing
+    tells the compiler they do not overlap); this way it is one vector loop behind a
+    run-time overlap check."""
+    for j in range(rows.shape[0]):
         on = fpl.lane(fb, fpl.SO, B.F_PWM_ON, j) != 0
         inv_top = 1.0 / fpl.lane(fb, fpl.PO, B.C_PWM_TOP, j)
         mode = pb[_pix(lanes_mod.UO, L.IN_MODE, j)]
-        off = (not on) & (np.int64(mode) != L.DriveMode.OFF)
+        off = (not on) & (np.int64(mode) != _OFF_MODE)
         pb[_pix(lanes_mod.UO, L.IN_MODE, j)] = _DUTY if on else (_OFF if off else mode)
-        for k in range(3):
-            d = fpl.lane(fb, fpl.SO, B.F_DUTY_A + k, j) * inv_top
-            at = _pix(lanes_mod.UO, L.IN_DA + k, j)
-            pb[at] = d if on else pb[at]
-        for s in (L.S_ID, L.S_IQ):
-            at = _pix(lanes_mod.X, s, j)
-            pb[at] = 0.0 if off else pb[at]
+        d_a = fpl.lane(fb, fpl.SO, B.F_DUTY_A, j) * inv_top
+        d_b = fpl.lane(fb, fpl.SO, B.F_DUTY_B, j) * inv_top
+        d_c = fpl.lane(fb, fpl.SO, B.F_DUTY_C, j) * inv_top
+        pb[_pix(lanes_mod.UO, L.IN_DA, j)] = d_a if on else pb[_pix(lanes_mod.UO, L.IN_DA, j)]
+        pb[_pix(lanes_mod.UO, L.IN_DB, j)] = d_b if on else pb[_pix(lanes_mod.UO, L.IN_DB, j)]
+        pb[_pix(lanes_mod.UO, L.IN_DC, j)] = d_c if on else pb[_pix(lanes_mod.UO, L.IN_DC, j)]
+        pb[_pix(lanes_mod.X, L.S_ID, j)] = 0.0 if off else pb[_pix(lanes_mod.X, L.S_ID, j)]
+        pb[_pix(lanes_mod.X, L.S_IQ, j)] = 0.0 if off else pb[_pix(lanes_mod.X, L.S_IQ, j)]
 
 
 @njit(cache=True)

@@ -281,7 +281,7 @@ def advance_robot_lanes(counter, n_periods, period, tick0, blocks, sizes, n_sub_
                             link_lanes.word_log(tap_trace[i], at, TRACE_WORDS, ls.link, j)
                         if logging_trace:
                             link_lanes.word_log(log.trace[i], lt, TRACE_WORDS, ls.link, j)
-                drive_lanes(fb, buf)
+                drive_lanes(fb, buf, rows)
                 lanes_mod.rk4_lanes(buf, n_sub_max)
                 outputs_in_lanes(buf, pl.rng, rows, m)
                 if tap_y.shape[0] > 0:

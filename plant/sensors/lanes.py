@@ -214,9 +214,10 @@ def digitise_lanes(sb, pb, fb, chips, rows, m, tick, y, raw):
     (:data:`firmware_model.fpga.lanes.RO`), every lane (chips loaded by
     :func:`load_chips`). A lane on the scalar :func:`digitise` runs it on its actuator's
     rows (``y[rows[j]]``, ``raw[rows[j]]``): its outputs and raw words moved there first,
-    its raw words back after."""
-    for q in range(Y_SOURCES.size):
-        for j in range(LW):
+    its raw words back after. (The outputs' copy runs over ``rows``' length, ``LW``, as
+    a count the compiler does not know: see :func:`hil.sim.actuator.drive_lanes`.)"""
+    for j in range(rows.shape[0]):
+        for q in range(Y_SOURCES.size):
             sb[_ix(YO + q, j)] = pb[np.uint64(PYO + Y_SOURCES[q] * LW + j)]
     _codes(sb, tick)
     _raw_words(sb, fb)
