@@ -360,7 +360,7 @@ def exchange_in(fb, j, st, raw, down):
     fb[_ix(SO, B.F_ERR_LINK_CRC, j)] = st[B.F_ERR_LINK_CRC]
 
 
-@njit(**LANES)
+@njit(**LANES, inline="always")
 def board_tick(fb, rows, m, raw, down, state, up, params):
     """One tick of the boards ``rows[:m]``, their state and the tick's inputs (raw sensor
     words, downstream memory, the link's two counts) in the lanes of ``fb``

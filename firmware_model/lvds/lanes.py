@@ -202,7 +202,7 @@ def _scalar_down(lb, lk, mdown, fb, j, st, down):
     _log_from(lb, D, j, lk)
 
 
-@njit(**LANES)
+@njit(**LANES, inline="always")
 def sweep_down_lanes(lb, lk, mdown, fb, st, down, rows, m):
     """:func:`~firmware_model.lvds.link.sweep_down` of one tick for the actuators
     ``rows[:m]`` (lanes 0..m-1): MCU memory rows ``mdown`` -> the boards' downstream
@@ -219,7 +219,7 @@ def sweep_down_lanes(lb, lk, mdown, fb, st, down, rows, m):
             fb[np.uint64(fpl.SO + B.F_SINCE_VALID * LW + j)] = 0
 
 
-@njit(**LANES)
+@njit(**LANES, inline="always")
 def sweep_up_lanes(lb, lk, up, mup, rows, m):
     """:func:`~firmware_model.lvds.link.sweep_up` of one tick for the actuators
     ``rows[:m]``: board memory rows ``up`` -> MCU memory rows ``mup``."""

@@ -131,7 +131,7 @@ _OFF = float(L.DriveMode.OFF.value)
 _OFF_MODE = np.int64(L.DriveMode.OFF.value)
 
 
-@njit(**lanes_mod.LANES)
+@njit(**lanes_mod.LANES, inline="always")
 def drive_lanes(fb, pb, rows):
     """:func:`drive_plant` for every lane of the batch ``rows`` (its ``LW`` entries, the
     free lanes too): from the board lanes ``fb`` (:mod:`firmware_model.fpga.lanes`, after

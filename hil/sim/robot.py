@@ -191,7 +191,7 @@ def advance_robot(counter, n_periods, period, tick0, batched, s, mcu, no_rec, ta
             in32[i, _IN_CRC] = lk.state[i, LK.LK_MASTER_CRC]
 
 
-@njit(cache=True, nogil=True, _nrt=False)
+@njit(cache=True, nogil=True, _nrt=False, error_model="numpy")
 def advance_robot_lanes(counter, n_periods, period, tick0, blocks, sizes, n_sub_max, s, mcu,
                         buf, fb, ls, tap_y, tap_trace, log):
     """:func:`advance_robot` with the plants in lanes: this thread claims whole batches

@@ -207,7 +207,7 @@ def _raw_words(sb, fb):
         fb[_raw_at(B.R_HALL, j)] = np.int64(sb[_ix(RO + _C_HALL, j)])
 
 
-@njit(**LANES)
+@njit(**LANES, inline="always")
 def digitise_lanes(sb, pb, fb, chips, rows, m, tick, y, raw):
     """:func:`digitise` at ``tick`` of the plant outputs in the plant lanes ``pb``
     (:data:`plant.lanes.YO`) into the raw words in the board lanes ``fb``
