@@ -58,10 +58,12 @@ def _stage(which, n_ticks, tick0, x, p, u, y, rng, work, k, raw, c, st, down, up
                 LK.sweep_up(lk[i], up[i], mup[i])
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _rk4_in_lanes(n_ticks, x, p, u, blocks, sizes, n_sub_max, buf):
     """``n_ticks`` RK4 ticks of every actuator, batch by batch in lanes: states and inputs
-    loaded when the batch is claimed and stored at its end, as the engine does."""
+    loaded when the batch is claimed and stored at its end, as the engine does. (The lane
+    harnesses compile with numpy's error model, as the engine's kernel: the stages they
+    inline must not get a division-by-zero check per lane.)"""
     for b in range(blocks.shape[0]):
         lanes.load_params(buf, p, blocks[b], sizes[b])
         lanes.load_states(buf, x, u, blocks[b], sizes[b])
@@ -70,7 +72,7 @@ def _rk4_in_lanes(n_ticks, x, p, u, blocks, sizes, n_sub_max, buf):
         lanes.store_states(buf, x, blocks[b], sizes[b])
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _link_sensors_in_lanes(which, n_ticks, tick0, blocks, sizes, y, rng, k, raw, c, st, down,
                            up, mdown, mup, lk, lb, sb, buf, fb):
     """``n_ticks`` ticks of the sensor chips (``which`` 0) or of both LVDS sweeps (1) of
@@ -95,7 +97,7 @@ def _link_sensors_in_lanes(which, n_ticks, tick0, blocks, sizes, y, rng, k, raw,
         fpl.store_board(fb, st, raw, down, rows, m)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _outputs_in_lanes(n_ticks, x, p, u, y, rng, blocks, sizes, buf):
     """``n_ticks`` ticks of every actuator's outputs and noise, batch by batch in lanes,
     from the states in the lane buffer (the engine computes them right after the RK4 step,
@@ -109,7 +111,7 @@ def _outputs_in_lanes(n_ticks, x, p, u, y, rng, blocks, sizes, buf):
         store_outputs(buf, y, rng, blocks[b], sizes[b])
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _board_in_lanes(n_ticks, c, st, down, up, raw, blocks, sizes, fb, buf):
     """``n_ticks`` board ticks and inverter moves of every actuator, batch by batch in
     lanes: state and exchange words loaded when the batch is claimed and stored at its end,
