@@ -67,7 +67,7 @@ from hil.sim.stack_rows import SOURCES, LinkSensorLanes, McuRows, StackRows, Tap
 from plant import lanes as lanes_mod
 from plant import layout as L
 from plant.config import Config, ConfigError
-from plant.lane_outputs import outputs_lanes
+from plant.lane_outputs import load_outputs, outputs_in_lanes, store_outputs
 from plant.sensors import lanes as sensor_lanes
 
 #: Offsets of the input record's fields, in 16-bit words (the kernel writes through a view).
@@ -191,7 +191,7 @@ def advance_robot(counter, n_periods, period, tick0, batched, s, mcu, no_rec, ta
             in32[i, _IN_CRC] = lk.state[i, LK.LK_MASTER_CRC]
 
 
-@njit(cache=True, nogil=True, _nrt=False)
+@njit(cache=True, nogil=True, _nrt=False, error_model="numpy")
 def advance_robot_lanes(counter, n_periods, period, tick0, blocks, sizes, n_sub_max, s, mcu,
                         buf, fb, ls, tap_y, tap_trace, log):
     """:func:`advance_robot` with the plants in lanes: this thread claims whole batches
@@ -203,13 +203,20 @@ def advance_robot_lanes(counter, n_periods, period, tick0, blocks, sizes, n_sub_
     upstream sweeps in lanes, the inverters (:func:`~hil.sim.actuator.drive_lanes`), then
     all their plants take the tick's RK4 step in one pass over the lanes
     (:func:`plant.lanes.rk4_lanes`, in ``buf``, this thread's lane buffer), then their
-    outputs and noise (:func:`plant.lane_outputs.outputs_lanes`, from the same buffer).
-    ``fb``: this thread's board lane buffer (the boards' state, loaded when a batch is
-    claimed, stored back at its end). ``ls`` (a
+    outputs and noise (:func:`plant.lane_outputs.outputs_in_lanes`, in the same buffer).
+    ``fb``: this thread's board lane buffer. ``ls`` (a
     :class:`~hil.sim.stack_rows.LinkSensorLanes`): this thread's lane buffers of the links'
-    counters and word logs (loaded when a batch is claimed, stored back at its end) and of
-    the chips' parameters. Each actuator sees the operations of
-    :func:`advance_stack` in its order: the batch only interleaves independent actuators.
+    counters and word logs and of the chips' parameters and codes.
+
+    What the stages hand each other stays in the lanes for the whole call: loaded from
+    the actuators' rows when a batch is claimed, stored back at its end (plant states,
+    inputs, outputs and noise streams; the board's state, raw sensor words, downstream
+    memory and link counts; the links' counters). A tick moves no actuator row but the
+    board's upstream memory (its row: the link copies it whole into its delay ring), the
+    MCU's memories (once per MCU period, below) and what a tap or log copies out. Each
+    actuator sees the operations of :func:`advance_stack` in its order: the batch only
+    interleaves independent actuators.
+
     ``tap_y`` (actuators, ticks, outputs) and ``tap_trace`` (actuators, ticks,
     ``TRACE_WIDTH``): where given (not empty), every tick's plant outputs and board trace
     row (:func:`advance_stack`'s) of every actuator (:attr:`RobotEngine.tap`). ``log`` (a
@@ -225,8 +232,12 @@ def advance_robot_lanes(counter, n_periods, period, tick0, blocks, sizes, n_sub_
         m = sizes[b]
         rows = blocks[b]
         done += m
+        # The batch's stages and the words between them in lanes for the whole call:
+        # loaded here, stored back at the batch's end.
         lanes_mod.load_params(buf, pl.params, rows, m)
-        fpl.load_board(fb, bd.params, bd.state, rows, m)
+        lanes_mod.load_states(buf, pl.x, pl.u, rows, m)
+        load_outputs(buf, pl.y, pl.rng, rows, m)
+        fpl.load_board(fb, bd.params, bd.state, se.raw, bd.down, rows, m)
         sensor_lanes.load_chips(ls.chips, se.chips, rows, m)
         link_lanes.load_link(ls.link, lk.state, rows, m)
         for n in range(n_periods):
@@ -234,6 +245,7 @@ def advance_robot_lanes(counter, n_periods, period, tick0, blocks, sizes, n_sub_
             r = log.row[0] + n
             # advance_stack traces only into a slice with a row for every tick of the period
             logging_trace = log.trace.shape[1] >= (r + 1) * period
+            tracing = logging_trace or tap_trace.shape[0] > 0
             for j in range(m):
                 i = rows[j]
                 in32[i, _IN_TICK] = t
@@ -249,41 +261,43 @@ def advance_robot_lanes(counter, n_periods, period, tick0, blocks, sizes, n_sub_
             for k in range(period):
                 at = n * period + k
                 lt = r * period + k  # the log trace's row (advance_stack's k-th)
-                sensor_lanes.digitise_lanes(ls.chips, pl.y, se.chips, rows, m, t + k, se.raw)
-                link_lanes.sweep_down_lanes(ls.link, lk.state, lk.mcu_down, bd.state,
+                sensor_lanes.digitise_lanes(ls.chips, buf, fb, se.chips, rows, m, t + k, pl.y,
+                                            se.raw)
+                link_lanes.sweep_down_lanes(ls.link, lk.state, lk.mcu_down, fb, bd.state,
                                             bd.down, rows, m)
                 fpl.board_tick(fb, rows, m, se.raw, bd.down, bd.state, bd.up, bd.params)
-                for j in range(m):
-                    i = rows[j]
-                    if tap_trace.shape[0] > 0:
-                        trace_row_lanes(tap_trace[i], at, fb, j, se.raw[i], bd.down[i],
-                                        bd.up[i])
-                    if logging_trace:
-                        trace_row_lanes(log.trace[i], lt, fb, j, se.raw[i], bd.down[i],
-                                        bd.up[i])
+                if tracing:
+                    for j in range(m):
+                        i = rows[j]
+                        if tap_trace.shape[0] > 0:
+                            trace_row_lanes(tap_trace[i], at, fb, j, bd.up[i])
+                        if logging_trace:
+                            trace_row_lanes(log.trace[i], lt, fb, j, bd.up[i])
                 link_lanes.sweep_up_lanes(ls.link, lk.state, bd.up, lk.mcu_up, rows, m)
-                for j in range(m):
-                    i = rows[j]
-                    if tap_trace.shape[0] > 0:
-                        link_lanes.word_log(tap_trace[i], at, TRACE_WORDS, ls.link, j)
-                    if logging_trace:
-                        link_lanes.word_log(log.trace[i], lt, TRACE_WORDS, ls.link, j)
-                drive_lanes(fb, rows, m, bd.params, pl.u, pl.x)
-                lanes_mod.load_states(buf, pl.x, pl.u, rows, m)
+                if tracing:
+                    for j in range(m):
+                        i = rows[j]
+                        if tap_trace.shape[0] > 0:
+                            link_lanes.word_log(tap_trace[i], at, TRACE_WORDS, ls.link, j)
+                        if logging_trace:
+                            link_lanes.word_log(log.trace[i], lt, TRACE_WORDS, ls.link, j)
+                drive_lanes(fb, buf, rows)
                 lanes_mod.rk4_lanes(buf, n_sub_max)
-                lanes_mod.store_states(buf, pl.x, rows, m)
-                outputs_lanes(buf, pl.y, pl.rng, rows, m)
+                outputs_in_lanes(buf, pl.rng, rows, m)
                 if tap_y.shape[0] > 0:
                     for j in range(m):
                         i = rows[j]
-                        for w in range(pl.y.shape[1]):
-                            tap_y[i, at, w] = pl.y[i, w]
+                        for w in range(tap_y.shape[2]):
+                            tap_y[i, at, w] = buf[lanes_mod.YO + w * lanes_mod.LW + j]
             for j in range(m):
                 i = rows[j]
                 for w in range(lk.mcu_up.shape[1]):
                     in16[i, _IN_UP + w] = lk.mcu_up[i, w] & 0xFFFF
                 in32[i, _IN_CRC] = lk.state[i, LK.LK_MASTER_CRC]
-        fpl.store_board(fb, bd.state, rows, m)
+        lanes_mod.store_states(buf, pl.x, rows, m)
+        lanes_mod.store_inputs(buf, pl.u, rows, m)
+        store_outputs(buf, pl.y, pl.rng, rows, m)
+        fpl.store_board(fb, bd.state, se.raw, bd.down, rows, m)
         link_lanes.store_link(ls.link, lk.state, rows, m)
 
 
