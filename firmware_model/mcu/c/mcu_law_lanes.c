@@ -8,8 +8,8 @@
  * operand and in its order (the comments give the scalar line where the form differs);
  * vector adds, multiplies, divides, compares and int <-> float conversions round as their
  * scalar forms do (IEEE 754, round to nearest even, no contraction: -ffp-contract=off).
- * A lane past the batch's size computes on whatever it holds and is never stored. Only
- * the gathers and scatters of the records run lane by lane (they are transposes).
+ * A free lane (past the batch's size) repeats the batch's last actuator and is never
+ * stored. Only the gathers and scatters of the records are lane by lane (transposes).
  */
 #include "mcu_law_lanes.h"
 
@@ -31,29 +31,41 @@ uint32_t mcu_lanes_size(void)
     return (uint32_t)sizeof(mcu_lanes);
 }
 
-void mcu_lanes_load(mcu_lanes *restrict L, const mcu_state *states, const int64_t *rows,
-                    uint32_t m)
+/* Vectors are built from the eight lanes' values in registers and stored whole: a vector
+ * load right after eight 4-byte stores to its bytes would wait for them to reach the cache
+ * (no store forwarding), once per vector. */
+typedef char mcu_lw_is_eight[MCU_LW == 8 ? 1 : -1];
+#define ON8(p, member) \
+    {p[0]->member, p[1]->member, p[2]->member, p[3]->member, \
+     p[4]->member, p[5]->member, p[6]->member, p[7]->member}
+
+/* The records of lanes 0..m-1 at base[rows[j]]; a free lane repeats the batch's last. */
+#define LANE_RECORDS(p, base, rows, m)                    \
+    for (uint32_t j_ = 0; j_ < MCU_LW; j_++)                \
+        p[j_] = &(base)[(rows)[j_ < (m) ? j_ : (m) - 1]]
+
+static INLINE void load(mcu_lanes *restrict L, const mcu_state *states, const int64_t *rows,
+                        uint32_t m)
 {
-    for (uint32_t j = 0; j < m; j++) {
-        const mcu_state *s = &states[rows[j]];
-#define LOAD_CFG(type, name) L->cfg.name[j] = s->cfg.name;
-#define LOAD(type, name) L->name[j] = s->name;
-        MCU_LANE_CONFIG(LOAD_CFG)
-        MCU_LANE_STATE(LOAD)
-        for (int k = 0; k < N_ANALOG; k++) {
-            L->cfg.analog_register[k][j] = s->cfg.analog_register[k];
-            L->cfg.analog_v0[k][j] = s->cfg.analog_v0[k];
-            L->cfg.analog_mul[k][j] = s->cfg.analog_mul[k];
-            L->cfg.analog_div[k][j] = s->cfg.analog_div[k];
-            L->analog[k][j] = s->analog[k];
-        }
-        for (int w = 0; w < DOWN_WORDS; w++)
-            L->down[w][j] = s->down[w];
+    const mcu_state *s[MCU_LW];
+    LANE_RECORDS(s, states, rows, m);
+#define LOAD_CFG(type, name) L->cfg.name = (vec_##type)ON8(s, cfg.name);
+#define LOAD(type, name) L->name = (vec_##type)ON8(s, name);
+    MCU_LANE_CONFIG(LOAD_CFG)
+    MCU_LANE_STATE(LOAD)
+    for (int k = 0; k < N_ANALOG; k++) {
+        L->cfg.analog_register[k] = (vec_uint32_t)ON8(s, cfg.analog_register[k]);
+        L->cfg.analog_v0[k] = (vec_float)ON8(s, cfg.analog_v0[k]);
+        L->cfg.analog_mul[k] = (vec_float)ON8(s, cfg.analog_mul[k]);
+        L->cfg.analog_div[k] = (vec_float)ON8(s, cfg.analog_div[k]);
+        L->analog[k] = (vec_float)ON8(s, analog[k]);
     }
+    for (int w = 0; w < DOWN_WORDS; w++)
+        L->down[w] = (vec_uint32_t)ON8(s, down[w]);
 }
 
-void mcu_lanes_store(const mcu_lanes *restrict L, mcu_state *states, mcu_output *out,
-                     const int64_t *rows, uint32_t m)
+static INLINE void store(const mcu_lanes *restrict L, mcu_state *states, mcu_output *out,
+                         const int64_t *rows, uint32_t m)
 {
     for (uint32_t j = 0; j < m; j++) {
         mcu_state *s = &states[rows[j]];
@@ -68,30 +80,34 @@ void mcu_lanes_store(const mcu_lanes *restrict L, mcu_state *states, mcu_output 
 }
 
 /* The input records of the batch's lanes: what mcu_law_step reads of them. */
-static void gather(mcu_lanes *restrict L, const mcu_input *in, const int64_t *rows, uint32_t m)
+static INLINE void gather(mcu_lanes *restrict L, const mcu_input *in, const int64_t *rows,
+                          uint32_t m)
 {
-    for (uint32_t j = 0; j < m; j++) {
-        const mcu_input *r = &in[rows[j]];
-        L->in.tick[j] = r->tick;
-        L->in.flags[j] = r->flags;
-        L->in.mode[j] = r->mode;
-        L->in.value[j] = r->value;
-        L->in.kp_position[j] = r->kp_position;
-        L->in.kp_force[j] = r->kp_force;
-        L->in.up_crc_errors[j] = r->up_crc_errors;
-        L->in.angle_offset[j] = r->angle_offset;
-        for (int k = 0; k < N_ANALOG; k++)
-            L->in.analog_word[k][j] = r->up[L->cfg.analog_register[k][j]];
-        L->in.status[j] = r->up[U_STATUS];
-        L->in.ssi[j] = r->up[U_SSI];
-        L->in.speed[j] = r->up[U_SPEED];
-        L->in.piston_lo[j] = r->up[U_PISTON_LO];
-        L->in.piston_hi[j] = r->up[U_PISTON_HI];
-        L->in.iq[j] = r->up[U_IQ];
-        L->in.strain_lo[j] = r->up[U_STRAIN_LO];
-        L->in.strain_hi[j] = r->up[U_STRAIN_HI];
-        L->in.err_link_crc[j] = r->up[U_ERR_LINK_CRC];
+    const mcu_input *p[MCU_LW];
+    LANE_RECORDS(p, in, rows, m);
+    L->in.tick = (vec_int32_t)ON8(p, tick);
+    L->in.flags = (vec_uint32_t)ON8(p, flags);
+    L->in.mode = (vec_uint32_t)ON8(p, mode);
+    L->in.value = (vec_float)ON8(p, value);
+    L->in.kp_position = (vec_float)ON8(p, kp_position);
+    L->in.kp_force = (vec_float)ON8(p, kp_force);
+    L->in.up_crc_errors = (vec_uint32_t)ON8(p, up_crc_errors);
+    L->in.angle_offset = (vec_uint32_t)ON8(p, angle_offset);
+    for (int k = 0; k < N_ANALOG; k++) {
+        vec_uint32_t r = L->cfg.analog_register[k]; /* each lane's own register */
+        L->in.analog_word[k] = (vec_int32_t){p[0]->up[r[0]], p[1]->up[r[1]], p[2]->up[r[2]],
+                                             p[3]->up[r[3]], p[4]->up[r[4]], p[5]->up[r[5]],
+                                             p[6]->up[r[6]], p[7]->up[r[7]]};
     }
+    L->in.status = (vec_int32_t)ON8(p, up[U_STATUS]);
+    L->in.ssi = (vec_int32_t)ON8(p, up[U_SSI]);
+    L->in.speed = (vec_int32_t)ON8(p, up[U_SPEED]);
+    L->in.piston_lo = (vec_int32_t)ON8(p, up[U_PISTON_LO]);
+    L->in.piston_hi = (vec_int32_t)ON8(p, up[U_PISTON_HI]);
+    L->in.iq = (vec_int32_t)ON8(p, up[U_IQ]);
+    L->in.strain_lo = (vec_int32_t)ON8(p, up[U_STRAIN_LO]);
+    L->in.strain_hi = (vec_int32_t)ON8(p, up[U_STRAIN_HI]);
+    L->in.err_link_crc = (vec_int32_t)ON8(p, up[U_ERR_LINK_CRC]);
 }
 
 static INLINE vec_float fsel(mask m, vec_float a, vec_float b)
@@ -350,22 +366,20 @@ static INLINE void step(mcu_lanes *restrict L, const mcu_input *in, mcu_output *
             out[rows[j]].down[w] = (uint16_t)L->down[w][j];
 }
 
-/* Two builds of the same step: with AVX2 (one 256-bit register per vector) and for any
- * x86-64 (SSE2: pairs of 128-bit registers, some compares lane by lane). Both round
- * every operation alike (no FMA in either: AVX2 does not imply it, and contraction is
- * off), so they give the same bits; the first call's CPU check picks one. */
-__attribute__((target("avx2"))) static void step_avx2(mcu_lanes *restrict L,
-                                                      const mcu_input *in, mcu_output *out,
-                                                      const int64_t *rows, uint32_t m)
-{
-    step(L, in, out, rows, m);
-}
+/* Two builds of each entry point: with AVX2 (one 256-bit register per vector) and for any
+ * x86-64 (SSE2: pairs of 128-bit registers, some compares lane by lane). Both round every
+ * operation alike (no FMA in either: AVX2 does not imply it, and contraction is off), so
+ * they give the same bits; a CPU check when the library loads picks one. */
+#define TWO_BUILDS(name, params, args)                                                      \
+    __attribute__((target("avx2"))) static void name##_avx2 params { name args; }          \
+    static void name##_generic params { name args; }
 
-static void step_generic(mcu_lanes *restrict L, const mcu_input *in, mcu_output *out,
-                         const int64_t *rows, uint32_t m)
-{
-    step(L, in, out, rows, m);
-}
+TWO_BUILDS(load, (mcu_lanes *restrict L, const mcu_state *s, const int64_t *rows, uint32_t m),
+           (L, s, rows, m))
+TWO_BUILDS(step, (mcu_lanes *restrict L, const mcu_input *in, mcu_output *out,
+                  const int64_t *rows, uint32_t m), (L, in, out, rows, m))
+TWO_BUILDS(store, (const mcu_lanes *restrict L, mcu_state *s, mcu_output *out,
+                   const int64_t *rows, uint32_t m), (L, s, out, rows, m))
 
 static int use_avx2;
 
@@ -382,11 +396,24 @@ int32_t mcu_lanes_build(int32_t avx2)
     return use_avx2;
 }
 
+void mcu_lanes_load(mcu_lanes *restrict L, const mcu_state *states, const int64_t *rows,
+                    uint32_t m)
+{
+    if (m == 0)
+        return;
+    (use_avx2 ? load_avx2 : load_generic)(L, states, rows, m);
+}
+
 void mcu_lanes_step(mcu_lanes *restrict L, const mcu_input *in, mcu_output *out,
                     const int64_t *rows, uint32_t m)
 {
-    if (use_avx2)
-        step_avx2(L, in, out, rows, m);
-    else
-        step_generic(L, in, out, rows, m);
+    if (m == 0)
+        return;
+    (use_avx2 ? step_avx2 : step_generic)(L, in, out, rows, m);
+}
+
+void mcu_lanes_store(const mcu_lanes *restrict L, mcu_state *states, mcu_output *out,
+                     const int64_t *rows, uint32_t m)
+{
+    (use_avx2 ? store_avx2 : store_generic)(L, states, out, rows, m);
 }

@@ -85,7 +85,8 @@ typedef struct {
 
 /* sizeof mcu_lanes (the engine allocates one per compute thread). */
 uint32_t mcu_lanes_size(void);
-/* Lanes 0..m-1 from the programs states[rows[j]]; lanes m.. keep what they held. */
+/* Lanes 0..m-1 from the programs states[rows[j]]; the free lanes m.. repeat lane m-1 (they
+ * compute, and are never stored). */
 void mcu_lanes_load(mcu_lanes *lanes, const mcu_state *states, const int64_t *rows, uint32_t m);
 /* One step of every lane with the input records in[rows[j]] (mcu_law_step's); the
  * downstream words of lanes 0..m-1 into out[rows[j]].down (the rest of the output record is
