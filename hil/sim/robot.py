@@ -109,6 +109,16 @@ assert fpl.LW == lanes_mod.LW, "a batch's boards and plants share the lanes"
 #: before the first call): ``mcu_law_step_many(states, inputs, n, outputs)``, addresses.
 _mcu_law_step_many = types.ExternalFunction(
     "mcu_law_step_many", types.void(types.intp, types.intp, types.uint32, types.intp))
+#: The law in lanes (``mcu_law_lanes.c``, same library), for a batch of at most ``LW``
+#: actuators, rows ``rows[:m]``: ``mcu_lanes_load(lanes, states, rows, m)`` when the batch is
+#: claimed, ``mcu_lanes_step(lanes, inputs, outputs, rows, m)`` once per MCU period,
+#: ``mcu_lanes_store(lanes, states, outputs, rows, m)`` at the batch's end; addresses.
+_mcu_lanes_load = types.ExternalFunction(
+    "mcu_lanes_load", types.void(types.intp, types.intp, types.intp, types.uint32))
+_mcu_lanes_step = types.ExternalFunction(
+    "mcu_lanes_step", types.void(types.intp, types.intp, types.intp, types.intp, types.uint32))
+_mcu_lanes_store = types.ExternalFunction(
+    "mcu_lanes_store", types.void(types.intp, types.intp, types.intp, types.intp, types.uint32))
 
 
 @intrinsic
@@ -240,6 +250,10 @@ def advance_robot_lanes(counter, n_periods, period, tick0, blocks, sizes, n_sub_
         fpl.load_board(fb, bd.params, bd.state, se.raw, bd.down, rows, m)
         sensor_lanes.load_chips(ls.chips, se.chips, rows, m)
         link_lanes.load_link(ls.link, lk.state, rows, m)
+        # The batch's MCU programs in lanes (ls.mcu) until the batch's end: the records'
+        # bases are row 0's addresses.
+        at_rows, n_lanes = rows.ctypes.data, np.uint32(m)
+        _mcu_lanes_load(ls.mcu.ctypes.data, mcu.ptrs[0, 0], at_rows, n_lanes)
         for n in range(n_periods):
             t = tick0 + n * period
             r = log.row[0] + n
@@ -247,9 +261,10 @@ def advance_robot_lanes(counter, n_periods, period, tick0, blocks, sizes, n_sub_
             logging_trace = log.trace.shape[1] >= (r + 1) * period
             tracing = logging_trace or tap_trace.shape[0] > 0
             for j in range(m):
+                in32[rows[j], _IN_TICK] = t
+            _mcu_lanes_step(ls.mcu.ctypes.data, mcu.ptrs[0, 1], mcu.ptrs[0, 2], at_rows, n_lanes)
+            for j in range(m):
                 i = rows[j]
-                in32[i, _IN_TICK] = t
-                _mcu_law_step_many(mcu.ptrs[i, 0], mcu.ptrs[i, 1], 1, mcu.ptrs[i, 2])
                 in32[i, _IN_FLAGS] = 0
                 if n == n_periods - 1:
                     mcu.err[i, 0] = in16[i, _IN_UP + B.U_ERR_LINK_CRC]
@@ -299,6 +314,7 @@ def advance_robot_lanes(counter, n_periods, period, tick0, blocks, sizes, n_sub_
         store_outputs(buf, pl.y, pl.rng, rows, m)
         fpl.store_board(fb, bd.state, se.raw, bd.down, rows, m)
         link_lanes.store_link(ls.link, lk.state, rows, m)
+        _mcu_lanes_store(ls.mcu.ctypes.data, mcu.ptrs[0, 0], mcu.ptrs[0, 2], at_rows, n_lanes)
 
 
 @njit(cache=True)
@@ -790,7 +806,8 @@ class RobotEngine:
         while len(self._lane_bufs) <= slot:
             self._lane_bufs.append((lanes_mod.lane_buffer(), fpl.board_buffer()))
             self._link_sensor_bufs.append(LinkSensorLanes(
-                link_lanes.link_lane_buffer(), sensor_lanes.sensor_lane_buffer()))
+                link_lanes.link_lane_buffer(), sensor_lanes.sensor_lane_buffer(),
+                self.law.lane_buffer()))
         buf, fb = self._lane_bufs[slot]
         return (self._blocks, self._sizes, self._n_sub_max, self.arrays, self.mcu, buf, fb,
                 self._link_sensor_bufs[slot], self.tap_y, self.tap_trace, self.log_rows)
