@@ -23,7 +23,7 @@ from numba import njit
 
 from plant import layout as L
 from plant.blocks.hydraulics import P_ATM_PA
-from plant.blocks.lanemath import exp3, sincos3, tanh3
+from plant.blocks.lanemath import exp3, pick, sincos3, tanh3
 from plant.blocks.motor_dq import SQRT3, SQRT3_2
 
 #: Compile options of the lane loops: cached, no runtime, no division-by-zero checks (a
@@ -322,7 +322,7 @@ def _rates_lane(B, i, xo, do):
     B[_ix(do, L.S_VP, i)] = (tau_p - dp * vp - f_cp - g * tq) / _p(B, L.P_JP, i)
     # hydraulics.pressure_force (line_stiffness: the aerated one from KA)
     ks_series = series_stiffness_lane(B, i, _p(B, L.S_THC, i, xo))
-    ks = B[_ix(KA, 0, i)] if _p(B, L.P_AIR_ON, i) > 0.5 else ks_series
+    ks = pick(_p(B, L.P_AIR_ON, i) > 0.5, B[_ix(KA, 0, i)], ks_series)
     B[_ix(do, L.S_TQ, i)] = ks * (g * vp - tq / ds - vc)
     # load.piston_and_load: the seal friction from FS, the rest from LL and PE (the
     # slopes of the piston and the cart are in do already)
