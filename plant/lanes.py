@@ -10,7 +10,13 @@ own exp, sin/cos and tanh, :mod:`plant.blocks.lanemath`): bit for bit the scalar
 effects switched on or off, number of sub-steps. A branch of the scalar code becomes a
 select between both sides, both computed on every lane (an unused side may divide by a
 zero parameter: compiled with numpy's error model, that is an inf, not an exception, and
-it is never selected).
+it is never selected). An effect that no lane of the batch has on is not computed at all
+(:func:`batch_effects`, :func:`_effect_passes`): every lane would select the scalar code's
+value for "off", which does not depend on what the other side computes.
+
+Every loop over the lanes is large (or fused into one that is): numba runs LLVM's loop
+vectoriser, not its straight-line one, and a small loop is fully unrolled into scalar code
+before the loop vectoriser sees it (docs/robot-engine.md, "The plants in vector lanes").
 
 The scalar blocks stay the readable reference; this module repeats their equations
 lane-wise and says where each comes from.
@@ -368,8 +374,8 @@ def rk4_stage(B, xo, do, fx, a):
 
 @njit(cache=True, inline="always", error_model="numpy")
 def _rk4_last(B, fx, step):
-    """The last slope of sub-step ``step`` and the states' update, in the same loop over
-    the lanes (a lane with fewer sub-steps keeps its states), then the end stops."""
+    """The last slope of sub-step ``step``, the states' update (a lane with fewer sub-steps
+    keeps its states) and the end stops, in the same loop over the lanes."""
     _effect_passes(B, XT, K4, fx)
     for i in range(LW):
         _rates_lane(B, i, XT, K4)
@@ -380,26 +386,25 @@ def _rk4_last(B, fx, step):
             new = x + h6 * (B[_ix(K1, s, i)] + 2.0 * B[_ix(K2, s, i)]
                             + 2.0 * B[_ix(K3, s, i)] + B[_ix(K4, s, i)])
             B[_ix(X, s, i)] = new if live else x
-    if fx[4]:  # some load moves: load.end_stops on the lanes still stepping
-        for i in range(LW):
-            _end_stops_lane(B, i, step)
+        _end_stops_lane(B, i, live)
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _end_stops_lane(B, i, step):
+def _end_stops_lane(B, i, live):
     """:func:`plant.blocks.load.end_stops` of lane ``i`` (not for a fixed load), if the
-    lane takes sub-step ``step``."""
-    on = (step < _p(B, L.P_N_SUB, i)) & (_p(B, L.P_LOAD_KIND, i) != L.LOAD_FIXED)
+    lane takes this sub-step (``live``). Selects (:func:`~plant.blocks.lanemath.pick`)
+    throughout: as conditional expressions LLVM keeps a branch around the dissipated
+    energy's products and the loop over the lanes stays scalar."""
+    on = live & (_p(B, L.P_LOAD_KIND, i) != L.LOAD_FIXED)
     half = _p(B, L.P_HALF_STROKE, i)
     v = B[_ix(X, L.S_VC, i)]
     x_c = B[_ix(X, L.S_THC, i)]
     e0 = B[_ix(X, L.S_EDISS, i)]
     hit = on & (((x_c > half) & (v > 0.0)) | ((x_c < -half) & (v < 0.0)))
-    ediss = e0 + 0.5 * _p(B, L.P_JC, i) * v * v
-    B[_ix(X, L.S_EDISS, i)] = ediss if hit else e0
-    B[_ix(X, L.S_VC, i)] = 0.0 if hit else v
-    clamped = half if x_c > half else (-half if x_c < -half else x_c)
-    B[_ix(X, L.S_THC, i)] = clamped if on else x_c
+    B[_ix(X, L.S_EDISS, i)] = pick(hit, e0 + 0.5 * _p(B, L.P_JC, i) * v * v, e0)
+    B[_ix(X, L.S_VC, i)] = pick(hit, 0.0, v)
+    clamped = pick(x_c > half, half, pick(x_c < -half, -half, x_c))
+    B[_ix(X, L.S_THC, i)] = pick(on, clamped, x_c)
 
 
 @njit(**LANES)
