@@ -614,16 +614,17 @@ class _Loop:
         if self.restart_far() and not self.structure_left():
             return
         pool = _joint_pool(self.rounds, defs_all, self.added_labels)
-        sets = [[lbl] for lbl in _single_pool(self.rounds, defs_all, self.added_labels,
-                                              self.excluded)]
-        sets += [[a, b] for i, a in enumerate(pool) for b in pool[i + 1:]]
+        sets = [[a, b] for i, a in enumerate(pool) for b in pool[i + 1:]]
         if len(pool) >= 3:
             sets.append(pool[:3])
+        # then, where no pair or triple passes, single candidates again (_single_pool)
+        sets += [[lbl] for lbl in _single_pool(self.rounds, defs_all, self.added_labels,
+                                               self.excluded)]
         best_set: tuple[float, list[str], FitResult, dict[str, str]] | None = None
         before = _val_cost(exp, self.current.outputs, self.sigma_ref)
         for labels in sets:
-            if best_set is not None and len(labels) > len(best_set[1]):
-                break  # a pair only where no single passes, a triple where no pair does
+            if best_set is not None and len(labels) != 2:
+                break  # a triple only where no pair passes, a single where neither does
             ds_ = [defs_all[lbl] for lbl in labels]
             self.say(f"jointly: {' + '.join(labels)}")
             start = {p: 0.25 * nom for e in ds_
@@ -782,7 +783,7 @@ def _joint_pool(rounds: list[list[CandidateTest]], defs: dict[str, EffectDef],
 
 def _single_pool(rounds: list[list[CandidateTest]], defs: dict[str, EffectDef],
                  added: set[str], excluded: set[str]) -> list[str]:
-    """Candidates refitted alone again, from the robust start, before any pair: those
+    """Candidates refitted alone again, from the robust start, where no pair passes: those
     rejected at their refit in an earlier round (the model has changed since: the seal
     friction on the free piston, refused while a pulsation was still missing) and those the
     last round's score test called collinear with a declared parameter (the fit had taken

@@ -90,7 +90,7 @@ def test_a_joint_refit_that_runs_away_on_the_validation_part_is_named_so():
 
 
 def test_candidates_refitted_alone_again_are_the_rejected_and_the_collinear():
-    """Before any pair, the joint search refits alone the candidates its forward rounds
+    """Where no pair passes, the joint search refits alone the candidates its forward rounds
     rejected (the model has changed since) and those the last round called collinear with a
     declared parameter: one per library effect, none of an effect already in, none judged
     at its own fit, none merely tested (a single that did not pass its score test is the
