@@ -26,18 +26,21 @@ import numpy as np
 from numba import njit
 
 from plant import layout as L
-from plant.blocks.lanemath import _bits, _from_bits
+from plant.blocks.lanemath import _bits, _from_bits, pick
 from plant.blocks.motor_dq import phase_angles
 from plant.lanes import (
     GO,
+    KA,
     LANES,
     LW,
     RG,
     UO,
+    VR,
     YO,
     _ix,
     _p,
-    line_stiffness_lane,
+    aerated_stiffness_lane,
+    series_stiffness_lane,
     viscosity_lane,
 )
 from plant.lanes import X as XO
@@ -63,12 +66,30 @@ def _put(B, k, i, v):
 @njit(cache=True, inline="always", error_model="numpy")
 def _physical_lanes(B):
     """:func:`plant.kernel.physical_outputs` (with :func:`~plant.kernel.stored_energy`) of
-    every lane, into the output rows at :data:`plant.lanes.YO`."""
+    every lane, into the output rows at :data:`plant.lanes.YO`. The viscosity ratio and the
+    stiffness with entrained air are loops of their own into their rows of the buffer
+    (``VR``, ``KA``), run only where some lane of the batch has the effect on (else every
+    lane selects 1 and the series stiffness, the scalar code's values)."""
+    temp = False
+    air = False
+    for i in range(LW):
+        temp |= _p(B, L.P_TEMP_ON, i) > 0.5
+        air |= _p(B, L.P_AIR_ON, i) > 0.5
+    if temp:
+        for i in range(LW):
+            B[_ix(VR, 0, i)] = viscosity_lane(B, i, _x(B, L.S_TOIL, i))
+    else:
+        for i in range(LW):
+            B[_ix(VR, 0, i)] = 1.0
+    if air:
+        for i in range(LW):
+            B[_ix(KA, 0, i)] = aerated_stiffness_lane(B, i, _x(B, L.S_THC, i),
+                                                      _x(B, L.S_TQ, i))
     for i in range(LW):
         kc = _p(B, L.P_KC, i)
         kc_kp = _p(B, L.P_KC_OVER_KP, i)
         kt = _p(B, L.P_KT_EQ, i)
-        r = viscosity_lane(B, i, _x(B, L.S_TOIL, i))
+        r = B[_ix(VR, 0, i)]
         mode = _p(B, L.IN_MODE, i, UO)
         current = mode == _CURRENT
         force = mode == _FORCE
@@ -134,7 +155,9 @@ def _physical_lanes(B):
         _put(B, L.Y_E_EXT, i, _x(B, L.S_EEXT, i))
         # kernel.stored_energy (x ** 2 is x * x; the sums in the scalar code's order)
         e = 0.5 * _p(B, L.P_JP, i) * (vp * vp) + 0.5 * _p(B, L.P_JC, i) * (vc * vc)
-        e += tq * tq / (2.0 * line_stiffness_lane(B, i, x_c, tq))
+        ks = pick(_p(B, L.P_AIR_ON, i) > 0.5, B[_ix(KA, 0, i)],
+                  series_stiffness_lane(B, i, x_c))
+        e += tq * tq / (2.0 * ks)
         d_anchor = x_c - _p(B, L.P_X_ANCHOR, i)
         d_cart = x_c - _x(B, L.S_XL, i)
         e_conrod = e + 0.5 * k_rod * (d_anchor * d_anchor)
@@ -147,7 +170,13 @@ def _physical_lanes(B):
 @njit(cache=True, inline="always", error_model="numpy")
 def _noise_lanes(B):
     """Recipe 4's seven samples of every lane into the rows at :data:`plant.lanes.GO`; a
-    lane's stream state moves on only where its noise is on under recipe 4."""
+    lane's stream state moves on only where its noise is on under recipe 4. Not drawn at
+    all where no lane has it on (no lane would read a sample or move its stream on)."""
+    draw = False
+    for i in range(LW):
+        draw |= (_p(B, L.P_NOISE_ON, i) > 0.5) & (_p(B, L.P_NUMERICS, i) >= 4.0)
+    if not draw:
+        return
     for i in range(LW):
         s0 = np.uint64(_bits(B[RG + i]))
         s, g0, g1, g2, g3, g4, g5, g6 = gauss7_4(s0)
@@ -206,30 +235,62 @@ def _sense_lanes(B):
 
 
 @njit(**LANES)
-def outputs_lanes(B, y, rng, rows, n):
-    """:func:`plant.kernel.outputs` of lanes 0..n-1 of the lane buffer ``B`` (states,
-    parameters and inputs where :func:`plant.lanes.rk4_lanes` left them) into the rows
-    ``rows[:n]`` of ``y``; the noise streams are the rows ``rows[:n]`` of ``rng``
-    ((actuators, 1) uint64). Every lane is computed; the free ones are never stored."""
+def load_outputs(B, y, rng, rows, n):
+    """The output rows ``rows[:n]`` of ``y`` and their noise streams (rows of ``rng``,
+    (actuators, 1) uint64) into lanes 0..n-1 (the last one's into the free lanes): where
+    the outputs stay from tick to tick for a kernel call (:func:`outputs_in_lanes` renews
+    them, the sensor chips read them there)."""
     for j in range(LW):
-        B[RG + j] = _from_bits(np.int64(rng[rows[min(j, n - 1)], 0]))
+        r = rows[min(j, n - 1)]
+        for k in range(L.N_OUTPUTS):
+            B[_ix(YO, k, j)] = y[r, k]
+        B[RG + j] = _from_bits(np.int64(rng[r, 0]))
+
+
+@njit(**LANES)
+def outputs_in_lanes(B, rng, rows, n):
+    """:func:`plant.kernel.outputs` of every lane of the lane buffer ``B`` (states,
+    parameters and inputs where :func:`plant.lanes.rk4_lanes` left them), the outputs into
+    the rows at :data:`plant.lanes.YO`, the noise streams' states kept at
+    :data:`plant.lanes.RG`. A lane of the actuator ``rows[j]`` under recipe 2 or 3 draws on
+    its row of ``rng`` (its state moved there and back)."""
     _physical_lanes(B)
     _noise_lanes(B)
-    for j in range(n):
-        rng[rows[j], 0] = np.uint64(_bits(B[RG + j]))
     for j in range(n):  # recipes 2 and 3: the polar method, lane by lane (see module doc)
         if _p(B, L.P_NOISE_ON, j) > 0.5 and _p(B, L.P_NUMERICS, j) < 4.0:
             r = rng[rows[j]]
+            r[0] = np.uint64(_bits(B[RG + j]))
             for q in range(3):
                 a, b = _gauss_pair(r)
                 B[_ix(GO, 2 * q, j)] = a
                 B[_ix(GO, 2 * q + 1, j)] = b
             B[_ix(GO, 6, j)] = _gauss_pair(r)[0]
+            B[RG + j] = _from_bits(np.int64(r[0]))
     _sense_lanes(B)
+
+
+@njit(**LANES)
+def store_outputs(B, y, rng, rows, n):
+    """The outputs and noise streams of lanes 0..n-1 back into the rows ``rows[:n]`` of
+    ``y`` and ``rng`` (:func:`load_outputs`'s reverse)."""
     for j in range(n):
         r = rows[j]
         for k in range(L.N_OUTPUTS):
             y[r, k] = B[_ix(YO, k, j)]
+        rng[r, 0] = np.uint64(_bits(B[RG + j]))
 
 
-__all__ = ["outputs_lanes"]
+@njit(**LANES)
+def outputs_lanes(B, y, rng, rows, n):
+    """:func:`plant.kernel.outputs` of lanes 0..n-1 of the lane buffer ``B`` (states,
+    parameters and inputs where :func:`plant.lanes.rk4_lanes` left them) into the rows
+    ``rows[:n]`` of ``y``; the noise streams are the rows ``rows[:n]`` of ``rng``
+    ((actuators, 1) uint64). Every lane is computed; the free ones are never stored. (The
+    robot kernel keeps outputs and streams in the lanes for a whole call instead:
+    :func:`load_outputs`, :func:`outputs_in_lanes`, :func:`store_outputs`.)"""
+    load_outputs(B, y, rng, rows, n)
+    outputs_in_lanes(B, rng, rows, n)
+    store_outputs(B, y, rng, rows, n)
+
+
+__all__ = ["load_outputs", "outputs_in_lanes", "outputs_lanes", "store_outputs"]
