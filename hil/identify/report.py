@@ -56,6 +56,7 @@ def summary(rep: IdentifyReport) -> dict:
         "refused": None,
         "rejected": rep.rejected,
         "tried_together": rep.joint,
+        "refitted_from_configuration": rep.restarts,
         "notes": rep.notes,
         "wall_s": rep.wall_s,
     }
@@ -110,6 +111,9 @@ def text(rep: IdentifyReport) -> str:
         change = j["validation_cost_change"]
         cost = "" if change is None else f"validation cost {change:+.1%}, "
         out.append(f"  tried together: {' + '.join(j['effects'])}: {cost}{j['outcome']}")
+    for r in rep.restarts:
+        out.append(f"  refitted from the configured {', '.join(r['from_configured'])}: "
+                   f"validation cost {r['validation_cost_change']:+.1%}, {r['outcome']}")
     rows = []
     b, a = rep.residual_before.channels, rep.residual_after.channels
     for c in rep.channels:

@@ -87,3 +87,35 @@ def test_a_joint_refit_that_runs_away_on_the_validation_part_is_named_so():
     for after in (100.0 * DIVERGED_RATIO * 1.01, 5.9e20, float("inf"), float("nan")):
         change, why = joint_change(100.0, after)
         assert change is None and why.startswith("diverged on the validation part"), after
+
+
+def test_candidates_refitted_alone_again_are_the_rejected_and_the_collinear():
+    """Where no pair passes, the joint search refits alone the candidates its forward rounds
+    rejected (the model has changed since) and those the last round called collinear with a
+    declared parameter: one per library effect, none of an effect already in, none judged
+    at its own fit, none merely tested (a single that did not pass its score test is the
+    pairs' business)."""
+    from hil.identify.candidates import CandidateTest
+    from hil.identify.effects import library
+    from hil.identify.experiment import prepare
+    from hil.identify.pipeline import _single_pool
+    from hil.identify.rig import generate_rig
+    from plant.config import load_config
+
+    exp = prepare(generate_rig("free_piston", {}, seconds=0.5, seed=1).data,
+                  load_config("hydra_default"), "bl")
+    defs = {d.label: d for d in library(exp)}
+
+    def t(label: str, status: str) -> CandidateTest:
+        return CandidateTest(label, defs[label].name, list(defs[label].params), status)
+
+    first = [t("pump_coulomb_friction", "collinear"), t("seal_friction", "tested")]
+    last = [t("pump_coulomb_friction", "collinear"), t("pump_pulsation[order=3]", "collinear"),
+            t("pump_pulsation[order=5]", "collinear"), t("strain_thermal_drift", "tested"),
+            t("input_delay", "collinear")]
+    pool = _single_pool([first, last], defs, {"pump_pulsation[order=4]"}, {"seal_friction"})
+    assert pool == ["seal_friction", "pump_coulomb_friction"]
+    # nothing rejected, the pulsation not in: its first collinear order stands for the effect
+    pool = _single_pool([last], defs, set(), set())
+    assert pool == ["pump_coulomb_friction", "pump_pulsation[order=3]"]
+    assert _single_pool([], defs, set(), set()) == []
