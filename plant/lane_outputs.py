@@ -235,30 +235,62 @@ def _sense_lanes(B):
 
 
 @njit(**LANES)
-def outputs_lanes(B, y, rng, rows, n):
-    """:func:`plant.kernel.outputs` of lanes 0..n-1 of the lane buffer ``B`` (states,
-    parameters and inputs where :func:`plant.lanes.rk4_lanes` left them) into the rows
-    ``rows[:n]`` of ``y``; the noise streams are the rows ``rows[:n]`` of ``rng``
-    ((actuators, 1) uint64). Every lane is computed; the free ones are never stored."""
+def load_outputs(B, y, rng, rows, n):
+    """The output rows ``rows[:n]`` of ``y`` and their noise streams (rows of ``rng``,
+    (actuators, 1) uint64) into lanes 0..n-1 (the last one's into the free lanes): where
+    the outputs stay from tick to tick for a kernel call (:func:`outputs_in_lanes` renews
+    them, the sensor chips read them there)."""
     for j in range(LW):
-        B[RG + j] = _from_bits(np.int64(rng[rows[min(j, n - 1)], 0]))
+        r = rows[min(j, n - 1)]
+        for k in range(L.N_OUTPUTS):
+            B[_ix(YO, k, j)] = y[r, k]
+        B[RG + j] = _from_bits(np.int64(rng[r, 0]))
+
+
+@njit(**LANES)
+def outputs_in_lanes(B, rng, rows, n):
+    """:func:`plant.kernel.outputs` of every lane of the lane buffer ``B`` (states,
+    parameters and inputs where :func:`plant.lanes.rk4_lanes` left them), the outputs into
+    the rows at :data:`plant.lanes.YO`, the noise streams' states kept at
+    :data:`plant.lanes.RG`. A lane of the actuator ``rows[j]`` under recipe 2 or 3 draws on
+    its row of ``rng`` (its state moved there and back)."""
     _physical_lanes(B)
     _noise_lanes(B)
-    for j in range(n):
-        rng[rows[j], 0] = np.uint64(_bits(B[RG + j]))
     for j in range(n):  # recipes 2 and 3: the polar method, lane by lane (see module doc)
         if _p(B, L.P_NOISE_ON, j) > 0.5 and _p(B, L.P_NUMERICS, j) < 4.0:
             r = rng[rows[j]]
+            r[0] = np.uint64(_bits(B[RG + j]))
             for q in range(3):
                 a, b = _gauss_pair(r)
                 B[_ix(GO, 2 * q, j)] = a
                 B[_ix(GO, 2 * q + 1, j)] = b
             B[_ix(GO, 6, j)] = _gauss_pair(r)[0]
+            B[RG + j] = _from_bits(np.int64(r[0]))
     _sense_lanes(B)
+
+
+@njit(**LANES)
+def store_outputs(B, y, rng, rows, n):
+    """The outputs and noise streams of lanes 0..n-1 back into the rows ``rows[:n]`` of
+    ``y`` and ``rng`` (:func:`load_outputs`'s reverse)."""
     for j in range(n):
         r = rows[j]
         for k in range(L.N_OUTPUTS):
             y[r, k] = B[_ix(YO, k, j)]
+        rng[r, 0] = np.uint64(_bits(B[RG + j]))
 
 
-__all__ = ["outputs_lanes"]
+@njit(**LANES)
+def outputs_lanes(B, y, rng, rows, n):
+    """:func:`plant.kernel.outputs` of lanes 0..n-1 of the lane buffer ``B`` (states,
+    parameters and inputs where :func:`plant.lanes.rk4_lanes` left them) into the rows
+    ``rows[:n]`` of ``y``; the noise streams are the rows ``rows[:n]`` of ``rng``
+    ((actuators, 1) uint64). Every lane is computed; the free ones are never stored. (The
+    robot kernel keeps outputs and streams in the lanes for a whole call instead:
+    :func:`load_outputs`, :func:`outputs_in_lanes`, :func:`store_outputs`.)"""
+    load_outputs(B, y, rng, rows, n)
+    outputs_in_lanes(B, rng, rows, n)
+    store_outputs(B, y, rng, rows, n)
+
+
+__all__ = ["load_outputs", "outputs_in_lanes", "outputs_lanes", "store_outputs"]

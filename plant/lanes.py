@@ -460,6 +460,16 @@ def store_states(B, x, rows, n):
             x[r, k] = B[_ix(X, k, i)]
 
 
+@njit(**LANES)
+def store_inputs(B, u, rows, n):
+    """The inputs of lanes 0..n-1 (the inverter's, :func:`hil.sim.actuator.drive_lanes`,
+    writes them in the lanes) back into the rows ``rows[:n]`` of ``u``."""
+    for i in range(n):
+        r = rows[i]
+        for k in range(L.N_INPUTS):
+            u[r, k] = B[_ix(UO, k, i)]
+
+
 def lane_buffer() -> np.ndarray:
     """A zeroed lane buffer (:data:`SIZE` doubles)."""
     return np.zeros(SIZE)
@@ -467,4 +477,5 @@ def lane_buffer() -> np.ndarray:
 
 __all__ = ["LANES", "LW", "aerated_stiffness_lane", "batch_effects", "derivatives_lanes",
            "lane_buffer", "line_stiffness_lane", "load_params", "load_states", "rk4_lanes",
-           "rk4_stage", "series_stiffness_lane", "store_states", "viscosity_lane"]
+           "rk4_stage", "series_stiffness_lane", "store_inputs", "store_states",
+           "viscosity_lane"]

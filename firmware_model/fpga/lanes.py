@@ -23,17 +23,22 @@ How it is made to vectorise (the recipe of :mod:`plant.lanes`):
 * **all LW lanes every time**: a free lane holds a copy of the batch's last board
   (computed, never stored back).
 
-What does not vectorise (one board after the other, in :func:`board_tick`'s gather and
-scatter loops): the moves of the tick's inputs (raw sensor words, downstream memory) from
-the boards' own rows into the lanes and of the upstream words back (those rows are what
-the sensor chips and the LVDS link, the stages around the board, read and write), and the
-ABI speed ring (each board reads and writes its own ring at its own position: a gather and
-scatter the compiler will not emit). The ring stays in each board's state row.
+The tick's exchange with the stages around the board lives in the lanes too, from
+:func:`load_board` to :func:`store_board` (one kernel call): the raw sensor words (``RO``,
+written by :func:`plant.sensors.lanes.digitise_lanes`), the downstream memory (``DO``,
+written by the link's downstream sweep, :func:`firmware_model.lvds.lanes.sweep_down_lanes`)
+and the LVDS receive endpoint's two state words ``F_SINCE_VALID`` and ``F_ERR_LINK_CRC``
+(``SO``, the sweep restarts the watchdog there). A stage that falls back to its scalar code
+for one actuator moves that lane's exchange words to the rows and back
+(:func:`exchange_out`, :func:`exchange_in`).
 
-Two state words are the LVDS receive endpoint's: ``F_SINCE_VALID`` and ``F_ERR_LINK_CRC``
-are written by the link's downstream sweep into the board's state row; the lanes read both
-from the row every tick and write ``F_SINCE_VALID`` back (the tick counts it up). Every
-other state word lives in the lanes from :func:`load_board` to :func:`store_board`.
+What does not vectorise (one board after the other, in :func:`board_tick`'s loops): the
+ABI speed ring (each board reads and writes its own ring at its own position: a gather and
+scatter the compiler will not emit; the ring stays in each board's state row) and the
+upstream memory (``up``): it stays in each board's row, where the link's upstream sweep
+copies all 32 words into its delay ring every tick as one contiguous move; from lanes that
+copy would be 32 strided moves per board, as many as the scatter of the words the tick
+writes.
 
 A batch with a board whose current loop is a compiled RTL (``C_RTL_TICK``: a call into a
 library per tick) runs the scalar ``control_tick`` on the boards' rows, board by board; the
@@ -70,13 +75,6 @@ HO = XO + N_EXTRA * LW              #: batch header: H_SCALAR
 H_SCALAR = 0                        # 1: a board of the batch runs a compiled RTL loop
 SIZE = HO + LW
 
-#: Raw words and downstream registers the lanes compute with (the others the board only
-#: copies, done in the gather loop straight from row to row).
-_RAW_IN = np.array([B.R_SSI, B.R_SSI_OK, B.R_BISS_OK, B.R_STRAIN, B.R_STRAIN_NEW,
-                    B.R_STRAIN_OK, B.R_IA, B.R_IB], dtype=np.int64)
-_DOWN_IN = np.array([B.D_CONTROL, B.D_MODE, B.D_IQ_REF, B.D_ID_REF, B.D_VQ_FF, B.D_VD_REF,
-                     B.D_VQ_REF, B.D_CURRENT_LIMIT, B.D_TRIP_CURRENT, B.D_ANGLE_OFFSET,
-                     B.D_KP, B.D_KI], dtype=np.int64)
 #: Upstream registers written every tick from the lanes: (register, lane row offset).
 _UP_OUT = np.array(
     [(u, UO + u * LW) for u in (B.U_STATUS, B.U_STATE, B.U_THETA_E, B.U_IQ, B.U_ID, B.U_IA,
@@ -86,9 +84,6 @@ _UP_OUT = np.array(
                                      (B.U_OC_TRIPS, B.F_OC_TRIPS),
                                      (B.U_WD_TRIPS, B.F_WD_TRIPS))],
     dtype=np.int64)
-#: State words the lanes own from load to store (not the link endpoint's two).
-_OWNED = np.array([f for f in range(N_NAMED) if f not in (B.F_SINCE_VALID, B.F_ERR_LINK_CRC)],
-                  dtype=np.int64)
 
 # The scalar helpers with no loop and no array, inlined into the lane loop as they are.
 _clarke = njit(inline="always")(foc.clarke.py_func)
@@ -340,43 +335,61 @@ def tick_lanes(fb):
         fb[_ix(SO, B.F_TICK, i)] = tick + 1
 
 
-@njit(**LANES)
+@njit(cache=True, inline="always")
+def exchange_out(fb, j, st, raw, down):
+    """Lane ``j``'s exchange words (raw sensor words, downstream memory, the link endpoint's
+    ``F_SINCE_VALID`` and ``F_ERR_LINK_CRC``) into one board's rows: for a stage's scalar
+    code, and at the batch's end."""
+    for k in range(B.N_RAW):
+        raw[k] = fb[_ix(RO, k, j)]
+    for k in range(B.DOWN_WORDS):
+        down[k] = fb[_ix(DO, k, j)]
+    st[B.F_SINCE_VALID] = fb[_ix(SO, B.F_SINCE_VALID, j)]
+    st[B.F_ERR_LINK_CRC] = fb[_ix(SO, B.F_ERR_LINK_CRC, j)]
+
+
+@njit(cache=True, inline="always")
+def exchange_in(fb, j, st, raw, down):
+    """One board's exchange words from its rows into lane ``j`` (:func:`exchange_out`'s
+    reverse): at the batch's claim, and after a stage's scalar code."""
+    for k in range(B.N_RAW):
+        fb[_ix(RO, k, j)] = raw[k]
+    for k in range(B.DOWN_WORDS):
+        fb[_ix(DO, k, j)] = down[k]
+    fb[_ix(SO, B.F_SINCE_VALID, j)] = st[B.F_SINCE_VALID]
+    fb[_ix(SO, B.F_ERR_LINK_CRC, j)] = st[B.F_ERR_LINK_CRC]
+
+
+@njit(**LANES, inline="always")
 def board_tick(fb, rows, m, raw, down, state, up, params):
-    """One tick of the boards ``rows[:m]`` (rows of ``raw``, ``down``, ``state``, ``up``,
-    ``params``: the per-board arrays the sensor chips and the link exchange words through),
-    their state in the lanes of ``fb`` (:func:`load_board`): what ``control_tick`` would
-    do to each. Afterwards the lanes hold each board's PWM-on flag and compare counts
-    (``lane(fb, SO, F_PWM_ON, j)``...), and the link's two counts as the tick found them
-    (``XO``: ``X_SINCE``, ``X_CRC``) for the trace."""
+    """One tick of the boards ``rows[:m]``, their state and the tick's inputs (raw sensor
+    words, downstream memory, the link's two counts) in the lanes of ``fb``
+    (:func:`load_board`): what ``control_tick`` would do to each. The upstream words go into
+    the boards' rows of ``up``, the speed ring is each board's row of ``state``; ``raw`` and
+    ``down`` (rows) are used only by a batch that runs the scalar tick. Afterwards the lanes
+    hold each board's PWM-on flag and compare counts (``lane(fb, SO, F_PWM_ON, j)``...), and
+    the link's two counts as the tick found them (``XO``: ``X_SINCE``, ``X_CRC``) for the
+    trace."""
+    for j in range(LW):
+        fb[_ix(XO, X_SINCE, j)] = fb[_ix(SO, B.F_SINCE_VALID, j)]
+        fb[_ix(XO, X_CRC, j)] = fb[_ix(SO, B.F_ERR_LINK_CRC, j)]
     if fb[HO + H_SCALAR] != 0:
         for j in range(m):
             r = rows[j]
             st = state[r]
-            fb[_ix(XO, X_SINCE, j)] = st[B.F_SINCE_VALID]
-            fb[_ix(XO, X_CRC, j)] = st[B.F_ERR_LINK_CRC]
+            exchange_out(fb, j, st, raw[r], down[r])
             fb[_ix(SO, B.F_PWM_ON, j)] = control_tick(params[r], st, down[r], up[r], raw[r])
             for f in range(B.F_DUTY_A, B.F_DUTY_C + 1):
                 fb[_ix(SO, f, j)] = st[f]
+            fb[_ix(SO, B.F_SINCE_VALID, j)] = st[B.F_SINCE_VALID]
         return
-    # gather: the inputs of every lane (a free lane: the last board's again); the words
-    # the board only copies, and the ABI speed ring, row to row
-    for j in range(LW):
-        r = rows[min(j, m - 1)]
-        for k in _RAW_IN:
-            fb[_ix(RO, k, j)] = raw[r, k]
-        for k in _DOWN_IN:
-            fb[_ix(DO, k, j)] = down[r, k]
-        since = state[r, B.F_SINCE_VALID]
-        crc = state[r, B.F_ERR_LINK_CRC]
-        fb[_ix(SO, B.F_SINCE_VALID, j)] = since
-        fb[_ix(XO, X_SINCE, j)] = since
-        fb[_ix(XO, X_CRC, j)] = crc
-        if j >= m:
-            continue
+    # the words the board only copies, and the ABI speed ring, board by board
+    for j in range(m):
+        r = rows[j]
         u = up[r]
         # speed: ABI count difference over a window of ticks (M method)
-        window = params[r, B.C_SPEED_WINDOW]
-        abi = wrap_u(raw[r, B.R_ABI], 16)
+        window = fb[_ix(PO, B.C_SPEED_WINDOW, j)]
+        abi = wrap_u(_raw(fb, B.R_ABI, j), 16)
         if fb[_ix(SO, B.F_TICK, j)] == 0:
             for k in range(window):
                 state[r, B.RING_BASE + k] = abi
@@ -385,34 +398,34 @@ def board_tick(fb, rows, m, raw, down, state, up, params):
         state[r, B.RING_BASE + pos] = abi
         fb[_ix(SO, B.F_RING_POS, j)] = (pos + 1) & (window - 1)
         u[B.U_ABI] = abi
-        if raw[r, B.R_SSI_OK] != 0:
-            u[B.U_SSI] = raw[r, B.R_SSI]
-        if raw[r, B.R_BISS_OK] != 0:
-            u[B.U_PISTON_LO] = raw[r, B.R_BISS] & 0xFFFF
-            u[B.U_PISTON_HI] = (raw[r, B.R_BISS] >> 16) & 0xFFFF
+        if _raw(fb, B.R_SSI_OK, j) != 0:
+            u[B.U_SSI] = _raw(fb, B.R_SSI, j)
+        if _raw(fb, B.R_BISS_OK, j) != 0:
+            biss = _raw(fb, B.R_BISS, j)
+            u[B.U_PISTON_LO] = biss & 0xFFFF
+            u[B.U_PISTON_HI] = (biss >> 16) & 0xFFFF
         for a in range(B.ANALOG_UP.size):
-            u[B.ANALOG_UP[a]] = raw[r, B.ANALOG_RAW[a]]
-        u[B.U_HALL] = raw[r, B.R_HALL]
-        u[B.U_ERR_LINK_CRC] = crc
-        u[B.U_SEQ_ECHO] = down[r, B.D_SEQUENCE]
+            u[B.ANALOG_UP[a]] = _raw(fb, B.ANALOG_RAW[a], j)
+        u[B.U_HALL] = _raw(fb, B.R_HALL, j)
+        u[B.U_ERR_LINK_CRC] = fb[_ix(SO, B.F_ERR_LINK_CRC, j)]
+        u[B.U_SEQ_ECHO] = _down(fb, B.D_SEQUENCE, j)
     tick_lanes(fb)
-    # scatter: the upstream words and the watchdog count into the boards' rows
+    # scatter: the upstream words into the boards' rows
     for j in range(m):
-        r = rows[j]
-        u = up[r]
+        u = up[rows[j]]
         for q in range(_UP_OUT.shape[0]):
             u[_UP_OUT[q, 0]] = fb[np.uint64(_UP_OUT[q, 1] + j)]
         if fb[_ix(XO, X_STRAIN, j)] != 0:
             u[B.U_STRAIN_LO] = fb[_ix(UO, B.U_STRAIN_LO, j)]
             u[B.U_STRAIN_HI] = fb[_ix(UO, B.U_STRAIN_HI, j)]
-        state[r, B.F_SINCE_VALID] = fb[_ix(SO, B.F_SINCE_VALID, j)]
 
 
 @njit(**LANES)
-def load_board(fb, params, state, rows, m):
-    """Parameters and named state of the boards ``rows[:m]`` into lanes 0..m-1 (the last
-    one's again into the free lanes); whether the batch runs the scalar tick (a compiled
-    RTL loop on one of its boards)."""
+def load_board(fb, params, state, raw, down, rows, m):
+    """Parameters, named state and exchange words (raw sensor words, downstream memory) of
+    the boards ``rows[:m]`` into lanes 0..m-1 (the last one's again into the free lanes,
+    computed and never stored); whether the batch runs the scalar tick (a compiled RTL
+    loop on one of its boards)."""
     scalar = 0
     for j in range(LW):
         r = rows[min(j, m - 1)]
@@ -420,20 +433,22 @@ def load_board(fb, params, state, rows, m):
             fb[_ix(PO, k, j)] = params[r, k]
         for k in range(N_NAMED):
             fb[_ix(SO, k, j)] = state[r, k]
+        exchange_in(fb, j, state[r], raw[r], down[r])
         if params[r, B.C_RTL_TICK] != 0:
             scalar = 1
     fb[HO + H_SCALAR] = scalar
 
 
 @njit(**LANES)
-def store_board(fb, state, rows, m):
-    """The state the lanes own back into the boards' rows ``rows[:m]``."""
-    if fb[HO + H_SCALAR] != 0:
-        return
+def store_board(fb, state, raw, down, rows, m):
+    """The named state and the exchange words of lanes 0..m-1 back into the boards' rows
+    ``rows[:m]`` (a batch on the scalar tick has its named state in the rows already)."""
     for j in range(m):
         r = rows[j]
-        for k in _OWNED:
-            state[r, k] = fb[_ix(SO, k, j)]
+        exchange_out(fb, j, state[r], raw[r], down[r])
+        if fb[HO + H_SCALAR] == 0:
+            for k in range(N_NAMED):
+                state[r, k] = fb[_ix(SO, k, j)]
 
 
 def board_buffer() -> np.ndarray:
@@ -441,5 +456,5 @@ def board_buffer() -> np.ndarray:
     return np.zeros(SIZE, dtype=np.int64)
 
 
-__all__ = ["LANES", "LW", "board_buffer", "board_tick", "isqrt16", "lane", "load_board",
-           "sin_cos_lanes", "store_board", "tick_lanes"]
+__all__ = ["LANES", "LW", "board_buffer", "board_tick", "exchange_in", "exchange_out",
+           "isqrt16", "lane", "load_board", "sin_cos_lanes", "store_board", "tick_lanes"]

@@ -12,8 +12,11 @@ of the latest tick. Here, for the whole kernel call:
   (:func:`store_link`); the trace and frame-log reads of the word log
   (:func:`word_log`) read the lanes;
 * the rings stay in each actuator's ``lk`` row (16 KiB each: moving them would cost more
-  than the sweep), and so do the exchange rows the link reads and writes (the MCU's and the
-  board's memories, the board's link-watchdog count).
+  than the sweep), and so do the MCU's memories (rows, moved once per MCU period) and the
+  board's upstream memory (its row: the upstream ring copy is one contiguous move);
+* the downstream sweep writes the board's downstream memory and restarts its link watchdog
+  in the board lanes (:mod:`firmware_model.fpga.lanes`: ``DO``, ``F_SINCE_VALID``), where
+  the board reads them.
 
 Per tick and direction: the bookkeeping of all lanes (words of the tick from the bit
 accumulator, ring slots, pointer, word count, which addresses the word log names) is one
@@ -26,7 +29,8 @@ Words sent, stored values, counters and word log are those of the scalar sweep, 
 bit accumulator below one word, tick >= 0). A direction with a **word fault** set (every
 N-th word corrupted, dropped or sent twice: the ``corrupt_every`` bit flips, the
 value-level ``drop_every``/``dup_every``) runs the scalar sweep for that actuator and that
-direction, in place in its ``lk`` row, and its word log is copied into the lanes; the other
+direction, in place in its ``lk`` row (downstream: on the board's rows, its exchange words
+moved out of the board lanes and back), and its word log is copied into the lanes; the other
 lanes and the other direction stay in the lane path. Fault settings change only between
 kernel calls (cycle boundaries), so which lanes fall back is decided at :func:`load_link`.
 A stopped direction (a dead cable) and a ``delay`` stay in the lane path.
@@ -40,6 +44,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from firmware_model.fpga import lanes as fpl
 from firmware_model.fpga import layout as B
 from firmware_model.fpga.lanes import LANES, LW
 from firmware_model.lvds import link as LK
@@ -117,23 +122,25 @@ def _book(lb, o, size, hist):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _copy_words(lb, wl, j, lk, src, dest, a0, a1, k0, mask):
+def _copy_words(lb, wl, j, lk, src, dest, d0, ds, a0, a1, k0, mask):
     """Words of addresses ``a0..a1-1`` (the ``k0``-th word of the tick first): from the
-    ring row ``src`` into ``dest`` as ``data & mask``, and the data of the word-log slots
-    below :data:`~firmware_model.lvds.link.MAX_WORDS_TICK` into lane ``j``."""
+    ring row ``src`` into ``dest`` (address ``a`` at ``d0 + a * ds``) as ``data & mask``,
+    and the data of the word-log slots below
+    :data:`~firmware_model.lvds.link.MAX_WORDS_TICK` into lane ``j``."""
     for a in range(a0, a1):
         v = lk[np.uint64(src + a)]
-        dest[np.uint64(a)] = v & mask
+        dest[np.uint64(d0 + a * ds)] = v & mask
         k = k0 + a - a0
         if k < LK.MAX_WORDS_TICK:
             lb[_ix(wl + 2 + 3 * k, j)] = v
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _sweep_lane(lb, o, j, lk, mem, dest, size, mask):
+def _sweep_lane(lb, o, j, lk, mem, dest, d0, ds, size, mask):
     """Lane ``j``'s memory moves of the tick (direction ``o``, bookkept by :func:`_book`):
     the sender's memory ``mem`` into its ring row; the tick's ``n`` words from the pointer
-    ``p0`` into ``dest`` (``data & mask``; both memories are whole link memories of
+    ``p0`` into ``dest`` (address ``a`` at ``d0 + a * ds``: a row, or a lane of the board
+    lanes; ``data & mask``; both memories are whole link memories of
     ``size`` words, so every address exists), as at most two runs of consecutive
     addresses (up to the memory's end, then from 0), and the word log's data. Returns
     ``n``."""
@@ -151,16 +158,16 @@ def _sweep_lane(lb, o, j, lk, mem, dest, size, mask):
         end = p0 + n
         first = end if end < size else size
         if src == wrow:  # no delay: the ring row just written is the memory itself
-            _copy_words(lb, wl, j, mem, 0, dest, p0, first, 0, mask)
-            _copy_words(lb, wl, j, mem, 0, dest, 0, end - first, first - p0, mask)
+            _copy_words(lb, wl, j, mem, 0, dest, d0, ds, p0, first, 0, mask)
+            _copy_words(lb, wl, j, mem, 0, dest, d0, ds, 0, end - first, first - p0, mask)
         else:
-            _copy_words(lb, wl, j, lk, src, dest, p0, first, 0, mask)
-            _copy_words(lb, wl, j, lk, src, dest, 0, end - first, first - p0, mask)
+            _copy_words(lb, wl, j, lk, src, dest, d0, ds, p0, first, 0, mask)
+            _copy_words(lb, wl, j, lk, src, dest, d0, ds, 0, end - first, first - p0, mask)
     else:  # more words than the memory holds (a bit rate far above the real one)
         a = p0
         for k in range(n):
             v = lk[np.uint64(src + a)]
-            dest[np.uint64(a)] = v & mask
+            dest[np.uint64(d0 + a * ds)] = v & mask
             if k < LK.MAX_WORDS_TICK:
                 lb[_ix(wl + 2 + 3 * k, j)] = v
             a = a + 1 if a + 1 < size else 0
@@ -177,23 +184,42 @@ def _log_from(lb, o, j, lk):
         lb[_ix(wl + w, j)] = lk[base + w]
 
 
-@njit(**LANES)
-def sweep_down_lanes(lb, lk, mdown, st, down, rows, m):
+@njit(cache=True, inline="always")
+def _scalar_down(lb, lk, mdown, fb, j, st, down):
+    """The scalar downstream sweep of lane ``j`` (a word fault) on the board's rows: its
+    downstream memory and link counts moved out of the board lanes, the sweep, and back."""
+    since = np.uint64(fpl.SO + B.F_SINCE_VALID * LW + j)
+    crc = np.uint64(fpl.SO + B.F_ERR_LINK_CRC * LW + j)
+    for w in range(B.DOWN_WORDS):
+        down[w] = fb[np.uint64(fpl.DO + w * LW + j)]
+    st[B.F_SINCE_VALID] = fb[since]
+    st[B.F_ERR_LINK_CRC] = fb[crc]
+    LK.sweep_down(lk, mdown, st, down)
+    for w in range(B.DOWN_WORDS):
+        fb[np.uint64(fpl.DO + w * LW + j)] = down[w]
+    fb[since] = st[B.F_SINCE_VALID]
+    fb[crc] = st[B.F_ERR_LINK_CRC]
+    _log_from(lb, D, j, lk)
+
+
+@njit(**LANES, inline="always")
+def sweep_down_lanes(lb, lk, mdown, fb, st, down, rows, m):
     """:func:`~firmware_model.lvds.link.sweep_down` of one tick for the actuators
-    ``rows[:m]`` (lanes 0..m-1): MCU memory rows ``mdown`` -> board memory rows ``down``;
-    a good word restarts the board's link watchdog (``st[i, F_SINCE_VALID]``, the board
-    state's exchange field)."""
+    ``rows[:m]`` (lanes 0..m-1): MCU memory rows ``mdown`` -> the boards' downstream
+    memories in the board lanes ``fb`` (:func:`firmware_model.fpga.lanes.load_board`); a
+    good word restarts the board's link watchdog (its ``F_SINCE_VALID`` lane). ``st`` and
+    ``down`` (the boards' state and downstream rows) only for a lane on the scalar sweep."""
     _book(lb, D, B.DOWN_WORDS, LK.LK_DOWN_HIST)
     for j in range(m):
         i = rows[j]
         if lb[_ix(D + _SCALAR, j)] != 0:
-            LK.sweep_down(lk[i], mdown[i], st[i], down[i])
-            _log_from(lb, D, j, lk[i])
-        elif _sweep_lane(lb, D, j, lk[i], mdown[i], down[i], B.DOWN_WORDS, 0xFFFF) > 0:
-            st[i, B.F_SINCE_VALID] = 0
+            _scalar_down(lb, lk[i], mdown[i], fb, j, st[i], down[i])
+        elif _sweep_lane(lb, D, j, lk[i], mdown[i], fb, fpl.DO + j, LW, B.DOWN_WORDS,
+                         0xFFFF) > 0:
+            fb[np.uint64(fpl.SO + B.F_SINCE_VALID * LW + j)] = 0
 
 
-@njit(**LANES)
+@njit(**LANES, inline="always")
 def sweep_up_lanes(lb, lk, up, mup, rows, m):
     """:func:`~firmware_model.lvds.link.sweep_up` of one tick for the actuators
     ``rows[:m]``: board memory rows ``up`` -> MCU memory rows ``mup``."""
@@ -204,7 +230,7 @@ def sweep_up_lanes(lb, lk, up, mup, rows, m):
             LK.sweep_up(lk[i], up[i], mup[i])
             _log_from(lb, U, j, lk[i])
         else:
-            _sweep_lane(lb, U, j, lk[i], up[i], mup[i], B.UP_WORDS, -1)
+            _sweep_lane(lb, U, j, lk[i], up[i], mup[i], 0, 1, B.UP_WORDS, -1)
 
 
 @njit(cache=True, inline="always")

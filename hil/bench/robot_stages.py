@@ -24,18 +24,26 @@ from firmware_model.fpga.tick import control_tick
 from firmware_model.lvds import lanes as link_lanes
 from firmware_model.lvds import link as LK
 from hil.bench.robot_cycle import python_per_cycle
+from hil.sim.actuator import drive_lanes
+from hil.sim.robot import _IN_FLAGS as IN_FLAGS
+from hil.sim.robot import _IN_TICK as IN_TICK
+from hil.sim.robot import _mcu_lanes_load as mcu_lanes_load
+from hil.sim.robot import _mcu_lanes_step as mcu_lanes_step
+from hil.sim.robot import _mcu_lanes_store as mcu_lanes_store
+from hil.sim.robot import _mcu_law_step_many as mcu_law_step_many
 from plant import kernel, lanes
 from plant import layout as L
 from plant.config import Config
-from plant.lane_outputs import outputs_lanes
+from plant.lane_outputs import load_outputs, outputs_in_lanes, store_outputs
 from plant.sensors import lanes as sensor_lanes
 from plant.sensors.harness import digitise
 
 #: Stage names, in the order of one tick.
 STAGES = ("plant RK4 + effects", "plant outputs + noise", "sensor chips", "driver board",
-          "LVDS link", "MCU law (C build)", "plant RK4 + effects, in lanes",
-          "sensor chips, in lanes", "LVDS link, in lanes",
-          "plant outputs + noise, in lanes", "driver board, in lanes")
+          "LVDS link", "MCU law (C build), one actuator at a time",
+          "plant RK4 + effects, in lanes", "sensor chips, in lanes", "LVDS link, in lanes",
+          "plant outputs + noise, in lanes", "driver board + inverter, in lanes",
+          "MCU law, in lanes")
 
 
 @njit(cache=True, nogil=True)
@@ -57,60 +65,103 @@ def _stage(which, n_ticks, tick0, x, p, u, y, rng, work, k, raw, c, st, down, up
                 LK.sweep_up(lk[i], up[i], mup[i])
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _rk4_in_lanes(n_ticks, x, p, u, blocks, sizes, n_sub_max, buf):
-    """``n_ticks`` RK4 ticks of every actuator, batch by batch in lanes, with the moves in
-    and out of the lane buffer the engine makes every tick."""
-    for b in range(blocks.shape[0]):
-        lanes.load_params(buf, p, blocks[b], sizes[b])
-        for _ in range(n_ticks):
-            lanes.load_states(buf, x, u, blocks[b], sizes[b])
-            lanes.rk4_lanes(buf, n_sub_max)
-            lanes.store_states(buf, x, blocks[b], sizes[b])
-
-
-@njit(cache=True, nogil=True)
-def _link_sensors_in_lanes(which, n_ticks, tick0, blocks, sizes, y, k, raw, st, down, up,
-                           mdown, mup, lk, lb, sb):
-    """``n_ticks`` ticks of the sensor chips (``which`` 0) or of both LVDS sweeps (1) of
-    every actuator, batch by batch in lanes, with the loads at each batch's claim and the
-    link's store at its end, as the engine makes them."""
-    for b in range(blocks.shape[0]):
-        rows, m = blocks[b], sizes[b]
-        if which == 0:
-            sensor_lanes.load_chips(sb, k, rows, m)
-            for j in range(n_ticks):
-                sensor_lanes.digitise_lanes(sb, y, k, rows, m, tick0 + j, raw)
-        else:
-            link_lanes.load_link(lb, lk, rows, m)
-            for _ in range(n_ticks):
-                link_lanes.sweep_down_lanes(lb, lk, mdown, st, down, rows, m)
-                link_lanes.sweep_up_lanes(lb, lk, up, mup, rows, m)
-            link_lanes.store_link(lb, lk, rows, m)
-
-
-@njit(cache=True, nogil=True)
-def _outputs_in_lanes(n_ticks, x, p, u, y, rng, blocks, sizes, buf):
-    """``n_ticks`` ticks of every actuator's outputs and noise, batch by batch in lanes,
-    from the states in the lane buffer (the engine computes them right after the RK4 step,
-    with no move in)."""
+    """``n_ticks`` RK4 ticks of every actuator, batch by batch in lanes: states and inputs
+    loaded when the batch is claimed and stored at its end, as the engine does. (The lane
+    harnesses compile with numpy's error model, as the engine's kernel: the stages they
+    inline must not get a division-by-zero check per lane.)"""
     for b in range(blocks.shape[0]):
         lanes.load_params(buf, p, blocks[b], sizes[b])
         lanes.load_states(buf, x, u, blocks[b], sizes[b])
         for _ in range(n_ticks):
-            outputs_lanes(buf, y, rng, blocks[b], sizes[b])
+            lanes.rk4_lanes(buf, n_sub_max)
+        lanes.store_states(buf, x, blocks[b], sizes[b])
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _link_sensors_in_lanes(which, n_ticks, tick0, blocks, sizes, y, rng, k, raw, c, st, down,
+                           up, mdown, mup, lk, lb, sb, buf, fb):
+    """``n_ticks`` ticks of the sensor chips (``which`` 0) or of both LVDS sweeps (1) of
+    every actuator, batch by batch in lanes, with the loads at each batch's claim and the
+    stores at its end, as the engine makes them (the chips read the plant outputs in the
+    plant lanes and write the raw words into the board lanes; the downstream sweep writes
+    the board lanes)."""
+    for b in range(blocks.shape[0]):
+        rows, m = blocks[b], sizes[b]
+        fpl.load_board(fb, c, st, raw, down, rows, m)
+        if which == 0:
+            load_outputs(buf, y, rng, rows, m)
+            sensor_lanes.load_chips(sb, k, rows, m)
+            for j in range(n_ticks):
+                sensor_lanes.digitise_lanes(sb, buf, fb, k, rows, m, tick0 + j, y, raw)
+        else:
+            link_lanes.load_link(lb, lk, rows, m)
+            for _ in range(n_ticks):
+                link_lanes.sweep_down_lanes(lb, lk, mdown, fb, st, down, rows, m)
+                link_lanes.sweep_up_lanes(lb, lk, up, mup, rows, m)
+            link_lanes.store_link(lb, lk, rows, m)
+        fpl.store_board(fb, st, raw, down, rows, m)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _outputs_in_lanes(n_ticks, x, p, u, y, rng, blocks, sizes, buf):
+    """``n_ticks`` ticks of every actuator's outputs and noise, batch by batch in lanes,
+    from the states in the lane buffer (the engine computes them right after the RK4 step,
+    with no move in), outputs and noise streams stored at the batch's end."""
+    for b in range(blocks.shape[0]):
+        lanes.load_params(buf, p, blocks[b], sizes[b])
+        lanes.load_states(buf, x, u, blocks[b], sizes[b])
+        load_outputs(buf, y, rng, blocks[b], sizes[b])
+        for _ in range(n_ticks):
+            outputs_in_lanes(buf, rng, blocks[b], sizes[b])
+        store_outputs(buf, y, rng, blocks[b], sizes[b])
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _board_in_lanes(n_ticks, c, st, down, up, raw, blocks, sizes, fb, buf):
+    """``n_ticks`` board ticks and inverter moves of every actuator, batch by batch in
+    lanes: state and exchange words loaded when the batch is claimed and stored at its end,
+    the upstream words scattered into the boards' rows every tick, the inverter into the
+    plant lanes, as the engine does."""
+    for b in range(blocks.shape[0]):
+        fpl.load_board(fb, c, st, raw, down, blocks[b], sizes[b])
+        for _ in range(n_ticks):
+            fpl.board_tick(fb, blocks[b], sizes[b], raw, down, st, up, c)
+            drive_lanes(fb, buf, blocks[b])
+        fpl.store_board(fb, st, raw, down, blocks[b], sizes[b])
 
 
 @njit(cache=True, nogil=True)
-def _board_in_lanes(n_ticks, c, st, down, up, raw, blocks, sizes, fb):
-    """``n_ticks`` board ticks of every actuator, batch by batch in lanes: the state loaded
-    when the batch is claimed and stored at its end, the inputs gathered and the upstream
-    words scattered every tick, as the engine does."""
-    for b in range(blocks.shape[0]):
-        fpl.load_board(fb, c, st, blocks[b], sizes[b])
-        for _ in range(n_ticks):
-            fpl.board_tick(fb, blocks[b], sizes[b], raw, down, st, up, c)
-        fpl.store_board(fb, st, blocks[b], sizes[b])
+def _mcu_law(in_lanes, n_cycles, per_cycle, tick0, period, blocks, sizes, bases, sizes_b,
+             in32, lanes_at):
+    """``n_cycles`` cycles of ``per_cycle`` MCU steps of every actuator, batch by batch as
+    the engine's kernels make them: each actuator's C law on its own
+    (``mcu_law_step_many`` for one, :func:`hil.sim.robot.advance_robot`), or the batch in
+    lanes (``in_lanes``: ``mcu_lanes_*``, buffer at ``lanes_at``, loaded at each claim and
+    stored at the cycle's end, :func:`hil.sim.robot.advance_robot_lanes`), with the tick and
+    flags the engine writes into the input records at each step. ``bases``: the states',
+    inputs' and outputs' addresses, ``sizes_b`` their records' sizes."""
+    for c in range(n_cycles):
+        for b in range(blocks.shape[0]):
+            rows, m = blocks[b], np.uint32(sizes[b])
+            if in_lanes:
+                mcu_lanes_load(lanes_at, bases[0], rows.ctypes.data, m)
+            for n in range(per_cycle):
+                t = tick0 + (c * per_cycle + n) * period
+                for j in range(m):
+                    in32[rows[j], IN_TICK] = t
+                if in_lanes:
+                    mcu_lanes_step(lanes_at, bases[1], bases[2], rows.ctypes.data, m)
+                else:
+                    for j in range(m):
+                        i = rows[j]
+                        mcu_law_step_many(bases[0] + i * sizes_b[0], bases[1] + i * sizes_b[1],
+                                          1, bases[2] + i * sizes_b[2])
+                for j in range(m):
+                    in32[rows[j], IN_FLAGS] = 0
+            if in_lanes:
+                mcu_lanes_store(lanes_at, bases[0], bases[2], rows.ctypes.data, m)
 
 
 @dataclass
@@ -157,17 +208,24 @@ def stage_costs(cfg: Config, ticks: int = 2000, warm_s: float = 0.2,
                 _stage(which, ticks, eng.tick, *arrays)
                 best = min(best, time.thread_time() - c0)
             rows.append((name, best * 1e9 / (n * ticks)))
-        # The MCU law: one step per MCU period per actuator, from copies of the records.
-        period = eng.period
-        steps = ticks // period
-        best = np.inf
-        for _ in range(3):
-            states, inp, out = eng.states.copy(), eng.inp.copy(), eng.out.copy()
-            c0 = time.thread_time()
-            for _ in range(steps):
-                eng.law.step_many(states, inp, out)
-            best = min(best, time.thread_time() - c0)
-        rows.append((STAGES[5], best * 1e9 / (n * ticks)))
+        # The MCU law, one actuator at a time and in lanes, from copies of the records, as
+        # the kernels call it (an engine cycle's MCU periods per claim).
+        eng._make_blocks()
+        per_cycle = eng.cycle_ticks // eng.period
+        lane_buf = eng.law.lane_buffer()
+        sizes_b = np.array([eng.law.state_size, eng.inp.itemsize, eng.out.itemsize])
+        for stage, in_lanes in ((5, False), (11, True)):
+            best = np.inf
+            for k in range(4):  # (the first compiles)
+                states, inp, out = eng.states.copy(), eng.inp.copy(), eng.out.copy()
+                bases = np.array([states.ctypes.data, inp.ctypes.data, out.ctypes.data])
+                c0 = time.thread_time()
+                _mcu_law(in_lanes, max(1, ticks // eng.cycle_ticks) if k else 1, per_cycle,
+                         eng.tick, eng.period, eng._blocks, eng._sizes, bases, sizes_b,
+                         inp.view(np.uint32).reshape(n, -1), lane_buf.ctypes.data)
+                if k:
+                    best = min(best, time.thread_time() - c0)
+            rows.append((STAGES[stage], best * 1e9 / (n * ticks)))
         if eng.lanes:
             eng._make_blocks()
             buf = lanes.lane_buffer()
@@ -182,11 +240,13 @@ def stage_costs(cfg: Config, ticks: int = 2000, warm_s: float = 0.2,
                 best = min(best, time.thread_time() - c0)
             rows.append((STAGES[6], best * 1e9 / (n * ticks)))
             lb, sb = link_lanes.link_lane_buffer(), sensor_lanes.sensor_lane_buffer()
+            fb = fpl.board_buffer()
             for which in (0, 1):
                 def run(n_ticks, arrays, which=which):
-                    (_, _, _, y, _, _, k, raw, _, st, down, up, mdown, mup, lk) = arrays
+                    (_, _, _, y, rng, _, k, raw, c, st, down, up, mdown, mup, lk) = arrays
                     _link_sensors_in_lanes(which, n_ticks, eng.tick, eng._blocks, eng._sizes,
-                                           y, k, raw, st, down, up, mdown, mup, lk, lb, sb)
+                                           y, rng, k, raw, c, st, down, up, mdown, mup, lk,
+                                           lb, sb, buf, fb)
 
                 run(1, [a.copy() for a in snap])  # compile outside the timing
                 best = np.inf
@@ -204,14 +264,14 @@ def stage_costs(cfg: Config, ticks: int = 2000, warm_s: float = 0.2,
                 _outputs_in_lanes(ticks, x, p, u, y, rng, eng._blocks, eng._sizes, buf)
                 best = min(best, time.thread_time() - c0)
             rows.append((STAGES[9], best * 1e9 / (n * ticks)))
-            fb = fpl.board_buffer()
-            board = (snap[8], snap[9].copy(), snap[10], snap[11].copy(), snap[7])
-            _board_in_lanes(1, *board, eng._blocks, eng._sizes, fb)
+            board = (snap[8], snap[9].copy(), snap[10].copy(), snap[11].copy(), snap[7].copy())
+            _board_in_lanes(1, *board, eng._blocks, eng._sizes, fb, buf)
             best = np.inf
             for _ in range(3):
-                board = (snap[8], snap[9].copy(), snap[10], snap[11].copy(), snap[7])
+                board = (snap[8], snap[9].copy(), snap[10].copy(), snap[11].copy(),
+                         snap[7].copy())
                 c0 = time.thread_time()
-                _board_in_lanes(ticks, *board, eng._blocks, eng._sizes, fb)
+                _board_in_lanes(ticks, *board, eng._blocks, eng._sizes, fb, buf)
                 best = min(best, time.thread_time() - c0)
             rows.append((STAGES[10], best * 1e9 / (n * ticks)))
         # The engine's compiled call as a whole (every stage, 1 thread), same ticks, with

@@ -38,6 +38,7 @@ from firmware_model.lvds import link as LK
 from firmware_model.mcu.mcu import Mcu
 from hil.sim.scheduler import Record, Scheduler
 from plant import kernel
+from plant import lanes as lanes_mod
 from plant import layout as L
 from plant.config import Config
 from plant.model import Plant
@@ -81,14 +82,22 @@ def _trace_row(tr, j, raw, down, link_since, link_crc, up, on, st):
 
 
 @njit(cache=True, _nrt=False)
-def trace_row_lanes(tr, j, fb, lane, raw, down, up):
+def trace_row_lanes(tr, j, fb, lane, up):
     """:func:`_trace_row` of the board in lane ``lane`` of the board lanes ``fb``
     (:mod:`firmware_model.fpga.lanes`, after its :func:`~firmware_model.fpga.lanes.
-    board_tick`): the counts and compare values from the lanes, the words from the rows."""
-    _trace_cols(tr, j, raw, down, fpl.lane(fb, fpl.XO, fpl.X_SINCE, lane),
-                fpl.lane(fb, fpl.XO, fpl.X_CRC, lane), up,
-                fpl.lane(fb, fpl.SO, B.F_PWM_ON, lane), fpl.lane(fb, fpl.SO, B.F_DUTY_A, lane),
-                fpl.lane(fb, fpl.SO, B.F_DUTY_B, lane), fpl.lane(fb, fpl.SO, B.F_DUTY_C, lane))
+    board_tick`): the raw words, downstream memory, counts and compare values from the
+    lanes, the upstream words from the board's row ``up``."""
+    for i in range(B.N_RAW):
+        tr[j, TRACE_RAW + i] = fpl.lane(fb, fpl.RO, i, lane)
+    for i in range(B.DOWN_WORDS):
+        tr[j, TRACE_DOWN + i] = fpl.lane(fb, fpl.DO, i, lane)
+    tr[j, TRACE_LINK] = fpl.lane(fb, fpl.XO, fpl.X_SINCE, lane)
+    tr[j, TRACE_LINK + 1] = fpl.lane(fb, fpl.XO, fpl.X_CRC, lane)
+    for i in range(up.shape[0]):
+        tr[j, TRACE_UP + i] = up[i]
+    tr[j, TRACE_ON] = fpl.lane(fb, fpl.SO, B.F_PWM_ON, lane)
+    for i in range(3):
+        tr[j, TRACE_DUTY + i] = fpl.lane(fb, fpl.SO, B.F_DUTY_A + i, lane)
 
 
 @njit(cache=True, inline="always")
@@ -111,16 +120,42 @@ def drive_plant(on, st, inv_top, u, x):
     _drive(on, st[B.F_DUTY_A], st[B.F_DUTY_B], st[B.F_DUTY_C], inv_top, u, x)
 
 
-@njit(cache=True, _nrt=False)
-def drive_lanes(fb, rows, m, c, u, x):
-    """:func:`drive_plant` for the boards ``rows[:m]`` in the board lanes ``fb`` (after
-    their :func:`~firmware_model.fpga.lanes.board_tick`): the plants' input rows ``u``
-    (and ``x``, gates off), the board parameters ``c`` for the carrier's top."""
-    for j in range(m):
-        r = rows[j]
-        _drive(fpl.lane(fb, fpl.SO, B.F_PWM_ON, j), fpl.lane(fb, fpl.SO, B.F_DUTY_A, j),
-               fpl.lane(fb, fpl.SO, B.F_DUTY_B, j), fpl.lane(fb, fpl.SO, B.F_DUTY_C, j),
-               1.0 / c[r, B.C_PWM_TOP], u[r], x[r])
+@njit(cache=True, inline="always")
+def _pix(at, k, j):
+    """Row ``k`` of lane ``j`` of the block at ``at`` in the plant lanes (unsigned)."""
+    return np.uint64(at + k * lanes_mod.LW + j)
+
+
+_DUTY = float(L.DriveMode.DUTY.value)
+_OFF = float(L.DriveMode.OFF.value)
+_OFF_MODE = np.int64(L.DriveMode.OFF.value)
+
+
+@njit(**lanes_mod.LANES, inline="always")
+def drive_lanes(fb, pb, rows):
+    """:func:`drive_plant` for every lane of the batch ``rows`` (its ``LW`` entries, the
+    free lanes too): from the board lanes ``fb`` (:mod:`firmware_model.fpga.lanes`, after
+    their :func:`~firmware_model.fpga.lanes.board_tick`) into the plant lanes ``pb``
+    (:mod:`plant.lanes`: inputs, and the currents of a plant whose gates go off), its
+    branches as selects, no actuator row. The trip count is ``rows``' length, not the
+    constant ``LW``: a loop this small with a known count is unrolled before the loop
+    vectoriser sees it, and the unrolled moves between two buffers stay scalar (nothing
+    tells the compiler they do not overlap); this way it is one vector loop behind a
+    run-time overlap check."""
+    for j in range(rows.shape[0]):
+        on = fpl.lane(fb, fpl.SO, B.F_PWM_ON, j) != 0
+        inv_top = 1.0 / fpl.lane(fb, fpl.PO, B.C_PWM_TOP, j)
+        mode = pb[_pix(lanes_mod.UO, L.IN_MODE, j)]
+        off = (not on) & (np.int64(mode) != _OFF_MODE)
+        pb[_pix(lanes_mod.UO, L.IN_MODE, j)] = _DUTY if on else (_OFF if off else mode)
+        d_a = fpl.lane(fb, fpl.SO, B.F_DUTY_A, j) * inv_top
+        d_b = fpl.lane(fb, fpl.SO, B.F_DUTY_B, j) * inv_top
+        d_c = fpl.lane(fb, fpl.SO, B.F_DUTY_C, j) * inv_top
+        pb[_pix(lanes_mod.UO, L.IN_DA, j)] = d_a if on else pb[_pix(lanes_mod.UO, L.IN_DA, j)]
+        pb[_pix(lanes_mod.UO, L.IN_DB, j)] = d_b if on else pb[_pix(lanes_mod.UO, L.IN_DB, j)]
+        pb[_pix(lanes_mod.UO, L.IN_DC, j)] = d_c if on else pb[_pix(lanes_mod.UO, L.IN_DC, j)]
+        pb[_pix(lanes_mod.X, L.S_ID, j)] = 0.0 if off else pb[_pix(lanes_mod.X, L.S_ID, j)]
+        pb[_pix(lanes_mod.X, L.S_IQ, j)] = 0.0 if off else pb[_pix(lanes_mod.X, L.S_IQ, j)]
 
 
 @njit(cache=True)

@@ -3,12 +3,14 @@ to ``LW`` actuators at once, one actuator per vector lane.
 
 The chips' parameters of a batch are loaded once per kernel call (:func:`load_chips`) into
 one flat float64 **lane buffer** (structure of arrays: row ``r`` of lane ``j`` at
-``r * LW + j``); per tick :func:`digitise_lanes` moves the plant outputs the chips read
-into it, computes every raw word of every lane in one branch-free pass over the lanes
-(LLVM vectorises it: ``floor``, float64 <-> int64 conversions, 64-bit multiplies and
-variable shifts all have AVX-512 forms), and writes each actuator's raw words into its
-exchange row (``raw[i]``), holding what the scalar code holds (a dead encoder's count, a
-rejected strain read).
+``r * LW + j``); per tick :func:`digitise_lanes` copies the plant outputs the chips read
+from the plant's lane buffer (:mod:`plant.lanes`, where the tick before left them) into it,
+computes every raw word of every lane in one branch-free pass over the lanes (LLVM
+vectorises it: ``floor``, float64 <-> int64 conversions, 64-bit multiplies and variable
+shifts all have AVX-512 forms), and writes them into the board lanes
+(:mod:`firmware_model.fpga.lanes`, rows ``RO``: the board's inputs) in a second branch-free
+pass, holding what the scalar code holds (a dead encoder's count, a rejected strain read).
+No actuator row is read or written per tick, except for a lane on the scalar code below.
 
 Per actuator the operations are :func:`digitise`'s in its order, except three integer
 steps that have no vector form for 64-bit lanes and are computed another way with the same
@@ -30,9 +32,11 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from firmware_model.fpga import lanes as fpl
 from firmware_model.fpga import layout as B
 from plant import layout as L
 from plant.lanes import LANES, LW
+from plant.lanes import YO as PYO
 from plant.sensors import chips as K
 from plant.sensors.hall_sensor import HALL_SEQUENCE
 from plant.sensors.harness import ANALOG_ROWS, digitise
@@ -166,43 +170,67 @@ def _codes(sb, tick):
             sb[_ix(RO + _C_ANALOG + q, j)] = 0.0 if sb[_ix(b + 3, j)] < 0.5 else code
 
 
-@njit(**LANES)
-def digitise_lanes(sb, y, chips, rows, m, tick, raw):
-    """:func:`digitise` of the plant outputs ``y[rows[j]]`` at ``tick`` into the raw words
-    ``raw[rows[j]]`` for lanes 0..m-1 (chips loaded by :func:`load_chips`)."""
-    for q in range(Y_SOURCES.size):
-        for j in range(LW):
-            sb[_ix(YO + q, j)] = y[rows[min(j, m - 1)], Y_SOURCES[q]]
-    _codes(sb, tick)
-    for j in range(m):
-        i = rows[j]
-        if sb[_ix(SCALAR, j)] != 0.0:
-            digitise(y[i], chips[i], tick, raw[i])
-            continue
-        if sb[_ix(KO + K.K_MOTOR_DEAD, j)] > 0.5:
-            raw[i, B.R_SSI_OK] = 0
-        else:
-            raw[i, B.R_SSI] = np.int64(sb[_ix(RO + _C_SSI, j)])
-            raw[i, B.R_SSI_OK] = 1
-            raw[i, B.R_ABI] = np.int64(sb[_ix(RO + _C_ABI, j)])
-        if sb[_ix(KO + K.K_PISTON_DEAD, j)] > 0.5:
-            raw[i, B.R_BISS_OK] = 0
-        else:
-            raw[i, B.R_BISS] = np.int64(sb[_ix(RO + _C_BISS, j)])
-            raw[i, B.R_BISS_OK] = 1
+@njit(cache=True, inline="always")
+def _raw_at(k, j):
+    """Raw word ``k`` of lane ``j`` in the board lanes."""
+    return np.uint64(fpl.RO + k * LW + j)
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _raw_words(sb, fb):
+    """Every lane's codes (:func:`_codes`) into its raw words in the board lanes ``fb``,
+    as :func:`digitise` writes them into a row: a dead encoder's OK word 0 and its counts
+    held, the strain code and OK word held but on a conversion, the OK word 0 and the
+    code held for a rejected read."""
+    for j in range(LW):
+        live = sb[_ix(KO + K.K_MOTOR_DEAD, j)] <= 0.5
+        ssi = np.int64(sb[_ix(RO + _C_SSI, j)])
+        abi = np.int64(sb[_ix(RO + _C_ABI, j)])
+        fb[_raw_at(B.R_SSI, j)] = ssi if live else fb[_raw_at(B.R_SSI, j)]
+        fb[_raw_at(B.R_ABI, j)] = abi if live else fb[_raw_at(B.R_ABI, j)]
+        fb[_raw_at(B.R_SSI_OK, j)] = 1 if live else 0
+        live = sb[_ix(KO + K.K_PISTON_DEAD, j)] <= 0.5
+        biss = np.int64(sb[_ix(RO + _C_BISS, j)])
+        fb[_raw_at(B.R_BISS, j)] = biss if live else fb[_raw_at(B.R_BISS, j)]
+        fb[_raw_at(B.R_BISS_OK, j)] = 1 if live else 0
         new = sb[_ix(RO + _C_NEW, j)] != 0.0
-        raw[i, B.R_STRAIN_NEW] = 1 if new else 0
-        if new:
-            if sb[_ix(RO + _C_CLAMPED, j)] != 0.0:
-                raw[i, B.R_STRAIN_OK] = 0
-            else:
-                raw[i, B.R_STRAIN] = np.int64(sb[_ix(RO + _C_STRAIN, j)])
-                raw[i, B.R_STRAIN_OK] = 1
+        good = new & (sb[_ix(RO + _C_CLAMPED, j)] == 0.0)
+        strain = np.int64(sb[_ix(RO + _C_STRAIN, j)])
+        fb[_raw_at(B.R_STRAIN_NEW, j)] = 1 if new else 0
+        fb[_raw_at(B.R_STRAIN, j)] = strain if good else fb[_raw_at(B.R_STRAIN, j)]
+        ok = 1 if good else 0
+        fb[_raw_at(B.R_STRAIN_OK, j)] = ok if new else fb[_raw_at(B.R_STRAIN_OK, j)]
         for q in range(N_ANALOG):
-            raw[i, B.ANALOG_RAW[q]] = np.int64(sb[_ix(RO + _C_ANALOG + q, j)])
-        raw[i, B.R_IA] = np.int64(sb[_ix(RO + _C_IA, j)])
-        raw[i, B.R_IB] = np.int64(sb[_ix(RO + _C_IB, j)])
-        raw[i, B.R_HALL] = np.int64(sb[_ix(RO + _C_HALL, j)])
+            fb[_raw_at(B.ANALOG_RAW[q], j)] = np.int64(sb[_ix(RO + _C_ANALOG + q, j)])
+        fb[_raw_at(B.R_IA, j)] = np.int64(sb[_ix(RO + _C_IA, j)])
+        fb[_raw_at(B.R_IB, j)] = np.int64(sb[_ix(RO + _C_IB, j)])
+        fb[_raw_at(B.R_HALL, j)] = np.int64(sb[_ix(RO + _C_HALL, j)])
+
+
+@njit(**LANES, inline="always")
+def digitise_lanes(sb, pb, fb, chips, rows, m, tick, y, raw):
+    """:func:`digitise` at ``tick`` of the plant outputs in the plant lanes ``pb``
+    (:data:`plant.lanes.YO`) into the raw words in the board lanes ``fb``
+    (:data:`firmware_model.fpga.lanes.RO`), every lane (chips loaded by
+    :func:`load_chips`). A lane on the scalar :func:`digitise` runs it on its actuator's
+    rows (``y[rows[j]]``, ``raw[rows[j]]``): its outputs and raw words moved there first,
+    its raw words back after. (The outputs' copy runs over ``rows``' length, ``LW``, as
+    a count the compiler does not know: see :func:`hil.sim.actuator.drive_lanes`.)"""
+    for j in range(rows.shape[0]):
+        for q in range(Y_SOURCES.size):
+            sb[_ix(YO + q, j)] = pb[np.uint64(PYO + Y_SOURCES[q] * LW + j)]
+    _codes(sb, tick)
+    _raw_words(sb, fb)
+    for j in range(m):
+        if sb[_ix(SCALAR, j)] != 0.0:
+            i = rows[j]
+            for q in range(Y_SOURCES.size):
+                y[i, Y_SOURCES[q]] = pb[np.uint64(PYO + Y_SOURCES[q] * LW + j)]
+            for k in range(B.N_RAW):
+                raw[i, k] = fb[_raw_at(k, j)]
+            digitise(y[i], chips[i], tick, raw[i])
+            for k in range(B.N_RAW):
+                fb[_raw_at(k, j)] = raw[i, k]
 
 
 def sensor_lane_buffer() -> np.ndarray:

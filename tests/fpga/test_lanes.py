@@ -120,33 +120,48 @@ def _apply(d, s, inputs):
         s[B.F_ERR_LINK_CRC] = crc
 
 
+def _put(fb, j, inputs):
+    """The same tick's inputs where the batch's stages write them, into lane ``j`` of the
+    board lanes: the sensor chips' raw words, the link's downstream words and counts."""
+    raw, down, since, crc = inputs
+    for k, v in enumerate(raw):
+        fb[fpl.RO + k * fpl.LW + j] = v
+    for k, v in down.items():
+        fb[fpl.DO + k * fpl.LW + j] = v
+    if since is not None:
+        fb[fpl.SO + B.F_SINCE_VALID * fpl.LW + j] = since
+    if crc is not None:
+        fb[fpl.SO + B.F_ERR_LINK_CRC * fpl.LW + j] = crc
+
+
 @settings(max_examples=60, deadline=None)
 @given(boards=st.lists(board(), min_size=1, max_size=fpl.LW), seed=st.integers(0, 1 << 32),
        ticks=st.integers(1, 8))
 def test_board_in_lanes_is_the_scalar_tick_bit_for_bit(boards, seed, ticks):
-    """Up to LW different boards in one batch, ``ticks`` ticks with random inputs: each
-    board's state (the ring too), upstream memory, PWM-on flag, compare counts and the
-    link counts a trace reads are the scalar tick's."""
+    """Up to LW different boards in one batch, ``ticks`` ticks with random inputs written
+    into the lanes: each board's upstream memory, PWM-on flag, compare counts and the link
+    counts a trace reads after every tick, and its state (the ring too) and exchange words
+    stored back after the batch, are the scalar tick's."""
     m = len(boards)
     C = np.array([b[0] for b in boards])
     S = np.array([b[1] for b in boards])
     D = np.array([b[2] for b in boards])
     U = np.zeros((m, B.UP_WORDS), dtype=np.int64)
     raw = np.zeros((m, B.N_RAW), dtype=np.int64)
-    rs, rd, ru = S.copy(), D.copy(), U.copy()
+    rs, rd, ru, rraw = S.copy(), D.copy(), U.copy(), raw.copy()
     fb = fpl.board_buffer()
     rows = np.arange(m)
-    fpl.load_board(fb, C, S, rows, m)
+    fpl.load_board(fb, C, S, raw, D, rows, m)
     g = np.random.default_rng(seed)
     for _ in range(ticks):
         inputs = [tick_inputs(g) for _ in range(m)]
         want = []
         for j in range(m):
-            raw[j] = inputs[j][0]
+            rraw[j] = inputs[j][0]
             _apply(rd[j], rs[j], inputs[j])
-            _apply(D[j], S[j], inputs[j])
+            _put(fb, j, inputs[j])
             since, crc = rs[j, B.F_SINCE_VALID], rs[j, B.F_ERR_LINK_CRC]
-            on = control_tick(C[j], rs[j], rd[j], ru[j], raw[j])
+            on = control_tick(C[j], rs[j], rd[j], ru[j], rraw[j])
             want.append((on, *rs[j, B.F_DUTY_A:B.F_DUTY_C + 1], since, crc))
         fpl.board_tick(fb, rows, m, raw, D, S, U, C)
         got = [(fpl.lane(fb, fpl.SO, B.F_PWM_ON, j),
@@ -155,8 +170,10 @@ def test_board_in_lanes_is_the_scalar_tick_bit_for_bit(boards, seed, ticks):
                for j in range(m)]
         assert got == want
         np.testing.assert_array_equal(U, ru)
-    fpl.store_board(fb, S, rows, m)
+    fpl.store_board(fb, S, raw, D, rows, m)
     np.testing.assert_array_equal(S, rs)
+    np.testing.assert_array_equal(D, rd)
+    np.testing.assert_array_equal(raw, rraw)
 
 
 @cfunc(types.void(types.voidptr))
@@ -194,13 +211,13 @@ def test_a_batch_with_an_rtl_loop_runs_the_scalar_tick_on_its_rows():
     u = np.zeros((2, B.UP_WORDS), dtype=np.int64)
     u2 = u.copy()
     fb = fpl.board_buffer()
-    fpl.load_board(fb, c, s, np.arange(2), 2)
+    fpl.load_board(fb, c, s, raw, d, np.arange(2), 2)
     assert fb[fpl.HO + fpl.H_SCALAR] == 1
     for _ in range(3):
         fpl.board_tick(fb, np.arange(2), 2, raw, d, s, u, c)
         for j in range(2):
             control_tick(c2[j], s2[j], d2[j], u2[j], raw2[j])
-    fpl.store_board(fb, s, np.arange(2), 2)
+    fpl.store_board(fb, s, raw, d, np.arange(2), 2)
     np.testing.assert_array_equal(s, s2)
     np.testing.assert_array_equal(u, u2)
     assert s[1, B.F_PWM_ON] == 1 and s[1, B.F_DUTY_A:B.F_DUTY_C + 1].tolist() == [100, 600, 1100]

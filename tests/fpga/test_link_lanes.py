@@ -14,6 +14,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from numba import njit
 
+from firmware_model.fpga import lanes as fpl
 from firmware_model.fpga import layout as B
 from firmware_model.lvds import lanes as LL
 from firmware_model.lvds import link as LK
@@ -75,14 +76,19 @@ def test_the_sweeps_in_lanes_are_the_scalar_sweeps_bit_for_bit(links, extra, tic
     block = np.zeros(LW, dtype=np.int64)
     block[:m] = rows
     LL.load_link(lb, lk, block, m)
+    # the boards' downstream memories and link counts in the board lanes, as in the engine
+    fb = fpl.board_buffer()
+    raw = np.zeros((n, B.N_RAW), dtype=np.int64)
+    fpl.load_board(fb, np.zeros((n, B.N_PARAMS), dtype=np.int64), st_, raw, down, block, m)
     trace = np.zeros((1, 2 * LK.WORDS_W), dtype=np.int64)
     for _ in range(ticks):
         new_down = rng.integers(0, 1 << 17, (n, B.DOWN_WORDS))
         new_up = rng.integers(-(1 << 33), 1 << 33, (n, B.UP_WORDS))
         mdown[:], ref[1][:] = new_down, new_down
         up[:], ref[5][:] = new_up, new_up
-        LL.sweep_down_lanes(lb, lk, mdown, st_, down, block, m)
+        LL.sweep_down_lanes(lb, lk, mdown, fb, st_, down, block, m)
         LL.sweep_up_lanes(lb, lk, up, mup, block, m)
+        fpl.store_board(fb, st_, raw, down, block, m)
         r_lk, r_mdown, r_mup, r_st, r_down, r_up = ref
         for j, r in enumerate(rows):
             LK.sweep_down(r_lk[r], r_mdown[r], r_st[r], r_down[r])

@@ -11,9 +11,12 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from firmware_model.fpga import lanes as fpl
 from firmware_model.fpga import layout as B
+from plant import lanes
 from plant import layout as L
 from plant.config import load_config
+from plant.lane_outputs import load_outputs
 from plant.lanes import LW
 from plant.sensors import chips as K
 from plant.sensors import lanes as SL
@@ -73,11 +76,18 @@ def test_digitise_in_lanes_is_the_scalar_digitise_bit_for_bit(data, ks, extra, t
     block = np.zeros(LW, dtype=np.int64)
     block[:m] = rows
     SL.load_chips(sb, k, block, m)
+    # as in the engine: the outputs in the plant lanes, the raw words in the board lanes
+    pb, fb = lanes.lane_buffer(), fpl.board_buffer()
+    params, state = np.zeros((n, B.N_PARAMS), np.int64), np.zeros((n, B.N_STATE), np.int64)
+    down = np.zeros((n, B.DOWN_WORDS), np.int64)
+    fpl.load_board(fb, params, state, raw, down, block, m)
     y = np.zeros((n, L.N_OUTPUTS))
     for t in range(tick0, tick0 + ticks):
         for r in rows:
             y[r] = outputs(data.draw)
-        SL.digitise_lanes(sb, y, k, block, m, t, raw)
+        load_outputs(pb, y, np.zeros((n, 1), np.uint64), block, m)
+        SL.digitise_lanes(sb, pb, fb, k, block, m, t, y, raw)
+        fpl.store_board(fb, state, raw, down, block, m)
         for r in rows:
             digitise(y[r], k[r], t, ref[r])
         np.testing.assert_array_equal(raw, ref)
