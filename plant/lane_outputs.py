@@ -26,18 +26,21 @@ import numpy as np
 from numba import njit
 
 from plant import layout as L
-from plant.blocks.lanemath import _bits, _from_bits
+from plant.blocks.lanemath import _bits, _from_bits, pick
 from plant.blocks.motor_dq import phase_angles
 from plant.lanes import (
     GO,
+    KA,
     LANES,
     LW,
     RG,
     UO,
+    VR,
     YO,
     _ix,
     _p,
-    line_stiffness_lane,
+    aerated_stiffness_lane,
+    series_stiffness_lane,
     viscosity_lane,
 )
 from plant.lanes import X as XO
@@ -63,12 +66,30 @@ def _put(B, k, i, v):
 @njit(cache=True, inline="always", error_model="numpy")
 def _physical_lanes(B):
     """:func:`plant.kernel.physical_outputs` (with :func:`~plant.kernel.stored_energy`) of
-    every lane, into the output rows at :data:`plant.lanes.YO`."""
+    every lane, into the output rows at :data:`plant.lanes.YO`. The viscosity ratio and the
+    stiffness with entrained air are loops of their own into their rows of the buffer
+    (``VR``, ``KA``), run only where some lane of the batch has the effect on (else every
+    lane selects 1 and the series stiffness, the scalar code's values)."""
+    temp = False
+    air = False
+    for i in range(LW):
+        temp |= _p(B, L.P_TEMP_ON, i) > 0.5
+        air |= _p(B, L.P_AIR_ON, i) > 0.5
+    if temp:
+        for i in range(LW):
+            B[_ix(VR, 0, i)] = viscosity_lane(B, i, _x(B, L.S_TOIL, i))
+    else:
+        for i in range(LW):
+            B[_ix(VR, 0, i)] = 1.0
+    if air:
+        for i in range(LW):
+            B[_ix(KA, 0, i)] = aerated_stiffness_lane(B, i, _x(B, L.S_THC, i),
+                                                      _x(B, L.S_TQ, i))
     for i in range(LW):
         kc = _p(B, L.P_KC, i)
         kc_kp = _p(B, L.P_KC_OVER_KP, i)
         kt = _p(B, L.P_KT_EQ, i)
-        r = viscosity_lane(B, i, _x(B, L.S_TOIL, i))
+        r = B[_ix(VR, 0, i)]
         mode = _p(B, L.IN_MODE, i, UO)
         current = mode == _CURRENT
         force = mode == _FORCE
@@ -134,7 +155,9 @@ def _physical_lanes(B):
         _put(B, L.Y_E_EXT, i, _x(B, L.S_EEXT, i))
         # kernel.stored_energy (x ** 2 is x * x; the sums in the scalar code's order)
         e = 0.5 * _p(B, L.P_JP, i) * (vp * vp) + 0.5 * _p(B, L.P_JC, i) * (vc * vc)
-        e += tq * tq / (2.0 * line_stiffness_lane(B, i, x_c, tq))
+        ks = pick(_p(B, L.P_AIR_ON, i) > 0.5, B[_ix(KA, 0, i)],
+                  series_stiffness_lane(B, i, x_c))
+        e += tq * tq / (2.0 * ks)
         d_anchor = x_c - _p(B, L.P_X_ANCHOR, i)
         d_cart = x_c - _x(B, L.S_XL, i)
         e_conrod = e + 0.5 * k_rod * (d_anchor * d_anchor)
@@ -147,7 +170,13 @@ def _physical_lanes(B):
 @njit(cache=True, inline="always", error_model="numpy")
 def _noise_lanes(B):
     """Recipe 4's seven samples of every lane into the rows at :data:`plant.lanes.GO`; a
-    lane's stream state moves on only where its noise is on under recipe 4."""
+    lane's stream state moves on only where its noise is on under recipe 4. Not drawn at
+    all where no lane has it on (no lane would read a sample or move its stream on)."""
+    draw = False
+    for i in range(LW):
+        draw |= (_p(B, L.P_NOISE_ON, i) > 0.5) & (_p(B, L.P_NUMERICS, i) >= 4.0)
+    if not draw:
+        return
     for i in range(LW):
         s0 = np.uint64(_bits(B[RG + i]))
         s, g0, g1, g2, g3, g4, g5, g6 = gauss7_4(s0)

@@ -9,10 +9,11 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from firmware_model.fpga.params import board_params
 from firmware_model.fpga.rtl_abi import timing_ticks_model, timing_ticks_rtl
+from hil.bench.robot_cycle import CpuSplit, cpu_split
 from hil.sim.scheduler import Scheduler
 from plant.config import Config
 from plant.model import Plant
@@ -147,11 +148,17 @@ class RobotBench(TimedRun):
     tick_s: float = 50e-6
     engine: str = "lanes"  #: "lanes" or "per-actuator" (hil.sim.robot)
     numerics: int = 3      #: the plant's arithmetic recipe it ran
+    #: The run's CPU by thread (:mod:`hil.bench.robot_cycle`).
+    split: CpuSplit = field(default_factory=CpuSplit)
+
+    def per_actuator_tick(self, cpu_s: float) -> float:
+        """``cpu_s`` over the run in ns per actuator per 50 us tick."""
+        return 1e9 * cpu_s / (self.actuators * self.simulated_s / self.tick_s)
 
     @property
     def ns_per_actuator_tick(self) -> float:
         """CPU time (every thread) per actuator per 50 us tick, ns."""
-        return 1e9 * self.cpu_s / (self.actuators * self.simulated_s / self.tick_s)
+        return self.per_actuator_tick(self.cpu_s)
 
 
 def bench_robot(cfg: Config, seconds: float = 10.0, workers: int = 1,
@@ -169,19 +176,20 @@ def bench_robot(cfg: Config, seconds: float = 10.0, workers: int = 1,
     cycles = int(round(seconds * 1000))
     pc = demo_pc()
     with BusSystem(topo, cfg, "inproc", model="robot") as bs:
-        bs.chain.engine.workers = workers
+        eng = bs.chain.engine
+        eng.workers = workers
         if lanes is not None:
-            bs.chain.engine.lanes = lanes
-        used = bs.chain.engine.lanes
+            eng.lanes = lanes
+        used = eng.lanes
         bs.run(20, pc)  # compile / warm up outside the timing
-        t0, c0 = time.perf_counter(), time.process_time()
-        bs.run(cycles, pc, keep=0)
-        wall, cpu = time.perf_counter() - t0, time.process_time() - c0
-        bs.chain.engine.wait()
+        with cpu_split(eng) as split:
+            t0, c0 = time.perf_counter(), time.process_time()
+            bs.run(cycles, pc, keep=0)
+            wall, cpu = time.perf_counter() - t0, time.process_time() - c0
     return RobotBench(cycles * 1e-3, wall, cpu, workers=workers, actuators=topo.n_actuators,
                       tick_s=cfg.get("sim.tick_ns") * 1e-9,
                       engine="lanes" if used else "per-actuator",
-                      numerics=cfg.get("sim.plant_numerics"))
+                      numerics=cfg.get("sim.plant_numerics"), split=split)
 
 
 # --- one tick's call of the current loop: RTL under Verilator against the board model ------

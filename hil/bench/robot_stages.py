@@ -25,6 +25,12 @@ from firmware_model.lvds import lanes as link_lanes
 from firmware_model.lvds import link as LK
 from hil.bench.robot_cycle import python_per_cycle
 from hil.sim.actuator import drive_lanes
+from hil.sim.robot import _IN_FLAGS as IN_FLAGS
+from hil.sim.robot import _IN_TICK as IN_TICK
+from hil.sim.robot import _mcu_lanes_load as mcu_lanes_load
+from hil.sim.robot import _mcu_lanes_step as mcu_lanes_step
+from hil.sim.robot import _mcu_lanes_store as mcu_lanes_store
+from hil.sim.robot import _mcu_law_step_many as mcu_law_step_many
 from plant import kernel, lanes
 from plant import layout as L
 from plant.config import Config
@@ -34,9 +40,10 @@ from plant.sensors.harness import digitise
 
 #: Stage names, in the order of one tick.
 STAGES = ("plant RK4 + effects", "plant outputs + noise", "sensor chips", "driver board",
-          "LVDS link", "MCU law (C build)", "plant RK4 + effects, in lanes",
-          "sensor chips, in lanes", "LVDS link, in lanes",
-          "plant outputs + noise, in lanes", "driver board + inverter, in lanes")
+          "LVDS link", "MCU law (C build), one actuator at a time",
+          "plant RK4 + effects, in lanes", "sensor chips, in lanes", "LVDS link, in lanes",
+          "plant outputs + noise, in lanes", "driver board + inverter, in lanes",
+          "MCU law, in lanes")
 
 
 @njit(cache=True, nogil=True)
@@ -133,6 +140,38 @@ def _board_in_lanes(n_ticks, c, st, down, up, raw, blocks, sizes, fb, buf):
         fpl.store_board(fb, st, raw, down, blocks[b], sizes[b])
 
 
+@njit(cache=True, nogil=True)
+def _mcu_law(in_lanes, n_cycles, per_cycle, tick0, period, blocks, sizes, bases, sizes_b,
+             in32, lanes_at):
+    """``n_cycles`` cycles of ``per_cycle`` MCU steps of every actuator, batch by batch as
+    the engine's kernels make them: each actuator's C law on its own
+    (``mcu_law_step_many`` for one, :func:`hil.sim.robot.advance_robot`), or the batch in
+    lanes (``in_lanes``: ``mcu_lanes_*``, buffer at ``lanes_at``, loaded at each claim and
+    stored at the cycle's end, :func:`hil.sim.robot.advance_robot_lanes`), with the tick and
+    flags the engine writes into the input records at each step. ``bases``: the states',
+    inputs' and outputs' addresses, ``sizes_b`` their records' sizes."""
+    for c in range(n_cycles):
+        for b in range(blocks.shape[0]):
+            rows, m = blocks[b], np.uint32(sizes[b])
+            if in_lanes:
+                mcu_lanes_load(lanes_at, bases[0], rows.ctypes.data, m)
+            for n in range(per_cycle):
+                t = tick0 + (c * per_cycle + n) * period
+                for j in range(m):
+                    in32[rows[j], IN_TICK] = t
+                if in_lanes:
+                    mcu_lanes_step(lanes_at, bases[1], bases[2], rows.ctypes.data, m)
+                else:
+                    for j in range(m):
+                        i = rows[j]
+                        mcu_law_step_many(bases[0] + i * sizes_b[0], bases[1] + i * sizes_b[1],
+                                          1, bases[2] + i * sizes_b[2])
+                for j in range(m):
+                    in32[rows[j], IN_FLAGS] = 0
+            if in_lanes:
+                mcu_lanes_store(lanes_at, bases[0], bases[2], rows.ctypes.data, m)
+
+
 @dataclass
 class StageCosts:
     """CPU ns per actuator tick of each stage (``rows``: (stage, ns)), over ``ticks``."""
@@ -177,17 +216,24 @@ def stage_costs(cfg: Config, ticks: int = 2000, warm_s: float = 0.2,
                 _stage(which, ticks, eng.tick, *arrays)
                 best = min(best, time.thread_time() - c0)
             rows.append((name, best * 1e9 / (n * ticks)))
-        # The MCU law: one step per MCU period per actuator, from copies of the records.
-        period = eng.period
-        steps = ticks // period
-        best = np.inf
-        for _ in range(3):
-            states, inp, out = eng.states.copy(), eng.inp.copy(), eng.out.copy()
-            c0 = time.thread_time()
-            for _ in range(steps):
-                eng.law.step_many(states, inp, out)
-            best = min(best, time.thread_time() - c0)
-        rows.append((STAGES[5], best * 1e9 / (n * ticks)))
+        # The MCU law, one actuator at a time and in lanes, from copies of the records, as
+        # the kernels call it (an engine cycle's MCU periods per claim).
+        eng._make_blocks()
+        per_cycle = eng.cycle_ticks // eng.period
+        lane_buf = eng.law.lane_buffer()
+        sizes_b = np.array([eng.law.state_size, eng.inp.itemsize, eng.out.itemsize])
+        for stage, in_lanes in ((5, False), (11, True)):
+            best = np.inf
+            for k in range(4):  # (the first compiles)
+                states, inp, out = eng.states.copy(), eng.inp.copy(), eng.out.copy()
+                bases = np.array([states.ctypes.data, inp.ctypes.data, out.ctypes.data])
+                c0 = time.thread_time()
+                _mcu_law(in_lanes, max(1, ticks // eng.cycle_ticks) if k else 1, per_cycle,
+                         eng.tick, eng.period, eng._blocks, eng._sizes, bases, sizes_b,
+                         inp.view(np.uint32).reshape(n, -1), lane_buf.ctypes.data)
+                if k:
+                    best = min(best, time.thread_time() - c0)
+            rows.append((STAGES[stage], best * 1e9 / (n * ticks)))
         if eng.lanes:
             eng._make_blocks()
             buf = lanes.lane_buffer()

@@ -117,20 +117,33 @@ def cmd_bench_robot(args: argparse.Namespace, ctx: Context) -> Outcome:
                                          source=f"plant recipe {numerics}") if numerics else cfg
             r = bench_robot(run_cfg, args.seconds, w, lanes=lanes)
             label = f"{r.engine}, recipe {r.numerics}"
+            sp = r.split
+            by_thread = [r.per_actuator_tick(s) for s in (
+                sp.compiled_s, sp.python_s, sp.helpers_s,
+                r.cpu_s - sp.calling_s - sp.helpers_s)]
             rows.append((w, label, r.simulated_s, r.wall_s, r.cpu_s, r.real_time_factor,
-                         r.cpu_real_time_factor, r.ns_per_actuator_tick))
+                         r.cpu_real_time_factor, r.ns_per_actuator_tick,
+                         *(f"{v:.0f}" for v in by_thread)))
             data.append({"workers": w, "engine": r.engine, "plant_numerics": r.numerics,
                          "simulated_s": r.simulated_s, "wall_s": r.wall_s,
                          "cpu_s": r.cpu_s, "real_time_factor": r.real_time_factor,
                          "cpu_real_time_factor": r.cpu_real_time_factor,
-                         "ns_per_actuator_tick": r.ns_per_actuator_tick})
+                         "ns_per_actuator_tick": r.ns_per_actuator_tick,
+                         "ns_per_actuator_tick_by_thread": dict(zip(
+                             ("calling_compiled", "calling_python", "helpers", "other"),
+                             by_thread, strict=True))})
     text = table(["workers", "engine", "simulated [s]", "wall [s]", "CPU [s]",
-                  "real-time (wall)", "real-time (CPU)", "CPU ns/actuator/tick"], rows,
+                  "real-time (wall)", "real-time (CPU)", "CPU ns/actuator/tick",
+                  "calling thread: compiled", "calling thread: Python", "helper threads",
+                  "other"], rows,
                  fmt=".3g",
                  title=f"hydra_full, {r.actuators} actuators, full stack behind every box "
                  f"(robot engine), PC loop at 1 kHz, {cfg.sources[-1]}; load average "
                  f"{load:.2f} on {os.cpu_count()} cores at the start (target: lanes >= 2x "
-                 "wall with 1 worker, >= 3.5x with 2)")
+                 "wall with 1 worker, >= 3.5x with 2); the last four columns split the CPU "
+                 "ns/actuator/tick by thread: the calling thread's compiled calls, the rest "
+                 "of it (master, PC loop, chain, hand-offs), the engine's helper threads "
+                 "(their compiled calls, spins, sleeps), the rest of the process")
     return Outcome(text, {"config": cfg.sources, "load_average": load, "runs": data})
 
 

@@ -190,6 +190,8 @@ class BusSystem:
                 self.s_end.send(reply)
 
     def close(self) -> None:
+        if self.chain is not None and self.chain.engine is not None:
+            self.chain.engine.close()  # (its helper threads)
         for end in (self.m_end, self.s_end):
             if end is not None:
                 end.close()

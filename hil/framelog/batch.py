@@ -6,12 +6,13 @@ updates one at a time, and two more ``struct.pack`` per message for its index en
 chunk closes; measured by ``eha-hil bench log``). A ``bus run`` log has
 thousands of small messages per simulated second (one decoded-signal sample per
 actuator and MCU step, two fieldbus frames per cycle), and that alone would cost about
-half of the run's own time. :func:`add_messages` builds the records of a whole batch with
-one ``struct.pack`` per message (or a numpy structured array when every payload has the
-same length) and makes exactly the updates ``add_message`` would: statistics (count,
-start and end time, per-channel counts), the chunk builder's message index, count and
-time range, then the chunk-size check; the index of a channel written this way writes its
-entries with one numpy call.
+half of the run's own time. :func:`add_messages` builds the record heads of a whole batch
+as one numpy structured array (with the payloads in it when they all have one length) and
+makes exactly the updates ``add_message`` would: statistics (count, start and end time,
+per-channel counts), the chunk builder's message index, count and time range, then the
+chunk-size check; a channel's index entries are numpy arrays, written with one call
+(:func:`hil.framelog.chunk.write_indexes`). :func:`records` and :func:`add_records`:
+the records of many channels built in place in the chunk's buffer.
 
 These are the Writer's private attributes (mcap 1.x). :func:`supported` checks that they
 are there and have the expected types; if not, :func:`add_messages` falls back to
@@ -31,42 +32,19 @@ import numpy as np
 from mcap.records import MessageIndex, Opcode
 from mcap.writer import Writer
 
+from hil.framelog.chunk import ChunkBuffer, write_indexes
+
 _HEAD = struct.Struct("<BQHIQQ")  # opcode, record length, channel, sequence, log, publish
-_INDEX_HEAD = struct.Struct("<BQHI")  # opcode, record length, channel, bytes of entries
-_PAIR = struct.Struct("<QQ")  # an index entry: log time, offset in the chunk
 
 
 class _MessageIndex(MessageIndex):
-    """A MessageIndex that writes its (time, offset) pairs with one numpy call instead of
-    two ``struct.pack`` per message (the same bytes)."""
+    """A MessageIndex whose ``records`` may also hold (n, 2) arrays of (time, offset)
+    pairs (from :func:`add_messages` and :func:`add_records`); written in one go, the
+    bytes of the library's record (:func:`hil.framelog.chunk.write_indexes`, which also
+    writes a chunk's indexes when our chunk closing is installed)."""
 
     def write(self, stream) -> None:  # noqa: ANN001 - mcap's RecordBuilder
-        # ``records`` holds (time, offset) pairs and, from :func:`add_messages`, (n, 2)
-        # arrays of them: one array each run of either, in order; the record goes out in
-        # one write (the library's start/finish_record seek back to patch the length)
-        recs = self.records
-        if len(recs) == 1:  # the common case: a channel's one block or batch in a chunk
-            r = recs[0]
-            body = _PAIR.pack(*r) if isinstance(r, tuple) else \
-                r.astype("<u8", copy=False).tobytes()
-            stream.write(_INDEX_HEAD.pack(Opcode.MESSAGE_INDEX, 6 + len(body),
-                                          self.channel_id, len(body)) + body)
-            return
-        parts, pairs = [], []
-        for r in recs:
-            if isinstance(r, np.ndarray):
-                if pairs:
-                    parts.append(np.asarray(pairs, dtype="<u8").reshape(-1, 2))
-                    pairs = []
-                parts.append(r)
-            else:
-                pairs.append(r)
-        if pairs:
-            parts.append(np.asarray(pairs, dtype="<u8").reshape(-1, 2))
-        body = (np.concatenate(parts).astype("<u8", copy=False).tobytes() if len(parts) > 1
-                else parts[0].astype("<u8", copy=False).tobytes() if parts else b"")
-        stream.write(_INDEX_HEAD.pack(Opcode.MESSAGE_INDEX, 6 + len(body), self.channel_id,
-                                      len(body)) + body)
+        write_indexes({self.channel_id: self}, stream, 0, {})
 
 
 def supported(w: Writer) -> bool:
@@ -139,20 +117,26 @@ def add_messages(w: Writer, channel_id: int, times: Sequence[int] | np.ndarray,
         index.records.append(np.stack([t, base + step * np.arange(n, dtype=np.uint64)],
                                       axis=1))
         offsets = None
-    else:
-        parts, offsets, pos = [], [], base
-        pack = _HEAD.pack
-        op = Opcode.MESSAGE
-        for i in range(n):
-            d = data[i]
-            parts.append(pack(op, _HEAD.size - 9 + len(d), channel_id,
-                              (seq0 + i) & 0xFFFFFFFF, int(times[i]), int(times[i])))
-            parts.append(d)
-            offsets.append(pos)
-            pos += _HEAD.size + len(d)
+    else:  # the record heads as one array, each message's bytes between them
+        lens = np.fromiter(map(len, data), np.int64, n)
+        heads = np.zeros(n, np.dtype(HEAD_FIELDS))
+        heads["op"] = Opcode.MESSAGE
+        heads["len"] = _HEAD.size - 9 + lens
+        heads["ch"] = channel_id
+        heads["seq"] = (np.arange(n, dtype=np.int64) + seq0) & 0xFFFFFFFF
+        heads["log"] = times
+        heads["pub"] = times
+        hb = heads.tobytes()
+        h = _HEAD.size
+        parts: list = [None] * (2 * n)
+        parts[0::2] = [hb[i:i + h] for i in range(0, n * h, h)]
+        parts[1::2] = data
         blob = b"".join(parts)
+        ends = np.cumsum(lens + h)
+        offsets = np.stack([times.astype(np.uint64),
+                            (base + ends - (lens + h)).astype(np.uint64)], axis=1)
     if offsets is not None:
-        index.records.extend(zip(times.tolist(), offsets, strict=True))
+        index.records.append(offsets)
     cb.num_messages += n
     cb.record_writer._buffer.write(blob)  # noqa: SLF001
     w._Writer__maybe_finalize_chunk()  # noqa: SLF001
@@ -164,17 +148,40 @@ HEAD_FIELDS = [("op", "u1"), ("len", "<u8"), ("ch", "<u2"), ("seq", "<u4"), ("lo
                ("pub", "<u8")]
 
 
+def records(w: Writer, dtype: np.dtype, n: int) -> tuple[np.ndarray, int | None]:
+    """``n`` uninitialised records of ``dtype`` (fields starting with :data:`HEAD_FIELDS`)
+    to fill and pass to :func:`add_records`, and where they lie: in the open chunk's
+    :class:`~hil.framelog.chunk.ChunkBuffer` at that offset, so that they go into the chunk
+    without a copy (the chunk closes after them if it is then over its size, as after
+    ``add_message``); or (None) a new array, when the Writer has no such buffer."""
+    cb = w._Writer__chunk_builder  # noqa: SLF001 - see the module docstring
+    buf = cb.record_writer._buffer  # noqa: SLF001
+    if not isinstance(buf, ChunkBuffer):
+        return np.empty(n, dtype), None
+    at = buf.tell()
+    return buf.reserve(n * dtype.itemsize).view(dtype), at
+
+
+def drop(w: Writer, at: int | None) -> None:
+    """Take records reserved by :func:`records` at ``at`` out of the chunk again (their
+    filling failed); nothing for None."""
+    if at is not None:
+        w._Writer__chunk_builder.record_writer._buffer.drop(at)  # noqa: SLF001
+
+
 def add_records(w: Writer, channel_ids: Sequence[int], log_ns: np.ndarray,
-                publish_ns: np.ndarray, seqs: Sequence[int], rec: np.ndarray) -> None:
+                publish_ns: np.ndarray, seqs: Sequence[int], rec: np.ndarray,
+                at: int | None = None) -> None:
     """``k`` messages on each channel of ``channel_ids`` (``c`` of them), channel-major:
     ``rec`` ((c * k,) structured, fields starting with :data:`HEAD_FIELDS`, filled here;
     the payload after them filled by the caller, e.g.
     :func:`hil.framelog.rawpb.pack_blocks`) holds channel ``j``'s records at
     ``[j * k, (j + 1) * k)``, at log times ``log_ns`` and publish times ``publish_ns``
     ((k,) each, the same for every channel), sequences from ``seqs[j]`` on. As
-    ``add_message`` per message, with no bytes object each: the records go into the chunk
-    buffer straight from the array, a slice of channels at a time that keeps a chunk near
-    its size."""
+    ``add_message`` per message, with no bytes object each: ``rec`` made by
+    :func:`records` lies in the chunk at ``at`` already; any other array goes into the
+    chunk buffer straight from the array, a slice of channels at a time that keeps a chunk
+    near its size."""
     c = len(channel_ids)
     if not c:
         return
@@ -198,9 +205,15 @@ def add_records(w: Writer, channel_ids: Sequence[int], log_ns: np.ndarray,
         stats.message_start_time = min(t_first, stats.message_start_time)
     stats.message_end_time = max(t_last, stats.message_end_time)
     stats.message_count += c * k
-    step = np.arange(k, dtype=np.uint64) * size
-    times = log.astype(np.uint64)
-    per = max(1, w._Writer__chunk_size // (size * k))  # noqa: SLF001 - channels a slice
+    per = c if at is not None else max(1, w._Writer__chunk_size // (size * k))  # noqa: SLF001
+    if k > 1:  # every channel's index entries (log time, offset in the chunk) at once
+        pairs = np.empty((c, k, 2), np.uint64)
+        pairs[:, :, 0] = log.astype(np.uint64)
+        within = (np.arange(min(per, c), dtype=np.uint64)[:, None] * k
+                  + np.arange(k, dtype=np.uint64)) * np.uint64(size)
+    t0 = int(log[0])
+    counts = stats.channel_message_counts
+    indices = cb.message_indices
     for lo in range(0, c, per):
         part = rec[lo * k:(lo + per) * k]
         if cb.num_messages == 0:
@@ -208,16 +221,18 @@ def add_records(w: Writer, channel_ids: Sequence[int], log_ns: np.ndarray,
         else:
             cb.message_start_time = min(cb.message_start_time, t_first)
         cb.message_end_time = max(cb.message_end_time, t_last)
-        base = cb.record_writer.count
+        base = cb.record_writer.count if at is None else at
+        if k > 1:
+            n = min(per, c - lo)
+            pairs[lo:lo + n, :, 1] = within[:n] + np.uint64(base)
         for j, cid in enumerate(channel_ids[lo:lo + per]):
-            stats.channel_message_counts[cid] += k
-            index = cb.message_indices.get(cid)
-            if not isinstance(index, _MessageIndex):  # none yet, or the library's own
-                index = cb.message_indices[cid] = _MessageIndex(
+            counts[cid] += k
+            index = indices.get(cid)
+            if type(index) is not _MessageIndex:  # none yet, or the library's own
+                index = indices[cid] = _MessageIndex(
                     channel_id=cid, records=list(index.records) if index else [])
-            at = base + j * k * size
-            index.records.append((int(log[0]), at) if k == 1 else
-                                 np.stack([times, at + step], axis=1))
+            index.records.append((t0, base + j * k * size) if k == 1 else pairs[lo + j])
         cb.num_messages += len(part)
-        cb.record_writer._buffer.write(part.view(np.uint8))  # noqa: SLF001
+        if at is None:
+            cb.record_writer._buffer.write(part.view(np.uint8))  # noqa: SLF001
         w._Writer__maybe_finalize_chunk()  # noqa: SLF001

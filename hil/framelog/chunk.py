@@ -1,20 +1,28 @@
-"""Closing a chunk of the mcap library's Writer: one compressor kept at a chosen level, and
-the chunk's bytes compressed and checksummed where they lie.
+"""The chunk of the mcap library's Writer: records built in one buffer kept for the file,
+closed with one compressor kept at a chosen level, compressed where they lie.
 
-``mcap.writer.Writer`` closes a chunk by copying its records out of the chunk buffer
-(``getvalue``), compressing them with a compressor made for the call at the codec's
-default level (zstd 3), copying the compressed bytes into a record buffer and that buffer
-out again before it writes them. A whole-robot log passes ~55 MB per simulated second
-through this (docs/framelog.md, "The whole robot"), so each copy and the level show in
-the run's CPU time. :func:`install` replaces the Writer's private ``__finalize_chunk`` on
-one Writer by :func:`_finalize`, which writes the same records (chunk, message indexes,
-chunk index, the data-section CRC) from a view of the chunk buffer with a compressor kept
-for the file at ``level``.
+``mcap.writer.Writer`` builds a chunk in a ``BytesIO`` (a new one per chunk: its memory is
+fresh pages each time) and closes it by copying its records out (``getvalue``),
+compressing them with a compressor made for the call at the codec's default level (zstd
+3), copying the compressed bytes into a record buffer and that buffer out again before it
+writes them. A whole-robot log passes ~50 MB per simulated second through this
+(docs/framelog.md, "The whole robot"), so each copy and the level show in the run's CPU
+time. :func:`install` gives one Writer a :class:`ChunkBuffer` (one array for the file's
+life: :meth:`ChunkBuffer.reserve` lets :mod:`hil.framelog.batch` build record arrays in
+place, no copy into the chunk) and replaces its private ``__finalize_chunk`` by
+:func:`_finalize`, which writes the same records (chunk, message indexes, chunk index, the
+data-section CRC) from a view of that buffer with a compressor kept for the file at
+``level``.
+
+The chunk's integrity check: a zstd chunk carries zstd's own content checksum (xxh64, which
+every zstd decoder checks: the mcap library's, ours) and the chunk record's CRC field 0
+(MCAP: not computed), which costs half of a CRC-32 over the uncompressed bytes; lz4 and
+uncompressed chunks keep the CRC-32. A flipped byte in a chunk fails either way.
 
 Like :mod:`hil.framelog.batch`, this uses the Writer's private state (mcap 1.x);
 :func:`supported` checks it is there, and without it the library's own method stays (a
-future mcap release can make logging slower, never wrong). At the library's level (zstd 3)
-the file is byte for byte the library's: ``tests/framelog/test_chunk.py``.
+future mcap release can make logging slower, never wrong). At the library's level, lz4 and
+uncompressed files are byte for byte the library's: ``tests/framelog/test_chunk.py``.
 """
 
 from __future__ import annotations
@@ -25,6 +33,7 @@ from collections.abc import Callable
 from io import BytesIO
 
 import lz4.frame
+import numpy as np
 import zstandard
 from mcap.records import ChunkIndex
 from mcap.writer import IndexType, Writer
@@ -39,6 +48,66 @@ _PRIVATE = ("chunk_builder", "statistics", "enable_crcs", "enable_data_crcs",
             "data_section_crc", "stream", "record_builder", "index_types", "chunk_indices")
 
 
+class ChunkBuffer:
+    """The open chunk's records in one ``bytearray`` kept for the file (grown when a batch
+    needs more, never shrunk): the part of ``BytesIO`` the mcap library's ``RecordBuilder``
+    uses (``write``, ``tell``, ``seek``, ``getvalue``, ``getbuffer``), :meth:`reserve` for
+    records built in place, :meth:`reset` when the chunk is written. No fresh pages per
+    chunk, no copy out of it."""
+
+    def __init__(self, capacity: int) -> None:
+        self._buf = bytearray(max(capacity, 1 << 16))
+        self._pos = 0
+        self._end = 0
+
+    def _room(self, n: int) -> None:
+        if self._pos + n > len(self._buf):  # a new array: views of the old one stay valid
+            grown = bytearray(max(self._pos + n, 2 * len(self._buf)))
+            grown[:self._end] = memoryview(self._buf)[:self._end]
+            self._buf = grown
+
+    def write(self, data: bytes | bytearray | memoryview) -> int:
+        n = len(data) if isinstance(data, bytes | bytearray) else memoryview(data).nbytes
+        self._room(n)
+        self._buf[self._pos:self._pos + n] = data
+        self._pos += n
+        self._end = max(self._end, self._pos)
+        return n
+
+    def reserve(self, n: int) -> np.ndarray:
+        """``n`` bytes at the write position as a writable uint8 array (their content is
+        whatever was there: fill every byte), the position moved past them."""
+        self._room(n)
+        out = np.frombuffer(self._buf, np.uint8, n, self._pos)
+        self._pos += n
+        self._end = max(self._end, self._pos)
+        return out
+
+    def drop(self, at: int) -> None:
+        """Forget everything from ``at`` on (records reserved but never filled)."""
+        self._pos = self._end = min(at, self._end)
+
+    def tell(self) -> int:
+        return self._pos
+
+    def seek(self, pos: int, whence: int = 0) -> int:
+        self._pos = pos if whence == 0 else (self._pos + pos if whence == 1 else
+                                             self._end + pos)
+        return self._pos
+
+    def getbuffer(self) -> memoryview:
+        return memoryview(self._buf)[:self._end]
+
+    def getvalue(self) -> bytes:
+        return bytes(memoryview(self._buf)[:self._end])
+
+    def close(self) -> None:
+        pass  # the array is kept for the next chunk
+
+    def reset(self) -> None:
+        self._pos = self._end = 0
+
+
 def supported(w: Writer) -> bool:
     """True if ``w`` has the private state :func:`_finalize` reads and updates."""
     have = all(hasattr(w, f"_Writer__{name}") for name in _PRIVATE)
@@ -46,71 +115,84 @@ def supported(w: Writer) -> bool:
     return (have and cb is not None and callable(getattr(w, "_Writer__flush", None))
             and callable(getattr(w, "_Writer__finalize_chunk", None))
             and isinstance(getattr(getattr(cb, "record_writer", None), "_buffer", None),
-                           BytesIO)
+                           BytesIO | ChunkBuffer)
             and all(hasattr(cb, a) for a in ("message_indices", "num_messages",
                                              "message_start_time", "message_end_time")))
 
 
 def compressor(compression: str, level: int | None) -> Callable[[memoryview], bytes]:
-    """bytes-like -> compressed bytes, for ``zstd`` (``level`` None: :data:`ZSTD_LEVEL`)
-    or ``lz4`` (None: the library's default)."""
+    """bytes-like -> compressed bytes, for ``zstd`` (``level`` None: :data:`ZSTD_LEVEL`;
+    frames with zstd's content checksum) or ``lz4`` (None: the library's default)."""
     if compression == "zstd":
-        return zstandard.ZstdCompressor(level=ZSTD_LEVEL if level is None else level).compress
+        return zstandard.ZstdCompressor(level=ZSTD_LEVEL if level is None else level,
+                                        write_checksum=True).compress
     if compression == "lz4":
         lvl = 0 if level is None else level
         return lambda data: lz4.frame.compress(data, compression_level=lvl)
     raise ValueError(f"compression {compression!r} has no compressor here")
 
 
-def install(w: Writer, compression: str, level: int | None) -> bool:
-    """Make ``w`` close its chunks with :func:`_finalize` (``compression`` zstd or lz4 at
-    ``level``); False (and nothing changed) if ``w`` lacks the private state."""
+def install(w: Writer, compression: str, level: int | None, chunk_size: int) -> bool:
+    """Make ``w`` build its chunks in a :class:`ChunkBuffer` (of ``chunk_size`` bytes to
+    start with) and close them with :func:`_finalize` (``compression`` zstd or lz4 at
+    ``level``, or none); False (and nothing changed) if ``w`` lacks the private state."""
     if not supported(w):
         return False
-    compress = compressor(compression, level)
-    name = compression.encode()
+    compress = None if compression == "none" else compressor(compression, level)
+    rw = w._Writer__chunk_builder.record_writer  # noqa: SLF001 - see the module docstring
+    buf = ChunkBuffer(chunk_size + (chunk_size >> 2))
+    buf.write(rw._buffer.getvalue())  # noqa: SLF001 - empty before the first record
+    buf.seek(rw._buffer.tell())  # noqa: SLF001
+    rw._buffer = buf  # noqa: SLF001
+    name = b"" if compress is None else compression.encode()  # MCAP: "" = uncompressed
+    crc = compression != "zstd"  # zstd frames carry their own checksum
     # an instance attribute: the Writer's own ``self.__finalize_chunk()`` finds it first
-    w._Writer__finalize_chunk = lambda: _finalize(w, compress, name)  # noqa: SLF001
+    w._Writer__finalize_chunk = lambda: _finalize(w, compress, name, crc)  # noqa: SLF001
     return True
 
 
-def _finalize(w: Writer, compress: Callable[[memoryview], bytes], name: bytes) -> None:
+def _finalize(w: Writer, compress: Callable[[memoryview], bytes] | None, name: bytes,
+              crc_on: bool) -> None:
     """The library's ``__finalize_chunk`` (same records, same order) without its copies."""
     cb = w._Writer__chunk_builder  # noqa: SLF001 - see the module docstring
     if cb is None or cb.num_messages == 0:
         return
     w._Writer__statistics.chunk_count += 1  # noqa: SLF001
-    view = cb.record_writer._buffer.getbuffer()  # noqa: SLF001
+    buf = cb.record_writer._buffer  # noqa: SLF001
+    view = buf.getbuffer()
     try:
         size = len(view)
-        data = compress(view)
-        crc = zlib.crc32(view) if w._Writer__enable_crcs else 0  # noqa: SLF001
+        data = view if compress is None else compress(view)
+        crc = zlib.crc32(view) if crc_on and w._Writer__enable_crcs else 0  # noqa: SLF001
+        w._Writer__flush()  # noqa: SLF001 - records buffered before the chunk go first
+        stream = w._Writer__stream  # noqa: SLF001
+        start = stream.tell()
+        body = 8 + 8 + 8 + 4 + 4 + len(name) + 8 + len(data)
+        head = b"".join((_HEAD.pack(_CHUNK_OPCODE, body, cb.message_start_time,
+                                    cb.message_end_time, size, crc),
+                         struct.pack("<I", len(name)), name, struct.pack("<Q", len(data))))
+        if w._Writer__enable_data_crcs:  # noqa: SLF001
+            w._Writer__data_section_crc = zlib.crc32(  # noqa: SLF001
+                data, zlib.crc32(head, w._Writer__data_section_crc))  # noqa: SLF001
+        stream.write(head)
+        stream.write(data)
+        compressed = len(data)
     finally:
+        data = None
         view.release()
-    cb.record_writer._buffer = BytesIO()  # noqa: SLF001 - the chunk's records are in data now
-    w._Writer__flush()  # noqa: SLF001 - records buffered before the chunk go first
-    stream = w._Writer__stream  # noqa: SLF001
-    start = stream.tell()
-    body = 8 + 8 + 8 + 4 + 4 + len(name) + 8 + len(data)
-    head = b"".join((_HEAD.pack(_CHUNK_OPCODE, body, cb.message_start_time,
-                                cb.message_end_time, size, crc),
-                     struct.pack("<I", len(name)), name, struct.pack("<Q", len(data))))
-    if w._Writer__enable_data_crcs:  # noqa: SLF001
-        w._Writer__data_section_crc = zlib.crc32(  # noqa: SLF001
-            data, zlib.crc32(head, w._Writer__data_section_crc))  # noqa: SLF001
-    stream.write(head)
-    stream.write(data)
+    if isinstance(buf, ChunkBuffer):
+        buf.reset()
+    else:
+        cb.record_writer._buffer = BytesIO()  # noqa: SLF001 - the records are written
     index = ChunkIndex(message_start_time=cb.message_start_time,
                        message_end_time=cb.message_end_time, chunk_start_offset=start,
-                       chunk_length=len(head) + len(data), message_index_offsets={},
+                       chunk_length=len(head) + compressed, message_index_offsets={},
                        message_index_length=0, compression=name.decode(),
-                       compressed_size=len(data), uncompressed_size=size)
+                       compressed_size=compressed, uncompressed_size=size)
     rb = w._Writer__record_builder  # noqa: SLF001
     at = stream.tell()
     if w._Writer__index_types & IndexType.MESSAGE:  # noqa: SLF001
-        for cid, mi in cb.message_indices.items():
-            index.message_index_offsets[cid] = at + rb.count
-            mi.write(rb)
+        write_indexes(cb.message_indices, rb, at + rb.count, index.message_index_offsets)
     index.message_index_length = rb.count
     w._Writer__flush()  # noqa: SLF001
     w._Writer__chunk_indices.append(index)  # noqa: SLF001
@@ -119,3 +201,61 @@ def _finalize(w: Writer, compress: Callable[[memoryview], bytes], name: bytes) -
     cb.message_indices.clear()
     cb.message_start_time = 0
     cb.num_messages = 0
+
+
+#: A MessageIndex record of one entry (a channel with one message in the chunk: a block).
+_ONE_INDEX = np.dtype([("op", "u1"), ("len", "<u8"), ("ch", "<u2"), ("n", "<u4"),
+                       ("t", "<u8"), ("off", "<u8")])
+_INDEX_HEAD = struct.Struct("<BQHI")  # opcode, record length, channel, bytes of entries
+_MESSAGE_INDEX_OPCODE = 0x07
+
+
+def write_indexes(indices: dict, rb: object, at: int, offsets: dict[int, int]) -> None:
+    """The chunk's MessageIndex records, in the order of ``indices`` (channel -> an index
+    whose ``records`` are (log time, offset) pairs and (n, 2) arrays of them), as one write
+    to ``rb`` starting at file offset ``at``; ``offsets[channel]`` set to each record's.
+    The bytes the library's ``MessageIndex.write`` makes, one by one; the records of one
+    entry (most: a block channel's one message) built as one array."""
+    items = list(indices.items())
+    one = [i for i, (_, mi) in enumerate(items)
+           if len(mi.records) == 1 and type(mi.records[0]) is tuple]
+    ones: dict[int, bytes] = {}
+    if one:
+        arr = np.zeros(len(one), _ONE_INDEX)
+        arr["op"] = _MESSAGE_INDEX_OPCODE
+        arr["len"] = _ONE_INDEX.itemsize - 9
+        arr["ch"] = [items[i][0] for i in one]
+        arr["n"] = 16
+        arr["t"] = [items[i][1].records[0][0] for i in one]
+        arr["off"] = [items[i][1].records[0][1] for i in one]
+        blob = arr.tobytes()
+        size = _ONE_INDEX.itemsize
+        ones = {i: blob[j * size:(j + 1) * size] for j, i in enumerate(one)}
+    parts = []
+    pos = at
+    for i, (cid, mi) in enumerate(items):
+        rec = ones.get(i)
+        if rec is None:
+            recs = mi.records
+            if len(recs) == 1 and isinstance(recs[0], np.ndarray):  # a batch's entries
+                body = recs[0].astype("<u8", copy=False).tobytes()
+            else:  # runs of single pairs (add_message) as one array each, in order
+                parts_of: list[np.ndarray] = []
+                run: list[tuple[int, int]] = []
+                for r in recs:
+                    if type(r) is tuple:
+                        run.append(r)
+                        continue
+                    if run:
+                        parts_of.append(np.asarray(run, dtype="<u8"))
+                        run = []
+                    parts_of.append(np.asarray(r, dtype="<u8"))
+                if run:
+                    parts_of.append(np.asarray(run, dtype="<u8"))
+                body = (np.concatenate(parts_of) if parts_of else np.zeros((0, 2), "<u8")
+                        ).astype("<u8", copy=False).tobytes()
+            rec = _INDEX_HEAD.pack(_MESSAGE_INDEX_OPCODE, 6 + len(body), cid, len(body)) + body
+        offsets[cid] = pos
+        parts.append(rec)
+        pos += len(rec)
+    rb.write(b"".join(parts))  # type: ignore[attr-defined]

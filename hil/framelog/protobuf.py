@@ -123,14 +123,22 @@ class MessageType:
 
     def encode_array(self, columns: Mapping[str, np.ndarray], n: int) -> np.ndarray:
         """:meth:`encode` as one (n, :attr:`size`) uint8 array, row i the i-th message."""
-        rec = np.empty(n, self.record)
-        out = rec.view(np.uint8).reshape(n, self.size)
+        out = np.empty((n, self.size), np.uint8)
+        self.encode_into(columns, out)
+        return out
+
+    def encode_into(self, columns: Mapping[str, np.ndarray], out: np.ndarray) -> None:
+        """:meth:`encode_array` written into ``out`` ((n, :attr:`size`) uint8, rows of any
+        stride, e.g. the messages' places in their MCAP records)."""
+        if out.ndim != 2 or out.shape[1] != self.size or out.strides[1] != 1:
+            raise ValueError(f"{self.full_name}: need out (n, {self.size}) with contiguous "
+                             f"rows, got {out.shape}")
         out[:] = self._blank  # every key, every value 0: one byte copy, not a field loop
+        rec = out.view(self.record)[:, 0]
         for f in self.fields:
             v = columns.get(f.name)
             if v is not None:
                 rec[f.name] = np.asarray(v) != 0 if f.kind == "bool" else v
-        return out
 
     @cached_property
     def _blank(self) -> np.ndarray:

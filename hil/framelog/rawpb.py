@@ -6,9 +6,16 @@ travel inside protobuf messages whose schema (a ``FileDescriptorSet`` in the fil
 protobuf reader understands -- Foxglove Studio, PlotJuggler, ``mcap-protobuf-support``:
 
 * a **block** of fixed-width frames (``add_block_channel``) is one message
-  ``eha_hil.raw.<Encoding>Block``: ``t_ns`` (packed ``sfixed64``, one time per frame),
-  ``frames`` (``bytes``: the frames row by row, each element little endian), ``count``,
-  ``width`` (``fixed32``) and ``dtype`` (numpy's name of one element, ``uint32``);
+  ``eha_hil.raw.<Encoding>Block``: ``frames`` (``bytes``), ``count``, ``width``
+  (``fixed32``), ``dtype`` (numpy's name of one element, ``uint32``) and the frame times:
+  ``t0_ns`` and ``dt_ns`` (``sfixed64``) when they are evenly spaced, else ``t_ns`` (packed
+  ``sfixed64``, one per frame). This writer stores ``frames`` as byte planes
+  (``byte_planes`` true: byte ``b`` of element ``j`` of frame ``i`` at
+  ``(b * width + j) * count + i``, each element little endian): a register word or a
+  trace column changes little from frame to frame and its high bytes hardly at all, so
+  zstd finds long runs there and compresses a whole-robot log twice as fast into a third
+  fewer bytes than the frames row by row (docs/framelog.md, "The whole robot"). Blocks
+  without ``byte_planes`` (logs before) hold the frames row by row and ``t_ns``;
 * a **single** frame (``add_channel`` with an encoding that is not a stock MCAP message
   encoding) is one message ``eha_hil.raw.<Encoding>``: ``frame`` (``bytes``, the frame as
   it was logged) and, for encodings that have them, the frame's header fields decoded
@@ -48,7 +55,9 @@ PACKAGE = "eha_hil.raw"
 _FD = descriptor_pb2.FieldDescriptorProto
 _BLOCK_TYPES = {"t_ns": (1, _FD.TYPE_SFIXED64, True), "frames": (2, _FD.TYPE_BYTES, False),
                 "count": (3, _FD.TYPE_FIXED32, False), "width": (4, _FD.TYPE_FIXED32, False),
-                "dtype": (5, _FD.TYPE_STRING, False)}
+                "dtype": (5, _FD.TYPE_STRING, False), "t0_ns": (6, _FD.TYPE_SFIXED64, False),
+                "dt_ns": (7, _FD.TYPE_SFIXED64, False),
+                "byte_planes": (8, _FD.TYPE_BOOL, False)}
 _T_NS = np.dtype("<i8")
 
 
@@ -92,39 +101,80 @@ def block_schema(encoding: str) -> tuple[str, bytes]:
 
 def pack_block(t_ns: np.ndarray, frames: np.ndarray, dtype: np.dtype) -> bytes:
     """One block message of ``frames`` ((count, width), written as ``dtype`` little endian)
-    at ``t_ns`` ((count,) int ns)."""
-    count, width = frames.shape
-    t = np.ascontiguousarray(t_ns, dtype=_T_NS).tobytes()
-    f = np.ascontiguousarray(frames, dtype=np.dtype(dtype).newbyteorder("<")).tobytes()
-    name = np.dtype(dtype).name.encode()
-    return b"".join((b"\x1d", struct.pack("<I", count), b"\x25", struct.pack("<I", width),
-                     b"\x2a", _varint(len(name)), name,
-                     b"\x0a", _varint(len(t)), t, b"\x12", _varint(len(f)), f))
+    at ``t_ns`` ((count,) int ns): :func:`pack_blocks` of one channel."""
+    return pack_blocks(t_ns, frames[None], dtype).tobytes()
+
+
+def even_spacing(t_ns: np.ndarray) -> int | None:
+    """The spacing of ``t_ns`` (int ns, at least one) if they are evenly spaced (0 for
+    one time), else None."""
+    t = np.asarray(t_ns, dtype=_T_NS)
+    if len(t) < 2:
+        return 0
+    dt = int(t[1]) - int(t[0])
+    return dt if bool((np.diff(t) == dt).all()) else None
 
 
 def pack_blocks(t_ns: np.ndarray, frames: np.ndarray, dtype: np.dtype,
-                head: list[tuple] = ()) -> np.ndarray:
+                head: list[tuple] = (), byte_planes: bool = True,
+                alloc: Callable[[np.dtype, int], np.ndarray] | None = None) -> np.ndarray:
     """The block messages of ``k`` channels at once, frames ``(k, count, width)`` at the
     same times ``t_ns`` (count,): a (k,) structured array whose row ``i`` holds, after
-    the fields ``head`` (left 0, e.g. :data:`hil.framelog.batch.HEAD_FIELDS`), the bytes
-    :func:`pack_block` makes of ``frames[i]`` (one copy of the frames, no bytes object)."""
+    the fields ``head`` (left 0, e.g. :data:`hil.framelog.batch.HEAD_FIELDS`), the block
+    message of ``frames[i]`` (one copy of the frames, no bytes object): ``t0_ns`` and
+    ``dt_ns`` if the times are evenly spaced, else ``t_ns``; the frames as byte planes
+    (``byte_planes`` False: row by row, as logs before wrote them). ``alloc(dtype, k)``
+    gives the array to fill (every byte is written; default a new one)."""
     k, count, width = frames.shape
     dt = np.dtype(dtype).newbyteorder("<")
     name = np.dtype(dtype).name.encode()
-    tl, fl, nl = _varint(8 * count), _varint(count * width * dt.itemsize), _varint(len(name))
-    rec = np.zeros(k, np.dtype([*head, ("k3", "u1"), ("count", "<u4"), ("k4", "u1"),
-                                ("width", "<u4"), ("k5", "u1"), ("nl", "u1", (len(nl),)),
-                                ("name", "u1", (len(name),)), ("k1", "u1"),
-                                ("tl", "u1", (len(tl),)), ("t", _T_NS, (count,)),
-                                ("k2", "u1"), ("fl", "u1", (len(fl),)),
-                                ("f", dt, (count * width,))]))
+    size = count * width * dt.itemsize
+    fl, nl = _varint(size), _varint(len(name))
+    t = np.asarray(t_ns, dtype=_T_NS)
+    step = even_spacing(t) if count else None
+    if step is None:
+        tl = _varint(8 * count)
+        times = [("k1", "u1"), ("tl", "u1", (len(tl),)), ("t", _T_NS, (count,))]
+    else:
+        times = [("k6", "u1"), ("t0", _T_NS), ("k7", "u1"), ("dt", _T_NS)]
+    planes = [("k8", "u1"), ("planes", "u1")] if byte_planes else []
+    layout = np.dtype([*head, ("k3", "u1"), ("count", "<u4"), ("k4", "u1"), ("width", "<u4"),
+                       ("k5", "u1"), ("nl", "u1", (len(nl),)), ("name", "u1", (len(name),)),
+                       *times, *planes, ("k2", "u1"), ("fl", "u1", (len(fl),)),
+                       ("f", "u1", (size,))])
+    rec = np.zeros(k, layout) if alloc is None else alloc(layout, k)
     rec["k3"], rec["count"], rec["k4"], rec["width"] = 0x1D, count, 0x25, width
     rec["k5"], rec["nl"], rec["name"] = 0x2A, np.frombuffer(nl, np.uint8), np.frombuffer(
         name, np.uint8)
-    rec["k1"], rec["tl"], rec["t"] = 0x0A, np.frombuffer(tl, np.uint8), t_ns
+    if step is None:
+        rec["k1"], rec["tl"], rec["t"] = 0x0A, np.frombuffer(tl, np.uint8), t
+    else:
+        rec["k6"], rec["t0"], rec["k7"], rec["dt"] = 0x31, t[0], 0x39, step
     rec["k2"], rec["fl"] = 0x12, np.frombuffer(fl, np.uint8)
-    rec["f"] = frames.reshape(k, count * width)
+    f = np.asarray(frames, dtype=dt)
+    if f.strides[-1] != dt.itemsize:  # the byte views below need whole elements in a row
+        f = np.ascontiguousarray(f)
+    if byte_planes:
+        _planes(f, rec["f"].reshape(k, dt.itemsize, width, count))
+        rec["k8"], rec["planes"] = 0x40, 1
+    else:
+        rec["f"] = f.reshape(k, count * width).view(np.uint8)
     return rec
+
+
+def _planes(frames: np.ndarray, out: np.ndarray) -> None:
+    """``out[i, b, j, n]`` = byte ``b`` (little endian) of element ``j`` of frame ``n`` of
+    ``frames[i]`` ((k, count, width)): the frames transposed to columns (whole elements)
+    in a copy, then each byte split off by shifts (faster than gathering single bytes)."""
+    size = frames.dtype.itemsize
+    if size == 1:
+        out[:, 0] = frames.view(np.uint8).transpose(0, 2, 1)
+        return
+    cols = frames.transpose(0, 2, 1).copy().view(f"<u{size}")  # a copy: shifted below
+    for b in range(size):
+        np.copyto(out[:, b], cols, casting="unsafe")  # the low byte
+        if b + 1 < size:
+            np.right_shift(cols, 8, out=cols)
 
 
 def _read_varint(mv: memoryview, p: int, n: int, what: str) -> tuple[int, int]:
@@ -182,8 +232,9 @@ def block_count(data: memoryview | bytes) -> int:
 
 
 def unpack_block(data: memoryview | bytes) -> tuple[np.ndarray, np.ndarray]:
-    """``(t_ns (count,) int64, frames (count, width))`` of a block message (views, no
-    copy); ValueError if a field is missing or the sizes disagree."""
+    """``(t_ns (count,) int64, frames (count, width))`` of a block message: frames as
+    byte planes or row by row (then a view, no copy), times as ``t_ns`` or ``t0_ns`` +
+    ``dt_ns``; ValueError if a field is missing or the sizes disagree."""
     f = _fields(data)
     count, width, dname = f.get(3), f.get(4), f.get(5)
     times, frames = f.get(1, b""), f.get(2, b"")
@@ -193,12 +244,28 @@ def unpack_block(data: memoryview | bytes) -> tuple[np.ndarray, np.ndarray]:
     dt = _DTYPES.get(bytes(dname).decode("ascii", "replace"))
     if dt is None:
         raise ValueError(f"block dtype {bytes(dname)!r} unknown")
-    if len(times) != 8 * count or len(frames) != count * width * dt.itemsize:
+    if len(frames) != count * width * dt.itemsize or (
+            len(times) != 8 * count and (len(times) or not count or 6 not in f)):
         raise ValueError(f"block of {count} x {width} {dt} frames has {len(times)} bytes of "
-                         f"times and {len(frames)} of frames")
-    t = np.frombuffer(times, _T_NS, count)
+                         f"times and {len(frames)} of frames"
+                         + ("" if len(times) or 6 in f else " and no t0_ns"))
+    if len(times) or not count:
+        t = np.frombuffer(times, _T_NS, count)
+    else:
+        t0, step = (_signed64(f.get(n, 0)) for n in (6, 7))
+        t = t0 + step * np.arange(count, dtype=np.int64)
+    if f.get(8):
+        fr = np.frombuffer(frames, np.uint8).reshape(dt.itemsize, width, count)
+        return t, np.ascontiguousarray(fr.transpose(2, 1, 0)).view(dt).reshape(count, width)
     fr = np.frombuffer(frames, dt, count * width)
     return t, fr.reshape(count, width)
+
+
+def _signed64(v: object) -> int:
+    """An ``sfixed64`` field's value (read as unsigned by :func:`_fields`)."""
+    if not isinstance(v, int):
+        raise ValueError("block time field is not a fixed64")
+    return v - (1 << 64) if v >= 1 << 63 else v
 
 
 # --- single frames --------------------------------------------------------------------------

@@ -24,6 +24,7 @@ from __future__ import annotations
 import json
 import math
 import os
+from collections.abc import Callable
 from dataclasses import dataclass
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
@@ -134,8 +135,9 @@ class FrameLogWriter:
     the last one (None: by size only). ``compression``: ``zstd`` (default), ``lz4`` or
     ``none``; the mcap library depends on ``zstandard`` and ``lz4``, so all three work out
     of the box. ``compression_level``: the codec's level (None: zstd
-    :data:`hil.framelog.chunk.ZSTD_LEVEL`, lz4 its default); chunks are closed by
-    :mod:`hil.framelog.chunk` (one compressor per file, no copy of the chunk).
+    :data:`hil.framelog.chunk.ZSTD_LEVEL`, lz4 its default); chunks are built in one
+    buffer kept for the file and closed by :mod:`hil.framelog.chunk` (one compressor per
+    file, no copy of the chunk; zstd chunks carry zstd's checksum instead of a CRC).
 
     Times must be integers >= 0 (ns of simulated time) and non-decreasing per channel, so
     that each channel reads back in time order.
@@ -187,8 +189,9 @@ class FrameLogWriter:
             self._file.close()
             raise ValueError(f"compression {compression!r} unavailable ({exc}); "
                              "use compression='none'") from None
-        if compression != "none":
-            chunk.install(self._writer, compression, compression_level)
+        #: records built in place in the chunk (hil.framelog.chunk's buffer installed)
+        self._in_place = chunk.install(self._writer, compression, compression_level,
+                                       chunk_size)
         try:
             self._writer.start(profile=profile, library=f"eha-hil/{package_version()}")
             self._fast = batch.supported(self._writer)
@@ -410,6 +413,9 @@ class FrameLogWriter:
         if n == 0:
             return
         t = _block_times(ch.topic, t)
+        if ch.container and self._fast and self._in_place:  # in the chunk, as write_blocks
+            self._write_block_records([channel_id], [ch], t, f[None])
+            return
         first, last = int(t[0]), int(t[-1])
         self._advance(ch, first, last)
         msg = rawpb.pack_block(t, f, ch.dtype) if ch.container else pack_block(t, f)
@@ -446,13 +452,32 @@ class FrameLogWriter:
             f = self._cast(ch0, f)
         if t.shape[0] == 0:
             return
-        t = _block_times(ch0.topic, t)
+        self._write_block_records(channel_ids, chs, _block_times(ch0.topic, t), f)
+
+    def _write_block_records(self, channel_ids: list[int], chs: list[_Channel],
+                             t: np.ndarray, f: np.ndarray) -> None:
+        """The block messages of ``f[i]`` on ``channel_ids[i]`` (protobuf containers of
+        one dtype and width, checked) at the times ``t`` (checked), built in place in the
+        chunk (:func:`batch.records`, :func:`rawpb.pack_blocks`)."""
         first, last = int(t[0]), int(t[-1])
+        before = [c.last_ns for c in chs]
         for c in sorted(chs, key=lambda c: -c.last_ns):  # a channel that would raise first
             self._advance(c, first, last)
-        rec = rawpb.pack_blocks(t, f, ch0.dtype, batch.HEAD_FIELDS)
+        at: list[int | None] = [None]
+
+        def alloc(dtype: np.dtype, k: int) -> np.ndarray:
+            rec, at[0] = batch.records(self._writer, dtype, k)
+            return rec
+
+        try:
+            rec = rawpb.pack_blocks(t, f, chs[0].dtype, batch.HEAD_FIELDS, alloc=alloc)
+        except BaseException:
+            batch.drop(self._writer, at[0])  # no half-filled records left in the chunk
+            for c, t_last in zip(chs, before, strict=True):
+                c.last_ns = t_last
+            raise
         batch.add_records(self._writer, channel_ids, t[:1], t[-1:], [c.count for c in chs],
-                          rec)
+                          rec, at[0])
         for c in chs:
             c.count += 1
 
@@ -461,20 +486,41 @@ class FrameLogWriter:
         """:meth:`write_messages` of ``messages[j]`` ((k, size) uint8: messages of one
         length) on ``channel_ids[j]`` for every ``j``, all at the times ``t_ns`` (k,): e.g.
         every actuator's decoded signals of a block. The same messages, built as one
-        record array and put into the chunk from it (:func:`batch.add_records`)."""
-        chs = [self._channel(c) for c in channel_ids]
+        record array in the chunk (:meth:`write_messages_filled`)."""
         m = np.asarray(messages)
-        if m.ndim != 3 or m.dtype != np.uint8 or len(m) != len(chs):
-            raise ValueError(f"need messages (channels, n, size) uint8 for {len(chs)} "
-                             f"channels, got {m.shape} {m.dtype}")
+        if m.ndim != 3 or m.dtype != np.uint8 or len(m) != len(channel_ids):
+            raise ValueError(f"need messages (channels, n, size) uint8 for "
+                             f"{len(channel_ids)} channels, got {m.shape} {m.dtype}")
+        if np.ndim(t_ns) != 1 or len(t_ns) != m.shape[1]:
+            raise ValueError(f"need (n,) times for {m.shape[1]} messages per channel, got "
+                             f"{np.shape(t_ns)}")
+
+        def fill(out: np.ndarray) -> None:
+            out[...] = m
+
+        self.write_messages_filled(channel_ids, t_ns, m.shape[2], fill)
+
+    def write_messages_filled(self, channel_ids: list[int], t_ns: np.ndarray, size: int,
+                              fill: Callable[[np.ndarray], None]) -> None:
+        """``k`` messages of ``size`` bytes on each channel of ``channel_ids``, at the times
+        ``t_ns`` (k,), written by ``fill(out)`` straight into their records in the chunk:
+        ``out`` is a (channels, k, size) uint8 view (rows ``size`` bytes apart inside the
+        records, not contiguous) whose every byte ``fill`` must set; ``out[j, i]`` is
+        message ``i`` of ``channel_ids[j]``. The messages :meth:`write_messages_many` of
+        that array would write, without a copy of them (a producer that encodes messages
+        can encode them there). ``fill`` must not write to this log; if it raises,
+        nothing is written."""
+        chs = [self._channel(c) for c in channel_ids]
+        t = np.asarray(t_ns)
         if any(c.block or c.wrap is not None for c in chs) or not self._fast:
+            m = np.zeros((len(chs), len(t), size), np.uint8)
+            fill(m)
             for c, part in zip(channel_ids, m, strict=True):
                 self.write_messages(c, t_ns, part)
             return
-        t = np.asarray(t_ns)
-        if t.ndim != 1 or t.shape[0] != m.shape[1] or t.dtype.kind not in "iu":
-            raise ValueError(f"{chs[0].topic}...: need (n,) integer times for "
-                             f"{m.shape[1]} messages, got {t.shape} {t.dtype}")
+        if t.ndim != 1 or t.dtype.kind not in "iu":
+            raise ValueError(f"{chs[0].topic if chs else '?'}...: need (n,) integer times, "
+                             f"got {t.shape} {t.dtype}")
         if not len(t) or not chs:
             return
         times = t.astype(np.int64)
@@ -482,13 +528,21 @@ class FrameLogWriter:
             raise ValueError(f"{chs[0].topic}: message times must be >= 0 and "
                              "non-decreasing")
         first, last = int(times[0]), int(times[-1])
+        before = [c.last_ns for c in chs]
         for c in sorted(chs, key=lambda c: -c.last_ns):  # a channel that would raise first
             self._advance(c, first, last)
-        c_n, k, size = m.shape
-        rec = np.zeros(c_n * k, np.dtype([*batch.HEAD_FIELDS, ("data", "u1", (size,))]))
-        rec["data"] = m.reshape(c_n * k, size)
+        c_n, k = len(chs), len(times)
+        rec, at = batch.records(self._writer, np.dtype([*batch.HEAD_FIELDS,
+                                                        ("data", "u1", (size,))]), c_n * k)
+        try:
+            fill(rec["data"].reshape(c_n, k, size))
+        except BaseException:
+            batch.drop(self._writer, at)  # no half-filled records left in the chunk
+            for c, t_last in zip(chs, before, strict=True):
+                c.last_ns = t_last
+            raise
         batch.add_records(self._writer, channel_ids, times, times, [c.count for c in chs],
-                          rec)
+                          rec, at)
         for c in chs:
             c.count += k
 

@@ -336,8 +336,9 @@ def replay_metadata(topo: Topology, cfg: Config, boxes: list, model: str,
 
 
 class BusSignals:
-    """``/signals/bus``: the master's counters and the WKC of each cycle, buffered and
-    written every :data:`FLUSH_CYCLES` cycles."""
+    """``/signals/bus``: the master's counters and the WKC of each cycle, from the frames
+    the run's tap keeps for the log (:attr:`frames`, appended per frame, a block's worth
+    at a time), counted a block at a time in :meth:`flush`."""
 
     def __init__(self, out: SignalOut, master: Master, tick_ns: int) -> None:
         self.out = out
@@ -346,37 +347,46 @@ class BusSignals:
         self.ch = out.add(BUS_SIGNAL_TOPIC, SG.BUS)
         self.wkc_expected = sum(w for _, _, w in master.plan.frames)
         self.rows: list[tuple[int, ...]] = []
-        self.wkc = 0
-        self.frames = 0
-
-    def tap(self, direction: str, frame: bytes) -> None:
-        """A frame of the current cycle; a reply's working counter is the 2 bytes before
-        its FCS (the master sends one datagram per frame)."""
-        if direction == "tx":
-            self.frames += 1
-        elif len(frame) >= 6:
-            self.wkc += int.from_bytes(frame[-6:-4], "little")
+        #: the block's frames, as the tap saw them
+        self.frames: list[bytes] = []
 
     def end_cycle(self) -> None:
         """Called at the start of each cycle but the first, and once after the last."""
         m = self.master
         st = m.stats
-        self.rows.append((m.cycle - 1, self.frames, self.wkc, st.frames_sent, st.frames_ok,
+        self.rows.append((m.cycle - 1, len(self.frames), st.frames_sent, st.frames_ok,
                           st.wkc_errors, st.bad_frames, st.stale_frames, st.lost_frames))
-        self.wkc = self.frames = 0
-        if len(self.rows) >= FLUSH_CYCLES:
-            self.flush()
 
-    def flush(self) -> None:
-        if not self.rows:
-            return
-        a = np.array(self.rows, dtype=np.int64)
-        cols = {"cycle": a[:, 0], "frames": a[:, 1], "wkc": a[:, 2],
-                "wkc_expected": self.wkc_expected,
-                **{name: a[:, 3 + i] for i, name in enumerate(SG.MASTER_COUNTERS)}}
-        # stamped at the end of the cycle (when its replies are in)
-        self.out.write(self.ch, (a[:, 0] + 1) * CYCLE_TICKS * self.tick_ns - 1, cols)
-        self.rows = []
+    def flush(self, rx: np.ndarray) -> None:
+        """Write the block's cycles and forget its frames (``rx``: which are replies)."""
+        if self.rows:
+            a = np.array(self.rows, dtype=np.int64)
+            frames, wkc = _frames_and_wkc(self.frames, rx, a[:, 1])
+            cols = {"cycle": a[:, 0], "frames": frames, "wkc": wkc,
+                    "wkc_expected": self.wkc_expected,
+                    **{name: a[:, 2 + i] for i, name in enumerate(SG.MASTER_COUNTERS)}}
+            # stamped at the end of the cycle (when its replies are in)
+            self.out.write(self.ch, (a[:, 0] + 1) * CYCLE_TICKS * self.tick_ns - 1, cols)
+            self.rows = []
+        self.frames.clear()
+
+
+def _frames_and_wkc(frames: list[bytes], rx: np.ndarray | list[bool], ends: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """Per cycle (its frames end at index ``ends[i]`` of ``frames``): the frames sent, and
+    the sum of its replies' working counters, the 2 bytes before the FCS (the master
+    sends one datagram per frame)."""
+    n = len(frames)
+    cycle = np.searchsorted(ends, np.arange(n), side="right")  # each frame's cycle
+    is_rx = np.array(rx, dtype=bool)
+    lens = np.fromiter(map(len, frames), np.int64, n)
+    buf = np.frombuffer(b"".join(frames), np.uint8)
+    at = np.cumsum(lens) - 6  # the working counter's first byte, if it has one
+    has = is_rx & (lens >= 6)
+    w = buf[at[has]].astype(np.int64) | (buf[at[has] + 1].astype(np.int64) << 8)
+    c = len(ends)
+    return (np.bincount(cycle[~is_rx], minlength=c)[:c],
+            np.bincount(cycle[has], weights=w, minlength=c)[:c].astype(np.int64))
 
 
 def run_logged(topo: Topology, cfg: Config, cycles: int, pc: Callable[[int, Master], None],
@@ -414,34 +424,34 @@ def run_logged(topo: Topology, cfg: Config, cycles: int, pc: Callable[[int, Mast
                                      schema_name=ENC_FIELDBUS, schema_encoding=LAYOUT_ENCODING,
                                      schema_data=lay.schema())
         bus_sig: BusSignals | None = None
-        # the frames of the last cycles, written with the blocks (one batch per
-        # FLUSH_CYCLES: a message at a time costs ~9 us, see hil.framelog.batch)
-        bus_t: list[int] = []
+        # the frames of the last cycles, kept for /signals/bus and the log and written
+        # once per FLUSH_CYCLES (a message at a time costs ~9 us, see hil.framelog.batch)
+        bus_t: list[int] = []  # a reply 1 ns after its cycle's tick (as in the log)
         bus_frames: list[bytes] = []
 
         def tap(cycle: int, tick: int, frame: bytes, direction: str) -> None:
-            if ch_bus is not None:
-                bus_t.append(tick * tick_ns + (1 if direction == "rx" else 0))
-                bus_frames.append(bytes(frame))
-            bus_sig.tap(direction, frame)
+            bus_t.append(tick * tick_ns + (direction == "rx"))
+            bus_frames.append(bytes(frame))
             if capture is not None:
                 capture(cycle, tick, frame, direction)
 
-        def flush_frames() -> None:
-            if bus_frames:
-                log.write_messages(ch_bus, np.array(bus_t, dtype=np.int64), bus_frames)
-                bus_t.clear()
-                bus_frames.clear()
+        def flush_block() -> None:
+            t = np.array(bus_t, dtype=np.int64)
+            if bus_frames and ch_bus is not None:
+                log.write_messages(ch_bus, t, bus_frames)
+            bus_sig.flush(t % tick_ns != 0)  # (clears bus_frames)
+            bus_t.clear()
 
         def pc_signals(cycle: int, m: Master) -> None:
             if cycle > 0:
                 bus_sig.end_cycle()
                 if cycle % FLUSH_CYCLES == 0:
-                    flush_frames()
+                    flush_block()
             pc(cycle, m)
 
         with BusSystem(topo, cfg, "inproc", model=model, tap=tap) as bs:
             bus_sig = BusSignals(out, bs.master, tick_ns)
+            bus_sig.frames = bus_frames  # the tap's
             engine = bs.chain.engine
             if engine is None:
                 boxes = [RecordingStackBox(b, cfg, log, out) for b in topo.boxes]
@@ -472,8 +482,7 @@ def run_logged(topo: Topology, cfg: Config, cycles: int, pc: Callable[[int, Mast
                 rec = BusRecord(np.concatenate([p.inputs for p in parts]), last.master,
                                 last.chain, last.transport, last.faults)
             bus_sig.end_cycle()
-            bus_sig.flush()
-            flush_frames()
+            flush_block()
             if engine is not None:
                 engine.wait()
             for f in flushers:

@@ -29,6 +29,7 @@ from hil.framelog.layout import Layout
 from hil.replay import layouts as LY
 from hil.replay import signals as SG
 from hil.replay.record import FLUSH_CYCLES, UP_WIDTH, add_signal_channels, topics
+from hil.replay.signal_kernel import ActuatorEncoder
 from hil.replay.signal_out import SignalOut
 from hil.sim.actuator import TRACE_WIDTH, TRACE_WORDS
 from hil.sim.robot import RobotEngine
@@ -88,8 +89,13 @@ class RobotRecorder:
         self.in_t = np.zeros(c, np.int64)
         self.n_cycles = 0
         self._taken = False  # outputs taken for a cycle that has not ended (yet)
-        self._last_out = [(np.zeros(0, np.int64), np.zeros((0, b.out_dtype.itemsize), np.uint8))
-                          for b in engine.boxes]
+        # per cycle (1 kHz): what the two hooks below read, looked up once
+        self._box_first = np.asarray(engine._first[:-1], np.intp)
+        self._other_inputs = [(r, b.inputs) for r, b in zip(self.other_in, self.others,
+                                                             strict=True)]
+        self._rows = 0  # the tap's rows filled (tap.row[0], as a Python int)
+        #: the last row at which a cycle's steps still fit the tap
+        self._last_row_start = rows - engine.cycle_ticks // self.period
         self.carry = SG.PistonCarry.start(n)
         #: per engine box: the index of its first actuator in the engine's order
         self.first_act = np.cumsum([0] + [len(b.act) for b in engine.boxes])[:-1].tolist()
@@ -97,6 +103,19 @@ class RobotRecorder:
                       if background else None)
         self._jobs: list[Future] = []
         self._channels(log)
+        # the actuators' signals (each with the PC's command from its slot of the output
+        # image), decoded and encoded by one compiled call per block
+        box_of, slot_off = [], []
+        for e, b in enumerate(engine.boxes):
+            for slot in b.act:
+                box_of.append(e)
+                slot_off.append(int(self.out_span[e][0])
+                                + sum(s.sizes[0] for s in b.box.slots[:slot]))
+        self.encoder = (ActuatorEncoder(self.cal, self.out.message(self.sig_act[0]),
+                                        self.period * self.ns * 1e-9, self.every, box_of,
+                                        slot_off, [tuple(map(int, sp)) for sp in self.out_span],
+                                        len(engine.out_image))
+                        if self.sig_act else None)
         engine.log_rows = self.tap
         engine.log = self
 
@@ -143,21 +162,21 @@ class RobotRecorder:
     def took_outputs(self, tick: int) -> None:
         e, c = self.engine, self.n_cycles
         self.out_rows[c] = e.out_image
-        self.out_got[c] = e._got[e._first[:-1]]
+        np.take(e._got, self._box_first, out=self.out_got[c])
         self.out_t[c] = tick
         self._taken = True
 
     def finished(self, tick: int, periods: int) -> None:
         c = self.n_cycles
         self.in_rows[c] = self.engine.in_image
-        for rows, b in zip(self.other_in, self.others, strict=True):
-            rows[c] = np.frombuffer(b.inputs(), np.uint8)
+        for rows, inputs in self._other_inputs:
+            rows[c] = np.frombuffer(inputs(), np.uint8)
         self.in_t[c] = tick
         self._taken = False
         self.n_cycles = c + 1
-        self.tap.row[0] += periods
-        room = self.tap.up.shape[1] - int(self.tap.row[0])
-        if self.n_cycles == self.cycles or room < self.engine.cycle_ticks // self.period:
+        self._rows += periods
+        self.tap.row[0] = self._rows
+        if self.n_cycles == self.cycles or self._rows > self._last_row_start:
             self.flush()
 
     # --- writing a block -----------------------------------------------------------------
@@ -169,7 +188,7 @@ class RobotRecorder:
         c_out = c + self._taken  # the run's last outputs, taken for a cycle never run
         self.n_cycles = 0
         self._taken = False
-        self.tap.row[0] = 0
+        self.tap.row[0] = self._rows = 0
         if not c_out and not r:
             return
         end = int(self.in_t[c - 1]) if c else self.engine.tick
@@ -197,9 +216,7 @@ class RobotRecorder:
 
     def _write(self, k: _Block) -> None:
         c = k.cycles
-        period_s = self.period * self.ns * 1e-9
         others = iter(k.other_in)
-        box_out: list[tuple[np.ndarray, np.ndarray]] = []
         # boxes of one slot layout (and, for outputs, the same cycles' records) are
         # written together: one block message array, one decoding and encoding for all
         groups: dict[tuple, list[tuple[int, np.ndarray]]] = {}
@@ -216,11 +233,6 @@ class RobotRecorder:
                 got = k.out_got[:, e]
                 olo, ohi = self.out_span[e]
                 outs = (k.out_t[got], k.out_rows[got, olo:ohi])
-                if len(outs[0]):
-                    self._last_out[e] = (outs[0][-1:], outs[1][-1:])
-                    box_out.append(outs)
-                else:
-                    box_out.append(self._last_out[e])
             if c:
                 groups.setdefault(("inputs", layout), []).append((n_box, ins))
                 times[("inputs", layout)] = k.in_t
@@ -229,12 +241,10 @@ class RobotRecorder:
                 groups.setdefault(key, []).append((n_box, outs[1]))
                 times[key] = outs[0]
         # the steps first: their reads' validity is the box reports' piston flags
-        steps = SG.actuator_block(self.cal, k.up, k.down, self.every, period_s, self.carry)
+        self._write_steps(k)
         flags = SG.report_flags(self.carry, k.t_steps, k.in_t) if c else None
         for key, members in groups.items():
             self._write_records(key[0], times[key], members, flags)
-        if len(k.t_steps):
-            self._write_steps(k, box_out, steps)
 
     def _write_records(self, d: str, t: np.ndarray, members: list[tuple[int, np.ndarray]],
                        flags: tuple[np.ndarray, np.ndarray] | None) -> None:
@@ -262,12 +272,14 @@ class RobotRecorder:
                                      rows.reshape(-1, rows.shape[2]), piston)
             self.out.write_split(sig, t_ns, cols)
 
-    def _write_steps(self, k: _Block, box_out: list,
-                     steps: tuple[np.ndarray, dict[str, np.ndarray]]) -> None:
+    def _write_steps(self, k: _Block) -> None:
+        """The block's MCU steps: their raw words (and traces), and every actuator's
+        decoded signals, encoded into their places in the log (this moves
+        :attr:`carry` on, also when no step of the block is kept)."""
         ns, log, n = self.ns, self.log, self.engine.n
         t_steps, up, down = k.t_steps, k.up, k.down
         r = len(t_steps)
-        if log is not None:
+        if log is not None and r:
             t = t_steps * ns
             log.write_blocks(self.ch_up, t, up)  # one record array for every actuator
             log.write_blocks(self.ch_down, t, down)
@@ -281,14 +293,18 @@ class RobotRecorder:
                         tw, words = LK.line_words(tr[:, TRACE_WORDS + d * LK.WORDS_W:], tt)
                         if len(tw):
                             log.write_block(ch, tw, words[:, None])
-        keep, cols = steps
-        if not len(keep):
+        enc = self.encoder
+        if enc is None:
             return
-        t = t_steps[keep]
-        cols.update(SG.pc_command_block(
-            [(*box_out[e], b.box, slot) for e, b in enumerate(self.engine.boxes)
-             for slot in b.act], t))
-        self.out.write_split(self.sig_act, t * ns, cols)
+
+        def encode(out: np.ndarray | None = None) -> None:
+            enc.encode(up, down, self.carry, t_steps, k.out_t, k.out_rows, k.out_got, out)
+
+        keep = enc.kept(r)
+        if len(keep):
+            self.out.write_filled(self.sig_act, t_steps[keep] * ns, enc.message.size, encode)
+        else:
+            encode()
 
 
 @dataclass

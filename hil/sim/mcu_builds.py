@@ -23,7 +23,8 @@ import numpy as np
 from firmware_model.mcu.c_abi import CONFIG, INPUT, OUTPUT
 
 SOURCE_DIR = Path(__file__).resolve().parents[2] / "firmware_model" / "mcu" / "c"
-LAW = ("mcu_law.c",)
+#: The host library: the law and its lanes (mcu_law_lanes.c, the robot engine's batches).
+LAW = ("mcu_law.c", "mcu_law_lanes.c")
 IMAGE = ("target/startup.c", "target/main.c", "mcu_law.c")
 CONTRACTIONS = ("off", "fast")
 
@@ -163,6 +164,16 @@ class HostLaw:
                                           ctypes.c_void_p]
         lib.mcu_law_step_many.restype = None
         self.state_size = lib.mcu_law_sizes(3)
+        for name, args in (("mcu_lanes_load", 4), ("mcu_lanes_step", 5),
+                           ("mcu_lanes_store", 5)):
+            fn = getattr(lib, name)
+            fn.argtypes = [ctypes.c_void_p] * (args - 1) + [ctypes.c_uint32]
+            fn.restype = None
+        lib.mcu_lanes_size.restype = ctypes.c_uint32
+        lib.mcu_lanes_build.argtypes = [ctypes.c_int32]
+        lib.mcu_lanes_build.restype = ctypes.c_int32
+        #: Bytes of one batch's lanes (``mcu_lanes``: :meth:`lanes_load`).
+        self.lanes_size = lib.mcu_lanes_size()
         self._lib = lib
 
     def init(self, state: ctypes.Array, config: np.ndarray) -> None:
@@ -178,6 +189,43 @@ class HostLaw:
         (``state_size`` bytes each), ``inp`` and ``out`` are arrays of records."""
         self._lib.mcu_law_step_many(states.ctypes.data, inp.ctypes.data, len(inp),
                                     out.ctypes.data)
+
+    def lane_buffer(self) -> np.ndarray:
+        """Room for one batch's lanes (``mcu_lanes``, zeros), on a 64-byte boundary."""
+        raw = np.zeros(self.lanes_size + 64, dtype=np.uint8)
+        skip = -raw.ctypes.data % 64
+        return raw[skip:skip + self.lanes_size]
+
+    def lanes_load(self, lanes: np.ndarray, states: np.ndarray, rows: np.ndarray) -> None:
+        """The programs ``states`` (back to back, ``state_size`` bytes each) of ``rows``
+        (int64, at most ``MCU_LW``) into the lanes of ``lanes`` (:meth:`lane_buffer`)."""
+        rows = self._rows(rows)
+        self._lib.mcu_lanes_load(lanes.ctypes.data, states.ctypes.data, rows.ctypes.data,
+                                 len(rows))
+
+    def lanes_step(self, lanes: np.ndarray, inp: np.ndarray, out: np.ndarray,
+                   rows: np.ndarray) -> None:
+        """One step of the loaded lanes, their input records ``inp[rows]``; their
+        downstream words into ``out[rows]``."""
+        rows = self._rows(rows)
+        self._lib.mcu_lanes_step(lanes.ctypes.data, inp.ctypes.data, out.ctypes.data,
+                                 rows.ctypes.data, len(rows))
+
+    def lanes_store(self, lanes: np.ndarray, states: np.ndarray, out: np.ndarray,
+                    rows: np.ndarray) -> None:
+        """The lanes back into ``states`` of ``rows`` and their output records ``out[rows]``."""
+        rows = self._rows(rows)
+        self._lib.mcu_lanes_store(lanes.ctypes.data, states.ctypes.data, out.ctypes.data,
+                                  rows.ctypes.data, len(rows))
+
+    def lanes_build(self, avx2: int = -1) -> int:
+        """Which build of the lane step runs (1: AVX2, 0: any x86-64); 0 or 1 selects it
+        (1 only on a CPU with AVX2), for every caller of this library."""
+        return int(self._lib.mcu_lanes_build(avx2))
+
+    @staticmethod
+    def _rows(rows: np.ndarray) -> np.ndarray:
+        return np.ascontiguousarray(rows, dtype=np.int64)
 
     def init_at(self, address: int, config: np.ndarray) -> None:
         """A fresh program state at ``address`` (``state_size`` bytes)."""

@@ -25,8 +25,7 @@ Same results as the per-actuator path, bit for bit (``tests/hil/test_robot.py``)
 from __future__ import annotations
 
 import itertools
-import threading
-from concurrent.futures import Future, ThreadPoolExecutor
+from collections.abc import Callable
 from typing import Protocol
 
 import llvmlite.binding as llvm
@@ -55,6 +54,7 @@ from hil.fieldbus import pdo
 from hil.fieldbus.pdo_compiled import counts as _counts
 from hil.fieldbus.pdo_compiled import le as _le
 from hil.fieldbus.pdo_compiled import put as _put
+from hil.sim import compute_threads as ct
 from hil.sim.actuator import (
     TRACE_WIDTH,
     TRACE_WORDS,
@@ -109,6 +109,16 @@ assert fpl.LW == lanes_mod.LW, "a batch's boards and plants share the lanes"
 #: before the first call): ``mcu_law_step_many(states, inputs, n, outputs)``, addresses.
 _mcu_law_step_many = types.ExternalFunction(
     "mcu_law_step_many", types.void(types.intp, types.intp, types.uint32, types.intp))
+#: The law in lanes (``mcu_law_lanes.c``, same library), for a batch of at most ``LW``
+#: actuators, rows ``rows[:m]``: ``mcu_lanes_load(lanes, states, rows, m)`` when the batch is
+#: claimed, ``mcu_lanes_step(lanes, inputs, outputs, rows, m)`` once per MCU period,
+#: ``mcu_lanes_store(lanes, states, outputs, rows, m)`` at the batch's end; addresses.
+_mcu_lanes_load = types.ExternalFunction(
+    "mcu_lanes_load", types.void(types.intp, types.intp, types.intp, types.uint32))
+_mcu_lanes_step = types.ExternalFunction(
+    "mcu_lanes_step", types.void(types.intp, types.intp, types.intp, types.intp, types.uint32))
+_mcu_lanes_store = types.ExternalFunction(
+    "mcu_lanes_store", types.void(types.intp, types.intp, types.intp, types.intp, types.uint32))
 
 
 @intrinsic
@@ -240,6 +250,10 @@ def advance_robot_lanes(counter, n_periods, period, tick0, blocks, sizes, n_sub_
         fpl.load_board(fb, bd.params, bd.state, se.raw, bd.down, rows, m)
         sensor_lanes.load_chips(ls.chips, se.chips, rows, m)
         link_lanes.load_link(ls.link, lk.state, rows, m)
+        # The batch's MCU programs in lanes (ls.mcu) until the batch's end: the records'
+        # bases are row 0's addresses.
+        at_rows, n_lanes = rows.ctypes.data, np.uint32(m)
+        _mcu_lanes_load(ls.mcu.ctypes.data, mcu.ptrs[0, 0], at_rows, n_lanes)
         for n in range(n_periods):
             t = tick0 + n * period
             r = log.row[0] + n
@@ -247,9 +261,10 @@ def advance_robot_lanes(counter, n_periods, period, tick0, blocks, sizes, n_sub_
             logging_trace = log.trace.shape[1] >= (r + 1) * period
             tracing = logging_trace or tap_trace.shape[0] > 0
             for j in range(m):
+                in32[rows[j], _IN_TICK] = t
+            _mcu_lanes_step(ls.mcu.ctypes.data, mcu.ptrs[0, 1], mcu.ptrs[0, 2], at_rows, n_lanes)
+            for j in range(m):
                 i = rows[j]
-                in32[i, _IN_TICK] = t
-                _mcu_law_step_many(mcu.ptrs[i, 0], mcu.ptrs[i, 1], 1, mcu.ptrs[i, 2])
                 in32[i, _IN_FLAGS] = 0
                 if n == n_periods - 1:
                     mcu.err[i, 0] = in16[i, _IN_UP + B.U_ERR_LINK_CRC]
@@ -299,6 +314,7 @@ def advance_robot_lanes(counter, n_periods, period, tick0, blocks, sizes, n_sub_
         store_outputs(buf, pl.y, pl.rng, rows, m)
         fpl.store_board(fb, bd.state, se.raw, bd.down, rows, m)
         link_lanes.store_link(ls.link, lk.state, rows, m)
+        _mcu_lanes_store(ls.mcu.ctypes.data, mcu.ptrs[0, 0], mcu.ptrs[0, 2], at_rows, n_lanes)
 
 
 @njit(cache=True)
@@ -358,10 +374,42 @@ def give_inputs(image, at, out32, outf32, x_prev, dt, cos_alpha, err, lsb, bound
         _put(image, pos + 4, 2, min(err[i, 1], 0xFFFF))
 
 
+@njit(nogil=True, cache=True)
+def _serve_lanes(ctl, job, seen, spins, counter, period, *rest):
+    """A helper thread's life (:mod:`hil.sim.compute_threads`): each posted cycle (its MCU
+    periods and first tick in ``job``), its share of :func:`advance_robot_lanes`, with
+    ``rest``: that kernel's arguments after ``tick0``."""
+    while True:
+        seen = ct.await_post(ctl, seen, spins)
+        if ct.stopping(ctl):
+            return 0
+        advance_robot_lanes(counter, job[ct.JOB_A], period, job[ct.JOB_B], *rest)
+        ct.finished(ctl)
+
+
+@njit(nogil=True, cache=True)
+def _serve_actuators(ctl, job, seen, spins, counter, period, *rest):
+    """:func:`_serve_lanes` for :func:`advance_robot` (one actuator at a time)."""
+    while True:
+        seen = ct.await_post(ctl, seen, spins)
+        if ct.stopping(ctl):
+            return 0
+        advance_robot(counter, job[ct.JOB_A], period, job[ct.JOB_B], *rest)
+        ct.finished(ctl)
+
+
+def _entry(kernel: Callable, args: tuple) -> Callable:
+    """The compiled entry point of ``kernel`` for the types of ``args``: called with
+    arguments of those types it skips the dispatcher's typing of every argument (~4 us for
+    the engine's nested tuples of arrays, per call)."""
+    return kernel.compile(tuple(kernel.typeof_pyval(a) for a in args))
+
+
 class RobotEngine:
     """All StackBoxes of a chain advanced as one; ``workers`` threads share the actuators
-    (``None``: one per core). The calling thread is one of them once its own work of the
-    cycle is done; with overlap and one worker, that worker is the background thread."""
+    (``None``: one per core). The calling thread is one of them (with one worker, the
+    only one: no hand-off at all); the others are helper threads that wait for each cycle
+    in compiled code (:mod:`hil.sim.compute_threads`)."""
 
     def __init__(self, boxes: list, cfg: Config, workers: int | None = None,
                  overlap: bool = True, cycle_ticks: int = 20, lanes: bool | None = None
@@ -370,8 +418,7 @@ class RobotEngine:
 
         self.all_boxes = boxes
         self.boxes = [b for b in boxes if getattr(b, "board", None) is not None]
-        if workers is not None and not 1 <= workers <= numba.config.NUMBA_NUM_THREADS:
-            raise ConfigError(f"workers = {workers}: expected 1..{numba.config.NUMBA_NUM_THREADS}")
+        self._stale = True  # the compiled calls' arguments changed (see _calls)
         self.workers = workers
         self.period = cfg.get("mcu.period_ticks")
         self.tick_s = cfg.get("sim.tick_ns") * 1e-9
@@ -394,6 +441,7 @@ class RobotEngine:
         #: The plants in vector lanes (:func:`advance_robot_lanes`); else one actuator at a
         #: time (:func:`advance_robot`). Default: lanes where the recipe allows them.
         self.lanes = lane_ok if lanes is None else lanes
+        self._take = self._give = None  # entry points of take_outputs / give_inputs
         config = config_record(cfg)
         size = self.law.state_size
         self.states = np.zeros(n * size, dtype=np.uint8)
@@ -445,15 +493,17 @@ class RobotEngine:
         self.mcu = McuRows(self.ptrs, self.in16, self.in32, self.out16, self.err)
         for b in self.boxes:
             b.engine = self
-        #: Start a cycle's compute in a background thread as soon as every box has its
-        #: outputs (:meth:`applied`), overlapping it with the master and the PC loop.
+        #: Start a cycle's compute in the helper threads as soon as every box has its
+        #: outputs (:meth:`applied`), overlapping it with the master and the PC loop (with
+        #: one worker there is no helper: the cycle is computed at :meth:`advance`).
         self.overlap = overlap
         self.cycle_ticks = cycle_ticks
         self._counter = np.zeros(1, dtype=np.int64)  # the next actuator nobody has claimed
-        self._pool: ThreadPoolExecutor | None = None
-        self._pool_size = 0
-        self._jobs: list[Future] = []
-        self._started = threading.Semaphore(0)
+        #: The helper threads (workers - 1) and this thread's compiled call (its entry
+        #: point and its arguments after the first tick), made by :meth:`_calls`.
+        self._threads: ct.ComputeThreads | None = None
+        self._main_call: tuple[Callable, tuple] | None = None
+        self._posted = False  # the helpers compute a cycle posted ahead (overlap)
         self._ready: list[int] | None = None  # prepared, with stacks under sensor faults
         #: Per box: its outputs of this cycle are in :attr:`out_image` (not yet taken).
         self._box_got = np.zeros(len(self.boxes), dtype=bool)
@@ -473,6 +523,40 @@ class RobotEngine:
         #: Called with the first tick of each cycle once it is computed (:meth:`tap`).
         self.on_cycle = None
         self.tap(False, False)
+
+    # --- what the compiled calls take: changing one makes them again at the next cycle ----
+    @property
+    def workers(self) -> int | None:
+        """Compute threads (None: one per core), the calling thread included."""
+        return self._workers_given
+
+    @workers.setter
+    def workers(self, workers: int | None) -> None:
+        if workers is not None and not 1 <= workers <= numba.config.NUMBA_NUM_THREADS:
+            raise ConfigError(f"workers = {workers}: expected 1..{numba.config.NUMBA_NUM_THREADS}")
+        self._workers_given = workers
+        self._stale = True
+
+    @property
+    def lanes(self) -> bool:
+        """The plants in vector lanes (:func:`advance_robot_lanes`); else one actuator at
+        a time (:func:`advance_robot`)."""
+        return self._lanes
+
+    @lanes.setter
+    def lanes(self, lanes: bool) -> None:
+        self._lanes = lanes
+        self._stale = True
+
+    @property
+    def log_rows(self) -> TapRows:
+        """Copies of each MCU step's words (and board traces) for a frame log."""
+        return self._log_rows
+
+    @log_rows.setter
+    def log_rows(self, rows: TapRows) -> None:
+        self._log_rows = rows
+        self._stale = True
 
     # --- set-up --------------------------------------------------------------------------
     def _images(self) -> None:
@@ -560,7 +644,7 @@ class RobotEngine:
         """:meth:`applied` for several boxes at once (their records in one frame's data):
         the bytes ``data[at]`` are the outputs of the boxes ``boxes`` (engine numbers: an
         int or an index array), at ``out_image[to]``."""
-        if self._jobs or self._ready is not None:
+        if self._posted or self._ready is not None:
             # A duplicate of a frame already applied: the reference path would apply the
             # same bytes again, which changes nothing; anything else cannot be undone.
             if not np.array_equal(self.out_image[to], data[at]):
@@ -572,30 +656,33 @@ class RobotEngine:
         if self.overlap and got.all():
             self._take_outputs()
             external = self._prepare()
-            if external:  # Python per tick: no gain from a thread, run it at advance
+            if external or self._workers() == 1:
+                # Python per tick (sensor faults) or no helper thread: run it at advance
                 self._ready = external
                 return
-            self._start(self.cycle_ticks, max(1, self._workers() - 1))
+            self._start(self.cycle_ticks)
 
     def advance(self, ticks: int) -> None:
         """``ticks`` ticks (whole MCU periods) of every actuator; then every box's inputs."""
         if ticks % self.period:
             raise ValueError(f"the robot engine advances whole MCU periods ({self.period} "
                              f"ticks), not {ticks}")
-        jobs, self._jobs = self._jobs, []
+        posted, self._posted = self._posted, False
         ready, self._ready = self._ready, None
-        if jobs:
-            if self._workers() > 1:  # this thread joins the background ones
+        if posted:
+            threads = self._threads  # (made again if its arguments changed since: joined)
+            try:  # this thread joins the helpers (nothing is left if wait() joined them)
                 self._compute(self.cycle_ticks)
-            for job in jobs:
-                job.result()
+            finally:
+                threads.join()
         elif ready is not None:
             self._run_cycle(self.cycle_ticks)
-            self._advance_external(ready, self.cycle_ticks)
-        if (jobs or ready is not None) and ticks == self.cycle_ticks:
+            if ready:
+                self._advance_external(ready, self.cycle_ticks)
+        if (posted or ready is not None) and ticks == self.cycle_ticks:
             self._finish(ticks)
             return
-        if jobs or ready is not None:
+        if posted or ready is not None:
             self._finish(self.cycle_ticks)
         self._take_outputs()
         external = self._prepare()
@@ -607,8 +694,16 @@ class RobotEngine:
     def wait(self) -> None:
         """Let a compute started ahead finish (its results are kept for the next
         :meth:`advance`)."""
-        for job in self._jobs:
-            job.result()
+        if self._threads is not None:
+            self._threads.join()
+
+    def close(self) -> None:
+        """Let a compute started ahead finish and end the helper threads (they end too
+        when the engine is garbage collected; a later cycle starts them again)."""
+        if self._threads is not None:
+            self._threads.close()
+            self._threads = None
+        self._stale = True
 
     def _prepare(self) -> list[int]:
         """Which stacks the kernel advances (not those under a sensor fault, returned) and
@@ -643,58 +738,79 @@ class RobotEngine:
             self._sizes[b] = len(part)
         self._n_sub_max = int(self.arrays.plant.params[:, L.P_N_SUB].max())
         self._blocks_for = self._batched.tobytes()
+        self._stale = True
 
     def _workers(self) -> int:
         return self.workers or numba.config.NUMBA_NUM_THREADS
 
-    def _start(self, ticks: int, helpers: int) -> None:
-        """Open the cycle's actuators for claiming and start ``helpers`` background threads
-        on them; returns once each has entered the compiled call."""
+    def _start(self, ticks: int) -> None:
+        """Open the cycle's actuators for claiming and post the cycle to the helper
+        threads (at least one); :meth:`advance` joins them."""
+        self._calls(ticks)
         self._counter[0] = 0
-        if helpers <= 0:
-            return
-        if self._pool_size < helpers:
-            if self._pool is not None:
-                self._pool.shutdown()
-            self._pool = ThreadPoolExecutor(helpers, thread_name_prefix="robot-engine")
-            self._pool_size = helpers
-        self._jobs = [self._pool.submit(self._compute, ticks, self._started, k + 1)
-                      for k in range(helpers)]
-        for _ in range(helpers):
-            # Hand the GIL over until the thread has released it in the compiled call: else
-            # it could wait for the interpreter's switch interval (5 ms) before it starts.
-            self._started.acquire()
+        self._threads.post(ticks // self.period, self.tick)
+        self._posted = True
 
     def _run_cycle(self, ticks: int) -> None:
         """A cycle's compute now: this thread and ``workers - 1`` helpers."""
-        self._start(ticks, self._workers() - 1)
-        jobs, self._jobs = self._jobs, []
-        self._compute(ticks)
-        for job in jobs:
-            job.result()
+        threads = self._calls(ticks)
+        self._counter[0] = 0
+        if threads is None:
+            self._compute(ticks)
+            return
+        threads.post(ticks // self.period, self.tick)
+        try:
+            self._compute(ticks)
+        finally:
+            threads.join()
 
-    def _compute(self, ticks: int, started: threading.Semaphore | None = None,
-                 slot: int = 0) -> int:
-        """Claim and advance actuators until none is left (nothing here but the compiled
-        call, which releases the GIL). ``slot``: which lane buffer this thread uses (0: the
-        calling thread, k: the k-th helper)."""
-        if self.lanes:
-            while len(self._lane_bufs) <= slot:
-                self._lane_bufs.append((lanes_mod.lane_buffer(), fpl.board_buffer()))
-                self._link_sensor_bufs.append(LinkSensorLanes(
-                    link_lanes.link_lane_buffer(), sensor_lanes.sensor_lane_buffer()))
-            buf, fb = self._lane_bufs[slot]
-            ls = self._link_sensor_bufs[slot]
-        if started is not None:
-            started.release()
-        if self.lanes:
-            return advance_robot_lanes(self._counter, ticks // self.period, self.period,
-                                       self.tick, self._blocks, self._sizes,
-                                       self._n_sub_max, self.arrays, self.mcu, buf, fb, ls,
-                                       *self._taps(ticks), self.log_rows)
-        return advance_robot(self._counter, ticks // self.period, self.period, self.tick,
-                             self._batched, self.arrays, self.mcu, self._no_rec,
-                             self.log_rows)
+    def _compute(self, ticks: int) -> int:
+        """This thread's share of a cycle: claim and advance actuators until none is left
+        (nothing here but the compiled call, which releases the GIL)."""
+        call, rest = self._main_call if not self._stale else self._main_call_for(ticks)
+        return call(self._counter, ticks // self.period, self.period, self.tick, *rest)
+
+    def _calls(self, ticks: int) -> ct.ComputeThreads | None:
+        """The helper threads for this cycle's compiled calls (None: no helper), made
+        again after anything they take changed (workers, lanes, batches, taps, log rows):
+        each thread keeps its arguments, and its own lane buffers, from call to call."""
+        if ticks > self.cycle_ticks:
+            self._taps(ticks)  # (the taps hold one cycle: this refuses more)
+        if not self._stale:
+            return self._threads
+        if self._threads is not None:
+            self._threads.close()
+            self._threads = None
+        helpers = self._workers() - 1
+        args = [self._kernel_args(slot) for slot in range(helpers + 1)]
+        kernel = advance_robot_lanes if self.lanes else advance_robot
+        self._main_call = (_entry(kernel, (self._counter, 1, self.period, self.tick,
+                                           *args[0])), args[0])
+        if helpers:
+            serve = _serve_lanes if self.lanes else _serve_actuators
+            self._threads = ct.ComputeThreads(
+                serve, [(self._counter, self.period, *a) for a in args[1:]],
+                name="robot-engine")
+        self._stale = False
+        return self._threads
+
+    def _main_call_for(self, ticks: int) -> tuple[Callable, tuple]:
+        self._calls(ticks)
+        return self._main_call
+
+    def _kernel_args(self, slot: int) -> tuple:
+        """The compiled call's arguments after its first tick, for thread ``slot`` (0: the
+        calling thread): the engine's arrays and that thread's lane buffers."""
+        if not self.lanes:
+            return (self._batched, self.arrays, self.mcu, self._no_rec, self.log_rows)
+        while len(self._lane_bufs) <= slot:
+            self._lane_bufs.append((lanes_mod.lane_buffer(), fpl.board_buffer()))
+            self._link_sensor_bufs.append(LinkSensorLanes(
+                link_lanes.link_lane_buffer(), sensor_lanes.sensor_lane_buffer(),
+                self.law.lane_buffer()))
+        buf, fb = self._lane_bufs[slot]
+        return (self._blocks, self._sizes, self._n_sub_max, self.arrays, self.mcu, buf, fb,
+                self._link_sensor_bufs[slot], self.tap_y, self.tap_trace, self.log_rows)
 
     def tap(self, plant: bool = True, trace: bool = False) -> None:
         """Keep every tick of the next cycles (lanes only): :attr:`tap_y` (actuators,
@@ -707,6 +823,7 @@ class RobotEngine:
         ticks = self.cycle_ticks
         self.tap_y = np.zeros((self.n if plant else 0, ticks, L.N_OUTPUTS))
         self.tap_trace = np.zeros((self.n if trace else 0, ticks, TRACE_WIDTH), dtype=np.int64)
+        self._stale = True
 
     def _taps(self, ticks: int) -> tuple[np.ndarray, np.ndarray]:
         if (self.tap_y.shape[0] and ticks > self.tap_y.shape[1]) or (
@@ -762,16 +879,21 @@ class RobotEngine:
         got = self._got
         np.take(self._box_got, self._box_of, out=got)  # (out_image holds them already)
         self._box_got[:] = False
-        take_outputs(self.out_image, self._out_at, got, self.enabled, self.clear, self.in32,
-                     self.inf32, self._cmd_lsb, self._gain_lsb)
+        args = (self.out_image, self._out_at, got, self.enabled, self.clear, self.in32,
+                self.inf32, self._cmd_lsb, self._gain_lsb)
+        if self._take is None:
+            self._take = _entry(take_outputs, args)
+        self._take(*args)
         if self.log is not None:
             self.log.took_outputs(self.tick)
 
     def _give_inputs(self, ticks: int) -> None:
         """Every box's input record from the programs' last outputs (as McuBoard.report)."""
-        give_inputs(self.in_image, self._in_at, self.out32, self.outf32, self.x_prev,
-                    ticks * self.tick_s, self.cos_alpha, self.err, self._in_lsb,
-                    self._in_bounds)
+        args = (self.in_image, self._in_at, self.out32, self.outf32, self.x_prev,
+                ticks * self.tick_s, self.cos_alpha, self.err, self._in_lsb, self._in_bounds)
+        if self._give is None:
+            self._give = _entry(give_inputs, args)
+        self._give(*args)
 
 
 class EngineLog(Protocol):

@@ -80,9 +80,11 @@ class LinkSensorLanes(NamedTuple):
     """One compute thread's lane buffers (:func:`hil.sim.robot.advance_robot_lanes`): the
     LVDS links' counters and word logs of the batch it holds
     (:func:`firmware_model.lvds.lanes.link_lane_buffer`) and its sensor chips' parameters
-    and codes (:func:`plant.sensors.lanes.sensor_lane_buffer`)."""
+    and codes (:func:`plant.sensors.lanes.sensor_lane_buffer`), and its MCU programs' states
+    (:meth:`hil.sim.mcu_builds.HostLaw.lane_buffer`: the C law's ``mcu_lanes``)."""
     link: np.ndarray
     chips: np.ndarray
+    mcu: np.ndarray
 
 
 #: Where each field of :class:`StackRows` lives on an :class:`~hil.sim.actuator.FpgaStack`:

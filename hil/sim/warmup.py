@@ -111,6 +111,14 @@ def _robot(cfg) -> None:
         bs.chain.engine.wait()
 
 
+def _log_signals(cfg) -> None:
+    """The decoded actuator signals of a frame log (``bus run --model robot --log``)."""
+    from firmware_model.calibration import calibration
+    from hil.replay.signal_kernel import warm_up
+
+    warm_up(calibration(cfg))
+
+
 def _esc_frames(cfg) -> None:
     """The EtherCAT frame path of ``serve --transport ethercat`` (every slave's datagram
     processing, the 3-buffers, the frame loop)."""
@@ -128,6 +136,7 @@ STEPS: list[tuple[str, Callable]] = [
     ("current loop RTL (Verilator)", _rtl),
     ("identification model", _identify_model),
     ("robot engine", _robot),
+    ("frame log signals", _log_signals),
     ("EtherCAT frame path", _esc_frames),
 ]
 

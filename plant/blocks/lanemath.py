@@ -55,6 +55,21 @@ def _from_bits(typingctx, n):
     return types.float64(types.int64), codegen
 
 
+@intrinsic
+def pick(typingctx, c, a, b):
+    """``a if c else b`` for two float64 already computed, as one LLVM ``select``: numba
+    compiles a conditional expression into a branch, and where one side costs more than
+    LLVM will speculate (a division, a row loaded only on one side) the branch stays and
+    the loop over the lanes around it is not vectorised. Same bits as the branch."""
+    if c != types.boolean or a != types.float64 or b != types.float64:
+        return None
+
+    def codegen(context, builder, signature, args):
+        return builder.select(args[0], args[1], args[2])
+
+    return types.float64(types.boolean, types.float64, types.float64), codegen
+
+
 # exp: x = k ln2 + r, |r| <= ln2 / 2; ln2 in two parts, the first with 32 bits so k ln2_hi
 # is exact for |k| < 2**20.
 _LN2_HI = 6.93147180369123816490e-01
@@ -207,4 +222,4 @@ def tanh_r(x, numerics):
     return tanh3(x) if numerics >= 3.0 else math.tanh(x)
 
 
-__all__ = ["exp3", "exp_r", "log4", "sin3", "sin_r", "sincos3", "tanh3", "tanh_r"]
+__all__ = ["exp3", "exp_r", "log4", "pick", "sin3", "sin_r", "sincos3", "tanh3", "tanh_r"]

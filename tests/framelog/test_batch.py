@@ -88,14 +88,20 @@ def test_messages_as_one_array_make_the_same_file(chunk_size: int) -> None:
         assert [m.log_time for _, _, m in msgs][19:22] == [190, 195, 200]
 
 
+@pytest.mark.parametrize("library_chunks", [False, True])
 @pytest.mark.parametrize("chunk_size", [700, 1 << 20])
-def test_blocks_of_many_channels_make_the_same_file(tmp_path, chunk_size: int) -> None:  # noqa: ANN001
-    """FrameLogWriter.write_blocks (one record array for all channels) writes the messages
-    write_block writes one channel at a time; with chunks larger than a batch, the same
-    file byte for byte."""
+def test_blocks_of_many_channels_make_the_same_file(tmp_path, chunk_size: int,  # noqa: ANN001
+                                                    library_chunks: bool, monkeypatch) -> None:  # noqa: ANN001
+    """FrameLogWriter.write_blocks (one record array for all channels, built in the chunk
+    buffer, or with the library's own chunks copied into its buffer a slice of channels at
+    a time) writes the messages write_block writes one channel at a time; with chunks
+    larger than a batch, the same file byte for byte."""
     import numpy as np
 
-    from hil.framelog import FrameLogReader, FrameLogWriter
+    from hil.framelog import FrameLogReader, FrameLogWriter, chunk
+
+    if library_chunks:
+        monkeypatch.setattr(chunk, "install", lambda *a: False)
 
     rng = np.random.default_rng(7)
     t = [np.arange(k * 20, k * 20 + 20, dtype=np.int64) * 1000 for k in range(5)]
@@ -128,13 +134,19 @@ def test_blocks_of_many_channels_make_the_same_file(tmp_path, chunk_size: int) -
             w.write_blocks([c], t[0], np.full((1, 20, 34), 70000))
 
 
+@pytest.mark.parametrize("library_chunks", [False, True])
 @pytest.mark.parametrize("chunk_size", [500, 1 << 20])
-def test_messages_of_many_channels_make_the_same_file(tmp_path, chunk_size: int) -> None:  # noqa: ANN001
+def test_messages_of_many_channels_make_the_same_file(tmp_path, chunk_size: int,  # noqa: ANN001
+                                                      library_chunks: bool, monkeypatch) -> None:  # noqa: ANN001
     """FrameLogWriter.write_messages_many writes what write_messages writes one channel at
-    a time (the very file when no chunk closes inside a batch)."""
+    a time (the very file when no chunk closes inside a batch), in our chunk buffer or the
+    library's."""
     import numpy as np
 
-    from hil.framelog import FrameLogWriter
+    from hil.framelog import FrameLogWriter, chunk
+
+    if library_chunks:
+        monkeypatch.setattr(chunk, "install", lambda *a: False)
     from hil.framelog.protobuf import Field, MessageType
 
     msg = MessageType("t.M", [Field("a", "double"), Field("b", "fixed32")])
@@ -162,3 +174,39 @@ def test_messages_of_many_channels_make_the_same_file(tmp_path, chunk_size: int)
         got.append(sorted((c.topic, m.log_time, m.sequence, m.data)
                           for _, c, m in reader.iter_messages()))
     assert got[0] == got[1] and len(got[0]) == 72
+
+
+def test_messages_filled_in_place_are_the_messages_of_the_array(tmp_path) -> None:  # noqa: ANN001
+    """write_messages_filled (the producer writes the messages into their records) gives
+    the file write_messages_many gives; a fill that raises leaves nothing behind."""
+    import numpy as np
+
+    from hil.framelog import FrameLogReader, FrameLogWriter
+
+    rng = np.random.default_rng(4)
+    m = rng.integers(0, 256, (3, 5, 9)).astype(np.uint8)
+    t = np.arange(5) * 10
+    files = []
+    for filled in (True, False):
+        path = tmp_path / f"{filled}.mcap"
+        with FrameLogWriter(path, compression="none") as w:
+            chs = [w.add_channel(f"/s{i}", "json") for i in range(3)]
+            if filled:
+                def boom(out: np.ndarray) -> None:
+                    out[0] = 1
+                    raise RuntimeError("encoder failed")
+
+                with pytest.raises(RuntimeError, match="encoder"):
+                    w.write_messages_filled(chs, t, 9, boom)
+
+                def fill(out: np.ndarray) -> None:
+                    assert out.shape == (3, 5, 9)
+                    out[...] = m
+
+                w.write_messages_filled(chs, t, 9, fill)
+            else:
+                w.write_messages_many(chs, t, m)
+        files.append(path.read_bytes())
+    assert files[0] == files[1]
+    got = FrameLogReader(tmp_path / "True.mcap")
+    assert [bytes(d) for _, _, d in got.frames(topics=["/s2"])] == [bytes(r) for r in m[2]]

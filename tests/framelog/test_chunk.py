@@ -8,7 +8,20 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import zstandard
+from mcap.data_stream import RecordBuilder
 from mcap.reader import make_reader
+from mcap.records import (
+    Chunk,
+    ChunkIndex,
+    DataEnd,
+    Footer,
+    Message,
+    MessageIndex,
+    MetadataIndex,
+    SummaryOffset,
+)
+from mcap.stream_reader import StreamReader, breakup_chunk
 
 from hil.framelog import FrameLogWriter, chunk
 
@@ -20,7 +33,7 @@ def _log(path: Path, compression: str, level: int | None, ours: bool) -> bytes:
     try:
         rng = np.random.default_rng(5)
         with FrameLogWriter(path, compression=compression, compression_level=level,
-                            chunk_size=3000) as w:
+                            chunk_size=1500) as w:
             blk = w.add_block_channel("/b", "eha-hil/test", dtype=np.uint16, width=5)
             one = w.add_channel("/one", "eha-hil/test-frame")
             for k in range(12):
@@ -35,12 +48,39 @@ def _log(path: Path, compression: str, level: int | None, ours: bool) -> bytes:
             mp.undo()
 
 
-@pytest.mark.parametrize(("compression", "level"), [("zstd", 3), ("lz4", 0)])
+@pytest.mark.parametrize(("compression", "level"), [("lz4", 0), ("none", None)])
 def test_library_level_gives_the_librarys_file(tmp_path: Path, compression: str,
-                                               level: int) -> None:
+                                               level: int | None) -> None:
     ours = _log(tmp_path / "ours.mcap", compression, level, True)
     lib = _log(tmp_path / "lib.mcap", compression, level, False)
     assert ours == lib
+
+
+def _records(data: bytes) -> list:
+    """Every record of a file, chunks as (start, end, size, records inside)."""
+    out = []
+    for rec in StreamReader(io.BytesIO(data), emit_chunks=True).records:
+        if isinstance(rec, Chunk):
+            inner = breakup_chunk(rec, validate_crc=True)
+            out.append((rec.message_start_time, rec.message_end_time, rec.uncompressed_size,
+                        inner))
+        elif isinstance(rec, ChunkIndex | MetadataIndex | DataEnd | SummaryOffset | Footer):
+            out.append(type(rec).__name__)  # offsets and CRCs differ with the chunks' bytes
+        else:
+            out.append(rec)
+    return out
+
+
+def test_zstd_at_the_librarys_level_gives_the_librarys_records(tmp_path: Path) -> None:
+    """zstd chunks carry zstd's checksum instead of the chunk CRC: the compressed bytes
+    differ from the library's, every record inside and around the chunks is the same."""
+    ours = _log(tmp_path / "ours.mcap", "zstd", 3, True)
+    lib = _log(tmp_path / "lib.mcap", "zstd", 3, False)
+    assert ours != lib and _records(ours) == _records(lib)
+    chunks = [r for r in StreamReader(io.BytesIO(ours), emit_chunks=True).records
+              if isinstance(r, Chunk)]
+    assert len(chunks) > 3 and {c.uncompressed_crc for c in chunks} == {0}
+    assert all(zstandard.get_frame_parameters(c.data).has_checksum for c in chunks)
 
 
 def test_default_level_reads_back_with_crcs(tmp_path: Path) -> None:
@@ -63,3 +103,55 @@ def test_bad_level_is_one_line(tmp_path: Path, compression: str, level: int) -> 
     with pytest.raises(ValueError, match="level|takes no"):
         FrameLogWriter(tmp_path / "x.mcap", compression=compression,  # type: ignore[arg-type]
                        compression_level=level)
+
+
+@pytest.mark.parametrize("compression", ["zstd", "none"])
+def test_every_message_index_entry_points_at_its_message(tmp_path: Path,
+                                                         compression: str) -> None:
+    """The chunk's message indexes (one entry for a channel's one block, many for a
+    channel of single messages), checked record by record with the mcap library: each
+    entry's offset is a Message record of that channel at that log time."""
+    path = tmp_path / "i.mcap"
+    with FrameLogWriter(path, compression=compression, chunk_size=4000,  # type: ignore[arg-type]
+                        flush_every_ns=400) as w:
+        blocks = [w.add_block_channel(f"/b{i}", "eha-hil/x", dtype=np.uint16, width=3)
+                  for i in range(5)]
+        one = w.add_channel("/one", "eha-hil/y")
+        for k in range(6):
+            t = 500 * k + np.arange(4)
+            w.write_blocks(blocks, t, np.full((5, 4, 3), k))
+            for j in range(3):
+                w.write(one, int(t[-1]) + j, bytes([k, j]))
+    records = list(StreamReader(io.BytesIO(path.read_bytes()), emit_chunks=True).records)
+    chunks = {}
+    pos = 0
+    for rec in records:  # chunk records in file order, then the indexes that follow each
+        if isinstance(rec, Chunk):
+            pos += 1
+            chunks[pos] = breakup_chunk(rec, validate_crc=True), []
+        elif isinstance(rec, MessageIndex):
+            chunks[pos][1].append(rec)
+    entries = 0
+    for inner, indexes in chunks.values():
+        offsets, at = {}, 0
+        for r in inner:  # each record's offset inside the uncompressed chunk
+            offsets[at] = r
+            at += _record_length(r)
+        assert {ix.channel_id for ix in indexes} == {r.channel_id for r in inner
+                                                     if isinstance(r, Message)}
+        for ix in indexes:
+            for t, off in ix.records:
+                m = offsets[off]
+                assert isinstance(m, Message) and m.channel_id == ix.channel_id
+                assert m.log_time == t
+                entries += 1
+    assert entries == 6 * 5 + 6 * 3 and len(chunks) >= 6
+    # most channels had one message in a chunk: the one-entry records were written
+    assert sum(len(ix.records) == 1 for _, ixs in chunks.values() for ix in ixs) >= 25
+
+
+def _record_length(r: object) -> int:
+    """Bytes of the record ``r`` as the library writes it (opcode and length included)."""
+    rb = RecordBuilder()
+    r.write(rb)  # type: ignore[attr-defined]
+    return len(rb.end())

@@ -18,8 +18,8 @@ from hil.framelog.writer import FrameLogWriter
 REPO = Path(__file__).resolve().parents[2]
 
 
-def _counter_log(path: Path, n: int, chunk_size: int = 200) -> None:
-    with FrameLogWriter(path, chunk_size=chunk_size, compression="lz4") as w:
+def _counter_log(path: Path, n: int, chunk_size: int = 200, compression: str = "lz4") -> None:
+    with FrameLogWriter(path, chunk_size=chunk_size, compression=compression) as w:
         c = w.add_channel("/counter", "raw", schema_name="")
         for i in range(n):
             w.write(c, i * 1000, i.to_bytes(4, "little"))
@@ -73,11 +73,13 @@ def test_missing_file_and_directory(tmp_path: Path) -> None:
         FrameLogReader(tmp_path)
 
 
-def test_damaged_chunk_raises_with_offset(tmp_path: Path) -> None:
+@pytest.mark.parametrize("compression", ["lz4", "zstd"])
+def test_damaged_chunk_raises_with_offset(tmp_path: Path, compression: str) -> None:
     path = tmp_path / "d.mcap"
-    _counter_log(path, 60)
+    _counter_log(path, 60, compression=compression)
     data = bytearray(path.read_bytes())
-    # Flip a byte inside the second chunk's (lz4) payload: CRC or decompression must fail.
+    # Flip a byte inside the second chunk's payload: its CRC (lz4) or zstd's checksum or
+    # the decompression must fail.
     offsets = _chunk_offsets(bytes(data))
     assert len(offsets) > 2
     data[offsets[1] + 80] ^= 0x55

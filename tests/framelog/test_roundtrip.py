@@ -23,6 +23,7 @@ from hil.framelog.formats import (
 )
 from hil.framelog.reader import FrameLogError, FrameLogReader
 from hil.framelog.writer import FrameLogWriter
+from tests.framelog.stock_blocks import block_rows
 
 
 def _write_mixed(path: Path, **kw) -> None:
@@ -121,9 +122,9 @@ def test_mcap_library_reads_it_with_crc_validation(tmp_path: Path) -> None:
                 # a protobuf message the library's stock decoder reads
                 assert channel.message_encoding == "protobuf" and schema.encoding == "protobuf"
                 blk = DecoderFactory().decoder_for("protobuf", schema)(message.data)
-                t = np.frombuffer(blk.frames, np.uint16).reshape(blk.count, blk.width)
-                assert list(blk.t_ns)[0] == message.log_time and blk.width == 31
-                assert blk.dtype == "uint16" and t.shape[0] == len(blk.t_ns)
+                t, f = block_rows(blk)
+                assert t[0] == message.log_time and blk.width == 31
+                assert blk.dtype == "uint16" and f.shape == (len(t), 31)
             if channel.topic == "/signals/motor":
                 assert channel.message_encoding == "json"
                 assert schema is not None and schema.encoding == "jsonschema"

@@ -14,6 +14,8 @@ import numpy as np
 from mcap.reader import make_reader
 from mcap_protobuf.decoder import DecoderFactory
 
+from tests.framelog.stock_blocks import block_rows
+
 #: MCAP's well-known message encodings and the schema encodings Foxglove decodes.
 STOCK_MESSAGE_ENCODINGS = {"ros1", "cdr", "protobuf", "flatbuffer", "cbor", "json"}
 FOXGLOVE_SCHEMA_ENCODINGS = {"protobuf", "jsonschema", "ros1msg", "ros2msg", "ros2idl",
@@ -61,9 +63,9 @@ def _check_raw_content(path: Path, decoded: dict[str, list]) -> None:
     assert blocks, "no block channels"
     ours = r.blocks_many(blocks)
     for topic, msgs in blocks.items():
-        t = np.concatenate([np.asarray(m.t_ns, np.int64) for m in msgs])
-        frames = np.concatenate([np.frombuffer(m.frames, np.dtype(m.dtype).newbyteorder("<"))
-                                 .reshape(m.count, m.width) for m in msgs])
+        rows = [block_rows(m) for m in msgs]
+        t = np.concatenate([r[0] for r in rows])
+        frames = np.concatenate([r[1] for r in rows])
         assert np.array_equal(t, ours[topic].t_ns), topic
         assert np.array_equal(frames, ours[topic].frames), topic
     frames = decoded["/fieldbus/frames"]

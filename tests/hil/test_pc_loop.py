@@ -46,6 +46,6 @@ def test_timing_the_per_cycle_python_changes_no_result():
                 assert python_per_cycle(bs, demo_pc(), 10) > 0.0
                 assert (eng.workers, eng.overlap, "_compute" in vars(eng)) == (2, True, False)
             else:
-                bs.run(12, demo_pc(), keep=0)
+                bs.run(2 + 3 * 10, demo_pc(), keep=0)  # (its warm-up, 3 runs of 10)
             images.append(bs.run(5, demo_pc()).inputs)
     assert np.array_equal(images[0], images[1])

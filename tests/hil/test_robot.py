@@ -93,10 +93,28 @@ def test_workers_and_overlap_do_not_change_results():
     topo, cfg = load_topology("hydra_full"), load_config("hydra_default")
     ref, _ = _run(topo, cfg, "stack", 40)
     assert np.unique(ref.inputs[20:], axis=0).shape[0] == 20  # the actuators move
-    for workers, overlap, lanes in ((1, False, True), (2, False, True), (2, True, True),
-                                    (1, False, False), (2, True, False)):
+    for workers, overlap, lanes in ((1, False, True), (1, True, True), (2, False, True),
+                                    (2, True, True), (1, False, False), (2, True, False)):
         rec, _ = _run(topo, cfg, "robot", 40, workers=workers, overlap=overlap, lanes=lanes)
         assert rec.inputs.tobytes() == ref.inputs.tobytes(), (workers, overlap, lanes)
+
+
+def test_the_helper_threads_live_from_the_first_cycle_to_the_bus_systems_end():
+    """One worker: no helper thread at all; two: one helper (hil.sim.compute_threads),
+    made at the first cycle, kept from cycle to cycle, ended when the bus system closes."""
+    topo, cfg = load_topology("bench_one_box"), load_config("hydra_default")
+    with BusSystem(topo, cfg, "inproc", model="robot") as bs:
+        e = bs.chain.engine
+        e.workers = 1
+        bs.run(3, demo_pc())
+        assert e._threads is None
+        e.workers = 2
+        bs.run(3, demo_pc())
+        threads = list(e._threads.threads)
+        assert len(threads) == 1 and threads[0].is_alive()
+        bs.run(3, demo_pc())
+        assert list(e._threads.threads) == threads
+    assert not threads[0].is_alive()
 
 
 def test_the_tap_gives_every_tick_and_changes_nothing():

@@ -83,3 +83,25 @@ def test_order_spectrum_with_the_kept_exponentials_is_the_direct_sum(monkeypatch
         monkeypatch.setattr(residuals, "BASIS_MAX", 0)  # too long to keep: computed as it goes
         assert np.array_equal(residuals.order_spectrum(r, angle), want)
         monkeypatch.undo()
+
+
+def test_a_kept_run_answers_for_its_head_bit_for_bit():
+    """The model keeps its last runs by parameter vector: a head asked after the whole run is
+    that run (read-only), and equals a fresh model's head simulation bit for bit; a longer
+    run after a head is simulated anew; another parameter vector is another run."""
+    model = _model()
+    theta = _theta(model)
+    k = model.exp.n // 3
+    whole = model.states(theta)
+    assert not whole.flags.writeable
+    assert model.states(theta, k) is whole
+    fresh = _model().states(theta, k)
+    assert np.array_equal(fresh[:k], whole[:k])
+    assert np.all(fresh[k:] == 0.0)
+    short = _model()
+    head = short.states(theta, k)
+    longer = short.states(theta)
+    assert longer is not head and np.array_equal(longer, whole)
+    other = theta.copy()
+    other[IDX["pc_force_n"]] = 41.0
+    assert not np.array_equal(model.states(other), whole)

@@ -96,6 +96,67 @@ def test_rk4_in_lanes_is_the_scalar_kernel_bit_for_bit(acts, ticks):
     np.testing.assert_array_equal(_bits(X), _bits(ref))
 
 
+def _run_both(P, X, U, ticks, n_sub_max):
+    """``ticks`` RK4 ticks of the actuators (P, X, U) in one batch and, each alone, in the
+    scalar kernel: (lanes' states, scalar states)."""
+    ref = X.copy()
+    work = np.zeros((5, L.N_STATES))
+    for i in range(len(P)):
+        for _ in range(ticks):
+            kernel.rk4_tick(ref[i], P[i], U[i], work)
+    X = X.copy()
+    buf = lanes.lane_buffer()
+    rows = np.arange(len(P))
+    lanes.load_params(buf, P, rows, len(P))
+    for _ in range(ticks):
+        lanes.load_states(buf, X, U, rows, len(P))
+        lanes.rk4_lanes(buf, n_sub_max)
+        lanes.store_states(buf, X, rows, len(P))
+    return X, ref
+
+
+def test_an_effect_on_in_one_lane_only_is_computed_for_it():
+    """A batch skips an effect no lane has on (its row holds the value each lane would
+    select): one lane with seal and pump Coulomb friction, entrained air, oil temperature,
+    a moving load against its end stop and two sub-steps among seven without any of them
+    (fixed loads, one sub-step) gets its scalar states, and so do the seven; and a batch
+    with none of them is unchanged by a larger ``n_sub_max`` (no lane takes the extra
+    sub-steps)."""
+    p = _BASE["fixed"].copy()
+    for f in _FLAGS:
+        p[f] = 0.0
+    P = np.array([p] * lanes.LW)
+    odd = _BASE["conrod"].copy()
+    for f in (L.P_TEMP_ON, L.P_PC_ON, L.P_SF_ON, L.P_AIR_ON, L.P_KSX_ON):
+        odd[f] = 1.0
+    odd[L.P_AIR_A] = 1e7
+    odd[L.P_H_SUB] = odd[L.P_H_SUB] * odd[L.P_N_SUB] / 2
+    odd[L.P_N_SUB] = 2
+    P[5] = odd
+    rng = np.random.default_rng(5)
+    X = np.zeros((lanes.LW, L.N_STATES))
+    X[:, L.S_VP] = rng.uniform(-0.2, 0.2, lanes.LW)
+    X[:, L.S_TQ] = rng.uniform(-2e4, 2e4, lanes.LW)
+    X[:, L.S_VC] = rng.uniform(-0.2, 0.2, lanes.LW)
+    X[:, L.S_ID] = rng.uniform(-10.0, 10.0, lanes.LW)
+    X[:, L.S_IQ] = rng.uniform(-10.0, 10.0, lanes.LW)
+    X[:, L.S_TOIL] = 40.0
+    odd[L.P_X_ANCHOR] = odd[L.P_HALF_STROKE]  # the rod lets the pressure hold the stop
+    P[5] = odd
+    X[5, L.S_THC] = odd[L.P_HALF_STROKE]
+    X[5, L.S_VC] = 0.3
+    X[5, L.S_VP] = 0.1
+    X[5, L.S_TQ] = 2e4
+    U = np.zeros((lanes.LW, L.N_INPUTS))
+    U[:, L.IN_DA:L.IN_DC + 1] = rng.uniform(0.2, 0.8, (lanes.LW, 3))
+    U[:, L.IN_T_AMB] = 25.0
+    got, ref = _run_both(P, X, U, 3, 2)
+    np.testing.assert_array_equal(_bits(got), _bits(ref))
+    assert got[5, L.S_THC] == odd[L.P_HALF_STROKE]  # the lane met its end stop
+    got, ref = _run_both(P[:4], X[:4], U[:4], 2, 3)
+    np.testing.assert_array_equal(_bits(got), _bits(ref))
+
+
 @njit(cache=True, error_model="numpy")
 def _lane_loop(x, out):
     """The recipe's functions in a loop the compiler vectorises."""
@@ -162,10 +223,10 @@ def test_exp3_at_its_limits():
 @pytest.mark.slow
 def test_rk4_lanes_compiles_to_vector_instructions_without_contraction():
     """The generated machine code of the lane kernel: its arithmetic is on full vector
-    registers (ymm with AVX2, zmm with AVX-512) and no multiply-add is fused. Compiled
-    here is one RK4 stage of it (the derivatives and the intermediate state, the code
-    ``rk4_lanes`` inlines four times): the same statements, a quarter of the compile
-    time (~7 s against ~47 s idle)."""
+    registers (ymm with AVX2, zmm with AVX-512), none of it scalar, and no multiply-add is
+    fused. Compiled here is one RK4 stage of it (the effects' loops, the derivatives and
+    the intermediate states, the code ``rk4_lanes`` inlines four times): the same
+    statements, a quarter of the compile time (~7 s against ~47 s idle)."""
     import llvmlite.binding as llvm
 
     if "+avx2" not in llvm.get_host_cpu_features().flatten():
@@ -173,12 +234,14 @@ def test_rk4_lanes_compiles_to_vector_instructions_without_contraction():
     opts = {k: v for k, v in lanes.LANES.items() if k != "cache"}
 
     def one_stage(B):
-        lanes.derivatives_lanes(B, lanes.X, lanes.K1)
-        lanes._stage(B, lanes.XT, lanes.K1, 0.5)
+        lanes.rk4_stage(B, lanes.X, lanes.K1, lanes.batch_effects(B), 0.5)
 
     f = numba.njit(**opts)(one_stage)
     f(lanes.lane_buffer())
     asm = next(iter(f.inspect_asm().values()))
     wide = re.findall(r"\bv(?:mul|add|sub|div)pd\s+[^\n]*%[yz]mm", asm)
     assert len(wide) > 200
+    # A loop of its own over the states (or a conditional expression LLVM keeps as a
+    # branch) is unrolled into scalar code: one vmulsd/vdivsd per lane.
+    assert not re.findall(r"\bv(?:mul|add|sub|div)sd\b", asm)
     assert not re.findall(r"vfn?m(?:add|sub)", asm)

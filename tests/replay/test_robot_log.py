@@ -22,6 +22,7 @@ from hil.replay.replay import replay_mcu as replay
 from hil.sim.pc import demo_pc
 from hil.sim.robot import RobotEngine
 from plant.config import load_config
+from tests.framelog.stock_blocks import block_rows
 
 #: Two actuators in box 0, an IMU box (inputs only, not simulated), one actuator in box 2.
 TOPOLOGY = """
@@ -247,10 +248,8 @@ def _stock(path) -> dict[str, list[tuple[int, object]]]:
 
 def _frames_of(msgs) -> tuple[np.ndarray, np.ndarray]:
     """Times and (n, width) frames of a raw block channel's stock-decoded messages."""
-    t = np.concatenate([np.asarray(m.t_ns, np.int64) for _, m in msgs])
-    f = np.concatenate([np.frombuffer(m.frames, np.dtype(m.dtype).newbyteorder("<"))
-                        .reshape(m.count, m.width) for _, m in msgs])
-    return t, f
+    rows = [block_rows(m) for _, m in msgs]
+    return np.concatenate([r[0] for r in rows]), np.concatenate([r[1] for r in rows])
 
 
 def test_the_export_of_a_robot_log_holds_what_the_stock_decoder_reads(logs, tmp_path,

@@ -270,7 +270,7 @@ static void cycle(mcu_state *s, const mcu_input *in)
     s->status = status;
 }
 
-static void report(const mcu_state *s, mcu_output *out)
+void mcu_law_report(const mcu_state *s, mcu_output *out)
 {
     memcpy(out->down, s->down, sizeof out->down);
     out->status = s->status;
@@ -303,7 +303,7 @@ void mcu_law_step(mcu_state *s, const mcu_input *in, mcu_output *out)
 {
     process_data(s, in);
     cycle(s, in);
-    report(s, out);
+    mcu_law_report(s, out);
 }
 
 void mcu_law_run(const mcu_config *cfg, const mcu_input *in, uint32_t n, mcu_output *out)

@@ -193,6 +193,8 @@ typedef struct {
 
 void mcu_law_init(mcu_state *s, const mcu_config *cfg);
 void mcu_law_step(mcu_state *s, const mcu_input *in, mcu_output *out);
+/* The output record of the state s (what mcu_law_step leaves in out after its step). */
+void mcu_law_report(const mcu_state *s, mcu_output *out);
 /* n steps from a fresh state: the host library's batch entry point. */
 void mcu_law_run(const mcu_config *cfg, const mcu_input *in, uint32_t n, mcu_output *out);
 /* One step of n independent programs (one per actuator): state k with in[k] and out[k].
