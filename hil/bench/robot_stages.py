@@ -65,12 +65,13 @@ def _stage(which, n_ticks, tick0, x, p, u, y, rng, work, k, raw, c, st, down, up
                 LK.sweep_up(lk[i], up[i], mup[i])
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
 def _rk4_in_lanes(n_ticks, x, p, u, blocks, sizes, n_sub_max, buf):
     """``n_ticks`` RK4 ticks of every actuator, batch by batch in lanes: states and inputs
     loaded when the batch is claimed and stored at its end, as the engine does. (The lane
-    harnesses compile with numpy's error model, as the engine's kernel: the stages they
-    inline must not get a division-by-zero check per lane.)"""
+    harnesses compile as the engine's kernel: numpy's error model, so that the stages they
+    inline get no division-by-zero check per lane, and no reference counting, so that
+    their row views count no references.)"""
     for b in range(blocks.shape[0]):
         lanes.load_params(buf, p, blocks[b], sizes[b])
         lanes.load_states(buf, x, u, blocks[b], sizes[b])
@@ -79,32 +80,39 @@ def _rk4_in_lanes(n_ticks, x, p, u, blocks, sizes, n_sub_max, buf):
         lanes.store_states(buf, x, blocks[b], sizes[b])
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
-def _link_sensors_in_lanes(which, n_ticks, tick0, blocks, sizes, y, rng, k, raw, c, st, down,
-                           up, mdown, mup, lk, lb, sb, buf, fb):
-    """``n_ticks`` ticks of the sensor chips (``which`` 0) or of both LVDS sweeps (1) of
-    every actuator, batch by batch in lanes, with the loads at each batch's claim and the
-    stores at its end, as the engine makes them (the chips read the plant outputs in the
-    plant lanes and write the raw words into the board lanes; the downstream sweep writes
+@njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
+def _sensors_in_lanes(n_ticks, tick0, blocks, sizes, y, rng, k, raw, c, st, down, sb, buf, fb):
+    """``n_ticks`` ticks of the sensor chips of every actuator, batch by batch in lanes,
+    with the loads at each batch's claim and the stores at its end, as the engine makes
+    them (the chips read the plant outputs in the plant lanes and write the raw words into
     the board lanes)."""
     for b in range(blocks.shape[0]):
         rows, m = blocks[b], sizes[b]
         fpl.load_board(fb, c, st, raw, down, rows, m)
-        if which == 0:
-            load_outputs(buf, y, rng, rows, m)
-            sensor_lanes.load_chips(sb, k, rows, m)
-            for j in range(n_ticks):
-                sensor_lanes.digitise_lanes(sb, buf, fb, k, rows, m, tick0 + j, y, raw)
-        else:
-            link_lanes.load_link(lb, lk, rows, m)
-            for _ in range(n_ticks):
-                link_lanes.sweep_down_lanes(lb, lk, mdown, fb, st, down, rows, m)
-                link_lanes.sweep_up_lanes(lb, lk, up, mup, rows, m)
-            link_lanes.store_link(lb, lk, rows, m)
+        load_outputs(buf, y, rng, rows, m)
+        sensor_lanes.load_chips(sb, k, rows, m)
+        for j in range(n_ticks):
+            sensor_lanes.digitise_lanes(sb, buf, fb, k, rows, m, tick0 + j, y, raw)
         fpl.store_board(fb, st, raw, down, rows, m)
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
+def _link_in_lanes(n_ticks, blocks, sizes, raw, c, st, down, up, mdown, mup, lk, lb, fb):
+    """``n_ticks`` ticks of both LVDS sweeps of every actuator, batch by batch in lanes,
+    with the loads at each batch's claim and the stores at its end, as the engine makes
+    them (the downstream sweep writes the board lanes)."""
+    for b in range(blocks.shape[0]):
+        rows, m = blocks[b], sizes[b]
+        fpl.load_board(fb, c, st, raw, down, rows, m)
+        link_lanes.load_link(lb, lk, rows, m)
+        for _ in range(n_ticks):
+            link_lanes.sweep_down_lanes(lb, lk, mdown, fb, st, down, rows, m)
+            link_lanes.sweep_up_lanes(lb, lk, up, mup, rows, m)
+        link_lanes.store_link(lb, lk, rows, m)
+        fpl.store_board(fb, st, raw, down, rows, m)
+
+
+@njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
 def _outputs_in_lanes(n_ticks, x, p, u, y, rng, blocks, sizes, buf):
     """``n_ticks`` ticks of every actuator's outputs and noise, batch by batch in lanes,
     from the states in the lane buffer (the engine computes them right after the RK4 step,
@@ -118,7 +126,7 @@ def _outputs_in_lanes(n_ticks, x, p, u, y, rng, blocks, sizes, buf):
         store_outputs(buf, y, rng, blocks[b], sizes[b])
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
 def _board_in_lanes(n_ticks, c, st, down, up, raw, blocks, sizes, fb, buf):
     """``n_ticks`` board ticks and inverter moves of every actuator, batch by batch in
     lanes: state and exchange words loaded when the batch is claimed and stored at its end,
@@ -244,9 +252,12 @@ def stage_costs(cfg: Config, ticks: int = 2000, warm_s: float = 0.2,
             for which in (0, 1):
                 def run(n_ticks, arrays, which=which):
                     (_, _, _, y, rng, _, k, raw, c, st, down, up, mdown, mup, lk) = arrays
-                    _link_sensors_in_lanes(which, n_ticks, eng.tick, eng._blocks, eng._sizes,
-                                           y, rng, k, raw, c, st, down, up, mdown, mup, lk,
-                                           lb, sb, buf, fb)
+                    if which == 0:
+                        _sensors_in_lanes(n_ticks, eng.tick, eng._blocks, eng._sizes, y, rng,
+                                          k, raw, c, st, down, sb, buf, fb)
+                    else:
+                        _link_in_lanes(n_ticks, eng._blocks, eng._sizes, raw, c, st, down,
+                                       up, mdown, mup, lk, lb, fb)
 
                 run(1, [a.copy() for a in snap])  # compile outside the timing
                 best = np.inf
