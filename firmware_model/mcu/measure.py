@@ -48,6 +48,12 @@ def analog_decoder(a: B.AnalogInput, cal: FirmwareCalibration) -> tuple[float, f
     return v0, mul, div
 
 
+def strain_decoder(cal: FirmwareCalibration) -> tuple[int, float]:
+    """(mid-scale code, N per count) of the strain gauge's conversion: a 24-bit code ``c``
+    reads ``(c - mid) * n_per_count`` N, as :func:`upstream_si` decodes it."""
+    return MIDSCALE, cal.strain_full_scale_n / MIDSCALE
+
+
 def upstream_si(up: np.ndarray, cal: FirmwareCalibration) -> dict[str, np.ndarray]:
     """SI values of logged upstream memories ``up`` (n rows of at least ``FIRST_N_UP``
     words) with the calibration's scales, float64 and vectorised, for offline decoding
@@ -60,7 +66,7 @@ def upstream_si(up: np.ndarray, cal: FirmwareCalibration) -> dict[str, np.ndarra
     out = {"iq": iq * 1e-3,
            "theta_m": _unwrap16(u[:, B.U_ABI]) * (TWO_PI / cal.abi_counts_per_rev),
            "x_piston": piston_x(piston_count(u), cal),
-           "f_strain_raw": (code - MIDSCALE) * (cal.strain_full_scale_n / MIDSCALE)}
+           "f_strain_raw": (code - strain_decoder(cal)[0]) * strain_decoder(cal)[1]}
     for a in B.ANALOG_INPUTS:
         if a.register < u.shape[1]:
             v0, mul, div = analog_decoder(a, cal)

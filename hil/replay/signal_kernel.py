@@ -31,7 +31,6 @@ from hil.fieldbus import pdo
 from hil.framelog.protobuf import MessageType
 from hil.replay import signals as SG
 from protocols import pressure_adc as padc
-from protocols.ad7195 import MIDSCALE
 from protocols.biss import LINEAR_COUNT_M
 
 #: The fields of :data:`hil.replay.signals.ACTUATOR` in their order; the kernel writes
@@ -311,11 +310,11 @@ class ActuatorEncoder:
                                           for q in (1, 2, 3))
         rad_per_count = 2.0 * math.pi / (cal.abi_counts_per_rev
                                          * cal.fpga["speed_window_ticks"] * cal.tick_s)
-        self.fk = np.array([padc.DEFAULT.lsb_v, cal.kc_m2, cal.strain_full_scale_n / MIDSCALE,
+        self.fk = np.array([padc.DEFAULT.lsb_v, cal.kc_m2, measure.strain_decoder(cal)[1],
                             LINEAR_COUNT_M, rad_per_count, period_s, pdo.FORCE_CMD_LSB,
                             pdo.POSITION_CMD_LSB], np.float64)
         si = [a.si_name for a, _ in SG._ANALOG]  # noqa: SLF001
-        self.ik = np.array([MIDSCALE, cal.biss_zero_count, pdo.FLAG_ENABLE,
+        self.ik = np.array([measure.strain_decoder(cal)[0], cal.biss_zero_count, pdo.FLAG_ENABLE,
                             pdo.MODE_CODES["force"], pdo.MODE_CODES["position"],
                             si.index("p_cyl_a"), si.index("p_cyl_b")], np.int64)
         self.box_of = np.array(box_of, np.int64)

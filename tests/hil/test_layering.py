@@ -221,6 +221,17 @@ ALLOWED = {
         "steps per actuator, and copies process-data bytes",
     ("hil/sim/robot.py", "plant.lanes.LW"):
         "the lane width: how many actuators one batch of the vector lanes holds (a size)",
+    ("hil/sim/robot.py", "plant.lanes.YO"):
+        "where the plant outputs' rows start in a lane buffer (an offset, for the tap's copy)",
+    ("hil/replay/signal_kernel.py", "kernel"):
+        "a log's decoded signals (hil.replay.signals' numpy reference, same operations) "
+        "compiled per block and encoded into their records: the log decoder's conversions, "
+        "no part's model",
+    ("hil/sim/actuator.py", "plant.lanes.LW"):
+        "the lane width: a row's stride in the plant lanes the inverter writes (a size)",
+    ("hil/sim/compute_threads.py", "kernel"):
+        "the engine's helper threads waiting for a cycle and calling the robot kernel "
+        "without the interpreter lock (a futex and counters, no part's arithmetic)",
     ("hil/bench/robot_stages.py", "kernel"):
         "times each stage of the robot engine alone: calls the parts' compiled steps in a "
         "loop, computes nothing of its own",
