@@ -405,10 +405,7 @@ class FrameLogWriter:
         if t.ndim != 1 or f.ndim != 2 or f.shape != (t.shape[0], ch.width):
             raise ValueError(f"{ch.topic}: need t_ns (n,) and frames (n, {ch.width}), got "
                              f"{t.shape} and {f.shape}")
-        if t.dtype.kind not in "iu":
-            raise ValueError(f"{ch.topic}: t_ns must be integer ns, got dtype {t.dtype}")
-        if f.dtype != ch.dtype:
-            f = self._cast(ch, f)
+        f = self._typed(ch, t, f)
         n = t.shape[0]
         if n == 0:
             return
@@ -446,13 +443,17 @@ class FrameLogWriter:
         if t.ndim != 1 or f.shape[1:] != (t.shape[0], ch0.width):
             raise ValueError(f"{ch0.topic}...: need t_ns (n,) and frames (k, n, "
                              f"{ch0.width}), got {t.shape} and {f.shape}")
-        if t.dtype.kind not in "iu":
-            raise ValueError(f"{ch0.topic}: t_ns must be integer ns, got dtype {t.dtype}")
-        if f.dtype != ch0.dtype:
-            f = self._cast(ch0, f)
+        f = self._typed(ch0, t, f)
         if t.shape[0] == 0:
             return
         self._write_block_records(channel_ids, chs, _block_times(ch0.topic, t), f)
+
+    def _typed(self, ch: _Channel, t: np.ndarray, f: np.ndarray) -> np.ndarray:
+        """Frames ``f`` of a block on ``ch`` in the channel's dtype (:meth:`_cast`), after
+        refusing times ``t`` that are not integer ns (one check for write_block(s))."""
+        if t.dtype.kind not in "iu":
+            raise ValueError(f"{ch.topic}: t_ns must be integer ns, got dtype {t.dtype}")
+        return f if f.dtype == ch.dtype else self._cast(ch, f)
 
     def _write_block_records(self, channel_ids: list[int], chs: list[_Channel],
                              t: np.ndarray, f: np.ndarray) -> None:
