@@ -115,7 +115,7 @@ def _columns(n: int, seed: int = 1) -> dict[str, np.ndarray]:
     rng = np.random.default_rng(seed)
     cols = {}
     for f in ACTUATOR.fields:
-        if f.kind == "double":
+        if f.kind in ("double", "float"):
             cols[f.name] = rng.normal(0.0, 1e5 if f.unit == "Pa" else 10.0, n)
         elif f.kind == "bool":
             cols[f.name] = rng.integers(0, 2, n)

@@ -41,7 +41,14 @@ PACKAGE = "eha_hil"
 _ANALOG_UNIT_SUFFIX = {"Pa": "pa", "degC": "c"}
 _ANALOG = tuple((a, f"{a.name}_{_ANALOG_UNIT_SUFFIX.get(a.unit, a.unit.lower())}")
                 for a in B.ANALOG_INPUTS)
-_ANALOG_FIELDS = tuple(Field(field, "double", a.unit, a.meaning.split(",")[0])
+#: How a decoded value is stored (docs/framelog.md, "Float or double"): ``float`` when it
+#: is one word of at most 24 significant bits times constants (a 16-bit ADC or register
+#: word, the 24-bit strain code): every distinct word gives a distinct float32, so the
+#: float32 holds all the word says; ``double`` when it comes from more bits (the two-word
+#: piston position and its speed, a 32-bit command, a difference of two words).
+WORD = "float"
+WIDE = "double"
+_ANALOG_FIELDS = tuple(Field(field, WORD, a.unit, a.meaning.split(",")[0])
                        for a, field in _ANALOG)
 _STATUS_FIELDS = tuple(Field(name.lower(), "bool", "", f"board status bit {bit}: {doc}")
                        for bit, name, doc in B.STATUS_BITS)
@@ -50,26 +57,26 @@ ACTUATOR = MessageType(f"{PACKAGE}.ActuatorSignals", (
     # commands: the PC's (fieldbus record, held between cycles) and the MCU's to the board
     Field("pc_mode", "fixed32", "", "PC command mode: 0 off, 1 force, 2 position"),
     Field("pc_enable", "bool", "", "PC enable flag"),
-    Field("force_command_n", "double", "N", "PC force command (NaN unless mode 1)"),
-    Field("position_command_m", "double", "m", "PC position command (NaN unless mode 2)"),
-    Field("iq_ref_a", "double", "A", "q-axis current reference the MCU wrote"),
-    Field("id_ref_a", "double", "A", "d-axis current reference the MCU wrote"),
-    Field("vq_ff_v", "double", "V", "q-axis voltage feed-forward the MCU wrote"),
+    Field("force_command_n", WIDE, "N", "PC force command (NaN unless mode 1)"),
+    Field("position_command_m", WIDE, "m", "PC position command (NaN unless mode 2)"),
+    Field("iq_ref_a", WORD, "A", "q-axis current reference the MCU wrote"),
+    Field("id_ref_a", WORD, "A", "d-axis current reference the MCU wrote"),
+    Field("vq_ff_v", WORD, "V", "q-axis voltage feed-forward the MCU wrote"),
     Field("board_mode", "fixed32", "", "board mode register: 0 off, 1 current, 2 voltage"),
     Field("board_control", "fixed32", "", "board control register: bit 0 enable, 1 clear"),
     # what the MCU read
     *_ANALOG_FIELDS,
-    Field("f_pressure_n", "double", "N", "pressure force k_c (p_cyl_a - p_cyl_b)"),
-    Field("f_strain_n", "double", "N", "strain-gauge force"),
-    Field("x_piston_m", "double", "m", "piston position about mid-stroke"),
-    Field("v_piston_m_s", "double", "m/s", "piston speed: position change over the MCU step"),
-    Field("omega_m_rad_s", "double", "rad/s", "motor speed (ABI count over the speed window)"),
-    Field("iq_a", "double", "A", "measured q-axis current"),
-    Field("id_a", "double", "A", "measured d-axis current"),
-    Field("ia_a", "double", "A", "phase a current"),
-    Field("ib_a", "double", "A", "phase b current"),
-    Field("vd_v", "double", "V", "d-axis voltage applied"),
-    Field("vq_v", "double", "V", "q-axis voltage applied"),
+    Field("f_pressure_n", WIDE, "N", "pressure force k_c (p_cyl_a - p_cyl_b)"),
+    Field("f_strain_n", WORD, "N", "strain-gauge force"),
+    Field("x_piston_m", WIDE, "m", "piston position about mid-stroke"),
+    Field("v_piston_m_s", WIDE, "m/s", "piston speed: position change over the MCU step"),
+    Field("omega_m_rad_s", WORD, "rad/s", "motor speed (ABI count over the speed window)"),
+    Field("iq_a", WORD, "A", "measured q-axis current"),
+    Field("id_a", WORD, "A", "measured d-axis current"),
+    Field("ia_a", WORD, "A", "phase a current"),
+    Field("ib_a", WORD, "A", "phase b current"),
+    Field("vd_v", WORD, "V", "d-axis voltage applied"),
+    Field("vq_v", WORD, "V", "q-axis voltage applied"),
     # status and errors
     Field("status", "fixed32", "", "board status word (the bits below)"),
     Field("state", "fixed32", "", "board state: 0 disabled, 1 enabled, 2 fault"),
@@ -92,12 +99,12 @@ ACTUATOR = MessageType(f"{PACKAGE}.ActuatorSignals", (
           "the values read from the board are NaN"),
 ), "one actuator, each MCU step")
 
-#: The fields of :data:`ACTUATOR` read from the board (upstream words) as doubles: NaN
+#: The fields of :data:`ACTUATOR` read from the board (upstream words) as numbers: NaN
 #: while no upstream sweep has reached the MCU (0 V through the MCU's formulas is not a
 #: measurement: -3 MPa, -20.5 degC, the piston 42 mm off).
-UPSTREAM_DOUBLES = (*(f for _, f in _ANALOG), "f_pressure_n", "f_strain_n", "x_piston_m",
-                    "v_piston_m_s", "omega_m_rad_s", "iq_a", "id_a", "ia_a", "ib_a", "vd_v",
-                    "vq_v")
+UPSTREAM_VALUES = (*(f for _, f in _ANALOG), "f_pressure_n", "f_strain_n", "x_piston_m",
+                   "v_piston_m_s", "omega_m_rad_s", "iq_a", "id_a", "ia_a", "ib_a", "vd_v",
+                   "vq_v")
 
 _UNFITTED_SUFFIX = "_no_"
 
@@ -146,11 +153,12 @@ def _record_fields(fields: tuple[pdo.Field, ...], prefix: str) -> list[Field]:
     out = []
     for f in fields:
         if f.lsb == 0.0:  # the command: its unit depends on the mode
-            out += [Field(f"{prefix}force_command_n", "double", "N", "force command (mode 1)"),
-                    Field(f"{prefix}position_command_m", "double", "m",
+            out += [Field(f"{prefix}force_command_n", WIDE, "N", "force command (mode 1)"),
+                    Field(f"{prefix}position_command_m", WIDE, "m",
                           "position command (mode 2)")]
         elif f.unit:
-            out.append(Field(f"{prefix}{f.name}_{_suffix(f.unit)}", "double", f.unit, f.doc))
+            kind = WORD if np.dtype(f.dtype).itemsize <= 2 else WIDE  # 32-bit counts: double
+            out.append(Field(f"{prefix}{f.name}_{_suffix(f.unit)}", kind, f.unit, f.doc))
         else:
             out.append(Field(f"{prefix}{f.name}", "fixed32", "", f.doc))
     return out
@@ -444,7 +452,7 @@ def actuator_block(cal: FirmwareCalibration, up: np.ndarray, down: np.ndarray, e
     up_ok = started[:, keep].reshape(a * k)
     cols["upstream_valid"] = up_ok
     if not up_ok.all():
-        for name in UPSTREAM_DOUBLES:
+        for name in UPSTREAM_VALUES:
             if name in cols:
                 cols[name] = np.where(up_ok, cols[name], math.nan)
     carry.valid_in, carry.step_valid = carry.valid, valid

@@ -254,7 +254,9 @@ def test_parquet_export_loads_with_pandas(exported):
         n_csv = sum(1 for _ in f) - 1
     assert len(df) == n_csv and list(df.columns[:3]) == ["t_ns", "t_s", "topic"]
     act = df[df["topic"] == "/signals/actuator/0.0"]
-    assert act["p_cyl_a_pa"].notna().all() and act["p_cyl_a_pa"].dtype == np.float64
+    # the schema's types: a word-sized float field float32, the piston's two words float64
+    assert act["p_cyl_a_pa"].notna().all() and act["p_cyl_a_pa"].dtype == np.float32
+    assert act["x_piston_m"].dtype == np.float64
     assert (act["t_ns"].diff().dropna() == 1_000_000).all()
     schema = pq.read_schema(exported["parquet"])
     unit = {f.name: (f.metadata or {}).get(b"unit", b"").decode() for f in schema}
@@ -282,6 +284,7 @@ def test_two_boards_each_decoded_from_its_own_words(tmp_path) -> None:  # noqa: 
         msgs = _decoded(log, f"/signals/actuator/0.{k}")
         assert len(msgs) >= 59
         for tt, d in msgs:
-            assert d.iq_a == pytest.approx(int(np.int16(rows[tt][B.U_IQ])) * 1e-3, abs=1e-12)
+            # a float field: the float32 nearest the word's value, exactly
+            assert d.iq_a == float(np.float32(int(np.int16(rows[tt][B.U_IQ])) * 1e-3))
         iq[k] = [d.iq_a for _, d in msgs]
     assert iq[0] != iq[1]  # the demo sine is phase-shifted per actuator
