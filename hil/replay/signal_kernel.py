@@ -33,9 +33,10 @@ from hil.replay import signals as SG
 from protocols import pressure_adc as padc
 from protocols.biss import LINEAR_COUNT_M
 
-#: The fields of :data:`hil.replay.signals.ACTUATOR` in their order; the kernel writes
-#: field ``FIELDS[i]`` at byte ``off[i]`` of a message (-1: not in this message type).
-FIELDS = tuple(f.name for f in SG.ACTUATOR.fields)
+#: Every field an actuator message has had (:data:`hil.replay.signals.ACTUATOR_ALL_DOUBLE`:
+#: today's and the PC's command of older logs), in that order; the kernel writes field
+#: ``FIELDS[i]`` at byte ``off[i]`` of a message (-1: not in this message type).
+FIELDS = tuple(f.name for f in SG.ACTUATOR_ALL_DOUBLE.fields)
 _I = {name: i for i, name in enumerate(FIELDS)}
 _ANALOG_NAMES = tuple(field for _, field in SG._ANALOG)  # noqa: SLF001 - one declaration
 _STATUS_NAMES = tuple(f.name for f in SG._STATUS_FIELDS)  # noqa: SLF001
@@ -157,6 +158,8 @@ def _encode(up, down, every, out, off, single, upstream, areg, av0, amul, adiv,
     the analog indices of p_cyl_a and p_cyl_b."""
     a, n = up.shape[0], up.shape[1]
     k = n // every
+    pc = (off[F_PC_MODE] >= 0 or off[F_PC_ENABLE] >= 0 or off[F_FORCE] >= 0
+          or off[F_POSITION] >= 0)
     na = areg.shape[0]
     si = np.empty(na, np.float64)
     x_all = np.empty(n, np.float64)
@@ -184,12 +187,12 @@ def _encode(up, down, every, out, off, single, upstream, areg, av0, amul, adiv,
                 carry_count[j] = c
                 carry_off[j] = total - base_t
                 carry_started[j] = started
-        # the PC's command: this block's output records of the box if it has any, else
-        # the last one before (signals.pc_command_block)
+        # the PC's command (older layouts only): this block's output records of the box
+        # if it has any, else the last one before (signals.pc_command_block)
         e = box_of[j]
         o = slot_off[j]
         own = False
-        for p in range(out_t.shape[0]):
+        for p in range(out_t.shape[0] if pc else 0):
             if out_got[p, e]:
                 own = True
                 break
@@ -201,7 +204,9 @@ def _encode(up, down, every, out, off, single, upstream, areg, av0, amul, adiv,
             i = s * every + every - 1
             row = j * k + s
             t = tick_keep[s]
-            if own:
+            if not pc:
+                pass
+            elif own:
                 while p < out_t.shape[0] and out_t[p] <= t:
                     if out_got[p, e]:
                         src = p
@@ -209,21 +214,19 @@ def _encode(up, down, every, out, off, single, upstream, areg, av0, amul, adiv,
                     p += 1
             else:
                 have = last_have[e] and have_t <= t
-            if src >= 0:
-                rec = out_rows[src]
-            else:
-                rec = last_img
-            mode = np.int64(rec[o]) if have else 0
-            flags = np.int64(rec[o + 1])
-            command = np.int64(np.int32(np.uint32(rec[o + 2]) | (np.uint32(rec[o + 3]) << 8)
-                                        | (np.uint32(rec[o + 4]) << 16)
-                                        | (np.uint32(rec[o + 5]) << 24)))
-            _u4(out, row, off[F_PC_MODE], mode)
-            _b1(out, row, off[F_PC_ENABLE], have and (flags & ik[2]) != 0)
-            _fx(out, row, off[F_FORCE], single[F_FORCE],
-                np.float64(command) * fk[6] if mode == ik[3] else math.nan)
-            _fx(out, row, off[F_POSITION], single[F_POSITION],
-                np.float64(command) * fk[7] if mode == ik[4] else math.nan)
+            if pc:
+                rec = out_rows[src] if src >= 0 else last_img
+                mode = np.int64(rec[o]) if have else 0
+                flags = np.int64(rec[o + 1])
+                command = np.int64(np.int32(
+                    np.uint32(rec[o + 2]) | (np.uint32(rec[o + 3]) << 8)
+                    | (np.uint32(rec[o + 4]) << 16) | (np.uint32(rec[o + 5]) << 24)))
+                _u4(out, row, off[F_PC_MODE], mode)
+                _b1(out, row, off[F_PC_ENABLE], have and (flags & ik[2]) != 0)
+                _fx(out, row, off[F_FORCE], single[F_FORCE],
+                    np.float64(command) * fk[6] if mode == ik[3] else math.nan)
+                _fx(out, row, off[F_POSITION], single[F_POSITION],
+                    np.float64(command) * fk[7] if mode == ik[4] else math.nan)
             # what the MCU wrote
             _fx(out, row, off[F_IQ_REF], single[F_IQ_REF],
                 _s16(np.int64(down[j, i, B.D_IQ_REF])) * 1e-3)

@@ -3,12 +3,13 @@
 Beside the raw frames the replay needs (:mod:`hil.replay.record`), a ``bus run`` log
 carries what those frames mean, one message per sample (``docs/framelog.md``):
 
-* ``/signals/actuator/<b>.<k>`` (:data:`ACTUATOR`), each MCU step: the PC's command in
-  force, the MCU's references to the board, what the MCU read from the board (pressures,
-  forces, piston, motor, currents, voltages, temperature) and the board's status bits and
-  error counters. Decoded from the MCU's side of the LVDS link (the words it read and
-  wrote) with the MCU's conversions (:func:`firmware_model.mcu.measure.upstream_si`) and
-  the run's firmware calibration; one field per analog input of the board
+* ``/signals/actuator/<b>.<k>`` (:data:`ACTUATOR`), each MCU step: the MCU's references
+  to the board, what the MCU read from the board (pressures, forces, piston, motor,
+  currents, voltages, temperature) and the board's status bits and error counters (the
+  PC's command it worked to is the box's outputs channel's, :data:`PC_COMMAND`). Decoded
+  from the MCU's side of the LVDS link (the words it read and wrote) with the MCU's
+  conversions (:func:`firmware_model.mcu.measure.upstream_si`) and the run's firmware
+  calibration; one field per analog input of the board
   (``firmware_model.fpga.layout.ANALOG_INPUTS``: the five pressures, the oil and rod
   temperatures).
 * ``/signals/box/<b>/outputs`` and ``.../inputs``, each fieldbus cycle: the box's process
@@ -44,8 +45,9 @@ _ANALOG = tuple((a, f"{a.name}_{_ANALOG_UNIT_SUFFIX.get(a.unit, a.unit.lower())}
 #: How a decoded value is stored (docs/framelog.md, "Float or double"): ``float`` when it
 #: is one word of at most 24 significant bits times constants (a 16-bit ADC or register
 #: word, the 24-bit strain code): every distinct word gives a distinct float32, so the
-#: float32 holds all the word says; ``double`` when it comes from more bits (the two-word
-#: piston position and its speed, a 32-bit command, a difference of two words).
+#: float32 holds all the word says (and the pressure force, whose two words are fields of
+#: the same message); ``double`` when it comes from more bits (the two-word piston
+#: position and its speed, a 32-bit command).
 WORD = "float"
 WIDE = "double"
 _ANALOG_FIELDS = tuple(Field(field, WORD, a.unit, a.meaning.split(",")[0])
@@ -53,12 +55,19 @@ _ANALOG_FIELDS = tuple(Field(field, WORD, a.unit, a.meaning.split(",")[0])
 _STATUS_FIELDS = tuple(Field(name.lower(), "bool", "", f"board status bit {bit}: {doc}")
                        for bit, name, doc in B.STATUS_BITS)
 
-ACTUATOR = MessageType(f"{PACKAGE}.ActuatorSignals", (
-    # commands: the PC's (fieldbus record, held between cycles) and the MCU's to the board
+#: The PC's command in force at each step, which the actuator messages of older logs
+#: carried first: the same values are the latest ``/signals/box/<b>/outputs`` message's
+#: (``s<k>_mode``, ``s<k>_flags``, ``s<k>_force_command_n``, ...) at or before the step,
+#: so today's actuator messages leave them out (:data:`ACTUATOR_ALL_DOUBLE` has them).
+PC_COMMAND = (
     Field("pc_mode", "fixed32", "", "PC command mode: 0 off, 1 force, 2 position"),
     Field("pc_enable", "bool", "", "PC enable flag"),
     Field("force_command_n", WIDE, "N", "PC force command (NaN unless mode 1)"),
     Field("position_command_m", WIDE, "m", "PC position command (NaN unless mode 2)"),
+)
+
+ACTUATOR = MessageType(f"{PACKAGE}.ActuatorSignals", (
+    # what the MCU wrote to the board
     Field("iq_ref_a", WORD, "A", "q-axis current reference the MCU wrote"),
     Field("id_ref_a", WORD, "A", "d-axis current reference the MCU wrote"),
     Field("vq_ff_v", WORD, "V", "q-axis voltage feed-forward the MCU wrote"),
@@ -66,7 +75,8 @@ ACTUATOR = MessageType(f"{PACKAGE}.ActuatorSignals", (
     Field("board_control", "fixed32", "", "board control register: bit 0 enable, 1 clear"),
     # what the MCU read
     *_ANALOG_FIELDS,
-    Field("f_pressure_n", WIDE, "N", "pressure force k_c (p_cyl_a - p_cyl_b)"),
+    # float: its two words are the message's p_cyl_a_pa and p_cyl_b_pa (docs/framelog.md)
+    Field("f_pressure_n", WORD, "N", "pressure force k_c (p_cyl_a - p_cyl_b)"),
     Field("f_strain_n", WORD, "N", "strain-gauge force"),
     Field("x_piston_m", WIDE, "m", "piston position about mid-stroke"),
     Field("v_piston_m_s", WIDE, "m/s", "piston speed: position change over the MCU step"),
@@ -99,6 +109,12 @@ ACTUATOR = MessageType(f"{PACKAGE}.ActuatorSignals", (
           "the values read from the board are NaN"),
 ), "one actuator, each MCU step")
 
+#: :data:`ACTUATOR` as logs before the float fields wrote it: :data:`PC_COMMAND` first,
+#: every float a double (what the readers of old logs and the kernel's tests use).
+ACTUATOR_ALL_DOUBLE = MessageType(ACTUATOR.full_name, tuple(
+    Field(f.name, WIDE if f.kind == WORD else f.kind, f.unit, f.doc)
+    for f in (*PC_COMMAND, *ACTUATOR.fields)), ACTUATOR.doc)
+
 #: The fields of :data:`ACTUATOR` read from the board (upstream words) as numbers: NaN
 #: while no upstream sweep has reached the MCU (0 V through the MCU's formulas is not a
 #: measurement: -3 MPa, -20.5 degC, the piston 42 mm off).
@@ -109,15 +125,17 @@ UPSTREAM_VALUES = (*(f for _, f in _ANALOG), "f_pressure_n", "f_strain_n", "x_pi
 _UNFITTED_SUFFIX = "_no_"
 
 
-def actuator_message(unfitted: tuple[str, ...] = ()) -> MessageType:
-    """:data:`ACTUATOR` without the fields of the analog inputs ``unfitted`` (names of
-    ``ANALOG_INPUTS`` whose part is not mounted: an empty input reads 0 V, which the
-    MCU's formula would turn into a confident value; the signal is left out instead)."""
+def actuator_message(unfitted: tuple[str, ...] = (), base: MessageType = ACTUATOR
+                     ) -> MessageType:
+    """:data:`ACTUATOR` (or ``base``, e.g. :data:`ACTUATOR_ALL_DOUBLE`) without the fields
+    of the analog inputs ``unfitted`` (names of ``ANALOG_INPUTS`` whose part is not
+    mounted: an empty input reads 0 V, which the MCU's formula would turn into a
+    confident value; the signal is left out instead)."""
     if not unfitted:
-        return ACTUATOR
+        return base
     drop = {field for a, field in _ANALOG if a.name in unfitted}
-    return MessageType(ACTUATOR.full_name + "".join(_UNFITTED_SUFFIX + n for n in unfitted),
-                       tuple(f for f in ACTUATOR.fields if f.name not in drop), ACTUATOR.doc)
+    return MessageType(base.full_name + "".join(_UNFITTED_SUFFIX + n for n in unfitted),
+                       tuple(f for f in base.fields if f.name not in drop), base.doc)
 
 
 def unfitted_inputs(sensors: dict) -> tuple[str, ...]:

@@ -143,9 +143,12 @@ def test_actuator_values_are_what_the_mcu_decodes(logs):
         assert d.status == rows[t][B.U_STATUS] and d.link_ok == bool(
             rows[t][B.U_STATUS] & B.ST_LINK_OK)
         checked += 1
-    assert checked == len(msgs) and msgs[-1][1].enabled and msgs[-1][1].pc_mode == 1
-    # the force command is the demo sine (300 N, 2 Hz) as the PC sent it
-    forces = np.array([d.force_command_n for _, d in msgs])
+    assert checked == len(msgs) and msgs[-1][1].enabled
+    # the command it worked to is the box's outputs channel's: the demo sine (300 N, 2 Hz)
+    # as the PC sent it, in force mode
+    outs = _decoded(path, "/signals/box/0/outputs")
+    assert outs[-1][1].s0_mode == 1
+    forces = np.array([d.s0_force_command_n for _, d in outs])
     assert 200 < np.nanmax(np.abs(forces)) <= 300
 
 

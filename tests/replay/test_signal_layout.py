@@ -45,10 +45,26 @@ def test_every_float_field_of_the_actuator_keeps_every_word():
     assert {"p_cyl_a_pa", "temperature_c", "iq_a", "f_strain_n", "omega_m_rad_s",
             "iq_ref_a"} <= set(floats)
     for name in floats:
-        assert _distinct_as_float32(np.asarray(cols[name], np.float64)), name
+        if name != "f_pressure_n":  # two words: below
+            assert _distinct_as_float32(np.asarray(cols[name], np.float64)), name
     doubles = {f.name for f in SG.ACTUATOR.fields if f.kind == "double"}
-    assert doubles == {"force_command_n", "position_command_m", "f_pressure_n",
-                       "x_piston_m", "v_piston_m_s"}
+    assert doubles == {"x_piston_m", "v_piston_m_s"}
+
+
+def test_the_pressure_force_as_float_is_far_finer_than_one_pressure_word():
+    """``f_pressure_n`` = k_c (p_cyl_a - p_cyl_b) comes from two words, both fields of the
+    same message (each exact as a float): its float32 is off by less than a hundredth of
+    what one word of either pressure moves it (0.7 N), up to the largest forces."""
+    cal = calibration(load_config(None))
+    up = np.zeros((len(WORDS), B.UP_WORDS + 2), np.uint16)
+    reg = {a.si_name: a.register for a in B.ANALOG_INPUTS}
+    up[:, reg["p_cyl_a"]] = WORDS
+    up[:, reg["p_cyl_b"]] = WORDS[::-1]  # every word against a far one, the largest forces
+    down = np.zeros((len(WORDS), B.DOWN_WORDS), np.uint16)
+    cols = SG.actuator_columns(cal, up, down, np.zeros(len(WORDS)), 200e-6)
+    f = cols["f_pressure_n"]
+    step = np.abs(np.diff(cols["p_cyl_a_pa"])).min() * cal.kc_m2  # N per pressure word
+    assert np.abs(f.astype(np.float32) - f).max() < 1e-2 * step
 
 
 def test_the_strain_force_keeps_all_24_bit_codes():
@@ -81,13 +97,6 @@ def test_every_float_field_of_a_box_record_keeps_every_word(direction):
         else {"s0_x_piston_m"})
 
 
-def _old_layout(message: MessageType) -> MessageType:
-    """``message`` as logs before the float fields wrote it: every float a double."""
-    return MessageType(message.full_name, tuple(
-        Field(f.name, "double" if f.kind == "float" else f.kind, f.unit, f.doc)
-        for f in message.fields), message.doc)
-
-
 def test_the_kernel_refuses_a_field_of_a_kind_it_does_not_write():
     from hil.replay.signal_kernel import ActuatorEncoder
 
@@ -102,8 +111,9 @@ def test_the_old_all_double_layout_is_still_the_references_bytes():
     from hil.replay.signal_kernel import ActuatorEncoder
 
     cal = calibration(load_config(None))
-    msg = _old_layout(SG.ACTUATOR)
+    msg = SG.ACTUATOR_ALL_DOUBLE
     assert msg.size > SG.ACTUATOR.size and not any(f.kind == "float" for f in msg.fields)
+    assert {"pc_mode", "force_command_n"} <= {f.name for f in msg.fields}
     slot = pdo.ACTUATOR_OUT_DTYPE.itemsize
     rng = np.random.default_rng(2)
     a, n = 2, 20
@@ -147,9 +157,9 @@ def test_exports_keep_each_files_types(tmp_path):
     rng = np.random.default_rng(1)
     n = 40
     cols = {f.name: (rng.integers(-30000, 30000, n) * 1e-3 if f.kind in ("float", "double")
-                     else rng.integers(0, 2, n)) for f in SG.ACTUATOR.fields}
+                     else rng.integers(0, 2, n)) for f in SG.ACTUATOR_ALL_DOUBLE.fields}
     cols["x_piston_m"] = (rng.integers(0, 1 << 30, n) - (1 << 29)) * 5e-9  # 30 bits
-    for layout, message in (("new", SG.ACTUATOR), ("old", _old_layout(SG.ACTUATOR))):
+    for layout, message in (("new", SG.ACTUATOR), ("old", SG.ACTUATOR_ALL_DOUBLE)):
         path = tmp_path / f"{layout}.mcap"
         _log(path, message, cols, n)
         export_parquet(path, tmp_path / f"{layout}.parquet")
