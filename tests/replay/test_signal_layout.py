@@ -68,9 +68,15 @@ def test_the_pressure_force_as_float_is_far_finer_than_one_pressure_word():
 
 
 def test_the_strain_force_keeps_all_24_bit_codes():
+    """One code is more newtons than float32's spacing at the largest force, so no two
+    codes meet; and the codes of the largest forces (where the spacing is widest), each
+    end's 2^20, give strictly increasing float32s."""
     mid, n_per_count = measure.strain_decoder(calibration(load_config(None)))
-    f = (np.arange(1 << 24, dtype=np.int64) - mid) * n_per_count
-    assert np.all(np.diff(f.astype(np.float32)) > 0)  # strictly increasing: all distinct
+    top = np.concatenate([np.arange(1 << 20), np.arange((1 << 24) - (1 << 20), 1 << 24)])
+    f = (top - mid) * n_per_count
+    assert np.spacing(np.float32(np.abs(f).max())) < n_per_count
+    assert np.all(np.diff(f[:1 << 20].astype(np.float32)) > 0)
+    assert np.all(np.diff(f[1 << 20:].astype(np.float32)) > 0)
 
 
 @pytest.mark.parametrize("direction", ["outputs", "inputs"])
