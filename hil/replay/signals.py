@@ -219,17 +219,23 @@ def record_columns(box: Box, direction: str, records: np.ndarray,
                    ) -> dict[str, np.ndarray]:
     """SI columns of ``records`` ((n, bytes) uint8 rows of the box's record); for the
     inputs, ``piston`` = (x valid, v valid), each (actuator slots, n) bool
-    (:func:`report_flags`), gives the validity flags of each actuator slot's piston."""
+    (:func:`report_flags`), gives the validity flags of each actuator slot's piston.
+    Adjacent slots of one kind are decoded together (one numpy operation per field for
+    all of them, a column per slot a view of it)."""
     cols: dict[str, np.ndarray] = {}
-    for off, dt, fields in _record_plan(tuple(s.kind for s in box.slots), direction):
-        rec = np.ascontiguousarray(records[:, off:off + dt.itemsize]).view(dt)[:, 0]
-        for name, lsb, column in fields:
+    n = len(records)
+    for off, dt, m, fields in _record_plan(tuple(s.kind for s in box.slots), direction):
+        rec = np.ascontiguousarray(records[:, off:off + m * dt.itemsize]).view(dt)
+        for name, lsb, columns in fields:
             if lsb == 0.0:  # the command: its unit depends on the mode
-                cols.update(_commands(rec["mode"], rec[name].astype(np.int64), column))
-            elif lsb is not None:
-                cols[column] = rec[name] * lsb
-            else:
-                cols[column] = rec[name]
+                both = _commands(rec["mode"], rec[name].astype(np.int64))
+                for j, prefix in enumerate(columns):
+                    for what, v in both.items():
+                        cols[prefix + what] = v[:, j]
+                continue
+            v = rec[name] * lsb if lsb is not None else rec[name]
+            for j, column in enumerate(columns):
+                cols[column] = v[:, j] if m > 1 else v.reshape(n)
     if direction == "inputs" and _actuator_slots(box):
         if piston is None:
             raise ValueError("the inputs of a box with actuators need their piston flags")
@@ -241,31 +247,38 @@ def record_columns(box: Box, direction: str, records: np.ndarray,
 
 @functools.cache
 def _record_plan(kinds: tuple[str, ...], direction: str
-                 ) -> tuple[tuple[int, np.dtype, tuple[tuple[str, float | None, str], ...]],
-                            ...]:
+                 ) -> tuple[tuple[int, np.dtype, int,
+                                  tuple[tuple[str, float | None, tuple[str, ...]], ...]], ...]:
     """How :func:`record_columns` reads a record of slots ``kinds``, worked out once per
     slot layout (a block of records is decoded 20 times per simulated second per box):
-    per slot with a record, (byte offset, dtype, per field (name, lsb: 0.0 the command,
-    None a count, column or the command's column prefix))."""
+    per run of ``m`` adjacent slots of one kind with a record, (byte offset, the slot's
+    dtype, m, per field (name, lsb: 0.0 the command, None a count, per slot its column
+    or, for the command, its columns' prefix))."""
     which = 0 if direction == "outputs" else 1
-    plan = []
+    plan: list[tuple[int, np.dtype, str, list[int]]] = []  # off, dt, kind, slots
     off = 0
     for k, kind in enumerate(kinds):
-        decl = pdo.SLOT_FIELDS[kind][which]
-        dt = pdo.record_dtype(decl)
+        dt = pdo.record_dtype(pdo.SLOT_FIELDS[kind][which])
         if not dt.itemsize:
             continue
-        fields = []
-        for f in decl:
-            if f.lsb == 0.0:
-                fields.append((f.name, 0.0, f"s{k}_"))
-            elif f.unit:
-                fields.append((f.name, f.lsb, f"s{k}_{f.name}_{_suffix(f.unit)}"))
-            else:
-                fields.append((f.name, None, f"s{k}_{f.name}"))
-        plan.append((off, dt, tuple(fields)))
+        if plan and plan[-1][2] == kind and plan[-1][0] + len(plan[-1][3]) * dt.itemsize == off:
+            plan[-1][3].append(k)
+        else:
+            plan.append((off, dt, kind, [k]))
         off += dt.itemsize
-    return tuple(plan)
+    out = []
+    for start, dt, kind, slots in plan:
+        fields = []
+        for f in pdo.SLOT_FIELDS[kind][which]:
+            if f.lsb == 0.0:
+                fields.append((f.name, 0.0, tuple(f"s{k}_" for k in slots)))
+            elif f.unit:
+                fields.append((f.name, f.lsb, tuple(f"s{k}_{f.name}_{_suffix(f.unit)}"
+                                                    for k in slots)))
+            else:
+                fields.append((f.name, None, tuple(f"s{k}_{f.name}" for k in slots)))
+        out.append((start, dt, len(slots), tuple(fields)))
+    return tuple(out)
 
 
 def pc_command_block(parts: list[tuple[np.ndarray, np.ndarray, Box, int]],

@@ -225,3 +225,28 @@ def test_a_committed_log_of_the_all_double_layout_exports_and_decodes(tmp_path):
     assert len(msgs) == len(iq) == 39 and [m.iq_a for m in msgs] == iq.tolist()
     # the values are doubles of the words: not all of them float32-exact
     assert any(v != float(np.float32(v)) for v in iq)
+
+
+def test_adjacent_slots_decoded_together_are_each_slot_decoded_alone():
+    """``record_columns`` decodes a run of slots of one kind at once: each slot's columns
+    are those of a one-slot box given that slot's bytes."""
+    topo = load_topology("hydra_full")
+    box = next(b for b in topo.boxes if sum(s.kind == "actuator" for s in b.slots) >= 3)
+    one = load_topology("bench_one_box").boxes[0]
+    rng = np.random.default_rng(7)
+    for which, d in enumerate(("outputs", "inputs")):
+        sizes = [s.sizes[which] for s in box.slots]
+        rec = rng.integers(0, 256, (50, sum(sizes))).astype(np.uint8)
+        acts = [k for k, s in enumerate(box.slots) if s.kind == "actuator"]
+        if d == "outputs":
+            for k in acts:
+                rec[:, sum(sizes[:k])] = rng.integers(0, 3, 50)  # modes 0..2
+        flags = rng.random((len(acts), 50)) < 0.5
+        piston = (flags, ~flags) if d == "inputs" else None
+        cols = SG.record_columns(box, d, rec, piston)
+        for i, k in enumerate(acts):
+            part = rec[:, sum(sizes[:k]):sum(sizes[:k + 1])]
+            alone = SG.record_columns(one, d, part, (flags[i:i + 1], ~flags[i:i + 1])
+                                      if d == "inputs" else None)
+            for name, v in alone.items():
+                np.testing.assert_array_equal(cols[f"s{k}_" + name[3:]], v, name)
