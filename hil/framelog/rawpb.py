@@ -57,7 +57,8 @@ _BLOCK_TYPES = {"t_ns": (1, _FD.TYPE_SFIXED64, True), "frames": (2, _FD.TYPE_BYT
                 "count": (3, _FD.TYPE_FIXED32, False), "width": (4, _FD.TYPE_FIXED32, False),
                 "dtype": (5, _FD.TYPE_STRING, False), "t0_ns": (6, _FD.TYPE_SFIXED64, False),
                 "dt_ns": (7, _FD.TYPE_SFIXED64, False),
-                "byte_planes": (8, _FD.TYPE_BOOL, False)}
+                "byte_planes": (8, _FD.TYPE_BOOL, False),
+                "frame_deltas": (9, _FD.TYPE_BYTES, False)}
 _T_NS = np.dtype("<i8")
 
 
@@ -117,14 +118,17 @@ def even_spacing(t_ns: np.ndarray) -> int | None:
 
 def pack_blocks(t_ns: np.ndarray, frames: np.ndarray, dtype: np.dtype,
                 head: list[tuple] = (), byte_planes: bool = True,
-                alloc: Callable[[np.dtype, int], np.ndarray] | None = None) -> np.ndarray:
+                alloc: Callable[[np.dtype, int], np.ndarray] | None = None,
+                deltas: bool = True) -> np.ndarray:
     """The block messages of ``k`` channels at once, frames ``(k, count, width)`` at the
     same times ``t_ns`` (count,): a (k,) structured array whose row ``i`` holds, after
     the fields ``head`` (left 0, e.g. :data:`hil.framelog.batch.HEAD_FIELDS`), the block
-    message of ``frames[i]`` (one copy of the frames, no bytes object): ``t0_ns`` and
-    ``dt_ns`` if the times are evenly spaced, else ``t_ns``; the frames as byte planes
-    (``byte_planes`` False: row by row, as logs before wrote them). ``alloc(dtype, k)``
-    gives the array to fill (every byte is written; default a new one)."""
+    message of ``frames[i]`` (one pass over the frames, no bytes object): ``t0_ns`` and
+    ``dt_ns`` if the times are evenly spaced, else ``t_ns``; the frames as the byte planes
+    of their zigzag-coded differences in ``frame_deltas`` (:func:`zigzag_deltas`; ``deltas``
+    False: the frames' own byte planes in ``frames``, and ``byte_planes`` False as well:
+    row by row, as logs before wrote them). ``alloc(dtype, k)`` gives the array to fill
+    (every byte is written; default a new one)."""
     k, count, width = frames.shape
     dt = np.dtype(dtype).newbyteorder("<")
     name = np.dtype(dtype).name.encode()
@@ -137,6 +141,7 @@ def pack_blocks(t_ns: np.ndarray, frames: np.ndarray, dtype: np.dtype,
         times = [("k1", "u1"), ("tl", "u1", (len(tl),)), ("t", _T_NS, (count,))]
     else:
         times = [("k6", "u1"), ("t0", _T_NS), ("k7", "u1"), ("dt", _T_NS)]
+    deltas = deltas and byte_planes
     planes = [("k8", "u1"), ("planes", "u1")] if byte_planes else []
     layout = np.dtype([*head, ("k3", "u1"), ("count", "<u4"), ("k4", "u1"), ("width", "<u4"),
                        ("k5", "u1"), ("nl", "u1", (len(nl),)), ("name", "u1", (len(name),)),
@@ -150,31 +155,63 @@ def pack_blocks(t_ns: np.ndarray, frames: np.ndarray, dtype: np.dtype,
         rec["k1"], rec["tl"], rec["t"] = 0x0A, np.frombuffer(tl, np.uint8), t
     else:
         rec["k6"], rec["t0"], rec["k7"], rec["dt"] = 0x31, t[0], 0x39, step
-    rec["k2"], rec["fl"] = 0x12, np.frombuffer(fl, np.uint8)
+    # field 9 (frame_deltas) or 2 (frames), length-delimited
+    rec["k2"], rec["fl"] = 0x4A if deltas else 0x12, np.frombuffer(fl, np.uint8)
     f = np.asarray(frames, dtype=dt)
     if f.strides[-1] != dt.itemsize:  # the byte views below need whole elements in a row
         f = np.ascontiguousarray(f)
     if byte_planes:
-        _planes(f, rec["f"].reshape(k, dt.itemsize, width, count))
+        _planes(f, rec["f"].reshape(k, dt.itemsize, width, count), deltas)
         rec["k8"], rec["planes"] = 0x40, 1
     else:
         rec["f"] = f.reshape(k, count * width).view(np.uint8)
     return rec
 
 
-def _planes(frames: np.ndarray, out: np.ndarray) -> None:
+def _planes(frames: np.ndarray, out: np.ndarray, deltas: bool) -> None:
     """``out[i, b, j, n]`` = byte ``b`` (little endian) of element ``j`` of frame ``n`` of
-    ``frames[i]`` ((k, count, width)): the frames transposed to columns (whole elements)
-    in a copy, then each byte split off by shifts (faster than gathering single bytes)."""
+    ``frames[i]`` ((k, count, width)), or of its zigzag-coded difference to frame ``n - 1``
+    (``deltas``, :func:`zigzag_deltas`, computed in the frames' own order, where it is
+    cheap): the columns transposed once into a copy, then each byte split off by a shift
+    (faster than gathering single bytes)."""
     size = frames.dtype.itemsize
+    x = frames.view(f"<u{size}")
+    if deltas:
+        x = zigzag_deltas(x, axis=1)
     if size == 1:
-        out[:, 0] = frames.view(np.uint8).transpose(0, 2, 1)
+        out[:, 0] = x.transpose(0, 2, 1)
         return
-    cols = frames.transpose(0, 2, 1).copy().view(f"<u{size}")  # a copy: shifted below
-    for b in range(size):
-        np.copyto(out[:, b], cols, casting="unsafe")  # the low byte
-        if b + 1 < size:
-            np.right_shift(cols, 8, out=cols)
+    cols = x.transpose(0, 2, 1).copy()  # (k, width, count)
+    np.copyto(out[:, 0], cols, casting="unsafe")  # the low byte
+    for b in range(1, size):
+        np.right_shift(cols, 8 * b, out=out[:, b], casting="unsafe")
+
+
+def zigzag_deltas(x: np.ndarray, axis: int = -1) -> np.ndarray:
+    """``x`` (unsigned integers) as the zigzag code of each element's difference to the
+    one before it along ``axis`` (the first: to 0), a new array of ``x``'s dtype:
+    ``d = x[n] - x[n - 1]`` modulo 2^bits, read as signed, coded ``(d << 1) ^ (d >> (bits
+    - 1))``, so that small changes either way are small numbers (a sensor word's noise
+    leaves its high byte 0). :func:`undo_zigzag_deltas` inverts it exactly."""
+    ax = axis % x.ndim
+    first = (slice(None),) * ax + (slice(None, 1),)
+    later = (slice(None),) * ax + (slice(1, None),)
+    before = (slice(None),) * ax + (slice(None, -1),)
+    d = np.empty(x.shape, x.dtype)
+    d[first] = x[first]
+    np.subtract(x[later], x[before], out=d[later])
+    sign = np.right_shift(d.view(f"i{x.dtype.itemsize}"), 8 * x.dtype.itemsize - 1)
+    np.left_shift(d, 1, out=d)
+    np.bitwise_xor(d, sign.view(d.dtype), out=d)
+    return d
+
+
+def undo_zigzag_deltas(z: np.ndarray, axis: int = 0) -> np.ndarray:
+    """The values whose :func:`zigzag_deltas` along ``axis`` are ``z`` (unsigned): the
+    differences ``(z >> 1) ^ -(z & 1)`` summed up modulo 2^bits."""
+    d = np.right_shift(z, 1)
+    d ^= np.negative(z & 1)  # unsigned: 0 or all ones
+    return np.cumsum(d, axis=axis, dtype=z.dtype)
 
 
 def _read_varint(mv: memoryview, p: int, n: int, what: str) -> tuple[int, int]:
@@ -237,7 +274,11 @@ def unpack_block(data: memoryview | bytes) -> tuple[np.ndarray, np.ndarray]:
     ``dt_ns``; ValueError if a field is missing or the sizes disagree."""
     f = _fields(data)
     count, width, dname = f.get(3), f.get(4), f.get(5)
-    times, frames = f.get(1, b""), f.get(2, b"")
+    times, frames = f.get(1, b""), f.get(9, f.get(2, b""))
+    if 9 in f and len(f.get(2, b"")):  # type: ignore[arg-type]
+        raise ValueError("block message has both frames and frame_deltas")
+    if not isinstance(frames, memoryview | bytes) or not isinstance(times, memoryview | bytes):
+        raise ValueError("block frames or times are not length-delimited")
     if not isinstance(count, int) or not isinstance(width, int) or \
             not isinstance(dname, memoryview):
         raise ValueError("block message lacks count, width or dtype")
@@ -254,6 +295,11 @@ def unpack_block(data: memoryview | bytes) -> tuple[np.ndarray, np.ndarray]:
     else:
         t0, step = (_signed64(f.get(n, 0)) for n in (6, 7))
         t = t0 + step * np.arange(count, dtype=np.int64)
+    if 9 in f:  # zigzag-coded differences of consecutive frames, as byte planes
+        u = np.dtype(f"<u{dt.itemsize}")
+        fr = np.frombuffer(f[9], np.uint8).reshape(dt.itemsize, width, count)
+        z = np.ascontiguousarray(fr.transpose(2, 1, 0)).view(u).reshape(count, width)
+        return t, undo_zigzag_deltas(z).view(dt)
     if f.get(8):
         fr = np.frombuffer(frames, np.uint8).reshape(dt.itemsize, width, count)
         return t, np.ascontiguousarray(fr.transpose(2, 1, 0)).view(dt).reshape(count, width)
