@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import re
 import struct
+import threading
 import zlib
 from collections.abc import Callable
 
@@ -171,36 +172,77 @@ def pack_blocks(t_ns: np.ndarray, frames: np.ndarray, dtype: np.dtype,
 def _planes(frames: np.ndarray, out: np.ndarray, deltas: bool) -> None:
     """``out[i, b, j, n]`` = byte ``b`` (little endian) of element ``j`` of frame ``n`` of
     ``frames[i]`` ((k, count, width)), or of its zigzag-coded difference to frame ``n - 1``
-    (``deltas``, :func:`zigzag_deltas`, computed in the frames' own order, where it is
-    cheap): the columns transposed once into a copy, then each byte split off by a shift
-    (faster than gathering single bytes)."""
-    size = frames.dtype.itemsize
-    x = frames.view(f"<u{size}")
-    if deltas:
-        x = zigzag_deltas(x, axis=1)
-    if size == 1:
-        out[:, 0] = x.transpose(0, 2, 1)
+    (``deltas``, :func:`zigzag_deltas`): one compiled pass (:func:`hil.framelog.planes.split`)
+    for blocks worth it, else :func:`_planes_numpy`."""
+    if frames.size >= _COMPILED_FROM:
+        from hil.framelog.planes import split  # numba: imported when first needed
+
+        size = frames.dtype.itemsize
+        split(frames.view(f"<i{size}"), out, deltas)
         return
-    cols = x.transpose(0, 2, 1).copy()  # (k, width, count)
+    _planes_numpy(frames, out, deltas)
+
+
+#: Elements from which a block's planes are made by the compiled pass (below: numpy,
+#: which costs less than the call into numba for a few frames).
+_COMPILED_FROM = 4096
+
+
+def _planes_numpy(frames: np.ndarray, out: np.ndarray, deltas: bool) -> None:
+    """:func:`_planes` in numpy (the reference): the columns transposed once into a work
+    array, then each byte split off by a shift (faster than gathering single bytes). The
+    work arrays are kept per thread (:func:`_work`): fresh ones of a few MB per call cost
+    page faults that the copies themselves do not."""
+    size = frames.dtype.itemsize
+    u = np.dtype(f"<u{size}")
+    k, count, width = frames.shape
+    if size == 1 and not deltas:
+        out[:, 0] = frames.transpose(0, 2, 1)
+        return
+    cols = _work(0, (k, width, count), u)
+    np.copyto(cols, frames.view(u).transpose(0, 2, 1))
+    if deltas:
+        cols = zigzag_deltas(cols, out=_work(1, (k, width, count), u))
+    if size == 1:
+        out[:, 0] = cols
+        return
     np.copyto(out[:, 0], cols, casting="unsafe")  # the low byte
     for b in range(1, size):
         np.right_shift(cols, 8 * b, out=out[:, b], casting="unsafe")
 
 
-def zigzag_deltas(x: np.ndarray, axis: int = -1) -> np.ndarray:
+_WORK = threading.local()
+
+
+def _work(slot: int, shape: tuple[int, ...], dtype: np.dtype) -> np.ndarray:
+    """A work array of ``shape`` and ``dtype`` (content undefined) in this thread's buffer
+    ``slot``, grown when too small and kept."""
+    bufs = _WORK.__dict__.setdefault("bufs", {})
+    n = int(np.prod(shape)) * dtype.itemsize
+    buf = bufs.get(slot)
+    if buf is None or len(buf) < n:
+        buf = bufs[slot] = np.empty(max(n, 1 << 16), np.uint8)
+    return buf[:n].view(dtype).reshape(shape)
+
+
+def zigzag_deltas(x: np.ndarray, axis: int = -1, out: np.ndarray | None = None
+                  ) -> np.ndarray:
     """``x`` (unsigned integers) as the zigzag code of each element's difference to the
     one before it along ``axis`` (the first: to 0), a new array of ``x``'s dtype:
     ``d = x[n] - x[n - 1]`` modulo 2^bits, read as signed, coded ``(d << 1) ^ (d >> (bits
     - 1))``, so that small changes either way are small numbers (a sensor word's noise
-    leaves its high byte 0). :func:`undo_zigzag_deltas` inverts it exactly."""
+    leaves its high byte 0). :func:`undo_zigzag_deltas` inverts it exactly. ``out``: the
+    array to write them to (not ``x``); ``x`` is then used as work space and overwritten."""
     ax = axis % x.ndim
     first = (slice(None),) * ax + (slice(None, 1),)
     later = (slice(None),) * ax + (slice(1, None),)
     before = (slice(None),) * ax + (slice(None, -1),)
-    d = np.empty(x.shape, x.dtype)
+    d = np.empty(x.shape, x.dtype) if out is None else out
     d[first] = x[first]
     np.subtract(x[later], x[before], out=d[later])
-    sign = np.right_shift(d.view(f"i{x.dtype.itemsize}"), 8 * x.dtype.itemsize - 1)
+    signed = f"i{x.dtype.itemsize}"
+    sign = np.right_shift(d.view(signed), 8 * x.dtype.itemsize - 1,
+                          out=None if out is None else x.view(signed))
     np.left_shift(d, 1, out=d)
     np.bitwise_xor(d, sign.view(d.dtype), out=d)
     return d
@@ -377,6 +419,34 @@ def wrap_many(encoding: str, frames: list[bytes]) -> list[bytes] | np.ndarray:
     return out
 
 
+def wrap_periodic(encoding: str, frames: list[bytes]) -> list[np.ndarray] | None:
+    """The messages of ``frames`` (as :func:`wrapper` makes each) when their lengths
+    repeat with a period ``p`` of at most 8 (a bus run's cycles: the same requests and
+    replies each cycle) and the encoding has a vectorised header: ``p`` arrays, array ``r``
+    holding the messages of frames ``r, r + p, ...`` ((n / p, size_r) uint8); None if
+    not (then :func:`wrap_many`)."""
+    many = _MANY.get(encoding)
+    n = len(frames)
+    if many is None or n < 2:
+        return None
+    lens = np.fromiter(map(len, frames), np.int64, n)
+    for p in range(1, min(8, n) + 1):
+        if n % p == 0 and bool((lens.reshape(-1, p) == lens[:p]).all()):
+            break
+    else:
+        return None
+    rows = np.frombuffer(b"".join(frames), np.uint8).reshape(n // p, -1)
+    parts: list[np.ndarray] = []
+    at = 0
+    for r in range(p):
+        got = many(rows[:, at:at + int(lens[r])])
+        if got is None:
+            return None
+        parts.append(got)
+        at += int(lens[r])
+    return parts
+
+
 def unwrap(data: memoryview | bytes) -> memoryview:
     """The frame of a single-frame message (field 1); ValueError if it is not one."""
     mv = memoryview(data)
@@ -461,7 +531,10 @@ def _ethercat_fcs_many(frames: np.ndarray) -> np.ndarray | None:
     if used and not bool((frames[:, used] == frames[0, used]).all()):
         return None
     pdu = frames[:, :-4]
-    crc = np.fromiter((zlib.crc32(r) for r in pdu), np.uint32, k)
+    flat = np.ascontiguousarray(pdu).tobytes()
+    n_pdu = size - 4
+    crc = np.fromiter((zlib.crc32(flat[i:i + n_pdu]) for i in range(0, k * n_pdu, n_pdu)),
+                      np.uint32, k)
     fcs_ok = crc == np.ascontiguousarray(frames[:, -4:]).view("<u4")[:, 0]
     n = len(dgs)
 

@@ -69,7 +69,7 @@ def test_frame_deltas_give_back_every_bit(dtype: type) -> None:
     frames = bits.view(dtype).reshape(2, 40, 4)
     if np.dtype(dtype).kind == "f":
         frames[1, :3, 0] = [np.nan, -0.0, np.inf]
-    rec = rawpb.pack_blocks(np.arange(40) * 3, frames, np.dtype(dtype))
+    rec = rawpb.pack_blocks(np.arange(40) * 3, frames, np.dtype(dtype), deltas=True)
     for i in range(2):
         _, got = rawpb.unpack_block(rec[i].tobytes())
         assert got.dtype == np.dtype(dtype) and got.tobytes() == frames[i].tobytes()
@@ -77,7 +77,8 @@ def test_frame_deltas_give_back_every_bit(dtype: type) -> None:
 
 def test_a_block_with_frames_and_deltas_is_refused() -> None:
     frames = np.arange(6, dtype=np.uint16).reshape(1, 3, 2)
-    m = _stock("eha-hil/x", rawpb.pack_blocks(np.arange(3), frames, np.dtype(np.uint16))[0]
+    m = _stock("eha-hil/x", rawpb.pack_blocks(np.arange(3), frames, np.dtype(np.uint16),
+                                             deltas=True)[0]
                .tobytes())
     m.frames = bytes(m.frame_deltas)
     with pytest.raises(ValueError, match="both frames and frame_deltas"):
