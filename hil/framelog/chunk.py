@@ -204,69 +204,59 @@ def _finalize(w: Writer, compress: Callable[[memoryview], bytes] | None, name: b
     cb.num_messages = 0
 
 
+#: A MessageIndex record of one entry (a channel with one message in the chunk: a block).
+_ONE_INDEX = np.dtype([("op", "u1"), ("len", "<u8"), ("ch", "<u2"), ("n", "<u4"),
+                       ("t", "<u8"), ("off", "<u8")])
 _INDEX_HEAD = struct.Struct("<BQHI")  # opcode, record length, channel, bytes of entries
 _MESSAGE_INDEX_OPCODE = 0x07
-
-
-def _index_records(cids: list[int], entries: np.ndarray) -> bytes:
-    """The MessageIndex records of channels ``cids`` with ``k`` entries each (``entries``
-    (c, k, 2): log time, offset), one after the other, built as one array."""
-    c, k = entries.shape[:2]
-    rec = np.empty(c, np.dtype([("op", "u1"), ("len", "<u8"), ("ch", "<u2"), ("n", "<u4"),
-                                ("e", "<u8", (k, 2))]))
-    rec["op"] = _MESSAGE_INDEX_OPCODE
-    rec["len"] = 6 + 16 * k
-    rec["ch"] = cids
-    rec["n"] = 16 * k
-    rec["e"] = entries
-    return rec.tobytes()
 
 
 def write_indexes(indices: dict, rb: object, at: int, offsets: dict[int, int]) -> None:
     """The chunk's MessageIndex records, in the order of ``indices`` (channel -> an index
     whose ``records`` are (log time, offset) pairs and (n, 2) arrays of them), as one write
     to ``rb`` starting at file offset ``at``; ``offsets[channel]`` set to each record's.
-    The bytes the library's ``MessageIndex.write`` makes, one by one; the records of
-    channels with the same number of entries in one piece each (a block channel's one
-    message, a batch of samples on each of many channels) built as one array."""
+    The bytes the library's ``MessageIndex.write`` makes, one by one; the records of one
+    entry (most: a block channel's one message) built as one array."""
     items = list(indices.items())
-    groups: dict[int, list[int]] = {}  # entries -> positions in items, when in one piece
-    bodies: list[np.ndarray | None] = []
-    for i, (_, mi) in enumerate(items):
-        recs = mi.records
-        body = None
-        if len(recs) == 1:
-            r = recs[0]
-            body = np.asarray(r, dtype=np.uint64).reshape(-1, 2)  # a pair or an (n, 2) batch
-            groups.setdefault(len(body), []).append(i)
-        bodies.append(body)
-    parts: list[bytes] = [b""] * len(items)
-    for members in groups.values():
-        blob = _index_records([items[i][0] for i in members],
-                              np.stack([bodies[i] for i in members]))
-        size = len(blob) // len(members)
-        for j, i in enumerate(members):
-            parts[i] = blob[j * size:(j + 1) * size]
+    one = [i for i, (_, mi) in enumerate(items)
+           if len(mi.records) == 1 and type(mi.records[0]) is tuple]
+    ones: dict[int, bytes] = {}
+    if one:
+        arr = np.zeros(len(one), _ONE_INDEX)
+        arr["op"] = _MESSAGE_INDEX_OPCODE
+        arr["len"] = _ONE_INDEX.itemsize - 9
+        arr["ch"] = [items[i][0] for i in one]
+        arr["n"] = 16
+        arr["t"] = [items[i][1].records[0][0] for i in one]
+        arr["off"] = [items[i][1].records[0][1] for i in one]
+        blob = arr.tobytes()
+        size = _ONE_INDEX.itemsize
+        ones = {i: blob[j * size:(j + 1) * size] for j, i in enumerate(one)}
+    parts = []
+    pos = at
     for i, (cid, mi) in enumerate(items):
-        if bodies[i] is None:  # runs of single pairs (add_message) and arrays, in order
-            parts_of: list[np.ndarray] = []
-            run: list[tuple[int, int]] = []
-            for r in mi.records:
-                if type(r) is tuple:
-                    run.append(r)
-                    continue
+        rec = ones.get(i)
+        if rec is None:
+            recs = mi.records
+            if len(recs) == 1 and isinstance(recs[0], np.ndarray):  # a batch's entries
+                body = recs[0].astype("<u8", copy=False).tobytes()
+            else:  # runs of single pairs (add_message) as one array each, in order
+                parts_of: list[np.ndarray] = []
+                run: list[tuple[int, int]] = []
+                for r in recs:
+                    if type(r) is tuple:
+                        run.append(r)
+                        continue
+                    if run:
+                        parts_of.append(np.asarray(run, dtype="<u8"))
+                        run = []
+                    parts_of.append(np.asarray(r, dtype="<u8"))
                 if run:
                     parts_of.append(np.asarray(run, dtype="<u8"))
-                    run = []
-                parts_of.append(np.asarray(r, dtype="<u8"))
-            if run:
-                parts_of.append(np.asarray(run, dtype="<u8"))
-            body = (np.concatenate(parts_of) if parts_of else np.zeros((0, 2), "<u8")
-                    ).astype("<u8", copy=False).tobytes()
-            parts[i] = _INDEX_HEAD.pack(_MESSAGE_INDEX_OPCODE, 6 + len(body), cid,
-                                        len(body)) + body
-    pos = at
-    for (cid, _), rec in zip(items, parts, strict=True):
+                body = (np.concatenate(parts_of) if parts_of else np.zeros((0, 2), "<u8")
+                        ).astype("<u8", copy=False).tobytes()
+            rec = _INDEX_HEAD.pack(_MESSAGE_INDEX_OPCODE, 6 + len(body), cid, len(body)) + body
         offsets[cid] = pos
+        parts.append(rec)
         pos += len(rec)
     rb.write(b"".join(parts))  # type: ignore[attr-defined]
