@@ -248,6 +248,9 @@ ALLOWED = {
         "interpreter lock, and passes each frame to the ESC model's compiled frame path",
     ("hil/replay/fpga_replay.py", "kernel"):
         "feeds logged words through the board's compiled tick and compares its outputs",
+    ("hil/framelog/planes.py", "kernel"):
+        "a log's raw blocks split into byte planes (and frame-to-frame differences) in one "
+        "compiled pass: bytes moved, no part's arithmetic",
     ("hil/identify/model.py", "kernel"):
         "identification: the reduced model fitted to measured data, not the plant's parts",
     ("hil/identify/rig.py", "kernel"):
