@@ -35,6 +35,7 @@ length-delimited or fixed fields: no per-frame Python); any protobuf runtime rea
 
 from __future__ import annotations
 
+import functools
 import re
 import struct
 import threading
@@ -134,39 +135,39 @@ def pack_blocks(t_ns: np.ndarray, frames: np.ndarray, dtype: np.dtype,
     dt = np.dtype(dtype).newbyteorder("<")
     name = np.dtype(dtype).name.encode()
     size = count * width * dt.itemsize
-    fl, nl = _varint(size), _varint(len(name))
     t = np.asarray(t_ns, dtype=_T_NS)
     step = even_spacing(t) if count else None
-    if step is None:
-        tl = _varint(8 * count)
-        times = [("k1", "u1"), ("tl", "u1", (len(tl),)), ("t", _T_NS, (count,))]
-    else:
-        times = [("k6", "u1"), ("t0", _T_NS), ("k7", "u1"), ("dt", _T_NS)]
     deltas = deltas and byte_planes
-    planes = [("k8", "u1"), ("planes", "u1")] if byte_planes else []
-    layout = np.dtype([*head, ("k3", "u1"), ("count", "<u4"), ("k4", "u1"), ("width", "<u4"),
-                       ("k5", "u1"), ("nl", "u1", (len(nl),)), ("name", "u1", (len(name),)),
-                       *times, *planes, ("k2", "u1"), ("fl", "u1", (len(fl),)),
-                       ("f", "u1", (size,))])
-    rec = np.zeros(k, layout) if alloc is None else alloc(layout, k)
-    rec["k3"], rec["count"], rec["k4"], rec["width"] = 0x1D, count, 0x25, width
-    rec["k5"], rec["nl"], rec["name"] = 0x2A, np.frombuffer(nl, np.uint8), np.frombuffer(
-        name, np.uint8)
+    # everything but the frames is the same bytes in every channel's message: built once
+    pre = [b"\x1d", struct.pack("<I", count), b"\x25", struct.pack("<I", width),
+           b"\x2a", _varint(len(name)), name]
     if step is None:
-        rec["k1"], rec["tl"], rec["t"] = 0x0A, np.frombuffer(tl, np.uint8), t
+        pre += [b"\x0a", _varint(8 * count), t.astype("<i8", copy=False).tobytes()]
     else:
-        rec["k6"], rec["t0"], rec["k7"], rec["dt"] = 0x31, t[0], 0x39, step
+        pre += [b"\x31", struct.pack("<q", int(t[0])), b"\x39", struct.pack("<q", step)]
+    if byte_planes:
+        pre.append(b"\x40\x01")
     # field 9 (frame_deltas) or 2 (frames), length-delimited
-    rec["k2"], rec["fl"] = 0x4A if deltas else 0x12, np.frombuffer(fl, np.uint8)
+    pre += [b"\x4a" if deltas else b"\x12", _varint(size)]
+    prefix = b"".join(pre)
+    layout = _layout(tuple(head), len(prefix), size)
+    rec = np.zeros(k, layout) if alloc is None else alloc(layout, k)
+    rec["pre"] = np.frombuffer(prefix, np.uint8)
     f = np.asarray(frames, dtype=dt)
     if f.strides[-1] != dt.itemsize:  # the byte views below need whole elements in a row
         f = np.ascontiguousarray(f)
     if byte_planes:
         _planes(f, rec["f"].reshape(k, dt.itemsize, width, count), deltas)
-        rec["k8"], rec["planes"] = 0x40, 1
     else:
         rec["f"] = f.reshape(k, count * width).view(np.uint8)
     return rec
+
+
+@functools.lru_cache(maxsize=64)
+def _layout(head: tuple, prefix: int, size: int) -> np.dtype:
+    """A block record: the fields ``head``, the message's ``prefix`` bytes (every field but
+    the frames), the ``size`` bytes of frames."""
+    return np.dtype([*head, ("pre", "u1", (prefix,)), ("f", "u1", (size,))])
 
 
 def _planes(frames: np.ndarray, out: np.ndarray, deltas: bool) -> None:
