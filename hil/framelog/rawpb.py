@@ -163,6 +163,19 @@ def pack_blocks(t_ns: np.ndarray, frames: np.ndarray, dtype: np.dtype,
     return rec
 
 
+def warm_up() -> None:
+    """Compile (or load from numba's cache) the byte-plane pass for every element size,
+    with the frames contiguous or a view of a larger array (the engine's taps), into a
+    record's field (strided), as logs call it (``python -m hil.sim.warmup``)."""
+    from hil.framelog.planes import split
+
+    for size in (1, 2, 4, 8):
+        frames = np.zeros((2, 3, 4), f"<i{size}")
+        out = np.zeros((2, size + 1, 4, 3), np.uint8)[:, :size]
+        for f in (frames, frames[:, :2]):
+            split(f, out[..., :f.shape[1]], True)
+
+
 @functools.lru_cache(maxsize=64)
 def _layout(head: tuple, prefix: int, size: int) -> np.dtype:
     """A block record: the fields ``head``, the message's ``prefix`` bytes (every field but
