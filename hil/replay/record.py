@@ -40,6 +40,7 @@ that names its fields and their byte offsets.
 from __future__ import annotations
 
 import json
+import operator
 from collections.abc import Callable
 from pathlib import Path
 
@@ -347,15 +348,14 @@ class BusSignals:
         self.ch = out.add(BUS_SIGNAL_TOPIC, SG.BUS)
         self.wkc_expected = sum(w for _, _, w in master.plan.frames)
         self.rows: list[tuple[int, ...]] = []
+        self._counters = operator.attrgetter(*SG.MASTER_COUNTERS)  # one call per cycle
         #: the block's frames, as the tap saw them
         self.frames: list[bytes] = []
 
     def end_cycle(self) -> None:
         """Called at the start of each cycle but the first, and once after the last."""
         m = self.master
-        st = m.stats
-        self.rows.append((m.cycle - 1, len(self.frames), st.frames_sent, st.frames_ok,
-                          st.wkc_errors, st.bad_frames, st.stale_frames, st.lost_frames))
+        self.rows.append((m.cycle - 1, len(self.frames), *self._counters(m.stats)))
 
     def flush(self, rx: np.ndarray) -> None:
         """Write the block's cycles and forget its frames (``rx``: which are replies)."""
@@ -394,7 +394,8 @@ def run_logged(topo: Topology, cfg: Config, cycles: int, pc: Callable[[int, Mast
                progress: Callable[[int, int], None] | None = None,
                faults: object = None, live: object = None,
                capture: Callable[[int, int, bytes, str], None] | None = None,
-               model: str = "stack", compression: str = "zstd") -> BusRecord:
+               model: str = "stack", compression: str = "zstd", keep: int | None = 1
+               ) -> BusRecord:
     """Run ``cycles`` cycles in-process with the box model ``model`` (``stack``: each box
     on its own, :class:`RecordingStackBox`; ``robot``: every box in the whole-robot engine,
     :class:`hil.replay.robot_record.RobotRecorder`: the same channels) and log them to
@@ -406,7 +407,12 @@ def run_logged(topo: Topology, cfg: Config, cycles: int, pc: Callable[[int, Mast
     signals also go to (:class:`SignalOut`); ``log_path`` None: only there. ``capture``: a
     further tap that sees every fieldbus frame (e.g.
     :meth:`hil.fieldbus.capture.CaptureWriter.tap`). ``compression``: of the log's chunks
-    (zstd, lz4 or none; :class:`~hil.framelog.writer.FrameLogWriter`)."""
+    (zstd, lz4 or none; :class:`~hil.framelog.writer.FrameLogWriter`). ``keep``: the
+    returned record holds the input images of the last ``keep`` cycles (None: every
+    cycle's; the log holds them all anyway): by default the last one, so that the memory
+    of a long run does not grow with it (an hour of the whole robot: 4 GB of images)."""
+    if keep is not None and keep < 0:
+        raise ValueError(f"keep = {keep}: expected >= 0 cycles")
     import contextlib
 
     tick_ns = cfg.get("sim.tick_ns")
@@ -429,9 +435,10 @@ def run_logged(topo: Topology, cfg: Config, cycles: int, pc: Callable[[int, Mast
         bus_t: list[int] = []  # a reply 1 ns after its cycle's tick (as in the log)
         bus_frames: list[bytes] = []
 
-        def tap(cycle: int, tick: int, frame: bytes, direction: str) -> None:
-            bus_t.append(tick * tick_ns + (direction == "rx"))
-            bus_frames.append(bytes(frame))
+        def tap(cycle: int, tick: int, frame: bytes, direction: str,
+                t_add=bus_t.append, f_add=bus_frames.append) -> None:  # noqa: ANN001
+            t_add(tick * tick_ns + (direction == "rx"))  # (4 calls per cycle: kept short)
+            f_add(bytes(frame))
             if capture is not None:
                 capture(cycle, tick, frame, direction)
 
@@ -472,15 +479,18 @@ def run_logged(topo: Topology, cfg: Config, cycles: int, pc: Callable[[int, Mast
             done = 0
             while done < cycles:
                 n = min(step, cycles - done)
-                parts.append(bs.run(n, pc_signals))
+                parts.append(bs.run(n, pc_signals, keep=keep))
                 done += n
                 if progress:
                     progress(done, cycles)
             rec = None
-            if parts:  # the input images of every part, joined once
+            if parts:  # the input images kept of every part, joined once
                 last = parts[-1]
-                rec = BusRecord(np.concatenate([p.inputs for p in parts]), last.master,
-                                last.chain, last.transport, last.faults)
+                inputs = np.concatenate([p.inputs for p in parts])
+                if keep is not None:
+                    inputs = inputs[len(inputs) - min(keep, len(inputs)):]
+                rec = BusRecord(inputs, last.master, last.chain, last.transport, last.faults,
+                                cycles - len(inputs))
             bus_sig.end_cycle()
             flush_block()
             if engine is not None:
