@@ -78,7 +78,7 @@ PARTS: tuple[tuple[str, str, str], ...] = (
 SIDES = ("file", "producer")
 #: The label of the fieldbus tap's own CPU (run_logged's closure, wrapped where the bus
 #: system takes it).
-TAP = "producer: fieldbus tap (per frame)"
+TAP = "producer: fieldbus tap (per cycle)"
 
 
 class _Timer:
@@ -190,8 +190,9 @@ def _install(timer: _Timer) -> list[tuple[object, str, object]]:
     chunk.compressor = lambda c, lvl: timer.wrap(make(c, lvl), "file: zstd (in _finalize)")
     init = system.BusSystem.__init__
 
-    def bus_init(bs, *args, tap=None, **kwargs):  # noqa: ANN001, ANN002, ANN003, ANN202
-        init(bs, *args, tap=None if tap is None else timer.wrap(tap, TAP), **kwargs)
+    def bus_init(bs, *args, tap_cycle=None, **kwargs):  # noqa: ANN001, ANN002, ANN003, ANN202
+        init(bs, *args, tap_cycle=None if tap_cycle is None else timer.wrap(tap_cycle, TAP),
+             **kwargs)
 
     undo.append((system.BusSystem, "__init__", init))
     system.BusSystem.__init__ = bus_init

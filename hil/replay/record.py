@@ -431,23 +431,26 @@ def run_logged(topo: Topology, cfg: Config, cycles: int, pc: Callable[[int, Mast
                                      schema_data=lay.schema())
         bus_sig: BusSignals | None = None
         # the frames of the last cycles, kept for /signals/bus and the log and written
-        # once per FLUSH_CYCLES (a message at a time costs ~9 us, see hil.framelog.batch)
-        bus_t: list[int] = []  # a reply 1 ns after its cycle's tick (as in the log)
+        # once per FLUSH_CYCLES (a message at a time costs ~9 us, see hil.framelog.batch),
+        # taken a cycle at a time (the bus system's tap_cycle: one call, not one per frame)
+        bus_cycles: list[tuple[int, int, int]] = []  # (tick, frames sent, received)
         bus_frames: list[bytes] = []
 
-        def tap(cycle: int, tick: int, frame: bytes, direction: str,
-                t_add=bus_t.append, f_add=bus_frames.append) -> None:  # noqa: ANN001
-            t_add(tick * tick_ns + (direction == "rx"))  # (4 calls per cycle: kept short)
-            f_add(bytes(frame))
-            if capture is not None:
-                capture(cycle, tick, frame, direction)
+        def tap_cycle(cycle: int, tick: int, sent: list[bytes], received: list[bytes],
+                      add=bus_frames.extend, count=bus_cycles.append) -> None:  # noqa: ANN001
+            add(map(bytes, sent))
+            add(map(bytes, received))
+            count((tick, len(sent), len(received)))
 
         def flush_block() -> None:
-            t = np.array(bus_t, dtype=np.int64)
+            # each frame's time: its cycle's tick, a reply 1 ns after it (as in the log)
+            c = np.array(bus_cycles, dtype=np.int64).reshape(-1, 3)
+            t0 = c[:, 0] * tick_ns
+            t = np.repeat(np.stack([t0, t0 + 1], axis=1).ravel(), c[:, 1:].ravel())
             if bus_frames and ch_bus is not None:
                 log.write_messages(ch_bus, t, bus_frames)
             bus_sig.flush(t % tick_ns != 0)  # (clears bus_frames)
-            bus_t.clear()
+            bus_cycles.clear()
 
         def pc_signals(cycle: int, m: Master) -> None:
             if cycle > 0:
@@ -456,7 +459,8 @@ def run_logged(topo: Topology, cfg: Config, cycles: int, pc: Callable[[int, Mast
                     flush_block()
             pc(cycle, m)
 
-        with BusSystem(topo, cfg, "inproc", model=model, tap=tap) as bs:
+        with BusSystem(topo, cfg, "inproc", model=model, tap=capture,
+                       tap_cycle=tap_cycle) as bs:
             bus_sig = BusSignals(out, bs.master, tick_ns)
             bus_sig.frames = bus_frames  # the tap's
             engine = bs.chain.engine

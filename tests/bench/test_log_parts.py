@@ -41,26 +41,30 @@ def _block():  # noqa: ANN202
 
 
 def test_the_fieldbus_tap_is_timed_where_the_bus_system_takes_it() -> None:
-    """run_logged's tap is a closure: the breakdown wraps it as the bus system is made, and
-    every frame of a run goes through the wrapper to the tap."""
+    """run_logged's tap is a closure: the breakdown wraps it as the bus system is made; it
+    is called once per cycle with every frame sent and received."""
     from hil.bench.log_parts import TAP
     from hil.fieldbus.system import BusSystem
     from hil.fieldbus.topology import load_topology
     from hil.sim.pc import demo_pc
     from plant.config import load_config
 
-    seen = []
+    seen, each = [], []
     timer = _Timer()
     undo = _install(timer)
     try:
         with BusSystem(load_topology("bench_one_box"), load_config(None), "inproc",
-                       tap=lambda *frame: seen.append(frame)) as bs:
+                       tap=lambda *frame: each.append(frame),
+                       tap_cycle=lambda *cycle: seen.append(cycle)) as bs:
             rec = bs.run(5, demo_pc(), keep=1)
     finally:
         for owner, name, fn in reversed(undo):
             setattr(owner, name, fn)
-    sent = rec.master["frames_sent"]
-    assert sent > 0 and timer.calls[TAP] == len(seen) == 2 * sent  # each request and reply
+    assert timer.calls[TAP] == len(seen) == 5
+    # the per-cycle tap holds what the per-frame tap saw, in its order
+    flat = [e for c, t, sent, got in seen
+            for e in [(c, t, f, "tx") for f in sent] + [(c, t, f, "rx") for f in got]]
+    assert flat == each and sum(len(s[2]) for s in seen) == rec.master["frames_sent"] > 0
 
 
 def test_the_split_adds_up_to_what_the_logging_costs() -> None:
