@@ -15,6 +15,7 @@ channel, and the decoded signals of all actuators computed and encoded as whole 
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 
@@ -98,8 +99,8 @@ class RobotRecorder:
         self._box_first = np.asarray(engine._first[:-1], np.intp)
         self._out_image, self._in_image, self._got = engine.out_image, engine.in_image, engine._got
         self._tap_row = self.tap.row
-        self._other_inputs = [(r, b.inputs) for r, b in zip(self.other_in, self.others,
-                                                             strict=True)]
+        self._other_inputs = [(r, _input_source(b)) for r, b in zip(self.other_in, self.others,
+                                                                    strict=True)]
         self._rows = 0  # the tap's rows filled (tap.row[0], as a Python int)
         #: the last row at which a cycle's steps still fit the tap
         self._last_row_start = rows - engine.cycle_ticks // self.period
@@ -178,7 +179,8 @@ class RobotRecorder:
         c = self.n_cycles
         self.in_rows[c] = self._in_image
         for rows, inputs in self._other_inputs:
-            rows[c] = np.frombuffer(inputs(), np.uint8)
+            rows[c] = inputs if isinstance(inputs, np.ndarray) else np.frombuffer(
+                inputs(), np.uint8)
         self.in_t[c] = tick
         self._taken = False
         self.n_cycles = c = c + 1
@@ -317,6 +319,19 @@ class RobotRecorder:
             self.out.write_filled(self.sig_act, t_steps[keep] * ns, enc.message.size, encode)
         else:
             encode()
+
+
+def _input_source(box) -> np.ndarray | Callable[[], bytes]:  # noqa: ANN001
+    """Where a box the engine does not advance keeps its input record: a view of its
+    buffer, read in place each cycle, where it is the plain box's fixed ``bytearray``
+    (:meth:`hil.fieldbus.boxes._BoxBase.inputs` copies it); else its ``inputs``."""
+    from hil.fieldbus.boxes import _BoxBase
+
+    buf = getattr(box, "_in_buf", None)
+    if type(box).inputs is _BoxBase.inputs and isinstance(buf, bytearray) \
+            and len(buf) == box.in_dtype.itemsize:
+        return np.frombuffer(buf, np.uint8)
+    return box.inputs
 
 
 @dataclass
