@@ -190,9 +190,10 @@ def _install(timer: _Timer) -> list[tuple[object, str, object]]:
     chunk.compressor = lambda c, lvl: timer.wrap(make(c, lvl), "file: zstd (in _finalize)")
     init = system.BusSystem.__init__
 
-    def bus_init(bs, *args, tap_cycle=None, **kwargs):  # noqa: ANN001, ANN002, ANN003, ANN202
-        init(bs, *args, tap_cycle=None if tap_cycle is None else timer.wrap(tap_cycle, TAP),
-             **kwargs)
+    def bus_init(bs, *args, **kwargs):  # noqa: ANN001, ANN002, ANN003, ANN202
+        if kwargs.get("tap_cycle") is not None:
+            kwargs["tap_cycle"] = timer.wrap(kwargs["tap_cycle"], TAP)
+        init(bs, *args, **kwargs)
 
     undo.append((system.BusSystem, "__init__", init))
     system.BusSystem.__init__ = bus_init
