@@ -29,7 +29,8 @@ PcFn = Callable[[int, Master], None]
 #: Called with (cycle, tick, frame bytes, direction "tx"/"rx") for logs and captures.
 TapFn = Callable[[int, int, bytes, str], None]
 #: Called once per cycle with (cycle, tick, frames sent, frames received), in the orders a
-#: tap sees them, once the cycle's replies are in: one call per cycle for a log.
+#: tap sees them, once the cycle has ended (the master's counters hold it): one call per
+#: cycle for a log.
 CycleTapFn = Callable[[int, int, list[bytes], list[bytes]], None]
 
 
@@ -167,9 +168,10 @@ class BusSystem:
                     self.tap(m.cycle, tick, reply, "rx")
                 replies.append(reply)
                 m.receive(reply)
-            if tap_cycle is not None:
-                tap_cycle(m.cycle, tick, frames, replies)
+            cycle = m.cycle
             m.end_cycle()
+            if tap_cycle is not None:
+                tap_cycle(cycle, tick, frames, replies)
             if n_rows:
                 rows[k % n_rows] = np.frombuffer(m.input_image(), dtype=np.uint8)
         first = cycles - n_rows

@@ -353,7 +353,7 @@ class BusSignals:
         self.frames: list[bytes] = []
 
     def end_cycle(self) -> None:
-        """Called at the start of each cycle but the first, and once after the last."""
+        """Called once each cycle has ended (the master's counters hold it)."""
         m = self.master
         self.rows.append((m.cycle - 1, len(self.frames), *self._counters(m.stats)))
 
@@ -432,7 +432,8 @@ def run_logged(topo: Topology, cfg: Config, cycles: int, pc: Callable[[int, Mast
         bus_sig: BusSignals | None = None
         # the frames of the last cycles, kept for /signals/bus and the log and written
         # once per FLUSH_CYCLES (a message at a time costs ~9 us, see hil.framelog.batch),
-        # taken a cycle at a time (the bus system's tap_cycle: one call, not one per frame)
+        # taken a cycle at a time (the bus system's tap_cycle, at the end of each cycle:
+        # one call, not one per frame, and the cycle's /signals/bus row with it)
         bus_cycles: list[tuple[int, int, int]] = []  # (tick, frames sent, received)
         bus_frames: list[bytes] = []
 
@@ -441,6 +442,9 @@ def run_logged(topo: Topology, cfg: Config, cycles: int, pc: Callable[[int, Mast
             add(map(bytes, sent))
             add(map(bytes, received))
             count((tick, len(sent), len(received)))
+            bus_sig.end_cycle()
+            if (cycle + 1) % FLUSH_CYCLES == 0:
+                flush_block()
 
         def flush_block() -> None:
             # each frame's time: its cycle's tick, a reply 1 ns after it (as in the log)
@@ -451,13 +455,6 @@ def run_logged(topo: Topology, cfg: Config, cycles: int, pc: Callable[[int, Mast
                 log.write_messages(ch_bus, t, bus_frames)
             bus_sig.flush(t % tick_ns != 0)  # (clears bus_frames)
             bus_cycles.clear()
-
-        def pc_signals(cycle: int, m: Master) -> None:
-            if cycle > 0:
-                bus_sig.end_cycle()
-                if cycle % FLUSH_CYCLES == 0:
-                    flush_block()
-            pc(cycle, m)
 
         with BusSystem(topo, cfg, "inproc", model=model, tap=capture,
                        tap_cycle=tap_cycle) as bs:
@@ -483,7 +480,7 @@ def run_logged(topo: Topology, cfg: Config, cycles: int, pc: Callable[[int, Mast
             done = 0
             while done < cycles:
                 n = min(step, cycles - done)
-                parts.append(bs.run(n, pc_signals, keep=keep))
+                parts.append(bs.run(n, pc, keep=keep))
                 done += n
                 if progress:
                     progress(done, cycles)
@@ -495,7 +492,6 @@ def run_logged(topo: Topology, cfg: Config, cycles: int, pc: Callable[[int, Mast
                     inputs = inputs[len(inputs) - min(keep, len(inputs)):]
                 rec = BusRecord(inputs, last.master, last.chain, last.transport, last.faults,
                                 cycles - len(inputs))
-            bus_sig.end_cycle()
             flush_block()
             if engine is not None:
                 engine.wait()
