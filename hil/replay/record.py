@@ -283,18 +283,22 @@ class RecordingStackBox(StackBox):
             self.out.write(self.sig_act[k], t * ns, cols)
 
 
-def add_signal_channels(out: SignalOut, box, cfg: Config) -> tuple[dict, list[int]]:  # noqa: ANN001
+def add_signal_channels(out: SignalOut, box, cfg: Config,  # noqa: ANN001
+                        act_message: object = None) -> tuple[dict, list[int]]:
     """The decoded-signal channels of box ``box``: ({"outputs"/"inputs": channel} for its
     records that have simulated fields, [channel of each actuator]). The actuators'
     message leaves out the analog inputs whose part the configuration says is not fitted
-    (:func:`hil.replay.signals.unfitted_inputs`)."""
+    (:func:`hil.replay.signals.unfitted_inputs`); ``act_message``: that message, made
+    already (by a caller that adds many boxes)."""
     st = signal_topics(box.id)
     rec = {}
     for d in ("outputs", "inputs"):
         message = SG.record_message(box, d)
         if message.fields:
             rec[d] = out.add(st[d], message)
-    act = SG.actuator_message(SG.unfitted_inputs(cfg.get("sensors")))
+    act = act_message
+    if act is None:
+        act = SG.actuator_message(SG.unfitted_inputs(cfg.get("sensors")))
     return rec, [out.add(signal_topics(box.id, k)["actuator"], act)
                  for k in range(len(box.actuators))]
 

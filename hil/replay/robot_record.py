@@ -129,11 +129,21 @@ class RobotRecorder:
 
     # --- channels ------------------------------------------------------------------------
     def _channels(self, log: FrameLogWriter | None) -> None:
+        schemas: dict[int, str] = {}  # per layout its schema text, made once per run
+
         def block(topic: str, lay: Layout, dtype: type, width: int) -> int:
+            if id(lay) not in schemas:
+                schemas[id(lay)] = lay.schema()
             return log.add_block_channel(topic, lay.encoding, dtype=dtype, width=width,
                                          schema_name=lay.encoding,
                                          schema_encoding=LAYOUT_ENCODING,
-                                         schema_data=lay.schema())
+                                         schema_data=schemas[id(lay)])
+
+        # the layouts every actuator's channels share (47 actuators: made once, not each)
+        up, down = LY.mcu_up(), LY.mcu_down()
+        trace, word, raw = ((LY.fpga_trace(), LY.lvds_word(), LY.sensor_raw()) if self.full
+                            else (None, None, None))
+        act_message = SG.actuator_message(SG.unfitted_inputs(self.cfg.get("sensors")))
 
         self.ch_out: list[int | None] = []
         self.ch_in: list[int] = []
@@ -151,18 +161,17 @@ class RobotRecorder:
                                         np.uint8, b.in_dtype.itemsize))
                 for k in range(len(box.actuators)):
                     tk = topics(box.id, k)
-                    self.ch_up.append(block(tk["up"], LY.mcu_up(), np.uint16, UP_WIDTH))
-                    self.ch_down.append(block(tk["down"], LY.mcu_down(), np.uint16,
-                                              B.DOWN_WORDS))
+                    self.ch_up.append(block(tk["up"], up, np.uint16, UP_WIDTH))
+                    self.ch_down.append(block(tk["down"], down, np.uint16, B.DOWN_WORDS))
                     if self.full:
-                        self.ch_trace.append(block(tk["trace"], LY.fpga_trace(), np.int64,
+                        self.ch_trace.append(block(tk["trace"], trace, np.int64,
                                                    TRACE_WIDTH))
                         self.ch_words.append(tuple(
-                            block(f"/lvds/{box.id}.{k}/{d}_words", LY.lvds_word(), np.uint64, 1)
+                            block(f"/lvds/{box.id}.{k}/{d}_words", word, np.uint64, 1)
                             for d in ("down", "up")))
-                        self.ch_raw.append(block(f"/sensors/{box.id}.{k}/raw", LY.sensor_raw(),
+                        self.ch_raw.append(block(f"/sensors/{box.id}.{k}/raw", raw,
                                                  np.uint32, B.N_RAW))
-            rec, act = add_signal_channels(self.out, box, self.cfg)
+            rec, act = add_signal_channels(self.out, box, self.cfg, act_message)
             self.sig_rec.append(rec)
             self.sig_act += act
 
