@@ -111,6 +111,7 @@ class RobotRecorder:
                       if background else None)
         self._jobs: list[Future] = []
         self._channels(log)
+        self._groups: dict[tuple, tuple] = {}  # see _group
         # the actuators' signals (each with the PC's command from its slot of the output
         # image), decoded and encoded by one compiled call per block
         box_of, slot_off = [], []
@@ -276,24 +277,40 @@ class RobotRecorder:
         ``flags``: every actuator's piston flags of the block's cycles
         (:func:`hil.replay.signals.report_flags`)."""
         rows = np.stack([r for _, r in members])
-        boxes = [n for n, _ in members]
+        chs, sig, pick = self._group(d, tuple(n for n, _ in members))
         t_ns = t * self.ns
-        if self.log is not None:
-            chs = self.ch_in if d == "inputs" else self.ch_out
-            if chs[boxes[0]] is not None:
-                self.log.write_blocks([chs[n] for n in boxes], t_ns, rows)
-        sig = [self.sig_rec[n].get(d) for n in boxes]
-        if sig[0] is not None:
+        if chs is not None:
+            self.log.write_blocks(chs, t_ns, rows)
+        if sig is not None:
             piston = None
-            if d == "inputs" and flags is not None:
-                # per member box its actuators' rows, stacked box-major as the records
-                js = [self.first_act[self.engine_box[n]] for n in boxes]
-                m = len(self.engine.boxes[self.engine_box[boxes[0]]].act)
-                piston = tuple(np.stack([f[j:j + m] for j in js], axis=1).reshape(m, -1)
-                               for f in flags)
-            cols = SG.record_columns(self.boxes[boxes[0]].box, d,
+            if pick is not None and flags is not None:
+                # per member box its actuators' rows, box-major as the records
+                piston = tuple(f[pick].reshape(len(pick), -1) for f in flags)
+            cols = SG.record_columns(self.boxes[members[0][0]].box, d,
                                      rows.reshape(-1, rows.shape[2]), piston)
             self.out.write_split(sig, t_ns, cols)
+
+    def _group(self, d: str, boxes: tuple[int, ...]) -> tuple:
+        """For the ``d`` records of the chain boxes ``boxes`` (one slot layout): their log
+        channels (None: none), their signal channels (None: none) and the rows of their
+        actuators' piston flags, (actuators per box, boxes) (None: not an input record of
+        engine boxes); worked out once per group of the run."""
+        key = (d, boxes)
+        got = self._groups.get(key)
+        if got is None:
+            chs = None
+            if self.log is not None:
+                per = self.ch_in if d == "inputs" else self.ch_out
+                if per[boxes[0]] is not None:
+                    chs = [per[n] for n in boxes]
+            sig = [self.sig_rec[n].get(d) for n in boxes]
+            pick = None
+            if d == "inputs" and self.engine_box[boxes[0]] is not None:
+                m = len(self.engine.boxes[self.engine_box[boxes[0]]].act)
+                js = [self.first_act[self.engine_box[n]] for n in boxes]
+                pick = np.arange(m)[:, None] + np.array(js, np.intp)[None, :]
+            got = self._groups[key] = (chs, sig if sig[0] is not None else None, pick)
+        return got
 
     def _write_steps(self, k: _Block) -> None:
         """The block's MCU steps: their raw words (and traces), and every actuator's
