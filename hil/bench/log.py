@@ -211,11 +211,13 @@ def format_report(ov: Overhead | None, enc: list[EncodingCost]) -> str:
                 f"{ov.extra_budget_ms:.0f} at this bare run")
         if ov.parts is not None:
             p = ov.parts
+            kernel = (f"engine's compiled calls {p['in_kernel']:.0f}, "
+                      if ov.topology.endswith("robot model") else "")  # (no engine: none)
             lines.append(
                 f"  its parts (one more pair, instrumented; ms CPU per simulated second): "
-                f"file side {p['file']:.0f}, producer {p['producer']:.0f}, engine's compiled "
-                f"calls {p['in_kernel']:.0f}, timers {p['timers']:.0f}, rest {p['rest']:.0f} "
-                f"(sum {p['total']:.0f}; python -m hil.bench.log_parts for each function)")
+                f"file side {p['file']:.0f}, producer {p['producer']:.0f}, {kernel}timers "
+                f"{p['timers']:.0f}, rest {p['rest']:.0f} (sum {p['total']:.0f}; python -m "
+                "hil.bench.log_parts for each function)")
     if not enc:
         return "\n".join(lines)
     lines.append(f"decoded signals of one actuator ({enc[0].messages} samples, "

@@ -72,6 +72,8 @@ PARTS: tuple[tuple[str, str, str], ...] = (
     ("hil.replay.signal_kernel", "ActuatorEncoder.encode", "producer"),
     ("hil.replay.signal_out", "SignalOut.write_split", "producer"),
     ("hil.replay.signal_out", "SignalOut.write_filled", "producer"),
+    ("hil.replay.record", "RecordingStackBox.flush", "producer"),  # (--model stack)
+    ("hil.replay.record", "RecordingStackBox._write_signals", "producer"),
     ("hil.replay.record", "BusSignals.end_cycle", "producer"),
     ("hil.replay.record", "BusSignals.flush", "producer"),
 )
