@@ -21,8 +21,8 @@ from threadpoolctl import threadpool_info, threadpool_limits
 import hil.identify.model as model
 from hil.identify.effects import EFFECTS
 from hil.identify.pipeline import identify
-from hil.identify.report import summary
 from hil.identify.rig import generate_rig
+from hil.identify.rigcheck import report_text
 from plant.config import load_config
 
 #: the free piston's two frictions under ``slide`` (the matrix row whose outcome was seen to
@@ -31,13 +31,6 @@ from plant.config import load_config
 _X = dict(load="free_piston", effects=["pump_coulomb_friction", "seal_friction"],
           seconds=0.6, seed=1, profile="slide")
 _Y = dict(load="free_piston", effects=["viscosity_temperature"], seconds=0.6, seed=2)
-
-
-def _bits(rep) -> str:  # noqa: ANN001
-    """The report's JSON summary with every float at full precision, its wall time left out."""
-    s = summary(rep)
-    s.pop("wall_s")
-    return json.dumps(s, sort_keys=True, default=repr)
 
 
 @pytest.fixture(scope="module")
@@ -57,7 +50,7 @@ def then_y(first_x):
 def test_a_case_does_not_depend_on_what_ran_before(first_x, then_y):
     """The record identified again after another one: the same report, bit for bit."""
     data, cfg, rep = first_x
-    assert _bits(identify(data, cfg)) == _bits(rep)
+    assert report_text(identify(data, cfg)) == report_text(rep)
 
 
 def test_thread_counts_move_no_bit(first_x, monkeypatch):
@@ -75,7 +68,7 @@ def test_thread_counts_move_no_bit(first_x, monkeypatch):
     finally:
         if model._POOL is not None:
             model._POOL.shutdown()
-    assert _bits(again) == _bits(rep)
+    assert report_text(again) == report_text(rep)
 
 
 _OTHER_BLAS = r"""
