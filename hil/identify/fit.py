@@ -218,10 +218,14 @@ class OutputErrorFit:
             def column(i: int) -> np.ndarray:
                 xx = x.copy()
                 xx[i] += steps[i]
+                theta = self._to_theta(xx, free, theta0)
                 # an offset, a drift, a lag, a clip: the same states, new outputs
-                z = z0 if free[i] in OUTPUT_ONLY else None
-                return (self._stack(self._to_theta(xx, free, theta0), sigma, mask, z)
-                        - r0) / steps[i]
+                if free[i] in OUTPUT_ONLY:
+                    z = z0
+                else:
+                    self.n_sims += 1
+                    z = self.model.states(theta, n_stop, keep=False)
+                return (self._stack(theta, sigma, mask, z) - r0) / steps[i]
 
             # one row per column, then one transposing copy: writing each column into
             # the (rows x columns) array strides across all of it once per column

@@ -93,13 +93,29 @@ RUNS_BYTES = 64 << 20
 _T = TypeVar("_T")
 _R = TypeVar("_R")
 _POOL: ThreadPoolExecutor | None = None
+#: Threads :func:`map_threads` runs on; None: one per core, at most 8
+#: (:func:`set_threads`).
+_WORKERS: int | None = None
+
+
+def set_threads(workers: int | None) -> None:
+    """Run :func:`map_threads` on ``workers`` threads (1: in the calling thread), None: one
+    per core. The results do not depend on it (each item is computed alone); the CPU
+    time may (``eha-hil bench identify --threads``)."""
+    global _POOL, _WORKERS
+    if workers is not None and workers < 1:
+        raise ValueError(f"threads must be at least 1, not {workers}")
+    _WORKERS = workers
+    if _POOL is not None:
+        _POOL.shutdown()
+        _POOL = None
 
 
 def map_threads(fn: Callable[[_T], _R], items: Iterable[_T]) -> list[_R]:
     """``[fn(i) for i in items]`` on a thread per core (the simulation kernel drops the GIL)."""
     global _POOL
     items = list(items)
-    workers = min(os.cpu_count() or 1, 8)
+    workers = _WORKERS or min(os.cpu_count() or 1, 8)
     if workers < 2 or len(items) < 2:
         return [fn(i) for i in items]
     if _POOL is None:
@@ -528,11 +544,14 @@ class FastModel:
             self._input_cache[key] = hit
         return hit
 
-    def states(self, theta: np.ndarray, n_stop: int | None = None) -> np.ndarray:
+    def states(self, theta: np.ndarray, n_stop: int | None = None, keep: bool = True
+               ) -> np.ndarray:
         """State trajectory (n x 5) for the parameter vector ``theta``, read-only; with
         ``n_stop`` only the first ``n_stop`` samples are simulated (the rest is zero, or the
         rest of a longer run of the same vector that is still kept: the simulation is
-        causal, so a run's head is the shorter run, bit for bit)."""
+        causal, so a run's head is the shorter run, bit for bit). ``keep=False``: a vector
+        no one asks for again (a Jacobian column's) is not kept, so it evicts no run that
+        may be asked for (a fit's point, its cost compared later)."""
         n_run = self.exp.n if n_stop is None else max(2, min(n_stop, self.exp.n))
         key = (theta.tobytes(), self.solve_tol)
         hit = self._runs.get(key)
@@ -540,6 +559,8 @@ class FastModel:
             return hit[1]
         out = self._simulate_states(theta, n_stop)
         out.setflags(write=False)
+        if not keep:
+            return out
         with self._runs_lock:
             self._runs[key] = (n_run, out)
             while len(self._runs) > 1 and (
@@ -686,4 +707,4 @@ class FastModel:
 
 
 __all__ = ["BASE_NAMES", "EFFECT_NAMES", "OUTPUT_ONLY", "FastModel", "IDX", "N_PARAMS",
-           "PARAM_NAMES", "continuous", "discretise", "fast_stop", "map_threads"]
+           "PARAM_NAMES", "continuous", "discretise", "fast_stop", "map_threads", "set_threads"]
