@@ -178,8 +178,8 @@ VS_FLOOR_OF_EPS = 0.25
 
 class SealFriction(Effect):
     name = "seal_friction"
-    description = ("rod-seal Coulomb + Stribeck friction on the piston; v_s and the sign "
-                   "law's shape (tanh .. atan) fitted")
+    description = ("rod-seal Coulomb + Stribeck friction on the piston; v_s, eps and the "
+                   "sign law's shape (tanh .. atan) fitted")
     judged = (("coulomb_n", "coulomb_n", "magnitude"),)
 
     def definitions(self, exp: Experiment) -> list[EffectDef]:
@@ -188,7 +188,8 @@ class SealFriction(Effect):
                           lambda exp: ("piston fixed: the seal never slides"
                                        if exp.load == "fixed" else None),
                           refit_extra=(("sf_vs_m_per_s", lambda exp: exp.const.vs_seal),
-                                       ("sf_shape", lambda exp: FRICTION_SHAPE_START)))]
+                                       ("sf_shape", lambda exp: FRICTION_SHAPE_START),
+                                       ("sf_eps_m_per_s", lambda exp: exp.const.eps_seal)))]
 
     def implausible(self, fit: FitResult, exp: Experiment) -> dict[str, str]:
         """A Stribeck velocity far below the regularisation velocity puts the dip inside the
@@ -199,7 +200,7 @@ class SealFriction(Effect):
         if "sf_vs_m_per_s" not in fit.free:
             return {}
         vs = fit.value("sf_vs_m_per_s")
-        eps = exp.const.eps_seal
+        eps = fit.value("sf_eps_m_per_s") or exp.const.eps_seal
         if vs < VS_FLOOR_OF_EPS * eps:
             return {"sf_vs_m_per_s": (f"the Stribeck velocity ran to {vs:.3g} m/s, far below "
                                       f"the regularisation velocity {eps:.3g} m/s (a "
@@ -215,6 +216,8 @@ class SealFriction(Effect):
         if "sf_vs_m_per_s" in fit.free:
             out["stribeck_velocity_m_per_s"] = _value(fit, "stribeck_velocity_m_per_s",
                                                       "sf_vs_m_per_s", "m/s")
+        if "sf_eps_m_per_s" in fit.free:
+            out["eps_m_per_s"] = _value(fit, "eps_m_per_s", "sf_eps_m_per_s", "m/s")
         if "sf_shape" in fit.free:
             out["shape"] = _value(fit, "shape", "sf_shape", "0 tanh .. 1 atan")
         return out
