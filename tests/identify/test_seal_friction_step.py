@@ -12,12 +12,14 @@ the piston's speed, the seal's force and the pressure force sample by sample.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
+from hil.identify.effects import STUCK_SHARE, SealFriction, stuck_share
 from hil.identify.experiment import prepare
 from hil.identify.model import IDX, FastModel
 from hil.identify.rig import generate_rig
@@ -136,3 +138,20 @@ def test_the_seals_regularisation_velocity_is_a_parameter(stuck_piston):
     err_on = np.sqrt(np.mean((z[1:, 2] - ref[1:, 2]) ** 2))
     err_off = np.sqrt(np.mean((z_off[1:, 2] - ref[1:, 2]) ** 2))
     assert err_off > 4.0 * err_on
+
+
+def test_the_seals_eps_is_fitted_where_the_piston_sits_in_the_stuck_zone(stuck_piston):
+    """The conrod's piston stays below twice the preset's eps for most of the record, so the
+    seal's refit frees eps; the same record with the piston sliding (its measured speed
+    scaled up) keeps the preset's eps, as the free piston's records do."""
+    exp = stuck_piston[0]
+    assert stuck_share(exp) >= STUCK_SHARE
+    (seal,) = SealFriction().definitions(exp)
+    assert "sf_eps_m_per_s" in dict(seal.refit_extra)
+    measured = dict(exp.measured)
+    measured["v_piston"] = 100.0 * measured["v_piston"]
+    sliding = dataclasses.replace(exp, measured=measured)
+    assert stuck_share(sliding) < STUCK_SHARE
+    (seal,) = SealFriction().definitions(sliding)
+    assert "sf_eps_m_per_s" not in dict(seal.refit_extra)
+    assert {"sf_vs_m_per_s", "sf_shape"} <= set(dict(seal.refit_extra))
