@@ -220,7 +220,8 @@ class SealFriction(Effect):
         if "sf_vs_m_per_s" not in fit.free:
             return {}
         vs = fit.value("sf_vs_m_per_s")
-        eps = fit.value("sf_eps_m_per_s") or exp.const.eps_seal
+        eps = ((fit.value("sf_eps_m_per_s") if "sf_eps_m_per_s" in fit.free else 0.0)
+               or exp.const.eps_seal)
         if vs < VS_FLOOR_OF_EPS * eps:
             return {"sf_vs_m_per_s": (f"the Stribeck velocity ran to {vs:.3g} m/s, far below "
                                       f"the regularisation velocity {eps:.3g} m/s (a "
