@@ -48,7 +48,7 @@ BASELINE_FREE: dict[str, tuple[str, ...]] = {
     "conrod": ("gain_n_per_a", "ds", "dp", "dc", "ks", "k_rod", "c_rod"),
 }
 LOG_PARAMS = frozenset({"gain_n_per_a", "ds", "dp", "dc", "ks", "jp", "jc", "k_rod", "c_rod",
-                        "pc_eps_m_per_s", "sf_vs_m_per_s"})
+                        "pc_eps_m_per_s", "sf_vs_m_per_s", "sf_eps_m_per_s"})
 #: Parameters with a physical sign and size whose confidence interval must not swallow
 #: their value (the pulsation's sine/cosine parts, offsets and the skew may sit near zero).
 CREDIBLE = LOG_PARAMS | {"pc_force_n", "sf_coulomb_n", "sf_static_n", "visc_coeff_per_c",

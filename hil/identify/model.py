@@ -13,9 +13,11 @@ exactly (zero-order hold, matrix exponential) over ``n_sub`` sub-steps per sampl
 stiff modes (leakage ``k_s/d_s``, the piston on ``k_s`` near 1.4 kHz) cost nothing in
 accuracy. The effect terms enter through ``f_pump``, ``q_rate``, ``f_piston``, evaluated
 from the state at the start of each sub-step; the Coulomb frictions are solved implicitly
-for the end-of-sub-step velocity (a scalar root per friction), so a small regularisation
-velocity does not chatter. Output-side effects (strain drift, sensor saturation) and the
-input delay act outside the loop.
+(a scalar root per friction), so a small regularisation velocity does not chatter: the
+pump's for the end-of-sub-step velocity, the seal's for the mid-sub-step one (second order:
+a piston held by a stiff rod lives in the seal's stuck zone, where the law is a damper whose
+time constant is a fraction of the sub-step). Output-side effects (strain drift, sensor
+saturation) and the input delay act outside the loop.
 
 Parameters live in one flat vector addressed by :data:`PARAM_NAMES`; all effect parameters
 at zero is the linear model.
@@ -57,6 +59,7 @@ SAT_PRESSURE = "sat_pressure"
 EFFECT_NAMES = _PULS + (
     "pc_force_n", "sf_coulomb_n", "sf_static_n", "ks_k1", "ks_k2", "visc_coeff_per_c",
     "drift_n_per_c", "delay_s", "pc_eps_m_per_s", "sf_vs_m_per_s", "pc_shape", "sf_shape",
+    "sf_eps_m_per_s",
 ) + tuple(f"sat_{c}" for c in SAT_CHANNELS) + (SAT_PRESSURE,)
 PARAM_NAMES = BASE_NAMES + EFFECT_NAMES
 IDX = {name: i for i, name in enumerate(PARAM_NAMES)}
@@ -288,7 +291,7 @@ def _solve_friction(v_free, b, level_c, level_s, vs, eps, w, f_start, tol_scale)
 
 @njit(cache=True, nogil=True, fastmath=_FAST)
 def _simulate(ad, bd, z0, tau_p, ks, ds, dp, dc, eff, angle, has_angle, xs, has_x, temp,
-              has_temp, t_ref, n_sub, fixed, out):
+              has_temp, t_ref, n_sub, fixed, out, adh, bdh):
     """Run the model over ``out.shape[0]`` samples; ``out[k]`` gets the state at sample ``k``.
 
     ``tau_p`` holds one value per sub-step; ``angle``, ``xs``, ``temp`` one per sample. The
@@ -296,6 +299,9 @@ def _simulate(ad, bd, z0, tau_p, ks, ds, dp, dc, eff, angle, has_angle, xs, has_
     angle with the first-order gain ``alpha`` per sample. With the piston fixed only the
     first three states move, and only they are propagated. The harmonics n = 1..8 of the
     rotor angle come from one sine and cosine by the angle-addition recurrence.
+
+    ``adh, bdh``: the linear part over half a sub-step, where the seal friction is solved
+    (implicit midpoint; the pump friction is solved at the sub-step's end).
     """
     n = out.shape[0]
     ns = 3 if fixed else 5
@@ -384,6 +390,7 @@ def _simulate(ad, bd, z0, tau_p, ks, ds, dp, dc, eff, angle, has_angle, xs, has_
                 for m in range(4):
                     acc += bd[i, m] * u[m]
                 zn[i] = acc
+            dq = 0.0
             if ksx_on:
                 # the stiffness term is a sizeable part of k_s acting at the piston's
                 # resonance: held from the sub-step's start it is a first-order step that
@@ -402,9 +409,23 @@ def _simulate(ad, bd, z0, tau_p, ks, ds, dp, dc, eff, angle, has_angle, xs, has_
                 for i in range(ns):
                     zn[i] -= bd[i, 1] * fp
             if sf_on:
+                # The seal's force held over the sub-step is its law's value at the
+                # sub-step's middle (implicit midpoint, second order), not at its end
+                # (implicit Euler, first order). With the piston held by a stiff rod its
+                # speed stays in the seal's stuck zone and Stribeck dip, where the law is a
+                # damper of F_s/eps (~2e4 N s/m on J_c ~0.3 kg: a time constant of a third
+                # of the sub-step), and the end value's lag there moved the piston's speed by
+                # a third of its rms against a fine-step solve of the same law.
+                vmid = -bdh[4, 1] * fp
+                for m in range(ns):
+                    vmid += adh[4, m] * z[m]
+                for m in range(4):
+                    vmid += bdh[4, m] * u[m]
+                if ksx_on:  # the Heun correction's rate grows linearly over the sub-step
+                    vmid += bdh[4, 2] * 0.5 * dq
                 f_start = 2.0 * fs - fs_prev
                 fs_prev = fs
-                vnew, fs = _solve_friction(zn[4], bd[4, 3], sf_c, sf_s, eff[_E_SF_VS],
+                vnew, fs = _solve_friction(vmid, bdh[4, 3], sf_c, sf_s, eff[_E_SF_VS],
                                            eff[_E_SF_EPS], eff[_E_SF_SHAPE], f_start,
                                            solve_tol)
                 for i in range(ns):
@@ -445,7 +466,7 @@ class FastModel:
         self.n_sub = n_sub
         self._iq_sub0 = np.repeat(exp.iq, n_sub)
         self._input_cache: dict[tuple[str, float], np.ndarray] = {}
-        self._disc_cache: dict[tuple[float, ...], tuple[np.ndarray, np.ndarray]] = {}
+        self._disc_cache: dict[tuple[float, ...], tuple[np.ndarray, ...]] = {}
         self._empty = np.zeros(1)
         # the last few simulations, by parameter vector: a fit simulates the same vector
         # again (the weights' residual after a pass, then the step on all samples starting
@@ -511,8 +532,9 @@ class FastModel:
         if hit is None:
             if len(self._disc_cache) > 64:
                 self._disc_cache.clear()
-            hit = self._disc_cache[key] = discretise(a, b, h)
-        ad, bd = hit
+            # the full sub-step, and its first half (where the seal's friction is solved)
+            hit = self._disc_cache[key] = discretise(a, b, h) + discretise(a, b, 0.5 * h)
+        ad, bd, adh, bdh = hit
         gain = theta[IDX["gain_n_per_a"]]
         tau_p = gain * self.applied_current(theta[IDX["delay_s"]] + theta[IDX["skew_s"]])
         u0 = np.array([tau_p[0], 0.0, 0.0, 0.0])
@@ -525,7 +547,7 @@ class FastModel:
         eff[_E_SF_C] = theta[IDX["sf_coulomb_n"]]
         eff[_E_SF_S] = theta[IDX["sf_static_n"]]
         eff[_E_SF_VS] = theta[IDX["sf_vs_m_per_s"]] or exp.const.vs_seal
-        eff[_E_SF_EPS] = exp.const.eps_seal
+        eff[_E_SF_EPS] = theta[IDX["sf_eps_m_per_s"]] or exp.const.eps_seal
         eff[_E_PC_SHAPE] = theta[IDX["pc_shape"]]
         eff[_E_SF_SHAPE] = theta[IDX["sf_shape"]]
         eff[_E_K1] = theta[IDX["ks_k1"]]
@@ -544,7 +566,8 @@ class FastModel:
                   exp.angle if exp.angle is not None else e, exp.angle is not None,
                   exp.position if exp.position is not None else e, exp.position is not None,
                   exp.temperature if exp.temperature is not None else e,
-                  exp.temperature is not None, exp.t_ref, self.n_sub, exp.load == "fixed", sim)
+                  exp.temperature is not None, exp.t_ref, self.n_sub, exp.load == "fixed", sim,
+                  adh, bdh)
         return out
 
     def outputs(self, theta: np.ndarray, z: np.ndarray | None = None,
