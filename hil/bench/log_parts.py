@@ -1,25 +1,44 @@
-"""Where the CPU of a logged whole-robot run goes: the logging's parts, per simulated second.
+"""Where the CPU of a logged whole-robot run goes: the logging's parts, per simulated second,
+adding up to what the logged run costs more than the bare one.
 
 ``eha-hil bench log`` gives the whole cost (logged / bare CPU); this splits the logged run's
-extra CPU into the functions that make it. Each function below is wrapped for one run:
-its *own* CPU (``time.thread_time`` of the thread that runs it, less the wrapped functions
-it calls) is summed, so the parts add up without double counting; zstd is timed inside the
-chunk closing (``hil.framelog.chunk``). The file side (``hil/framelog``: building records,
-compressing and writing chunks) and the producer side (``hil/replay``: copies of the
-engine's images, decoding the signals) are listed apart.
+extra CPU (logged minus bare, both measured here) into:
 
-Run: ``python -m hil.bench.log_parts [seconds] [topology]`` (default 2 s of ``hydra_full``
-at level ``mcu``, zstd), after a warm-up run of 50 cycles. The figures grow with the
-machine's load (memory bandwidth is shared): quote them with ``uptime``.
+* **file side** (``hil/framelog``: building records, compressing and writing chunks,
+  opening and closing the file) and **producer side** (``hil/replay``: the engine's hooks
+  per cycle, the fieldbus tap per frame, decoding and encoding the signals, set-up): each
+  function of :data:`PARTS` is wrapped for the run and its *own* CPU (``time.thread_time``
+  of the thread that runs it, less the wrapped functions it calls) summed, so the parts
+  add up without double counting; zstd is timed inside the chunk closing
+  (``hil.framelog.chunk``); the fieldbus tap (a closure of ``run_logged``) where the bus
+  system is given it;
+* **in the engine's compiled calls**: the CPU of the cycle's compiled calls in every
+  compute thread (the calling thread's share, :meth:`RobotEngine._compute`, and the helper
+  threads' whole CPU, by their POSIX thread clocks) of the logged run less the bare run's:
+  the kernel's copies of each MCU step's words (``_log_words``) and whatever else the
+  logging costs the kernel (its data evicted from the caches by the file side's work);
+* **timers**: what the wrappers themselves cost (calls counted, each at the cost of one
+  wrapped call of an empty function, measured here; what a wrapper counts inside the
+  function it times is taken off that function's own CPU);
+* **rest**: the difference less all of the above: ``run_logged``'s glue (the PC callback's
+  wrapper, the tap's lists), and the bare run's own work done slower beside the logging
+  (caches, memory bandwidth), plus the two runs' noise.
+
+Run: ``python -m hil.bench.log_parts [seconds] [topology] [pairs]`` (default 2 s of
+``hydra_full`` at level ``mcu``, zstd, one pair), after a warm-up of both runs; with
+several pairs (the order alternating) the figures are their sums. The figures grow with
+the machine's load (caches and memory bandwidth are shared): quote them with ``uptime``.
 """
 
 from __future__ import annotations
 
 import sys
 import tempfile
+import threading
 import time
 from collections import Counter
 from collections.abc import Callable
+from dataclasses import dataclass, field
 from pathlib import Path
 
 #: (module, attribute path, side) of every wrapped function.
@@ -30,6 +49,8 @@ PARTS: tuple[tuple[str, str, str], ...] = (
     ("hil.framelog.batch", "add_messages", "file"),
     ("hil.framelog.rawpb", "pack_blocks", "file"),
     ("hil.framelog.rawpb", "wrap_many", "file"),
+    ("hil.framelog.writer", "FrameLogWriter.__init__", "file"),
+    ("hil.framelog.writer", "FrameLogWriter.close", "file"),
     ("hil.framelog.writer", "FrameLogWriter.write_blocks", "file"),
     ("hil.framelog.writer", "FrameLogWriter.write_block", "file"),
     ("hil.framelog.writer", "FrameLogWriter.write_messages_many", "file"),
@@ -41,24 +62,33 @@ PARTS: tuple[tuple[str, str, str], ...] = (
     ("hil.replay.signals", "record_columns", "producer"),
     ("hil.replay.signals", "pc_command_block", "producer"),
     ("hil.replay.signals", "report_flags", "producer"),
+    ("hil.replay.robot_record", "RobotRecorder.__init__", "producer"),
     ("hil.replay.robot_record", "RobotRecorder.took_outputs", "producer"),
     ("hil.replay.robot_record", "RobotRecorder.finished", "producer"),
+    ("hil.replay.robot_record", "RobotRecorder.flush", "producer"),
     ("hil.replay.robot_record", "RobotRecorder._write_records", "producer"),
     ("hil.replay.robot_record", "RobotRecorder._write_steps", "producer"),
     ("hil.replay.robot_record", "RobotRecorder._write", "producer"),
     ("hil.replay.signal_kernel", "ActuatorEncoder.encode", "producer"),
     ("hil.replay.signal_out", "SignalOut.write_split", "producer"),
     ("hil.replay.signal_out", "SignalOut.write_filled", "producer"),
+    ("hil.replay.record", "RecordingStackBox.flush", "producer"),  # (--model stack)
+    ("hil.replay.record", "RecordingStackBox._write_signals", "producer"),
     ("hil.replay.record", "BusSignals.end_cycle", "producer"),
     ("hil.replay.record", "BusSignals.flush", "producer"),
 )
+SIDES = ("file", "producer")
+#: The label of the fieldbus tap's own CPU (run_logged's closure, wrapped where the bus
+#: system takes it).
+TAP = "producer: fieldbus tap (per cycle)"
 
 
 class _Timer:
-    """Own thread CPU per label of the functions wrapped with :meth:`wrap`."""
+    """Own thread CPU and calls per label of the functions wrapped with :meth:`wrap`."""
 
     def __init__(self) -> None:
         self.own: Counter[str] = Counter()
+        self.calls: Counter[str] = Counter()
         self._inner: list[float] = []
 
     def wrap(self, fn: Callable, label: str) -> Callable:
@@ -70,15 +100,80 @@ class _Timer:
             finally:
                 dt = time.thread_time() - t0
                 self.own[label] += dt - self._inner.pop()
+                self.calls[label] += 1
                 if self._inner:
                     self._inner[-1] += dt
         return timed
 
 
+def timer_cost(n: int = 20000) -> tuple[float, float]:
+    """CPU seconds one wrapped call adds (the wrapper's own work, thread CPU: two reads of
+    the thread clock, each a system call), and of that what the wrapper counts as the
+    wrapped function's own CPU (measured on an empty function: the least of 3 tries)."""
+    def nothing() -> None:
+        return None
+
+    best = (float("inf"), float("inf"))
+    for _ in range(3):
+        timer = _Timer()
+        wrapped = timer.wrap(nothing, "x")
+        t0 = time.thread_time()
+        for _ in range(n):
+            wrapped()
+        t1 = time.thread_time()
+        for _ in range(n):
+            nothing()
+        t2 = time.thread_time()
+        best = min(best, (((t1 - t0) - (t2 - t1)) / n, timer.own["x"] / n))
+    return max(best[0], 0.0), min(max(best[1], 0.0), max(best[0], 0.0))
+
+
+class _Compute:
+    """CPU of the robot engine's compiled calls: the calling thread's share
+    (:meth:`RobotEngine._compute`) and the helper threads' whole CPU (read from their
+    thread clocks when they are closed)."""
+
+    def __init__(self) -> None:
+        self.cpu = 0.0
+        self.calls = 0
+
+    def install(self) -> list[tuple[object, str, object]]:
+        from hil.sim import compute_threads, robot
+
+        compute, close = robot.RobotEngine._compute, compute_threads.ComputeThreads.close
+
+        def timed_compute(engine, ticks):  # noqa: ANN001, ANN202
+            t0 = time.thread_time()
+            try:
+                return compute(engine, ticks)
+            finally:
+                self.cpu += time.thread_time() - t0
+                self.calls += 1
+
+        def closing(threads):  # noqa: ANN001, ANN202
+            threads.join()  # (what close does first: the helpers' last cycle counted)
+            self.cpu += sum(_thread_cpu(t) for t in threads.threads)
+            return close(threads)
+
+        robot.RobotEngine._compute = timed_compute
+        compute_threads.ComputeThreads.close = closing
+        return [(robot.RobotEngine, "_compute", compute),
+                (compute_threads.ComputeThreads, "close", close)]
+
+
+def _thread_cpu(t: threading.Thread) -> float:
+    """CPU seconds thread ``t`` (alive) has used."""
+    if t.ident is None or not t.is_alive():
+        return 0.0
+    return time.clock_gettime(time.pthread_getcpuclockid(t.ident))
+
+
 def _install(timer: _Timer) -> list[tuple[object, str, object]]:
-    """Wrap every function of :data:`PARTS` and zstd; the originals, to put back."""
+    """Wrap every function of :data:`PARTS`, zstd and the fieldbus tap; the originals, to
+    put back."""
     import importlib
 
+    from hil.fieldbus import system
     from hil.framelog import chunk
 
     undo = []
@@ -95,46 +190,147 @@ def _install(timer: _Timer) -> list[tuple[object, str, object]]:
     make = chunk.compressor
     undo.append((chunk, "compressor", make))
     chunk.compressor = lambda c, lvl: timer.wrap(make(c, lvl), "file: zstd (in _finalize)")
+    init = system.BusSystem.__init__
+
+    def bus_init(bs, *args, **kwargs):  # noqa: ANN001, ANN002, ANN003, ANN202
+        if kwargs.get("tap_cycle") is not None:
+            kwargs["tap_cycle"] = timer.wrap(kwargs["tap_cycle"], TAP)
+        init(bs, *args, **kwargs)
+
+    undo.append((system.BusSystem, "__init__", init))
+    system.BusSystem.__init__ = bus_init
     return undo
 
 
+@dataclass
+class Parts:
+    """``pairs`` bare and logged runs of ``seconds / pairs`` simulated seconds each (CPU in
+    seconds, summed over the pairs; :attr:`extras`: each pair's logged minus bare)."""
+
+    seconds: float
+    bare_cpu: float
+    logged_cpu: float
+    bare_compute: float        # the engine's compiled calls, every thread
+    logged_compute: float
+    own: Counter[str]          # own CPU per wrapped part of the logged run
+    calls: Counter[str] = field(default_factory=Counter)
+    timer_s: float = 0.0       # the wrappers' own cost in the logged run (estimate)
+    log_bytes: int = 0
+    extras: list[float] = field(default_factory=list)
+
+    @property
+    def extra(self) -> float:
+        """What logging costs: logged minus bare CPU."""
+        return self.logged_cpu - self.bare_cpu
+
+    @property
+    def in_kernel(self) -> float:
+        return self.logged_compute - self.bare_compute
+
+    def side(self, side: str) -> float:
+        return sum(v for k, v in self.own.items() if k.startswith(side))
+
+    @property
+    def rest(self) -> float:
+        return self.extra - self.side("file") - self.side("producer") - self.in_kernel \
+            - self.timer_s
+
+    def split(self) -> dict[str, float]:
+        """ms per simulated second of each part of :attr:`extra` (they add up to it)."""
+        per = 1e3 / self.seconds
+        return {"file": self.side("file") * per, "producer": self.side("producer") * per,
+                "in_kernel": self.in_kernel * per, "timers": self.timer_s * per,
+                "rest": self.rest * per, "total": self.extra * per}
+
+
 def measure(seconds: float = 2.0, topology: str = "hydra_full", level: str = "mcu",
-            ) -> tuple[float, Counter[str], int]:
-    """(process CPU of the logged run, own CPU per part, log bytes) of ``seconds`` of
-    ``topology`` with the whole-robot engine."""
+            compression: str = "zstd", warm: bool = True, pairs: int = 1,
+            model: str = "robot", cfg: object = None) -> Parts:
+    """``pairs`` bare and logged runs of ``seconds`` each of ``topology`` with the
+    whole-robot engine (the order alternating), the logged ones with their parts timed
+    (see the module doc); the figures summed over the pairs. ``model`` "stack": the same
+    without the engine (no compiled calls to compare)."""
+    from hil.fieldbus.system import BusSystem
     from hil.fieldbus.topology import load_topology
     from hil.replay.record import run_logged
     from hil.sim.pc import demo_pc
     from plant.config import load_config
 
-    cfg = load_config(None, [])
+    cfg = load_config(None, []) if cfg is None else cfg
     topo = load_topology(topology)
-    timer = _Timer()
+    cycles = max(int(round(seconds * 1000)), 1)
     with tempfile.TemporaryDirectory() as d:
         path = Path(d) / "parts.mcap"
-        run_logged(topo, cfg, 50, demo_pc(), path, level=level, model="robot")  # warm-up
-        undo = _install(timer)
-        try:
-            c0 = time.process_time()
-            run_logged(topo, cfg, max(int(round(seconds * 1000)), 1), demo_pc(), path,
-                       level=level, model="robot")
-            cpu = time.process_time() - c0
-        finally:
-            for owner, name, fn in reversed(undo):
-                setattr(owner, name, fn)
+
+        def bare(n: int = cycles) -> None:
+            with BusSystem(topo, cfg, "inproc", model=model) as bs:
+                bs.run(n, demo_pc(), keep=1)
+
+        def logged(n: int = cycles) -> None:
+            run_logged(topo, cfg, n, demo_pc(), path, level=level, model=model,
+                       compression=compression)
+
+        if warm:  # compiled code loaded, imports done, a block written
+            bare(120)
+            logged(120)
+        compute = _Compute()
+        timer = _Timer()
+        cpu = {"bare": 0.0, "logged": 0.0}
+        held = {"bare": 0.0, "logged": 0.0}  # the compiled calls' CPU
+        extras = []
+        for i in range(pairs):
+            one = {}
+            for kind in ("logged", "bare") if i % 2 else ("bare", "logged"):
+                undo = compute.install()
+                if kind == "logged":
+                    undo += _install(timer)
+                try:
+                    compute.cpu = 0.0
+                    c0 = time.process_time()
+                    (logged if kind == "logged" else bare)()
+                    one[kind] = time.process_time() - c0
+                finally:
+                    for owner, name, fn in reversed(undo):
+                        setattr(owner, name, fn)
+                cpu[kind] += one[kind]
+                held[kind] += compute.cpu
+            extras.append(one["logged"] - one["bare"])
         size = path.stat().st_size
-    return cpu, timer.own, size
+    per_call, inside = timer_cost()
+    # each part less what its wrapper counted in it; the wrappers' whole cost apart
+    own = Counter({k: v - inside * timer.calls[k] for k, v in timer.own.items()})
+    return Parts(cycles / 1000 * pairs, cpu["bare"], cpu["logged"], held["bare"],
+                 held["logged"], own, timer.calls, per_call * sum(timer.calls.values()),
+                 size, extras)
 
 
-def format_parts(seconds: float, cpu: float, own: Counter[str], size: int) -> str:
-    lines = [f"logged run: {cpu:.3f} s CPU for {seconds:g} s simulated, "
-             f"{size / seconds / 1e6:.1f} MB of log per simulated second",
-             "own CPU per simulated second (ms):"]
-    for side in ("file", "producer"):
-        parts = sorted(((v, k) for k, v in own.items() if k.startswith(side)), reverse=True)
-        total = sum(v for v, _ in parts)
-        lines.append(f"  {side} side: {total / seconds * 1e3:.1f}")
-        lines += [f"    {v / seconds * 1e3:6.1f}  {k.split(': ', 1)[1]}" for v, k in parts]
+def format_parts(p: Parts, detail: bool = True) -> str:
+    """The split of :attr:`Parts.extra` (ms per simulated second); ``detail``: each
+    wrapped function's own CPU too."""
+    s = p.seconds
+    sp = p.split()
+    n = max(len(p.extras), 1)
+    each = ", ".join(f"{e / s * n * 1e3:.0f}" for e in p.extras)
+    lines = [f"bare {p.bare_cpu:.3f} s CPU, logged {p.logged_cpu:.3f} s CPU for {s / n:g} s "
+             f"simulated each ({n} pair{'s' * (n > 1)}; a log of "
+             f"{p.log_bytes / (s / n) / 1e6:.1f} MB per simulated second): the logging "
+             f"costs {sp['total']:.1f} ms CPU per simulated second"
+             + (f" (the pairs: {each})" if n > 1 else ""),
+             "  made of (ms per simulated second):"]
+    for side in SIDES:
+        lines.append(f"    {sp[side]:6.1f}  {side} side")
+        if detail:
+            parts = sorted(((v, k) for k, v in p.own.items() if k.startswith(side)),
+                           reverse=True)
+            lines += [f"      {v / s * 1e3:6.1f}  {k.split(': ', 1)[1]}"
+                      f" ({p.calls[k] / s:g} calls)" for v, k in parts]
+    lines += [f"    {sp['in_kernel']:6.1f}  in the engine's compiled calls (logged "
+              f"{p.logged_compute / s * 1e3:.1f}, bare {p.bare_compute / s * 1e3:.1f}: every "
+              "compute thread)",
+              f"    {sp['timers']:6.1f}  the timers of this breakdown (estimate: "
+              f"{sum(p.calls.values()) / s:.0f} wrapped calls)",
+              f"    {sp['rest']:6.1f}  rest: run_logged's glue, the bare run's work slowed "
+              "beside the logging, noise"]
     return "\n".join(lines)
 
 
@@ -142,8 +338,8 @@ def main(argv: list[str] | None = None) -> int:
     args = sys.argv[1:] if argv is None else argv
     seconds = float(args[0]) if args else 2.0
     topology = args[1] if len(args) > 1 else "hydra_full"
-    cpu, own, size = measure(seconds, topology)
-    print(format_parts(seconds, cpu, own, size))
+    pairs = int(args[2]) if len(args) > 2 else 1
+    print(format_parts(measure(seconds, topology, pairs=pairs)))
     return 0
 
 

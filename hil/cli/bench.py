@@ -284,7 +284,7 @@ def cmd_bench_log(args: argparse.Namespace, ctx: Context) -> Outcome:
         _topology(args.topology)  # a bad name or file: one line, before any run
     ov = None if args.seconds == 0 else bench_overhead(cfg, args.seconds, args.level,
                                                        args.pairs, args.topology, args.model,
-                                                       args.compression)
+                                                       args.compression, args.parts)
     enc = bench_encodings(args.samples)
     return Outcome(format_report(ov, enc),
                    {"overhead": None if ov is None else asdict(ov),
@@ -311,4 +311,7 @@ def add_log_parser(bsub) -> None:  # noqa: ANN001
                    "bench_one_box for --model stack, hydra_full for --model robot)")
     p.add_argument("--samples", type=int_range(10, 1_000_000), default=5000,
                    help="samples for the encoding comparison")
+    p.add_argument("--parts", action=argparse.BooleanOptionalAction, default=True,
+                   help="after the pairs, one more pair with the logging's parts timed (file "
+                   "side, producer, the engine's compiled calls; default: on)")
     command(p, cmd_bench_log)

@@ -345,6 +345,9 @@ def configure_bench(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--realism", default="rig", choices=("rig", "plant"),
                         help="where the record comes from: rig (the independent rig "
                         "simulator, default) or plant (the project's plant)")
+    parser.add_argument("--threads", type=int_range(1, 8), default=None,
+                        help="simulation threads of the fits (default: one per core; the "
+                        "results do not depend on it, the CPU time may)")
     parser.add_argument("--json", action="store_true", help="print JSON")
 
 
@@ -373,6 +376,9 @@ def run_bench(args: argparse.Namespace, ctx: Context) -> Outcome:
         if profile != "multisine" and load != "free_piston":
             raise UsageError(f"--profile {profile}: needs --load free_piston")
     cfg = load_config(args.config, args.set or ())
+    if args.threads is not None:
+        from hil.identify.model import set_threads
+        set_threads(args.threads)
     rows = []
     for load, effects, profile in records:
         ctx.say(f"bench identify: {load}, {' + '.join(effects)} ({profile})")
@@ -387,7 +393,7 @@ def run_bench(args: argparse.Namespace, ctx: Context) -> Outcome:
                      f"{', '.join(r['effects_added']) or 'none'}; "
                      f"{'unexplained' if r['unexplained'] else 'explained'}")
     out = {"seconds": args.seconds, "realism": args.realism, "cpu_budget_s": CPU_BUDGET_S,
-           "records": rows, "cpu_s_max": max(r["cpu_s"] for r in rows)}
+           "threads": args.threads, "records": rows, "cpu_s_max": max(r["cpu_s"] for r in rows)}
     return Outcome("\n".join(lines), out)
 
 

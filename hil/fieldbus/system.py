@@ -28,6 +28,10 @@ from plant.config import Config
 PcFn = Callable[[int, Master], None]
 #: Called with (cycle, tick, frame bytes, direction "tx"/"rx") for logs and captures.
 TapFn = Callable[[int, int, bytes, str], None]
+#: Called once per cycle with (cycle, tick, frames sent, frames received), in the orders a
+#: tap sees them, once the cycle has ended (the master's counters hold it): one call per
+#: cycle for a log.
+CycleTapFn = Callable[[int, int, list[bytes], list[bytes]], None]
 
 
 @dataclass
@@ -49,7 +53,7 @@ class BusSystem:
                  model: str = "stack", reply_timeout_s: float = 2.0,
                  remote: bool | None = None, tap: TapFn | None = None,
                  transport_options: dict | None = None, faults: object = None,
-                 crc_trailer: bool | None = None) -> None:
+                 crc_trailer: bool | None = None, tap_cycle: CycleTapFn | None = None) -> None:
         from hil.transports import TransportError, backend, transport_pair
 
         kind = backend(transport)
@@ -65,6 +69,7 @@ class BusSystem:
         self.inline_wait_s = 0.5
         self.reply_timeout_s = reply_timeout_s
         self.tap = tap
+        self.tap_cycle = tap_cycle
         self.proc: subprocess.Popen | None = None
         self.m_end = self.s_end = None
         self._release = None  # what the remote peer's set-up made (e.g. a pty)
@@ -135,6 +140,7 @@ class BusSystem:
             raise ValueError(f"keep = {keep}: expected >= 0 cycles")
         n_rows = cycles if keep is None else min(cycles, keep)
         rows = np.zeros((n_rows, len(m.input_image())), dtype=np.uint8)
+        tap_cycle = self.tap_cycle
         for k in range(cycles):
             pc(m.cycle, m)
             frames = m.frames()
@@ -153,14 +159,19 @@ class BusSystem:
                 timeout = 0.0 if self._in_memory else 0.05
             # Until every frame of the cycle is answered: stale replies (duplicated or
             # delayed ones) are read and counted, they do not stand for this cycle's.
+            replies = []
             while not all(m._answered):
                 reply = self.m_end.recv(timeout=timeout)
                 if reply is None:
                     break
                 if self.tap:
                     self.tap(m.cycle, tick, reply, "rx")
+                replies.append(reply)
                 m.receive(reply)
+            cycle = m.cycle
             m.end_cycle()
+            if tap_cycle is not None:
+                tap_cycle(cycle, tick, frames, replies)
             if n_rows:
                 rows[k % n_rows] = np.frombuffer(m.input_image(), dtype=np.uint8)
         first = cycles - n_rows

@@ -5,6 +5,7 @@ See ``docs/framelog.md``. Writing: :class:`FrameLogWriter`; reading: :class:`Fra
 ``eha-hil log info|export``: :mod:`hil.cli.log`.
 """
 
+from firmware_model import jit_cache  # noqa: F401  (before any kernel is defined)
 from hil.framelog.formats import LEVELS, level_includes, lvds_topic, sensor_topic, signal_topic
 from hil.framelog.reader import Blocks, ChannelInfo, FrameLogError, FrameLogReader, LogInfo
 from hil.framelog.writer import FrameLogWriter

@@ -60,14 +60,34 @@ def supported(w: Writer) -> bool:
             and callable(getattr(w, "_Writer__maybe_finalize_chunk", None)))
 
 
+class Interleaved:
+    """Messages whose lengths repeat with a period ``p``: message ``i`` is row ``i // p`` of
+    ``parts[i % p]`` (each an (m, size_r) uint8 array), e.g. a bus cycle's request and
+    reply. :func:`add_messages` builds their records as one array, with no bytes object
+    per message (:func:`hil.framelog.rawpb.wrap_periodic` makes them)."""
+
+    def __init__(self, parts: list[np.ndarray]) -> None:
+        self.parts = parts
+
+    def __len__(self) -> int:
+        return len(self.parts) * len(self.parts[0])
+
+    def __getitem__(self, i: int) -> bytes:
+        p = len(self.parts)
+        return self.parts[i % p][i // p].tobytes()
+
+
 def add_messages(w: Writer, channel_id: int, times: Sequence[int] | np.ndarray,
-                 data: Sequence[bytes] | np.ndarray, seq0: int, fast: bool = True) -> None:
+                 data: Sequence[bytes] | np.ndarray | Interleaved, seq0: int,
+                 fast: bool = True) -> None:
     """Messages ``data[i]`` at log and publish time ``times[i]``, sequence ``seq0 + i``
     (mod 2^32), on ``channel_id``; as ``add_message`` for each, in one go. ``data`` may be
-    a (n, size) uint8 array (messages of one length)."""
+    a (n, size) uint8 array (messages of one length) or :class:`Interleaved`."""
     n = len(data)
     if not n:
         return
+    if isinstance(data, Interleaved) and not fast:
+        data = [data[i] for i in range(n)]
     if isinstance(data, np.ndarray):
         if not fast:
             data = [bytes(d) for d in data]
@@ -99,6 +119,13 @@ def add_messages(w: Writer, channel_id: int, times: Sequence[int] | np.ndarray,
         index = cb.message_indices[channel_id] = _MessageIndex(
             channel_id=channel_id, records=list(index.records) if index else [])
     base = cb.record_writer.count
+    if isinstance(data, Interleaved):
+        blob, offsets = _interleaved(data, channel_id, times, seq0, base)
+        index.records.append(offsets)
+        cb.num_messages += n
+        cb.record_writer._buffer.write(blob)  # noqa: SLF001
+        w._Writer__maybe_finalize_chunk()  # noqa: SLF001
+        return
     size = len(data[0])
     if isinstance(data, np.ndarray) or all(len(d) == size for d in data):
         rec = np.zeros(n, np.dtype([("op", "u1"), ("len", "<u8"), ("ch", "<u2"), ("seq", "<u4"),
@@ -140,6 +167,37 @@ def add_messages(w: Writer, channel_id: int, times: Sequence[int] | np.ndarray,
     cb.num_messages += n
     cb.record_writer._buffer.write(blob)  # noqa: SLF001
     w._Writer__maybe_finalize_chunk()  # noqa: SLF001
+
+
+def _interleaved(data: Interleaved, channel_id: int, times: np.ndarray, seq0: int,
+                 base: int) -> tuple[memoryview, np.ndarray]:
+    """The records of :class:`Interleaved` messages as one array (a row: one period of
+    records, each head then its message) and their index entries (time, offset from
+    ``base``), in message order."""
+    p, m = len(data.parts), len(data.parts[0])
+    fields: list[tuple] = []
+    for r, part in enumerate(data.parts):
+        fields += [(f"{name}{r}", *spec) for name, *spec in HEAD_FIELDS]
+        fields.append((f"data{r}", "u1", (part.shape[1],)))
+    dt = np.dtype(fields)
+    rec = np.empty(m, dt)
+    t = times.reshape(m, p)
+    seq = (np.arange(m, dtype=np.int64) * p + seq0) & 0xFFFFFFFF
+    within = np.empty(p, np.uint64)
+    for r, part in enumerate(data.parts):
+        rec[f"op{r}"] = Opcode.MESSAGE
+        rec[f"len{r}"] = _HEAD.size - 9 + part.shape[1]
+        rec[f"ch{r}"] = channel_id
+        rec[f"seq{r}"] = (seq + r) & 0xFFFFFFFF
+        rec[f"log{r}"] = t[:, r]
+        rec[f"pub{r}"] = t[:, r]
+        rec[f"data{r}"] = part
+        within[r] = dt.fields[f"op{r}"][1]
+    offsets = np.empty((m, p, 2), np.uint64)
+    offsets[:, :, 0] = t
+    offsets[:, :, 1] = (np.uint64(base) + np.arange(m, dtype=np.uint64)[:, None]
+                        * np.uint64(dt.itemsize) + within)
+    return memoryview(rec.view(np.uint8)), offsets.reshape(m * p, 2)
 
 
 #: The MCAP Message record's head as numpy fields: what :func:`add_records` fills in

@@ -12,8 +12,10 @@ is then decoded by columns, not frame by frame:
   the stock protobuf runtime message by message;
 * the rest (EtherCAT frames of varying length, JSON): the channel's per-frame decoder.
 
-Each column is an int64 or float64 array with a validity mask (a frame may lack a field:
-an EtherCAT frame with fewer datagrams, a frame that failed to decode).
+Each column is an int64, float64 or float32 array with a validity mask (a frame may lack
+a field: an EtherCAT frame with fewer datagrams, a frame that failed to decode). float32
+stays float32 (a protobuf ``float`` field, a layout's ``f32``): the export writes it as
+such (Parquet ``float``, CSV the shortest text that reads back to the same float32).
 """
 
 from __future__ import annotations
@@ -119,9 +121,16 @@ def _protobuf_fast(ch: ChannelInfo, payloads: list[memoryview]) -> dict[str, np.
     out = {}
     for name, is_bool in rec.fields:
         v = a[name]
-        out[name] = (v != 0).astype(np.int64) if is_bool else \
-            (v.astype(np.float64) if v.dtype.kind == "f" else v.astype(np.int64))
+        out[name] = (v != 0).astype(np.int64) if is_bool else v.astype(_wide(v.dtype))
     return out
+
+
+def _wide(dt: np.dtype) -> type:
+    """The column type of values of type ``dt``: float32 and float64 as they are, other
+    floats as float64, integers as int64."""
+    if dt.kind == "f":
+        return np.float32 if dt == np.float32 else np.float64
+    return np.int64
 
 
 def _from_dicts(rows: list[dict[str, object]]) -> tuple[dict[str, np.ndarray],
@@ -147,7 +156,7 @@ def _dense(cols: dict[str, np.ndarray]) -> tuple[dict[str, np.ndarray],
     out = {}
     for k, v in cols.items():
         v = np.asarray(v)
-        out[k] = v.astype(np.float64 if v.dtype.kind == "f" else np.int64, copy=False)
+        out[k] = v.astype(_wide(v.dtype), copy=False)
     return out, dict.fromkeys(out)
 
 

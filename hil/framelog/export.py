@@ -159,14 +159,15 @@ def _parquet_batches(plan: Plan, win: Window, schema, topics,  # noqa: ANN001, A
         bitmaps: dict[tuple[int, ...], tuple[object, int]] = {}
         for j, name in enumerate(plan.columns):
             have = tuple(i for i in by_col.get(name, ()) if len(pos[i]))
-            floating = name in plan.floats
-            typ = pa.float64() if floating else pa.int64()
+            floating, single = name in plan.floats, name in plan.singles
+            typ = _arrow_type(plan, name)
             if not have:
                 arrays.append(pa.nulls(m, typ))
                 continue
             # a row of the scratch buffer: the writer has encoded the last slice when
             # this one is filled; what stays under a null is never read
-            vals = scratch[j, :m].view(np.float64) if floating else scratch[j, :m]
+            vals = scratch[j].view(np.float32)[:m] if single else \
+                scratch[j, :m].view(np.float64) if floating else scratch[j, :m]
             own = any(win.groups[i].valid[name] is not None for i in have)
             ok = np.zeros(m, bool) if own else None
             for i in have:
@@ -193,6 +194,14 @@ def _parquet_batches(plan: Plan, win: Window, schema, topics,  # noqa: ANN001, A
                         err[k] = g.errors[j]
             arrays.append(pa.array(err, pa.string()))
         yield pa.RecordBatch.from_arrays(arrays, schema=schema)
+
+
+def _arrow_type(plan: Plan, column: str):  # noqa: ANN202 - a pyarrow type
+    """The Parquet type of an export column: float32, float64 or int64 (:class:`Plan`)."""
+    import pyarrow as pa
+
+    return pa.float32() if column in plan.singles else \
+        pa.float64() if column in plan.floats else pa.int64()
 
 
 def _bitmap(ok: np.ndarray) -> tuple[object, int]:
@@ -290,8 +299,9 @@ def export_parquet(log_path: str | os.PathLike[str], out_path: str | os.PathLike
                    fields: Sequence[str] | None = None, info: LogInfo | None = None,
                    summary: list[LogInfo] | None = None) -> int:
     """As :func:`export_csv`, to a Parquet file (pyarrow): columns ``t_ns`` (int64, exact),
-    ``t_s`` (float64), ``topic`` (dictionary), then one per field (int64 or float64, null
-    where a frame has no such field); each field's unit in its column metadata (``unit``),
+    ``t_s`` (float64), ``topic`` (dictionary), then one per field (int64, float64, or
+    float32 where every channel with the field stores it as float32; null where a frame
+    has no such field); each field's unit in its column metadata (``unit``),
     the log's path in the file metadata (``eha-hil.source``). One row group per slice of
     rows; Snappy-compressed pages, dictionary encoding for ``topic`` only (the fields' values
     rarely repeat enough to pay for it), statistics for the time and topic columns only
@@ -308,7 +318,7 @@ def export_parquet(log_path: str | os.PathLike[str], out_path: str | os.PathLike
                    pa.field("t_s", pa.float64(), metadata={"unit": "s"}),
                    pa.field("topic", pa.dictionary(pa.int32(), pa.string()))]
         for c in plan.columns:
-            fields_.append(pa.field(c, pa.float64() if c in plan.floats else pa.int64(),
+            fields_.append(pa.field(c, _arrow_type(plan, c),
                                     metadata={"unit": plan.units[c]} if c in plan.units
                                     else None))
         if plan.errors:

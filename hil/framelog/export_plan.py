@@ -92,7 +92,7 @@ class Plan:
                 units[topic] = c.units
                 kinds = cols.setdefault(topic, {})
                 for k, v in c.columns.items():
-                    kinds[k] = "f" if v.dtype.kind == "f" or kinds.get(k) == "f" else "i"
+                    kinds[k] = _merge(kinds.get(k), column_kind(v))
                     ok = c.valid[k]
                     if c.n and (ok is None or ok.any()):
                         present.add(k)
@@ -113,7 +113,7 @@ class Plan:
             if not ch.frame_count:  # its columns all the same (a block channel's decoder)
                 c = self.decode(topic, _empty(ch))
                 units[topic] = c.units
-                cols[topic] = {k: v.dtype.kind for k, v in c.columns.items()}
+                cols[topic] = {k: column_kind(v) for k, v in c.columns.items()}
         if self.fields:
             missing = [f for f in self.fields if f not in present]
             if missing:
@@ -123,14 +123,16 @@ class Plan:
         order = sorted(self.infos, key=lambda t: first.get(t, _NONE))
         names: dict[str, None] = {}
         self.units: dict[str, str] = {}
-        self.floats: set[str] = set()
+        kind_of: dict[str, str] = {}
         for t in order:
             for k, kind in cols[t].items():
                 names.setdefault(k, None)
                 if k in units[t]:
                     self.units.setdefault(k, units[t][k])
-                if kind == "f":
-                    self.floats.add(k)
+                kind_of[k] = _merge(kind_of.get(k), kind)
+        #: the float columns; of those, the ones every channel gives as float32
+        self.floats = {k for k, kind in kind_of.items() if kind != "i"}
+        self.singles = {k for k, kind in kind_of.items() if kind == "f4"}
         self.columns = list(self.fields) if self.fields else list(names)
         self.where = {k: j for j, k in enumerate(self.columns)}
         self.errors = errors
@@ -142,7 +144,7 @@ class Plan:
         key are written as one group (a fixed channel's is made once)."""
         key = self._keys.get(c.topic) if c.fixed else None
         if key is None:
-            key = tuple(sorted((self.where[k], v.dtype.kind) for k, v in c.columns.items()))
+            key = tuple(sorted((self.where[k], column_kind(v)) for k, v in c.columns.items()))
             if c.fixed:
                 self._keys[c.topic] = key
         return key
@@ -229,7 +231,9 @@ class Plan:
 
     def _check_planned(self, c: Columns) -> None:
         for k, v in c.columns.items():
-            if k not in self.where or (v.dtype.kind == "f" and k not in self.floats):
+            kind = column_kind(v)
+            if k not in self.where or (kind != "i" and k not in self.floats) or (
+                    kind == "f" and k in self.singles):
                 raise Replan(f"{c.topic}: column {k!r} not planned")
         if c.errors is not None and not self.errors:
             raise Replan(f"{c.topic}: decode errors not planned")
@@ -262,6 +266,19 @@ class Plan:
         if not frames:
             return None
         return Window(self, out, frames)
+
+
+def column_kind(v: np.ndarray) -> str:
+    """A decoded column's kind: ``f4`` float32, ``f`` float64, ``i`` int64."""
+    return ("f4" if v.dtype == np.float32 else "f") if v.dtype.kind == "f" else "i"
+
+
+def _merge(a: str | None, b: str) -> str:
+    """The kind of a column two channels give as kinds ``a`` (None: not yet) and ``b``:
+    float32 only if both are (int64 and float32 together: float64, which holds both)."""
+    if a is None or a == b:
+        return b
+    return "f"
 
 
 def _raw_concat(parts: list[RawChannel]) -> RawChannel:

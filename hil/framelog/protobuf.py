@@ -2,16 +2,17 @@
 
 A decoded-signal channel carries one protobuf message per sample, so that Foxglove Studio,
 PlotJuggler and the MCAP libraries decode it with their stock protobuf support. Our
-messages hold only fixed-width scalars (``double``, ``fixed32``, ``fixed64``, ``sfixed64``,
-``bool``), each field written every time, in field-number order. The wire bytes of such a
-message have the same layout in every sample: per field a constant key (field number and
-wire type, a varint), then the value in 1, 4 or 8 bytes, little endian. So a whole block
-of samples is one numpy structured array whose ``tobytes()`` is the concatenated messages:
-no per-sample Python, which is what keeps logging at 5 kHz per actuator cheap
-(``hil.framelog.signal_bench`` measures it against JSON). Any protobuf parser reads these
-bytes (writing a field although it holds its default value is legal protobuf; a parser
-keeps the last occurrence); the schema is a ``FileDescriptorSet`` built with the protobuf
-runtime's own descriptor classes, so no ``protoc`` step and no generated code.
+messages hold only fixed-width scalars (``double``, ``float``, ``fixed32``, ``fixed64``,
+``sfixed64``, ``bool``), each field written every time, in field-number order. The wire
+bytes of such a message have the same layout in every sample: per field a constant key
+(field number and wire type, a varint), then the value in 1, 4 or 8 bytes, little endian.
+So a whole block of samples is one numpy structured array whose ``tobytes()`` is the
+concatenated messages: no per-sample Python, which is what keeps logging at 5 kHz per
+actuator cheap (``hil.framelog.signal_bench`` measures it against JSON). Any protobuf
+parser reads these bytes (writing a field although it holds its default value is legal
+protobuf; a parser keeps the last occurrence); the schema is a ``FileDescriptorSet`` built
+with the protobuf runtime's own descriptor classes, so no ``protoc`` step and no generated
+code.
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ from google.protobuf import descriptor_pb2
 #: Scalar kind -> (wire type, numpy dtype of the value, descriptor field type, JSON type).
 KINDS: dict[str, tuple[int, str, int, str]] = {
     "double": (1, "<f8", descriptor_pb2.FieldDescriptorProto.TYPE_DOUBLE, "number"),
+    "float": (5, "<f4", descriptor_pb2.FieldDescriptorProto.TYPE_FLOAT, "number"),
     "fixed64": (1, "<u8", descriptor_pb2.FieldDescriptorProto.TYPE_FIXED64, "integer"),
     "sfixed64": (1, "<i8", descriptor_pb2.FieldDescriptorProto.TYPE_SFIXED64, "integer"),
     "fixed32": (5, "<u4", descriptor_pb2.FieldDescriptorProto.TYPE_FIXED32, "integer"),
@@ -116,7 +118,8 @@ class MessageType:
 
     def encode(self, columns: Mapping[str, np.ndarray], n: int) -> list[bytes]:
         """``n`` messages from ``columns`` (field -> (n,) array, or a scalar for all);
-        a missing field is written as 0. Floats are stored as they come (NaN included)."""
+        a missing field is written as 0. Floats are stored as they come (NaN included),
+        a ``float`` field's value rounded to the nearest float32 (numpy's cast)."""
         buf = self.encode_array(columns, n).tobytes()
         s = self.size
         return [buf[i:i + s] for i in range(0, n * s, s)]

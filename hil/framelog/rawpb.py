@@ -35,8 +35,10 @@ length-delimited or fixed fields: no per-frame Python); any protobuf runtime rea
 
 from __future__ import annotations
 
+import functools
 import re
 import struct
+import threading
 import zlib
 from collections.abc import Callable
 
@@ -57,7 +59,8 @@ _BLOCK_TYPES = {"t_ns": (1, _FD.TYPE_SFIXED64, True), "frames": (2, _FD.TYPE_BYT
                 "count": (3, _FD.TYPE_FIXED32, False), "width": (4, _FD.TYPE_FIXED32, False),
                 "dtype": (5, _FD.TYPE_STRING, False), "t0_ns": (6, _FD.TYPE_SFIXED64, False),
                 "dt_ns": (7, _FD.TYPE_SFIXED64, False),
-                "byte_planes": (8, _FD.TYPE_BOOL, False)}
+                "byte_planes": (8, _FD.TYPE_BOOL, False),
+                "frame_deltas": (9, _FD.TYPE_BYTES, False)}
 _T_NS = np.dtype("<i8")
 
 
@@ -117,64 +120,154 @@ def even_spacing(t_ns: np.ndarray) -> int | None:
 
 def pack_blocks(t_ns: np.ndarray, frames: np.ndarray, dtype: np.dtype,
                 head: list[tuple] = (), byte_planes: bool = True,
-                alloc: Callable[[np.dtype, int], np.ndarray] | None = None) -> np.ndarray:
+                alloc: Callable[[np.dtype, int], np.ndarray] | None = None,
+                deltas: bool = True) -> np.ndarray:
     """The block messages of ``k`` channels at once, frames ``(k, count, width)`` at the
     same times ``t_ns`` (count,): a (k,) structured array whose row ``i`` holds, after
     the fields ``head`` (left 0, e.g. :data:`hil.framelog.batch.HEAD_FIELDS`), the block
-    message of ``frames[i]`` (one copy of the frames, no bytes object): ``t0_ns`` and
-    ``dt_ns`` if the times are evenly spaced, else ``t_ns``; the frames as byte planes
-    (``byte_planes`` False: row by row, as logs before wrote them). ``alloc(dtype, k)``
-    gives the array to fill (every byte is written; default a new one)."""
+    message of ``frames[i]`` (one pass over the frames, no bytes object): ``t0_ns`` and
+    ``dt_ns`` if the times are evenly spaced, else ``t_ns``; the frames as the byte planes
+    of their zigzag-coded differences in ``frame_deltas`` (:func:`zigzag_deltas`; ``deltas``
+    False: the frames' own byte planes in ``frames``, and ``byte_planes`` False as well:
+    row by row, as logs before wrote them). ``alloc(dtype, k)`` gives the array to fill
+    (every byte is written; default a new one)."""
     k, count, width = frames.shape
     dt = np.dtype(dtype).newbyteorder("<")
     name = np.dtype(dtype).name.encode()
     size = count * width * dt.itemsize
-    fl, nl = _varint(size), _varint(len(name))
     t = np.asarray(t_ns, dtype=_T_NS)
     step = even_spacing(t) if count else None
+    deltas = deltas and byte_planes
+    # everything but the frames is the same bytes in every channel's message: built once
+    pre = [b"\x1d", struct.pack("<I", count), b"\x25", struct.pack("<I", width),
+           b"\x2a", _varint(len(name)), name]
     if step is None:
-        tl = _varint(8 * count)
-        times = [("k1", "u1"), ("tl", "u1", (len(tl),)), ("t", _T_NS, (count,))]
+        pre += [b"\x0a", _varint(8 * count), t.astype("<i8", copy=False).tobytes()]
     else:
-        times = [("k6", "u1"), ("t0", _T_NS), ("k7", "u1"), ("dt", _T_NS)]
-    planes = [("k8", "u1"), ("planes", "u1")] if byte_planes else []
-    layout = np.dtype([*head, ("k3", "u1"), ("count", "<u4"), ("k4", "u1"), ("width", "<u4"),
-                       ("k5", "u1"), ("nl", "u1", (len(nl),)), ("name", "u1", (len(name),)),
-                       *times, *planes, ("k2", "u1"), ("fl", "u1", (len(fl),)),
-                       ("f", "u1", (size,))])
+        pre += [b"\x31", struct.pack("<q", int(t[0])), b"\x39", struct.pack("<q", step)]
+    if byte_planes:
+        pre.append(b"\x40\x01")
+    # field 9 (frame_deltas) or 2 (frames), length-delimited
+    pre += [b"\x4a" if deltas else b"\x12", _varint(size)]
+    prefix = b"".join(pre)
+    layout = _layout(tuple(head), len(prefix), size)
     rec = np.zeros(k, layout) if alloc is None else alloc(layout, k)
-    rec["k3"], rec["count"], rec["k4"], rec["width"] = 0x1D, count, 0x25, width
-    rec["k5"], rec["nl"], rec["name"] = 0x2A, np.frombuffer(nl, np.uint8), np.frombuffer(
-        name, np.uint8)
-    if step is None:
-        rec["k1"], rec["tl"], rec["t"] = 0x0A, np.frombuffer(tl, np.uint8), t
-    else:
-        rec["k6"], rec["t0"], rec["k7"], rec["dt"] = 0x31, t[0], 0x39, step
-    rec["k2"], rec["fl"] = 0x12, np.frombuffer(fl, np.uint8)
+    rec["pre"] = np.frombuffer(prefix, np.uint8)
     f = np.asarray(frames, dtype=dt)
     if f.strides[-1] != dt.itemsize:  # the byte views below need whole elements in a row
         f = np.ascontiguousarray(f)
     if byte_planes:
-        _planes(f, rec["f"].reshape(k, dt.itemsize, width, count))
-        rec["k8"], rec["planes"] = 0x40, 1
+        _planes(f, rec["f"].reshape(k, dt.itemsize, width, count), deltas)
     else:
         rec["f"] = f.reshape(k, count * width).view(np.uint8)
     return rec
 
 
-def _planes(frames: np.ndarray, out: np.ndarray) -> None:
+def warm_up() -> None:
+    """Compile (or load from numba's cache) the byte-plane pass for every element size,
+    with the frames contiguous or a view of a larger array (the engine's taps), into a
+    record's field (strided), as logs call it (``python -m hil.sim.warmup``)."""
+    from hil.framelog.planes import split
+
+    for size in (1, 2, 4, 8):
+        frames = np.zeros((2, 3, 4), f"<i{size}")
+        out = np.zeros((2, size + 1, 4, 3), np.uint8)[:, :size]
+        for f in (frames, frames[:, :2]):
+            split(f, out[..., :f.shape[1]], True)
+
+
+@functools.lru_cache(maxsize=64)
+def _layout(head: tuple, prefix: int, size: int) -> np.dtype:
+    """A block record: the fields ``head``, the message's ``prefix`` bytes (every field but
+    the frames), the ``size`` bytes of frames."""
+    return np.dtype([*head, ("pre", "u1", (prefix,)), ("f", "u1", (size,))])
+
+
+def _planes(frames: np.ndarray, out: np.ndarray, deltas: bool) -> None:
     """``out[i, b, j, n]`` = byte ``b`` (little endian) of element ``j`` of frame ``n`` of
-    ``frames[i]`` ((k, count, width)): the frames transposed to columns (whole elements)
-    in a copy, then each byte split off by shifts (faster than gathering single bytes)."""
-    size = frames.dtype.itemsize
-    if size == 1:
-        out[:, 0] = frames.view(np.uint8).transpose(0, 2, 1)
+    ``frames[i]`` ((k, count, width)), or of its zigzag-coded difference to frame ``n - 1``
+    (``deltas``, :func:`zigzag_deltas`): one compiled pass (:func:`hil.framelog.planes.split`)
+    for blocks worth it, else :func:`_planes_numpy`."""
+    if frames.size >= _COMPILED_FROM:
+        from hil.framelog.planes import split  # numba: imported when first needed
+
+        size = frames.dtype.itemsize
+        split(frames.view(f"<i{size}"), out, deltas)
         return
-    cols = frames.transpose(0, 2, 1).copy().view(f"<u{size}")  # a copy: shifted below
-    for b in range(size):
-        np.copyto(out[:, b], cols, casting="unsafe")  # the low byte
-        if b + 1 < size:
-            np.right_shift(cols, 8, out=cols)
+    _planes_numpy(frames, out, deltas)
+
+
+#: Elements from which a block's planes are made by the compiled pass (below: numpy,
+#: which costs less than the call into numba for a few frames).
+_COMPILED_FROM = 4096
+
+
+def _planes_numpy(frames: np.ndarray, out: np.ndarray, deltas: bool) -> None:
+    """:func:`_planes` in numpy (the reference): the columns transposed once into a work
+    array, then each byte split off by a shift (faster than gathering single bytes). The
+    work arrays are kept per thread (:func:`_work`): fresh ones of a few MB per call cost
+    page faults that the copies themselves do not."""
+    size = frames.dtype.itemsize
+    u = np.dtype(f"<u{size}")
+    k, count, width = frames.shape
+    if size == 1 and not deltas:
+        out[:, 0] = frames.transpose(0, 2, 1)
+        return
+    cols = _work(0, (k, width, count), u)
+    np.copyto(cols, frames.view(u).transpose(0, 2, 1))
+    if deltas:
+        cols = zigzag_deltas(cols, out=_work(1, (k, width, count), u))
+    if size == 1:
+        out[:, 0] = cols
+        return
+    np.copyto(out[:, 0], cols, casting="unsafe")  # the low byte
+    for b in range(1, size):
+        np.right_shift(cols, 8 * b, out=out[:, b], casting="unsafe")
+
+
+_WORK = threading.local()
+
+
+def _work(slot: int, shape: tuple[int, ...], dtype: np.dtype) -> np.ndarray:
+    """A work array of ``shape`` and ``dtype`` (content undefined) in this thread's buffer
+    ``slot``, grown when too small and kept."""
+    bufs = _WORK.__dict__.setdefault("bufs", {})
+    n = int(np.prod(shape)) * dtype.itemsize
+    buf = bufs.get(slot)
+    if buf is None or len(buf) < n:
+        buf = bufs[slot] = np.empty(max(n, 1 << 16), np.uint8)
+    return buf[:n].view(dtype).reshape(shape)
+
+
+def zigzag_deltas(x: np.ndarray, axis: int = -1, out: np.ndarray | None = None
+                  ) -> np.ndarray:
+    """``x`` (unsigned integers) as the zigzag code of each element's difference to the
+    one before it along ``axis`` (the first: to 0), a new array of ``x``'s dtype:
+    ``d = x[n] - x[n - 1]`` modulo 2^bits, read as signed, coded ``(d << 1) ^ (d >> (bits
+    - 1))``, so that small changes either way are small numbers (a sensor word's noise
+    leaves its high byte 0). :func:`undo_zigzag_deltas` inverts it exactly. ``out``: the
+    array to write them to (not ``x``); ``x`` is then used as work space and overwritten."""
+    ax = axis % x.ndim
+    first = (slice(None),) * ax + (slice(None, 1),)
+    later = (slice(None),) * ax + (slice(1, None),)
+    before = (slice(None),) * ax + (slice(None, -1),)
+    d = np.empty(x.shape, x.dtype) if out is None else out
+    d[first] = x[first]
+    np.subtract(x[later], x[before], out=d[later])
+    signed = f"i{x.dtype.itemsize}"
+    sign = np.right_shift(d.view(signed), 8 * x.dtype.itemsize - 1,
+                          out=None if out is None else x.view(signed))
+    np.left_shift(d, 1, out=d)
+    np.bitwise_xor(d, sign.view(d.dtype), out=d)
+    return d
+
+
+def undo_zigzag_deltas(z: np.ndarray, axis: int = 0) -> np.ndarray:
+    """The values whose :func:`zigzag_deltas` along ``axis`` are ``z`` (unsigned): the
+    differences ``(z >> 1) ^ -(z & 1)`` summed up modulo 2^bits."""
+    d = np.right_shift(z, 1)
+    d ^= np.negative(z & 1)  # unsigned: 0 or all ones
+    return np.cumsum(d, axis=axis, dtype=z.dtype)
 
 
 def _read_varint(mv: memoryview, p: int, n: int, what: str) -> tuple[int, int]:
@@ -237,7 +330,11 @@ def unpack_block(data: memoryview | bytes) -> tuple[np.ndarray, np.ndarray]:
     ``dt_ns``; ValueError if a field is missing or the sizes disagree."""
     f = _fields(data)
     count, width, dname = f.get(3), f.get(4), f.get(5)
-    times, frames = f.get(1, b""), f.get(2, b"")
+    times, frames = f.get(1, b""), f.get(9, f.get(2, b""))
+    if 9 in f and len(f.get(2, b"")):  # type: ignore[arg-type]
+        raise ValueError("block message has both frames and frame_deltas")
+    if not isinstance(frames, memoryview | bytes) or not isinstance(times, memoryview | bytes):
+        raise ValueError("block frames or times are not length-delimited")
     if not isinstance(count, int) or not isinstance(width, int) or \
             not isinstance(dname, memoryview):
         raise ValueError("block message lacks count, width or dtype")
@@ -254,6 +351,11 @@ def unpack_block(data: memoryview | bytes) -> tuple[np.ndarray, np.ndarray]:
     else:
         t0, step = (_signed64(f.get(n, 0)) for n in (6, 7))
         t = t0 + step * np.arange(count, dtype=np.int64)
+    if 9 in f:  # zigzag-coded differences of consecutive frames, as byte planes
+        u = np.dtype(f"<u{dt.itemsize}")
+        fr = np.frombuffer(f[9], np.uint8).reshape(dt.itemsize, width, count)
+        z = np.ascontiguousarray(fr.transpose(2, 1, 0)).view(u).reshape(count, width)
+        return t, undo_zigzag_deltas(z).view(dt)
     if f.get(8):
         fr = np.frombuffer(frames, np.uint8).reshape(dt.itemsize, width, count)
         return t, np.ascontiguousarray(fr.transpose(2, 1, 0)).view(dt).reshape(count, width)
@@ -329,6 +431,34 @@ def wrap_many(encoding: str, frames: list[bytes]) -> list[bytes] | np.ndarray:
             for j, i in enumerate(idx):
                 out[i] = blob[j * size:(j + 1) * size]
     return out
+
+
+def wrap_periodic(encoding: str, frames: list[bytes]) -> list[np.ndarray] | None:
+    """The messages of ``frames`` (as :func:`wrapper` makes each) when their lengths
+    repeat with a period ``p`` of at most 8 (a bus run's cycles: the same requests and
+    replies each cycle) and the encoding has a vectorised header: ``p`` arrays, array ``r``
+    holding the messages of frames ``r, r + p, ...`` ((n / p, size_r) uint8); None if
+    not (then :func:`wrap_many`)."""
+    many = _MANY.get(encoding)
+    n = len(frames)
+    if many is None or n < 2:
+        return None
+    lens = np.fromiter(map(len, frames), np.int64, n)
+    for p in range(1, min(8, n) + 1):
+        if n % p == 0 and bool((lens.reshape(-1, p) == lens[:p]).all()):
+            break
+    else:
+        return None
+    rows = np.frombuffer(b"".join(frames), np.uint8).reshape(n // p, -1)
+    parts: list[np.ndarray] = []
+    at = 0
+    for r in range(p):
+        got = many(rows[:, at:at + int(lens[r])])
+        if got is None:
+            return None
+        parts.append(got)
+        at += int(lens[r])
+    return parts
 
 
 def unwrap(data: memoryview | bytes) -> memoryview:
@@ -415,7 +545,10 @@ def _ethercat_fcs_many(frames: np.ndarray) -> np.ndarray | None:
     if used and not bool((frames[:, used] == frames[0, used]).all()):
         return None
     pdu = frames[:, :-4]
-    crc = np.fromiter((zlib.crc32(r) for r in pdu), np.uint32, k)
+    flat = memoryview(np.ascontiguousarray(pdu)).cast("B")  # slices below: no copies
+    n_pdu = size - 4
+    crc = np.fromiter((zlib.crc32(flat[i:i + n_pdu]) for i in range(0, k * n_pdu, n_pdu)),
+                      np.uint32, k)
     fcs_ok = crc == np.ascontiguousarray(frames[:, -4:]).view("<u4")[:, 0]
     n = len(dgs)
 

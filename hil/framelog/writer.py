@@ -572,7 +572,10 @@ class FrameLogWriter:
             raise ValueError(f"{ch.topic}: message times must be >= 0 and non-decreasing")
         self._advance(ch, int(times[0]), int(times[-1]))
         if ch.wrap is not None:
-            messages = rawpb.wrap_many(ch.encoding, [bytes(m) for m in messages])
+            frames = [bytes(m) for m in messages]
+            parts = rawpb.wrap_periodic(ch.encoding, frames)
+            messages = (batch.Interleaved(parts) if parts is not None
+                        else rawpb.wrap_many(ch.encoding, frames))
         batch.add_messages(self._writer, channel_id, times, messages, ch.count, self._fast)
         ch.count += len(messages)
 

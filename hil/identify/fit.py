@@ -48,7 +48,7 @@ BASELINE_FREE: dict[str, tuple[str, ...]] = {
     "conrod": ("gain_n_per_a", "ds", "dp", "dc", "ks", "k_rod", "c_rod"),
 }
 LOG_PARAMS = frozenset({"gain_n_per_a", "ds", "dp", "dc", "ks", "jp", "jc", "k_rod", "c_rod",
-                        "pc_eps_m_per_s", "sf_vs_m_per_s"})
+                        "pc_eps_m_per_s", "sf_vs_m_per_s", "sf_eps_m_per_s"})
 #: Parameters with a physical sign and size whose confidence interval must not swallow
 #: their value (the pulsation's sine/cosine parts, offsets and the skew may sit near zero).
 CREDIBLE = LOG_PARAMS | {"pc_force_n", "sf_coulomb_n", "sf_static_n", "visc_coeff_per_c",
@@ -218,10 +218,14 @@ class OutputErrorFit:
             def column(i: int) -> np.ndarray:
                 xx = x.copy()
                 xx[i] += steps[i]
+                theta = self._to_theta(xx, free, theta0)
                 # an offset, a drift, a lag, a clip: the same states, new outputs
-                z = z0 if free[i] in OUTPUT_ONLY else None
-                return (self._stack(self._to_theta(xx, free, theta0), sigma, mask, z)
-                        - r0) / steps[i]
+                if free[i] in OUTPUT_ONLY:
+                    z = z0
+                else:
+                    self.n_sims += 1
+                    z = self.model.states(theta, n_stop, keep=False)
+                return (self._stack(theta, sigma, mask, z) - r0) / steps[i]
 
             # one row per column, then one transposing copy: writing each column into
             # the (rows x columns) array strides across all of it once per column

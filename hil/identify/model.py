@@ -13,9 +13,11 @@ exactly (zero-order hold, matrix exponential) over ``n_sub`` sub-steps per sampl
 stiff modes (leakage ``k_s/d_s``, the piston on ``k_s`` near 1.4 kHz) cost nothing in
 accuracy. The effect terms enter through ``f_pump``, ``q_rate``, ``f_piston``, evaluated
 from the state at the start of each sub-step; the Coulomb frictions are solved implicitly
-for the end-of-sub-step velocity (a scalar root per friction), so a small regularisation
-velocity does not chatter. Output-side effects (strain drift, sensor saturation) and the
-input delay act outside the loop.
+(a scalar root per friction), so a small regularisation velocity does not chatter: the
+pump's for the end-of-sub-step velocity, the seal's for the mid-sub-step one (second order:
+a piston held by a stiff rod lives in the seal's stuck zone, where the law is a damper whose
+time constant is a fraction of the sub-step). Output-side effects (strain drift, sensor
+saturation) and the input delay act outside the loop.
 
 Parameters live in one flat vector addressed by :data:`PARAM_NAMES`; all effect parameters
 at zero is the linear model.
@@ -56,6 +58,7 @@ SAT_PRESSURE = "sat_pressure"
 EFFECT_NAMES = _PULS + (
     "pc_force_n", "sf_coulomb_n", "sf_static_n", "ks_k1", "ks_k2", "visc_coeff_per_c",
     "drift_n_per_c", "delay_s", "pc_eps_m_per_s", "sf_vs_m_per_s", "pc_shape", "sf_shape",
+    "sf_eps_m_per_s",
 ) + tuple(f"sat_{c}" for c in SAT_CHANNELS) + (SAT_PRESSURE,)
 PARAM_NAMES = BASE_NAMES + EFFECT_NAMES
 IDX = {name: i for i, name in enumerate(PARAM_NAMES)}
@@ -93,13 +96,29 @@ RUNS_BYTES = 64 << 20
 _T = TypeVar("_T")
 _R = TypeVar("_R")
 _POOL: ThreadPoolExecutor | None = None
+#: Threads :func:`map_threads` runs on; None: one per core, at most 8
+#: (:func:`set_threads`).
+_WORKERS: int | None = None
+
+
+def set_threads(workers: int | None) -> None:
+    """Run :func:`map_threads` on ``workers`` threads (1: in the calling thread), None: one
+    per core. The results do not depend on it (each item is computed alone); the CPU
+    time may (``eha-hil bench identify --threads``)."""
+    global _POOL, _WORKERS
+    if workers is not None and workers < 1:
+        raise ValueError(f"threads must be at least 1, not {workers}")
+    _WORKERS = workers
+    if _POOL is not None:
+        _POOL.shutdown()
+        _POOL = None
 
 
 def map_threads(fn: Callable[[_T], _R], items: Iterable[_T]) -> list[_R]:
     """``[fn(i) for i in items]`` on a thread per core (the simulation kernel drops the GIL)."""
     global _POOL
     items = list(items)
-    workers = min(os.cpu_count() or 1, 8)
+    workers = _WORKERS or min(os.cpu_count() or 1, 8)
     if workers < 2 or len(items) < 2:
         return [fn(i) for i in items]
     if _POOL is None:
@@ -271,7 +290,7 @@ def _solve_friction(v_free, b, level_c, level_s, vs, eps, w, f_start, tol_scale)
 
 @njit(cache=True, nogil=True, fastmath=_FAST)
 def _simulate(ad, bd, z0, tau_p, ks, ds, dp, dc, eff, angle, has_angle, xs, has_x, temp,
-              has_temp, t_ref, n_sub, fixed, out):
+              has_temp, t_ref, n_sub, fixed, out, adh, bdh):
     """Run the model over ``out.shape[0]`` samples; ``out[k]`` gets the state at sample ``k``.
 
     ``tau_p`` holds one value per sub-step; ``angle``, ``xs``, ``temp`` one per sample. The
@@ -279,6 +298,9 @@ def _simulate(ad, bd, z0, tau_p, ks, ds, dp, dc, eff, angle, has_angle, xs, has_
     angle with the first-order gain ``alpha`` per sample. With the piston fixed only the
     first three states move, and only they are propagated. The harmonics n = 1..8 of the
     rotor angle come from one sine and cosine by the angle-addition recurrence.
+
+    ``adh, bdh``: the linear part over half a sub-step, where the seal friction is solved
+    (implicit midpoint; the pump friction is solved at the sub-step's end).
     """
     n = out.shape[0]
     ns = 3 if fixed else 5
@@ -367,6 +389,7 @@ def _simulate(ad, bd, z0, tau_p, ks, ds, dp, dc, eff, angle, has_angle, xs, has_
                 for m in range(4):
                     acc += bd[i, m] * u[m]
                 zn[i] = acc
+            dq = 0.0
             if ksx_on:
                 # the stiffness term is a sizeable part of k_s acting at the piston's
                 # resonance: held from the sub-step's start it is a first-order step that
@@ -385,9 +408,23 @@ def _simulate(ad, bd, z0, tau_p, ks, ds, dp, dc, eff, angle, has_angle, xs, has_
                 for i in range(ns):
                     zn[i] -= bd[i, 1] * fp
             if sf_on:
+                # The seal's force held over the sub-step is its law's value at the
+                # sub-step's middle (implicit midpoint, second order), not at its end
+                # (implicit Euler, first order). With the piston held by a stiff rod its
+                # speed stays in the seal's stuck zone and Stribeck dip, where the law is a
+                # damper of F_s/eps (~2e4 N s/m on J_c ~0.3 kg: a time constant of a third
+                # of the sub-step), and the end value's lag there moved the piston's speed by
+                # a third of its rms against a fine-step solve of the same law.
+                vmid = -bdh[4, 1] * fp
+                for m in range(ns):
+                    vmid += adh[4, m] * z[m]
+                for m in range(4):
+                    vmid += bdh[4, m] * u[m]
+                if ksx_on:  # the Heun correction's rate grows linearly over the sub-step
+                    vmid += bdh[4, 2] * 0.5 * dq
                 f_start = 2.0 * fs - fs_prev
                 fs_prev = fs
-                vnew, fs = _solve_friction(zn[4], bd[4, 3], sf_c, sf_s, eff[_E_SF_VS],
+                vnew, fs = _solve_friction(vmid, bdh[4, 3], sf_c, sf_s, eff[_E_SF_VS],
                                            eff[_E_SF_EPS], eff[_E_SF_SHAPE], f_start,
                                            solve_tol)
                 for i in range(ns):
@@ -497,7 +534,7 @@ class FastModel:
         self.n_sub = n_sub
         self._iq_sub0 = np.repeat(exp.iq, n_sub)
         self._input_cache: dict[tuple[str, float], np.ndarray] = {}
-        self._disc_cache: dict[tuple[float, ...], tuple[np.ndarray, np.ndarray]] = {}
+        self._disc_cache: dict[tuple[float, ...], tuple[np.ndarray, ...]] = {}
         self._empty = np.zeros(1)
         # the last few simulations, by parameter vector: a fit simulates the same vector
         # again (the weights' residual after a pass, then the step on all samples starting
@@ -528,11 +565,14 @@ class FastModel:
             self._input_cache[key] = hit
         return hit
 
-    def states(self, theta: np.ndarray, n_stop: int | None = None) -> np.ndarray:
+    def states(self, theta: np.ndarray, n_stop: int | None = None, keep: bool = True
+               ) -> np.ndarray:
         """State trajectory (n x 5) for the parameter vector ``theta``, read-only; with
         ``n_stop`` only the first ``n_stop`` samples are simulated (the rest is zero, or the
         rest of a longer run of the same vector that is still kept: the simulation is
-        causal, so a run's head is the shorter run, bit for bit)."""
+        causal, so a run's head is the shorter run, bit for bit). ``keep=False``: a vector
+        no one asks for again (a Jacobian column's) is not kept, so it evicts no run that
+        may be asked for (a fit's point, its cost compared later)."""
         n_run = self.exp.n if n_stop is None else max(2, min(n_stop, self.exp.n))
         key = (theta.tobytes(), self.solve_tol)
         hit = self._runs.get(key)
@@ -540,6 +580,8 @@ class FastModel:
             return hit[1]
         out = self._simulate_states(theta, n_stop)
         out.setflags(write=False)
+        if not keep:
+            return out
         with self._runs_lock:
             self._runs[key] = (n_run, out)
             while len(self._runs) > 1 and (
@@ -558,8 +600,9 @@ class FastModel:
         if hit is None:
             if len(self._disc_cache) > 64:
                 self._disc_cache.clear()
-            hit = self._disc_cache[key] = discretise(a, b, h)
-        ad, bd = hit
+            # the full sub-step, and its first half (where the seal's friction is solved)
+            hit = self._disc_cache[key] = discretise(a, b, h) + discretise(a, b, 0.5 * h)
+        ad, bd, adh, bdh = hit
         gain = theta[IDX["gain_n_per_a"]]
         tau_p = gain * self.applied_current(theta[IDX["delay_s"]] + theta[IDX["skew_s"]])
         u0 = np.array([tau_p[0], 0.0, 0.0, 0.0])
@@ -572,7 +615,7 @@ class FastModel:
         eff[_E_SF_C] = theta[IDX["sf_coulomb_n"]]
         eff[_E_SF_S] = theta[IDX["sf_static_n"]]
         eff[_E_SF_VS] = theta[IDX["sf_vs_m_per_s"]] or exp.const.vs_seal
-        eff[_E_SF_EPS] = exp.const.eps_seal
+        eff[_E_SF_EPS] = theta[IDX["sf_eps_m_per_s"]] or exp.const.eps_seal
         eff[_E_PC_SHAPE] = theta[IDX["pc_shape"]]
         eff[_E_SF_SHAPE] = theta[IDX["sf_shape"]]
         eff[_E_K1] = theta[IDX["ks_k1"]]
@@ -591,7 +634,8 @@ class FastModel:
                   exp.angle if exp.angle is not None else e, exp.angle is not None,
                   exp.position if exp.position is not None else e, exp.position is not None,
                   exp.temperature if exp.temperature is not None else e,
-                  exp.temperature is not None, exp.t_ref, self.n_sub, exp.load == "fixed", sim)
+                  exp.temperature is not None, exp.t_ref, self.n_sub, exp.load == "fixed", sim,
+                  adh, bdh)
         return out
 
     def outputs(self, theta: np.ndarray, z: np.ndarray | None = None,
@@ -686,4 +730,4 @@ class FastModel:
 
 
 __all__ = ["BASE_NAMES", "EFFECT_NAMES", "OUTPUT_ONLY", "FastModel", "IDX", "N_PARAMS",
-           "PARAM_NAMES", "continuous", "discretise", "fast_stop", "map_threads"]
+           "PARAM_NAMES", "continuous", "discretise", "fast_stop", "map_threads", "set_threads"]

@@ -190,6 +190,9 @@ class CaseResult:
     cpu_s: float = 0.0
     #: fitted baseline parameter / its true value - 1, for those the fit did not hold
     param_error: dict[str, float] = field(default_factory=dict)
+    #: :func:`report_digest` of the identification's report ("" when refused): two runs of
+    #: a case with the same code and seed give the same, wherever the case ran
+    digest: str = ""
 
     def as_dict(self) -> dict[str, Any]:
         return {"case": self.case.label, "load": self.case.load,
@@ -199,7 +202,7 @@ class CaseResult:
                 "refused": self.refused,
                 "magnitudes": [{"what": w, "truth": t, "found": f}
                                for w, t, f in self.magnitudes],
-                "param_error": self.param_error,
+                "param_error": self.param_error, "digest": self.digest,
                 "wall_s": self.wall_s, "cpu_s": self.cpu_s}
 
 
@@ -301,7 +304,28 @@ def identify_and_judge(case: Case, seed: int, rig: Any, cfg: Any, t0: float,
                    if sym in rep.final and name in true_p and name not in rep.held}
     return CaseResult(case, seed, right, why, list(case.effects), labels, rep.unexplained,
                       magnitudes=mags, wall_s=time.perf_counter() - t0,
-                      cpu_s=time.process_time() - c0, param_error=param_error)
+                      cpu_s=time.process_time() - c0, param_error=param_error,
+                      digest=report_digest(rep))
+
+
+def report_text(rep: Any) -> str:
+    """The report's JSON summary (:func:`hil.identify.report.summary`) with every float at
+    full precision and its wall time left out: the same for the same record and code,
+    whatever ran before in the process and however many threads it had."""
+    import json
+
+    from hil.identify.report import summary
+
+    s = summary(rep)
+    s.pop("wall_s", None)
+    return json.dumps(s, sort_keys=True, default=repr)
+
+
+def report_digest(rep: Any) -> str:
+    """The first 16 hex digits of the SHA-256 of :func:`report_text`."""
+    import hashlib
+
+    return hashlib.sha256(report_text(rep).encode()).hexdigest()[:16]
 
 
 def _run_packed(args: tuple[Case, int]) -> CaseResult:

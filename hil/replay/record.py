@@ -40,6 +40,7 @@ that names its fields and their byte offsets.
 from __future__ import annotations
 
 import json
+import operator
 from collections.abc import Callable
 from pathlib import Path
 
@@ -282,18 +283,22 @@ class RecordingStackBox(StackBox):
             self.out.write(self.sig_act[k], t * ns, cols)
 
 
-def add_signal_channels(out: SignalOut, box, cfg: Config) -> tuple[dict, list[int]]:  # noqa: ANN001
+def add_signal_channels(out: SignalOut, box, cfg: Config,  # noqa: ANN001
+                        act_message: object = None) -> tuple[dict, list[int]]:
     """The decoded-signal channels of box ``box``: ({"outputs"/"inputs": channel} for its
     records that have simulated fields, [channel of each actuator]). The actuators'
     message leaves out the analog inputs whose part the configuration says is not fitted
-    (:func:`hil.replay.signals.unfitted_inputs`)."""
+    (:func:`hil.replay.signals.unfitted_inputs`); ``act_message``: that message, made
+    already (by a caller that adds many boxes)."""
     st = signal_topics(box.id)
     rec = {}
     for d in ("outputs", "inputs"):
         message = SG.record_message(box, d)
         if message.fields:
             rec[d] = out.add(st[d], message)
-    act = SG.actuator_message(SG.unfitted_inputs(cfg.get("sensors")))
+    act = act_message
+    if act is None:
+        act = SG.actuator_message(SG.unfitted_inputs(cfg.get("sensors")))
     return rec, [out.add(signal_topics(box.id, k)["actuator"], act)
                  for k in range(len(box.actuators))]
 
@@ -347,15 +352,14 @@ class BusSignals:
         self.ch = out.add(BUS_SIGNAL_TOPIC, SG.BUS)
         self.wkc_expected = sum(w for _, _, w in master.plan.frames)
         self.rows: list[tuple[int, ...]] = []
+        self._counters = operator.attrgetter(*SG.MASTER_COUNTERS)  # one call per cycle
         #: the block's frames, as the tap saw them
         self.frames: list[bytes] = []
 
     def end_cycle(self) -> None:
-        """Called at the start of each cycle but the first, and once after the last."""
+        """Called once each cycle has ended (the master's counters hold it)."""
         m = self.master
-        st = m.stats
-        self.rows.append((m.cycle - 1, len(self.frames), st.frames_sent, st.frames_ok,
-                          st.wkc_errors, st.bad_frames, st.stale_frames, st.lost_frames))
+        self.rows.append((m.cycle - 1, len(self.frames), *self._counters(m.stats)))
 
     def flush(self, rx: np.ndarray) -> None:
         """Write the block's cycles and forget its frames (``rx``: which are replies)."""
@@ -394,7 +398,8 @@ def run_logged(topo: Topology, cfg: Config, cycles: int, pc: Callable[[int, Mast
                progress: Callable[[int, int], None] | None = None,
                faults: object = None, live: object = None,
                capture: Callable[[int, int, bytes, str], None] | None = None,
-               model: str = "stack", compression: str = "zstd") -> BusRecord:
+               model: str = "stack", compression: str = "zstd", keep: int | None = 1
+               ) -> BusRecord:
     """Run ``cycles`` cycles in-process with the box model ``model`` (``stack``: each box
     on its own, :class:`RecordingStackBox`; ``robot``: every box in the whole-robot engine,
     :class:`hil.replay.robot_record.RobotRecorder`: the same channels) and log them to
@@ -406,7 +411,12 @@ def run_logged(topo: Topology, cfg: Config, cycles: int, pc: Callable[[int, Mast
     signals also go to (:class:`SignalOut`); ``log_path`` None: only there. ``capture``: a
     further tap that sees every fieldbus frame (e.g.
     :meth:`hil.fieldbus.capture.CaptureWriter.tap`). ``compression``: of the log's chunks
-    (zstd, lz4 or none; :class:`~hil.framelog.writer.FrameLogWriter`)."""
+    (zstd, lz4 or none; :class:`~hil.framelog.writer.FrameLogWriter`). ``keep``: the
+    returned record holds the input images of the last ``keep`` cycles (None: every
+    cycle's; the log holds them all anyway): by default the last one, so that the memory
+    of a long run does not grow with it (an hour of the whole robot: 4 GB of images)."""
+    if keep is not None and keep < 0:
+        raise ValueError(f"keep = {keep}: expected >= 0 cycles")
     import contextlib
 
     tick_ns = cfg.get("sim.tick_ns")
@@ -425,31 +435,33 @@ def run_logged(topo: Topology, cfg: Config, cycles: int, pc: Callable[[int, Mast
                                      schema_data=lay.schema())
         bus_sig: BusSignals | None = None
         # the frames of the last cycles, kept for /signals/bus and the log and written
-        # once per FLUSH_CYCLES (a message at a time costs ~9 us, see hil.framelog.batch)
-        bus_t: list[int] = []  # a reply 1 ns after its cycle's tick (as in the log)
+        # once per FLUSH_CYCLES (a message at a time costs ~9 us, see hil.framelog.batch),
+        # taken a cycle at a time (the bus system's tap_cycle, at the end of each cycle:
+        # one call, not one per frame, and the cycle's /signals/bus row with it)
+        bus_cycles: list[tuple[int, int, int]] = []  # (tick, frames sent, received)
         bus_frames: list[bytes] = []
 
-        def tap(cycle: int, tick: int, frame: bytes, direction: str) -> None:
-            bus_t.append(tick * tick_ns + (direction == "rx"))
-            bus_frames.append(bytes(frame))
-            if capture is not None:
-                capture(cycle, tick, frame, direction)
+        def tap_cycle(cycle: int, tick: int, sent: list[bytes], received: list[bytes],
+                      add=bus_frames.extend, count=bus_cycles.append) -> None:  # noqa: ANN001
+            add(sent)  # (bytes: the master's sealed frames, what the transport returns)
+            add(received)
+            count((tick, len(sent), len(received)))
+            bus_sig.end_cycle()
+            if (cycle + 1) % FLUSH_CYCLES == 0:
+                flush_block()
 
         def flush_block() -> None:
-            t = np.array(bus_t, dtype=np.int64)
+            # each frame's time: its cycle's tick, a reply 1 ns after it (as in the log)
+            c = np.array(bus_cycles, dtype=np.int64).reshape(-1, 3)
+            t0 = c[:, 0] * tick_ns
+            t = np.repeat(np.stack([t0, t0 + 1], axis=1).ravel(), c[:, 1:].ravel())
             if bus_frames and ch_bus is not None:
                 log.write_messages(ch_bus, t, bus_frames)
             bus_sig.flush(t % tick_ns != 0)  # (clears bus_frames)
-            bus_t.clear()
+            bus_cycles.clear()
 
-        def pc_signals(cycle: int, m: Master) -> None:
-            if cycle > 0:
-                bus_sig.end_cycle()
-                if cycle % FLUSH_CYCLES == 0:
-                    flush_block()
-            pc(cycle, m)
-
-        with BusSystem(topo, cfg, "inproc", model=model, tap=tap) as bs:
+        with BusSystem(topo, cfg, "inproc", model=model, tap=capture,
+                       tap_cycle=tap_cycle) as bs:
             bus_sig = BusSignals(out, bs.master, tick_ns)
             bus_sig.frames = bus_frames  # the tap's
             engine = bs.chain.engine
@@ -472,16 +484,18 @@ def run_logged(topo: Topology, cfg: Config, cycles: int, pc: Callable[[int, Mast
             done = 0
             while done < cycles:
                 n = min(step, cycles - done)
-                parts.append(bs.run(n, pc_signals))
+                parts.append(bs.run(n, pc, keep=keep))
                 done += n
                 if progress:
                     progress(done, cycles)
             rec = None
-            if parts:  # the input images of every part, joined once
+            if parts:  # the input images kept of every part, joined once
                 last = parts[-1]
-                rec = BusRecord(np.concatenate([p.inputs for p in parts]), last.master,
-                                last.chain, last.transport, last.faults)
-            bus_sig.end_cycle()
+                inputs = np.concatenate([p.inputs for p in parts])
+                if keep is not None:
+                    inputs = inputs[len(inputs) - min(keep, len(inputs)):]
+                rec = BusRecord(inputs, last.master, last.chain, last.transport, last.faults,
+                                cycles - len(inputs))
             flush_block()
             if engine is not None:
                 engine.wait()

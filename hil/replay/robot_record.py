@@ -15,6 +15,7 @@ channel, and the decoded signals of all actuators computed and encoded as whole 
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 
@@ -72,6 +73,8 @@ class RobotRecorder:
                            np.zeros((n, rows * self.period if self.full else 0, TRACE_WIDTH),
                                     np.int64), np.zeros(1, np.int64))
         self.boxes = boxes
+        #: per chain box: its slot layout (boxes of one layout are written together)
+        self._layout = [tuple(s.kind for s in b.box.slots) for b in boxes]
         where = {id(b): k for k, b in enumerate(engine.boxes)}
         #: per chain box: its index among the engine's boxes (None: it has no MCU board)
         self.engine_box = [where.get(id(b)) for b in boxes]
@@ -82,17 +85,22 @@ class RobotRecorder:
         # one row per cycle of the block
         c = self.cycles
         self.out_rows = np.zeros((c, len(engine.out_image)), np.uint8)
-        self.out_got = np.zeros((c, len(engine.boxes)), bool)
+        #: per cycle, per actuator: its box took outputs (the engine's ``_got``, copied
+        #: whole: cheaper per cycle than picking the boxes' first actuators, done per block)
+        self.out_got_act = np.zeros((c, n), bool)
         self.out_t = np.zeros(c, np.int64)
         self.in_rows = np.zeros((c, len(engine.in_image)), np.uint8)
         self.other_in = [np.zeros((c, b.in_dtype.itemsize), np.uint8) for b in self.others]
         self.in_t = np.zeros(c, np.int64)
         self.n_cycles = 0
         self._taken = False  # outputs taken for a cycle that has not ended (yet)
-        # per cycle (1 kHz): what the two hooks below read, looked up once
+        # per cycle (1 kHz): what the two hooks below read, looked up once (the engine
+        # keeps these arrays for its life and fills them in place)
         self._box_first = np.asarray(engine._first[:-1], np.intp)
-        self._other_inputs = [(r, b.inputs) for r, b in zip(self.other_in, self.others,
-                                                             strict=True)]
+        self._out_image, self._in_image, self._got = engine.out_image, engine.in_image, engine._got
+        self._tap_row = self.tap.row
+        self._other_inputs = [(r, _input_source(b)) for r, b in zip(self.other_in, self.others,
+                                                                    strict=True)]
         self._rows = 0  # the tap's rows filled (tap.row[0], as a Python int)
         #: the last row at which a cycle's steps still fit the tap
         self._last_row_start = rows - engine.cycle_ticks // self.period
@@ -103,6 +111,7 @@ class RobotRecorder:
                       if background else None)
         self._jobs: list[Future] = []
         self._channels(log)
+        self._groups: dict[tuple, tuple] = {}  # see _group
         # the actuators' signals (each with the PC's command from its slot of the output
         # image), decoded and encoded by one compiled call per block
         box_of, slot_off = [], []
@@ -121,11 +130,21 @@ class RobotRecorder:
 
     # --- channels ------------------------------------------------------------------------
     def _channels(self, log: FrameLogWriter | None) -> None:
+        schemas: dict[int, str] = {}  # per layout its schema text, made once per run
+
         def block(topic: str, lay: Layout, dtype: type, width: int) -> int:
+            if id(lay) not in schemas:
+                schemas[id(lay)] = lay.schema()
             return log.add_block_channel(topic, lay.encoding, dtype=dtype, width=width,
                                          schema_name=lay.encoding,
                                          schema_encoding=LAYOUT_ENCODING,
-                                         schema_data=lay.schema())
+                                         schema_data=schemas[id(lay)])
+
+        # the layouts every actuator's channels share (47 actuators: made once, not each)
+        up, down = LY.mcu_up(), LY.mcu_down()
+        trace, word, raw = ((LY.fpga_trace(), LY.lvds_word(), LY.sensor_raw()) if self.full
+                            else (None, None, None))
+        act_message = SG.actuator_message(SG.unfitted_inputs(self.cfg.get("sensors")))
 
         self.ch_out: list[int | None] = []
         self.ch_in: list[int] = []
@@ -143,40 +162,41 @@ class RobotRecorder:
                                         np.uint8, b.in_dtype.itemsize))
                 for k in range(len(box.actuators)):
                     tk = topics(box.id, k)
-                    self.ch_up.append(block(tk["up"], LY.mcu_up(), np.uint16, UP_WIDTH))
-                    self.ch_down.append(block(tk["down"], LY.mcu_down(), np.uint16,
-                                              B.DOWN_WORDS))
+                    self.ch_up.append(block(tk["up"], up, np.uint16, UP_WIDTH))
+                    self.ch_down.append(block(tk["down"], down, np.uint16, B.DOWN_WORDS))
                     if self.full:
-                        self.ch_trace.append(block(tk["trace"], LY.fpga_trace(), np.int64,
+                        self.ch_trace.append(block(tk["trace"], trace, np.int64,
                                                    TRACE_WIDTH))
                         self.ch_words.append(tuple(
-                            block(f"/lvds/{box.id}.{k}/{d}_words", LY.lvds_word(), np.uint64, 1)
+                            block(f"/lvds/{box.id}.{k}/{d}_words", word, np.uint64, 1)
                             for d in ("down", "up")))
-                        self.ch_raw.append(block(f"/sensors/{box.id}.{k}/raw", LY.sensor_raw(),
+                        self.ch_raw.append(block(f"/sensors/{box.id}.{k}/raw", raw,
                                                  np.uint32, B.N_RAW))
-            rec, act = add_signal_channels(self.out, box, self.cfg)
+            rec, act = add_signal_channels(self.out, box, self.cfg, act_message)
             self.sig_rec.append(rec)
             self.sig_act += act
 
     # --- the engine's hooks (hil.sim.robot.EngineLog) -------------------------------------
+    # Each runs once per fieldbus cycle: a few array copies, no Python loop over boxes.
     def took_outputs(self, tick: int) -> None:
-        e, c = self.engine, self.n_cycles
-        self.out_rows[c] = e.out_image
-        np.take(e._got, self._box_first, out=self.out_got[c])
+        c = self.n_cycles
+        self.out_rows[c] = self._out_image
+        self.out_got_act[c] = self._got
         self.out_t[c] = tick
         self._taken = True
 
     def finished(self, tick: int, periods: int) -> None:
         c = self.n_cycles
-        self.in_rows[c] = self.engine.in_image
+        self.in_rows[c] = self._in_image
         for rows, inputs in self._other_inputs:
-            rows[c] = np.frombuffer(inputs(), np.uint8)
+            rows[c] = inputs if isinstance(inputs, np.ndarray) else np.frombuffer(
+                inputs(), np.uint8)
         self.in_t[c] = tick
         self._taken = False
-        self.n_cycles = c + 1
-        self._rows += periods
-        self.tap.row[0] = self._rows
-        if self.n_cycles == self.cycles or self._rows > self._last_row_start:
+        self.n_cycles = c = c + 1
+        self._rows = r = self._rows + periods
+        self._tap_row[0] = r
+        if c == self.cycles or r > self._last_row_start:
             self.flush()
 
     # --- writing a block -----------------------------------------------------------------
@@ -194,7 +214,8 @@ class RobotRecorder:
         end = int(self.in_t[c - 1]) if c else self.engine.tick
         tap = self.tap
         block = _Block(c, c_out, end - self.period * np.arange(r, 0, -1, dtype=np.int64),
-                       self.out_t[:c_out], self.out_rows[:c_out], self.out_got[:c_out],
+                       self.out_t[:c_out], self.out_rows[:c_out],
+                       self.out_got_act[:c_out, self._box_first],
                        self.in_t[:c], self.in_rows[:c], [o[:c] for o in self.other_in],
                        tap.up[:, :r], tap.down[:, :r], tap.trace[:, :r * self.period])
         if self._pool is None:
@@ -221,23 +242,26 @@ class RobotRecorder:
         # written together: one block message array, one decoding and encoding for all
         groups: dict[tuple, list[tuple[int, np.ndarray]]] = {}
         times: dict[tuple, np.ndarray] = {}
-        for n_box, b in enumerate(self.boxes):
-            e = self.engine_box[n_box]
-            layout = tuple(s.kind for s in b.box.slots)
+        every = k.out_got.all()  # (the usual block: every box took outputs every cycle)
+        for n_box, e in enumerate(self.engine_box):
+            layout = self._layout[n_box]
             if e is None:
                 ins = next(others)
                 outs = None
             else:
                 lo, hi = self.in_span[e]
                 ins = k.in_rows[:, lo:hi]
-                got = k.out_got[:, e]
                 olo, ohi = self.out_span[e]
-                outs = (k.out_t[got], k.out_rows[got, olo:ohi])
+                if every:
+                    outs = (k.out_t, k.out_rows[:, olo:ohi])
+                else:
+                    got = k.out_got[:, e]
+                    outs = (k.out_t[got], k.out_rows[got, olo:ohi])
             if c:
                 groups.setdefault(("inputs", layout), []).append((n_box, ins))
                 times[("inputs", layout)] = k.in_t
             if outs is not None and len(outs[0]):
-                key = ("outputs", layout, outs[0].tobytes())
+                key = ("outputs", layout, None if every else outs[0].tobytes())
                 groups.setdefault(key, []).append((n_box, outs[1]))
                 times[key] = outs[0]
         # the steps first: their reads' validity is the box reports' piston flags
@@ -253,24 +277,40 @@ class RobotRecorder:
         ``flags``: every actuator's piston flags of the block's cycles
         (:func:`hil.replay.signals.report_flags`)."""
         rows = np.stack([r for _, r in members])
-        boxes = [n for n, _ in members]
+        chs, sig, pick = self._group(d, tuple(n for n, _ in members))
         t_ns = t * self.ns
-        if self.log is not None:
-            chs = self.ch_in if d == "inputs" else self.ch_out
-            if chs[boxes[0]] is not None:
-                self.log.write_blocks([chs[n] for n in boxes], t_ns, rows)
-        sig = [self.sig_rec[n].get(d) for n in boxes]
-        if sig[0] is not None:
+        if chs is not None:
+            self.log.write_blocks(chs, t_ns, rows)
+        if sig is not None:
             piston = None
-            if d == "inputs" and flags is not None:
-                # per member box its actuators' rows, stacked box-major as the records
-                js = [self.first_act[self.engine_box[n]] for n in boxes]
-                m = len(self.engine.boxes[self.engine_box[boxes[0]]].act)
-                piston = tuple(np.stack([f[j:j + m] for j in js], axis=1).reshape(m, -1)
-                               for f in flags)
-            cols = SG.record_columns(self.boxes[boxes[0]].box, d,
+            if pick is not None and flags is not None:
+                # per member box its actuators' rows, box-major as the records
+                piston = tuple(f[pick].reshape(len(pick), -1) for f in flags)
+            cols = SG.record_columns(self.boxes[members[0][0]].box, d,
                                      rows.reshape(-1, rows.shape[2]), piston)
             self.out.write_split(sig, t_ns, cols)
+
+    def _group(self, d: str, boxes: tuple[int, ...]) -> tuple:
+        """For the ``d`` records of the chain boxes ``boxes`` (one slot layout): their log
+        channels (None: none), their signal channels (None: none) and the rows of their
+        actuators' piston flags, (actuators per box, boxes) (None: not an input record of
+        engine boxes); worked out once per group of the run."""
+        key = (d, boxes)
+        got = self._groups.get(key)
+        if got is None:
+            chs = None
+            if self.log is not None:
+                per = self.ch_in if d == "inputs" else self.ch_out
+                if per[boxes[0]] is not None:
+                    chs = [per[n] for n in boxes]
+            sig = [self.sig_rec[n].get(d) for n in boxes]
+            pick = None
+            if d == "inputs" and self.engine_box[boxes[0]] is not None:
+                m = len(self.engine.boxes[self.engine_box[boxes[0]]].act)
+                js = [self.first_act[self.engine_box[n]] for n in boxes]
+                pick = np.arange(m)[:, None] + np.array(js, np.intp)[None, :]
+            got = self._groups[key] = (chs, sig if sig[0] is not None else None, pick)
+        return got
 
     def _write_steps(self, k: _Block) -> None:
         """The block's MCU steps: their raw words (and traces), and every actuator's
@@ -305,6 +345,19 @@ class RobotRecorder:
             self.out.write_filled(self.sig_act, t_steps[keep] * ns, enc.message.size, encode)
         else:
             encode()
+
+
+def _input_source(box) -> np.ndarray | Callable[[], bytes]:  # noqa: ANN001
+    """Where a box the engine does not advance keeps its input record: a view of its
+    buffer, read in place each cycle, where it is the plain box's fixed ``bytearray``
+    (:meth:`hil.fieldbus.boxes._BoxBase.inputs` copies it); else its ``inputs``."""
+    from hil.fieldbus.boxes import _BoxBase
+
+    buf = getattr(box, "_in_buf", None)
+    if type(box).inputs is _BoxBase.inputs and isinstance(buf, bytearray) \
+            and len(buf) == box.in_dtype.itemsize:
+        return np.frombuffer(buf, np.uint8)
+    return box.inputs
 
 
 @dataclass

@@ -33,9 +33,10 @@ from hil.replay import signals as SG
 from protocols import pressure_adc as padc
 from protocols.biss import LINEAR_COUNT_M
 
-#: The fields of :data:`hil.replay.signals.ACTUATOR` in their order; the kernel writes
-#: field ``FIELDS[i]`` at byte ``off[i]`` of a message (-1: not in this message type).
-FIELDS = tuple(f.name for f in SG.ACTUATOR.fields)
+#: Every field an actuator message has had (:data:`hil.replay.signals.ACTUATOR_ALL_DOUBLE`:
+#: today's and the PC's command of older logs), in that order; the kernel writes field
+#: ``FIELDS[i]`` at byte ``off[i]`` of a message (-1: not in this message type).
+FIELDS = tuple(f.name for f in SG.ACTUATOR_ALL_DOUBLE.fields)
 _I = {name: i for i, name in enumerate(FIELDS)}
 _ANALOG_NAMES = tuple(field for _, field in SG._ANALOG)  # noqa: SLF001 - one declaration
 _STATUS_NAMES = tuple(f.name for f in SG._STATUS_FIELDS)  # noqa: SLF001
@@ -66,8 +67,16 @@ _NAMED = {
 if _NAMED != _I:  # a field added to ACTUATOR needs its line here and in the kernel
     raise ImportError("hil.replay.signal_kernel: ACTUATOR's fields changed: "
                       f"{sorted(set(_I) ^ set(_NAMED)) or 'order'}")
+#: What the kernel stores in each field (``_u4``, ``_b1``, else ``_fx``): a message type's
+#: field of another kind is refused (:class:`ActuatorEncoder`).
+_COUNTS = {F_PC_MODE, F_BOARD_MODE, F_BOARD_CONTROL, F_STATUS, F_STATE, F_ERR_SSI,
+           F_ERR_BISS, F_ERR_STRAIN, F_ERR_LINK_DOWN, F_ERR_LINK_UP, F_OC_TRIPS, F_WD_TRIPS}
+_FLAGS = {F_PC_ENABLE, *range(F_STATUS_BITS, F_STATUS_BITS + len(_STATUS_NAMES)), F_X_VALID,
+          F_V_VALID, F_UP_VALID}
+_STORES = tuple(("fixed32",) if i in _COUNTS else ("bool",) if i in _FLAGS
+                else ("double", "float") for i in range(len(FIELDS)))
 #: The fields that are NaN while no upstream sweep has reached the MCU.
-_UPSTREAM = np.array(sorted(_I[name] for name in SG.UPSTREAM_DOUBLES), np.int64)
+_UPSTREAM = np.array(sorted(_I[name] for name in SG.UPSTREAM_VALUES), np.int64)
 _TEAR = SG.TEAR_COUNTS
 _N_STATUS = len(B.STATUS_BITS)
 if [bit for bit, _, _ in B.STATUS_BITS] != list(range(_N_STATUS)):
@@ -104,9 +113,14 @@ def _store(typingctx, buf, row, at, value):
 
 
 @njit(cache=True, inline="always")
-def _f8(out, row, off, x):
+def _fx(out, row, off, single, x):
+    """``x`` (a float64) as the field's ``float`` (``single``: rounded to nearest, as
+    numpy's cast in ``MessageType.encode_into``) or ``double``."""
     if off >= 0:
-        _store(out, row, off, np.float64(x))
+        if single:
+            _store(out, row, off, np.float32(x))
+        else:
+            _store(out, row, off, np.float64(x))
 
 
 @njit(cache=True, inline="always")
@@ -134,7 +148,7 @@ def _count(up, j, i):
 
 
 @njit(cache=True, nogil=True)
-def _encode(up, down, every, out, off, upstream, areg, av0, amul, adiv,
+def _encode(up, down, every, out, off, single, upstream, areg, av0, amul, adiv,
             fk, ik, carry_x, carry_count, carry_off, carry_valid, carry_started, step_valid,
             tick_keep, out_t, out_rows, out_got, box_of, slot_off, last_have, last_t,
             last_img, box_lo, box_hi):
@@ -144,6 +158,8 @@ def _encode(up, down, every, out, off, upstream, areg, av0, amul, adiv,
     the analog indices of p_cyl_a and p_cyl_b."""
     a, n = up.shape[0], up.shape[1]
     k = n // every
+    pc = (off[F_PC_MODE] >= 0 or off[F_PC_ENABLE] >= 0 or off[F_FORCE] >= 0
+          or off[F_POSITION] >= 0)
     na = areg.shape[0]
     si = np.empty(na, np.float64)
     x_all = np.empty(n, np.float64)
@@ -171,12 +187,12 @@ def _encode(up, down, every, out, off, upstream, areg, av0, amul, adiv,
                 carry_count[j] = c
                 carry_off[j] = total - base_t
                 carry_started[j] = started
-        # the PC's command: this block's output records of the box if it has any, else
-        # the last one before (signals.pc_command_block)
+        # the PC's command (older layouts only): this block's output records of the box
+        # if it has any, else the last one before (signals.pc_command_block)
         e = box_of[j]
         o = slot_off[j]
         own = False
-        for p in range(out_t.shape[0]):
+        for p in range(out_t.shape[0] if pc else 0):
             if out_got[p, e]:
                 own = True
                 break
@@ -188,7 +204,9 @@ def _encode(up, down, every, out, off, upstream, areg, av0, amul, adiv,
             i = s * every + every - 1
             row = j * k + s
             t = tick_keep[s]
-            if own:
+            if not pc:
+                pass
+            elif own:
                 while p < out_t.shape[0] and out_t[p] <= t:
                     if out_got[p, e]:
                         src = p
@@ -196,25 +214,26 @@ def _encode(up, down, every, out, off, upstream, areg, av0, amul, adiv,
                     p += 1
             else:
                 have = last_have[e] and have_t <= t
-            if src >= 0:
-                rec = out_rows[src]
-            else:
-                rec = last_img
-            mode = np.int64(rec[o]) if have else 0
-            flags = np.int64(rec[o + 1])
-            command = np.int64(np.int32(np.uint32(rec[o + 2]) | (np.uint32(rec[o + 3]) << 8)
-                                        | (np.uint32(rec[o + 4]) << 16)
-                                        | (np.uint32(rec[o + 5]) << 24)))
-            _u4(out, row, off[F_PC_MODE], mode)
-            _b1(out, row, off[F_PC_ENABLE], have and (flags & ik[2]) != 0)
-            _f8(out, row, off[F_FORCE],
-                np.float64(command) * fk[6] if mode == ik[3] else math.nan)
-            _f8(out, row, off[F_POSITION],
-                np.float64(command) * fk[7] if mode == ik[4] else math.nan)
+            if pc:
+                rec = out_rows[src] if src >= 0 else last_img
+                mode = np.int64(rec[o]) if have else 0
+                flags = np.int64(rec[o + 1])
+                command = np.int64(np.int32(
+                    np.uint32(rec[o + 2]) | (np.uint32(rec[o + 3]) << 8)
+                    | (np.uint32(rec[o + 4]) << 16) | (np.uint32(rec[o + 5]) << 24)))
+                _u4(out, row, off[F_PC_MODE], mode)
+                _b1(out, row, off[F_PC_ENABLE], have and (flags & ik[2]) != 0)
+                _fx(out, row, off[F_FORCE], single[F_FORCE],
+                    np.float64(command) * fk[6] if mode == ik[3] else math.nan)
+                _fx(out, row, off[F_POSITION], single[F_POSITION],
+                    np.float64(command) * fk[7] if mode == ik[4] else math.nan)
             # what the MCU wrote
-            _f8(out, row, off[F_IQ_REF], _s16(np.int64(down[j, i, B.D_IQ_REF])) * 1e-3)
-            _f8(out, row, off[F_ID_REF], _s16(np.int64(down[j, i, B.D_ID_REF])) * 1e-3)
-            _f8(out, row, off[F_VQ_FF], _s16(np.int64(down[j, i, B.D_VQ_FF])) * 1e-3)
+            _fx(out, row, off[F_IQ_REF], single[F_IQ_REF],
+                _s16(np.int64(down[j, i, B.D_IQ_REF])) * 1e-3)
+            _fx(out, row, off[F_ID_REF], single[F_ID_REF],
+                _s16(np.int64(down[j, i, B.D_ID_REF])) * 1e-3)
+            _fx(out, row, off[F_VQ_FF], single[F_VQ_FF],
+                _s16(np.int64(down[j, i, B.D_VQ_FF])) * 1e-3)
             _u4(out, row, off[F_BOARD_MODE], np.int64(down[j, i, B.D_MODE]) & 0xFFFF)
             _u4(out, row, off[F_BOARD_CONTROL],
                 np.int64(down[j, i, B.D_CONTROL]) & 0xFFFF)
@@ -222,11 +241,11 @@ def _encode(up, down, every, out, off, upstream, areg, av0, amul, adiv,
             for q in range(na):
                 w = np.int64(up[j, i, areg[q]]) & 0xFFFF
                 si[q] = (w * fk[0] - av0[q]) * amul[q] / adiv[q]
-                _f8(out, row, off[F_ANALOG + q], si[q])
-            _f8(out, row, off[F_F_PRESSURE], fk[1] * (si[ik[5]] - si[ik[6]]))
+                _fx(out, row, off[F_ANALOG + q], single[F_ANALOG + q], si[q])
+            _fx(out, row, off[F_F_PRESSURE], single[F_F_PRESSURE], fk[1] * (si[ik[5]] - si[ik[6]]))
             code = ((np.int64(up[j, i, B.U_STRAIN_HI]) & 0xFF) << 16) | (
                 np.int64(up[j, i, B.U_STRAIN_LO]) & 0xFFFF)
-            _f8(out, row, off[F_F_STRAIN], (code - ik[0]) * fk[2])
+            _fx(out, row, off[F_F_STRAIN], single[F_F_STRAIN], (code - ik[0]) * fk[2])
             x = x_all[i]
             if i == 0:
                 xb = carry_x[j]
@@ -234,15 +253,16 @@ def _encode(up, down, every, out, off, upstream, areg, av0, amul, adiv,
             else:
                 xb = x_all[i - 1]
                 vb = step_valid[j, i - 1]
-            _f8(out, row, off[F_X], x)
-            _f8(out, row, off[F_V], (x - xb) / fk[5])
-            _f8(out, row, off[F_OMEGA], _s16(np.int64(up[j, i, B.U_SPEED])) * fk[4])
-            _f8(out, row, off[F_IQ], _s16(np.int64(up[j, i, B.U_IQ])) * 1e-3)
-            _f8(out, row, off[F_ID], _s16(np.int64(up[j, i, B.U_ID])) * 1e-3)
-            _f8(out, row, off[F_IA], _s16(np.int64(up[j, i, B.U_IA])) * 1e-3)
-            _f8(out, row, off[F_IB], _s16(np.int64(up[j, i, B.U_IB])) * 1e-3)
-            _f8(out, row, off[F_VD], _s16(np.int64(up[j, i, B.U_VD_OUT])) * 1e-3)
-            _f8(out, row, off[F_VQ], _s16(np.int64(up[j, i, B.U_VQ_OUT])) * 1e-3)
+            _fx(out, row, off[F_X], single[F_X], x)
+            _fx(out, row, off[F_V], single[F_V], (x - xb) / fk[5])
+            _fx(out, row, off[F_OMEGA], single[F_OMEGA],
+                _s16(np.int64(up[j, i, B.U_SPEED])) * fk[4])
+            _fx(out, row, off[F_IQ], single[F_IQ], _s16(np.int64(up[j, i, B.U_IQ])) * 1e-3)
+            _fx(out, row, off[F_ID], single[F_ID], _s16(np.int64(up[j, i, B.U_ID])) * 1e-3)
+            _fx(out, row, off[F_IA], single[F_IA], _s16(np.int64(up[j, i, B.U_IA])) * 1e-3)
+            _fx(out, row, off[F_IB], single[F_IB], _s16(np.int64(up[j, i, B.U_IB])) * 1e-3)
+            _fx(out, row, off[F_VD], single[F_VD], _s16(np.int64(up[j, i, B.U_VD_OUT])) * 1e-3)
+            _fx(out, row, off[F_VQ], single[F_VQ], _s16(np.int64(up[j, i, B.U_VQ_OUT])) * 1e-3)
             status = np.int64(up[j, i, B.U_STATUS]) & 0xFFFF
             _u4(out, row, off[F_STATUS], status)
             _u4(out, row, off[F_STATE], np.int64(up[j, i, B.U_STATE]) & 0xFFFF)
@@ -266,7 +286,7 @@ def _encode(up, down, every, out, off, upstream, areg, av0, amul, adiv,
             _b1(out, row, off[F_UP_VALID], up_ok)
             if not up_ok:
                 for q in range(upstream.shape[0]):
-                    _f8(out, row, off[upstream[q]], math.nan)
+                    _fx(out, row, off[upstream[q]], single[upstream[q]], math.nan)
         carry_x[j] = x_all[n - 1]
         carry_valid[j] = step_valid[j, n - 1]
     # the boxes' last output records, for the next block
@@ -299,10 +319,16 @@ class ActuatorEncoder:
         if unknown:
             raise ValueError(f"{message.full_name}: fields {sorted(unknown)} are not "
                              "ActuatorSignals'")
+        kinds = {f.name: f.kind for f in message.fields}
+        for name, stores in zip(FIELDS, _STORES, strict=True):
+            if name in kinds and kinds[name] not in stores:
+                raise ValueError(f"{message.full_name}: field {name} is {kinds[name]}, "
+                                 f"the kernel writes it as {' or '.join(stores)}")
         self.message = message
         self.every = every
         fields = message.record.fields
         self.off = np.array([fields[n][1] if n in names else -1 for n in FIELDS], np.int64)
+        self.single = np.array([kinds.get(n) == "float" for n in FIELDS], np.bool_)
         self.blank = np.ascontiguousarray(message._blank.reshape(-1))  # noqa: SLF001
         dec = [(a.register, *measure.analog_decoder(a, cal)) for a, _ in SG._ANALOG]  # noqa: SLF001
         self.areg = np.array([d[0] for d in dec], np.int64)
@@ -359,7 +385,7 @@ class ActuatorEncoder:
         carry.valid_in = carry.valid.copy()
         step_valid = np.empty((a, n), bool)
         out[:] = self.blank  # every key; the kernel writes every value
-        _encode(up, down, every, out, self.off,
+        _encode(up, down, every, out, self.off, self.single,
                 _UPSTREAM, self.areg, self.av0, self.amul, self.adiv, self.fk, self.ik,
                 carry.x, carry.count, carry.offset, carry.valid, carry.started, step_valid,
                 np.ascontiguousarray(step_ticks[keep], np.int64),

@@ -3,12 +3,13 @@
 Beside the raw frames the replay needs (:mod:`hil.replay.record`), a ``bus run`` log
 carries what those frames mean, one message per sample (``docs/framelog.md``):
 
-* ``/signals/actuator/<b>.<k>`` (:data:`ACTUATOR`), each MCU step: the PC's command in
-  force, the MCU's references to the board, what the MCU read from the board (pressures,
-  forces, piston, motor, currents, voltages, temperature) and the board's status bits and
-  error counters. Decoded from the MCU's side of the LVDS link (the words it read and
-  wrote) with the MCU's conversions (:func:`firmware_model.mcu.measure.upstream_si`) and
-  the run's firmware calibration; one field per analog input of the board
+* ``/signals/actuator/<b>.<k>`` (:data:`ACTUATOR`), each MCU step: the MCU's references
+  to the board, what the MCU read from the board (pressures, forces, piston, motor,
+  currents, voltages, temperature) and the board's status bits and error counters (the
+  PC's command it worked to is the box's outputs channel's, :data:`PC_COMMAND`). Decoded
+  from the MCU's side of the LVDS link (the words it read and wrote) with the MCU's
+  conversions (:func:`firmware_model.mcu.measure.upstream_si`) and the run's firmware
+  calibration; one field per analog input of the board
   (``firmware_model.fpga.layout.ANALOG_INPUTS``: the five pressures, the oil and rod
   temperatures).
 * ``/signals/box/<b>/outputs`` and ``.../inputs``, each fieldbus cycle: the box's process
@@ -41,35 +42,51 @@ PACKAGE = "eha_hil"
 _ANALOG_UNIT_SUFFIX = {"Pa": "pa", "degC": "c"}
 _ANALOG = tuple((a, f"{a.name}_{_ANALOG_UNIT_SUFFIX.get(a.unit, a.unit.lower())}")
                 for a in B.ANALOG_INPUTS)
-_ANALOG_FIELDS = tuple(Field(field, "double", a.unit, a.meaning.split(",")[0])
+#: How a decoded value is stored (docs/framelog.md, "Float or double"): ``float`` when it
+#: is one word of at most 24 significant bits times constants (a 16-bit ADC or register
+#: word, the 24-bit strain code): every distinct word gives a distinct float32, so the
+#: float32 holds all the word says (and the pressure force, whose two words are fields of
+#: the same message); ``double`` when it comes from more bits (the two-word piston
+#: position and its speed, a 32-bit command).
+WORD = "float"
+WIDE = "double"
+_ANALOG_FIELDS = tuple(Field(field, WORD, a.unit, a.meaning.split(",")[0])
                        for a, field in _ANALOG)
 _STATUS_FIELDS = tuple(Field(name.lower(), "bool", "", f"board status bit {bit}: {doc}")
                        for bit, name, doc in B.STATUS_BITS)
 
-ACTUATOR = MessageType(f"{PACKAGE}.ActuatorSignals", (
-    # commands: the PC's (fieldbus record, held between cycles) and the MCU's to the board
+#: The PC's command in force at each step, which the actuator messages of older logs
+#: carried first: the same values are the latest ``/signals/box/<b>/outputs`` message's
+#: (``s<k>_mode``, ``s<k>_flags``, ``s<k>_force_command_n``, ...) at or before the step,
+#: so today's actuator messages leave them out (:data:`ACTUATOR_ALL_DOUBLE` has them).
+PC_COMMAND = (
     Field("pc_mode", "fixed32", "", "PC command mode: 0 off, 1 force, 2 position"),
     Field("pc_enable", "bool", "", "PC enable flag"),
-    Field("force_command_n", "double", "N", "PC force command (NaN unless mode 1)"),
-    Field("position_command_m", "double", "m", "PC position command (NaN unless mode 2)"),
-    Field("iq_ref_a", "double", "A", "q-axis current reference the MCU wrote"),
-    Field("id_ref_a", "double", "A", "d-axis current reference the MCU wrote"),
-    Field("vq_ff_v", "double", "V", "q-axis voltage feed-forward the MCU wrote"),
+    Field("force_command_n", WIDE, "N", "PC force command (NaN unless mode 1)"),
+    Field("position_command_m", WIDE, "m", "PC position command (NaN unless mode 2)"),
+)
+
+ACTUATOR = MessageType(f"{PACKAGE}.ActuatorSignals", (
+    # what the MCU wrote to the board
+    Field("iq_ref_a", WORD, "A", "q-axis current reference the MCU wrote"),
+    Field("id_ref_a", WORD, "A", "d-axis current reference the MCU wrote"),
+    Field("vq_ff_v", WORD, "V", "q-axis voltage feed-forward the MCU wrote"),
     Field("board_mode", "fixed32", "", "board mode register: 0 off, 1 current, 2 voltage"),
     Field("board_control", "fixed32", "", "board control register: bit 0 enable, 1 clear"),
     # what the MCU read
     *_ANALOG_FIELDS,
-    Field("f_pressure_n", "double", "N", "pressure force k_c (p_cyl_a - p_cyl_b)"),
-    Field("f_strain_n", "double", "N", "strain-gauge force"),
-    Field("x_piston_m", "double", "m", "piston position about mid-stroke"),
-    Field("v_piston_m_s", "double", "m/s", "piston speed: position change over the MCU step"),
-    Field("omega_m_rad_s", "double", "rad/s", "motor speed (ABI count over the speed window)"),
-    Field("iq_a", "double", "A", "measured q-axis current"),
-    Field("id_a", "double", "A", "measured d-axis current"),
-    Field("ia_a", "double", "A", "phase a current"),
-    Field("ib_a", "double", "A", "phase b current"),
-    Field("vd_v", "double", "V", "d-axis voltage applied"),
-    Field("vq_v", "double", "V", "q-axis voltage applied"),
+    # float: its two words are the message's p_cyl_a_pa and p_cyl_b_pa (docs/framelog.md)
+    Field("f_pressure_n", WORD, "N", "pressure force k_c (p_cyl_a - p_cyl_b)"),
+    Field("f_strain_n", WORD, "N", "strain-gauge force"),
+    Field("x_piston_m", WIDE, "m", "piston position about mid-stroke"),
+    Field("v_piston_m_s", WIDE, "m/s", "piston speed: position change over the MCU step"),
+    Field("omega_m_rad_s", WORD, "rad/s", "motor speed (ABI count over the speed window)"),
+    Field("iq_a", WORD, "A", "measured q-axis current"),
+    Field("id_a", WORD, "A", "measured d-axis current"),
+    Field("ia_a", WORD, "A", "phase a current"),
+    Field("ib_a", WORD, "A", "phase b current"),
+    Field("vd_v", WORD, "V", "d-axis voltage applied"),
+    Field("vq_v", WORD, "V", "q-axis voltage applied"),
     # status and errors
     Field("status", "fixed32", "", "board status word (the bits below)"),
     Field("state", "fixed32", "", "board state: 0 disabled, 1 enabled, 2 fault"),
@@ -92,25 +109,33 @@ ACTUATOR = MessageType(f"{PACKAGE}.ActuatorSignals", (
           "the values read from the board are NaN"),
 ), "one actuator, each MCU step")
 
-#: The fields of :data:`ACTUATOR` read from the board (upstream words) as doubles: NaN
+#: :data:`ACTUATOR` as logs before the float fields wrote it: :data:`PC_COMMAND` first,
+#: every float a double (what the readers of old logs and the kernel's tests use).
+ACTUATOR_ALL_DOUBLE = MessageType(ACTUATOR.full_name, tuple(
+    Field(f.name, WIDE if f.kind == WORD else f.kind, f.unit, f.doc)
+    for f in (*PC_COMMAND, *ACTUATOR.fields)), ACTUATOR.doc)
+
+#: The fields of :data:`ACTUATOR` read from the board (upstream words) as numbers: NaN
 #: while no upstream sweep has reached the MCU (0 V through the MCU's formulas is not a
 #: measurement: -3 MPa, -20.5 degC, the piston 42 mm off).
-UPSTREAM_DOUBLES = (*(f for _, f in _ANALOG), "f_pressure_n", "f_strain_n", "x_piston_m",
-                    "v_piston_m_s", "omega_m_rad_s", "iq_a", "id_a", "ia_a", "ib_a", "vd_v",
-                    "vq_v")
+UPSTREAM_VALUES = (*(f for _, f in _ANALOG), "f_pressure_n", "f_strain_n", "x_piston_m",
+                   "v_piston_m_s", "omega_m_rad_s", "iq_a", "id_a", "ia_a", "ib_a", "vd_v",
+                   "vq_v")
 
 _UNFITTED_SUFFIX = "_no_"
 
 
-def actuator_message(unfitted: tuple[str, ...] = ()) -> MessageType:
-    """:data:`ACTUATOR` without the fields of the analog inputs ``unfitted`` (names of
-    ``ANALOG_INPUTS`` whose part is not mounted: an empty input reads 0 V, which the
-    MCU's formula would turn into a confident value; the signal is left out instead)."""
+def actuator_message(unfitted: tuple[str, ...] = (), base: MessageType = ACTUATOR
+                     ) -> MessageType:
+    """:data:`ACTUATOR` (or ``base``, e.g. :data:`ACTUATOR_ALL_DOUBLE`) without the fields
+    of the analog inputs ``unfitted`` (names of ``ANALOG_INPUTS`` whose part is not
+    mounted: an empty input reads 0 V, which the MCU's formula would turn into a
+    confident value; the signal is left out instead)."""
     if not unfitted:
-        return ACTUATOR
+        return base
     drop = {field for a, field in _ANALOG if a.name in unfitted}
-    return MessageType(ACTUATOR.full_name + "".join(_UNFITTED_SUFFIX + n for n in unfitted),
-                       tuple(f for f in ACTUATOR.fields if f.name not in drop), ACTUATOR.doc)
+    return MessageType(base.full_name + "".join(_UNFITTED_SUFFIX + n for n in unfitted),
+                       tuple(f for f in base.fields if f.name not in drop), base.doc)
 
 
 def unfitted_inputs(sensors: dict) -> tuple[str, ...]:
@@ -146,11 +171,12 @@ def _record_fields(fields: tuple[pdo.Field, ...], prefix: str) -> list[Field]:
     out = []
     for f in fields:
         if f.lsb == 0.0:  # the command: its unit depends on the mode
-            out += [Field(f"{prefix}force_command_n", "double", "N", "force command (mode 1)"),
-                    Field(f"{prefix}position_command_m", "double", "m",
+            out += [Field(f"{prefix}force_command_n", WIDE, "N", "force command (mode 1)"),
+                    Field(f"{prefix}position_command_m", WIDE, "m",
                           "position command (mode 2)")]
         elif f.unit:
-            out.append(Field(f"{prefix}{f.name}_{_suffix(f.unit)}", "double", f.unit, f.doc))
+            kind = WORD if np.dtype(f.dtype).itemsize <= 2 else WIDE  # 32-bit counts: double
+            out.append(Field(f"{prefix}{f.name}_{_suffix(f.unit)}", kind, f.unit, f.doc))
         else:
             out.append(Field(f"{prefix}{f.name}", "fixed32", "", f.doc))
     return out
@@ -193,17 +219,23 @@ def record_columns(box: Box, direction: str, records: np.ndarray,
                    ) -> dict[str, np.ndarray]:
     """SI columns of ``records`` ((n, bytes) uint8 rows of the box's record); for the
     inputs, ``piston`` = (x valid, v valid), each (actuator slots, n) bool
-    (:func:`report_flags`), gives the validity flags of each actuator slot's piston."""
+    (:func:`report_flags`), gives the validity flags of each actuator slot's piston.
+    Adjacent slots of one kind are decoded together (one numpy operation per field for
+    all of them, a column per slot a view of it)."""
     cols: dict[str, np.ndarray] = {}
-    for off, dt, fields in _record_plan(tuple(s.kind for s in box.slots), direction):
-        rec = np.ascontiguousarray(records[:, off:off + dt.itemsize]).view(dt)[:, 0]
-        for name, lsb, column in fields:
+    n = len(records)
+    for off, dt, m, fields in _record_plan(tuple(s.kind for s in box.slots), direction):
+        rec = np.ascontiguousarray(records[:, off:off + m * dt.itemsize]).view(dt)
+        for name, lsb, columns in fields:
             if lsb == 0.0:  # the command: its unit depends on the mode
-                cols.update(_commands(rec["mode"], rec[name].astype(np.int64), column))
-            elif lsb is not None:
-                cols[column] = rec[name] * lsb
-            else:
-                cols[column] = rec[name]
+                both = _commands(rec["mode"], rec[name].astype(np.int64))
+                for j, prefix in enumerate(columns):
+                    for what, v in both.items():
+                        cols[prefix + what] = v[:, j]
+                continue
+            v = rec[name] * lsb if lsb is not None else rec[name]
+            for j, column in enumerate(columns):
+                cols[column] = v[:, j] if m > 1 else v.reshape(n)
     if direction == "inputs" and _actuator_slots(box):
         if piston is None:
             raise ValueError("the inputs of a box with actuators need their piston flags")
@@ -215,31 +247,38 @@ def record_columns(box: Box, direction: str, records: np.ndarray,
 
 @functools.cache
 def _record_plan(kinds: tuple[str, ...], direction: str
-                 ) -> tuple[tuple[int, np.dtype, tuple[tuple[str, float | None, str], ...]],
-                            ...]:
+                 ) -> tuple[tuple[int, np.dtype, int,
+                                  tuple[tuple[str, float | None, tuple[str, ...]], ...]], ...]:
     """How :func:`record_columns` reads a record of slots ``kinds``, worked out once per
     slot layout (a block of records is decoded 20 times per simulated second per box):
-    per slot with a record, (byte offset, dtype, per field (name, lsb: 0.0 the command,
-    None a count, column or the command's column prefix))."""
+    per run of ``m`` adjacent slots of one kind with a record, (byte offset, the slot's
+    dtype, m, per field (name, lsb: 0.0 the command, None a count, per slot its column
+    or, for the command, its columns' prefix))."""
     which = 0 if direction == "outputs" else 1
-    plan = []
+    plan: list[tuple[int, np.dtype, str, list[int]]] = []  # off, dt, kind, slots
     off = 0
     for k, kind in enumerate(kinds):
-        decl = pdo.SLOT_FIELDS[kind][which]
-        dt = pdo.record_dtype(decl)
+        dt = pdo.record_dtype(pdo.SLOT_FIELDS[kind][which])
         if not dt.itemsize:
             continue
-        fields = []
-        for f in decl:
-            if f.lsb == 0.0:
-                fields.append((f.name, 0.0, f"s{k}_"))
-            elif f.unit:
-                fields.append((f.name, f.lsb, f"s{k}_{f.name}_{_suffix(f.unit)}"))
-            else:
-                fields.append((f.name, None, f"s{k}_{f.name}"))
-        plan.append((off, dt, tuple(fields)))
+        if plan and plan[-1][2] == kind and plan[-1][0] + len(plan[-1][3]) * dt.itemsize == off:
+            plan[-1][3].append(k)
+        else:
+            plan.append((off, dt, kind, [k]))
         off += dt.itemsize
-    return tuple(plan)
+    out = []
+    for start, dt, kind, slots in plan:
+        fields = []
+        for f in pdo.SLOT_FIELDS[kind][which]:
+            if f.lsb == 0.0:
+                fields.append((f.name, 0.0, tuple(f"s{k}_" for k in slots)))
+            elif f.unit:
+                fields.append((f.name, f.lsb, tuple(f"s{k}_{f.name}_{_suffix(f.unit)}"
+                                                    for k in slots)))
+            else:
+                fields.append((f.name, None, tuple(f"s{k}_{f.name}" for k in slots)))
+        out.append((start, dt, len(slots), tuple(fields)))
+    return tuple(out)
 
 
 def pc_command_block(parts: list[tuple[np.ndarray, np.ndarray, Box, int]],
@@ -444,7 +483,7 @@ def actuator_block(cal: FirmwareCalibration, up: np.ndarray, down: np.ndarray, e
     up_ok = started[:, keep].reshape(a * k)
     cols["upstream_valid"] = up_ok
     if not up_ok.all():
-        for name in UPSTREAM_DOUBLES:
+        for name in UPSTREAM_VALUES:
             if name in cols:
                 cols[name] = np.where(up_ok, cols[name], math.nan)
     carry.valid_in, carry.step_valid = carry.valid, valid

@@ -119,6 +119,13 @@ def _log_signals(cfg) -> None:
     warm_up(calibration(cfg))
 
 
+def _log_planes(cfg) -> None:
+    """The byte planes of a frame log's raw blocks (every ``--log``)."""
+    from hil.framelog.rawpb import warm_up
+
+    warm_up()
+
+
 def _esc_frames(cfg) -> None:
     """The EtherCAT frame path of ``serve --transport ethercat`` (every slave's datagram
     processing, the 3-buffers, the frame loop)."""
@@ -137,6 +144,7 @@ STEPS: list[tuple[str, Callable]] = [
     ("identification model", _identify_model),
     ("robot engine", _robot),
     ("frame log signals", _log_signals),
+    ("frame log byte planes", _log_planes),
     ("EtherCAT frame path", _esc_frames),
 ]
 

@@ -38,3 +38,62 @@ def _block():  # noqa: ANN202
     import numpy as np
 
     return np.arange(3), np.zeros((3, 2), np.uint16), np.dtype(np.uint16)
+
+
+def test_the_fieldbus_tap_is_timed_where_the_bus_system_takes_it() -> None:
+    """run_logged's tap is a closure: the breakdown wraps it as the bus system is made; it
+    is called once per cycle with every frame sent and received."""
+    from hil.bench.log_parts import TAP
+    from hil.fieldbus.system import BusSystem
+    from hil.fieldbus.topology import load_topology
+    from hil.sim.pc import demo_pc
+    from plant.config import load_config
+
+    seen, each = [], []
+    timer = _Timer()
+    undo = _install(timer)
+    try:
+        with BusSystem(load_topology("bench_one_box"), load_config(None), "inproc",
+                       tap=lambda *frame: each.append(frame),
+                       tap_cycle=lambda *cycle: seen.append(cycle)) as bs:
+            rec = bs.run(5, demo_pc(), keep=1)
+    finally:
+        for owner, name, fn in reversed(undo):
+            setattr(owner, name, fn)
+    assert timer.calls[TAP] == len(seen) == 5
+    # the per-cycle tap holds what the per-frame tap saw, in its order
+    flat = [e for c, t, sent, got in seen
+            for e in [(c, t, f, "tx") for f in sent] + [(c, t, f, "rx") for f in got]]
+    assert flat == each and sum(len(s[2]) for s in seen) == rec.master["frames_sent"] > 0
+
+
+def test_the_split_adds_up_to_what_the_logging_costs() -> None:
+    """The parts of a breakdown are the logged run's extra CPU: the in-kernel part is the
+    compiled calls' difference, the rest what no part holds."""
+    from collections import Counter
+
+    from hil.bench.log_parts import Parts, format_parts, timer_cost
+
+    own = Counter({"file: zstd (in _finalize)": 0.05, "producer: RobotRecorder.finished": 0.02})
+    p = Parts(2.0, 0.40, 0.70, 0.10, 0.13, own, Counter({"producer: RobotRecorder.finished":
+                                                         2000}), 0.01, 0, [0.3])
+    sp = p.split()
+    assert round(sp["in_kernel"], 6) == 15.0 and round(sp["total"], 6) == 150.0
+    assert round(sp["rest"], 6) == round(150.0 - 25.0 - 10.0 - 15.0 - 5.0, 6)
+    assert "150.0 ms CPU per simulated second" in format_parts(p)
+    full, inside = timer_cost(2000)
+    assert full >= inside >= 0.0
+
+
+def test_bench_log_reports_the_logging_per_simulated_second_and_its_budget() -> None:
+    from hil.bench.log import Overhead, format_report
+
+    ov = Overhead("mcu", "hydra_full, zstd, robot model", 2.0, 3, 1.5, 1.4, 1.45, 0.4, 1.0,
+                  0.6, 1.3, 10**6, (1.4, 1.5, 1.6), (1.3, 1.4, 1.5), (80.0, 100.0, 120.0),
+                  {"file": 60.0, "producer": 20.0, "in_kernel": 8.0, "timers": 5.0,
+                   "rest": 7.0, "total": 100.0})
+    text = format_report(ov, [])  # no encodings measured
+    assert "CPU 1.500 (1.400-1.600)" in text
+    assert "100 ms CPU per simulated second (80-120)" in text
+    assert "the target allows 50 " in text  # (1.25 - 1) x 0.2 s per simulated second
+    assert "compiled calls 8," in text

@@ -14,6 +14,12 @@ def block_rows(m) -> tuple[np.ndarray, np.ndarray]:  # noqa: ANN001 - a decoded 
         t = np.asarray(m.t_ns, np.int64)
     else:  # evenly spaced: the first time and the spacing
         t = m.t0_ns + m.dt_ns * np.arange(m.count, dtype=np.int64)
+    if len(m.frame_deltas):  # byte planes of the zigzag-coded frame-to-frame differences
+        u = np.dtype(f"<u{dt.itemsize}")
+        raw = np.frombuffer(m.frame_deltas, np.uint8).reshape(dt.itemsize, m.width, m.count)
+        z = np.ascontiguousarray(raw.transpose(2, 1, 0)).view(u).reshape(m.count, m.width)
+        d = (z >> 1) ^ (0 - (z & 1)).astype(u)  # the signed differences, modulo 2^bits
+        return t, np.cumsum(d, axis=0, dtype=u).view(dt)
     raw = np.frombuffer(m.frames, np.uint8)
     if m.byte_planes:  # byte b of element j of frame i at (b * width + j) * count + i
         rows = raw.reshape(dt.itemsize, m.width, m.count).transpose(2, 1, 0)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import io
 
+import numpy as np
 import pytest
 from mcap.reader import make_reader
 from mcap.writer import CompressionType, Writer
@@ -11,7 +12,12 @@ from mcap.writer import CompressionType, Writer
 from hil.framelog import batch
 
 
-def _file(fast: bool, payloads: list[bytes], chunk_size: int) -> bytes:
+def _interleave(payloads: list[bytes], p: int) -> batch.Interleaved:
+    return batch.Interleaved([np.array([list(m) for m in payloads[r::p]], np.uint8)
+                              for r in range(p)])
+
+
+def _file(fast: bool, payloads: list[bytes], chunk_size: int, period: int = 0) -> bytes:
     buf = io.BytesIO()
     w = Writer(buf, chunk_size=chunk_size, compression=CompressionType.NONE)
     w.start(profile="t", library="t")
@@ -22,18 +28,25 @@ def _file(fast: bool, payloads: list[bytes], chunk_size: int) -> bytes:
     w.add_message(b, 5, b"first", 5, 0)  # a message by the library's own path in between
     times = [10 * i + (i % 3) for i in range(len(payloads))]
     half = len(payloads) // 2
-    batch.add_messages(w, a, times[:half], payloads[:half], 2**32 - 3, fast)
+    first, then = payloads[:half], payloads[half:]
+    if period:  # the same messages as the rows of one array per place in the period
+        first, then = _interleave(first, period), _interleave(then, period)
+    batch.add_messages(w, a, times[:half], first, 2**32 - 3, fast)
     w.add_message(b, 7, b"second", 7, 1)
-    batch.add_messages(w, a, times[half:], payloads[half:], 2**32 - 3 + half, fast)
+    batch.add_messages(w, a, times[half:], then, 2**32 - 3 + half, fast)
     w.finish()
     return buf.getvalue()
 
 
-@pytest.mark.parametrize("sizes", ["fixed", "varying"])
+@pytest.mark.parametrize("sizes", ["fixed", "varying", "periodic"])
 @pytest.mark.parametrize("chunk_size", [64, 1 << 20])
 def test_same_bytes_as_add_message(sizes: str, chunk_size: int) -> None:
-    payloads = [bytes([i % 251]) * (9 if sizes == "fixed" else 1 + i % 7) for i in range(40)]
-    fast, slow = _file(True, payloads, chunk_size), _file(False, payloads, chunk_size)
+    lengths = {"fixed": (9,), "varying": (1, 2, 3, 4, 5, 6, 7), "periodic": (3, 11, 11, 2)}
+    payloads = [bytes([i % 251]) * lengths[sizes][i % len(lengths[sizes])]
+                for i in range(40)]
+    period = 4 if sizes == "periodic" else 0  # Interleaved: 2 x 5 rows of 4 messages
+    fast = _file(True, payloads, chunk_size, period)
+    slow = _file(False, payloads, chunk_size, period)
     if chunk_size > 1000:
         assert fast == slow  # no chunk closes inside a batch: the very same file
     # small chunks: a batch stays in one chunk (closed after it), add_message closes one per

@@ -143,9 +143,12 @@ def test_actuator_values_are_what_the_mcu_decodes(logs):
         assert d.status == rows[t][B.U_STATUS] and d.link_ok == bool(
             rows[t][B.U_STATUS] & B.ST_LINK_OK)
         checked += 1
-    assert checked == len(msgs) and msgs[-1][1].enabled and msgs[-1][1].pc_mode == 1
-    # the force command is the demo sine (300 N, 2 Hz) as the PC sent it
-    forces = np.array([d.force_command_n for _, d in msgs])
+    assert checked == len(msgs) and msgs[-1][1].enabled
+    # the command it worked to is the box's outputs channel's: the demo sine (300 N, 2 Hz)
+    # as the PC sent it, in force mode
+    outs = _decoded(path, "/signals/box/0/outputs")
+    assert outs[-1][1].s0_mode == 1
+    forces = np.array([d.s0_force_command_n for _, d in outs])
     assert 200 < np.nanmax(np.abs(forces)) <= 300
 
 
@@ -254,7 +257,9 @@ def test_parquet_export_loads_with_pandas(exported):
         n_csv = sum(1 for _ in f) - 1
     assert len(df) == n_csv and list(df.columns[:3]) == ["t_ns", "t_s", "topic"]
     act = df[df["topic"] == "/signals/actuator/0.0"]
-    assert act["p_cyl_a_pa"].notna().all() and act["p_cyl_a_pa"].dtype == np.float64
+    # the schema's types: a word-sized float field float32, the piston's two words float64
+    assert act["p_cyl_a_pa"].notna().all() and act["p_cyl_a_pa"].dtype == np.float32
+    assert act["x_piston_m"].dtype == np.float64
     assert (act["t_ns"].diff().dropna() == 1_000_000).all()
     schema = pq.read_schema(exported["parquet"])
     unit = {f.name: (f.metadata or {}).get(b"unit", b"").decode() for f in schema}
@@ -282,6 +287,7 @@ def test_two_boards_each_decoded_from_its_own_words(tmp_path) -> None:  # noqa: 
         msgs = _decoded(log, f"/signals/actuator/0.{k}")
         assert len(msgs) >= 59
         for tt, d in msgs:
-            assert d.iq_a == pytest.approx(int(np.int16(rows[tt][B.U_IQ])) * 1e-3, abs=1e-12)
+            # a float field: the float32 nearest the word's value, exactly
+            assert d.iq_a == float(np.float32(int(np.int16(rows[tt][B.U_IQ])) * 1e-3))
         iq[k] = [d.iq_a for _, d in msgs]
     assert iq[0] != iq[1]  # the demo sine is phase-shifted per actuator

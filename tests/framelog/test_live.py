@@ -161,11 +161,16 @@ def test_serve_chain_sends_decoded_signals() -> None:
         b.flush()
     act = [(t, p) for topic, t, p in live.messages if topic == "/signals/actuator/0.0"]
     assert len(act) == 150
-    message = dict(live.channels)["/signals/actuator/0.0"]
-    decode = DecoderFactory().decoder_for("protobuf", Schema(
-        id=1, name=message.full_name, encoding="protobuf", data=message.schema))
-    last = decode(act[-1][1])
-    assert last.force_command_n == pytest.approx(100.0) and last.enabled
+    out = [(t, p) for topic, t, p in live.messages if topic == "/signals/box/0/outputs"]
+
+    def last(topic, msgs):  # noqa: ANN001, ANN202
+        message = dict(live.channels)[topic]
+        decode = DecoderFactory().decoder_for("protobuf", Schema(
+            id=1, name=message.full_name, encoding="protobuf", data=message.schema))
+        return decode(msgs[-1][1])
+
+    assert last("/signals/actuator/0.0", act).enabled
+    assert last("/signals/box/0/outputs", out).s0_force_command_n == pytest.approx(100.0)
 
 
 def test_serve_foxglove_bad_address_is_one_line(capsys) -> None:  # noqa: ANN001

@@ -63,3 +63,20 @@ def test_one_layout_gives_one_array() -> None:
     frames[4] = bytes(odd)
     got = rawpb.wrap_many(ENC, frames)
     assert [bytes(m) for m in got] == [rawpb.wrapper(ENC)(f) for f in frames]
+
+
+def test_periodic_lengths_give_one_array_per_place() -> None:
+    """A cycle's request and reply (two lengths, repeating) wrap into one array each, whose
+    rows interleaved are the per-frame messages; a period broken or an unknown layout: None."""
+    frames = []
+    for k in range(6):
+        frames.append(_frame([(12, k, 0x10000, bytes(8))], False, True, b""))
+        frames.append(_frame([(4, k, 0x20000, bytes(30)), (12, k, 3, bytes(2))], False,
+                             k != 2, b"\1"))
+    parts = rawpb.wrap_periodic(ENC, frames)
+    assert parts is not None and len(parts) == 2 and [len(p) for p in parts] == [6, 6]
+    wrap = rawpb.wrapper(ENC)
+    assert [parts[i % 2][i // 2].tobytes() for i in range(12)] == [wrap(f) for f in frames]
+    assert rawpb.wrap_periodic(ENC, frames[:-1]) is None  # 11 frames: no period up to 8
+    assert rawpb.wrap_periodic(ENC, [frames[0]] * 3 + [frames[1]] * 6) is None
+    assert rawpb.wrap_periodic("eha-hil/other", frames) is None

@@ -104,6 +104,7 @@ ROOMS: dict[str, set[str]] = {
 ROOM_EXCEPTIONS = {
     ("hil/sim/warmup.py", "replay"): "compiles every kernel once: the FPGA replay's",
     ("hil/sim/warmup.py", "identify"): "compiles every kernel once: the fitted model's",
+    ("hil/sim/warmup.py", "framelog"): "compiles every kernel once: the log's byte planes",
 }
 
 
@@ -248,6 +249,9 @@ ALLOWED = {
         "interpreter lock, and passes each frame to the ESC model's compiled frame path",
     ("hil/replay/fpga_replay.py", "kernel"):
         "feeds logged words through the board's compiled tick and compares its outputs",
+    ("hil/framelog/planes.py", "kernel"):
+        "a log's raw blocks split into byte planes (and frame-to-frame differences) in one "
+        "compiled pass: bytes moved, no part's arithmetic",
     ("hil/identify/model.py", "kernel"):
         "identification: the reduced model fitted to measured data, not the plant's parts",
     ("hil/identify/rig.py", "kernel"):

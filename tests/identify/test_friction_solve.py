@@ -113,8 +113,12 @@ def test_solve_meets_its_tolerance_against_an_independent_root():
 
 def test_simulation_with_both_frictions_stays_near_a_tighter_solve():
     """The whole model with both frictions against itself with the solves' tolerance a
-    hundred times tighter: the states agree to 1e-8 of their spread (far below what a fit
-    resolves), and the tolerance does act (the two differ)."""
+    hundred times tighter: the states agree to 4e-8 of their spread (far below what a fit
+    resolves), and the tolerance does act (the two differ). The seal's solve is at the
+    sub-step's middle: an error there reaches the force held over the whole sub-step with a
+    gain of up to 2 (its end-of-step solve damped it by 1/(1 + h F'/J_c), ~0.26 here), so a
+    stuck piston's states move by up to 1.6e-8 of their spread here (within 1e-8 with the
+    end-of-step solve)."""
     from hil.identify.experiment import prepare
     from hil.identify.rig import generate_rig
     from plant.config import load_config
@@ -131,5 +135,5 @@ def test_simulation_with_both_frictions_stays_near_a_tighter_solve():
     z_ref = fm.states(theta)
     spread = np.ptp(z_ref, axis=0)
     assert np.all(np.isfinite(z)) and np.all(spread[1:] > 0.0)
-    assert np.all(np.abs(z - z_ref) <= 1e-8 * spread)
+    assert np.all(np.abs(z - z_ref) <= 4e-8 * spread)
     assert not np.array_equal(z, z_ref)

@@ -31,7 +31,7 @@ def _pc(step_cycle: int):
 def logged(tmp_path_factory):
     cfg = load_config("hydra_default")
     path = tmp_path_factory.mktemp("replay") / "run.mcap"
-    rec = run_logged(load_topology("bench_one_box"), cfg, 400, _pc(100), path)
+    rec = run_logged(load_topology("bench_one_box"), cfg, 400, _pc(100), path, keep=None)
     return cfg, path, rec
 
 
@@ -51,6 +51,20 @@ def test_log_inputs_equal_the_masters_record(logged):
     _, path, rec = logged
     ins = FrameLogReader(path).blocks(topics(0)["inputs"]).frames
     assert np.array_equal(ins, rec.inputs[1:1 + len(ins)])
+
+
+def test_logged_run_keeps_only_the_input_images_asked_for(tmp_path):
+    """A logged run's record holds the last ``keep`` input images (its memory does not
+    grow with the run; the log has them all), joined across the run's parts in order."""
+    path = tmp_path / "keep.mcap"
+    cycles = 30  # parts of one cycle each: the kept images are joined across parts
+    rec = run_logged(load_topology("bench_one_box"), load_config("hydra_default"), cycles,
+                     _pc(10), path, keep=5)
+    assert rec.inputs.shape[0] == 5 and rec.first_cycle == cycles - 5
+    ins = FrameLogReader(path).blocks(topics(0)["inputs"]).frames  # after cycles 1..29
+    assert np.array_equal(rec.inputs, ins[cycles - 6:cycles - 1])
+    assert run_logged(load_topology("bench_one_box"), load_config("hydra_default"), 3,
+                      _pc(10), tmp_path / "default.mcap").inputs.shape[0] == 1
 
 
 def test_changed_gain_is_caught_at_the_first_step_it_acts(logged):

@@ -286,9 +286,11 @@ def test_the_export_of_a_robot_log_holds_what_the_stock_decoder_reads(logs, tmp_
         rows = df[df["topic"] == topic]
         assert rows["t_ns"].tolist() == [t for t, _ in msgs]
         for fd in msgs[0][1].DESCRIPTOR.fields:
-            want = np.array([float(getattr(m, fd.name)) for _, m in msgs])
+            # a float field: the CSV holds the float32's shortest text, exact as float32
+            dt = np.float32 if fd.type == fd.TYPE_FLOAT else np.float64
+            want = np.array([float(getattr(m, fd.name)) for _, m in msgs]).astype(dt)
             for got in (rows[fd.name], dc.loc[rows.index, fd.name]):
-                np.testing.assert_array_equal(got.to_numpy(np.float64), want, topic + fd.name)
+                np.testing.assert_array_equal(got.to_numpy(dt), want, topic + fd.name)
 
     t, up = _frames_of(stock["/lvds/2.0/up"])
     rows = df[df["topic"] == "/lvds/2.0/up"]
@@ -413,3 +415,27 @@ def test_the_box_records_carry_piston_flags(logs):
         for k in (0, 1):
             assert all(getattr(m, f"s{k}_x_piston_valid") for m in msgs)
             assert [getattr(m, f"s{k}_v_piston_valid") for m in msgs[:3]] == [False, True, True]
+
+
+def test_a_logged_run_keeps_the_engines_path(topo, tmp_path, monkeypatch):
+    """Logging changes no choice of the engine (lanes, compute threads, overlap, batches):
+    the compiled calls are made once per run, only with the log's rows, and not again per
+    block (which would restart the helper threads every 100 cycles)."""
+    from hil.fieldbus.system import BusSystem
+
+    made = []
+    calls = RobotEngine._calls
+
+    def counting(engine, ticks):
+        if engine._stale:
+            made.append((engine.lanes, engine._workers(), engine.overlap,
+                         engine._blocks.tobytes(), engine.log_rows.up.shape[1] > 0))
+        return calls(engine, ticks)
+
+    monkeypatch.setattr(RobotEngine, "_calls", counting)
+    cfg = load_config(None)
+    with BusSystem(topo, cfg, "inproc", model="robot") as bs:
+        bs.run(5, demo_pc(), keep=1)
+    run_logged(topo, cfg, 120, demo_pc(), tmp_path / "path.mcap", model="robot")
+    assert len(made) == 2  # the bare run's and the logged run's, each once
+    assert made[0][:4] == made[1][:4] and (made[0][4], made[1][4]) == (False, True)

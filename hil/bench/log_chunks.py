@@ -1,0 +1,100 @@
+"""What each codec and level makes of a whole-robot log's chunks: size and compression CPU.
+
+``python -m hil.bench.log_chunks [seconds] [topology]`` logs ``seconds`` (default 1) of
+``topology`` (default ``hydra_full``) at level ``mcu`` with the whole-robot engine, keeps
+every chunk as the writer closes it (uncompressed), then compresses each chunk with each
+codec and level the writer offers and reports the log's MB and the compression's CPU per
+simulated second (``time.process_time``, best of 3 per chunk, so a loaded machine reads
+high rather than noisy; quote ``uptime``). lz4 chunks also carry a CRC-32 of their
+uncompressed bytes (zstd's own checksum is in its time), listed apart.
+"""
+
+from __future__ import annotations
+
+import sys
+import tempfile
+import time
+import zlib
+from collections.abc import Callable
+from pathlib import Path
+
+#: (label, compression, level) of each row.
+CODECS = (("zstd 3 (the mcap library's)", "zstd", 3), ("zstd 1", "zstd", 1),
+          ("zstd -1 (default)", "zstd", -1), ("zstd -3", "zstd", -3),
+          ("zstd -5", "zstd", -5), ("lz4 (its default)", "lz4", None))
+
+
+def capture(seconds: float, topology: str) -> list[bytes]:
+    """The uncompressed chunks of a logged run of ``seconds`` of ``topology``."""
+    from hil.fieldbus.topology import load_topology
+    from hil.framelog import chunk
+    from hil.replay.record import run_logged
+    from hil.sim.pc import demo_pc
+    from plant.config import load_config
+
+    cfg = load_config(None, [])
+    topo = load_topology(topology)
+    chunks: list[bytes] = []
+    make = chunk.compressor
+
+    def keeping(compression: str, level: int | None) -> Callable[[memoryview], bytes]:
+        inner = make(compression, level)
+
+        def compress(view: memoryview) -> bytes:
+            chunks.append(bytes(view))
+            return inner(view)
+        return compress
+
+    with tempfile.TemporaryDirectory() as d:
+        path = Path(d) / "chunks.mcap"
+        run_logged(topo, cfg, 20, demo_pc(), path, level="mcu", model="robot")  # warm-up
+        chunk.compressor = keeping
+        try:
+            run_logged(topo, cfg, max(int(round(seconds * 1000)), 1), demo_pc(), path,
+                       level="mcu", model="robot")
+        finally:
+            chunk.compressor = make
+    return chunks
+
+
+def _cpu(fn: Callable[[bytes], object], data: bytes) -> float:
+    best = float("inf")
+    for _ in range(3):
+        t0 = time.process_time()
+        fn(data)
+        best = min(best, time.process_time() - t0)
+    return best
+
+
+def measure(chunks: list[bytes]) -> list[tuple[str, float, float, float]]:
+    """(label, compressed bytes, compression CPU s, CRC-32 CPU s) per codec of
+    :data:`CODECS`, summed over ``chunks``."""
+    from hil.framelog.chunk import compressor
+
+    rows = []
+    crc = sum(_cpu(zlib.crc32, c) for c in chunks)
+    for label, codec, level in CODECS:
+        fn = compressor(codec, level)
+        size = sum(len(fn(c)) for c in chunks)
+        rows.append((label, size, sum(_cpu(fn, c) for c in chunks),
+                     crc if codec == "lz4" else 0.0))
+    return rows
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = sys.argv[1:] if argv is None else argv
+    seconds = float(args[0]) if args else 1.0
+    topology = args[1] if len(args) > 1 else "hydra_full"
+    chunks = capture(seconds, topology)
+    raw = sum(map(len, chunks))
+    print(f"{len(chunks)} chunks, {raw / seconds / 1e6:.1f} MB per simulated second "
+          "uncompressed")
+    print("codec, level | MB per simulated s | compression ms per simulated s (+ CRC-32)")
+    for label, size, cpu, crc in measure(chunks):
+        extra = f" (+ {crc / seconds * 1e3:.1f})" if crc else ""
+        print(f"{label} | {size / seconds / 1e6:.2f} | {cpu / seconds * 1e3:.1f}{extra}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
