@@ -74,6 +74,12 @@ WEIGHTING_JACOBIANS = 3
 #: A step that lowers the cost by less than this many residual variances ends the fit.
 CONVERGED_GAIN = 1.0
 
+#: Levels of the seal's friction law F(v) = (F_c + (F_s - F_c) exp(-(v/v_s)^2)) s(v): the
+#: law dissipates (F(v) v >= 0 at every v) only with both levels >= 0. A negative static
+#: level is a seal that pushes the piston along near rest, a stand-in for another effect
+#: (a missing pump friction), never a seal: the fit keeps them >= 0.
+NON_NEGATIVE = frozenset({"sf_coulomb_n", "sf_static_n"})
+
 #: Longest first-order sensor lag the baseline may fit (a 160 Hz sensor).
 MAX_SENSOR_LAG_S = 1e-3
 #: The timing skew is a sub-sample alignment: |skew| <= SKEW_LIMIT x the sample period.
@@ -88,12 +94,12 @@ def NUISANCE_SCALES(dt: float) -> dict[str, float]:  # noqa: N802 - a table, by 
 def bounds_of(name: str, dt: float, skew_limit: float = SKEW_LIMIT) -> tuple[float, float]:
     """Bounds of a parameter in its own units (the log-parameters' are relative to the start):
     the skew is a sub-sample alignment (|skew| <= T/2), a delay is causal, a clip fraction
-    lies in 0..1."""
+    lies in 0..1, a seal friction level is >= 0 (:data:`NON_NEGATIVE`)."""
     if name == "skew_s":
         return -skew_limit * dt, skew_limit * dt
     if name.startswith("lag_"):
         return 0.0, MAX_SENSOR_LAG_S
-    if name == "delay_s":
+    if name == "delay_s" or name in NON_NEGATIVE:
         return 0.0, np.inf
     if name.startswith("sat_") or name.endswith("_shape"):
         return 0.0, 1.0
