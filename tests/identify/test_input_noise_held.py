@@ -17,12 +17,31 @@ import pytest
 
 from hil.identify.experiment import prepare, quantum
 from hil.identify.model import IDX, FastModel
-from hil.identify.noise import estimate_input_noise, held_noise_models, predicted_residual
+from hil.identify.noise import (
+    clean_current,
+    estimate_input_noise,
+    held_noise_models,
+    predicted_residual,
+)
 from hil.identify.pipeline import MATERIAL_SHARE
 from hil.identify.residuals import analyse
 from hil.identify.rig import SENSORS, generate_rig
 
-pytestmark = pytest.mark.slow
+
+def test_clean_current_keeps_the_excitation_lines_and_drops_the_white_floor():
+    fs, n, rms = 5000.0, 20000, 0.02
+    t = np.arange(n) / fs
+    rng = np.random.default_rng(3)
+    lines = sum(a * np.sin(2 * np.pi * f * t + p)
+                for a, f, p in zip(rng.uniform(0.5, 2.0, 12), np.arange(1, 13) * 7.25,
+                                   rng.uniform(0, 6.28, 12), strict=True))
+    iq = 3.0 + lines + rng.normal(0.0, rms, n)
+    noise = estimate_input_noise(iq, fs)
+    assert noise.rms_a == pytest.approx(rms, rel=0.1)
+    clean = clean_current(iq, noise)
+    # what is left of the noise is the part on the twelve kept lines: ~sqrt(12/n) of it
+    assert np.std(clean - 3.0 - lines) < 0.1 * rms
+    assert np.mean(clean) == pytest.approx(np.mean(iq))
 
 
 def _truth_theta(model: FastModel, rig) -> np.ndarray:
@@ -40,6 +59,7 @@ def _truth_theta(model: FastModel, rig) -> np.ndarray:
     return theta
 
 
+@pytest.mark.slow
 def test_held_seal_at_the_rig_truth_leaves_no_material_structure(ident_cfg):
     rig = generate_rig("conrod_fixed", ["seal_friction"], seconds=6.0, seed=1,
                        preset=ident_cfg)
