@@ -63,3 +63,32 @@ def test_the_shortcut_gives_the_jacobian_of_a_simulation_per_column(monkeypatch)
     assert np.array_equal(fast, slow)
     assert fitter.n_sims - sims_fast == len(free) + 1  # every column simulated, and the base
     assert sims_fast == len(free) + 1 - len(set(free) & OUTPUT_ONLY)
+
+
+def test_columns_are_not_kept_and_one_thread_gives_the_same_jacobian():
+    """A fit's columns leave the model's kept runs alone (a vector asked for again, the
+    fit's point, stays kept), and the Jacobian does not depend on the thread count."""
+    import threading
+
+    from hil.identify.model import map_threads, set_threads
+
+    model = _model()
+    theta = model.start_vector()
+    theta[IDX["pc_force_n"]] = 40.0
+    free = ["gain_n_per_a", "ks", "pc_force_n", "strain_offset_n"]
+    fitter = OutputErrorFit(model)
+    fitter._ref = {n: max(abs(theta[IDX[n]]), 1e-12) for n in ("gain_n_per_a", "ks")}
+    sigma = {c: 1.0 for c in model.exp.channels}
+    mask = fitter.fit_mask()
+    x = fitter._to_x(theta, free)
+    _, jac = fitter._problem(free, theta, sigma, mask)
+    several = jac(x)
+    assert len(model._runs) == 1  # the base point only, not its columns
+    try:
+        set_threads(1)
+        ids = map_threads(lambda _: threading.get_ident(), range(4))
+        assert set(ids) == {threading.get_ident()}
+        one = jac(x)
+    finally:
+        set_threads(None)
+    assert np.array_equal(one, several)

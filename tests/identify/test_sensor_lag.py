@@ -1,0 +1,56 @@
+"""The sensors' first-order lag: the filter applied to the spectrum of the signal's even
+extension. Held here to that definition written out on its own, to the continuous filter's
+gain and phase on a sine, and batched signals to single ones (a faster transform of the
+lag must pass the same tests)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from hil.identify.lag import sensor_lag, sensor_lags
+
+
+def _by_extension(y: np.ndarray, tau: float, dt: float, n: int) -> np.ndarray:
+    ext = np.concatenate([y[:n], y[:n][::-1]])
+    h = 1.0 / (1.0 + 2j * math.pi * np.fft.rfftfreq(ext.size, dt) * tau)
+    return np.fft.irfft(np.fft.rfft(ext) * h, ext.size)[:n]
+
+
+@pytest.mark.parametrize("n", [2, 7, 1000, 3072])
+@pytest.mark.parametrize("tau", [2e-5, 1.5e-4, 1e-3])
+def test_the_transforms_give_the_extension_s_filter(n, tau):
+    rng = np.random.default_rng(n)
+    dt = 2e-4
+    # a signal with a trend, a resonance and noise: every band carries something
+    t = np.arange(3072) * dt
+    y = 3e5 * t + 2e4 * np.sin(2 * math.pi * 1300 * t) + rng.normal(0.0, 2e3, t.size)
+    got = sensor_lag(y, tau, dt, n_valid=n)
+    want = _by_extension(y, tau, dt, n)
+    scale = np.abs(y[:n]).max()
+    assert np.max(np.abs(got[:n] - want)) <= 1e-13 * scale
+    assert np.array_equal(got[n:], y[n:])  # beyond n_valid: as given
+
+
+def test_a_lag_attenuates_and_delays_a_sine_as_the_continuous_filter_does():
+    dt, tau, f = 2e-4, 1e-4, 400.0
+    t = np.arange(4000) * dt
+    out = sensor_lag(np.sin(2 * math.pi * f * t), tau, dt)
+    w = 2 * math.pi * f
+    want = np.sin(w * t - math.atan(w * tau)) / math.sqrt(1 + (w * tau) ** 2)
+    mid = slice(1000, 3000)  # away from the reflected ends
+    assert np.max(np.abs(out[mid] - want[mid])) < 2e-3
+
+
+def test_batched_signals_are_filtered_each_as_alone_and_a_gap_falls_back():
+    rng = np.random.default_rng(3)
+    ys = [rng.normal(size=500).cumsum() for _ in range(3)]
+    batched = sensor_lags(ys, 1e-4, 2e-4)
+    for y, b in zip(ys, batched, strict=True):
+        assert np.allclose(b, sensor_lag(y, 1e-4, 2e-4), rtol=0, atol=1e-12)
+    gap = ys[0].copy()
+    gap[100] = np.nan
+    out = sensor_lag(gap, 1e-4, 2e-4)
+    assert np.isfinite(out[:100]).all() and np.isnan(out[100])
