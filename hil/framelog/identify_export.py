@@ -188,12 +188,14 @@ def export_identify(log_path: str | os.PathLike[str], out_path: str | os.PathLik
     skipped = int(filled[0])
     t_ns, frames = t_ns[skipped:], frames[skipped:]
     cols = signals(frames[:, :len(B.UP_REGISTERS)], cfg)
-    header = [f"# load: {load}", f"# sample_rate_hz: {fs:.12g}",
+    # every value as its shortest exact text (repr): the CSV read back is the export, bit for
+    # bit (a fixed number of digits moved values by ulps, and a fit's path with them)
+    header = [f"# load: {load}", f"# sample_rate_hz: {float(fs)!r}",
               f"# source: eha-hil log export {os.path.basename(path)} --format identify "
               f"--board {board} (the MCU's reads of {topic}, SI units)"]
     t_s = [f"{t // 1_000_000_000}.{t % 1_000_000_000:09d}" for t in t_ns.tolist()]
     mat = np.column_stack([cols[c] for c in COLUMNS[1:]])
-    body = [",".join([ts, *(f"{v:.12g}" for v in row)]) for ts, row in
+    body = [",".join([ts, *map(repr, row)]) for ts, row in
             zip(t_s, mat.tolist(), strict=True)]
     text = "\n".join([*header, ",".join(COLUMNS), *body]) + "\n"
     if str(out_path) == "-":

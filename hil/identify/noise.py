@@ -61,14 +61,47 @@ def estimate_input_noise(iq: np.ndarray, fs: float, lsb_a: float = 0.0) -> Input
     return InputNoise(rms, density, (lo, hi), lsb_a)
 
 
-def noisy_experiment(exp: Experiment, rms_a: float) -> Experiment:
-    """``exp`` with white noise of ``rms_a`` added to its logged current (fixed seed)."""
+def noisy_experiment(exp: Experiment, rms_a: float, iq: np.ndarray | None = None) -> Experiment:
+    """``exp`` with white noise of ``rms_a`` added to its logged current (fixed seed), or to
+    ``iq`` in its place."""
     rng = np.random.default_rng(NOISE_SEED)
+    base = exp.iq if iq is None else iq
+    return experiment_with_current(exp, base + rng.normal(0.0, rms_a, exp.n))
+
+
+#: A line of the current's spectrum is kept as signal when its power exceeds this multiple of
+#: the white noise's expected power per line: a noise-only line's power is exponentially
+#: distributed, so it passes with probability exp(-10) (5e-5), and an excitation line (tens of
+#: dB above the floor) is kept whole.
+SIGNAL_LINE_FACTOR = 10.0
+
+
+def clean_current(iq: np.ndarray, noise: InputNoise) -> np.ndarray:
+    """An estimate of the current the plant felt: ``iq`` with every line of its spectrum that
+    does not stand :data:`SIGNAL_LINE_FACTOR` above the white floor set to zero."""
+    x = np.fft.rfft(iq - np.mean(iq))
+    per_line = iq.size * noise.rms_a ** 2  # E|X_k|^2 of white noise of that rms
+    x[np.abs(x) ** 2 < SIGNAL_LINE_FACTOR * per_line] = 0.0
+    return np.fft.irfft(x, iq.size) + np.mean(iq)
+
+
+def experiment_with_current(exp: Experiment, iq: np.ndarray) -> Experiment:
+    """``exp`` with its logged current replaced by ``iq``."""
     cols = dict(exp.data.columns)
-    cols["iq"] = exp.iq + rng.normal(0.0, rms_a, exp.n)
+    cols["iq"] = iq
     data = MeasuredData(exp.data.path, exp.data.load, exp.data.sample_rate_hz, exp.data.t,
                         cols, dict(exp.data.header), list(exp.data.ignored))
     return dataclasses.replace(exp, data=data)
+
+
+def held_noise_models(exp: Experiment, noise: InputNoise) -> tuple:
+    """(model from the cleaned current, model from it plus a noise of the logged level): the
+    input-noise increment of a model whose friction can hold the piston (module docstring)."""
+    from hil.identify.model import FastModel
+
+    clean = clean_current(exp.iq, noise)
+    return (FastModel(experiment_with_current(exp, clean)),
+            FastModel(noisy_experiment(exp, noise.rms_a, clean)))
 
 
 def predicted_residual(simulate_clean: dict[str, np.ndarray],
@@ -77,4 +110,5 @@ def predicted_residual(simulate_clean: dict[str, np.ndarray],
     return {c: simulate_noisy[c] - simulate_clean[c] for c in simulate_clean}
 
 
-__all__ = ["InputNoise", "estimate_input_noise", "noisy_experiment", "predicted_residual"]
+__all__ = ["InputNoise", "clean_current", "estimate_input_noise", "experiment_with_current",
+           "held_noise_models", "noisy_experiment", "predicted_residual"]

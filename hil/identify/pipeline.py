@@ -59,6 +59,7 @@ from hil.identify.model import IDX, FastModel
 from hil.identify.noise import (
     InputNoise,
     estimate_input_noise,
+    held_noise_models,
     noisy_experiment,
     predicted_residual,
 )
@@ -337,6 +338,7 @@ class _Loop:
                                                   quantum(exp.iq))
         self.noisy_model = (FastModel(noisy_experiment(exp, noise.rms_a)) if noise.rms_a > 0
                             else None)
+        self._held_noise: tuple[FastModel, FastModel] | None = None
 
         say(f"baseline fit ({exp.load}, {exp.n} samples, channels {', '.join(exp.channels)})")
         self.base = base = fit_baseline(model, theta0=theta_prov)
@@ -370,7 +372,14 @@ class _Loop:
     def noise_part(self, theta: np.ndarray) -> dict[str, np.ndarray] | None:
         if self.noisy_model is None:
             return None
-        return predicted_residual(self.model.outputs(theta), self.noisy_model.outputs(theta))
+        if theta[IDX["sf_coulomb_n"]] == 0.0:
+            return predicted_residual(self.model.outputs(theta), self.noisy_model.outputs(theta))
+        # a seal that can hold the piston makes the noise's path depend on where it starts:
+        # the increment is taken from a cleaned current, as the rig felt it (noise.py)
+        if self._held_noise is None:
+            self._held_noise = held_noise_models(self.exp, self.noise)
+        clean, noisy = self._held_noise
+        return predicted_residual(clean.outputs(theta), noisy.outputs(theta))
 
     def refit_with(self, d: EffectDef | list[EffectDef], start: dict[str, float],
                    robust: bool = False) -> tuple[FitResult, dict[str, str]]:

@@ -53,21 +53,19 @@ def test_a_case_does_not_depend_on_what_ran_before(first_x, then_y):
     assert report_text(identify(data, cfg)) == report_text(rep)
 
 
-def test_thread_counts_move_no_bit(first_x, monkeypatch):
+def test_thread_counts_move_no_bit(first_x):
     """The simulations on another number of threads (one where the machine has several,
     three where it has one) and the linear algebra offered two BLAS threads: the same
     report, bit for bit (the identification holds BLAS to one thread: a dot product
     split over two threads sums in another order)."""
     data, cfg, rep = first_x
-    workers = 1 if (os.cpu_count() or 1) >= 2 else 3
-    monkeypatch.setattr(model.os, "cpu_count", lambda: workers)
-    monkeypatch.setattr(model, "_POOL", None)
+    before = model._WORKERS
+    model.set_threads(1 if (before or os.cpu_count() or 1) >= 2 else 3)
     try:
         with threadpool_limits(limits=2, user_api="blas"):
             again = identify(data, cfg)
     finally:
-        if model._POOL is not None:
-            model._POOL.shutdown()
+        model.set_threads(before)
     assert report_text(again) == report_text(rep)
 
 
