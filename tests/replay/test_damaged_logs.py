@@ -1,4 +1,4 @@
-"""Damaged logs through the console script: `eha-hil replay`, `log info` and `log export`
+"""Damaged logs through the command line: `eha-hil replay`, `log info` and `log export`
 exit 1 (a result: the log is truncated, what is readable was used and the output says
 where it ends) or 2 (nothing could be done: empty, foreign, damaged, unreadable metadata,
 nothing to replay), each with exactly one line on stderr and never a traceback.
@@ -26,7 +26,7 @@ from hil.replay.record import run_logged
 from hil.sim.pc import demo_pc
 from plant.config import load_config
 
-#: One console-script process per damaged log and command: ~20 s, so not in make test-fast.
+#: A real log made twice and 34 commands run (a few as processes): ~6 s, not in make test-fast.
 pytestmark = pytest.mark.slow
 
 EXE = shutil.which("eha-hil") or f"{sys.prefix}/bin/eha-hil"
@@ -116,17 +116,69 @@ def _run(cmd: str, log: Path, out: Path) -> subprocess.CompletedProcess[str]:
                           env=env)
 
 
+#: Cases run through the console script itself (a process each, ~1.5 s of start-up); the
+#: others go through the same ``main`` in this process, and the two are checked to agree.
+THROUGH_SCRIPT = ("empty", "cut_in_last_chunk", "flipped_metadata_then_cut")
+
+
+def _run_here(cmd: str, log: Path, out: Path) -> subprocess.CompletedProcess[str]:
+    """What the console script does (``hil.cli.main``, its return code or SystemExit), with
+    stdout and stderr captured: a traceback escaping ``main`` fails the test."""
+    import contextlib
+    import io
+
+    from hil.cli import main
+
+    argv = [a.format(log=log, out=out) for a in COMMANDS[cmd]]
+    so, se = io.StringIO(), io.StringIO()
+    columns = os.environ.get("COLUMNS")
+    os.environ["COLUMNS"] = "200"
+    try:
+        with contextlib.redirect_stdout(so), contextlib.redirect_stderr(se):
+            try:
+                code = main(argv)
+            except SystemExit as exc:
+                code = exc.code if isinstance(exc.code, int) else 1
+    finally:
+        if columns is None:
+            os.environ.pop("COLUMNS", None)
+        else:
+            os.environ["COLUMNS"] = columns
+    return subprocess.CompletedProcess([str(EXE), *argv], int(code or 0), so.getvalue(),
+                                       se.getvalue())
+
+
+def _jobs() -> list[tuple[str, str]]:
+    return [(name, cmd) for name, codes in EXPECTED.items()
+            for cmd, code in zip(COMMANDS, codes, strict=True) if code is not None]
+
+
 @pytest.fixture(scope="module")
 def results(logs: dict[str, Path], tmp_path_factory: pytest.TempPathFactory
             ) -> dict[tuple[str, str], subprocess.CompletedProcess[str]]:
-    """Every (case, command) run once through the console script, two at a time."""
+    """Every (case, command) run once: the console script's cases two processes at a time,
+    the rest through ``main`` here."""
     out_dir = tmp_path_factory.mktemp("csv")
-    jobs = [(name, cmd) for name, codes in EXPECTED.items()
-            for cmd, code in zip(COMMANDS, codes, strict=True) if code is not None]
+    script = [job for job in _jobs() if job[0] in THROUGH_SCRIPT]
     with ThreadPoolExecutor(max_workers=2) as pool:
-        done = pool.map(lambda job: _run(job[1], logs[job[0]], out_dir / f"{job[0]}.csv"),
-                        jobs)
-        return dict(zip(jobs, done, strict=True))
+        done = dict(zip(script, pool.map(
+            lambda job: _run(job[1], logs[job[0]], out_dir / f"{job[0]}.csv"), script),
+            strict=True))
+    for name, cmd in _jobs():
+        if (name, cmd) not in done:
+            done[(name, cmd)] = _run_here(cmd, logs[name], out_dir / f"{name}.here.csv")
+    return done
+
+
+def test_the_console_script_and_main_here_agree(logs: dict[str, Path], results: dict,
+                                                tmp_path: Path) -> None:
+    """The in-process runs stand for the console script: on the cases run both ways, the
+    same exit code and the same stderr, byte for byte."""
+    for name, cmd in [job for job in _jobs() if job[0] in THROUGH_SCRIPT]:
+        p = results[(name, cmd)]
+        out = Path(p.args[-1]) if cmd == "export" else tmp_path / f"{name}.csv"
+        q = _run_here(cmd, logs[name], out)
+        assert (q.returncode, q.stderr) == (p.returncode, p.stderr), (name, cmd)
 
 
 @pytest.mark.parametrize("name", list(EXPECTED))
