@@ -160,6 +160,7 @@ def test_no_permission_for_raw_sockets_is_one_line():
                                                    "sockets need root"), p.stderr
 
 
+@pytest.mark.slow  # seconds of wall-clock serving: in make test, not make test-fast
 def test_a_master_faster_than_the_boxes_is_answered_and_reported(netns):
     """A master flooding frames back to back (far above the boxes' 1 kHz) gets every frame
     answered, the boxes keep their clock (never ahead of it; behind only by counted, slipped

@@ -25,6 +25,9 @@ from hil.identify.rig import generate_rig
 from hil.identify.rigcheck import report_text
 from plant.config import load_config
 
+#: Several rig records and fits (a few seconds together): in make test, not make test-fast.
+pytestmark = pytest.mark.slow
+
 #: the free piston's two frictions under ``slide`` (the matrix row whose outcome was seen to
 #: differ between its place first in a process and 44th), and a record of the same load,
 #: length and rate (so a cache keyed by anything short of the record itself would mix them)
@@ -75,6 +78,7 @@ from threadpoolctl import threadpool_info
 from hil.identify.pipeline import identify
 from hil.identify.rig import generate_rig
 from plant.config import load_config
+
 rep = identify(generate_rig(**json.loads(sys.argv[1])).data, load_config("hydra_default"))
 print(json.dumps({"unexplained": rep.unexplained,
                   "effects": {e.label: {k: v.value for k, v in e.params.items()}

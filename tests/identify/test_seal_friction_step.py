@@ -25,6 +25,9 @@ from hil.identify.model import IDX, FastModel
 from hil.identify.rig import generate_rig
 from plant.config import load_config
 
+#: Several rig records and fits (a few seconds together): in make test, not make test-fast.
+pytestmark = pytest.mark.slow
+
 #: The seal: the rig's default conrod magnitudes, the rig's atan law at its eps of 1 mm/s
 #: (the fast model's atan law, shape 1, at pi/2 of it), the preset's eps being 2 mm/s.
 SEAL = {"sf_coulomb_n": 20.0, "sf_static_n": 35.0, "sf_vs_m_per_s": 4e-3, "sf_shape": 1.0,
