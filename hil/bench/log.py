@@ -95,24 +95,15 @@ def bench_overhead(cfg, seconds: float = 1.0, level: str = "mcu", pairs: int = 3
     pair, instrumented, split into the logging's parts (not in the ratios)."""
     if topology is None:
         topology = "hydra_full" if model == "robot" else "bench_one_box"
-    from hil.fieldbus.system import BusSystem
+    from hil.bench.log_parts import run_pair
     from hil.fieldbus.topology import load_topology
-    from hil.replay.record import run_logged
-    from hil.sim.pc import demo_pc
 
     topo = load_topology(topology)
     cycles = max(int(round(seconds * 1000)), 1)
     with tempfile.TemporaryDirectory() as d:
         path = Path(d) / "bench.mcap"
 
-        def bare(n: int = cycles) -> None:
-            with BusSystem(topo, cfg, "inproc", model=model) as bs:
-                bs.run(n, demo_pc(), keep=1)
-
-        def logged(n: int = cycles) -> None:
-            run_logged(topo, cfg, n, demo_pc(), path, level=level, model=model,
-                       compression=compression)
-
+        bare, logged = run_pair(topo, cfg, cycles, path, level, model, compression)
         bare(50)
         logged(50)  # warm-up: compiled code loaded, imports done
         runs: list[tuple[tuple[float, float], tuple[float, float]]] = []

@@ -243,6 +243,25 @@ class Parts:
                 "rest": self.rest * per, "total": self.extra * per}
 
 
+def run_pair(topo, cfg, cycles: int, path: Path, level: str, model: str,  # noqa: ANN001
+             compression: str) -> tuple[Callable[..., None], Callable[..., None]]:
+    """The bare and the logged run of the logging benches (``n`` cycles each, ``cycles`` by
+    default): the same bus, PC and engine, the logged one writing ``path``."""
+    from hil.fieldbus.system import BusSystem
+    from hil.replay.record import run_logged
+    from hil.sim.pc import demo_pc
+
+    def bare(n: int = cycles) -> None:
+        with BusSystem(topo, cfg, "inproc", model=model) as bs:
+            bs.run(n, demo_pc(), keep=1)
+
+    def logged(n: int = cycles) -> None:
+        run_logged(topo, cfg, n, demo_pc(), path, level=level, model=model,
+                   compression=compression)
+
+    return bare, logged
+
+
 def measure(seconds: float = 2.0, topology: str = "hydra_full", level: str = "mcu",
             compression: str = "zstd", warm: bool = True, pairs: int = 1,
             model: str = "robot", cfg: object = None) -> Parts:
@@ -250,10 +269,7 @@ def measure(seconds: float = 2.0, topology: str = "hydra_full", level: str = "mc
     whole-robot engine (the order alternating), the logged ones with their parts timed
     (see the module doc); the figures summed over the pairs. ``model`` "stack": the same
     without the engine (no compiled calls to compare)."""
-    from hil.fieldbus.system import BusSystem
     from hil.fieldbus.topology import load_topology
-    from hil.replay.record import run_logged
-    from hil.sim.pc import demo_pc
     from plant.config import load_config
 
     cfg = load_config(None, []) if cfg is None else cfg
@@ -262,14 +278,7 @@ def measure(seconds: float = 2.0, topology: str = "hydra_full", level: str = "mc
     with tempfile.TemporaryDirectory() as d:
         path = Path(d) / "parts.mcap"
 
-        def bare(n: int = cycles) -> None:
-            with BusSystem(topo, cfg, "inproc", model=model) as bs:
-                bs.run(n, demo_pc(), keep=1)
-
-        def logged(n: int = cycles) -> None:
-            run_logged(topo, cfg, n, demo_pc(), path, level=level, model=model,
-                       compression=compression)
-
+        bare, logged = run_pair(topo, cfg, cycles, path, level, model, compression)
         if warm:  # compiled code loaded, imports done, a block written
             bare(120)
             logged(120)
