@@ -268,36 +268,8 @@ def _one_interrupt_line(code: int, lines: list[str], verb: str, progress: str) -
     return last
 
 
-@pytest.mark.slow
-def test_ctrl_c_bus_run_closes_the_log(tmp_path):
-    from mcap.reader import make_reader
-
-    from hil.framelog.reader import FrameLogReader
-
-    log = tmp_path / "run.mcap"
-    run = _Running(["bus", "run", "--seconds", "120", "--log", str(log)], tmp_path)
-    run.wait_for(r"bus run: [1-9]\d*/120000 cycles")
-    code, lines = run.interrupt()
-    last = _one_interrupt_line(code, lines, "bus run", r"bus run: \d+/\d+ cycles")
-    assert re.search(r"interrupted at t=\d+\.\d+ s; log \S*run.mcap closed and readable$",
-                     last), last
-    info = FrameLogReader(log).info()
-    assert info.complete and info.frame_count > 0
-    with log.open("rb") as fh:  # the mcap library reads it too (summary and every message)
-        reader = make_reader(fh)
-        assert reader.get_summary() is not None
-        assert sum(1 for _ in reader.iter_messages()) == info.message_count
-
-
-@pytest.mark.slow
-def test_ctrl_c_run_thesis_names_the_scenario_and_the_plots(tmp_path):
-    run = _Running(["run", "thesis", "--plot-dir", str(tmp_path / "plots")], tmp_path)
-    run.wait_for(r"f4 \.\.\.")  # f1-measured and f3 are done and their plots written
-    code, lines = run.interrupt()
-    last = _one_interrupt_line(code, lines, "run thesis", r"f[\w-]+ \.\.\.")
-    assert re.search(r"interrupted in f[\w-]+ \(f1-measured(, f[\w-]+)* done\); plots? "
-                     r"f1-measured.png(, f[\w-]+.png)* written to \S+/plots/$", last), last
-    assert (tmp_path / "plots" / "f3.png").stat().st_size > 10_000
+# A logged bus run and run thesis interrupted (their files, lines and exit codes, for
+# SIGINT, SIGTERM and SIGHUP): tests/hil/test_signals.py.
 
 
 @pytest.mark.slow
