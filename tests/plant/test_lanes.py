@@ -279,6 +279,7 @@ def _check_vector_asm(asm: str) -> None:
     assert not re.findall(r"vfn?m(?:add|sub)", asm)
 
 
+@pytest.mark.slow  # ~1 s: loads the whole kernel from the cache
 def test_rk4_lanes_compiles_to_vector_instructions_without_contraction():
     """The machine code of the lane kernel: its arithmetic is on full vector registers
     (ymm with AVX2, zmm with AVX-512), none of it scalar, and no multiply-add is fused.
