@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import functools
 import io
 import os
 import re
@@ -24,6 +25,7 @@ from pathlib import Path
 
 import pytest
 
+from hil.cli import root
 from hil.cli.args import walk
 from hil.cli.root import build_parser, main
 
@@ -181,6 +183,9 @@ def test_every_option_is_classified():
 @pytest.mark.slow  # ~300 cases in this process: 5-15 s
 def test_mistake_matrix_gives_at_most_one_line(files, monkeypatch):
     monkeypatch.chdir(files["root"])
+    # main() builds the whole parser for each command line (~10 ms, most of a case's time
+    # when the value is refused): here built once and parsed with for every case.
+    monkeypatch.setattr(root, "build_parser", functools.cache(build_parser))
     cases = _cases(files)
     verbs = {label.split(" -")[0] for label, _ in cases}
     assert len(cases) > 150 and len(verbs) >= 15, (len(cases), sorted(verbs))
