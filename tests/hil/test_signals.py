@@ -213,11 +213,9 @@ def test_sweep_pool_ends_with_it_and_keeps_the_journal(sig, tmp_path):
 
 # --- computations with an output at the end -------------------------------------------------------
 @pytest.mark.parametrize("sig", SIGNALS)
-def test_identify_report_is_all_or_nothing(sig, tmp_path):
-    subprocess.run([EXE, "identify-synth", str(tmp_path / "d.csv"), "--seconds", "8"],
-                   check=True, capture_output=True, timeout=300)
-    run = Running(["identify", "d.csv", "--report", "rep"], tmp_path)
-    run.wait_for(r"identify: baseline fit")
+def test_identify_report_is_all_or_nothing(sig, tmp_path, identify_record):
+    run = Running(["identify", str(identify_record), "--report", "rep"], tmp_path)
+    run.wait_for(r"identify: baseline fit[^\n]*\n")  # its whole line (print, then "\n")
     code, lines = run.stop(sig)
     last = _ended(code, lines, sig, "identify")
     assert "nothing written" in last, last
