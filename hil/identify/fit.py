@@ -617,39 +617,6 @@ def hold_unsupported(fitter: OutputErrorFit, result: FitResult, configured: np.n
             result = alt
 
 
-#: The model's physical parameters (fitted as logarithms) that a start may put back at
-#: their configured values (:func:`configured_start`).
-PHYSICAL = ("gain_n_per_a", "ds", "dp", "dc", "ks", "jp", "jc", "k_rod", "c_rod")
-
-
-def configured_start(fitter: OutputErrorFit, theta0: np.ndarray, free: list[str],
-                     configured: np.ndarray, sigma: dict[str, float],
-                     factor: float = PROFILE_FACTOR) -> tuple[np.ndarray, list[str]]:
-    """The start of a refit with an effect added: ``theta0`` as it stands, or with every
-    free physical parameter beyond ``factor`` of its configured value put back there,
-    whichever the cost (weights ``sigma``) is lower at. One simulation, two with some far.
-
-    The fit without the effect may have moved parameters far to absorb it (the conrod's
-    seal friction: ``c_rod`` 49x and ``d_c`` 2.7x the configured values, dampers taking
-    the friction's dissipation). With the effect in at its linearised size they count the
-    dissipation twice, and a refit from there ends in another minimum than the rig's
-    (rig seed 1: ``k_s`` 1.04x, ``c_rod`` 4.2x the rig's; from the configured ones 0.96x
-    and 2.6x, the estimation cost 18 % lower; with the rig's noise-free current the rig's
-    parameters to 0.3 %, the seal's levels to 0.6 %). Put back one at a time, the others
-    still far, the start is no better (``c_rod`` alone: the far minimum): all together.
-    Returns the start and the parameters put back (empty when it is ``theta0``)."""
-    far = [n for n in PHYSICAL if n in free and configured[IDX[n]] > 0.0
-           and not 1.0 / factor <= theta0[IDX[n]] / configured[IDX[n]] <= factor]
-    if not far:
-        return theta0, []
-    back = theta0.copy()
-    for n in far:
-        back[IDX[n]] = configured[IDX[n]]
-    if fitter.cost(back, sigma) < fitter.cost(theta0, sigma):
-        return back, far
-    return theta0, []
-
-
 def baseline_free(exp: Experiment) -> list[str]:
     """The baseline's fitted parameters for this record: the linear model of the load kind,
     J_p where the motor encoder pins the rotor's inertia, J_c where the piston encoder pins
@@ -693,5 +660,4 @@ def fit_baseline(model: FastModel, theta0: np.ndarray | None = None,
 
 
 __all__ = ["BASELINE_FREE", "CREDIBLE", "FitResult", "OutputErrorFit", "baseline_free",
-           "bounds_of", "configured_start", "fit_baseline", "guarded_fit", "hold_unsupported",
-           "lr_threshold"]
+           "bounds_of", "fit_baseline", "guarded_fit", "hold_unsupported", "lr_threshold"]

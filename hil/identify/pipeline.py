@@ -51,7 +51,6 @@ from hil.identify.fit import (
     FitResult,
     OutputErrorFit,
     baseline_free,
-    configured_start,
     fit_baseline,
     guarded_fit,
     lr_threshold,
@@ -410,7 +409,6 @@ class _Loop:
         scales = {p: nom for e in ds_ for p, nom in zip(e.params, e.nominal, strict=True)}
         refitter = OutputErrorFit(self.model, {**NUISANCE_SCALES(exp.dt),
                                                **_all_scales(self.defs_all), **scales})
-        theta0, _ = configured_start(refitter, theta0, new_free, configured, current.sigma)
         new, held_now = guarded_fit(refitter, theta0, new_free, credible, sigma=current.sigma,
                                     configured=configured)
         # a shape parameter that took the effect's law to a degenerate one: held at its
