@@ -24,7 +24,7 @@ from __future__ import annotations
 import json
 import math
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
@@ -119,6 +119,7 @@ class _Channel:
     json_fields: frozenset[str] | None = None
     wrap: object = None  # raw single frames: frame bytes -> protobuf message (rawpb)
     container: str = ""  # block channels: "protobuf" (rawpb) or "" (eha-hil/block)
+    kind: str = ""  # the compression of the chunks its messages go to
     last_ns: int = 0
     count: int = 0
 
@@ -138,6 +139,12 @@ class FrameLogWriter:
     :data:`hil.framelog.chunk.ZSTD_LEVEL`, lz4 its default); chunks are built in one
     buffer kept for the file and closed by :mod:`hil.framelog.chunk` (one compressor per
     file, no copy of the chunk; zstd chunks carry zstd's checksum instead of a CRC).
+    ``chunk_compression`` maps topic prefixes to a compression of their own (the longest
+    prefix of a channel's topic wins): those channels' messages go to chunks of that
+    compression, open beside the others (MCAP compresses per chunk, and every reader
+    reads a file of mixed chunks), e.g. ``{"/signals/": "none"}`` keeps the decoded
+    signals, on which zstd spends much time for little (docs/framelog.md, "The whole
+    robot"), out of zstd; the messages are the same either way.
 
     Times must be integers >= 0 (ns of simulated time) and non-decreasing per channel, so
     that each channel reads back in time order.
@@ -154,6 +161,7 @@ class FrameLogWriter:
         compression: Compression = "zstd",
         flush_every_ns: int | None = None,
         compression_level: int | None = None,
+        chunk_compression: Mapping[str, Compression] | None = None,
     ) -> None:
         if level not in LEVELS:
             raise ValueError(f"unknown log level {level!r} (use {', '.join(LEVELS)})")
@@ -168,6 +176,11 @@ class FrameLogWriter:
             raise ValueError(f"{compression} level {compression_level} is outside {lo}..{hi}")
         if chunk_size < 1:
             raise ValueError(f"chunk_size must be >= 1 byte, got {chunk_size}")
+        kinds = {str(k): v for k, v in (chunk_compression or {}).items()}
+        for prefix, c in kinds.items():
+            if c not in _COMPRESSION:
+                raise ValueError(f"chunk compression {c!r} of {prefix!r} is not one of "
+                                 "zstd, lz4, none")
         if flush_every_ns is not None and flush_every_ns <= 0:
             raise ValueError(f"flush_every_ns must be > 0, got {flush_every_ns}")
         meta = {str(k): str(v) for k, v in (metadata or {}).items()}
@@ -191,7 +204,11 @@ class FrameLogWriter:
                              "use compression='none'") from None
         #: records built in place in the chunk (hil.framelog.chunk's buffer installed)
         self._in_place = chunk.install(self._writer, compression, compression_level,
-                                       chunk_size)
+                                       chunk_size, tuple(kinds.values()))
+        self._compression = compression
+        #: topic prefix -> compression, longest first (none when not installed)
+        self._kinds = sorted(kinds.items(), key=lambda kv: -len(kv[0])) \
+            if self._in_place and any(c != compression for c in kinds.values()) else []
         try:
             self._writer.start(profile=profile, library=f"eha-hil/{package_version()}")
             self._fast = batch.supported(self._writer)
@@ -227,6 +244,7 @@ class FrameLogWriter:
             return 0  # MCAP: schema id 0 = no schema
         key = (name, encoding, bytes(data))
         if key not in self._schemas:
+            chunk.use_first(self._writer)
             self._schemas[key] = self._writer.register_schema(name, encoding, bytes(data))
         return self._schemas[key]
 
@@ -235,6 +253,8 @@ class FrameLogWriter:
         self._check_open()
         if topic in self._topics:
             raise ValueError(f"topic {topic!r} already has a channel")
+        ch.kind = next((c for p, c in self._kinds if topic.startswith(p)), self._compression)
+        chunk.use_first(self._writer)
         cid = self._writer.register_channel(topic, message_encoding, schema_id,
                                             {str(k): str(v) for k, v in metadata.items()})
         self._topics.add(topic)
@@ -355,6 +375,15 @@ class FrameLogWriter:
         except KeyError:
             raise ValueError(f"no channel with id {channel_id}") from None
 
+    def _to(self, ch: _Channel) -> None:
+        """The next messages (of ``ch``) go to the open chunk of its compression."""
+        if self._kinds:
+            chunk.use(self._writer, ch.kind)
+
+    def _mixed(self, chs: list[_Channel]) -> bool:
+        """True if ``chs`` go to chunks of different compressions (then one at a time)."""
+        return bool(self._kinds) and any(c.kind != chs[0].kind for c in chs)
+
     def _advance(self, ch: _Channel, first_ns: int, last_ns: int) -> None:
         if first_ns < ch.last_ns:
             raise ValueError(f"{ch.topic}: time {first_ns} ns is before the previous frame's "
@@ -379,6 +408,7 @@ class FrameLogWriter:
             raise ValueError(f"{ch.topic}: time {t} ns is negative")
         self._advance(ch, t, t)
         payload = bytes(data) if ch.wrap is None else ch.wrap(bytes(data))  # type: ignore[operator]
+        self._to(ch)
         self._writer.add_message(channel_id, t, payload,
                                  t if publish_ns is None else int(publish_ns),
                                  ch.count & 0xFFFFFFFF)
@@ -416,6 +446,7 @@ class FrameLogWriter:
         first, last = int(t[0]), int(t[-1])
         self._advance(ch, first, last)
         msg = rawpb.pack_block(t, f, ch.dtype) if ch.container else pack_block(t, f)
+        self._to(ch)
         self._writer.add_message(channel_id, first, msg, last,
                                  ch.count & 0xFFFFFFFF)
         ch.count += 1
@@ -431,7 +462,7 @@ class FrameLogWriter:
         f = np.asarray(frames)
         if not chs or any(not c.block or c.container != rawpb.CONTAINER
                           or c.dtype != chs[0].dtype or c.width != chs[0].width for c in chs) \
-                or f.ndim != 3 or len(f) != len(chs) or not self._fast:
+                or f.ndim != 3 or len(f) != len(chs) or not self._fast or self._mixed(chs):
             if f.ndim != 3 or len(f) != len(chs):
                 raise ValueError(f"need frames (channels, n, width) for {len(chs)} "
                                  f"channels, got {f.shape}")
@@ -464,6 +495,7 @@ class FrameLogWriter:
         before = [c.last_ns for c in chs]
         for c in sorted(chs, key=lambda c: -c.last_ns):  # a channel that would raise first
             self._advance(c, first, last)
+        self._to(chs[0])
         at: list[int | None] = [None]
 
         def alloc(dtype: np.dtype, k: int) -> np.ndarray:
@@ -513,7 +545,8 @@ class FrameLogWriter:
         nothing is written."""
         chs = [self._channel(c) for c in channel_ids]
         t = np.asarray(t_ns)
-        if any(c.block or c.wrap is not None for c in chs) or not self._fast:
+        if any(c.block or c.wrap is not None for c in chs) or not self._fast \
+                or self._mixed(chs):
             m = np.zeros((len(chs), len(t), size), np.uint8)
             fill(m)
             for c, part in zip(channel_ids, m, strict=True):
@@ -532,6 +565,7 @@ class FrameLogWriter:
         before = [c.last_ns for c in chs]
         for c in sorted(chs, key=lambda c: -c.last_ns):  # a channel that would raise first
             self._advance(c, first, last)
+        self._to(chs[0])
         c_n, k = len(chs), len(times)
         rec, at = batch.records(self._writer, np.dtype([*batch.HEAD_FIELDS,
                                                         ("data", "u1", (size,))]), c_n * k)
@@ -576,6 +610,7 @@ class FrameLogWriter:
             parts = rawpb.wrap_periodic(ch.encoding, frames)
             messages = (batch.Interleaved(parts) if parts is not None
                         else rawpb.wrap_many(ch.encoding, frames))
+        self._to(ch)
         batch.add_messages(self._writer, channel_id, times, messages, ch.count, self._fast)
         ch.count += len(messages)
 
