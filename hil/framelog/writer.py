@@ -221,6 +221,7 @@ class FrameLogWriter:
         self._channels: dict[int, _Channel] = {}
         self._topics: set[str] = set()
         self._schemas: dict[tuple[str, str, bytes], int] = {}
+        self._groups: dict[tuple[int, ...], tuple[list[_Channel], bool, bool]] = {}
         self._flush_every = flush_every_ns
         self._last_flush_ns = 0
         self._closed = False
@@ -384,6 +385,32 @@ class FrameLogWriter:
         """True if ``chs`` go to chunks of different compressions (then one at a time)."""
         return bool(self._kinds) and any(c.kind != chs[0].kind for c in chs)
 
+    def _advance_all(self, chs: list[_Channel], first_ns: int, last_ns: int) -> None:
+        """:meth:`_advance` of every channel of ``chs`` (one batch): the one with the
+        latest frame raises if any does, before any has moved."""
+        latest = max(chs, key=_last_ns)
+        self._advance(latest, first_ns, last_ns)  # raises, or flushes when it is time
+        for c in chs:
+            c.last_ns = last_ns
+
+    def _group(self, channel_ids: list[int]) -> tuple[list[_Channel], bool, bool]:
+        """The channels of ``channel_ids`` (each checked once per log), whether they are
+        block channels of one protobuf layout (:meth:`write_blocks` in one array) and
+        whether single-message channels without a wrapper (:meth:`write_messages_filled`),
+        both only if they go to chunks of one compression."""
+        self._check_open()
+        key = tuple(channel_ids)
+        got = self._groups.get(key)
+        if got is None:
+            chs = [self._channel(c) for c in channel_ids]
+            one = bool(chs) and not self._mixed(chs)
+            blocks = one and all(c.block and c.container == rawpb.CONTAINER
+                                 and c.dtype == chs[0].dtype and c.width == chs[0].width
+                                 for c in chs)
+            singles = one and not any(c.block or c.wrap is not None for c in chs)
+            got = self._groups[key] = (chs, blocks, singles)
+        return got
+
     def _advance(self, ch: _Channel, first_ns: int, last_ns: int) -> None:
         if first_ns < ch.last_ns:
             raise ValueError(f"{ch.topic}: time {first_ns} ns is before the previous frame's "
@@ -439,9 +466,9 @@ class FrameLogWriter:
         n = t.shape[0]
         if n == 0:
             return
-        t = _block_times(ch.topic, t)
+        t, step = _block_times(ch.topic, t)
         if ch.container and self._fast and self._in_place:  # in the chunk, as write_blocks
-            self._write_block_records([channel_id], [ch], t, f[None])
+            self._write_block_records([channel_id], [ch], t, f[None], step)
             return
         first, last = int(t[0]), int(t[-1])
         self._advance(ch, first, last)
@@ -458,11 +485,9 @@ class FrameLogWriter:
         (e.g. every actuator's upstream words of a block of MCU steps). The same messages
         as one :meth:`write_block` each, built as one array (:func:`rawpb.pack_blocks`)
         and put into the chunk from it (:func:`batch.add_records`)."""
-        chs = [self._channel(c) for c in channel_ids]
+        chs, blocks, _ = self._group(channel_ids)
         f = np.asarray(frames)
-        if not chs or any(not c.block or c.container != rawpb.CONTAINER
-                          or c.dtype != chs[0].dtype or c.width != chs[0].width for c in chs) \
-                or f.ndim != 3 or len(f) != len(chs) or not self._fast or self._mixed(chs):
+        if not blocks or f.ndim != 3 or len(f) != len(chs) or not self._fast:
             if f.ndim != 3 or len(f) != len(chs):
                 raise ValueError(f"need frames (channels, n, width) for {len(chs)} "
                                  f"channels, got {f.shape}")
@@ -477,7 +502,8 @@ class FrameLogWriter:
         f = self._typed(ch0, t, f)
         if t.shape[0] == 0:
             return
-        self._write_block_records(channel_ids, chs, _block_times(ch0.topic, t), f)
+        t, step = _block_times(ch0.topic, t)
+        self._write_block_records(channel_ids, chs, t, f, step)
 
     def _typed(self, ch: _Channel, t: np.ndarray, f: np.ndarray) -> np.ndarray:
         """Frames ``f`` of a block on ``ch`` in the channel's dtype (:meth:`_cast`), after
@@ -487,14 +513,14 @@ class FrameLogWriter:
         return f if f.dtype == ch.dtype else self._cast(ch, f)
 
     def _write_block_records(self, channel_ids: list[int], chs: list[_Channel],
-                             t: np.ndarray, f: np.ndarray) -> None:
+                             t: np.ndarray, f: np.ndarray, step: int | None) -> None:
         """The block messages of ``f[i]`` on ``channel_ids[i]`` (protobuf containers of
-        one dtype and width, checked) at the times ``t`` (checked), built in place in the
-        chunk (:func:`batch.records`, :func:`rawpb.pack_blocks`)."""
+        one dtype and width, checked) at the times ``t`` (checked; evenly spaced by
+        ``step``, or None), built in place in the chunk (:func:`batch.records`,
+        :func:`rawpb.pack_blocks`)."""
         first, last = int(t[0]), int(t[-1])
         before = [c.last_ns for c in chs]
-        for c in sorted(chs, key=lambda c: -c.last_ns):  # a channel that would raise first
-            self._advance(c, first, last)
+        self._advance_all(chs, first, last)
         self._to(chs[0])
         at: list[int | None] = [None]
 
@@ -503,7 +529,8 @@ class FrameLogWriter:
             return rec
 
         try:
-            rec = rawpb.pack_blocks(t, f, chs[0].dtype, batch.HEAD_FIELDS, alloc=alloc)
+            rec = rawpb.pack_blocks(t, f, chs[0].dtype, batch.HEAD_FIELDS, alloc=alloc,
+                                    spacing=step)
         except BaseException:
             batch.drop(self._writer, at[0])  # no half-filled records left in the chunk
             for c, t_last in zip(chs, before, strict=True):
@@ -543,10 +570,9 @@ class FrameLogWriter:
         that array would write, without a copy of them (a producer that encodes messages
         can encode them there). ``fill`` must not write to this log; if it raises,
         nothing is written."""
-        chs = [self._channel(c) for c in channel_ids]
+        chs, _, singles = self._group(channel_ids)
         t = np.asarray(t_ns)
-        if any(c.block or c.wrap is not None for c in chs) or not self._fast \
-                or self._mixed(chs):
+        if (chs and not singles) or not self._fast:
             m = np.zeros((len(chs), len(t), size), np.uint8)
             fill(m)
             for c, part in zip(channel_ids, m, strict=True):
@@ -563,8 +589,7 @@ class FrameLogWriter:
                              "non-decreasing")
         first, last = int(times[0]), int(times[-1])
         before = [c.last_ns for c in chs]
-        for c in sorted(chs, key=lambda c: -c.last_ns):  # a channel that would raise first
-            self._advance(c, first, last)
+        self._advance_all(chs, first, last)
         self._to(chs[0])
         c_n, k = len(chs), len(times)
         rec, at = batch.records(self._writer, np.dtype([*batch.HEAD_FIELDS,
@@ -673,12 +698,21 @@ class FrameLogWriter:
             raise ValueError(f"frame log {self.path} is closed")
 
 
-def _block_times(topic: str, t: np.ndarray) -> np.ndarray:
-    """A block's frame times ``t`` (integer ns, at least one) as int64, refused in one line
-    (naming ``topic``) if negative or decreasing."""
+def _last_ns(ch: _Channel) -> int:
+    return ch.last_ns
+
+
+def _block_times(topic: str, t: np.ndarray) -> tuple[np.ndarray, int | None]:
+    """A block's frame times ``t`` (integer ns, at least one) as int64 and their spacing
+    (:func:`rawpb.even_spacing`, from the same differences), refused in one line (naming
+    ``topic``) if negative or decreasing."""
     t = t.astype(np.int64, copy=False)
     if t[0] < 0:
         raise ValueError(f"{topic}: time {int(t[0])} ns is negative")
-    if len(t) > 1 and bool(np.any(t[1:] < t[:-1])):
+    if len(t) < 2:
+        return t, 0
+    d = np.diff(t)
+    lo, hi = int(d.min()), int(d.max())
+    if lo < 0:
         raise ValueError(f"{topic}: block times decrease")
-    return t
+    return t, (lo if lo == hi else None)
