@@ -133,13 +133,17 @@ def compressor(compression: str, level: int | None) -> Callable[[memoryview], by
     raise ValueError(f"compression {compression!r} has no compressor here")
 
 
+#: A kind of chunk: compression and level (None: the codec's default here).
+Kind = tuple[str, int | None]
+
+
 def install(w: Writer, compression: str, level: int | None, chunk_size: int,
-            others: tuple[str, ...] = ()) -> bool:
+            others: tuple[Kind, ...] = ()) -> bool:
     """Make ``w`` build its chunks in a :class:`ChunkBuffer` (of ``chunk_size`` bytes to
     start with) and close them with :func:`_finalize` (``compression`` zstd or lz4 at
     ``level``, or none); False (and nothing changed) if ``w`` lacks the private state.
-    ``others``: further compressions (``none``, ``lz4``, ``zstd`` at ``level``), each with
-    a chunk of its own open beside the first (:class:`Chunks`, :func:`use`)."""
+    ``others``: further kinds (compression ``none``, ``lz4`` or ``zstd``, and level), each
+    with a chunk of its own open beside the first (:class:`Chunks`, :func:`use`)."""
     if not supported(w):
         return False
     rw = w._Writer__chunk_builder.record_writer  # noqa: SLF001 - see the module docstring
@@ -153,8 +157,8 @@ def install(w: Writer, compression: str, level: int | None, chunk_size: int,
         w._Writer__finalize_chunk = lambda: _finalize(  # noqa: SLF001
             w, first.compress, first.name, first.crc)
         return True
-    chunks = Chunks(w, first, [_Kind(_new_builder(chunk_size), c, level)
-                               for c in dict.fromkeys(others) if c != compression])
+    chunks = Chunks(w, first, [_Kind(_new_builder(chunk_size), *k)
+                               for k in dict.fromkeys(others) if k != first.key])
     w._Writer__finalize_chunk = chunks.finalize_all  # noqa: SLF001
     w._Writer__maybe_finalize_chunk = chunks.maybe_finalize  # noqa: SLF001
     w._eha_chunks = chunks  # noqa: SLF001 - found by use()
@@ -166,7 +170,7 @@ class _Kind:
 
     def __init__(self, builder: object, compression: str, level: int | None) -> None:
         self.builder = builder
-        self.compression = compression
+        self.key = (compression, None if compression == "none" else level)
         self.compress = None if compression == "none" else compressor(compression, level)
         self.name = b"" if self.compress is None else compression.encode()  # "": none
         self.crc = compression != "zstd"  # zstd frames carry their own checksum
@@ -195,11 +199,11 @@ class Chunks:
     def __init__(self, w: Writer, first: _Kind, others: list[_Kind]) -> None:
         self.w = w
         self.first = first
-        self.kinds = {k.compression: k for k in [first, *others]}
+        self.kinds = {k.key: k for k in [first, *others]}
         self.defs_pending = False  # schema or channel records in the first kind's buffer
 
-    def use(self, compression: str) -> None:
-        self.w._Writer__chunk_builder = self.kinds[compression].builder  # noqa: SLF001
+    def use(self, kind: Kind) -> None:
+        self.w._Writer__chunk_builder = self.kinds[kind].builder  # noqa: SLF001
 
     def finalize(self, kind: _Kind) -> None:
         if kind is self.first:
@@ -238,19 +242,19 @@ class Chunks:
             self.finalize(next(k for k in self.kinds.values() if k.builder is cb))
 
 
-def use(w: Writer, compression: str) -> None:
-    """Send the next messages to ``w``'s open chunk of ``compression`` (installed with
+def use(w: Writer, kind: Kind) -> None:
+    """Send the next messages to ``w``'s open chunk of ``kind`` (installed with
     :func:`install`'s ``others``; nothing to do for a Writer with one kind)."""
     chunks = getattr(w, "_eha_chunks", None)
     if chunks is not None:
-        chunks.use(compression)
+        chunks.use(kind)
 
 
 def use_first(w: Writer) -> None:
     """Send the next records (schemas, channels) to the first kind's chunk."""
     chunks = getattr(w, "_eha_chunks", None)
     if chunks is not None:
-        chunks.use(chunks.first.compression)
+        chunks.use(chunks.first.key)
         chunks.defs_pending = True
 
 

@@ -119,7 +119,7 @@ class _Channel:
     json_fields: frozenset[str] | None = None
     wrap: object = None  # raw single frames: frame bytes -> protobuf message (rawpb)
     container: str = ""  # block channels: "protobuf" (rawpb) or "" (eha-hil/block)
-    kind: str = ""  # the compression of the chunks its messages go to
+    kind: tuple = ()  # the kind of chunk its messages go to (compression, level)
     last_ns: int = 0
     count: int = 0
 
@@ -139,12 +139,13 @@ class FrameLogWriter:
     :data:`hil.framelog.chunk.ZSTD_LEVEL`, lz4 its default); chunks are built in one
     buffer kept for the file and closed by :mod:`hil.framelog.chunk` (one compressor per
     file, no copy of the chunk; zstd chunks carry zstd's checksum instead of a CRC).
-    ``chunk_compression`` maps topic prefixes to a compression of their own (the longest
-    prefix of a channel's topic wins): those channels' messages go to chunks of that
-    compression, open beside the others (MCAP compresses per chunk, and every reader
-    reads a file of mixed chunks), e.g. ``{"/signals/": "none"}`` keeps the decoded
-    signals, on which zstd spends much time for little (docs/framelog.md, "The whole
-    robot"), out of zstd; the messages are the same either way.
+    ``chunk_compression`` maps topic prefixes to a compression of their own, or a
+    (compression, level) pair (the longest prefix of a channel's topic wins): those
+    channels' messages go to chunks of that kind, open beside the others (MCAP compresses
+    per chunk, and every reader reads a file of mixed chunks), e.g. ``{"/signals/":
+    "none"}`` keeps the decoded signals, on which zstd spends much time for little
+    (docs/framelog.md, "The whole robot"), out of zstd, and ``("zstd", -7)`` gives them
+    zstd's fastest level; the messages are the same either way.
 
     Times must be integers >= 0 (ns of simulated time) and non-decreasing per channel, so
     that each channel reads back in time order.
@@ -161,26 +162,25 @@ class FrameLogWriter:
         compression: Compression = "zstd",
         flush_every_ns: int | None = None,
         compression_level: int | None = None,
-        chunk_compression: Mapping[str, Compression] | None = None,
+        chunk_compression: Mapping[str, Compression | tuple[Compression, int | None]]
+        | None = None,
     ) -> None:
         if level not in LEVELS:
             raise ValueError(f"unknown log level {level!r} (use {', '.join(LEVELS)})")
         if compression not in _COMPRESSION:
             raise ValueError(f"compression {compression!r} is not one of zstd, lz4, none")
-        if compression_level is not None and not (
-                compression in _LEVELS and
-                _LEVELS[compression][0] <= compression_level <= _LEVELS[compression][1]):
-            if compression not in _LEVELS:
-                raise ValueError(f"compression {compression!r} takes no level")
-            lo, hi = _LEVELS[compression]
-            raise ValueError(f"{compression} level {compression_level} is outside {lo}..{hi}")
+        _check_level(compression, compression_level)
         if chunk_size < 1:
             raise ValueError(f"chunk_size must be >= 1 byte, got {chunk_size}")
-        kinds = {str(k): v for k, v in (chunk_compression or {}).items()}
-        for prefix, c in kinds.items():
+        kinds: dict[str, chunk.Kind] = {}
+        for prefix, kind in (chunk_compression or {}).items():
+            c, lvl = (kind, compression_level if kind == compression else None) \
+                if isinstance(kind, str) else kind
             if c not in _COMPRESSION:
                 raise ValueError(f"chunk compression {c!r} of {prefix!r} is not one of "
                                  "zstd, lz4, none")
+            _check_level(c, lvl)
+            kinds[str(prefix)] = (c, lvl)
         if flush_every_ns is not None and flush_every_ns <= 0:
             raise ValueError(f"flush_every_ns must be > 0, got {flush_every_ns}")
         meta = {str(k): str(v) for k, v in (metadata or {}).items()}
@@ -205,10 +205,11 @@ class FrameLogWriter:
         #: records built in place in the chunk (hil.framelog.chunk's buffer installed)
         self._in_place = chunk.install(self._writer, compression, compression_level,
                                        chunk_size, tuple(kinds.values()))
-        self._compression = compression
-        #: topic prefix -> compression, longest first (none when not installed)
+        self._kind: chunk.Kind = (compression,
+                                  None if compression == "none" else compression_level)
+        #: topic prefix -> kind of chunk, longest first (none when not installed)
         self._kinds = sorted(kinds.items(), key=lambda kv: -len(kv[0])) \
-            if self._in_place and any(c != compression for c in kinds.values()) else []
+            if self._in_place and any(k != self._kind for k in kinds.values()) else []
         try:
             self._writer.start(profile=profile, library=f"eha-hil/{package_version()}")
             self._fast = batch.supported(self._writer)
@@ -254,7 +255,7 @@ class FrameLogWriter:
         self._check_open()
         if topic in self._topics:
             raise ValueError(f"topic {topic!r} already has a channel")
-        ch.kind = next((c for p, c in self._kinds if topic.startswith(p)), self._compression)
+        ch.kind = next((k for p, k in self._kinds if topic.startswith(p)), self._kind)
         chunk.use_first(self._writer)
         cid = self._writer.register_channel(topic, message_encoding, schema_id,
                                             {str(k): str(v) for k, v in metadata.items()})
@@ -696,6 +697,16 @@ class FrameLogWriter:
     def _check_open(self) -> None:
         if self._closed:
             raise ValueError(f"frame log {self.path} is closed")
+
+
+def _check_level(compression: str, level: int | None) -> None:
+    """ValueError in one line if ``compression`` does not take ``level``."""
+    if level is not None and not (
+            compression in _LEVELS and _LEVELS[compression][0] <= level <= _LEVELS[compression][1]):
+        if compression not in _LEVELS:
+            raise ValueError(f"compression {compression!r} takes no level")
+        lo, hi = _LEVELS[compression]
+        raise ValueError(f"{compression} level {level} is outside {lo}..{hi}")
 
 
 def _last_ns(ch: _Channel) -> int:

@@ -125,7 +125,26 @@ def test_stock_protobuf_decoder_reads_the_uncompressed_chunks(tmp_path: Path) ->
     assert len(got) == 60
 
 
-def test_unknown_chunk_compression_is_one_line(tmp_path: Path) -> None:
-    with pytest.raises(ValueError, match="'/signals/'.*zstd, lz4, none"):
+def test_a_level_of_its_own_is_a_chunk_of_its_own(tmp_path: Path) -> None:
+    path = tmp_path / "k.mcap"
+    _log(path, {"/signals/": ("zstd", -7)})
+    topics: dict[int, str] = {}
+    per_chunk = []
+    for rec in StreamReader(io.BytesIO(path.read_bytes()), emit_chunks=True).records:
+        if isinstance(rec, Chunk):
+            assert rec.compression == "zstd"
+            inner = breakup_chunk(rec, validate_crc=True)
+            topics.update({r.id: r.topic for r in inner if isinstance(r, Channel)})
+            per_chunk.append({topics[r.channel_id].startswith("/signals/")
+                              for r in inner if isinstance(r, Message)})
+    assert {True} in per_chunk and {False} in per_chunk and {True, False} not in per_chunk
+
+
+@pytest.mark.parametrize(("kind", "match"), [("brotli", "'/signals/'.*zstd, lz4, none"),
+                                             (("zstd", 30), "zstd level 30 is outside"),
+                                             (("none", 1), "takes no level")])
+def test_unknown_chunk_compression_is_one_line(tmp_path: Path, kind: object,
+                                               match: str) -> None:
+    with pytest.raises(ValueError, match=match):
         FrameLogWriter(tmp_path / "x.mcap",
-                       chunk_compression={"/signals/": "brotli"})  # type: ignore[dict-item]
+                       chunk_compression={"/signals/": kind})  # type: ignore[dict-item]
