@@ -27,6 +27,7 @@ uncompressed files are byte for byte the library's: ``tests/framelog/test_chunk.
 
 from __future__ import annotations
 
+import functools
 import struct
 import zlib
 from collections.abc import Callable
@@ -319,6 +320,13 @@ _INDEX_HEAD = struct.Struct("<BQHI")  # opcode, record length, channel, bytes of
 _MESSAGE_INDEX_OPCODE = 0x07
 
 
+@functools.lru_cache(maxsize=64)
+def _many_index(k: int) -> np.dtype:
+    """A MessageIndex record of ``k`` (log time, offset) entries."""
+    return np.dtype([("op", "u1"), ("len", "<u8"), ("ch", "<u2"), ("n", "<u4"),
+                     ("e", "<u8", (k, 2))])
+
+
 def write_indexes(indices: dict, rb: object, at: int, offsets: dict[int, int]) -> None:
     """The chunk's MessageIndex records, in the order of ``indices`` (channel -> an index
     whose ``records`` are (log time, offset) pairs and (n, 2) arrays of them), as one write
@@ -340,6 +348,24 @@ def write_indexes(indices: dict, rb: object, at: int, offsets: dict[int, int]) -
         blob = arr.tobytes()
         size = _ONE_INDEX.itemsize
         ones = {i: blob[j * size:(j + 1) * size] for j, i in enumerate(one)}
+    # channels whose entries are one array (a batch's: every channel of a batch has as
+    # many), built as one array per length
+    runs: dict[int, list[int]] = {}
+    for i, (_, mi) in enumerate(items):
+        recs = mi.records
+        if len(recs) == 1 and isinstance(recs[0], np.ndarray) and recs[0].ndim == 2:
+            runs.setdefault(len(recs[0]), []).append(i)
+    for k, idx in runs.items():
+        dt = _many_index(k)
+        arr = np.empty(len(idx), dt)
+        arr["op"] = _MESSAGE_INDEX_OPCODE
+        arr["len"] = dt.itemsize - 9
+        arr["ch"] = [items[i][0] for i in idx]
+        arr["n"] = 16 * k
+        arr["e"] = np.stack([items[i][1].records[0] for i in idx])
+        blob = arr.tobytes()
+        size = dt.itemsize
+        ones.update({i: blob[j * size:(j + 1) * size] for j, i in enumerate(idx)})
     parts = []
     pos = at
     for i, (cid, mi) in enumerate(items):
