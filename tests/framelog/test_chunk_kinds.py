@@ -140,6 +140,24 @@ def test_a_level_of_its_own_is_a_chunk_of_its_own(tmp_path: Path) -> None:
     assert {True} in per_chunk and {False} in per_chunk and {True, False} not in per_chunk
 
 
+@pytest.mark.parametrize(("kw", "apart"), [({}, True), ({"compression_level": -1}, False),
+                                            ({"chunk_compression": {}}, False)])
+def test_signals_have_chunks_of_their_own_by_default(tmp_path: Path, kw: dict,
+                                                     apart: bool) -> None:
+    """zstd at the writer's default level: /signals/ in chunks of their own (zstd -7);
+    a level or a chunk_compression of one's own: one kind of chunk."""
+    path = tmp_path / "d.mcap"
+    with FrameLogWriter(path, chunk_size=1 << 20, **kw) as w:
+        s = w.add_channel("/signals/x", "json")
+        b = w.add_block_channel("/lvds/0/up", "eha-hil/t", dtype=np.uint16, width=2)
+        w.write_messages(s, np.arange(3), [b"{}"] * 3)
+        w.write_block(b, np.arange(3), np.ones((3, 2), np.uint16))
+    with open(path, "rb") as f:
+        chunks = make_reader(f).get_summary().chunk_indexes
+    assert {c.compression for c in chunks} == {"zstd"}
+    assert len(chunks) == (2 if apart else 1)
+
+
 @pytest.mark.parametrize(("kind", "match"), [("brotli", "'/signals/'.*zstd, lz4, none"),
                                              (("zstd", 30), "zstd level 30 is outside"),
                                              (("none", 1), "takes no level")])
