@@ -168,3 +168,19 @@ class RecordEncoder:
                 np.ascontiguousarray(x_ok, np.bool_), np.ascontiguousarray(v_ok, np.bool_),
                 pick, self.flag_off, out)
         return out
+
+
+def warm_up() -> None:
+    """Compile :func:`_encode` for the argument types the recorder passes (messages into
+    an array of their own, and into their places in records), on one box of each kind."""
+    from hil.fieldbus.topology import Slot
+
+    box = Box(0, (Slot("s0", "actuator"),))
+    for d in ("outputs", "inputs"):
+        message = SG.record_message(box, d)
+        enc = RecordEncoder(box, d, message)
+        rows = np.zeros((1, 1, enc.bytes), np.uint8)
+        flags = (np.ones((1, 1), bool), np.ones((1, 1), bool))
+        records = np.zeros((1, message.size + 1), np.uint8)
+        for out in (np.empty((1, message.size), np.uint8), records[:, 1:]):
+            enc.encode(rows, out, flags, np.zeros((1, 1), np.int64))
