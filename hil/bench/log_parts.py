@@ -73,6 +73,7 @@ PARTS: tuple[tuple[str, str, str], ...] = (
     ("hil.replay.robot_record", "RobotRecorder._write_steps", "producer"),
     ("hil.replay.robot_record", "RobotRecorder._write", "producer"),
     ("hil.replay.signal_kernel", "ActuatorEncoder.encode", "producer"),
+    ("hil.replay.signal_records", "RecordEncoder.encode", "producer"),
     ("hil.replay.signal_out", "SignalOut.write_split", "producer"),
     ("hil.replay.signal_out", "SignalOut.write_filled", "producer"),
     ("hil.replay.record", "RecordingStackBox.flush", "producer"),  # (--model stack)
