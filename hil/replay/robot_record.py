@@ -389,3 +389,25 @@ class _Block:
             [a.copy() for a in v] if isinstance(v, list) else v.copy()
             for v in (self.t_steps, self.out_t, self.out_rows, self.out_got, self.in_t,
                       self.in_rows, self.other_in, self.up, self.down, self.trace)))
+
+
+def warm_up(cfg: Config) -> None:
+    """Compile what a logged run of the whole-robot engine calls for the argument types it
+    passes: a full block (the tap's rows whole: C-contiguous arrays), the last, partial one
+    (views of them) and the messages written into their places in the chunk (strided
+    rows). The kernels' own warm-ups (:func:`hil.replay.signal_kernel.warm_up`) pass
+    contiguous arrays only, so a first ``bus run --log`` compiled two more specialisations
+    of the actuators' encoder and one of the records' in its first blocks (~10 s of CPU at
+    load; the cold first pair of ``bench log``). A run of ``FLUSH_CYCLES + 20`` cycles of
+    ``hip_one_box`` (two actuators: with one, a partial block's rows are contiguous too),
+    logged to a temporary file, passes exactly those."""
+    import tempfile
+    from pathlib import Path
+
+    from hil.fieldbus.topology import load_topology
+    from hil.replay.record import run_logged
+    from hil.sim.pc import demo_pc
+
+    with tempfile.TemporaryDirectory() as d:
+        run_logged(load_topology("hip_one_box"), cfg, FLUSH_CYCLES + 20, demo_pc(),
+                   Path(d) / "warm.mcap", model="robot")

@@ -60,3 +60,17 @@ def test_a_message_that_is_not_the_records_is_refused() -> None:
     rows = np.zeros((1, 2, enc.bytes), np.uint8)
     with pytest.raises(ValueError, match="piston flags"):
         enc.encode(rows, np.empty((2, inputs.size), np.uint8))
+
+
+def test_the_log_warm_up_compiles_the_layouts_a_logged_run_passes() -> None:
+    """A full block hands the encoders C-contiguous rows, a partial one views, and the
+    messages go into strided places: the warm-up leaves each of these compiled."""
+    from hil.replay import signal_kernel, signal_records
+    from hil.replay.robot_record import warm_up
+    from plant.config import load_config
+
+    warm_up(load_config(None))
+    acts = {(str(s[0].layout), str(s[3].layout)) for s in signal_kernel._encode.signatures}  # noqa: SLF001
+    assert {("C", "A"), ("A", "A")} <= acts
+    recs = {str(s[7].layout) for s in signal_records._encode.signatures}  # noqa: SLF001
+    assert "A" in recs
