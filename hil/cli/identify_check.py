@@ -13,6 +13,7 @@ writes each case's JSON as it finishes, so a run stopped part way keeps what it 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import sys
@@ -56,21 +57,41 @@ def run_check(args: argparse.Namespace, ctx: Context) -> Outcome:
     if not cases:
         raise UsageError("no case matches --load/--case")
 
+    from hil.cli import outputs
+
     rows = open(args.rows, "w", encoding="utf-8") if args.rows else None  # noqa: SIM115
+
+    def drop_rows(exc: OSError) -> None:
+        # A full disk stops the rows file, not the matrix: the file is removed (no torn
+        # line passed off as the run's rows), the failure is named at the end (exit 1)
+        # and the table still reaches stdout.
+        nonlocal rows
+        with contextlib.suppress(OSError):
+            rows.close()
+        with contextlib.suppress(OSError):
+            os.remove(args.rows)
+        outputs.failed("rows", args.rows, exc)
+        rows = None
 
     def progress(r: CaseResult, i: int, n: int) -> None:
         mark = "ok " if r.right else "NO "
         print(f"[{i}/{n}] {mark} seed {r.seed} {r.case.label}: {r.why} "
               f"({r.wall_s:.0f} s wall, {r.cpu_s:.0f} s CPU)", file=sys.stderr, flush=True)
         if rows is not None:
-            rows.write(json.dumps(r.as_dict(), sort_keys=True) + "\n")
-            rows.flush()
+            try:
+                rows.write(json.dumps(r.as_dict(), sort_keys=True) + "\n")
+                rows.flush()
+            except OSError as exc:
+                drop_rows(exc)
 
     try:
         results = run_matrix(cases, args.seeds, jobs=args.jobs, progress=progress)
     finally:
         if rows is not None:
-            rows.close()
+            try:
+                rows.close()
+            except OSError as exc:
+                drop_rows(exc)
     table = markdown(results)
     files = ()
     if args.markdown:  # written after the result is printed: an interruption keeps it
