@@ -75,8 +75,9 @@ def run_check(args: argparse.Namespace, ctx: Context) -> Outcome:
 
     def progress(r: CaseResult, i: int, n: int) -> None:
         mark = "ok " if r.right else "NO "
-        print(f"[{i}/{n}] {mark} seed {r.seed} {r.case.label}: {r.why} "
-              f"({r.wall_s:.0f} s wall, {r.cpu_s:.0f} s CPU)", file=sys.stderr, flush=True)
+        sys.stderr.write(f"[{i}/{n}] {mark} seed {r.seed} {r.case.label}: {r.why} "
+                         f"({r.wall_s:.0f} s wall, {r.cpu_s:.0f} s CPU)\n")  # one write a line
+        sys.stderr.flush()
         if rows is not None:
             try:
                 rows.write(json.dumps(r.as_dict(), sort_keys=True) + "\n")
