@@ -51,7 +51,10 @@ S_SII_LEN, S_IN_START = 13, 14
 S_OUT_SM, S_IN_SM, S_MBX_RX, S_MBX_TX = 15, 16, 17, 18
 S_MBX0_START, S_MBX0_LEN, S_MBX1_START, S_MBX1_LEN = 19, 20, 21, 22
 # Distributed clocks: columns dcc.DC_BASE (23) .. dcc.DC_END (firmware_model.esc.dc_compiled).
-N_ST = dcc.DC_END
+# S_TRIP_SEEN: of the last watchdog trip, ns from the last output write to the tick of the
+# slave's clock that applied it (S_TRIP_DELAY: to the trip itself).
+S_TRIP_SEEN = dcc.DC_END
+N_ST = dcc.DC_END + 1
 #: Slots of ``obuf``/``olen`` after the output 3-buffer: the mailbox hand-over buffers.
 MBX_RX, MBX_TX = 3, 4
 N_OSLOTS = 5
@@ -663,26 +666,45 @@ def handle_frame(buf, n, mem, sii, st, wmask, obuf, olen, oidx, ibuf, ilen, iidx
 @njit(cache=True, nogil=True)
 def tick(mem, st, obuf, olen, oidx, dt_ns):
     """Every slave's clock ``dt_ns`` on; in OP a slave whose output buffer was not written
-    for its watchdog time trips (outputs safe, SAFEOP + error, code 0x001B). Mirrors
-    :meth:`Esc.tick`."""
+    for its watchdog time trips (outputs safe, SAFEOP + error, code 0x001B), at the first
+    watchdog increment of its clock that ends it (:func:`watchdog_expiry`), applied in the
+    tick that passes it. Mirrors :meth:`Esc.tick`."""
     for i in range(mem.shape[0]):
         m, s = mem[i], st[i]
         s[S_NOW] += dt_ns
         if s[S_STATE] != _OP or not s[S_OUT_BYTES]:
             continue
-        wd = 40 * (_u16(m, r.WD_DIVIDER) + 2) * _u16(m, r.WD_TIME_PD)
+        inc = 40 * (_u16(m, r.WD_DIVIDER) + 2)
+        wd = inc * _u16(m, r.WD_TIME_PD)
         if not wd or not _sm(m, s[S_OUT_SM])[2] & r.SM_WATCHDOG:
             continue
-        quiet = s[S_NOW] - s[S_LAST_OUT]
-        if quiet >= wd:
+        expiry = watchdog_expiry(s[S_LAST_OUT], inc, wd)
+        if s[S_NOW] >= expiry:
             _put16(m, r.WD_STATUS_PD, 0)
             m[r.WD_COUNTER_PD] = min(np.int64(m[r.WD_COUNTER_PD]) + 1, 0xFF)
             s[S_TRIPS] += 1
-            s[S_TRIP_DELAY] = quiet
+            s[S_TRIP_DELAY] = expiry - s[S_LAST_OUT]
+            s[S_TRIP_SEEN] = s[S_NOW] - s[S_LAST_OUT]
             _enter(m, s, obuf[i], olen[i], oidx[i], _SAFEOP)
             _refuse(m, s, 0x001B)
     if mem.shape[0]:
         dcc.tick(mem, st, st[0, S_NOW])
+
+
+@njit(cache=True, nogil=True)
+def watchdog_expiry(last_write_ns, increment_ns, watchdog_ns):
+    """When [ns of the slave's clock] the process-data watchdog runs out after an output
+    write at ``last_write_ns``: an ESC counts it in increments of its divider (40 ns *
+    (0x0400 + 2)), which runs free on its clock, so it expires at the first increment
+    boundary at least the watchdog time after the write: within [t, t + one increment]
+    (ESC datasheet, Section I, "Watchdogs"), whenever the emulator looks."""
+    t = last_write_ns + watchdog_ns
+    return -(-t // increment_ns) * increment_ns
+
+
+def watchdog_increment_ns(mem_row: np.ndarray) -> int:
+    """One watchdog increment [ns] of a slave (its divider, register 0x0400)."""
+    return 40 * ((int(mem_row[r.WD_DIVIDER]) | int(mem_row[r.WD_DIVIDER + 1]) << 8) + 2)
 
 
 def watchdog_ns(mem_row: np.ndarray) -> int:

@@ -135,9 +135,11 @@ class Esc:
         #: Simulated time [ns] (from :meth:`tick`) and the last output-buffer write.
         self.now_ns = 0
         self.last_output_ns = 0
-        #: Watchdog expirations and, of the last, ns from the last output write to the trip.
+        #: Watchdog expirations and, of the last, ns from the last output write to the trip
+        #: and to the tick that applied it.
         self.watchdog_trips = 0
         self.last_trip_delay_ns = 0
+        self.last_trip_seen_ns = 0
         self._pending: bytes | None = None
         #: Process-data lengths the application expects (the SII's, or as CoE remapped).
         self.out_bytes, self.in_bytes = desc.out_bytes, desc.in_bytes
@@ -495,6 +497,10 @@ class Esc:
         out, self._pending = self._pending, None
         return out
 
+    def watchdog_increment_ns(self) -> int:
+        """One watchdog increment [ns] (the divider, register 0x0400)."""
+        return 40 * (_U16.unpack_from(self.mem, r.WD_DIVIDER)[0] + 2)
+
     def watchdog_ns(self) -> int:
         """Process-data watchdog time [ns] (0: disabled)."""
         div = _U16.unpack_from(self.mem, r.WD_DIVIDER)[0]
@@ -502,7 +508,9 @@ class Esc:
 
     def tick(self, dt_ns: int) -> None:
         """Advance the slave's time; in OP the watchdog trips if the output buffer was not
-        written for the watchdog time (outputs safe, SAFEOP + error, code 0x001B)."""
+        written for the watchdog time (outputs safe, SAFEOP + error, code 0x001B): at the
+        first watchdog increment that ends it, as an ESC counts it, applied in the tick
+        that passes it."""
         self.now_ns += dt_ns
         self.dc.tick(self.mem, self.now_ns)
         if self.state != AlState.OP or not self.out_bytes:
@@ -510,11 +518,14 @@ class Esc:
         wd = self.watchdog_ns()
         if not wd or not self.sm(self.desc.out_sm)[2] & r.SM_WATCHDOG:
             return
-        quiet = self.now_ns - self.last_output_ns
-        if quiet >= wd:
+        inc = self.watchdog_increment_ns()
+        t = self.last_output_ns + wd
+        expiry = -(-t // inc) * inc   # the first increment boundary of the slave's clock
+        if self.now_ns >= expiry:
             _U16.pack_into(self.mem, r.WD_STATUS_PD, 0)
             self.mem[r.WD_COUNTER_PD] = min(self.mem[r.WD_COUNTER_PD] + 1, 0xFF)
             self.watchdog_trips += 1
-            self.last_trip_delay_ns = quiet
+            self.last_trip_delay_ns = expiry - self.last_output_ns
+            self.last_trip_seen_ns = self.now_ns - self.last_output_ns
             self._enter(AlState.SAFEOP)
             self._refuse(AlStatusCode.SM_WATCHDOG)

@@ -127,8 +127,11 @@ class EscChain:
 
     def watchdog_report(self) -> list[dict]:
         """Per slave: watchdog time, trips and the delay of the last trip [ms]."""
-        return [{"box": i, "watchdog_ms": e.watchdog_ns() / 1e6, "trips": e.watchdog_trips,
+        return [{"box": i, "watchdog_ms": e.watchdog_ns() / 1e6,
+                 "watchdog_increment_ms": e.watchdog_increment_ns() / 1e6,
+                 "trips": e.watchdog_trips,
                  "last_trip_after_ms": e.last_trip_delay_ns / 1e6,
+                 "last_trip_seen_after_ms": e.last_trip_seen_ns / 1e6,
                  "al_status": e.mem[0x130] | e.mem[0x131] << 8,
                  "al_status_code": e.mem[0x134] | e.mem[0x135] << 8}
                 for i, e in enumerate(self.escs)]

@@ -145,11 +145,15 @@ class ServedChain:
                 "spread_ns": list(self.dc_spread_ns)}
 
     def watchdog_report(self) -> list[dict]:
-        """Per slave: watchdog time, trips and the delay of the last trip [ms], AL status."""
+        """Per slave: watchdog time and increment, trips, the delay of the last trip after
+        the last output write on the slave's clock and of the tick that applied it [ms]
+        (later by the frame thread's wake-up), AL status."""
         a = self.arrays
         return [{"box": i, "watchdog_ms": ec.watchdog_ns(a.mem[i]) / 1e6,
+                 "watchdog_increment_ms": ec.watchdog_increment_ns(a.mem[i]) / 1e6,
                  "trips": int(a.st[i, ec.S_TRIPS]),
                  "last_trip_after_ms": int(a.st[i, ec.S_TRIP_DELAY]) / 1e6,
+                 "last_trip_seen_after_ms": int(a.st[i, ec.S_TRIP_SEEN]) / 1e6,
                  "al_status": int(a.mem[i, 0x130]) | int(a.mem[i, 0x131]) << 8,
                  "al_status_code": int(a.mem[i, 0x134]) | int(a.mem[i, 0x135]) << 8}
                 for i in range(a.n)]
