@@ -43,6 +43,17 @@ from mcap.writer import IndexType, Writer
 #: compression time for ~15 % more bytes; against level 1, 12 % less time for 7 % more
 #: bytes (measured on the chunks of a whole-robot log, docs/framelog.md "The whole robot").
 ZSTD_LEVEL = -1
+#: What the writer's own zstd levels (:data:`ZSTD_LEVEL`, and -7 of the decoded signals'
+#: chunks, :data:`hil.framelog.writer.SIGNAL_CHUNKS`) change in zstd's parameters of that
+#: level: a match table of 2^12 entries (zstd's: 2^13; 16 KiB, which stays in the L1 cache
+#: beside the data) and matches of at least 7 bytes (zstd's: 6; a sensor word's noise makes
+#: many 6-byte matches that save little and cost a sequence each). On the chunks of a
+#: second of the whole robot (``python -m hil.bench.log_chunks``; docs/framelog.md,
+#: "Compression level"): at -1 ~9 % less compression CPU for ~3 % more bytes of those
+#: chunks, at -7 ~19 % less for ~5 % more. Any reader reads the frames (zstd's format
+#: leaves the match finder to the writer).
+TUNED = {"hash_log": 12, "min_match": 7}
+TUNED_LEVELS = (ZSTD_LEVEL, -7)
 #: Chunk record: opcode, record length, start and end time, uncompressed size and CRC.
 _HEAD = struct.Struct("<BQQQQI")
 _CHUNK_OPCODE = 0x06
@@ -124,10 +135,15 @@ def supported(w: Writer) -> bool:
 
 def compressor(compression: str, level: int | None) -> Callable[[memoryview], bytes]:
     """bytes-like -> compressed bytes, for ``zstd`` (``level`` None: :data:`ZSTD_LEVEL`;
-    frames with zstd's content checksum) or ``lz4`` (None: the library's default)."""
+    the levels of :data:`TUNED_LEVELS` with the parameters :data:`TUNED`; frames with
+    zstd's content checksum) or ``lz4`` (None: the library's default)."""
     if compression == "zstd":
-        return zstandard.ZstdCompressor(level=ZSTD_LEVEL if level is None else level,
-                                        write_checksum=True).compress
+        lvl = ZSTD_LEVEL if level is None else level
+        if lvl in TUNED_LEVELS:
+            params = zstandard.ZstdCompressionParameters.from_level(
+                lvl, write_checksum=1, **TUNED)
+            return zstandard.ZstdCompressor(compression_params=params).compress
+        return zstandard.ZstdCompressor(level=lvl, write_checksum=True).compress
     if compression == "lz4":
         lvl = 0 if level is None else level
         return lambda data: lz4.frame.compress(data, compression_level=lvl)
@@ -333,6 +349,8 @@ def write_indexes(indices: dict, rb: object, at: int, offsets: dict[int, int]) -
     to ``rb`` starting at file offset ``at``; ``offsets[channel]`` set to each record's.
     The bytes the library's ``MessageIndex.write`` makes, one by one; the records of one
     entry (most: a block channel's one message) built as one array."""
+    if _write_uniform(indices, rb, at, offsets):
+        return
     items = list(indices.items())
     one = [i for i, (_, mi) in enumerate(items)
            if len(mi.records) == 1 and type(mi.records[0]) is tuple]
@@ -394,3 +412,39 @@ def write_indexes(indices: dict, rb: object, at: int, offsets: dict[int, int]) -
         parts.append(rec)
         pos += len(rec)
     rb.write(b"".join(parts))  # type: ignore[attr-defined]
+
+
+def _write_uniform(indices: dict, rb: object, at: int, offsets: dict[int, int]) -> bool:
+    """:func:`write_indexes` of a chunk whose every channel has one entry, a (time,
+    offset) pair each, or one (m, 2) array of them each of one ``m`` (a chunk of one
+    batch's channels, as most of a log's chunks are), as one record array; False (nothing
+    written) for any other chunk."""
+    recs = [mi.records for mi in indices.values()]
+    first = recs[0] if recs else None
+    if not first or len(first) != 1:
+        return False
+    r0 = first[0]
+    if type(r0) is tuple:
+        if not all(len(r) == 1 and type(r[0]) is tuple for r in recs):
+            return False
+        entries = np.array([r[0] for r in recs], dtype="<u8")
+        m = 1
+    else:
+        if not isinstance(r0, np.ndarray) or r0.ndim != 2:
+            return False
+        m = len(r0)
+        if not all(len(r) == 1 and isinstance(r[0], np.ndarray) and r[0].shape == (m, 2)
+                   for r in recs):
+            return False
+        entries = np.stack([r[0] for r in recs])
+    dt = _many_index(m)
+    arr = np.empty(len(recs), dt)
+    arr["op"] = _MESSAGE_INDEX_OPCODE
+    arr["len"] = dt.itemsize - 9
+    arr["ch"] = list(indices)
+    arr["n"] = 16 * m
+    arr["e"] = entries.reshape(len(recs), m, 2)
+    size = dt.itemsize
+    offsets.update(zip(indices, range(at, at + len(recs) * size, size), strict=True))
+    rb.write(arr.tobytes())  # type: ignore[attr-defined]
+    return True
