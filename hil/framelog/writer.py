@@ -642,7 +642,7 @@ class FrameLogWriter:
             raise ValueError(f"{ch.topic}: message times must be >= 0 and non-decreasing")
         self._advance(ch, int(times[0]), int(times[-1]))
         if ch.wrap is not None:
-            frames = [bytes(m) for m in messages]
+            frames = list(map(bytes, messages))
             parts = rawpb.wrap_periodic(ch.encoding, frames)
             messages = (batch.Interleaved(parts) if parts is not None
                         else rawpb.wrap_many(ch.encoding, frames))
