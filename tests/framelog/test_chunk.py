@@ -42,6 +42,12 @@ def _log(path: Path, compression: str, level: int | None, ours: bool) -> bytes:
                 w.write(one, int(t[-1]), bytes(rng.integers(0, 256, 30, dtype=np.uint8)))
                 if k == 6:
                     w.add_metadata("between", {"k": "6"})  # a record between two chunks
+                    # channels registered amid messages, one with a schema of its own
+                    late = w.add_channel("/late", "eha-hil/late-frame")
+                    js = w.add_json_channel("/late/json", {"x": "number"})
+                if k >= 6:
+                    w.write(late, int(t[0]), bytes([k]) * 20)
+                    w.write_json(js, int(t[1]), {"x": k / 3})
         return path.read_bytes()
     finally:
         if not ours:
@@ -94,7 +100,7 @@ def test_default_level_reads_back_with_crcs(tmp_path: Path) -> None:
         got = [[(c.topic, m.log_time, m.sequence, m.data) for _, c, m in
                 make_reader(io.BytesIO(f), validate_crcs=True).iter_messages(
                     log_time_order=order)] for f in files]
-        assert len(got[0]) == 24 and got[0] == got[1]
+        assert len(got[0]) == 36 and got[0] == got[1]
 
 
 @pytest.mark.parametrize(("compression", "level"), [("zstd", 23), ("lz4", -1),
