@@ -96,8 +96,10 @@ def _schema(full_name: str, fields: list[tuple[str, int, int, bool]]) -> bytes:
 
 
 # --- blocks ---------------------------------------------------------------------------------
+@functools.lru_cache(maxsize=256)
 def block_schema(encoding: str) -> tuple[str, bytes]:
-    """(message name, ``FileDescriptorSet``) of the block message of ``encoding``."""
+    """(message name, ``FileDescriptorSet``) of the block message of ``encoding`` (kept:
+    a whole-robot log asks for a few encodings' schemas 200 times)."""
     name = message_name(encoding, True)
     return name, _schema(name, [(k, n, t, r) for k, (n, t, r) in _BLOCK_TYPES.items()])
 
