@@ -169,6 +169,7 @@ def install(w: Writer, compression: str, level: int | None, chunk_size: int,
     buf.write(rw._buffer.getvalue())  # noqa: SLF001 - empty before the first record
     buf.seek(rw._buffer.tell())  # noqa: SLF001
     rw._buffer = buf  # noqa: SLF001
+    w._Writer__chunk_builder.eha_batches = []  # noqa: SLF001 - see :func:`write_indexes`
     first = _Kind(w._Writer__chunk_builder, compression, level)  # noqa: SLF001
     if not others:
         # an instance attribute: the Writer's own ``self.__finalize_chunk()`` finds it first
@@ -199,6 +200,7 @@ def _new_builder(chunk_size: int) -> object:
     from mcap._chunk_builder import ChunkBuilder
 
     cb = ChunkBuilder()
+    cb.eha_batches = []  # see write_indexes
     cb.record_writer._buffer = ChunkBuffer(chunk_size + (chunk_size >> 2))  # noqa: SLF001
     return cb
 
@@ -355,13 +357,16 @@ def _finalize(w: Writer, compress: Callable[[memoryview], bytes] | None, name: b
     rb = w._Writer__record_builder  # noqa: SLF001
     at = stream.tell()
     if w._Writer__index_types & IndexType.MESSAGE:  # noqa: SLF001
-        write_indexes(cb.message_indices, rb, at + rb.count, index.message_index_offsets)
+        write_indexes(cb.message_indices, rb, at + rb.count, index.message_index_offsets,
+                      getattr(cb, "eha_batches", None))
     index.message_index_length = rb.count
     w._Writer__flush()  # noqa: SLF001
     w._Writer__chunk_indices.append(index)  # noqa: SLF001
     # ChunkBuilder.reset, less its copy of the (already replaced) buffer
     cb.message_end_time = 0
     cb.message_indices.clear()
+    if getattr(cb, "eha_batches", None):
+        cb.eha_batches.clear()
     cb.message_start_time = 0
     cb.num_messages = 0
 
@@ -374,19 +379,24 @@ _MESSAGE_INDEX_OPCODE = 0x07
 
 
 @functools.lru_cache(maxsize=64)
-def _many_index(k: int) -> np.dtype:
+def many_index(k: int) -> np.dtype:
     """A MessageIndex record of ``k`` (log time, offset) entries."""
     return np.dtype([("op", "u1"), ("len", "<u8"), ("ch", "<u2"), ("n", "<u4"),
                      ("e", "<u8", (k, 2))])
 
 
-def write_indexes(indices: dict, rb: object, at: int, offsets: dict[int, int]) -> None:
+def write_indexes(indices: dict, rb: object, at: int, offsets: dict[int, int],
+                  batches: list[tuple[np.ndarray, list[int]]] | None = None) -> None:
     """The chunk's MessageIndex records, in the order of ``indices`` (channel -> an index
     whose ``records`` are (log time, offset) pairs and (n, 2) arrays of them), as one write
     to ``rb`` starting at file offset ``at``; ``offsets[channel]`` set to each record's.
+    ``batches``: the chunk builder's ``eha_batches`` (:func:`hil.framelog.batch.add_records`:
+    each batch's MessageIndex records already built, and their channels): when the chunk
+    is those batches' channels alone, one entry each, their records are written as they
+    are.
     The bytes the library's ``MessageIndex.write`` makes, one by one; the records of one
     entry (most: a block channel's one message) built as one array."""
-    if _write_uniform(indices, rb, at, offsets):
+    if _write_batches(indices, batches, rb, at, offsets):
         return
     items = list(indices.items())
     one = [i for i, (_, mi) in enumerate(items)
@@ -411,7 +421,7 @@ def write_indexes(indices: dict, rb: object, at: int, offsets: dict[int, int]) -
         if len(recs) == 1 and isinstance(recs[0], np.ndarray) and recs[0].ndim == 2:
             runs.setdefault(len(recs[0]), []).append(i)
     for k, idx in runs.items():
-        dt = _many_index(k)
+        dt = many_index(k)
         arr = np.empty(len(idx), dt)
         arr["op"] = _MESSAGE_INDEX_OPCODE
         arr["len"] = dt.itemsize - 9
@@ -451,37 +461,21 @@ def write_indexes(indices: dict, rb: object, at: int, offsets: dict[int, int]) -
     rb.write(b"".join(parts))  # type: ignore[attr-defined]
 
 
-def _write_uniform(indices: dict, rb: object, at: int, offsets: dict[int, int]) -> bool:
-    """:func:`write_indexes` of a chunk whose every channel has one entry, a (time,
-    offset) pair each, or one (m, 2) array of them each of one ``m`` (a chunk of one
-    batch's channels, as most of a log's chunks are), as one record array; False (nothing
-    written) for any other chunk."""
-    recs = [mi.records for mi in indices.values()]
-    first = recs[0] if recs else None
-    if not first or len(first) != 1:
+def _write_batches(indices: dict, batches: list[tuple[np.ndarray, list[int]]] | None,
+                   rb: object, at: int, offsets: dict[int, int]) -> bool:
+    """:func:`write_indexes` of a chunk whose channels are, in order, those of
+    ``batches`` (each batch's MessageIndex records as an array of :func:`many_index`
+    records, its channels), each with its batch's entry alone; False (nothing written)
+    for any other chunk."""
+    if not batches:
         return False
-    r0 = first[0]
-    if type(r0) is tuple:
-        if not all(len(r) == 1 and type(r[0]) is tuple for r in recs):
-            return False
-        entries = np.array([r[0] for r in recs], dtype="<u8")
-        m = 1
-    else:
-        if not isinstance(r0, np.ndarray) or r0.ndim != 2:
-            return False
-        m = len(r0)
-        if not all(len(r) == 1 and isinstance(r[0], np.ndarray) and r[0].shape == (m, 2)
-                   for r in recs):
-            return False
-        entries = np.stack([r[0] for r in recs])
-    dt = _many_index(m)
-    arr = np.empty(len(recs), dt)
-    arr["op"] = _MESSAGE_INDEX_OPCODE
-    arr["len"] = dt.itemsize - 9
-    arr["ch"] = list(indices)
-    arr["n"] = 16 * m
-    arr["e"] = entries.reshape(len(recs), m, 2)
-    size = dt.itemsize
-    offsets.update(zip(indices, range(at, at + len(recs) * size, size), strict=True))
-    rb.write(arr.tobytes())  # type: ignore[attr-defined]
+    ids = [cid for _, cids in batches for cid in cids]
+    if ids != list(indices) or any(len(indices[cid].records) != 1 for cid in ids):
+        return False
+    pos = at
+    for arr, cids in batches:
+        size = arr.dtype.itemsize
+        offsets.update(zip(cids, range(pos, pos + len(cids) * size, size), strict=True))
+        pos += len(cids) * size
+    rb.write(b"".join(arr.tobytes() for arr, _ in batches))  # type: ignore[attr-defined]
     return True

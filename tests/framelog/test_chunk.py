@@ -131,6 +131,10 @@ def test_every_message_index_entry_points_at_its_message(tmp_path: Path,
                 w.write(one, int(t[-1]) + j, bytes([k, j]))
             w.write_messages_many(many, t + 10, np.full((3, 4, 5), k, np.uint8))
             w.write_messages(many[0], t + 20, [b"x" * (1 + i) for i in range(4)])
+        w.flush()  # a chunk of batches of single-frame messages alone
+        t = 4000 + np.arange(5)
+        w.write_messages(many[1], t, [b"y" * 3] * 5)
+        w.write_messages(many[2], t, [b"z" * (1 + i) for i in range(5)])
     records = list(StreamReader(io.BytesIO(path.read_bytes()), emit_chunks=True).records)
     chunks = {}
     pos = 0
@@ -154,7 +158,7 @@ def test_every_message_index_entry_points_at_its_message(tmp_path: Path,
                 assert isinstance(m, Message) and m.channel_id == ix.channel_id
                 assert m.log_time == t
                 entries += 1
-    assert entries == 6 * 5 + 6 * 3 + 6 * 3 * 4 + 6 * 4 and len(chunks) >= 6
+    assert entries == 6 * 5 + 6 * 3 + 6 * 3 * 4 + 6 * 4 + 10 and len(chunks) >= 7
     # most channels had one message in a chunk: the one-entry records were written
     assert sum(len(ix.records) == 1 for _, ixs in chunks.values() for ix in ixs) >= 25
 
