@@ -249,7 +249,7 @@ class Parts:
 #: Cycles of the warm-up runs before the timed ones: more than one block of the log
 #: (:data:`hil.replay.record.FLUSH_CYCLES`), so that every compiled call and import of a
 #: block's writing is done before the timing starts.
-WARM_CYCLES = 120
+WARM_CYCLES = 220
 
 
 @contextlib.contextmanager

@@ -70,7 +70,20 @@ ENC_MCU_UP = LY.ENC_MCU_UP
 ENC_MCU_DOWN = LY.ENC_MCU_DOWN
 ENC_RECORD = LY.ENC_RECORD
 ENC_FIELDBUS = "eha-hil/ethercat-fcs"  # an EtherCAT PDU + FCS (hil.fieldbus.wire)
-FLUSH_CYCLES = 100  # one block per channel per 100 ms of simulated time
+#: Cycles per block: every raw channel gets one message per block, the decoded signals and
+#: the fieldbus frames are written a block at a time, and the log's chunk is closed after
+#: each (``flush_every_ns``: what a killed run loses). 200 ms of simulated time: half the
+#: writes of 100 ms blocks for the same frames, which cut a logged ``hydra_full`` run's
+#: extra CPU by ~10 % (the writer's and the recorder's work per call, per message array,
+#: per chunk); level "full" keeps :data:`FULL_FLUSH_CYCLES` (its traces, ~640 bytes per
+#: actuator tick, would double what an export holds between blocks).
+FLUSH_CYCLES = 200
+FULL_FLUSH_CYCLES = 100
+
+
+def flush_cycles(level: str) -> int:
+    """Cycles per block of a log at ``level`` (:data:`FLUSH_CYCLES`)."""
+    return FULL_FLUSH_CYCLES if level == "full" else FLUSH_CYCLES
 
 
 def signal_topics(box: int, board: int | None = None) -> dict[str, str]:
@@ -103,6 +116,7 @@ class RecordingStackBox(StackBox):
         self.log = log
         self.tick_ns = cfg.get("sim.tick_ns")
         self.traced = log is not None and log.level == "full"
+        self.flush_cycles = flush_cycles(log.level if log is not None else "mcu")
         self.ch_up, self.ch_down = [], []
         self.ch_trace, self.ch_words, self.ch_raw = [], [], []
         if log is not None:
@@ -156,7 +170,7 @@ class RecordingStackBox(StackBox):
         # after the step, i.e. each board's upstream block as the MCU read it and downstream
         # block as it wrote it, in one copy; and each link's CRC-error count
         if not hasattr(self, "ram_rows"):
-            cap = FLUSH_CYCLES * CYCLE_TICKS // self.period_ticks + 8
+            cap = self.flush_cycles * CYCLE_TICKS // self.period_ticks + 8
             # the blocks of the boards in use (they come first), in the memory's dtype: one
             # plain copy up to the last board's upstream block
             self.ram_words = (dpram.up_base(len(self.stacks) - 1) + B.UP_WORDS
@@ -205,7 +219,7 @@ class RecordingStackBox(StackBox):
     def advance(self, ticks: int) -> None:
         super().advance(ticks)
         self.buf_in.append((self.tick, self.inputs()))
-        if len(self.buf_in) >= FLUSH_CYCLES:
+        if len(self.buf_in) >= self.flush_cycles:
             self.flush()
 
     def flush(self) -> None:
@@ -439,11 +453,12 @@ def run_logged(topo: Topology, cfg: Config, cycles: int, pc: Callable[[int, Mast
     import contextlib
 
     tick_ns = cfg.get("sim.tick_ns")
+    block = flush_cycles(level)
     with contextlib.ExitStack() as stack:
         log = None
         if log_path is not None:
             log = stack.enter_context(FrameLogWriter(
-                log_path, level=level, flush_every_ns=FLUSH_CYCLES * CYCLE_TICKS * tick_ns,
+                log_path, level=level, flush_every_ns=block * CYCLE_TICKS * tick_ns,
                 compression=compression))
         out = SignalOut(log, live)
         ch_bus = None
@@ -454,7 +469,7 @@ def run_logged(topo: Topology, cfg: Config, cycles: int, pc: Callable[[int, Mast
                                      schema_data=lay.schema())
         bus_sig: BusSignals | None = None
         # the frames of the last cycles, kept for /signals/bus and the log and written
-        # once per FLUSH_CYCLES (a message at a time costs ~9 us, see hil.framelog.batch),
+        # once per block (a message at a time costs ~9 us, see hil.framelog.batch),
         # taken a cycle at a time (the bus system's tap_cycle, at the end of each cycle:
         # one call, not one per frame, and the cycle's /signals/bus row with it)
         take_cycle: Callable[[list[bytes], list[bytes], int], None] | None = None
@@ -462,7 +477,7 @@ def run_logged(topo: Topology, cfg: Config, cycles: int, pc: Callable[[int, Mast
         def tap_cycle(cycle: int, tick: int, sent: list[bytes], received: list[bytes]
                       ) -> None:
             take_cycle(sent, received, tick)
-            if (cycle + 1) % FLUSH_CYCLES == 0:
+            if (cycle + 1) % block == 0:
                 flush_block()
 
         def flush_block() -> None:

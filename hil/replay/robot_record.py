@@ -29,7 +29,7 @@ from hil.framelog.layout import SCHEMA_ENCODING as LAYOUT_ENCODING
 from hil.framelog.layout import Layout
 from hil.replay import layouts as LY
 from hil.replay import signals as SG
-from hil.replay.record import FLUSH_CYCLES, UP_WIDTH, add_signal_channels, topics
+from hil.replay.record import FLUSH_CYCLES, UP_WIDTH, add_signal_channels, flush_cycles, topics
 from hil.replay.signal_kernel import ActuatorEncoder
 from hil.replay.signal_out import SignalOut
 from hil.replay.signal_records import RecordEncoder
@@ -38,8 +38,8 @@ from hil.sim.robot import RobotEngine
 from hil.sim.stack_rows import TapRows
 from plant.config import Config
 
-#: Cycles per written block: the per-actuator path's (100 ms), fewer at level "full",
-#: whose traces take ~640 bytes per actuator tick.
+#: Cycles per written block: the per-actuator path's (:func:`hil.replay.record.flush_cycles`),
+#: fewer at level "full", whose traces take ~640 bytes per actuator tick.
 BLOCK_CYCLES = {"full": 10}
 
 
@@ -67,7 +67,7 @@ class RobotRecorder:
         self.full = level == "full"
         per_cycle = engine.cycle_ticks // self.period
         self.every = 1 if self.full else per_cycle
-        self.cycles = BLOCK_CYCLES.get(level, FLUSH_CYCLES)
+        self.cycles = BLOCK_CYCLES.get(level, flush_cycles(level))
         n, rows = engine.n, self.cycles * per_cycle
         self.tap = TapRows(np.zeros((n, rows, UP_WIDTH), np.uint16),
                            np.zeros((n, rows, B.DOWN_WORDS), np.uint16),

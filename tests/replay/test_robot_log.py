@@ -17,7 +17,7 @@ from firmware_model.fpga import layout as B
 from hil.fieldbus.topology import load_topology
 from hil.framelog import FrameLogReader
 from hil.replay import signals as SG
-from hil.replay.record import run_logged
+from hil.replay.record import flush_cycles, run_logged
 from hil.replay.replay import replay_mcu as replay
 from hil.sim.pc import demo_pc
 from hil.sim.robot import RobotEngine
@@ -103,6 +103,26 @@ def test_the_robot_engine_logs_what_the_per_actuator_path_logs(logs, level, mode
         rt, rf = robot[topic]
         assert np.array_equal(t, rt), topic
         assert np.array_equal(f, rf), topic
+
+
+def test_the_robot_engine_cuts_the_raw_channels_into_the_per_actuator_paths_blocks(logs):
+    """At level mcu both paths write a raw channel's frames in the same blocks
+    (``flush_cycles``: one message per channel per block), so that a reader holds the
+    same span of each channel between blocks whichever path wrote the log."""
+    from mcap.reader import make_reader
+
+    def block_times(path) -> dict[str, list[int]]:
+        with open(path, "rb") as f:
+            out: dict[str, list[int]] = {}
+            for _, ch, m in make_reader(f).iter_messages(log_time_order=False):
+                if not ch.topic.startswith(("/signals/", "/fieldbus/")):
+                    out.setdefault(ch.topic, []).append(m.log_time)
+            return out
+
+    robot, stack = block_times(logs["robot", "mcu"]), block_times(logs["stack", "mcu"])
+    assert robot == stack
+    n_blocks = -(-200 // flush_cycles("mcu"))  # the fixture's 200 cycles
+    assert {len(t) for t in robot.values()} == {n_blocks}
 
 
 def test_a_robot_engine_log_replays_bit_for_bit(logs):
