@@ -153,15 +153,27 @@ class RobotRecorder:
         self.ch_up, self.ch_down, self.ch_trace, self.ch_raw, self.ch_words = [], [], [], [], []
         self.sig_rec: list[dict] = []
         self.sig_act: list[int] = []
+        # a record's layout and message depend on its box's slot kinds only: made once per
+        # kinds (hydra_full: 16 boxes, 4 layouts), their schemas' JSON with them
+        messages: dict = {}  # the record messages (add_signal_channels)
+        records: dict[tuple, Layout] = {}
+
+        def record(box, d: str) -> Layout:  # noqa: ANN001
+            key = (tuple(s.kind for s in box.slots), d)
+            lay = records.get(key)
+            if lay is None:
+                lay = records[key] = LY.process_record(box, d)
+            return lay
+
         for b in self.boxes:
             box = b.box
             if log is not None:
                 tp = topics(box.id)
-                self.ch_out.append(block(tp["outputs"], LY.process_record(box, "outputs"),
-                                         np.uint8, b.out_dtype.itemsize)
+                self.ch_out.append(block(tp["outputs"], record(box, "outputs"), np.uint8,
+                                         b.out_dtype.itemsize)
                                    if b.out_dtype.itemsize else None)
-                self.ch_in.append(block(tp["inputs"], LY.process_record(box, "inputs"),
-                                        np.uint8, b.in_dtype.itemsize))
+                self.ch_in.append(block(tp["inputs"], record(box, "inputs"), np.uint8,
+                                        b.in_dtype.itemsize))
                 for k in range(len(box.actuators)):
                     tk = topics(box.id, k)
                     self.ch_up.append(block(tk["up"], up, np.uint16, UP_WIDTH))
@@ -174,7 +186,7 @@ class RobotRecorder:
                             for d in ("down", "up")))
                         self.ch_raw.append(block(f"/sensors/{box.id}.{k}/raw", raw,
                                                  np.uint32, B.N_RAW))
-            rec, act = add_signal_channels(self.out, box, self.cfg, act_message)
+            rec, act = add_signal_channels(self.out, box, self.cfg, act_message, messages)
             self.sig_rec.append(rec)
             self.sig_act += act
 
