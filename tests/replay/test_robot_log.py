@@ -125,6 +125,27 @@ def test_the_robot_engine_cuts_the_raw_channels_into_the_per_actuator_paths_bloc
     assert {len(t) for t in robot.values()} == {n_blocks}
 
 
+@pytest.mark.parametrize("level", ["mcu", "full"])
+def test_every_channel_has_the_per_actuator_paths_encoding_schema_and_metadata(logs, level):
+    """The engine's recorder makes each record layout and message once per slot kinds:
+    every box still gets the schema of its own slots (box 0 has two actuators, box 2
+    one, box 1 an IMU), as the per-actuator path gives it."""
+    from mcap.reader import make_reader
+
+    def channels(path) -> dict[str, tuple]:
+        with open(path, "rb") as f:
+            summary = make_reader(f).get_summary()
+        return {c.topic: (c.message_encoding, c.metadata, summary.schemas[c.schema_id].name,
+                          summary.schemas[c.schema_id].encoding,
+                          bytes(summary.schemas[c.schema_id].data))
+                for c in summary.channels.values()}
+
+    robot, stack = channels(logs["robot", level]), channels(logs["stack", level])
+    assert robot == stack
+    assert robot["/mcu/0/inputs"][1] != robot["/mcu/2/inputs"][1]  # (the layout)
+    assert robot["/signals/box/0/inputs"][2] != robot["/signals/box/2/inputs"][2]
+
+
 def test_a_robot_engine_log_replays_bit_for_bit(logs):
     r = replay(logs["robot", "mcu"])
     assert r.ok, r.divergence
