@@ -338,7 +338,11 @@ def _block_ms(recs: list, level: str) -> int:
     """Simulated ms between the recorders' blocks of decoded signals (a cycle is 1 ms)."""
     from hil.replay.record import flush_cycles
 
-    return getattr(recs[0], "cycles", flush_cycles(level)) if recs else flush_cycles(level)
+    if not recs:
+        return flush_cycles(level)
+    # a RobotRecorder's block, else a RecordingStackBox's
+    return getattr(recs[0], "cycles", None) or getattr(recs[0], "flush_cycles",
+                                                       flush_cycles(level))
 
 
 def _open_log(args: argparse.Namespace, path: str | None, model: str):  # noqa: ANN202
