@@ -5,13 +5,12 @@ and decodes to the same values.
 
 ``tests/data/replay/floats_by_source.mcap`` was written by ``run_logged`` at level "mcu"
 (hip_one_box, the robot engine, the default configuration with sensor noise on, 40
-cycles of :func:`_pc`) by the code as it stood before the field order: float fields,
+cycles of ``test_recipe_log._pc``) by the code as it stood before the field order: float fields,
 numbered in source order.
 """
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
 import numpy as np
@@ -25,19 +24,10 @@ from hil.framelog.columnar import decode_channel
 from hil.replay import signals as SG
 from hil.replay.record import run_logged
 from hil.replay.replay import _metadata, replay_mcu
+from tests.replay.test_recipe_log import _pc
 
 LOG = Path(__file__).resolve().parents[1] / "data" / "replay" / "floats_by_source.mcap"
 CYCLES = 40
-
-
-def _pc(cycle, m):
-    """Both hip actuators off, then force steps with a sine on top."""
-    for a in (0, 1):
-        if cycle < 10:
-            m.set_actuator(a, "off", 0.0)
-        else:
-            m.set_actuator(a, "force", 150.0 * (a + 1) + 100.0 * math.sin(
-                2 * math.pi * cycle / 25))
 
 
 def _stock(path) -> dict[str, list[tuple[int, dict[str, object], dict[str, int]]]]:
