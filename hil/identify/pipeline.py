@@ -690,14 +690,16 @@ class _Loop:
                 self.joint_why = ("not run: the refit from the configured values explains "
                                   "the record")
                 return
-        if disagree and not residual and self.free_held_again():
-            # a white residual with parameters that disagree between bands, some held at
-            # the preset: a held value the record does not share is taken up by the free
-            # ones, differently in each band. Freeing them is one short refit, and the
-            # last step anyway; the sets are several full refits, each with them still
-            # held (free piston, seal friction and pulsation under slide, rig seed 3: J_c
-            # apart between bands, 45 s of refused sets, then d_p and k_s freed explained
-            # the record)
+        if self.free_held_again():
+            # parameters held at a value an earlier round's model needed (a baseline one
+            # held at the preset, an effect's shape held when it came in before the others)
+            # are the model's own, and freeing them is the loop's last step anyway: one
+            # short refit, where a set is several full ones, each with them still held. Where
+            # that explains the record no effect is looked for beyond it (free piston, seal
+            # friction and pulsation under slide, rig seed 3: J_c apart between bands, 45 s
+            # of refused sets, then d_p and k_s freed explained the record; pump friction
+            # and pulsation: the motor encoder 1.6 floors, a refused pair, then d_s and the
+            # friction's regularisation velocity freed explained it)
             self.joint_why = ("not run: the refit with the held parameters freed again "
                               "explains the record")
             return

@@ -233,11 +233,11 @@ def test_joint_search_runs_only_where_the_verdict_finds_structure(monkeypatch,
 
 
 def test_held_parameters_are_freed_before_the_joint_search(monkeypatch):
-    """A white residual with parameters that disagree between parts of the record: the held
-    parameters are freed first, and where that explains the record no set is refitted (free
-    piston, seal friction and pulsation under slide, rig seed 3: 45 s of refused sets before
-    the freed refit that explained it). Residual structure: the sets first, as before. Freed
-    and not kept: the sets are refitted, and the same fit is not freed again at the end."""
+    """Structure left (in the residual, or as parameters that disagree between parts of the
+    record): the held parameters are freed first, and where that explains the record no set
+    is refitted (free piston, seal friction and pulsation under slide, rig seed 3: 45 s of
+    refused sets before the freed refit that explained it). Freed and not kept: the sets are
+    refitted, and the same fit is not freed again at the end."""
     monkeypatch.setattr(pipeline, "_joint_pool", lambda rounds, defs, added: ["a", "b"])
     monkeypatch.setattr(pipeline, "_single_pool", lambda *args: [])
     monkeypatch.setattr(pipeline, "_val_cost", lambda exp, out, sigma: 100.0)
@@ -257,10 +257,12 @@ def test_held_parameters_are_freed_before_the_joint_search(monkeypatch):
         loop.free_held_again()  # the last step of the loop
         return loop.joint_why, refitted, len(tried)
 
-    disagree = ("", "parameters disagree between parts of the record: J_c")
-    why, refitted, tried = run(disagree, explains=True)
-    assert refitted == [] and tried == 1 and "freed again explains" in why
-    why, refitted, tried = run(disagree, explains=False)
-    assert refitted == [("a", "b")] and tried == 1 and "J_c" in why
-    why, refitted, tried = run(("residual structure: p_cyl_a", disagree[1]), explains=True)
-    assert refitted == [("a", "b")] and tried == 1
+    for left in [("", "parameters disagree between parts of the record: J_c"),
+                 ("residual structure no candidate explains: omega_m", "")]:
+        why, refitted, tried = run(left, explains=True)
+        assert refitted == [] and tried == 1 and "freed again explains" in why
+        why, refitted, tried = run(left, explains=False)
+        assert refitted == [("a", "b")] and tried == 1 and left[0] + left[1] in why
+    # nothing left: neither the sets nor (in the joint step) the freeing
+    why, refitted, tried = run(("", ""), explains=True)
+    assert refitted == [] and why.startswith("not run: the fit explains")
