@@ -580,16 +580,29 @@ class _Loop:
                                  f"({sizes[p_max]:.1%} of a realistic size) once the others "
                                  "were in; dropped")
 
+    #: the last fit judged by :meth:`judged`, with its residual analysis and consistency
+    _judged: tuple[FitResult, ResidualAnalysis, Consistency] | None = None
+
+    def judged(self, fit: FitResult) -> tuple[ResidualAnalysis, Consistency]:
+        """The residual analysis (validation part) of ``fit`` and its parameters'
+        consistency across parts of the record. Kept for the last fit judged: the same fit
+        is judged by several steps (the freed refit's run-on and its keeping, the report),
+        each a few simulations and spectra for the same answer."""
+        if self._judged is None or self._judged[0] is not fit:
+            exp = self.exp
+            residual = {c: exp.measured[c] - fit.outputs[c] for c in exp.channels}
+            analysis = analyse(exp, residual, exp.val, self.noise_part(fit.theta))
+            self._judged = (fit, analysis, consistency(fit, exp, self.est_mask))
+        return self._judged[1], self._judged[2]
+
     def structure(self) -> tuple[str, str]:
         """What the current fit leaves unexplained, by the judge of the report's verdict, in
         its two kinds: material residual structure (:func:`_verdict`'s detail) and the
         parameters that disagree between parts of the record ("" each where there is
         none)."""
-        exp = self.exp
-        residual_now = {c: exp.measured[c] - self.current.outputs[c] for c in exp.channels}
-        left, detail = _verdict(analyse(exp, residual_now, exp.val,
-                                        self.noise_part(self.current.theta)))
-        bad = consistency(self.current, exp, self.est_mask).inconsistent
+        analysis, agree = self.judged(self.current)
+        left, detail = _verdict(analysis)
+        bad = agree.inconsistent
         disagree = ("parameters disagree between parts of the record: " + "; ".join(
             s.describe(BASELINE_LABELS[s.name][0]) for s in bad)) if bad else ""
         return (detail if left else ""), disagree
@@ -904,15 +917,13 @@ class _Loop:
         for e in self.added:
             d = self.defs_all[e.label]
             e.params = EFFECTS[d.name].describe(d, current, exp)
-        residual1 = {c: exp.measured[c] - current.outputs[c] for c in exp.channels}
-        analysis1 = analyse(exp, residual1, exp.val, self.noise_part(current.theta))
+        self.say("consistency of the parameters across frequency bands, time segments and "
+                 "channels")
+        analysis1, agree = self.judged(current)
         channels = [ChannelError(c, nrmse(exp.measured[c][exp.val], base.outputs[c][exp.val]),
                                  nrmse(exp.measured[c][exp.val], current.outputs[c][exp.val]))
                     for c in exp.channels]
         unexplained, detail = _verdict(analysis1)
-        self.say("consistency of the parameters across frequency bands, time segments and "
-                 "channels")
-        agree = consistency(current, exp, self.est_mask)
         if agree.inconsistent:
             # a white residual bought with parameters that differ with the part of the
             # record that pins them: the model absorbs a structure it does not have

@@ -151,8 +151,10 @@ def test_freed_parameters_kept_only_where_they_explain_the_record(monkeypatch,
     loop.current = before
     assert loop.worse_than(worse).startswith("it still leaves residual structure")
     structure["left"] = False
+    loop._judged = None  # the judges changed under the same fit
     assert loop.worse_than(worse).startswith("it still leaves parameters disagree")
     splits["ks"] = [_split("ks", False)]
+    loop._judged = None
     assert loop.worse_than(worse) == ""
 
 
@@ -266,3 +268,22 @@ def test_held_parameters_are_freed_before_the_joint_search(monkeypatch):
     # nothing left: neither the sets nor (in the joint step) the freeing
     why, refitted, tried = run(("", ""), explains=True)
     assert refitted == [] and why.startswith("not run: the fit explains")
+
+
+def test_a_fit_is_judged_once(monkeypatch, free_piston_loop):
+    """The residual analysis and the consistency of a fit are computed once however many
+    steps ask (the freed refit's run-on, its keeping, the report), and again for another
+    fit."""
+    loop, theta, free = free_piston_loop
+    calls = []
+    monkeypatch.setattr(pipeline, "analyse", lambda *args: calls.append("analyse"))
+    monkeypatch.setattr(pipeline, "_verdict", lambda analysis: (False, ""))
+    monkeypatch.setattr(pipeline, "consistency",
+                        lambda fit, exp, mask: calls.append("consistency") or Consistency([]))
+    loop.noisy_model, loop.est_mask, loop._judged = None, loop.exp.est, None
+    loop.current = _fit_at(loop.model, theta, free)
+    assert loop.structure_left() == "" and loop.structure_left() == ""
+    assert calls == ["analyse", "consistency"]
+    loop.current = _fit_at(loop.model, theta, free)
+    loop.structure()
+    assert calls == ["analyse", "consistency"] * 2
