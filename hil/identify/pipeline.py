@@ -580,20 +580,26 @@ class _Loop:
                                  f"({sizes[p_max]:.1%} of a realistic size) once the others "
                                  "were in; dropped")
 
-    #: the last fit judged by :meth:`judged`, with its residual analysis and consistency
-    _judged: tuple[FitResult, ResidualAnalysis, Consistency] | None = None
+    #: the last few fits judged by :meth:`judged`, with their residual analyses and
+    #: consistencies, latest last
+    _judged: tuple[tuple[FitResult, ResidualAnalysis, Consistency], ...] = ()
+    JUDGED_KEPT = 3
 
     def judged(self, fit: FitResult) -> tuple[ResidualAnalysis, Consistency]:
         """The residual analysis (validation part) of ``fit`` and its parameters'
-        consistency across parts of the record. Kept for the last fit judged: the same fit
-        is judged by several steps (the freed refit's run-on and its keeping, the report),
-        each a few simulations and spectra for the same answer."""
-        if self._judged is None or self._judged[0] is not fit:
-            exp = self.exp
-            residual = {c: exp.measured[c] - fit.outputs[c] for c in exp.channels}
-            analysis = analyse(exp, residual, exp.val, self.noise_part(fit.theta))
-            self._judged = (fit, analysis, consistency(fit, exp, self.est_mask))
-        return self._judged[1], self._judged[2]
+        consistency across parts of the record. Kept for the last few fits judged: the same
+        fit is judged by several steps (the joint step's gate, the freed refit's run-on and
+        its keeping, the report, which judges the fit before the freeing again where that
+        was not kept), each a few simulations and spectra for the same answer."""
+        for f, analysis, agree in self._judged:
+            if f is fit:
+                return analysis, agree
+        exp = self.exp
+        residual = {c: exp.measured[c] - fit.outputs[c] for c in exp.channels}
+        analysis = analyse(exp, residual, exp.val, self.noise_part(fit.theta))
+        agree = consistency(fit, exp, self.est_mask)
+        self._judged = (*self._judged[1 - self.JUDGED_KEPT:], (fit, analysis, agree))
+        return analysis, agree
 
     def structure(self) -> tuple[str, str]:
         """What the current fit leaves unexplained, by the judge of the report's verdict, in

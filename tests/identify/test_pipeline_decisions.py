@@ -151,10 +151,10 @@ def test_freed_parameters_kept_only_where_they_explain_the_record(monkeypatch,
     loop.current = before
     assert loop.worse_than(worse).startswith("it still leaves residual structure")
     structure["left"] = False
-    loop._judged = None  # the judges changed under the same fit
+    loop._judged = ()  # the judges changed under the same fit
     assert loop.worse_than(worse).startswith("it still leaves parameters disagree")
     splits["ks"] = [_split("ks", False)]
-    loop._judged = None
+    loop._judged = ()
     assert loop.worse_than(worse) == ""
 
 
@@ -280,10 +280,14 @@ def test_a_fit_is_judged_once(monkeypatch, free_piston_loop):
     monkeypatch.setattr(pipeline, "_verdict", lambda analysis: (False, ""))
     monkeypatch.setattr(pipeline, "consistency",
                         lambda fit, exp, mask: calls.append("consistency") or Consistency([]))
-    loop.noisy_model, loop.est_mask, loop._judged = None, loop.exp.est, None
+    loop.noisy_model, loop.est_mask, loop._judged = (), loop.exp.est, None
     loop.current = _fit_at(loop.model, theta, free)
     assert loop.structure_left() == "" and loop.structure_left() == ""
     assert calls == ["analyse", "consistency"]
+    first = loop.current
     loop.current = _fit_at(loop.model, theta, free)
+    loop.structure()
+    assert calls == ["analyse", "consistency"] * 2
+    loop.current = first  # a fit judged before, as the report does where freeing was not kept
     loop.structure()
     assert calls == ["analyse", "consistency"] * 2
