@@ -598,7 +598,7 @@ class _Loop:
         residual = {c: exp.measured[c] - fit.outputs[c] for c in exp.channels}
         analysis = analyse(exp, residual, exp.val, self.noise_part(fit.theta))
         agree = consistency(fit, exp, self.est_mask)
-        self._judged = (*self._judged[1 - self.JUDGED_KEPT:], (fit, analysis, agree))
+        self._judged = (*self._judged, (fit, analysis, agree))[-self.JUDGED_KEPT:]
         return analysis, agree
 
     def structure(self) -> tuple[str, str]:

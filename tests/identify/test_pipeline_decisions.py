@@ -280,7 +280,7 @@ def test_a_fit_is_judged_once(monkeypatch, free_piston_loop):
     monkeypatch.setattr(pipeline, "_verdict", lambda analysis: (False, ""))
     monkeypatch.setattr(pipeline, "consistency",
                         lambda fit, exp, mask: calls.append("consistency") or Consistency([]))
-    loop.noisy_model, loop.est_mask, loop._judged = (), loop.exp.est, None
+    loop.noisy_model, loop.est_mask, loop._judged = None, loop.exp.est, ()
     loop.current = _fit_at(loop.model, theta, free)
     assert loop.structure_left() == "" and loop.structure_left() == ""
     assert calls == ["analyse", "consistency"]
