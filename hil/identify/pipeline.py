@@ -373,6 +373,8 @@ class _Loop:
         self.est_mask = OutputErrorFit(model).fit_mask()
         self.configured = model.start_vector()
         self.prefit: dict[str, tuple[FitResult, dict[str, str]]] = {}
+        #: the fit :meth:`free_held_again` was last tried at
+        self.freed_at: FitResult | None = None
 
     def noise_part(self, theta: np.ndarray) -> dict[str, np.ndarray] | None:
         if self.noisy_model is None:
@@ -578,23 +580,44 @@ class _Loop:
                                  f"({sizes[p_max]:.1%} of a realistic size) once the others "
                                  "were in; dropped")
 
-    def structure_left(self) -> str:
-        """What the current fit leaves unexplained, by the judge of the report's verdict:
-        material residual structure (:func:`_verdict`), or parameters that disagree between
-        parts of the record; "" when it explains the record. The steps that search further
-        (the joint sets, the freed refit run on) run only where this is not empty."""
+    #: the last few fits judged by :meth:`judged`, with their residual analyses and
+    #: consistencies, latest last
+    _judged: tuple[tuple[FitResult, ResidualAnalysis, Consistency], ...] = ()
+    JUDGED_KEPT = 3
+
+    def judged(self, fit: FitResult) -> tuple[ResidualAnalysis, Consistency]:
+        """The residual analysis (validation part) of ``fit`` and its parameters'
+        consistency across parts of the record. Kept for the last few fits judged: the same
+        fit is judged by several steps (the joint step's gate, the freed refit's run-on and
+        its keeping, the report, which judges the fit before the freeing again where that
+        was not kept), each a few simulations and spectra for the same answer."""
+        for f, analysis, agree in self._judged:
+            if f is fit:
+                return analysis, agree
         exp = self.exp
-        residual_now = {c: exp.measured[c] - self.current.outputs[c] for c in exp.channels}
-        left, detail = _verdict(analyse(exp, residual_now, exp.val,
-                                        self.noise_part(self.current.theta)))
-        detail = detail if left else ""
-        bad = consistency(self.current, exp, self.est_mask).inconsistent
-        if bad:
-            detail = "; ".join(filter(None, [detail, "parameters disagree between parts of "
-                                             "the record: " + "; ".join(
-                                                 s.describe(BASELINE_LABELS[s.name][0])
-                                                 for s in bad)]))
-        return detail
+        residual = {c: exp.measured[c] - fit.outputs[c] for c in exp.channels}
+        analysis = analyse(exp, residual, exp.val, self.noise_part(fit.theta))
+        agree = consistency(fit, exp, self.est_mask)
+        self._judged = (*self._judged, (fit, analysis, agree))[-self.JUDGED_KEPT:]
+        return analysis, agree
+
+    def structure(self) -> tuple[str, str]:
+        """What the current fit leaves unexplained, by the judge of the report's verdict, in
+        its two kinds: material residual structure (:func:`_verdict`'s detail) and the
+        parameters that disagree between parts of the record ("" each where there is
+        none)."""
+        analysis, agree = self.judged(self.current)
+        left, detail = _verdict(analysis)
+        bad = agree.inconsistent
+        disagree = ("parameters disagree between parts of the record: " + "; ".join(
+            s.describe(BASELINE_LABELS[s.name][0]) for s in bad)) if bad else ""
+        return (detail if left else ""), disagree
+
+    def structure_left(self) -> str:
+        """:meth:`structure` in one line; "" when the fit explains the record. The steps
+        that search further (the joint sets, the freed refit run on) run only where this is
+        not empty."""
+        return "; ".join(filter(None, self.structure()))
 
     def restart_far(self) -> bool:
         """The effects found, added one at a time, each refitted from where the fit before
@@ -675,17 +698,31 @@ class _Loop:
         exp, defs_all = self.exp, self.defs_all
         if not (len(self.added) + 2 <= max_effects and self.rounds):
             return
-        why = self.structure_left()
-        if not why:
+        residual, disagree = self.structure()
+        if not (residual or disagree):
             self.joint_why = ("not run: the fit explains the record (no material residual "
                               "structure, its parameters agree between parts of the record)")
             return
         if self.restart_far():
-            why = self.structure_left()
-            if not why:
+            residual, disagree = self.structure()
+            if not (residual or disagree):
                 self.joint_why = ("not run: the refit from the configured values explains "
                                   "the record")
                 return
+        if self.free_held_again():
+            # parameters held at a value an earlier round's model needed (a baseline one
+            # held at the preset, an effect's shape held when it came in before the others)
+            # are the model's own, and freeing them is the loop's last step anyway: one
+            # short refit, where a set is several full ones, each with them still held. Where
+            # that explains the record no effect is looked for beyond it (free piston, seal
+            # friction and pulsation under slide, rig seed 3: J_c apart between bands, 45 s
+            # of refused sets, then d_p and k_s freed explained the record; pump friction
+            # and pulsation: the motor encoder 1.6 floors, a refused pair, then d_s and the
+            # friction's regularisation velocity freed explained it)
+            self.joint_why = ("not run: the refit with the held parameters freed again "
+                              "explains the record")
+            return
+        why = "; ".join(filter(None, (residual, disagree)))
         self.joint_why = f"run: {why}"
         self.say(f"joint search, the fit leaves {why}")
         pool = _joint_pool(self.rounds, defs_all, self.added_labels)
@@ -764,19 +801,30 @@ class _Loop:
             self.added.append(EffectAdded(defs_all[lbl].name, lbl, {}, len(self.rounds) - 1,
                                           last[lbl].p_holm, last[lbl].share_val))
 
-    def free_held_again(self) -> None:
+    def free_held_again(self) -> bool:
         """A baseline parameter held because an unmodelled effect blurred it may be credible
         now that the effect is in: free the held ones once more (the guard holds them again
         if not). So may an added effect's shape parameter held when it came in before the
         others (free piston, pump friction, pulsation and viscosity: the pump friction's
         regularisation velocity held at the preset's 0.1 mm/s in the round that added it, the
-        pulsation and the viscosity still missing, and its force 11 % low for it)."""
+        pulsation and the viscosity still missing, and its force 11 % low for it).
+
+        Tried once per fit: :meth:`joint` may try it first, and a fit it was tried at is
+        not tried again (the same fit and held parameters give the same answer). True when
+        the freed fit is kept."""
+        if self.current is self.freed_at:
+            return False
+        kept = self._free_held_again()
+        self.freed_at = self.current
+        return kept
+
+    def _free_held_again(self) -> bool:
         current, held = self.current, self.held
         shapes = {p for e in self.added for p, _ in self.defs_all[e.label].refit_extra}
         retry = [p for p in held if (p in BASELINE_LABELS or p in shapes)
                  and p not in current.free]
         if not (self.added and retry):
-            return
+            return False
         fitter = OutputErrorFit(self.model, {**NUISANCE_SCALES(self.exp.dt),
                                              **_all_scales(self.defs_all)})
         # One Jacobian tells which of them the data pin now: one whose interval at the
@@ -789,7 +837,7 @@ class _Loop:
         retry = [p for p in retry if p in shapes or p not in CREDIBLE
                  or 2.0 * Z95 * se.get(p, np.inf) <= abs(current.value(p))]
         if not retry:
-            return
+            return False
         self.say(f"refit with {', '.join(retry)} free again")
         first = fitter.fit(current.theta, current.free + retry, sigma=current.sigma, passes=1,
                            max_nfev=9)
@@ -797,18 +845,18 @@ class _Loop:
         if set(retry) <= {n for n, _, _ in bad}:
             # not one of them credible at the refit: the guard would hold them again one at
             # a time, a refit each, and come back to the fit there is
-            return
+            return False
         if bad and bad[0][0] in current.free:
             # the guard's first hold would be of a parameter the fit there is has free, and
             # a refit that holds one of those is not kept, whatever the guard's further
             # holds (a refit each) do
-            return
+            return False
         again, held_again = guarded_fit(fitter, current.theta, current.free + retry,
                                         current.theta, sigma=current.sigma, passes=1,
                                         max_nfev=9, configured=self.model.start_vector(),
                                         first=first)
         if any(p in held_again for p in current.free):
-            return
+            return False
         held_before = dict(held)
         for p in retry:
             if p not in held_again:
@@ -821,6 +869,8 @@ class _Loop:
             held.clear()
             held.update(held_before)
             self.rejected.append(f"{', '.join(retry)} freed again: not kept ({why})")
+            return False
+        return True
 
     def finish_freed(self, fitter: OutputErrorFit) -> None:
         """The refit that freed held parameters is short (one pass of three Jacobians: it
@@ -873,15 +923,13 @@ class _Loop:
         for e in self.added:
             d = self.defs_all[e.label]
             e.params = EFFECTS[d.name].describe(d, current, exp)
-        residual1 = {c: exp.measured[c] - current.outputs[c] for c in exp.channels}
-        analysis1 = analyse(exp, residual1, exp.val, self.noise_part(current.theta))
+        self.say("consistency of the parameters across frequency bands, time segments and "
+                 "channels")
+        analysis1, agree = self.judged(current)
         channels = [ChannelError(c, nrmse(exp.measured[c][exp.val], base.outputs[c][exp.val]),
                                  nrmse(exp.measured[c][exp.val], current.outputs[c][exp.val]))
                     for c in exp.channels]
         unexplained, detail = _verdict(analysis1)
-        self.say("consistency of the parameters across frequency bands, time segments and "
-                 "channels")
-        agree = consistency(current, exp, self.est_mask)
         if agree.inconsistent:
             # a white residual bought with parameters that differ with the part of the
             # record that pins them: the model absorbs a structure it does not have
