@@ -57,9 +57,13 @@ from hil.identify.fit import (
 )
 from hil.identify.model import IDX, FastModel
 from hil.identify.noise import (
+    CUTOFF_FACTOR,
     InputNoise,
+    current_cutoff,
     estimate_input_noise,
+    experiment_with_current,
     held_noise_models,
+    lowpass_current,
     noisy_experiment,
     predicted_residual,
 )
@@ -312,6 +316,23 @@ def _identify(data: MeasuredData, cfg: Config, max_effects: int,
     return loop.report(t_start)
 
 
+def model_input(exp: Experiment, say: Callable[[str], None]) -> tuple[Experiment, InputNoise]:
+    """The noise on the logged current and the experiment whose current every model of the run
+    is simulated from: a sampled continuous current low-passed above its band (its noise
+    there never reached the plant; :mod:`hil.identify.noise`), a held command as logged."""
+    fs = exp.data.sample_rate_hz
+    noise = estimate_input_noise(exp.iq, fs, quantum(exp.iq))
+    if exp.intersample == "zoh":
+        return exp, noise
+    cut = current_cutoff(exp.iq, fs)
+    if cut <= 0:
+        return exp, noise
+    noise.cutoff_hz = cut
+    say(f"current low-passed at {cut:.0f} Hz (its band ends at {cut / CUTOFF_FACTOR:.0f} Hz; "
+        f"above, {noise.rms_a:.3g} A rms of converter noise the plant never felt)")
+    return experiment_with_current(exp, lowpass_current(exp.iq, fs, cut)), noise
+
+
 class _Loop:
     """The state of one identification run, step by step: the baseline fit
     (:meth:`__init__`), effects added one at a time (:meth:`forward`), effects dropped that
@@ -327,17 +348,17 @@ class _Loop:
         if intersample is None:
             intersample = data.header.get("intersample")
         exp, theta_prov = choose_intersample(data, cfg, intersample, say)
-        self.exp = exp
         say(f"intersample {exp.intersample}: {exp.intersample_reason}")
+        exp, noise = model_input(exp, say)
+        self.exp = exp
         self.model = model = FastModel(exp)
         # the candidates' signatures are derivatives for a score test, not a fit: half the
         # sub-steps (100 us at 5 kHz) move them by far less than their standard errors, at
         # half the cost of the several dozen simulations each round takes
         self.test_model = FastModel(exp, n_sub=max(1, model.n_sub // 2))
-        self.noise = noise = estimate_input_noise(exp.iq, exp.data.sample_rate_hz,
-                                                  quantum(exp.iq))
-        self.noisy_model = (FastModel(noisy_experiment(exp, noise.rms_a)) if noise.rms_a > 0
-                            else None)
+        self.noise = noise
+        self.noisy_model = (FastModel(noisy_experiment(exp, noise.rms_a, None, noise.cutoff_hz))
+                            if noise.rms_a > 0 else None)
         self._held_noise: tuple[FastModel, FastModel] | None = None
 
         say(f"baseline fit ({exp.load}, {exp.n} samples, channels {', '.join(exp.channels)})")
