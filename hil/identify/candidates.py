@@ -38,6 +38,7 @@ imperfections.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -60,6 +61,8 @@ MIN_MAGNITUDE = 0.2
 #: Where the friction laws' shape starts its refit: between tanh (0) and atan (1), so the
 #: data, not the start, picks the law.
 FRICTION_SHAPE_START = 0.5
+#: Why a candidate judged at its own fit is not judged yet.
+DEFERRED = "judged at its own fit, in a round where no other candidate is selected"
 
 
 @dataclass(frozen=True)
@@ -208,8 +211,7 @@ def test_candidates(
             continue
         if d.judged_at_fit:
             if judge_at_fit is None:
-                t.status, t.reason = "deferred", ("judged at its own fit, in a round where "
-                                                  "no other candidate is selected")
+                t.status, t.reason = "deferred", DEFERRED
             else:
                 _judged(t, d, judge_at_fit(d))
             results.append(t)
@@ -336,6 +338,24 @@ def _judged(t: CandidateTest, d: EffectDef, j: FitJudgement) -> None:
         "restricted model's reach)" for p in names)
 
 
+def retested(tests: list[CandidateTest], defs: list[EffectDef]) -> list[CandidateTest]:
+    """The round ``tests`` again for the candidates ``defs`` (a subset of them), on the same
+    fit: a round whose best candidate was refused at its refit leaves the fit as it was, and
+    the score tests of the next round would simulate the same signatures to the same bits.
+    Copies, unselected, Holm's correction redone over the subset; a candidate judged at its
+    own fit is deferred again (its fit is redone only in a round that needs it, as in a
+    fresh round)."""
+    by_label = {t.label: t for t in tests}
+    out = []
+    for d in defs:
+        t = dataclasses.replace(by_label[d.label], selected=False)
+        if d.judged_at_fit and t.status != "not_applicable":
+            t = CandidateTest(d.label, d.name, list(d.params), "deferred", DEFERRED)
+        out.append(t)
+    _holm(out)
+    return out
+
+
 def rank(tests: list[CandidateTest]) -> list[CandidateTest]:
     """Significant candidates, best first (validation share, then Wald statistic)."""
     sig = [t for t in tests if t.significant and t.share_val >= MIN_SHARE
@@ -344,4 +364,4 @@ def rank(tests: list[CandidateTest]) -> list[CandidateTest]:
 
 
 __all__ = ["ALPHA", "CandidateTest", "EffectDef", "FitJudgement", "judge_deferred", "rank",
-           "test_candidates"]
+           "retested", "test_candidates"]

@@ -36,6 +36,7 @@ from hil.identify.candidates import (
     FitJudgement,
     judge_deferred,
     rank,
+    retested,
     test_candidates,
 )
 from hil.identify.checks import check_fit, check_record
@@ -496,15 +497,22 @@ class _Loop:
     def forward(self, max_effects: int) -> None:
         """Rounds of score tests, each adding the best candidate that its refit confirms."""
         exp, defs_all, say, held = self.exp, self.defs_all, self.say, self.held
+        tested_at: FitResult | None = None
         for rnd in range(max_effects + 1):
             defs = [d for lbl, d in defs_all.items()
                     if lbl not in self.added_labels and lbl not in self.excluded]
             residual = {c: exp.measured[c] - self.current.outputs[c] for c in exp.channels}
             say(f"round {rnd}: testing {len(defs)} candidates")
             self.prefit.clear()
-            tests = test_candidates(defs, self.test_model.outputs, self.current.theta, IDX, exp,
-                                    self.current.weights, residual, self.est_mask, exp.val,
-                                    self.current.free, states=self.test_model.states)
+            if self.rounds and tested_at is self.current:
+                # the last round's refit was refused: the same fit, the same signatures
+                tests = retested(self.rounds[-1], defs)
+            else:
+                tests = test_candidates(defs, self.test_model.outputs, self.current.theta, IDX,
+                                        exp, self.current.weights, residual, self.est_mask,
+                                        exp.val, self.current.free,
+                                        states=self.test_model.states)
+            tested_at = self.current
             self.rounds.append(tests)
             ranked = rank(tests)
             if not ranked and len(self.added) < max_effects and judge_deferred(
@@ -553,15 +561,18 @@ class _Loop:
             for p, why in held_now.items():
                 held[p] = f"after adding {best.label}: {why}"
             self.current = new
-            if "skew_s" in self.current.free:
-                # the skew pinned at +T/2 may have been another effect's doing: the delay is
-                # offered against the current fit's skew
-                exp.skew_at_bound = (self.skew_fitter.at_bound(self.current, "skew_s")
-                                     and self.current.value("skew_s") > 0)
+            self.skew_again()
             best.selected = True
             self.added_labels.add(best.label)
             self.added.append(EffectAdded(best.name, best.label, {}, rnd, best.p_holm,
                                           best.share_val))
+
+    def skew_again(self) -> None:
+        """The skew pinned at +T/2 may have been an effect's doing: once one is in, the delay
+        is offered against the current fit's skew."""
+        if "skew_s" in self.current.free:
+            self.exp.skew_at_bound = (self.skew_fitter.at_bound(self.current, "skew_s")
+                                      and self.current.value("skew_s") > 0)
 
     def drop_shrunk(self) -> None:
         """An effect added early, by a local test, may have shrunk to nothing once a later
@@ -681,7 +692,7 @@ class _Loop:
         passes alone, so the library's candidates are refitted in pairs (then as one
         triple), from the robust start, each judged on the validation part as a single one
         is."""
-        exp, defs_all, held, joint = self.exp, self.defs_all, self.held, self.joint_rows
+        exp, defs_all = self.exp, self.defs_all
         if not (len(self.added) + 2 <= max_effects and self.rounds):
             return
         if not self.structure_left():
@@ -698,19 +709,15 @@ class _Loop:
         best_set: tuple[float, list[str], FitResult, dict[str, str]] | None = None
         before = _val_cost(exp, self.current.outputs, self.sigma_ref)
         for labels in sets:
-            if best_set is not None and len(labels) != 2:
-                break  # a triple only where no pair passes, a single where neither does
+            if best_set is not None:
+                # the sets are in the pool's order, best-supported first: the first that
+                # passes is taken. Picking the lowest validation cost among all that pass
+                # made the outcome hang on which of two near-equal refits came out a hair
+                # lower, and cost a refit per set tried after it (free piston, both
+                # frictions: two more pairs, 12 s, both refused)
+                break
             ds_ = [defs_all[lbl] for lbl in labels]
-            self.say(f"jointly: {' + '.join(labels)}")
-            start = {p: 0.25 * nom for e in ds_
-                     for p, nom in zip(e.params, e.nominal, strict=True)}
-            new, held_now = self.refit_with(ds_, start, robust=True)
-            after = _val_cost(exp, new.outputs, self.sigma_ref)
-            change, why = joint_change(before, after)
-            if not why:
-                why = self.verdict_on(ds_, new, held_now)
-            joint.append({"effects": labels, "validation_cost_change": change,
-                          "outcome": why or "passes"})
+            new, held_now, after, change, why = self.refit_set(labels, before)
             if change is None:
                 continue
             shrunk = {e.label for e in _shrunk(ds_, new)}
@@ -722,12 +729,36 @@ class _Loop:
                 # the seal was in: with a third-order pulsation it removed 52 % of the
                 # validation cost, the pulsation shrunk to 0.8 % of a realistic size)
                 sets.append(rest)
-            if not why and (best_set is None or after < best_set[0]):
+            if not why:
                 best_set = (after, labels, new, held_now)
         if best_set is None:
             return
         _, labels, new, held_now = best_set
-        for row in joint:
+        self.add_set(labels, new, held_now)
+
+    def refit_set(self, labels: list[str], before: float
+                  ) -> tuple[FitResult, dict[str, str], float, float | None, str]:
+        """The candidates ``labels`` refitted together from the robust start, their
+        parameters from a quarter of their realistic sizes, judged as a single one is
+        (:meth:`verdict_on`) against the validation cost ``before``; reported in the joint
+        rows. Returns the fit, its held parameters, its validation cost, the cost's relative
+        change (None: diverged) and why it is not kept ("" if it is)."""
+        ds_ = [self.defs_all[lbl] for lbl in labels]
+        self.say(f"jointly: {' + '.join(labels)}")
+        start = {p: 0.25 * nom for e in ds_ for p, nom in zip(e.params, e.nominal, strict=True)}
+        new, held_now = self.refit_with(ds_, start, robust=True)
+        after = _val_cost(self.exp, new.outputs, self.sigma_ref)
+        change, why = joint_change(before, after)
+        if not why:
+            why = self.verdict_on(ds_, new, held_now)
+        self.joint_rows.append({"effects": labels, "validation_cost_change": change,
+                                "outcome": why or "passes"})
+        return new, held_now, after, change, why
+
+    def add_set(self, labels: list[str], new: FitResult, held_now: dict[str, str]) -> None:
+        """The candidates ``labels``, refitted together to ``new``, added."""
+        defs_all, held = self.defs_all, self.held
+        for row in self.joint_rows:
             if row["effects"] == labels:
                 row["outcome"] = "added"
         for lbl in labels:
@@ -789,11 +820,18 @@ class _Loop:
                                         first=first)
         if any(p in held_again for p in current.free):
             return
+        held_before = dict(held)
         for p in retry:
             if p not in held_again:
                 held.pop(p)
         self.current = again
         self.finish_freed(fitter)
+        why = self.worse_than(current)
+        if why:
+            self.current = current
+            held.clear()
+            held.update(held_before)
+            self.rejected.append(f"{', '.join(retry)} freed again: not kept ({why})")
 
     def finish_freed(self, fitter: OutputErrorFit) -> None:
         """The refit that freed held parameters is short (one pass of three Jacobians: it
@@ -817,6 +855,33 @@ class _Loop:
         after = _val_cost(self.exp, done.outputs, self.sigma_ref)
         if not held_now and after <= before:
             self.current = done
+
+    def worse_than(self, before: FitResult) -> str:
+        """Why the current fit, reached from ``before`` by freeing held parameters, is not
+        kept ("" if it is): a higher validation cost, or structure left, in the residual or
+        as parameters that disagree between parts of the record. Freeing them is kept where
+        it explains the record (the motivating cases of :meth:`finish_freed` end
+        ``explained``); a fit that still leaves structure has not found what the model
+        lacks, and a lower cost bought there by parameters the record barely pins is that
+        structure taken into them: the fit before is the one to report (free piston, both
+        frictions added near their sizes, the pressures' residual 75 % predictable either
+        way: `d_s`, `J_p`, `J_c` freed took `k_s` to 3.4x and the pump friction 22 % high for
+        1.7 % of the validation cost, and whether `k_s` then came out inconsistent between
+        bands hung on the CSV's last digits)."""
+        exp, now = self.exp, self.current
+        cost_before = _val_cost(exp, before.outputs, self.sigma_ref)
+        cost_now = _val_cost(exp, now.outputs, self.sigma_ref)
+        if cost_now > cost_before:
+            return f"the validation cost rises, {cost_now:.6g} vs {cost_before:.6g}"
+        residual = {c: exp.measured[c] - now.outputs[c] for c in exp.channels}
+        left, detail = _verdict(analyse(exp, residual, exp.val, self.noise_part(now.theta)))
+        if left:
+            return f"it still leaves {detail}"
+        bad = consistency(now, exp, self.est_mask).inconsistent
+        if bad:
+            return ("its parameters disagree between parts of the record: "
+                    + "; ".join(s.describe(BASELINE_LABELS[s.name][0]) for s in bad))
+        return ""
 
     def report(self, t_start: float) -> IdentifyReport:
         """The added effects described with the final fit's covariance, the residual judged

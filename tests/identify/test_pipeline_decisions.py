@@ -1,14 +1,17 @@
 """Decisions of the identification loop that send a fit to another start: a linear parameter
-whose configured value beats the fit's own (the fit sits behind a hump along it), and a
-joint set whose refit shrank some members to nothing (the rest is tried alone)."""
+whose configured value beats the fit's own (the fit sits behind a hump along it), a joint
+set whose refit shrank some members to nothing (the rest is tried alone), the first joint
+set that passes taken, held parameters freed again and not kept where that made the fit
+worse, and a round on an unchanged fit reusing the last round's score tests."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from hil.identify import pipeline
-from hil.identify.effects import EFFECTS
+from hil.identify import candidates, pipeline
+from hil.identify.consistency import Consistency, ParameterSplit, PartEstimate
+from hil.identify.effects import EFFECTS, library
 from hil.identify.experiment import prepare
 from hil.identify.fit import FitResult
 from hil.identify.model import IDX, FastModel
@@ -70,3 +73,117 @@ def test_a_set_with_a_shrunk_member_leaves_the_rest():
     assert [d.label for d in pipeline._shrunk(pair, fit)] == ["pump_pulsation[order=3]"]
     theta[IDX["puls3_torque_c"]] = -20.0
     assert pipeline._shrunk(pair, fit) == []
+
+
+def _stub_loop(sets_pass: dict[tuple[str, ...], float]):
+    """A loop whose joint refits are stubs: each set in ``sets_pass`` passes with that
+    validation cost, any other is refused; records the sets refitted."""
+    loop = object.__new__(pipeline._Loop)
+    loop.added, loop.added_labels, loop.excluded = [], set(), set()
+    loop.joint_rows, loop.held, loop.say = [], {}, lambda msg: None
+    loop.rounds = [[]]
+    loop.structure_left = lambda: True
+    loop.restart_far = lambda: False
+    loop.current = FitResult(np.zeros(len(IDX)), [], {}, {}, {}, np.zeros((1, 1)))
+    loop.exp = None
+    loop.sigma_ref = {}
+    refitted = []
+
+    def refit_set(labels, before):
+        refitted.append(tuple(labels))
+        cost = sets_pass.get(tuple(labels))
+        why = "" if cost is not None else "refit lowered the validation cost by less than 0.5%"
+        return loop.current, {}, cost or before, (cost or before) / before - 1.0, why
+
+    added = []
+    loop.refit_set = refit_set
+    loop.add_set = lambda labels, new, held_now: added.append(tuple(labels))
+    return loop, refitted, added
+
+
+def test_joint_takes_the_first_set_that_passes(monkeypatch):
+    """Pairs in the pool's order (best-supported first): the first that passes is added and
+    no later set is refitted, even one that would pass with a lower validation cost (the
+    choice among near-equal refits hung on their last bits, at a refit per set)."""
+    monkeypatch.setattr(pipeline, "_joint_pool", lambda rounds, defs, added: ["a", "b", "c"])
+    monkeypatch.setattr(pipeline, "_single_pool", lambda *args: [])
+    monkeypatch.setattr(pipeline, "_val_cost", lambda exp, out, sigma: 100.0)
+    loop, refitted, added = _stub_loop({("a", "b"): 60.0, ("a", "c"): 40.0})
+    loop.defs_all = {k: candidates.EffectDef(k, k, (), (), "") for k in "abc"}
+    loop.joint(6)
+    assert added == [("a", "b")]
+    assert refitted == [("a", "b")]
+    # the first pair refused: the next one in order is tried and taken
+    loop, refitted, added = _stub_loop({("a", "c"): 40.0, ("b", "c"): 30.0})
+    loop.defs_all = {k: candidates.EffectDef(k, k, (), (), "") for k in "abc"}
+    loop.joint(6)
+    assert added == [("a", "c")] and refitted == [("a", "b"), ("a", "c")]
+
+
+def _split(name: str, bad: bool) -> ParameterSplit:
+    parts = [PartEstimate("low", 1.0, 0.9, 1.1), PartEstimate("high", 1.3, 1.2, 1.4)]
+    return ParameterSplit(name, "frequency", parts, 30.0, 1, 1e-7, 1e-7 if bad else 0.5,
+                          (0, 1), 1.3)
+
+
+def test_freed_parameters_kept_only_where_they_explain_the_record(monkeypatch,
+                                                                   free_piston_loop):
+    """The fit with held parameters freed again is not kept where its validation cost is
+    higher, where its residual still has structure, or where a parameter disagrees between
+    parts of the record; it is kept where it costs no more and explains the record."""
+    loop, theta, free = free_piston_loop
+    before = _fit_at(loop.model, theta, free)
+    off = theta.copy()
+    off[IDX["ks"]] *= 3.0
+    worse = _fit_at(loop.model, off, free)
+    loop.sigma_ref = before.sigma
+    loop.est_mask = loop.exp.est
+    loop.noisy_model = None
+    loop.current = worse
+    assert "validation cost rises" in loop.worse_than(before)
+    structure = {"left": True}
+    monkeypatch.setattr(pipeline, "_verdict", lambda analysis: (
+        structure["left"], "residual structure no candidate explains: p_cyl_a-p_cyl_b"))
+    splits = {"ks": [_split("ks", True)]}
+    monkeypatch.setattr(pipeline, "consistency",
+                        lambda fit, exp, mask: Consistency(splits["ks"]))
+    loop.current = before
+    assert loop.worse_than(worse).startswith("it still leaves residual structure")
+    structure["left"] = False
+    assert loop.worse_than(worse).startswith("its parameters disagree")
+    splits["ks"] = [_split("ks", False)]
+    assert loop.worse_than(worse) == ""
+
+
+def test_a_round_on_an_unchanged_fit_reuses_the_tests():
+    """The score tests of a round whose fit is the last round's (its candidate refused at
+    the refit) are the last round's for the candidates left, Holm's correction redone over
+    those: the same as testing them again, bit for bit."""
+    rig = generate_rig("fixed_piston", ["pump_pulsation", "pump_coulomb_friction"],
+                       seconds=0.5, seed=1)
+    exp = prepare(rig.data, load_config("hydra_default"), "bl")
+    model = FastModel(exp)
+    theta = model.start_vector()
+    free = ["ds", "dp", "ks"]
+    fit = _fit_at(model, theta, free)
+    mask = pipeline.OutputErrorFit(model).fit_mask()
+    residual = {c: exp.measured[c] - fit.outputs[c] for c in exp.channels}
+    defs = library(exp)
+
+    def fresh(ds_):
+        return candidates.test_candidates(ds_, model.outputs, theta, IDX, exp, fit.sigma,
+                                          residual, mask, exp.val, free, states=model.states)
+
+    first = fresh(defs)
+    best = candidates.rank(first)[0]
+    best.selected = True
+    rest = [d for d in defs if d.label != best.label]
+    again = candidates.retested(first, rest)
+    ref = fresh(rest)
+    assert sum(t.status == "tested" for t in ref) >= 3
+    assert [(t.label, t.status, t.p_holm, t.share_val, t.selected) for t in again] == [
+        (t.label, t.status, t.p_holm, t.share_val, t.selected) for t in ref]
+    # Holm's correction is the subset's, not the round's it came from
+    moved = [t for t in again if t.status == "tested"]
+    assert any(t.p_holm != next(u for u in first if u.label == t.label).p_holm
+               for t in moved)
