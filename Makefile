@@ -37,11 +37,13 @@ run: $(STAMP)
 
 # The suite runs on one pytest-xdist worker per core: its tests are independent (each makes
 # its own temporary files, ports, namespaces), and most of its time is single-threaded work.
+# worksteal: a worker out of tests takes half of the other's queue; the files with slow tests
+# are collected first (tests/conftest.py), so that the run ends on short tests.
 test: $(TSTAMP)
-	$(BIN)/python -m pytest -q -n auto
+	$(BIN)/python -m pytest -q -n auto --dist worksteal
 
 test-fast: $(TSTAMP)
-	$(BIN)/python -m pytest -q -n auto -m "not slow"
+	$(BIN)/python -m pytest -q -n auto --dist worksteal -m "not slow"
 
 bench: $(STAMP)
 	$(BIN)/eha-hil bench plant

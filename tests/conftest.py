@@ -38,3 +38,13 @@ def _sigint_as_a_terminal_sends_it():
     signal.signal(signal.SIGINT, worker)
     if after is not before and not (before is signal.default_int_handler and deferred):
         pytest.fail(f"the test left the SIGINT handler changed: {before!r} -> {after!r}")
+
+
+def pytest_collection_modifyitems(config, items):  # noqa: ANN001, ANN201 - pytest's hook
+    """The test files that hold slow tests run first, each file's tests together and in
+    their order. ``make test`` runs on two pytest-xdist workers that take work from each
+    other (``--dist worksteal``): with the long tests first, the run ends on short tests
+    and the workers finish together, instead of one waiting while the other runs a long
+    test that happened to be collected last (tests/verify/ sorts after the rest)."""
+    slow_files = {item.path for item in items if item.get_closest_marker("slow")}
+    items.sort(key=lambda item: item.path not in slow_files)

@@ -4,11 +4,16 @@
 
 * **Overhead**: the same run (topology, cycles, force sine) without a log and with
   ``--log`` at a level, in pairs (the order alternating), in this process after a warm-up
-  of both (numba's compiled code loaded). Per pair the ratio logged / bare of CPU time
-  (``time.process_time``: what this process used, the figure that holds on a shared
-  machine) and of wall time; the median of the pairs is reported, and the ratio of the
-  fastest runs' CPU times (other processes can only make a run slower, so the minima are
-  the least disturbed). The target: at most 1.20 at the default level (1.25 for the
+  of both (numba's compiled code loaded, a block of the log written). Per pair the ratio
+  logged / bare of CPU time (``time.process_time``: what this process used, every thread
+  of it, the figure that holds on a shared machine) and of wall time; the median of the
+  pairs is reported with the least and most, each pair's in the order run, and the
+  ratio of the fastest runs' CPU times (other processes can only make a run slower, so
+  the minima are the least disturbed). Each run pays for collecting its own garbage and
+  for no other run's (:func:`hil.bench.log_parts.settled`: a logged run leaves ~10 MB in
+  reference cycles, whose full collection used to fall in a later run, often a bare
+  one); beside the times, each kind's minor page faults per run (memory the run touched
+  fresh). The target: at most 1.20 at the default level (1.25 for the
   whole-robot engine). Beside the ratios: what the logging costs in CPU per simulated
   second (logged minus bare, per pair), with the median, least and most over the pairs,
   and what it may cost for the target at this bare run; and (``parts``) one more,
@@ -59,6 +64,9 @@ class Overhead:
     #: ms per simulated second of one more pair, instrumented: file, producer, in_kernel,
     #: timers, rest, total (:meth:`hil.bench.log_parts.Parts.split`); None: not measured
     parts: dict[str, float] | None = None
+    #: medians of the minor page faults per run, bare and logged
+    bare_faults: int = 0
+    logged_faults: int = 0
 
     @property
     def target(self) -> float:
@@ -95,7 +103,7 @@ def bench_overhead(cfg, seconds: float = 1.0, level: str = "mcu", pairs: int = 3
     pair, instrumented, split into the logging's parts (not in the ratios)."""
     if topology is None:
         topology = "hydra_full" if model == "robot" else "bench_one_box"
-    from hil.bench.log_parts import run_pair
+    from hil.bench.log_parts import WARM_CYCLES, Run, run_cpu, run_pair, settled
     from hil.fieldbus.topology import load_topology
 
     topo = load_topology(topology)
@@ -104,17 +112,18 @@ def bench_overhead(cfg, seconds: float = 1.0, level: str = "mcu", pairs: int = 3
         path = Path(d) / "bench.mcap"
 
         bare, logged = run_pair(topo, cfg, cycles, path, level, model, compression)
-        bare(50)
-        logged(50)  # warm-up: compiled code loaded, imports done
-        runs: list[tuple[tuple[float, float], tuple[float, float]]] = []
-        for i in range(pairs):
-            if i % 2:
-                lg = _timed(logged)
-                b = _timed(bare)
-            else:
-                b = _timed(bare)
-                lg = _timed(logged)
-            runs.append((b, lg))
+        bare(WARM_CYCLES)
+        logged(WARM_CYCLES)  # warm-up: compiled code loaded, imports done, a block written
+        runs: list[tuple[Run, Run]] = []
+        with settled():
+            for i in range(pairs):
+                if i % 2:
+                    lg = run_cpu(logged)
+                    b = run_cpu(bare)
+                else:
+                    b = run_cpu(bare)
+                    lg = run_cpu(logged)
+                runs.append((b, lg))
         size = path.stat().st_size
     split = None
     if parts:
@@ -125,12 +134,14 @@ def bench_overhead(cfg, seconds: float = 1.0, level: str = "mcu", pairs: int = 3
     med = statistics.median
     sim = cycles / 1000
     return Overhead(level, f"{topology}, {compression}, {model} model", sim, pairs,
-                    med(lg[0] / b[0] for b, lg in runs), med(lg[1] / b[1] for b, lg in runs),
-                    min(lg[0] for _, lg in runs) / min(b[0] for b, _ in runs),
-                    med(b[0] for b, _ in runs), med(b[1] for b, _ in runs),
-                    med(lg[0] for _, lg in runs), med(lg[1] for _, lg in runs), size,
-                    tuple(lg[0] / b[0] for b, lg in runs), tuple(lg[1] / b[1] for b, lg in runs),
-                    tuple((lg[0] - b[0]) / sim * 1e3 for b, lg in runs), split)
+                    med(lg.cpu / b.cpu for b, lg in runs), med(lg.wall / b.wall for b, lg in runs),
+                    min(lg.cpu for _, lg in runs) / min(b.cpu for b, _ in runs),
+                    med(b.cpu for b, _ in runs), med(b.wall for b, _ in runs),
+                    med(lg.cpu for _, lg in runs), med(lg.wall for _, lg in runs), size,
+                    tuple(lg.cpu / b.cpu for b, lg in runs),
+                    tuple(lg.wall / b.wall for b, lg in runs),
+                    tuple((lg.cpu - b.cpu) / sim * 1e3 for b, lg in runs), split,
+                    int(med(b.faults for b, _ in runs)), int(med(lg.faults for _, lg in runs)))
 
 
 def _columns(n: int, seed: int = 1) -> dict[str, np.ndarray]:
@@ -195,6 +206,13 @@ def format_report(ov: Overhead | None, enc: list[EncodingCost]) -> str:
             f"{ov.wall_ratio:.3f}{_spread(ov.wall_ratios, '.3f')} (target <= "
             f"{ov.target:.2f}); fastest logged / fastest bare, CPU {ov.cpu_ratio_min:.3f}",
         ]
+        if len(ov.cpu_ratios) > 1:
+            # in the order run: the bare run first in the 1st, 3rd, ... pair
+            each = ", ".join(f"{r:.3f}{'' if i % 2 else '*'}"
+                             for i, r in enumerate(ov.cpu_ratios))
+            lines.append(f"  each pair's CPU ratio, in order (*: bare run first): {each}; "
+                         f"minor page faults per run: bare {ov.bare_faults}, logged "
+                         f"{ov.logged_faults}")
         if ov.extra_ms:
             lines.append(
                 f"  the logging: {statistics.median(ov.extra_ms):.0f} ms CPU per simulated "

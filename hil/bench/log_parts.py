@@ -32,12 +32,15 @@ the machine's load (caches and memory bandwidth are shared): quote them with ``u
 
 from __future__ import annotations
 
+import contextlib
+import gc
+import resource
 import sys
 import tempfile
 import threading
 import time
 from collections import Counter
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -70,11 +73,11 @@ PARTS: tuple[tuple[str, str, str], ...] = (
     ("hil.replay.robot_record", "RobotRecorder._write_steps", "producer"),
     ("hil.replay.robot_record", "RobotRecorder._write", "producer"),
     ("hil.replay.signal_kernel", "ActuatorEncoder.encode", "producer"),
+    ("hil.replay.signal_records", "RecordEncoder.encode", "producer"),
     ("hil.replay.signal_out", "SignalOut.write_split", "producer"),
     ("hil.replay.signal_out", "SignalOut.write_filled", "producer"),
     ("hil.replay.record", "RecordingStackBox.flush", "producer"),  # (--model stack)
     ("hil.replay.record", "RecordingStackBox._write_signals", "producer"),
-    ("hil.replay.record", "BusSignals.end_cycle", "producer"),
     ("hil.replay.record", "BusSignals.flush", "producer"),
 )
 SIDES = ("file", "producer")
@@ -243,6 +246,56 @@ class Parts:
                 "rest": self.rest * per, "total": self.extra * per}
 
 
+#: Cycles of the warm-up runs before the timed ones: more than one block of the log
+#: (:data:`hil.replay.record.FLUSH_CYCLES`), so that every compiled call and import of a
+#: block's writing is done before the timing starts.
+WARM_CYCLES = 120
+
+
+@contextlib.contextmanager
+def settled() -> Iterator[None]:
+    """Timed runs without each other's garbage: what exists before them (imports, compiled
+    code, the warm-up's leftovers) collected and then frozen out of the garbage
+    collector's way (``gc.freeze``) until the block ends; with :func:`run_cpu`, which
+    collects what each run leaves, every run pays for its own garbage and for none of
+    another's.
+
+    Why: a logged run leaves ~3,000 objects in reference cycles holding ~10 MB (the
+    writer, the recorder and the engine point at each other), freed only by a full
+    collection. Without this, the process grew by that much per logged run, every logged
+    run touched fresh pages (2,400-3,800 page faults against a bare run's ~500), and the
+    full collection (~60 ms, most of it walking the ~130,000 long-lived objects of numba
+    and the imports) fell in whichever run came after enough of them, often a bare one:
+    a pair's ratio moved by ~0.05-0.1 with it."""
+    gc.collect()
+    gc.freeze()
+    try:
+        yield
+    finally:
+        gc.unfreeze()
+
+
+@dataclass(frozen=True)
+class Run:
+    """One timed run: CPU seconds of the whole process (``time.process_time``: every
+    thread, the engine's helpers included), wall seconds, minor page faults."""
+
+    cpu: float
+    wall: float
+    faults: int
+
+
+def run_cpu(fn: Callable[[], object]) -> Run:
+    """``fn()`` timed, with the collection of the cyclic garbage it left (see
+    :func:`settled`: inside it, only this run's own objects are walked)."""
+    f0 = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
+    c0, w0 = time.process_time(), time.perf_counter()
+    fn()
+    gc.collect()
+    cpu, wall = time.process_time() - c0, time.perf_counter() - w0
+    return Run(cpu, wall, resource.getrusage(resource.RUSAGE_SELF).ru_minflt - f0)
+
+
 def run_pair(topo, cfg, cycles: int, path: Path, level: str, model: str,  # noqa: ANN001
              compression: str) -> tuple[Callable[..., None], Callable[..., None]]:
     """The bare and the logged run of the logging benches (``n`` cycles each, ``cycles`` by
@@ -280,30 +333,29 @@ def measure(seconds: float = 2.0, topology: str = "hydra_full", level: str = "mc
 
         bare, logged = run_pair(topo, cfg, cycles, path, level, model, compression)
         if warm:  # compiled code loaded, imports done, a block written
-            bare(120)
-            logged(120)
+            bare(WARM_CYCLES)
+            logged(WARM_CYCLES)
         compute = _Compute()
         timer = _Timer()
         cpu = {"bare": 0.0, "logged": 0.0}
         held = {"bare": 0.0, "logged": 0.0}  # the compiled calls' CPU
         extras = []
-        for i in range(pairs):
-            one = {}
-            for kind in ("logged", "bare") if i % 2 else ("bare", "logged"):
-                undo = compute.install()
-                if kind == "logged":
-                    undo += _install(timer)
-                try:
-                    compute.cpu = 0.0
-                    c0 = time.process_time()
-                    (logged if kind == "logged" else bare)()
-                    one[kind] = time.process_time() - c0
-                finally:
-                    for owner, name, fn in reversed(undo):
-                        setattr(owner, name, fn)
-                cpu[kind] += one[kind]
-                held[kind] += compute.cpu
-            extras.append(one["logged"] - one["bare"])
+        with settled():
+            for i in range(pairs):
+                one = {}
+                for kind in ("logged", "bare") if i % 2 else ("bare", "logged"):
+                    undo = compute.install()
+                    if kind == "logged":
+                        undo += _install(timer)
+                    try:
+                        compute.cpu = 0.0
+                        one[kind] = run_cpu(logged if kind == "logged" else bare).cpu
+                    finally:
+                        for owner, name, fn in reversed(undo):
+                            setattr(owner, name, fn)
+                    cpu[kind] += one[kind]
+                    held[kind] += compute.cpu
+                extras.append(one["logged"] - one["bare"])
         size = path.stat().st_size
     per_call, inside = timer_cost()
     # each part less what its wrapper counted in it; the wrappers' whole cost apart

@@ -92,7 +92,10 @@ def run_identify(args: argparse.Namespace, ctx: Context) -> Outcome:
 
     def progress(msg: str) -> None:
         if not args.quiet:
-            print(f"identify: {msg}", file=sys.stderr, flush=True)
+            # One write per line: print() writes the text and its newline separately, and an
+            # interrupt between the two glued its own line onto this one.
+            sys.stderr.write(f"identify: {msg}\n")
+            sys.stderr.flush()
 
     too_big = _size_check(args.data, args.max_rows, progress)
     if too_big:

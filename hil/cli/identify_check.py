@@ -3,15 +3,18 @@
 ::
 
     eha-hil identify-check [--seeds 1 2] [--load L] [--case TEXT] [--jobs N]
-                           [--markdown FILE] [--json]
+                           [--markdown FILE] [--rows FILE.jsonl] [--json]
 
 Runs :func:`hil.identify.rigcheck.run_matrix` (a line of progress per case on stderr), prints
-the markdown table (or JSON) and exits 0 when every case is right, 1 otherwise.
+the markdown table (or JSON) and exits 0 when every case is right, 1 otherwise. ``--rows``
+writes each case's JSON as it finishes, so a run stopped part way keeps what it judged.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
+import json
 import os
 import sys
 
@@ -34,6 +37,10 @@ def configure_check(parser: argparse.ArgumentParser) -> None:
                         help="worker processes (default: up to 2)")
     parser.add_argument("--markdown", type=output_file((".md",), text=True), default=None,
                         metavar="FILE.md", help="also write the table to this file")
+    parser.add_argument("--rows", type=output_file((".jsonl",), text=True), default=None,
+                        metavar="FILE.jsonl",
+                        help="write each case's result (the --json row) to this file as a "
+                             "line as soon as it is judged: a run stopped part way keeps them")
     parser.add_argument("--json", action="store_true", help="print JSON instead of the table")
 
 
@@ -50,12 +57,42 @@ def run_check(args: argparse.Namespace, ctx: Context) -> Outcome:
     if not cases:
         raise UsageError("no case matches --load/--case")
 
+    from hil.cli import outputs
+
+    rows = open(args.rows, "w", encoding="utf-8") if args.rows else None  # noqa: SIM115
+
+    def drop_rows(exc: OSError) -> None:
+        # A full disk stops the rows file, not the matrix: the file is removed (no torn
+        # line passed off as the run's rows), the failure is named at the end (exit 1)
+        # and the table still reaches stdout.
+        nonlocal rows
+        with contextlib.suppress(OSError):
+            rows.close()
+        with contextlib.suppress(OSError):
+            os.remove(args.rows)
+        outputs.failed("rows", args.rows, exc)
+        rows = None
+
     def progress(r: CaseResult, i: int, n: int) -> None:
         mark = "ok " if r.right else "NO "
-        print(f"[{i}/{n}] {mark} seed {r.seed} {r.case.label}: {r.why} "
-              f"({r.wall_s:.0f} s wall, {r.cpu_s:.0f} s CPU)", file=sys.stderr, flush=True)
+        sys.stderr.write(f"[{i}/{n}] {mark} seed {r.seed} {r.case.label}: {r.why} "
+                         f"({r.wall_s:.0f} s wall, {r.cpu_s:.0f} s CPU)\n")  # one write a line
+        sys.stderr.flush()
+        if rows is not None:
+            try:
+                rows.write(json.dumps(r.as_dict(), sort_keys=True) + "\n")
+                rows.flush()
+            except OSError as exc:
+                drop_rows(exc)
 
-    results = run_matrix(cases, args.seeds, jobs=args.jobs, progress=progress)
+    try:
+        results = run_matrix(cases, args.seeds, jobs=args.jobs, progress=progress)
+    finally:
+        if rows is not None:
+            try:
+                rows.close()
+            except OSError as exc:
+                drop_rows(exc)
     table = markdown(results)
     files = ()
     if args.markdown:  # written after the result is printed: an interruption keeps it

@@ -27,6 +27,7 @@ uncompressed files are byte for byte the library's: ``tests/framelog/test_chunk.
 
 from __future__ import annotations
 
+import functools
 import struct
 import zlib
 from collections.abc import Callable
@@ -133,29 +134,137 @@ def compressor(compression: str, level: int | None) -> Callable[[memoryview], by
     raise ValueError(f"compression {compression!r} has no compressor here")
 
 
-def install(w: Writer, compression: str, level: int | None, chunk_size: int) -> bool:
+#: A kind of chunk: compression and level (None: the codec's default here).
+Kind = tuple[str, int | None]
+
+
+def install(w: Writer, compression: str, level: int | None, chunk_size: int,
+            others: tuple[Kind, ...] = ()) -> bool:
     """Make ``w`` build its chunks in a :class:`ChunkBuffer` (of ``chunk_size`` bytes to
     start with) and close them with :func:`_finalize` (``compression`` zstd or lz4 at
-    ``level``, or none); False (and nothing changed) if ``w`` lacks the private state."""
+    ``level``, or none); False (and nothing changed) if ``w`` lacks the private state.
+    ``others``: further kinds (compression ``none``, ``lz4`` or ``zstd``, and level), each
+    with a chunk of its own open beside the first (:class:`Chunks`, :func:`use`)."""
     if not supported(w):
         return False
-    compress = None if compression == "none" else compressor(compression, level)
     rw = w._Writer__chunk_builder.record_writer  # noqa: SLF001 - see the module docstring
     buf = ChunkBuffer(chunk_size + (chunk_size >> 2))
     buf.write(rw._buffer.getvalue())  # noqa: SLF001 - empty before the first record
     buf.seek(rw._buffer.tell())  # noqa: SLF001
     rw._buffer = buf  # noqa: SLF001
-    name = b"" if compress is None else compression.encode()  # MCAP: "" = uncompressed
-    crc = compression != "zstd"  # zstd frames carry their own checksum
-    # an instance attribute: the Writer's own ``self.__finalize_chunk()`` finds it first
-    w._Writer__finalize_chunk = lambda: _finalize(w, compress, name, crc)  # noqa: SLF001
+    first = _Kind(w._Writer__chunk_builder, compression, level)  # noqa: SLF001
+    if not others:
+        # an instance attribute: the Writer's own ``self.__finalize_chunk()`` finds it first
+        w._Writer__finalize_chunk = lambda: _finalize(  # noqa: SLF001
+            w, first.compress, first.name, first.crc)
+        return True
+    chunks = Chunks(w, first, [_Kind(_new_builder(chunk_size), *k)
+                               for k in dict.fromkeys(others) if k != first.key])
+    w._Writer__finalize_chunk = chunks.finalize_all  # noqa: SLF001
+    w._Writer__maybe_finalize_chunk = chunks.maybe_finalize  # noqa: SLF001
+    w._eha_chunks = chunks  # noqa: SLF001 - found by use()
     return True
 
 
+class _Kind:
+    """One compression's chunk builder and how its chunks are closed."""
+
+    def __init__(self, builder: object, compression: str, level: int | None) -> None:
+        self.builder = builder
+        self.key = (compression, None if compression == "none" else level)
+        self.compress = None if compression == "none" else compressor(compression, level)
+        self.name = b"" if self.compress is None else compression.encode()  # "": none
+        self.crc = compression != "zstd"  # zstd frames carry their own checksum
+
+
+def _new_builder(chunk_size: int) -> object:
+    """A chunk builder like the Writer's own, its records in a :class:`ChunkBuffer`."""
+    from mcap._chunk_builder import ChunkBuilder
+
+    cb = ChunkBuilder()
+    cb.record_writer._buffer = ChunkBuffer(chunk_size + (chunk_size >> 2))  # noqa: SLF001
+    return cb
+
+
+class Chunks:
+    """Chunks of several compressions open at once in one Writer: messages of a channel go
+    to the chunk of its compression (:func:`use` before writing them), so that bytes zstd
+    can do little with (e.g. decoded signals) need not pass through it. The Writer's
+    schema and channel records go to the first kind's chunk (:func:`use_first`); a chunk
+    of another kind is only written after every such record (the first kind's chunk is
+    written before it when it holds any not yet written), so that a reader reading the
+    file in order meets each channel before its messages. A chunk is closed when it is
+    over the size (that chunk alone), and every open chunk by ``flush``, ``finish`` and
+    the time-based flush."""
+
+    def __init__(self, w: Writer, first: _Kind, others: list[_Kind]) -> None:
+        self.w = w
+        self.first = first
+        self.kinds = {k.key: k for k in [first, *others]}
+        self.defs_pending = False  # schema or channel records in the first kind's buffer
+
+    def use(self, kind: Kind) -> None:
+        self.w._Writer__chunk_builder = self.kinds[kind].builder  # noqa: SLF001
+
+    def finalize(self, kind: _Kind) -> None:
+        if kind is self.first:
+            if kind.builder.num_messages:  # (else the records wait in its buffer)
+                self.defs_pending = False
+        elif self.defs_pending and kind.builder.num_messages:
+            self._write_first()
+        _finalize(self.w, kind.compress, kind.name, kind.crc, kind.builder)
+
+    def _write_first(self) -> None:
+        """The first kind's chunk now (its schema and channel records with it); without
+        messages, those records alone, outside a chunk (as MCAP allows)."""
+        cb = self.first.builder
+        self.defs_pending = False
+        if cb.num_messages:
+            _finalize(self.w, self.first.compress, self.first.name, self.first.crc, cb)
+            return
+        buf = cb.record_writer._buffer  # noqa: SLF001
+        if isinstance(buf, ChunkBuffer) and buf.tell():
+            w = self.w
+            w._Writer__flush()  # noqa: SLF001
+            data = bytes(buf.getbuffer())
+            if w._Writer__enable_data_crcs:  # noqa: SLF001
+                w._Writer__data_section_crc = zlib.crc32(  # noqa: SLF001
+                    data, w._Writer__data_section_crc)  # noqa: SLF001
+            w._Writer__stream.write(data)  # noqa: SLF001
+            buf.reset()
+
+    def finalize_all(self) -> None:
+        for kind in self.kinds.values():  # the first kind first
+            self.finalize(kind)
+
+    def maybe_finalize(self) -> None:
+        cb = self.w._Writer__chunk_builder  # noqa: SLF001
+        if cb.count > self.w._Writer__chunk_size:  # noqa: SLF001
+            self.finalize(next(k for k in self.kinds.values() if k.builder is cb))
+
+
+def use(w: Writer, kind: Kind) -> None:
+    """Send the next messages to ``w``'s open chunk of ``kind`` (installed with
+    :func:`install`'s ``others``; nothing to do for a Writer with one kind)."""
+    chunks = getattr(w, "_eha_chunks", None)
+    if chunks is not None:
+        chunks.use(kind)
+
+
+def use_first(w: Writer) -> None:
+    """Send the next records (schemas, channels) to the first kind's chunk."""
+    chunks = getattr(w, "_eha_chunks", None)
+    if chunks is not None:
+        chunks.use(chunks.first.key)
+        chunks.defs_pending = True
+
+
 def _finalize(w: Writer, compress: Callable[[memoryview], bytes] | None, name: bytes,
-              crc_on: bool) -> None:
-    """The library's ``__finalize_chunk`` (same records, same order) without its copies."""
-    cb = w._Writer__chunk_builder  # noqa: SLF001 - see the module docstring
+              crc_on: bool, cb: object = None) -> None:
+    """The library's ``__finalize_chunk`` (same records, same order) without its copies,
+    of the chunk builder ``cb`` (None: the Writer's)."""
+    if cb is None:
+        cb = w._Writer__chunk_builder  # noqa: SLF001 - see the module docstring
     if cb is None or cb.num_messages == 0:
         return
     w._Writer__statistics.chunk_count += 1  # noqa: SLF001
@@ -211,6 +320,13 @@ _INDEX_HEAD = struct.Struct("<BQHI")  # opcode, record length, channel, bytes of
 _MESSAGE_INDEX_OPCODE = 0x07
 
 
+@functools.lru_cache(maxsize=64)
+def _many_index(k: int) -> np.dtype:
+    """A MessageIndex record of ``k`` (log time, offset) entries."""
+    return np.dtype([("op", "u1"), ("len", "<u8"), ("ch", "<u2"), ("n", "<u4"),
+                     ("e", "<u8", (k, 2))])
+
+
 def write_indexes(indices: dict, rb: object, at: int, offsets: dict[int, int]) -> None:
     """The chunk's MessageIndex records, in the order of ``indices`` (channel -> an index
     whose ``records`` are (log time, offset) pairs and (n, 2) arrays of them), as one write
@@ -232,6 +348,24 @@ def write_indexes(indices: dict, rb: object, at: int, offsets: dict[int, int]) -
         blob = arr.tobytes()
         size = _ONE_INDEX.itemsize
         ones = {i: blob[j * size:(j + 1) * size] for j, i in enumerate(one)}
+    # channels whose entries are one array (a batch's: every channel of a batch has as
+    # many), built as one array per length
+    runs: dict[int, list[int]] = {}
+    for i, (_, mi) in enumerate(items):
+        recs = mi.records
+        if len(recs) == 1 and isinstance(recs[0], np.ndarray) and recs[0].ndim == 2:
+            runs.setdefault(len(recs[0]), []).append(i)
+    for k, idx in runs.items():
+        dt = _many_index(k)
+        arr = np.empty(len(idx), dt)
+        arr["op"] = _MESSAGE_INDEX_OPCODE
+        arr["len"] = dt.itemsize - 9
+        arr["ch"] = [items[i][0] for i in idx]
+        arr["n"] = 16 * k
+        arr["e"] = np.stack([items[i][1].records[0] for i in idx])
+        blob = arr.tobytes()
+        size = dt.itemsize
+        ones.update({i: blob[j * size:(j + 1) * size] for j, i in enumerate(idx)})
     parts = []
     pos = at
     for i, (cid, mi) in enumerate(items):

@@ -121,7 +121,7 @@ def even_spacing(t_ns: np.ndarray) -> int | None:
 def pack_blocks(t_ns: np.ndarray, frames: np.ndarray, dtype: np.dtype,
                 head: list[tuple] = (), byte_planes: bool = True,
                 alloc: Callable[[np.dtype, int], np.ndarray] | None = None,
-                deltas: bool = True) -> np.ndarray:
+                deltas: bool = True, spacing: int | None = -1) -> np.ndarray:
     """The block messages of ``k`` channels at once, frames ``(k, count, width)`` at the
     same times ``t_ns`` (count,): a (k,) structured array whose row ``i`` holds, after
     the fields ``head`` (left 0, e.g. :data:`hil.framelog.batch.HEAD_FIELDS`), the block
@@ -130,13 +130,14 @@ def pack_blocks(t_ns: np.ndarray, frames: np.ndarray, dtype: np.dtype,
     of their zigzag-coded differences in ``frame_deltas`` (:func:`zigzag_deltas`; ``deltas``
     False: the frames' own byte planes in ``frames``, and ``byte_planes`` False as well:
     row by row, as logs before wrote them). ``alloc(dtype, k)`` gives the array to fill
-    (every byte is written; default a new one)."""
+    (every byte is written; default a new one). ``spacing``: the times' spacing if the
+    caller has it (:func:`even_spacing`'s answer), -1: work it out here."""
     k, count, width = frames.shape
     dt = np.dtype(dtype).newbyteorder("<")
     name = np.dtype(dtype).name.encode()
     size = count * width * dt.itemsize
     t = np.asarray(t_ns, dtype=_T_NS)
-    step = even_spacing(t) if count else None
+    step = None if not count else even_spacing(t) if spacing == -1 else spacing
     deltas = deltas and byte_planes
     # everything but the frames is the same bytes in every channel's message: built once
     pre = [b"\x1d", struct.pack("<I", count), b"\x25", struct.pack("<I", width),

@@ -24,7 +24,7 @@ from __future__ import annotations
 import json
 import math
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
@@ -65,6 +65,12 @@ _COMPRESSION = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4,
 #: Compression levels the codecs take (zstd's negative levels trade ratio for speed).
 _LEVELS = {"zstd": (-7, 22), "lz4": (0, 16)}
 _JSON_TYPES = ("number", "integer")
+#: The writer's default ``chunk_compression`` (with zstd at its default level): the decoded
+#: signals (``/signals/...``: doubles and floats of noisy sensor words, ~40 % of a
+#: whole-robot log's bytes and half of zstd's time) in chunks of zstd's fastest level,
+#: ~15 % less compression time for a log ~20 % larger (docs/framelog.md, "Chunks of
+#: their own compression"); the register words and frames keep :data:`chunk.ZSTD_LEVEL`.
+SIGNAL_CHUNKS: dict[str, tuple[Compression, int]] = {"/signals/": ("zstd", -7)}
 #: Keys of the "eha-hil" metadata record that the writer sets itself.
 RESERVED_METADATA = ("level", "version", "time")
 
@@ -119,6 +125,7 @@ class _Channel:
     json_fields: frozenset[str] | None = None
     wrap: object = None  # raw single frames: frame bytes -> protobuf message (rawpb)
     container: str = ""  # block channels: "protobuf" (rawpb) or "" (eha-hil/block)
+    kind: tuple = ()  # the kind of chunk its messages go to (compression, level)
     last_ns: int = 0
     count: int = 0
 
@@ -138,6 +145,14 @@ class FrameLogWriter:
     :data:`hil.framelog.chunk.ZSTD_LEVEL`, lz4 its default); chunks are built in one
     buffer kept for the file and closed by :mod:`hil.framelog.chunk` (one compressor per
     file, no copy of the chunk; zstd chunks carry zstd's checksum instead of a CRC).
+    ``chunk_compression`` maps topic prefixes to a compression of their own, or a
+    (compression, level) pair (the longest prefix of a channel's topic wins): those
+    channels' messages go to chunks of that kind, open beside the others (MCAP compresses
+    per chunk, and every reader reads a file of mixed chunks), e.g. ``{"/signals/":
+    "none"}`` keeps the decoded signals, on which zstd spends much time for little
+    (docs/framelog.md, "The whole robot"), out of zstd, and ``("zstd", -7)`` gives them
+    zstd's fastest level; the messages are the same either way. None (the default):
+    :data:`SIGNAL_CHUNKS` when ``compression`` is zstd at its default level, else none.
 
     Times must be integers >= 0 (ns of simulated time) and non-decreasing per channel, so
     that each channel reads back in time order.
@@ -154,20 +169,28 @@ class FrameLogWriter:
         compression: Compression = "zstd",
         flush_every_ns: int | None = None,
         compression_level: int | None = None,
+        chunk_compression: Mapping[str, Compression | tuple[Compression, int | None]]
+        | None = None,
     ) -> None:
         if level not in LEVELS:
             raise ValueError(f"unknown log level {level!r} (use {', '.join(LEVELS)})")
         if compression not in _COMPRESSION:
             raise ValueError(f"compression {compression!r} is not one of zstd, lz4, none")
-        if compression_level is not None and not (
-                compression in _LEVELS and
-                _LEVELS[compression][0] <= compression_level <= _LEVELS[compression][1]):
-            if compression not in _LEVELS:
-                raise ValueError(f"compression {compression!r} takes no level")
-            lo, hi = _LEVELS[compression]
-            raise ValueError(f"{compression} level {compression_level} is outside {lo}..{hi}")
+        _check_level(compression, compression_level)
         if chunk_size < 1:
             raise ValueError(f"chunk_size must be >= 1 byte, got {chunk_size}")
+        if chunk_compression is None:
+            chunk_compression = SIGNAL_CHUNKS \
+                if compression == "zstd" and compression_level is None else {}
+        kinds: dict[str, chunk.Kind] = {}
+        for prefix, kind in chunk_compression.items():
+            c, lvl = (kind, compression_level if kind == compression else None) \
+                if isinstance(kind, str) else kind
+            if c not in _COMPRESSION:
+                raise ValueError(f"chunk compression {c!r} of {prefix!r} is not one of "
+                                 "zstd, lz4, none")
+            _check_level(c, lvl)
+            kinds[str(prefix)] = (c, lvl)
         if flush_every_ns is not None and flush_every_ns <= 0:
             raise ValueError(f"flush_every_ns must be > 0, got {flush_every_ns}")
         meta = {str(k): str(v) for k, v in (metadata or {}).items()}
@@ -191,7 +214,12 @@ class FrameLogWriter:
                              "use compression='none'") from None
         #: records built in place in the chunk (hil.framelog.chunk's buffer installed)
         self._in_place = chunk.install(self._writer, compression, compression_level,
-                                       chunk_size)
+                                       chunk_size, tuple(kinds.values()))
+        self._kind: chunk.Kind = (compression,
+                                  None if compression == "none" else compression_level)
+        #: topic prefix -> kind of chunk, longest first (none when not installed)
+        self._kinds = sorted(kinds.items(), key=lambda kv: -len(kv[0])) \
+            if self._in_place and any(k != self._kind for k in kinds.values()) else []
         try:
             self._writer.start(profile=profile, library=f"eha-hil/{package_version()}")
             self._fast = batch.supported(self._writer)
@@ -204,6 +232,7 @@ class FrameLogWriter:
         self._channels: dict[int, _Channel] = {}
         self._topics: set[str] = set()
         self._schemas: dict[tuple[str, str, bytes], int] = {}
+        self._groups: dict[tuple[int, ...], tuple[list[_Channel], bool, bool]] = {}
         self._flush_every = flush_every_ns
         self._last_flush_ns = 0
         self._closed = False
@@ -227,6 +256,7 @@ class FrameLogWriter:
             return 0  # MCAP: schema id 0 = no schema
         key = (name, encoding, bytes(data))
         if key not in self._schemas:
+            chunk.use_first(self._writer)
             self._schemas[key] = self._writer.register_schema(name, encoding, bytes(data))
         return self._schemas[key]
 
@@ -235,6 +265,8 @@ class FrameLogWriter:
         self._check_open()
         if topic in self._topics:
             raise ValueError(f"topic {topic!r} already has a channel")
+        ch.kind = next((k for p, k in self._kinds if topic.startswith(p)), self._kind)
+        chunk.use_first(self._writer)
         cid = self._writer.register_channel(topic, message_encoding, schema_id,
                                             {str(k): str(v) for k, v in metadata.items()})
         self._topics.add(topic)
@@ -355,6 +387,41 @@ class FrameLogWriter:
         except KeyError:
             raise ValueError(f"no channel with id {channel_id}") from None
 
+    def _to(self, ch: _Channel) -> None:
+        """The next messages (of ``ch``) go to the open chunk of its compression."""
+        if self._kinds:
+            chunk.use(self._writer, ch.kind)
+
+    def _mixed(self, chs: list[_Channel]) -> bool:
+        """True if ``chs`` go to chunks of different compressions (then one at a time)."""
+        return bool(self._kinds) and any(c.kind != chs[0].kind for c in chs)
+
+    def _advance_all(self, chs: list[_Channel], first_ns: int, last_ns: int) -> None:
+        """:meth:`_advance` of every channel of ``chs`` (one batch): the one with the
+        latest frame raises if any does, before any has moved."""
+        latest = max(chs, key=_last_ns)
+        self._advance(latest, first_ns, last_ns)  # raises, or flushes when it is time
+        for c in chs:
+            c.last_ns = last_ns
+
+    def _group(self, channel_ids: list[int]) -> tuple[list[_Channel], bool, bool]:
+        """The channels of ``channel_ids`` (each checked once per log), whether they are
+        block channels of one protobuf layout (:meth:`write_blocks` in one array) and
+        whether single-message channels without a wrapper (:meth:`write_messages_filled`),
+        both only if they go to chunks of one compression."""
+        self._check_open()
+        key = tuple(channel_ids)
+        got = self._groups.get(key)
+        if got is None:
+            chs = [self._channel(c) for c in channel_ids]
+            one = bool(chs) and not self._mixed(chs)
+            blocks = one and all(c.block and c.container == rawpb.CONTAINER
+                                 and c.dtype == chs[0].dtype and c.width == chs[0].width
+                                 for c in chs)
+            singles = one and not any(c.block or c.wrap is not None for c in chs)
+            got = self._groups[key] = (chs, blocks, singles)
+        return got
+
     def _advance(self, ch: _Channel, first_ns: int, last_ns: int) -> None:
         if first_ns < ch.last_ns:
             raise ValueError(f"{ch.topic}: time {first_ns} ns is before the previous frame's "
@@ -379,6 +446,7 @@ class FrameLogWriter:
             raise ValueError(f"{ch.topic}: time {t} ns is negative")
         self._advance(ch, t, t)
         payload = bytes(data) if ch.wrap is None else ch.wrap(bytes(data))  # type: ignore[operator]
+        self._to(ch)
         self._writer.add_message(channel_id, t, payload,
                                  t if publish_ns is None else int(publish_ns),
                                  ch.count & 0xFFFFFFFF)
@@ -409,13 +477,14 @@ class FrameLogWriter:
         n = t.shape[0]
         if n == 0:
             return
-        t = _block_times(ch.topic, t)
+        t, step = _block_times(ch.topic, t)
         if ch.container and self._fast and self._in_place:  # in the chunk, as write_blocks
-            self._write_block_records([channel_id], [ch], t, f[None])
+            self._write_block_records([channel_id], [ch], t, f[None], step)
             return
         first, last = int(t[0]), int(t[-1])
         self._advance(ch, first, last)
         msg = rawpb.pack_block(t, f, ch.dtype) if ch.container else pack_block(t, f)
+        self._to(ch)
         self._writer.add_message(channel_id, first, msg, last,
                                  ch.count & 0xFFFFFFFF)
         ch.count += 1
@@ -427,11 +496,9 @@ class FrameLogWriter:
         (e.g. every actuator's upstream words of a block of MCU steps). The same messages
         as one :meth:`write_block` each, built as one array (:func:`rawpb.pack_blocks`)
         and put into the chunk from it (:func:`batch.add_records`)."""
-        chs = [self._channel(c) for c in channel_ids]
+        chs, blocks, _ = self._group(channel_ids)
         f = np.asarray(frames)
-        if not chs or any(not c.block or c.container != rawpb.CONTAINER
-                          or c.dtype != chs[0].dtype or c.width != chs[0].width for c in chs) \
-                or f.ndim != 3 or len(f) != len(chs) or not self._fast:
+        if not blocks or f.ndim != 3 or len(f) != len(chs) or not self._fast:
             if f.ndim != 3 or len(f) != len(chs):
                 raise ValueError(f"need frames (channels, n, width) for {len(chs)} "
                                  f"channels, got {f.shape}")
@@ -446,7 +513,8 @@ class FrameLogWriter:
         f = self._typed(ch0, t, f)
         if t.shape[0] == 0:
             return
-        self._write_block_records(channel_ids, chs, _block_times(ch0.topic, t), f)
+        t, step = _block_times(ch0.topic, t)
+        self._write_block_records(channel_ids, chs, t, f, step)
 
     def _typed(self, ch: _Channel, t: np.ndarray, f: np.ndarray) -> np.ndarray:
         """Frames ``f`` of a block on ``ch`` in the channel's dtype (:meth:`_cast`), after
@@ -456,14 +524,15 @@ class FrameLogWriter:
         return f if f.dtype == ch.dtype else self._cast(ch, f)
 
     def _write_block_records(self, channel_ids: list[int], chs: list[_Channel],
-                             t: np.ndarray, f: np.ndarray) -> None:
+                             t: np.ndarray, f: np.ndarray, step: int | None) -> None:
         """The block messages of ``f[i]`` on ``channel_ids[i]`` (protobuf containers of
-        one dtype and width, checked) at the times ``t`` (checked), built in place in the
-        chunk (:func:`batch.records`, :func:`rawpb.pack_blocks`)."""
+        one dtype and width, checked) at the times ``t`` (checked; evenly spaced by
+        ``step``, or None), built in place in the chunk (:func:`batch.records`,
+        :func:`rawpb.pack_blocks`)."""
         first, last = int(t[0]), int(t[-1])
         before = [c.last_ns for c in chs]
-        for c in sorted(chs, key=lambda c: -c.last_ns):  # a channel that would raise first
-            self._advance(c, first, last)
+        self._advance_all(chs, first, last)
+        self._to(chs[0])
         at: list[int | None] = [None]
 
         def alloc(dtype: np.dtype, k: int) -> np.ndarray:
@@ -471,7 +540,8 @@ class FrameLogWriter:
             return rec
 
         try:
-            rec = rawpb.pack_blocks(t, f, chs[0].dtype, batch.HEAD_FIELDS, alloc=alloc)
+            rec = rawpb.pack_blocks(t, f, chs[0].dtype, batch.HEAD_FIELDS, alloc=alloc,
+                                    spacing=step)
         except BaseException:
             batch.drop(self._writer, at[0])  # no half-filled records left in the chunk
             for c, t_last in zip(chs, before, strict=True):
@@ -511,9 +581,9 @@ class FrameLogWriter:
         that array would write, without a copy of them (a producer that encodes messages
         can encode them there). ``fill`` must not write to this log; if it raises,
         nothing is written."""
-        chs = [self._channel(c) for c in channel_ids]
+        chs, _, singles = self._group(channel_ids)
         t = np.asarray(t_ns)
-        if any(c.block or c.wrap is not None for c in chs) or not self._fast:
+        if (chs and not singles) or not self._fast:
             m = np.zeros((len(chs), len(t), size), np.uint8)
             fill(m)
             for c, part in zip(channel_ids, m, strict=True):
@@ -530,8 +600,8 @@ class FrameLogWriter:
                              "non-decreasing")
         first, last = int(times[0]), int(times[-1])
         before = [c.last_ns for c in chs]
-        for c in sorted(chs, key=lambda c: -c.last_ns):  # a channel that would raise first
-            self._advance(c, first, last)
+        self._advance_all(chs, first, last)
+        self._to(chs[0])
         c_n, k = len(chs), len(times)
         rec, at = batch.records(self._writer, np.dtype([*batch.HEAD_FIELDS,
                                                         ("data", "u1", (size,))]), c_n * k)
@@ -576,6 +646,7 @@ class FrameLogWriter:
             parts = rawpb.wrap_periodic(ch.encoding, frames)
             messages = (batch.Interleaved(parts) if parts is not None
                         else rawpb.wrap_many(ch.encoding, frames))
+        self._to(ch)
         batch.add_messages(self._writer, channel_id, times, messages, ch.count, self._fast)
         ch.count += len(messages)
 
@@ -638,12 +709,31 @@ class FrameLogWriter:
             raise ValueError(f"frame log {self.path} is closed")
 
 
-def _block_times(topic: str, t: np.ndarray) -> np.ndarray:
-    """A block's frame times ``t`` (integer ns, at least one) as int64, refused in one line
-    (naming ``topic``) if negative or decreasing."""
+def _check_level(compression: str, level: int | None) -> None:
+    """ValueError in one line if ``compression`` does not take ``level``."""
+    if level is not None and not (
+            compression in _LEVELS and _LEVELS[compression][0] <= level <= _LEVELS[compression][1]):
+        if compression not in _LEVELS:
+            raise ValueError(f"compression {compression!r} takes no level")
+        lo, hi = _LEVELS[compression]
+        raise ValueError(f"{compression} level {level} is outside {lo}..{hi}")
+
+
+def _last_ns(ch: _Channel) -> int:
+    return ch.last_ns
+
+
+def _block_times(topic: str, t: np.ndarray) -> tuple[np.ndarray, int | None]:
+    """A block's frame times ``t`` (integer ns, at least one) as int64 and their spacing
+    (:func:`rawpb.even_spacing`, from the same differences), refused in one line (naming
+    ``topic``) if negative or decreasing."""
     t = t.astype(np.int64, copy=False)
     if t[0] < 0:
         raise ValueError(f"{topic}: time {int(t[0])} ns is negative")
-    if len(t) > 1 and bool(np.any(t[1:] < t[:-1])):
+    if len(t) < 2:
+        return t, 0
+    d = np.diff(t)
+    lo, hi = int(d.min()), int(d.max())
+    if lo < 0:
         raise ValueError(f"{topic}: block times decrease")
-    return t
+    return t, (lo if lo == hi else None)

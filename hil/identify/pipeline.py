@@ -147,6 +147,9 @@ class IdentifyReport:
     #: candidates refitted together (no single one passing, structure left): the effects,
     #: the relative change of the validation cost, the outcome ("added", "passes" or why not)
     joint: list[dict] = field(default_factory=list)
+    #: why the joint search ran (the structure the fit left then) or did not ("" where its
+    #: preconditions, a round and room for two more effects, were not met)
+    joint_why: str = ""
     #: the effects found refitted from the configured values of the parameters their fit
     #: moved far (structure left): those parameters, the relative change of the validation
     #: cost, the outcome ("kept" or why not)
@@ -386,6 +389,7 @@ class _Loop:
         self.excluded: set[str] = set()
         self.rounds: list[list[CandidateTest]] = []
         self.joint_rows: list[dict] = []
+        self.joint_why = ""
         self.restarts: list[dict] = []
         self.est_mask = OutputErrorFit(model).fit_mask()
         self.configured = model.start_vector()
@@ -607,14 +611,23 @@ class _Loop:
                                  f"({sizes[p_max]:.1%} of a realistic size) once the others "
                                  "were in; dropped")
 
-    def structure_left(self) -> bool:
-        """The current fit leaves material residual structure, or its parameters disagree
-        between parts of the record."""
+    def structure_left(self) -> str:
+        """What the current fit leaves unexplained, by the judge of the report's verdict:
+        material residual structure (:func:`_verdict`), or parameters that disagree between
+        parts of the record; "" when it explains the record. The steps that search further
+        (the joint sets, the freed refit run on) run only where this is not empty."""
         exp = self.exp
         residual_now = {c: exp.measured[c] - self.current.outputs[c] for c in exp.channels}
-        left = _verdict(analyse(exp, residual_now, exp.val,
-                                self.noise_part(self.current.theta)))[0]
-        return left or consistency(self.current, exp, self.est_mask).inconsistent
+        left, detail = _verdict(analyse(exp, residual_now, exp.val,
+                                        self.noise_part(self.current.theta)))
+        detail = detail if left else ""
+        bad = consistency(self.current, exp, self.est_mask).inconsistent
+        if bad:
+            detail = "; ".join(filter(None, [detail, "parameters disagree between parts of "
+                                             "the record: " + "; ".join(
+                                                 s.describe(BASELINE_LABELS[s.name][0])
+                                                 for s in bad)]))
+        return detail
 
     def restart_far(self) -> bool:
         """The effects found, added one at a time, each refitted from where the fit before
@@ -695,10 +708,19 @@ class _Loop:
         exp, defs_all = self.exp, self.defs_all
         if not (len(self.added) + 2 <= max_effects and self.rounds):
             return
-        if not self.structure_left():
+        why = self.structure_left()
+        if not why:
+            self.joint_why = ("not run: the fit explains the record (no material residual "
+                              "structure, its parameters agree between parts of the record)")
             return
-        if self.restart_far() and not self.structure_left():
-            return
+        if self.restart_far():
+            why = self.structure_left()
+            if not why:
+                self.joint_why = ("not run: the refit from the configured values explains "
+                                  "the record")
+                return
+        self.joint_why = f"run: {why}"
+        self.say(f"joint search, the fit leaves {why}")
         pool = _joint_pool(self.rounds, defs_all, self.added_labels)
         sets = [[a, b] for i, a in enumerate(pool) for b in pool[i + 1:]]
         if len(pool) >= 3:
@@ -873,15 +895,8 @@ class _Loop:
         cost_now = _val_cost(exp, now.outputs, self.sigma_ref)
         if cost_now > cost_before:
             return f"the validation cost rises, {cost_now:.6g} vs {cost_before:.6g}"
-        residual = {c: exp.measured[c] - now.outputs[c] for c in exp.channels}
-        left, detail = _verdict(analyse(exp, residual, exp.val, self.noise_part(now.theta)))
-        if left:
-            return f"it still leaves {detail}"
-        bad = consistency(now, exp, self.est_mask).inconsistent
-        if bad:
-            return ("its parameters disagree between parts of the record: "
-                    + "; ".join(s.describe(BASELINE_LABELS[s.name][0]) for s in bad))
-        return ""
+        left = self.structure_left()
+        return f"it still leaves {left}" if left else ""
 
     def report(self, t_start: float) -> IdentifyReport:
         """The added effects described with the final fit's covariance, the residual judged
@@ -917,7 +932,8 @@ class _Loop:
             unexplained, detail,
             notes=list(data.notes) + list(exp.notes)
             + [f"ignored column {c}" for c in data.ignored],
-            rejected=self.rejected, joint=self.joint_rows, restarts=self.restarts,
+            rejected=self.rejected, joint=self.joint_rows, joint_why=self.joint_why,
+            restarts=self.restarts,
             wall_s=time.perf_counter() - t_start, experiment=exp,
             outputs_before=base.outputs, outputs_after=current.outputs,
             intersample=exp.intersample, intersample_reason=exp.intersample_reason,

@@ -56,6 +56,7 @@ def summary(rep: IdentifyReport) -> dict:
         "refused": None,
         "rejected": rep.rejected,
         "tried_together": rep.joint,
+        "joint_search": rep.joint_why,
         "refitted_from_configuration": rep.restarts,
         "notes": rep.notes,
         "wall_s": rep.wall_s,
@@ -107,6 +108,8 @@ def text(rep: IdentifyReport) -> str:
         out.append("\neffects added: none")
     for r in rep.rejected:
         out.append(f"  rejected: {r}")
+    if rep.joint_why:
+        out.append(f"  joint search: {rep.joint_why}")
     for j in rep.joint:
         change = j["validation_cost_change"]
         cost = "" if change is None else f"validation cost {change:+.1%}, "

@@ -379,16 +379,19 @@ def _fmt_mag(what: str, truth: float, found: float | None) -> str:
 
 
 def markdown(results: Sequence[CaseResult]) -> str:
-    """The matrix as a markdown table, then a one-line tally."""
-    lines = ["| case | seed | truth / found (magnitudes) | effects found | verdict | right |",
-             "|---|---|---|---|---|---|"]
+    """The matrix as a markdown table (CPU: the case's process, record and identification),
+    then a one-line tally."""
+    lines = ["| case | seed | truth / found (magnitudes) | effects found | verdict | right "
+             "| CPU s |",
+             "|---|---|---|---|---|---|---|"]
     for r in results:
         mags = "; ".join(_fmt_mag(*m) for m in r.magnitudes) or "-"
         found = ", ".join(r.found) or "none"
         verdict = ("refused" if r.refused else
                    "unexplained" if r.unexplained else "explained")
         ok = "yes" if r.right else f"**no**: {r.why}"
-        lines.append(f"| {r.case.label} | {r.seed} | {mags} | {found} | {verdict} | {ok} |")
+        lines.append(f"| {r.case.label} | {r.seed} | {mags} | {found} | {verdict} | {ok} "
+                     f"| {r.cpu_s:.0f} |")
     n_right = sum(r.right for r in results)
     cpu = sum(r.cpu_s for r in results)
     lines.append("")

@@ -341,9 +341,10 @@ def replay_metadata(topo: Topology, cfg: Config, boxes: list, model: str,
 
 
 class BusSignals:
-    """``/signals/bus``: the master's counters and the WKC of each cycle, from the frames
-    the run's tap keeps for the log (:attr:`frames`, appended per frame, a block's worth
-    at a time), counted a block at a time in :meth:`flush`."""
+    """``/signals/bus``: the master's counters and the WKC of each cycle, from what the
+    run's tap keeps for the log (:meth:`tap`, called once per cycle: the cycle's frames
+    appended to :attr:`frames` and one row to :attr:`cycles`), counted a block at a time
+    in :meth:`flush`."""
 
     def __init__(self, out: SignalOut, master: Master, tick_ns: int) -> None:
         self.out = out
@@ -351,27 +352,45 @@ class BusSignals:
         self.tick_ns = tick_ns
         self.ch = out.add(BUS_SIGNAL_TOPIC, SG.BUS)
         self.wkc_expected = sum(w for _, _, w in master.plan.frames)
-        self.rows: list[tuple[int, ...]] = []
-        self._counters = operator.attrgetter(*SG.MASTER_COUNTERS)  # one call per cycle
-        #: the block's frames, as the tap saw them
+        #: per cycle of the block: (its first tick, frames sent, frames received, the
+        #: master's counters once it ended: :data:`~hil.replay.signals.MASTER_COUNTERS`)
+        self.cycles: list[tuple[int, ...]] = []
+        #: the block's frames, as the tap saw them (sent, then received, per cycle)
         self.frames: list[bytes] = []
 
-    def end_cycle(self) -> None:
-        """Called once each cycle has ended (the master's counters hold it)."""
-        m = self.master
-        self.rows.append((m.cycle - 1, len(self.frames), *self._counters(m.stats)))
+    def tap(self) -> Callable[[list[bytes], list[bytes], int], None]:
+        """The per-cycle call (``sent``, ``received``, the cycle's first tick), once the
+        master has ended the cycle: its frames and its row, one tuple, no other call."""
+        add, count = self.frames.extend, self.cycles.append
+        counters, stats = operator.attrgetter(*SG.MASTER_COUNTERS), self.master.stats
 
-    def flush(self, rx: np.ndarray) -> None:
-        """Write the block's cycles and forget its frames (``rx``: which are replies)."""
-        if self.rows:
-            a = np.array(self.rows, dtype=np.int64)
-            frames, wkc = _frames_and_wkc(self.frames, rx, a[:, 1])
-            cols = {"cycle": a[:, 0], "frames": frames, "wkc": wkc,
+        def cycle(sent: list[bytes], received: list[bytes], tick: int) -> None:
+            add(sent)  # (bytes: the master's sealed frames, what the transport returns)
+            add(received)
+            count((tick, len(sent), len(received), *counters(stats)))
+        return cycle
+
+    def frame_times(self) -> np.ndarray:
+        """Each of :attr:`frames`' time (ns): its cycle's first tick, a reply 1 ns after
+        it (as in the log)."""
+        a = np.array(self.cycles, dtype=np.int64).reshape(-1, 3 + len(SG.MASTER_COUNTERS))
+        t0 = a[:, 0] * self.tick_ns
+        return np.repeat(np.stack([t0, t0 + 1], axis=1).ravel(), a[:, 1:3].ravel())
+
+    def flush(self, t: np.ndarray) -> None:
+        """Write the block's cycles and forget them and their frames (``t``: the frames'
+        :meth:`frame_times`)."""
+        if self.cycles:
+            a = np.array(self.cycles, dtype=np.int64)
+            n_frames, wkc = _frames_and_wkc(self.frames, t % self.tick_ns != 0,
+                                            np.cumsum(a[:, 1] + a[:, 2]))
+            cycle = a[:, 0] // CYCLE_TICKS
+            cols = {"cycle": cycle, "frames": n_frames, "wkc": wkc,
                     "wkc_expected": self.wkc_expected,
-                    **{name: a[:, 2 + i] for i, name in enumerate(SG.MASTER_COUNTERS)}}
+                    **{name: a[:, 3 + i] for i, name in enumerate(SG.MASTER_COUNTERS)}}
             # stamped at the end of the cycle (when its replies are in)
-            self.out.write(self.ch, (a[:, 0] + 1) * CYCLE_TICKS * self.tick_ns - 1, cols)
-            self.rows = []
+            self.out.write(self.ch, (cycle + 1) * CYCLE_TICKS * self.tick_ns - 1, cols)
+            self.cycles.clear()
         self.frames.clear()
 
 
@@ -438,32 +457,24 @@ def run_logged(topo: Topology, cfg: Config, cycles: int, pc: Callable[[int, Mast
         # once per FLUSH_CYCLES (a message at a time costs ~9 us, see hil.framelog.batch),
         # taken a cycle at a time (the bus system's tap_cycle, at the end of each cycle:
         # one call, not one per frame, and the cycle's /signals/bus row with it)
-        bus_cycles: list[tuple[int, int, int]] = []  # (tick, frames sent, received)
-        bus_frames: list[bytes] = []
+        take_cycle: Callable[[list[bytes], list[bytes], int], None] | None = None
 
-        def tap_cycle(cycle: int, tick: int, sent: list[bytes], received: list[bytes],
-                      add=bus_frames.extend, count=bus_cycles.append) -> None:  # noqa: ANN001
-            add(sent)  # (bytes: the master's sealed frames, what the transport returns)
-            add(received)
-            count((tick, len(sent), len(received)))
-            bus_sig.end_cycle()
+        def tap_cycle(cycle: int, tick: int, sent: list[bytes], received: list[bytes]
+                      ) -> None:
+            take_cycle(sent, received, tick)
             if (cycle + 1) % FLUSH_CYCLES == 0:
                 flush_block()
 
         def flush_block() -> None:
-            # each frame's time: its cycle's tick, a reply 1 ns after it (as in the log)
-            c = np.array(bus_cycles, dtype=np.int64).reshape(-1, 3)
-            t0 = c[:, 0] * tick_ns
-            t = np.repeat(np.stack([t0, t0 + 1], axis=1).ravel(), c[:, 1:].ravel())
-            if bus_frames and ch_bus is not None:
-                log.write_messages(ch_bus, t, bus_frames)
-            bus_sig.flush(t % tick_ns != 0)  # (clears bus_frames)
-            bus_cycles.clear()
+            t = bus_sig.frame_times()
+            if bus_sig.frames and ch_bus is not None:
+                log.write_messages(ch_bus, t, bus_sig.frames)
+            bus_sig.flush(t)
 
         with BusSystem(topo, cfg, "inproc", model=model, tap=capture,
                        tap_cycle=tap_cycle) as bs:
             bus_sig = BusSignals(out, bs.master, tick_ns)
-            bus_sig.frames = bus_frames  # the tap's
+            take_cycle = bus_sig.tap()
             engine = bs.chain.engine
             if engine is None:
                 boxes = [RecordingStackBox(b, cfg, log, out) for b in topo.boxes]

@@ -32,6 +32,7 @@ from hil.replay import signals as SG
 from hil.replay.record import FLUSH_CYCLES, UP_WIDTH, add_signal_channels, topics
 from hil.replay.signal_kernel import ActuatorEncoder
 from hil.replay.signal_out import SignalOut
+from hil.replay.signal_records import RecordEncoder
 from hil.sim.actuator import TRACE_WIDTH, TRACE_WORDS
 from hil.sim.robot import RobotEngine
 from hil.sim.stack_rows import TapRows
@@ -112,6 +113,7 @@ class RobotRecorder:
         self._jobs: list[Future] = []
         self._channels(log)
         self._groups: dict[tuple, tuple] = {}  # see _group
+        self._encoders: dict[tuple, RecordEncoder] = {}  # per direction and slot layout
         # the actuators' signals (each with the PC's command from its slot of the output
         # image), decoded and encoded by one compiled call per block
         box_of, slot_off = [], []
@@ -277,24 +279,22 @@ class RobotRecorder:
         ``flags``: every actuator's piston flags of the block's cycles
         (:func:`hil.replay.signals.report_flags`)."""
         rows = np.stack([r for _, r in members])
-        chs, sig, pick = self._group(d, tuple(n for n, _ in members))
+        chs, sig, pick, enc = self._group(d, tuple(n for n, _ in members))
         t_ns = t * self.ns
         if chs is not None:
             self.log.write_blocks(chs, t_ns, rows)
         if sig is not None:
-            piston = None
-            if pick is not None and flags is not None:
-                # per member box its actuators' rows, box-major as the records
-                piston = tuple(f[pick].reshape(len(pick), -1) for f in flags)
-            cols = SG.record_columns(self.boxes[members[0][0]].box, d,
-                                     rows.reshape(-1, rows.shape[2]), piston)
-            self.out.write_split(sig, t_ns, cols)
+            # decoded and encoded by one compiled call, into the messages' places
+            # (the reference: signals.record_columns + encode_into)
+            self.out.write_filled(sig, t_ns, enc.message.size,
+                                  lambda out: enc.encode(rows, out, flags, pick))
 
     def _group(self, d: str, boxes: tuple[int, ...]) -> tuple:
         """For the ``d`` records of the chain boxes ``boxes`` (one slot layout): their log
-        channels (None: none), their signal channels (None: none) and the rows of their
+        channels (None: none), their signal channels (None: none), the rows of their
         actuators' piston flags, (actuators per box, boxes) (None: not an input record of
-        engine boxes); worked out once per group of the run."""
+        engine boxes) and the signals' encoder (:class:`RecordEncoder`, one per slot
+        layout and direction); worked out once per group of the run."""
         key = (d, boxes)
         got = self._groups.get(key)
         if got is None:
@@ -309,7 +309,14 @@ class RobotRecorder:
                 m = len(self.engine.boxes[self.engine_box[boxes[0]]].act)
                 js = [self.first_act[self.engine_box[n]] for n in boxes]
                 pick = np.arange(m)[:, None] + np.array(js, np.intp)[None, :]
-            got = self._groups[key] = (chs, sig if sig[0] is not None else None, pick)
+            enc = None
+            if sig[0] is not None:
+                box = self.boxes[boxes[0]].box
+                at = (d, self._layout[boxes[0]])
+                enc = self._encoders.get(at)
+                if enc is None:
+                    enc = self._encoders[at] = RecordEncoder(box, d, self.out.message(sig[0]))
+            got = self._groups[key] = (chs, sig if sig[0] is not None else None, pick, enc)
         return got
 
     def _write_steps(self, k: _Block) -> None:
@@ -382,3 +389,25 @@ class _Block:
             [a.copy() for a in v] if isinstance(v, list) else v.copy()
             for v in (self.t_steps, self.out_t, self.out_rows, self.out_got, self.in_t,
                       self.in_rows, self.other_in, self.up, self.down, self.trace)))
+
+
+def warm_up(cfg: Config) -> None:
+    """Compile what a logged run of the whole-robot engine calls for the argument types it
+    passes: a full block (the tap's rows whole: C-contiguous arrays), the last, partial one
+    (views of them) and the messages written into their places in the chunk (strided
+    rows). The kernels' own warm-ups (:func:`hil.replay.signal_kernel.warm_up`) pass
+    contiguous arrays only, so a first ``bus run --log`` compiled two more specialisations
+    of the actuators' encoder and one of the records' in its first blocks (~10 s of CPU at
+    load; the cold first pair of ``bench log``). A run of ``FLUSH_CYCLES + 20`` cycles of
+    ``hip_one_box`` (two actuators: with one, a partial block's rows are contiguous too),
+    logged to a temporary file, passes exactly those."""
+    import tempfile
+    from pathlib import Path
+
+    from hil.fieldbus.topology import load_topology
+    from hil.replay.record import run_logged
+    from hil.sim.pc import demo_pc
+
+    with tempfile.TemporaryDirectory() as d:
+        run_logged(load_topology("hip_one_box"), cfg, FLUSH_CYCLES + 20, demo_pc(),
+                   Path(d) / "warm.mcap", model="robot")

@@ -398,7 +398,11 @@ class ActuatorEncoder:
 
 def warm_up(cal: FirmwareCalibration) -> None:
     """Compile :func:`_encode` for the argument types the recorder passes (the tap's rows
-    are a view of a longer array), on one step of one actuator."""
+    are a view of a longer array), on one step of one actuator; and the boxes' record
+    signals (:func:`hil.replay.signal_records.warm_up`)."""
+    from hil.replay import signal_records
+
+    signal_records.warm_up()
     room = np.zeros((1, 2, B.UP_WORDS + 2), np.uint16)
     down = np.zeros((1, 2, B.DOWN_WORDS), np.uint16)
     enc = ActuatorEncoder(cal, SG.ACTUATOR, 200e-6, 1, [0], [0], [(0, _OUT.itemsize)],

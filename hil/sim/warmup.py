@@ -114,9 +114,11 @@ def _robot(cfg) -> None:
 def _log_signals(cfg) -> None:
     """The decoded actuator signals of a frame log (``bus run --model robot --log``)."""
     from firmware_model.calibration import calibration
+    from hil.replay import robot_record
     from hil.replay.signal_kernel import warm_up
 
     warm_up(calibration(cfg))
+    robot_record.warm_up(cfg)  # the array layouts a logged run passes
 
 
 def _log_planes(cfg) -> None:

@@ -97,3 +97,38 @@ def test_bench_log_reports_the_logging_per_simulated_second_and_its_budget() -> 
     assert "100 ms CPU per simulated second (80-120)" in text
     assert "the target allows 50 " in text  # (1.25 - 1) x 0.2 s per simulated second
     assert "compiled calls 8," in text
+    assert "in order (*: bare run first): 1.400*, 1.500, 1.600*;" in text
+
+
+def test_each_timed_run_collects_its_own_garbage_and_none_from_before() -> None:
+    """The bench's runs: what a run leaves in reference cycles is freed inside its own
+    timing (not in a later run's), and what existed before the runs is frozen out of the
+    collector's way while they run, given back after."""
+    import gc
+
+    from hil.bench.log_parts import run_cpu, settled
+
+    freed = []
+
+    class Node:
+        def __init__(self) -> None:
+            self.me = self  # a cycle: only the cyclic collector frees it
+
+        def __del__(self) -> None:
+            freed.append(1)
+
+    def leave_a_cycle() -> None:
+        Node()
+
+    was = gc.isenabled()
+    gc.disable()  # (no automatic collection: only what run_cpu does)
+    try:
+        with settled():
+            assert gc.get_freeze_count() > 0
+            run = run_cpu(leave_a_cycle)
+            assert freed == [1]
+        assert gc.get_freeze_count() == 0
+    finally:
+        if was:
+            gc.enable()
+    assert run.cpu >= 0.0 and run.wall >= 0.0 and run.faults >= 0

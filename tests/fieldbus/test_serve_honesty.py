@@ -5,6 +5,8 @@ and on udp. And ``eha-hil bench ethercat --wire`` with SOEM and the whole robot.
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
 import shutil
 import subprocess
@@ -98,17 +100,28 @@ def test_a_threshold_exceeded_exits_1_and_says_which(netns):
 
 
 def test_udp_serve_seconds_are_wall_seconds():
-    p = subprocess.run([sys.executable, "-m", "hil.cli", "serve", "--transport", "udp",
-                        "--port", "0", "--seconds", "1", "--json", "-q"],
-                       capture_output=True, text=True, timeout=120, env=_env())
-    rep = json.loads(p.stdout)
+    """In this process (the console script is main(): tests/hil/test_cli_robust.py)."""
+    from hil.cli.root import main
+
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(io.StringIO()):
+        code = main(["serve", "--transport", "udp", "--port", "0", "--seconds", "1", "--json",
+                     "-q"])
+    rep = json.loads(out.getvalue())
     assert 1.0 <= rep["wall_s"] < 1.3
-    assert p.returncode == 1 and "no frame was served" in " ".join(rep["failures"])
+    assert code == 1 and "no frame was served" in " ".join(rep["failures"])
     assert rep["reply_us"]["p50"] is None and rep["lag_max_ms"] >= 0
 
 
+#: Seconds of 1 kHz cycles in the test below. Long enough that the whole-robot engine runs
+#: thousands of its cycles behind SOEM's stock timeouts and the serving threads settle
+#: (the boxes' clock, the frame thread's polls); the long runs (600 s) and their timing
+#: figures are ``eha-hil bench ethercat --wire --model robot --seconds N``'s.
+WIRE_S = 10.0
+
+
 @pytest.mark.slow
-def test_bench_wire_whole_robot_30_s():
+def test_bench_wire_whole_robot():
     """SOEM at stock timeouts against all 16 boxes with the whole-robot engine behind them:
     every bring-up reaches OP and no cycle has a wrong working counter. (Timing figures are
     the benchmark's to report, not the test's to assert.)"""
@@ -121,11 +134,11 @@ def test_bench_wire_whole_robot_30_s():
     from hil.bench.ethercat import bench_wire
 
     try:
-        res = bench_wire("robot", 30.0, 3)
+        res = bench_wire("robot", WIRE_S, 3)
     except NamespaceError as exc:
         pytest.skip(str(exc))
     assert res["bring_ups_ok"] == 3, res["failed"]
-    assert res["cycles"] >= 29_000 and res["wkc_errors"] == 0
+    assert res["cycles"] >= 0.99 * WIRE_S * 1000 and res["wkc_errors"] == 0
     s = res["serve"]
     assert s["frames_answered"] >= 2 * res["cycles"]
     assert s["cycles"] > 0 and s["reply_us"]["p50"] is not None

@@ -117,11 +117,14 @@ def test_every_message_index_entry_points_at_its_message(tmp_path: Path,
         blocks = [w.add_block_channel(f"/b{i}", "eha-hil/x", dtype=np.uint16, width=3)
                   for i in range(5)]
         one = w.add_channel("/one", "eha-hil/y")
+        many = [w.add_channel(f"/m{i}", "json") for i in range(3)]  # batches of arrays
         for k in range(6):
             t = 500 * k + np.arange(4)
             w.write_blocks(blocks, t, np.full((5, 4, 3), k))
             for j in range(3):
                 w.write(one, int(t[-1]) + j, bytes([k, j]))
+            w.write_messages_many(many, t + 10, np.full((3, 4, 5), k, np.uint8))
+            w.write_messages(many[0], t + 20, [b"x" * (1 + i) for i in range(4)])
     records = list(StreamReader(io.BytesIO(path.read_bytes()), emit_chunks=True).records)
     chunks = {}
     pos = 0
@@ -145,7 +148,7 @@ def test_every_message_index_entry_points_at_its_message(tmp_path: Path,
                 assert isinstance(m, Message) and m.channel_id == ix.channel_id
                 assert m.log_time == t
                 entries += 1
-    assert entries == 6 * 5 + 6 * 3 and len(chunks) >= 6
+    assert entries == 6 * 5 + 6 * 3 + 6 * 3 * 4 + 6 * 4 and len(chunks) >= 6
     # most channels had one message in a chunk: the one-entry records were written
     assert sum(len(ix.records) == 1 for _, ixs in chunks.values() for ix in ixs) >= 25
 

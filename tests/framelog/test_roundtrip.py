@@ -64,8 +64,12 @@ def test_mixed_round_trip_and_info(tmp_path: Path, compression: str) -> None:
     frames = list(r.frames())
     times = [t for _, t, _ in frames]
     assert times == sorted(times) and len(frames) == 28
-    # A tie (t = 0: JSON sample and first snapshot) keeps file order: JSON was written first.
-    assert [tp for tp, t, _ in frames if t == 0] == ["/signals/motor", "/lvds/0/up"]
+    # A tie (t = 0: JSON sample and first snapshot) keeps file order: JSON was written
+    # first, but with zstd at its default level the decoded signals have chunks of their
+    # own (writer.SIGNAL_CHUNKS), written after the chunk of the channels' records.
+    first = ["/signals/motor", "/lvds/0/up"]
+    assert [tp for tp, t, _ in frames if t == 0] == (first[::-1] if compression == "zstd"
+                                                     else first)
     assert ("/fieldbus/frames", 2_500_000, b"\x02\x02\x02") in frames
     assert json.loads(next(d for tp, t, d in frames if tp == "/signals/motor" and t == 3_000_000)
                       ) == {"iq": 0.75, "tick": 3}

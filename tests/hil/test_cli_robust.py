@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import functools
 import io
 import os
 import re
@@ -24,6 +25,7 @@ from pathlib import Path
 
 import pytest
 
+from hil.cli import root
 from hil.cli.args import walk
 from hil.cli.root import build_parser, main
 
@@ -181,6 +183,9 @@ def test_every_option_is_classified():
 @pytest.mark.slow  # ~300 cases in this process: 5-15 s
 def test_mistake_matrix_gives_at_most_one_line(files, monkeypatch):
     monkeypatch.chdir(files["root"])
+    # main() builds the whole parser for each command line (~10 ms, most of a case's time
+    # when the value is refused): here built once and parsed with for every case.
+    monkeypatch.setattr(root, "build_parser", functools.cache(build_parser))
     cases = _cases(files)
     verbs = {label.split(" -")[0] for label, _ in cases}
     assert len(cases) > 150 and len(verbs) >= 15, (len(cases), sorted(verbs))
@@ -268,36 +273,8 @@ def _one_interrupt_line(code: int, lines: list[str], verb: str, progress: str) -
     return last
 
 
-@pytest.mark.slow
-def test_ctrl_c_bus_run_closes_the_log(tmp_path):
-    from mcap.reader import make_reader
-
-    from hil.framelog.reader import FrameLogReader
-
-    log = tmp_path / "run.mcap"
-    run = _Running(["bus", "run", "--seconds", "120", "--log", str(log)], tmp_path)
-    run.wait_for(r"bus run: [1-9]\d*/120000 cycles")
-    code, lines = run.interrupt()
-    last = _one_interrupt_line(code, lines, "bus run", r"bus run: \d+/\d+ cycles")
-    assert re.search(r"interrupted at t=\d+\.\d+ s; log \S*run.mcap closed and readable$",
-                     last), last
-    info = FrameLogReader(log).info()
-    assert info.complete and info.frame_count > 0
-    with log.open("rb") as fh:  # the mcap library reads it too (summary and every message)
-        reader = make_reader(fh)
-        assert reader.get_summary() is not None
-        assert sum(1 for _ in reader.iter_messages()) == info.message_count
-
-
-@pytest.mark.slow
-def test_ctrl_c_run_thesis_names_the_scenario_and_the_plots(tmp_path):
-    run = _Running(["run", "thesis", "--plot-dir", str(tmp_path / "plots")], tmp_path)
-    run.wait_for(r"f4 \.\.\.")  # f1-measured and f3 are done and their plots written
-    code, lines = run.interrupt()
-    last = _one_interrupt_line(code, lines, "run thesis", r"f[\w-]+ \.\.\.")
-    assert re.search(r"interrupted in f[\w-]+ \(f1-measured(, f[\w-]+)* done\); plots? "
-                     r"f1-measured.png(, f[\w-]+.png)* written to \S+/plots/$", last), last
-    assert (tmp_path / "plots" / "f3.png").stat().st_size > 10_000
+# A logged bus run and run thesis interrupted (their files, lines and exit codes, for
+# SIGINT, SIGTERM and SIGHUP): tests/hil/test_signals.py.
 
 
 @pytest.mark.slow
@@ -311,15 +288,13 @@ def test_ctrl_c_bench_stack(tmp_path):
 
 
 @pytest.mark.slow
-def test_ctrl_c_identify(tmp_path):
-    data = tmp_path / "d.csv"
-    exe = shutil.which("eha-hil") or f"{sys.prefix}/bin/eha-hil"
-    subprocess.run([exe, "identify-synth", str(data), "--seconds", "4"], check=True,
-                   capture_output=True, timeout=300)
-    run = _Running(["identify", str(data), "--report", str(tmp_path / "rep")], tmp_path)
+def test_ctrl_c_identify(tmp_path, identify_record):
+    run = _Running(["identify", str(identify_record), "--report", str(tmp_path / "rep")],
+                   tmp_path)
     # early, while numba loads the model's machine code from its cache: a SIGINT there would
     # land in an LLVM callback, where Python can only print it and go on (hil/cli/interrupts.py)
-    run.wait_for(r"identify: ")
+    # (the whole line: a signal between print's text and its newline would cut the line)
+    run.wait_for(r"identify: [^\n]*\n")
     code, lines = run.interrupt()
     last = _one_interrupt_line(code, lines, "identify", r"identify: .*")
     assert "nothing written" in last, last

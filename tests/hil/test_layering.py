@@ -228,6 +228,10 @@ ALLOWED = {
         "a log's decoded signals (hil.replay.signals' numpy reference, same operations) "
         "compiled per block and encoded into their records: the log decoder's conversions, "
         "no part's model",
+    ("hil/replay/signal_records.py", "kernel"):
+        "the boxes' records decoded and encoded into their log messages (hil.replay."
+        "signals' numpy reference, same operations) compiled per block: the log's "
+        "conversions, no part's model",
     ("hil/sim/actuator.py", "plant.lanes.LW"):
         "the lane width: a row's stride in the plant lanes the inverter writes (a size)",
     ("hil/sim/compute_threads.py", "kernel"):

@@ -41,6 +41,9 @@ RECIPES: dict[tuple[str, str], list[str]] = {
     ("eha-hil identify-check", "--markdown"): ["identify-check", "--case",
                                                "fixed_piston: null", "--seeds", "1",
                                                "--jobs", "1"],
+    ("eha-hil identify-check", "--rows"): ["identify-check", "--case",
+                                           "fixed_piston: null", "--seeds", "1",
+                                           "--jobs", "1"],
     ("eha-hil sweep", "--out"): ["sweep", "current-step", "--seeds", "0..1",
                                  "--workers", "1"],
     ("eha-hil sweep", "--plot-dir"): ["sweep", "current-step", "--seeds", "0..1",
@@ -54,7 +57,8 @@ STREAMS = {("eha-hil bus run", "--log"), ("eha-hil bus run", "--capture"),
            ("eha-hil bus run", "--can-log"), ("eha-hil serve", "--capture"),
            ("eha-hil serve", "--log")}
 #: Long to run (a whole identification): the full-disk case is in the slow set.
-SLOW = {("eha-hil identify", "--report"), ("eha-hil identify-check", "--markdown")}
+SLOW = {("eha-hil identify", "--report"), ("eha-hil identify-check", "--markdown"),
+        ("eha-hil identify-check", "--rows")}
 
 
 def _output_options() -> list[tuple[str, str, str, tuple[str, ...]]]:

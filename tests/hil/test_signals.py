@@ -112,20 +112,31 @@ def _no_partials(d: Path) -> None:
 
 
 # --- streams: the file is closed and kept, readable by the stock readers ----------------------
-@pytest.mark.parametrize("sig", SIGNALS)
+@pytest.mark.parametrize("sig", [*SIGNALS, pytest.param(signal.SIGHUP, id="SIGHUP")])
 def test_bus_run_log_is_finalised(sig, tmp_path):
+    """Also SIGHUP (a closed terminal): the same end, exit 129. The line names a signal
+    other than Ctrl-C's, says when, and is the only line besides the progress."""
     from mcap.reader import make_reader
+
+    from hil.framelog.reader import FrameLogReader
 
     run = Running(["bus", "run", "--seconds", "120", "--log", "run.mcap"], tmp_path)
     run.wait_for(r"bus run: [1-9]\d*/120000 cycles")
     code, lines = run.stop(sig)
     last = _ended(code, lines, sig, "bus run")
-    assert last.endswith("log run.mcap closed and readable"), last
+    by = "" if sig == signal.SIGINT else f"by {signal.Signals(sig).name} "
+    assert re.fullmatch(rf"eha-hil bus run: interrupted {by}at t=\d+\.\d+ s; "
+                        r"log run.mcap closed and readable", last), last
+    others = [ln for ln in lines[:-1] if ln and not re.fullmatch(r"bus run: \d+/\d+ cycles", ln)]
+    assert not others, others
+    info = FrameLogReader(tmp_path / "run.mcap").info()
+    assert info.complete and info.frame_count > 0
     with (tmp_path / "run.mcap").open("rb") as fh:
         reader = make_reader(fh)  # the stock reader: a summary (footer) and every message
         summary = reader.get_summary()
         assert summary is not None and summary.statistics.message_count > 0
-        assert sum(1 for _ in reader.iter_messages()) == summary.statistics.message_count
+        assert sum(1 for _ in reader.iter_messages()) == summary.statistics.message_count \
+            == info.message_count
     _no_partials(tmp_path)
 
 
@@ -202,11 +213,9 @@ def test_sweep_pool_ends_with_it_and_keeps_the_journal(sig, tmp_path):
 
 # --- computations with an output at the end -------------------------------------------------------
 @pytest.mark.parametrize("sig", SIGNALS)
-def test_identify_report_is_all_or_nothing(sig, tmp_path):
-    subprocess.run([EXE, "identify-synth", str(tmp_path / "d.csv"), "--seconds", "8"],
-                   check=True, capture_output=True, timeout=300)
-    run = Running(["identify", "d.csv", "--report", "rep"], tmp_path)
-    run.wait_for(r"identify: baseline fit")
+def test_identify_report_is_all_or_nothing(sig, tmp_path, identify_record):
+    run = Running(["identify", str(identify_record), "--report", "rep"], tmp_path)
+    run.wait_for(r"identify: baseline fit[^\n]*\n")  # its whole line (print, then "\n")
     code, lines = run.stop(sig)
     last = _ended(code, lines, sig, "identify")
     assert "nothing written" in last, last
@@ -221,8 +230,14 @@ def test_run_thesis_keeps_the_finished_plots(sig, tmp_path):
     time.sleep(1.0)  # into f4 (a signal inside the print of "f4 ..." would cut its line)
     code, lines = run.stop(sig)
     last = _ended(code, lines, sig, "run thesis")
-    done = r"plots? ([\w-]+\.png, )*f3\.png(, [\w-]+\.png)* written to plots/$"
+    # the scenario it was in, those done, and their plots
+    by = "" if sig == signal.SIGINT else f"by {signal.Signals(sig).name} "
+    assert re.match(rf"eha-hil run thesis: interrupted {by}in f[\w-]+ "
+                    r"\(f1-measured(, f[\w-]+)* done\); ", last), last
+    done = r"plots? f1-measured\.png(, [\w-]+\.png)*, f3\.png(, [\w-]+\.png)* written to plots/$"
     assert re.search(done, last), last
+    others = [ln for ln in lines[:-1] if ln and not re.fullmatch(r"f[\w-]+ \.\.\.", ln)]
+    assert not others, others  # besides the line, only the scenarios' progress
     from PIL import Image
 
     with Image.open(tmp_path / "plots" / "f3.png") as im:  # a whole PNG: it decodes

@@ -45,6 +45,10 @@ def coulomb_csv(tmp_path_factory):
     return path
 
 
+#: The identification's stderr, one item per write() call (filled by report_run).
+STDERR_WRITES: list[str] = []
+
+
 @pytest.fixture(scope="module")
 def report_run(coulomb_csv, tmp_path_factory):
     """One identification through the command line with ``--report`` (the whole tool: a
@@ -52,12 +56,34 @@ def report_run(coulomb_csv, tmp_path_factory):
     import contextlib
     import io
 
+    class Writes(io.StringIO):
+        """stderr that also keeps each write() call's text."""
+
+        def __init__(self) -> None:
+            super().__init__()
+            self.calls: list[str] = []
+
+        def write(self, text: str) -> int:
+            self.calls.append(text)
+            return super().write(text)
+
     rdir = tmp_path_factory.mktemp("rep") / "rep"
     args = _parser().parse_args(["identify", str(coulomb_csv), "--report", str(rdir)])
-    out, err = io.StringIO(), io.StringIO()
+    out, err = io.StringIO(), Writes()
     with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
         code = args.func(args)
+    STDERR_WRITES[:] = err.calls
     return code, out.getvalue(), err.getvalue(), rdir
+
+
+@pytest.mark.slow
+def test_each_progress_line_is_one_write(report_run):
+    """A line written in two pieces (text, then newline) lets an interrupt's line land
+    between them, glued to the progress line: every write is whole lines."""
+    calls = STDERR_WRITES
+    assert calls and any("round 0" in c for c in calls)
+    torn = [c for c in calls if not c.endswith("\n")]
+    assert not torn, torn[:3]
 
 
 @pytest.mark.slow

@@ -72,10 +72,11 @@ def test_markdown_table_rows_and_tally():
                        magnitudes=[("pump_coulomb_friction.force_n", 80.0, 79.9)]),
             CaseResult(Case("fixed_piston"), 2, False, "added input_delay", [],
                        ["input_delay"], False)]
+    rows[1].cpu_s = 12.6
     text = markdown(rows)
     lines = text.splitlines()
     assert lines[2].startswith("| fixed_piston: pump_coulomb_friction | 1 | force_n 80 / 79.9")
-    assert "**no**: added input_delay" in lines[3]
+    assert "**no**: added input_delay" in lines[3] and lines[3].endswith("| 13 |")
     assert lines[-1].startswith("1 of 2 right")
 
 
@@ -101,3 +102,26 @@ def test_an_absorbed_maxwell_branch_is_judged_by_the_equivalent_spring():
     assert not judge(case, truth, {}, False, eq, {})[0]  # k_s held: nothing to compare
     assert not judge(case, truth, {"pump_coulomb_friction": {"force_n": 5.0}}, False, eq,
                      {"ks": 3.0e7})[0]
+
+
+def test_rows_file_holds_each_case_as_it_is_judged(tmp_path, monkeypatch, capsys):
+    """``--rows``: a JSON line per case written when the case is judged, so a run stopped
+    part way keeps its rows; here the run stops after the first of two."""
+    import json
+
+    import hil.identify.rigcheck as rigcheck
+    from hil.cli import main
+
+    def two_then_stop(cases, seeds, jobs=1, progress=None):
+        res = CaseResult(cases[0], seeds[0], True, "ok", [], [], False, cpu_s=2.5)
+        progress(res, 1, 2)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(rigcheck, "run_matrix", two_then_stop)
+    out = tmp_path / "rows.jsonl"
+    code = main(["identify-check", "--case", "fixed_piston: null", "--seeds", "3",
+                 "--rows", str(out)])
+    assert code != 0
+    lines = out.read_text(encoding="utf-8").splitlines()
+    assert [json.loads(x)["case"] for x in lines] == ["fixed_piston: null"]
+    assert json.loads(lines[0])["seed"] == 3 and json.loads(lines[0])["cpu_s"] == 2.5

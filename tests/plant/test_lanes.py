@@ -220,17 +220,46 @@ def test_exp3_at_its_limits():
     assert _scalar(0.0)[1:3] == (0.0, 1.0)
 
 
-@pytest.mark.slow
-def test_rk4_lanes_compiles_to_vector_instructions_without_contraction():
-    """The generated machine code of the lane kernel: its arithmetic is on full vector
-    registers (ymm with AVX2, zmm with AVX-512), none of it scalar, and no multiply-add is
-    fused. Compiled here is one RK4 stage of it (the effects' loops, the derivatives and
-    the intermediate states, the code ``rk4_lanes`` inlines four times): the same
-    statements, a quarter of the compile time (~7 s against ~47 s idle)."""
-    import llvmlite.binding as llvm
+def _cached_kernel_asm() -> str | None:
+    """The machine code of ``rk4_lanes`` as the runs use it: the object code numba's cache
+    holds (compiled once by ``hil.sim.warmup``), disassembled by objdump. None when there is
+    no objdump or the kernel is not in the cache."""
+    import shutil
+    import subprocess
+    import tempfile
 
-    if "+avx2" not in llvm.get_host_cpu_features().flatten():
-        pytest.skip("no AVX2 on this CPU: nothing to check the lanes against")
+    from numba.core import codegen
+
+    if shutil.which("objdump") is None:
+        return None
+    objects = []
+    keep = codegen.CodeLibrary._set_compiled_object
+
+    def spy(self, value):  # noqa: ANN001, ANN202 - numba's own signature
+        objects.append(value)
+        return keep(self, value)
+
+    # A dispatcher of its own over the same function reads the same cache entry (the one
+    # the engines load) and hands its object code to the library being rebuilt.
+    f = numba.njit(**lanes.LANES)(lanes.rk4_lanes.py_func)
+    codegen.CodeLibrary._set_compiled_object = spy
+    try:
+        f(lanes.lane_buffer(), 1)
+    finally:
+        codegen.CodeLibrary._set_compiled_object = keep
+    if not f.stats.cache_hits or len(objects) != 1:
+        return None
+    with tempfile.NamedTemporaryFile(suffix=".o") as obj:
+        obj.write(objects[0])
+        obj.flush()
+        return subprocess.run(["objdump", "-d", "--no-show-raw-insn", obj.name],
+                              capture_output=True, text=True, check=True).stdout
+
+
+def _one_stage_asm() -> str:
+    """One RK4 stage of the lane kernel compiled here (the effects' loops, the derivatives
+    and the intermediate states, the code ``rk4_lanes`` inlines four times): the same
+    statements, a quarter of the kernel's compile time (~7 s against ~47 s idle)."""
     opts = {k: v for k, v in lanes.LANES.items() if k != "cache"}
 
     def one_stage(B):
@@ -238,10 +267,26 @@ def test_rk4_lanes_compiles_to_vector_instructions_without_contraction():
 
     f = numba.njit(**opts)(one_stage)
     f(lanes.lane_buffer())
-    asm = next(iter(f.inspect_asm().values()))
+    return next(iter(f.inspect_asm().values()))
+
+
+def _check_vector_asm(asm: str) -> None:
     wide = re.findall(r"\bv(?:mul|add|sub|div)pd\s+[^\n]*%[yz]mm", asm)
     assert len(wide) > 200
     # A loop of its own over the states (or a conditional expression LLVM keeps as a
     # branch) is unrolled into scalar code: one vmulsd/vdivsd per lane.
     assert not re.findall(r"\bv(?:mul|add|sub|div)sd\b", asm)
     assert not re.findall(r"vfn?m(?:add|sub)", asm)
+
+
+@pytest.mark.slow  # ~1 s: loads the whole kernel from the cache
+def test_rk4_lanes_compiles_to_vector_instructions_without_contraction():
+    """The machine code of the lane kernel: its arithmetic is on full vector registers
+    (ymm with AVX2, zmm with AVX-512), none of it scalar, and no multiply-add is fused.
+    Read from the kernel the runs load (numba's cache, disassembled by objdump: no compile
+    here); without objdump or a cached kernel, one RK4 stage compiled here."""
+    import llvmlite.binding as llvm
+
+    if "+avx2" not in llvm.get_host_cpu_features().flatten():
+        pytest.skip("no AVX2 on this CPU: nothing to check the lanes against")
+    _check_vector_asm(_cached_kernel_asm() or _one_stage_asm())

@@ -19,6 +19,7 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import pytest
+from mcap.reader import make_reader
 
 from hil.fieldbus.topology import load_topology
 from hil.framelog.reader import MAGIC
@@ -44,6 +45,17 @@ def _records(data: bytes) -> list[tuple[int, int, int]]:
             break
         pos += 9 + length
     return out
+
+
+def _last_raw_chunk(path: Path) -> int:
+    """Offset of the last chunk holding frames the replay reads (not only decoded signals,
+    which have chunks of their own: writer.SIGNAL_CHUNKS)."""
+    with open(path, "rb") as f:
+        summary = make_reader(f).get_summary()
+    assert summary is not None
+    return max(ci.chunk_start_offset for ci in summary.chunk_indexes
+               if any(not summary.channels[c].topic.startswith("/signals/")
+                      for c in ci.message_index_offsets))
 
 
 def _flip(data: bytes, at: int, mask: int = 0xFF) -> bytes:
@@ -75,7 +87,7 @@ def logs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
         "cut_in_header": data[:20],
         "cut_in_metadata": data[:recs[2][0] + 40],
         "cut_in_first_chunk": data[:chunks[0] + 50],
-        "cut_in_last_chunk": data[:chunks[-1] + 50],
+        "cut_in_last_chunk": data[:_last_raw_chunk(full) + 50],
         "end_dropped": data[:-40],
         "flipped_chunk_byte": _flip(data, chunks[-1] + 200),
         "flipped_length_byte": _flip(data, len(MAGIC) + 1, 0x01),  # the Header's length
