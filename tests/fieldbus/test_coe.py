@@ -11,13 +11,14 @@ import struct
 import numpy as np
 import pytest
 
-from firmware_model.esc import coe, objects
+from firmware_model.esc import coe, objects, sii
 from firmware_model.esc import registers as r
 from firmware_model.esc.objects import Abort
 from firmware_model.mcu.mcu import CMD_TIMEOUT
 from hil.fieldbus.boxes import make_box
 from hil.fieldbus.esc.chain import EscChain
 from hil.fieldbus.esc.master import STATION_BASE, EscMaster
+from hil.fieldbus.esc.slaves import CYCLE_PDO
 from protocols import ethercat as ec
 from tests.fieldbus.test_esc import THREE
 
@@ -267,6 +268,26 @@ def test_remapped_box_exchanges_the_smaller_records(preop):
     full = preop.chain.boxes[0].inputs()
     mem = bytes(preop.chain.escs[0].mem[start:start + d.in_bytes])
     assert mem[:len(full) - d.tx_pdos[0].bytes] == full[d.tx_pdos[0].bytes:]
+
+
+def test_cycle_counter_pdo_assigned_stamps_each_record_with_its_box_cycle(preop):
+    """TxPDO 0x1AFF appended to 0x1C13 in PREOP: the inputs are the box's full record, then
+    the number of box cycles run, the one that made the record included (not the bus's:
+    cycles without a frame count too)."""
+    d = preop.chain.escs[0].desc
+    keep = [p.index for p in d.tx_pdos] + [CYCLE_PDO]
+    assert preop.download(0x1C13, 0, struct.pack(f"<BB{len(keep)}H", len(keep), 0, *keep),
+                          ca=True) == 0
+    assert preop.chain.escs[0].in_bytes == d.in_bytes + 4
+    start = d.sms[d.in_sm].start
+    for _ in range(3):
+        preop.chain.cycle()
+        mem = bytes(preop.chain.escs[0].mem[start:start + d.in_bytes + 4])
+        assert mem[:d.in_bytes] == preop.chain.boxes[0].inputs()
+        assert struct.unpack_from("<I", mem, d.in_bytes)[0] == preop.chain.stats.cycles > 0
+    # not assigned by default: the SII's sizes and the default image leave it out
+    assert CYCLE_PDO not in [p.index for p in d.tx_pdos]
+    assert sii.pdo_bits(preop.chain.escs[0].sii, sii.CAT_TXPDO) == 8 * d.in_bytes
 
 
 def test_mcu_watchdog_trip_sends_its_emergency(cfg):

@@ -88,6 +88,8 @@ class Both:
             assert got == mem, f"slave {i}: memories differ"
             assert self.arr.state(i) == (int(esc.state), esc.error, int(esc.code))
             assert self.arr.st[i, cc.S_TRIPS] == esc.watchdog_trips
+            assert (self.arr.st[i, cc.S_TRIP_DELAY], self.arr.st[i, cc.S_TRIP_SEEN]) == (
+                esc.last_trip_delay_ns, esc.last_trip_seen_ns)
             dc, row = esc.dc, self.arr.st[i]
             assert [int(row[c]) for c in _DC_COLUMNS] == [
                 dc.corr_u, dc.l_upd, dc.slew, dc.freq, dc.l_cmp, dc.diff_f, dc.compares,
@@ -396,6 +398,32 @@ def test_master_reads_whole_input_records_while_a_box_publishes(cfg):
         stop.set()
         t.join()
     assert torn == 0
+
+
+def test_watchdog_expires_on_the_slaves_increments_whatever_the_ticks(cfg):
+    """The slaves' clock ticked in uneven steps of up to 3.3 ms (a frame thread woken late):
+    the process-data watchdog still expires at the first increment of the divider at least
+    its time after the last output write (the ESC's granularity: [t, t + one increment]),
+    applied in the tick that passes that instant, not before; compiled and reference the
+    same (:meth:`Both.check`)."""
+    both = Both(cfg)
+    master = EscMaster(both)
+    master.bring_up()
+    both.tick(1_234_567)           # off any grid
+    master.cycle()                 # the last output write
+    esc = both.ref.escs[0]
+    last, wd, inc = esc.last_output_ns, esc.watchdog_ns(), esc.watchdog_increment_ns()
+    assert wd and inc and esc.out_bytes
+    steps = [3_300_013, 700_001, 2_900_017, 1_000_003]
+    k = 0
+    while not esc.watchdog_trips:
+        before = esc.now_ns
+        both.tick(steps[k % len(steps)])
+        k += 1
+    expiry = last + esc.last_trip_delay_ns
+    assert wd <= esc.last_trip_delay_ns <= wd + inc and expiry % inc == 0
+    assert before < expiry <= esc.now_ns == last + esc.last_trip_seen_ns
+    assert esc.last_trip_seen_ns - esc.last_trip_delay_ns > inc  # a late tick, not counted
 
 
 @pytest.mark.parametrize("cut", [0, 5, 13, 15])

@@ -15,6 +15,7 @@ import pytest
 
 from firmware_model.esc import coe
 from firmware_model.esc.objects import Abort
+from firmware_model.mcu import mcu
 from hil.fieldbus.boxes import make_box
 from hil.fieldbus.esc.slaves import describe_all
 from hil.fieldbus.esc.veth import MASTER_IF, in_ns, run_master, start_serve, stop_serve
@@ -172,6 +173,11 @@ def test_force_gain_written_by_soem_changes_that_box_only(netns, full, cfg, mode
         stop_serve(serve)
     assert (res["kp_read"], res["kp_other"]) == (KP, cfg.get("mcu.kp_force"))
     assert (res["op"], res["bad_wkc"]) == (8, 0)
+    # The boxes' MCUs had a fresh command every box cycle. (A box thread that fell more than
+    # command_timeout_s + safe_off_delay_s behind and caught up back to back runs those
+    # cycles on one record: its MCU switches the board off and the step never shows.)
+    assert not any(st & (mcu.CMD_TIMEOUT | mcu.SAFE_OFF) for st in res["status_seen"]), \
+        "an MCU command watchdog ran out: the box clock fell behind (serve's lag)"
     tuned = _predicted(make_box(
         "stack", full.boxes[0], cfg.with_overrides({"mcu.kp_force": KP}, "kp")), cfg, 400)
     plain = _predicted(make_box("stack", full.boxes[0], cfg), cfg, 400)

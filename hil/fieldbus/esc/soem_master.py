@@ -265,7 +265,8 @@ def gain(ifname: str, box: int, other: int, kp: float, newtons: float, n: int) -
     slot 0 of both enabled at 0 N for 200 cycles, then a NEWTONS step for the rest of N
     cycles; both f_pressure inputs per cycle, each with the box cycle that made it
     (``box_cycle``), and the box cycles of the inputs the step's frame brought back
-    (``step_seen_cycle``: the boxes took the step in a later cycle)."""
+    (``step_seen_cycle``: the boxes took the step in a later cycle), and every bit slot 0's
+    MCU status word showed (``status_seen``)."""
     m = pysoem.Master()
     m.open(ifname)
     info: dict = {"found": m.config_init()}
@@ -284,6 +285,7 @@ def gain(ifname: str, box: int, other: int, kp: float, newtons: float, n: int) -
     info["op"] = m.state_check(pysoem.OP_STATE, STATE_TIMEOUT_US)
     f: dict[int, list[float]] = {box: [], other: []}
     cyc: dict[int, list[int]] = {box: [], other: []}
+    status: dict[int, int] = {box: 0, other: 0}
 
     def each(k: int) -> None:
         for s, key in ((a, box), (b, other)):
@@ -293,10 +295,12 @@ def gain(ifname: str, box: int, other: int, kp: float, newtons: float, n: int) -
             inp = s.input
             f[key].append(struct.unpack_from("<h", inp, 6)[0] * 0.1)
             cyc[key].append(struct.unpack_from("<I", inp, len(inp) - 4)[0])
+            status[key] |= struct.unpack_from("<H", inp, 16)[0]
 
     info["bad_wkc"], info["bad_wkc_values"] = paced(m, n, each)
     info["f_pressure"] = [f[box], f[other]]
     info["box_cycle"] = [cyc[box], cyc[other]]
+    info["status_seen"] = [status[box], status[other]]  # slot 0's status words, or-ed
     # the inputs read at cycle 201 came back in the frame that carried the step (cycle 200)
     info["step_seen_cycle"] = [cyc[box][201], cyc[other][201]] if n > 201 else None
     m.state = pysoem.INIT_STATE
