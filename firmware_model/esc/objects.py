@@ -4,7 +4,8 @@ tunables (:mod:`firmware_model.mcu.tunables`):
 
 * 0x1000 device type, 0x1008 name, 0x1009 hardware and 0x100A software version;
 * 0x1018 identity (equal to the SII's);
-* 0x1600 + k / 0x1A00 + k: the fixed PDO mappings of slot k (read only);
+* 0x1600 + k / 0x1A00 + k: the fixed PDO mappings of slot k (read only), and of the
+  TxPDOs not assigned by default;
 * 0x1C00 sync manager types; 0x1C12 / 0x1C13 PDO assignment of SM2 / SM3 (writable in
   PREOP only: a master may drop PDOs, the box then exchanges the smaller records);
 * 0x1C32 / 0x1C33: sync manager parameters (free run, 1 ms cycle);
@@ -291,10 +292,14 @@ def _mapping(index: int, name: str, entries) -> Obj:  # noqa: ANN001
     return obj
 
 
-def _assignment(index: int, name: str, pdos) -> Obj:  # noqa: ANN001
-    obj = Obj(index, name, "ARRAY").add(_count(len(pdos), "rw_preop", high=len(pdos)))
-    for k, p in enumerate(pdos, start=1):
-        obj.add(Entry(k, f"PDO {k}", "u16", "rw_preop", p.index))
+def _assignment(index: int, name: str, pdos, optional=()) -> Obj:  # noqa: ANN001
+    """An assignment object: the default PDOs, and a (zero) entry more for each PDO
+    not assigned by default, so that a master can assign every PDO at once."""
+    n = len(pdos) + len(optional)
+    obj = Obj(index, name, "ARRAY").add(_count(len(pdos), "rw_preop", high=n))
+    for k in range(1, n + 1):
+        obj.add(Entry(k, f"PDO {k}", "u16", "rw_preop", pdos[k - 1].index if k <= len(pdos)
+                      else 0))
     return obj
 
 
@@ -333,13 +338,13 @@ def build(desc: SlaveDescription, actuators: int, mcu_defaults: dict[str, float]
             Entry(3, "Revision", "u32", "ro", desc.revision),
             Entry(4, "Serial number", "u32", "ro", desc.serial)),
     ]
-    for p in desc.rx_pdos + desc.tx_pdos:
+    for p in desc.rx_pdos + desc.tx_pdos + desc.tx_optional:
         objs.append(_mapping(p.index, p.name, p.entries))
     kinds = [sm.kind for sm in desc.sms]
     objs.append(Obj(0x1C00, "Sync manager type", "ARRAY").add(
         _count(len(kinds)), *(Entry(k + 1, f"SM{k}", "u8", "ro", v) for k, v in enumerate(kinds))))
     objs.append(_assignment(0x1C12, "RxPDO assign", desc.rx_pdos))
-    objs.append(_assignment(0x1C13, "TxPDO assign", desc.tx_pdos))
+    objs.append(_assignment(0x1C13, "TxPDO assign", desc.tx_pdos, desc.tx_optional))
     objs.append(_sync_parameters(0x1C32, "SM output parameter", cycle_ns))
     objs.append(_sync_parameters(0x1C33, "SM input parameter", cycle_ns))
     if actuators:

@@ -47,6 +47,10 @@ SM_MBX_OUT, SM_MBX_IN, SM_OUTPUTS, SM_INPUTS = 1, 2, 3, 4
 MBX_PROTO_COE = 0x0004
 COE_SDO, COE_SDO_INFO, COE_PDO_ASSIGN, COE_PDO_CONFIG, COE_UPLOAD, COE_SDO_CA = (
     0x01, 0x02, 0x04, 0x08, 0x10, 0x20)
+#: SyncM byte of a PDO category entry for a PDO not assigned by default (no sync manager:
+#: a master sizing the image from the SII, as SOEM does, counts only PDOs whose sync
+#: manager is in range; with CoE a master may assign it through 0x1C12 / 0x1C13).
+PDO_NOT_ASSIGNED = 0xFF
 
 
 @dataclass(frozen=True)
@@ -65,7 +69,7 @@ class PdoEntry:
 class Pdo:
     index: int          # 0x16xx (RxPDO, outputs) or 0x1Axx (TxPDO, inputs)
     name: str
-    sm: int             # sync manager it is assigned to
+    sm: int             # sync manager it is assigned to (PDO_NOT_ASSIGNED: none by default)
     entries: tuple[PdoEntry, ...]
 
     @property
@@ -99,6 +103,9 @@ class SlaveDescription:
     pdi_control: int = 0x05         # PDI: SPI slave (the ESC talks to the MCU over SPI)
     alias: int = 0
     coe: bool = False               # a mailbox (SM0/SM1) speaking CoE
+    #: TxPDOs not assigned by default (after ``tx_pdos`` in the SII, the ESI and the full
+    #: input record); a master assigns them through 0x1C13 in PREOP.
+    tx_optional: tuple[Pdo, ...] = ()
 
     @property
     def out_sm(self) -> int:
@@ -172,7 +179,7 @@ def build_image(d: SlaveDescription) -> bytes:
     strings = _Strings()
     name_idx = strings.add(d.name)  # string 1: the device name
     group_idx = strings.add(d.group)
-    txpdo = _pdo_category(d.tx_pdos, strings)
+    txpdo = _pdo_category(d.tx_pdos + d.tx_optional, strings)
     rxpdo = _pdo_category(d.rx_pdos, strings)
     general = bytearray(32)
     general[0] = group_idx
@@ -244,12 +251,13 @@ def strings(image: bytes) -> list[str]:
 
 
 def pdo_bits(image: bytes, kind: int) -> int:
-    """Total mapped bits of the TxPDO (50) or RxPDO (51) category."""
+    """Total mapped bits of the PDOs the TxPDO (50) or RxPDO (51) category assigns to a
+    sync manager (those not assigned by default left out)."""
     data, pos, total = categories(image).get(kind, b""), 0, 0
     while pos + 8 <= len(data):
-        n = data[pos + 2]
+        n, assigned = data[pos + 2], data[pos + 3] != PDO_NOT_ASSIGNED
         pos += 8
         for _ in range(n):
-            total += data[pos + 5]
+            total += data[pos + 5] if assigned else 0
             pos += 8
     return total

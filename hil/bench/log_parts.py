@@ -60,6 +60,12 @@ PARTS: tuple[tuple[str, str, str], ...] = (
     ("hil.framelog.writer", "FrameLogWriter.write_messages_filled", "file"),
     ("hil.framelog.writer", "FrameLogWriter.write_messages", "file"),
     ("hil.framelog.writer", "FrameLogWriter.write", "file"),
+    # the channels' and schemas' records, made as the recorders set up (~200 channels of
+    # hydra_full: most of RobotRecorder.__init__'s CPU, counted there before)
+    ("hil.framelog.writer", "FrameLogWriter.add_channel", "file"),
+    ("hil.framelog.writer", "FrameLogWriter.add_block_channel", "file"),
+    ("hil.framelog.writer", "FrameLogWriter.add_protobuf_channel", "file"),
+    ("hil.framelog.writer", "FrameLogWriter.add_metadata", "file"),
     ("hil.framelog.protobuf", "MessageType.encode_array", "producer"),
     ("hil.replay.signals", "actuator_block", "producer"),
     ("hil.replay.signals", "record_columns", "producer"),
@@ -249,7 +255,7 @@ class Parts:
 #: Cycles of the warm-up runs before the timed ones: more than one block of the log
 #: (:data:`hil.replay.record.FLUSH_CYCLES`), so that every compiled call and import of a
 #: block's writing is done before the timing starts.
-WARM_CYCLES = 120
+WARM_CYCLES = 220
 
 
 @contextlib.contextmanager

@@ -329,8 +329,20 @@ def _live_view(args: argparse.Namespace, chain: Chain, cfg, log=None):  # noqa: 
     recs = attach_recorders(chain, cfg, log, live, args.level, background=True)
     if live is not None:
         print(f"eha-hil serve: foxglove live view at {live.url} (decoded signals of "
-              f"{len(chain.boxes)} box(es), sent every 100 ms)", file=sys.stderr, flush=True)
+              f"{len(chain.boxes)} box(es), sent every {_block_ms(recs, args.level)} ms)",
+              file=sys.stderr, flush=True)
     return live, recs
+
+
+def _block_ms(recs: list, level: str) -> int:
+    """Simulated ms between the recorders' blocks of decoded signals (a cycle is 1 ms)."""
+    from hil.replay.record import flush_cycles
+
+    if not recs:
+        return flush_cycles(level)
+    # a RobotRecorder's block, else a RecordingStackBox's
+    return getattr(recs[0], "cycles", None) or getattr(recs[0], "flush_cycles",
+                                                       flush_cycles(level))
 
 
 def _open_log(args: argparse.Namespace, path: str | None, model: str):  # noqa: ANN202
@@ -341,10 +353,10 @@ def _open_log(args: argparse.Namespace, path: str | None, model: str):  # noqa: 
         raise _usage("--log records the MCU's words: use --model stack or robot (the echo "
                      "model has no MCU)")
     from hil.framelog import FrameLogWriter
-    from hil.replay.record import FLUSH_CYCLES
+    from hil.replay.record import flush_cycles
 
     return FrameLogWriter(path, level=args.level, compression=args.log_compression,
-                          flush_every_ns=FLUSH_CYCLES * 1_000_000,
+                          flush_every_ns=flush_cycles(args.level) * 1_000_000,
                           metadata={"mode": "serve (paced to the wall clock)"})
 
 

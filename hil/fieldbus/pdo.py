@@ -73,6 +73,12 @@ IMU_IN = tuple(Field(n, "i4", 1e-6, "rad/s" if n[0] == "w" else "m/s^2",
                      f"IMU {n} (not simulated: 0)")
                for n in ("wx", "wy", "wz", "ax", "ay", "az"))
 
+#: The box's cycle counter (one per box, not per slot): an optional TxPDO of the EtherCAT
+#: slaves (:mod:`hil.fieldbus.esc.slaves`), left out of the default image.
+BOX_CYCLE = Field("cycle", "u4", 1, "",
+                  "box cycles (1 ms each, on the box's own clock) run when this record was "
+                  "published, the one that made it included; wraps at 2^32")
+
 SLOT_FIELDS: dict[str, tuple[tuple[Field, ...], tuple[Field, ...]]] = {
     "actuator": (ACTUATOR_OUT, ACTUATOR_IN),
     "foot_sensor": ((), FOOT_IN),

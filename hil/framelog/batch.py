@@ -32,7 +32,7 @@ import numpy as np
 from mcap.records import MessageIndex, Opcode
 from mcap.writer import Writer
 
-from hil.framelog.chunk import ChunkBuffer, write_indexes
+from hil.framelog.chunk import ChunkBuffer, many_index, write_indexes
 
 _HEAD = struct.Struct("<BQHIQQ")  # opcode, record length, channel, sequence, log, publish
 
@@ -122,6 +122,7 @@ def add_messages(w: Writer, channel_id: int, times: Sequence[int] | np.ndarray,
     if isinstance(data, Interleaved):
         blob, offsets = _interleaved(data, channel_id, times, seq0, base)
         index.records.append(offsets)
+        _keep_batch(cb, channel_id, offsets)
         cb.num_messages += n
         cb.record_writer._buffer.write(blob)  # noqa: SLF001
         w._Writer__maybe_finalize_chunk()  # noqa: SLF001
@@ -141,9 +142,7 @@ def add_messages(w: Writer, channel_id: int, times: Sequence[int] | np.ndarray,
                        np.frombuffer(b"".join(data), np.uint8).reshape(n, size))
         blob = rec.tobytes()
         step = rec.itemsize
-        index.records.append(np.stack([t, base + step * np.arange(n, dtype=np.uint64)],
-                                      axis=1))
-        offsets = None
+        offsets = np.stack([t, base + step * np.arange(n, dtype=np.uint64)], axis=1)
     else:  # the record heads as one array, each message's bytes between them
         lens = np.fromiter(map(len, data), np.int64, n)
         heads = np.zeros(n, np.dtype(HEAD_FIELDS))
@@ -162,11 +161,26 @@ def add_messages(w: Writer, channel_id: int, times: Sequence[int] | np.ndarray,
         ends = np.cumsum(lens + h)
         offsets = np.stack([times.astype(np.uint64),
                             (base + ends - (lens + h)).astype(np.uint64)], axis=1)
-    if offsets is not None:
-        index.records.append(offsets)
+    index.records.append(offsets)
+    _keep_batch(cb, channel_id, offsets)
     cb.num_messages += n
     cb.record_writer._buffer.write(blob)  # noqa: SLF001
     w._Writer__maybe_finalize_chunk()  # noqa: SLF001
+
+
+def _keep_batch(cb: object, channel_id: int, entries: np.ndarray) -> None:
+    """``channel_id``'s MessageIndex record of ``entries`` ((n, 2) log times and offsets)
+    kept with the chunk builder's batches (when it keeps them, see :func:`add_records`)."""
+    batches = getattr(cb, "eha_batches", None)
+    if batches is None:
+        return
+    rec = np.empty(1, many_index(len(entries)))
+    rec["op"] = Opcode.MESSAGE_INDEX
+    rec["len"] = rec.dtype.itemsize - 9
+    rec["ch"] = channel_id
+    rec["n"] = 16 * len(entries)
+    rec["e"][0] = entries
+    batches.append((rec, [channel_id]))
 
 
 def _interleaved(data: Interleaved, channel_id: int, times: np.ndarray, seq0: int,
@@ -264,14 +278,21 @@ def add_records(w: Writer, channel_ids: Sequence[int], log_ns: np.ndarray,
     stats.message_end_time = max(t_last, stats.message_end_time)
     stats.message_count += c * k
     per = c if at is not None else max(1, w._Writer__chunk_size // (size * k))  # noqa: SLF001
-    if k > 1:  # every channel's index entries (log time, offset in the chunk) at once
-        pairs = np.empty((c, k, 2), np.uint64)
-        pairs[:, :, 0] = log.astype(np.uint64)
-        within = (np.arange(min(per, c), dtype=np.uint64)[:, None] * k
-                  + np.arange(k, dtype=np.uint64)) * np.uint64(size)
+    # every channel's MessageIndex record (entries: log time, offset in the chunk) at once,
+    # kept with the chunk builder's batches for its closing (chunk.write_indexes)
+    ix = np.empty(c, many_index(k))
+    ix["op"] = Opcode.MESSAGE_INDEX
+    ix["len"] = ix.dtype.itemsize - 9
+    ix["ch"] = channel_ids
+    ix["n"] = 16 * k
+    pairs = ix["e"]
+    pairs[:, :, 0] = log.astype(np.uint64)
+    within = (np.arange(min(per, c), dtype=np.uint64)[:, None] * k
+              + np.arange(k, dtype=np.uint64)) * np.uint64(size)
     t0 = int(log[0])
     counts = stats.channel_message_counts
     indices = cb.message_indices
+    batches = getattr(cb, "eha_batches", None)
     for lo in range(0, c, per):
         part = rec[lo * k:(lo + per) * k]
         if cb.num_messages == 0:
@@ -280,9 +301,10 @@ def add_records(w: Writer, channel_ids: Sequence[int], log_ns: np.ndarray,
             cb.message_start_time = min(cb.message_start_time, t_first)
         cb.message_end_time = max(cb.message_end_time, t_last)
         base = cb.record_writer.count if at is None else at
-        if k > 1:
-            n = min(per, c - lo)
-            pairs[lo:lo + n, :, 1] = within[:n] + np.uint64(base)
+        n = min(per, c - lo)
+        pairs[lo:lo + n, :, 1] = within[:n] + np.uint64(base)
+        if batches is not None:
+            batches.append((ix[lo:lo + n], list(channel_ids[lo:lo + n])))
         for j, cid in enumerate(channel_ids[lo:lo + per]):
             counts[cid] += k
             index = indices.get(cid)

@@ -27,10 +27,11 @@ uncompressed files are byte for byte the library's: ``tests/framelog/test_chunk.
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import struct
 import zlib
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from io import BytesIO
 
 import lz4.frame
@@ -43,6 +44,17 @@ from mcap.writer import IndexType, Writer
 #: compression time for ~15 % more bytes; against level 1, 12 % less time for 7 % more
 #: bytes (measured on the chunks of a whole-robot log, docs/framelog.md "The whole robot").
 ZSTD_LEVEL = -1
+#: What the writer's own zstd levels (:data:`ZSTD_LEVEL`, and -7 of the decoded signals'
+#: chunks, :data:`hil.framelog.writer.SIGNAL_CHUNKS`) change in zstd's parameters of that
+#: level: a match table of 2^12 entries (zstd's: 2^13; 16 KiB, which stays in the L1 cache
+#: beside the data) and matches of at least 7 bytes (zstd's: 6; a sensor word's noise makes
+#: many 6-byte matches that save little and cost a sequence each). On the chunks of a
+#: second of the whole robot (``python -m hil.bench.log_chunks``; docs/framelog.md,
+#: "Compression level"): at -1 ~9 % less compression CPU for ~3 % more bytes of those
+#: chunks, at -7 ~19 % less for ~5 % more. Any reader reads the frames (zstd's format
+#: leaves the match finder to the writer).
+TUNED = {"hash_log": 12, "min_match": 7}
+TUNED_LEVELS = (ZSTD_LEVEL, -7)
 #: Chunk record: opcode, record length, start and end time, uncompressed size and CRC.
 _HEAD = struct.Struct("<BQQQQI")
 _CHUNK_OPCODE = 0x06
@@ -124,10 +136,15 @@ def supported(w: Writer) -> bool:
 
 def compressor(compression: str, level: int | None) -> Callable[[memoryview], bytes]:
     """bytes-like -> compressed bytes, for ``zstd`` (``level`` None: :data:`ZSTD_LEVEL`;
-    frames with zstd's content checksum) or ``lz4`` (None: the library's default)."""
+    the levels of :data:`TUNED_LEVELS` with the parameters :data:`TUNED`; frames with
+    zstd's content checksum) or ``lz4`` (None: the library's default)."""
     if compression == "zstd":
-        return zstandard.ZstdCompressor(level=ZSTD_LEVEL if level is None else level,
-                                        write_checksum=True).compress
+        lvl = ZSTD_LEVEL if level is None else level
+        if lvl in TUNED_LEVELS:
+            params = zstandard.ZstdCompressionParameters.from_level(
+                lvl, write_checksum=1, **TUNED)
+            return zstandard.ZstdCompressor(compression_params=params).compress
+        return zstandard.ZstdCompressor(level=lvl, write_checksum=True).compress
     if compression == "lz4":
         lvl = 0 if level is None else level
         return lambda data: lz4.frame.compress(data, compression_level=lvl)
@@ -152,6 +169,7 @@ def install(w: Writer, compression: str, level: int | None, chunk_size: int,
     buf.write(rw._buffer.getvalue())  # noqa: SLF001 - empty before the first record
     buf.seek(rw._buffer.tell())  # noqa: SLF001
     rw._buffer = buf  # noqa: SLF001
+    w._Writer__chunk_builder.eha_batches = []  # noqa: SLF001 - see :func:`write_indexes`
     first = _Kind(w._Writer__chunk_builder, compression, level)  # noqa: SLF001
     if not others:
         # an instance attribute: the Writer's own ``self.__finalize_chunk()`` finds it first
@@ -182,6 +200,7 @@ def _new_builder(chunk_size: int) -> object:
     from mcap._chunk_builder import ChunkBuilder
 
     cb = ChunkBuilder()
+    cb.eha_batches = []  # see write_indexes
     cb.record_writer._buffer = ChunkBuffer(chunk_size + (chunk_size >> 2))  # noqa: SLF001
     return cb
 
@@ -259,6 +278,42 @@ def use_first(w: Writer) -> None:
         chunks.defs_pending = True
 
 
+@contextlib.contextmanager
+def definitions(w: Writer) -> Iterator[None]:
+    """Schema and channel records registered inside go to the first kind's chunk
+    (:func:`use_first`), each built in a ``BytesIO`` and put into the chunk's
+    :class:`ChunkBuffer` as one write: the library's ``Channel.write`` makes ~27 small
+    writes per record, each a Python call here (~6 ms for the 200 channels of a
+    whole-robot log). The chunk's size is checked once, after."""
+    use_first(w)
+    cb = w._Writer__chunk_builder  # noqa: SLF001 - see the module docstring
+    rw = getattr(cb, "record_writer", None)
+    buf = getattr(rw, "_buffer", None)
+    if not isinstance(buf, ChunkBuffer):
+        yield
+        return
+    had = "_Writer__maybe_finalize_chunk" in vars(w)
+    check = w._Writer__maybe_finalize_chunk  # noqa: SLF001
+    # no chunk closed while the records are apart from the chunk's buffer
+    w._Writer__maybe_finalize_chunk = _nothing  # noqa: SLF001
+    tmp = BytesIO()
+    rw._buffer = tmp  # noqa: SLF001
+    try:
+        yield
+    finally:
+        rw._buffer = buf  # noqa: SLF001
+        buf.write(tmp.getbuffer())
+        if had:
+            w._Writer__maybe_finalize_chunk = check  # noqa: SLF001
+        else:
+            del w._Writer__maybe_finalize_chunk  # noqa: SLF001 - the class's method again
+    check()
+
+
+def _nothing() -> None:
+    pass
+
+
 def _finalize(w: Writer, compress: Callable[[memoryview], bytes] | None, name: bytes,
               crc_on: bool, cb: object = None) -> None:
     """The library's ``__finalize_chunk`` (same records, same order) without its copies,
@@ -302,13 +357,16 @@ def _finalize(w: Writer, compress: Callable[[memoryview], bytes] | None, name: b
     rb = w._Writer__record_builder  # noqa: SLF001
     at = stream.tell()
     if w._Writer__index_types & IndexType.MESSAGE:  # noqa: SLF001
-        write_indexes(cb.message_indices, rb, at + rb.count, index.message_index_offsets)
+        write_indexes(cb.message_indices, rb, at + rb.count, index.message_index_offsets,
+                      getattr(cb, "eha_batches", None))
     index.message_index_length = rb.count
     w._Writer__flush()  # noqa: SLF001
     w._Writer__chunk_indices.append(index)  # noqa: SLF001
     # ChunkBuilder.reset, less its copy of the (already replaced) buffer
     cb.message_end_time = 0
     cb.message_indices.clear()
+    if getattr(cb, "eha_batches", None):
+        cb.eha_batches.clear()
     cb.message_start_time = 0
     cb.num_messages = 0
 
@@ -321,18 +379,25 @@ _MESSAGE_INDEX_OPCODE = 0x07
 
 
 @functools.lru_cache(maxsize=64)
-def _many_index(k: int) -> np.dtype:
+def many_index(k: int) -> np.dtype:
     """A MessageIndex record of ``k`` (log time, offset) entries."""
     return np.dtype([("op", "u1"), ("len", "<u8"), ("ch", "<u2"), ("n", "<u4"),
                      ("e", "<u8", (k, 2))])
 
 
-def write_indexes(indices: dict, rb: object, at: int, offsets: dict[int, int]) -> None:
+def write_indexes(indices: dict, rb: object, at: int, offsets: dict[int, int],
+                  batches: list[tuple[np.ndarray, list[int]]] | None = None) -> None:
     """The chunk's MessageIndex records, in the order of ``indices`` (channel -> an index
     whose ``records`` are (log time, offset) pairs and (n, 2) arrays of them), as one write
     to ``rb`` starting at file offset ``at``; ``offsets[channel]`` set to each record's.
+    ``batches``: the chunk builder's ``eha_batches`` (:func:`hil.framelog.batch.add_records`:
+    each batch's MessageIndex records already built, and their channels): when the chunk
+    is those batches' channels alone, one entry each, their records are written as they
+    are.
     The bytes the library's ``MessageIndex.write`` makes, one by one; the records of one
     entry (most: a block channel's one message) built as one array."""
+    if _write_batches(indices, batches, rb, at, offsets):
+        return
     items = list(indices.items())
     one = [i for i, (_, mi) in enumerate(items)
            if len(mi.records) == 1 and type(mi.records[0]) is tuple]
@@ -356,7 +421,7 @@ def write_indexes(indices: dict, rb: object, at: int, offsets: dict[int, int]) -
         if len(recs) == 1 and isinstance(recs[0], np.ndarray) and recs[0].ndim == 2:
             runs.setdefault(len(recs[0]), []).append(i)
     for k, idx in runs.items():
-        dt = _many_index(k)
+        dt = many_index(k)
         arr = np.empty(len(idx), dt)
         arr["op"] = _MESSAGE_INDEX_OPCODE
         arr["len"] = dt.itemsize - 9
@@ -394,3 +459,23 @@ def write_indexes(indices: dict, rb: object, at: int, offsets: dict[int, int]) -
         parts.append(rec)
         pos += len(rec)
     rb.write(b"".join(parts))  # type: ignore[attr-defined]
+
+
+def _write_batches(indices: dict, batches: list[tuple[np.ndarray, list[int]]] | None,
+                   rb: object, at: int, offsets: dict[int, int]) -> bool:
+    """:func:`write_indexes` of a chunk whose channels are, in order, those of
+    ``batches`` (each batch's MessageIndex records as an array of :func:`many_index`
+    records, its channels), each with its batch's entry alone; False (nothing written)
+    for any other chunk."""
+    if not batches:
+        return False
+    ids = [cid for _, cids in batches for cid in cids]
+    if ids != list(indices) or any(len(indices[cid].records) != 1 for cid in ids):
+        return False
+    pos = at
+    for arr, cids in batches:
+        size = arr.dtype.itemsize
+        offsets.update(zip(cids, range(pos, pos + len(cids) * size, size), strict=True))
+        pos += len(cids) * size
+    rb.write(b"".join(arr.tobytes() for arr, _ in batches))  # type: ignore[attr-defined]
+    return True

@@ -40,7 +40,7 @@ import re
 import struct
 import threading
 import zlib
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 
 import numpy as np
 from google.protobuf import descriptor_pb2
@@ -96,8 +96,10 @@ def _schema(full_name: str, fields: list[tuple[str, int, int, bool]]) -> bytes:
 
 
 # --- blocks ---------------------------------------------------------------------------------
+@functools.lru_cache(maxsize=256)
 def block_schema(encoding: str) -> tuple[str, bytes]:
-    """(message name, ``FileDescriptorSet``) of the block message of ``encoding``."""
+    """(message name, ``FileDescriptorSet``) of the block message of ``encoding`` (kept:
+    a whole-robot log asks for a few encodings' schemas 200 times)."""
     name = message_name(encoding, True)
     return name, _schema(name, [(k, n, t, r) for k, (n, t, r) in _BLOCK_TYPES.items()])
 
@@ -399,9 +401,10 @@ def wrapper(encoding: str) -> Callable[[bytes], bytes]:
     return lambda data: b"\x0a" + _varint(len(data)) + data + head(data)
 
 
-#: Many frames of one length at once: (frames (k, length) uint8) -> their messages
-#: (k, size) uint8, or None where the group needs the per-frame :func:`wrapper`.
-Many = Callable[[np.ndarray], np.ndarray | None]
+#: Many frames of one length at once: (frames (k, length) uint8, the same frames as k
+#: bytes-like objects, e.g. the ones logged) -> their messages (k, size) uint8, or None
+#: where the group needs the per-frame :func:`wrapper`.
+Many = Callable[[np.ndarray, Sequence[bytes]], np.ndarray | None]
 _MANY: dict[str, Many] = {}
 
 
@@ -419,8 +422,9 @@ def wrap_many(encoding: str, frames: list[bytes]) -> list[bytes] | np.ndarray:
         by_len.setdefault(len(f), []).append(i)
     out: list[bytes] = [b""] * len(frames)
     for idx in by_len.values():
-        got = many(np.frombuffer(b"".join(frames[i] for i in idx), np.uint8)
-                   .reshape(len(idx), -1)) if len(idx) > 1 else None
+        group = [frames[i] for i in idx]
+        got = many(np.frombuffer(b"".join(group), np.uint8).reshape(len(idx), -1),
+                   group) if len(idx) > 1 else None
         if got is not None and len(by_len) == 1:
             return got  # one message size: the batch goes in as one array
         if got is None:
@@ -454,7 +458,7 @@ def wrap_periodic(encoding: str, frames: list[bytes]) -> list[np.ndarray] | None
     parts: list[np.ndarray] = []
     at = 0
     for r in range(p):
-        got = many(rows[:, at:at + int(lens[r])])
+        got = many(rows[:, at:at + int(lens[r])], frames[r::p])
         if got is None:
             return None
         parts.append(got)
@@ -536,9 +540,15 @@ def _ethercat_walk(pdu: bytes) -> tuple[bool, list[int], list[int]]:
     return False, dgs, used
 
 
-def _ethercat_fcs_many(frames: np.ndarray) -> np.ndarray | None:
-    """The messages of frames of one length (:func:`wrap_many`): the datagram layout of
-    the first, taken for every frame whose layout bytes agree (None if one does not)."""
+#: CRC-32 of any bytes followed by their own CRC-32 (little endian): a frame's FCS is right
+#: if and only if the CRC of the whole frame is this (one C call per frame, no slice).
+_CRC_RESIDUE = 0x2144DF1C
+
+
+def _ethercat_fcs_many(frames: np.ndarray, each: Sequence[bytes]) -> np.ndarray | None:
+    """The messages of frames of one length (:func:`wrap_many`; ``each``: the same
+    frames as bytes): the datagram layout of the first, taken for every frame whose layout
+    bytes agree (None if one does not)."""
     k, size = frames.shape
     if size < 6:
         return None
@@ -546,11 +556,7 @@ def _ethercat_fcs_many(frames: np.ndarray) -> np.ndarray | None:
     if used and not bool((frames[:, used] == frames[0, used]).all()):
         return None
     pdu = frames[:, :-4]
-    flat = memoryview(np.ascontiguousarray(pdu)).cast("B")  # slices below: no copies
-    n_pdu = size - 4
-    crc = np.fromiter((zlib.crc32(flat[i:i + n_pdu]) for i in range(0, k * n_pdu, n_pdu)),
-                      np.uint32, k)
-    fcs_ok = crc == np.ascontiguousarray(frames[:, -4:]).view("<u4")[:, 0]
+    fcs_ok = np.fromiter(map(zlib.crc32, each), np.uint32, k) == _CRC_RESIDUE
     n = len(dgs)
 
     def u16(col: int) -> np.ndarray:

@@ -256,8 +256,8 @@ class FrameLogWriter:
             return 0  # MCAP: schema id 0 = no schema
         key = (name, encoding, bytes(data))
         if key not in self._schemas:
-            chunk.use_first(self._writer)
-            self._schemas[key] = self._writer.register_schema(name, encoding, bytes(data))
+            with chunk.definitions(self._writer):
+                self._schemas[key] = self._writer.register_schema(name, encoding, bytes(data))
         return self._schemas[key]
 
     def _register(self, topic: str, message_encoding: str, schema_id: int,
@@ -266,9 +266,9 @@ class FrameLogWriter:
         if topic in self._topics:
             raise ValueError(f"topic {topic!r} already has a channel")
         ch.kind = next((k for p, k in self._kinds if topic.startswith(p)), self._kind)
-        chunk.use_first(self._writer)
-        cid = self._writer.register_channel(topic, message_encoding, schema_id,
-                                            {str(k): str(v) for k, v in metadata.items()})
+        with chunk.definitions(self._writer):
+            cid = self._writer.register_channel(topic, message_encoding, schema_id,
+                                                {str(k): str(v) for k, v in metadata.items()})
         self._topics.add(topic)
         self._channels[cid] = ch
         return cid
@@ -642,7 +642,7 @@ class FrameLogWriter:
             raise ValueError(f"{ch.topic}: message times must be >= 0 and non-decreasing")
         self._advance(ch, int(times[0]), int(times[-1]))
         if ch.wrap is not None:
-            frames = [bytes(m) for m in messages]
+            frames = list(map(bytes, messages))
             parts = rawpb.wrap_periodic(ch.encoding, frames)
             messages = (batch.Interleaved(parts) if parts is not None
                         else rawpb.wrap_many(ch.encoding, frames))

@@ -218,14 +218,21 @@ def _homogeneity(name: str, split: str, x: np.ndarray, se: np.ndarray, labels: l
     mean = float(np.sum(w * x[ok]) / np.sum(w))
     q = float(np.sum(w * (x[ok] - mean) ** 2))
     dof = int(ok.sum()) - 1
-    parts = [PartEstimate(lbl, value * math.exp(xi), value * math.exp(xi - Z95 * s),
-                          value * math.exp(xi + Z95 * s))
+    parts = [PartEstimate(lbl, value * _exp(xi), value * _exp(xi - Z95 * s),
+                          value * _exp(xi + Z95 * s))
              for lbl, xi, s in zip(labels, x, se, strict=True)]
     idx = np.flatnonzero(ok)
     lo = int(idx[np.argmin(x[ok])])
     hi = int(idx[np.argmax(x[ok])])
     return ParameterSplit(name, split, parts, q, dof, float(sps.chi2.sf(q, dof)),
-                          far=(lo, hi), ratio=float(math.exp(x[hi] - x[lo])))
+                          far=(lo, hi), ratio=_exp(float(x[hi] - x[lo])))
+
+
+def _exp(v: float) -> float:
+    """``exp(v)``, infinite beyond the floats' range: a part that barely pins a parameter
+    can take a linearised step of hundreds of e-folds (the baseline's fit on its way, before
+    a weakly pinned parameter is held), which is reported as such, not raised."""
+    return math.exp(v) if not v >= 709.0 else math.inf  # (a NaN stays NaN)
 
 
 def _band(f_lo: float, f_hi: float) -> str:

@@ -70,7 +70,20 @@ ENC_MCU_UP = LY.ENC_MCU_UP
 ENC_MCU_DOWN = LY.ENC_MCU_DOWN
 ENC_RECORD = LY.ENC_RECORD
 ENC_FIELDBUS = "eha-hil/ethercat-fcs"  # an EtherCAT PDU + FCS (hil.fieldbus.wire)
-FLUSH_CYCLES = 100  # one block per channel per 100 ms of simulated time
+#: Cycles per block: every raw channel gets one message per block, the decoded signals and
+#: the fieldbus frames are written a block at a time, and the log's chunk is closed after
+#: each (``flush_every_ns``: what a killed run loses). 200 ms of simulated time: half the
+#: writes of 100 ms blocks for the same frames, which cut a logged ``hydra_full`` run's
+#: extra CPU by ~10 % (the writer's and the recorder's work per call, per message array,
+#: per chunk); level "full" keeps :data:`FULL_FLUSH_CYCLES` (its traces, ~640 bytes per
+#: actuator tick, would double what an export holds between blocks).
+FLUSH_CYCLES = 200
+FULL_FLUSH_CYCLES = 100
+
+
+def flush_cycles(level: str) -> int:
+    """Cycles per block of a log at ``level`` (:data:`FLUSH_CYCLES`)."""
+    return FULL_FLUSH_CYCLES if level == "full" else FLUSH_CYCLES
 
 
 def signal_topics(box: int, board: int | None = None) -> dict[str, str]:
@@ -103,6 +116,7 @@ class RecordingStackBox(StackBox):
         self.log = log
         self.tick_ns = cfg.get("sim.tick_ns")
         self.traced = log is not None and log.level == "full"
+        self.flush_cycles = flush_cycles(log.level if log is not None else "mcu")
         self.ch_up, self.ch_down = [], []
         self.ch_trace, self.ch_words, self.ch_raw = [], [], []
         if log is not None:
@@ -156,7 +170,7 @@ class RecordingStackBox(StackBox):
         # after the step, i.e. each board's upstream block as the MCU read it and downstream
         # block as it wrote it, in one copy; and each link's CRC-error count
         if not hasattr(self, "ram_rows"):
-            cap = FLUSH_CYCLES * CYCLE_TICKS // self.period_ticks + 8
+            cap = self.flush_cycles * CYCLE_TICKS // self.period_ticks + 8
             # the blocks of the boards in use (they come first), in the memory's dtype: one
             # plain copy up to the last board's upstream block
             self.ram_words = (dpram.up_base(len(self.stacks) - 1) + B.UP_WORDS
@@ -205,7 +219,7 @@ class RecordingStackBox(StackBox):
     def advance(self, ticks: int) -> None:
         super().advance(ticks)
         self.buf_in.append((self.tick, self.inputs()))
-        if len(self.buf_in) >= FLUSH_CYCLES:
+        if len(self.buf_in) >= self.flush_cycles:
             self.flush()
 
     def flush(self) -> None:
@@ -284,16 +298,26 @@ class RecordingStackBox(StackBox):
 
 
 def add_signal_channels(out: SignalOut, box, cfg: Config,  # noqa: ANN001
-                        act_message: object = None) -> tuple[dict, list[int]]:
+                        act_message: object = None, messages: dict | None = None
+                        ) -> tuple[dict, list[int]]:
     """The decoded-signal channels of box ``box``: ({"outputs"/"inputs": channel} for its
     records that have simulated fields, [channel of each actuator]). The actuators'
     message leaves out the analog inputs whose part the configuration says is not fitted
     (:func:`hil.replay.signals.unfitted_inputs`); ``act_message``: that message, made
-    already (by a caller that adds many boxes)."""
+    already (by a caller that adds many boxes). ``messages``: the record messages made so
+    far, per slot kinds and direction (a caller that adds many boxes keeps it: a record's
+    message depends on its box's slot kinds only, and ``hydra_full``'s 16 boxes have 4
+    layouts; each message costs ~0.2 ms to make)."""
     st = signal_topics(box.id)
     rec = {}
+    kinds = tuple(s.kind for s in box.slots)
     for d in ("outputs", "inputs"):
-        message = SG.record_message(box, d)
+        if messages is None:
+            message = SG.record_message(box, d)
+        else:
+            message = messages.get((kinds, d))
+            if message is None:
+                message = messages[kinds, d] = SG.record_message(box, d)
         if message.fields:
             rec[d] = out.add(st[d], message)
     act = act_message
@@ -343,8 +367,11 @@ def replay_metadata(topo: Topology, cfg: Config, boxes: list, model: str,
 class BusSignals:
     """``/signals/bus``: the master's counters and the WKC of each cycle, from what the
     run's tap keeps for the log (:meth:`tap`, called once per cycle: the cycle's frames
-    appended to :attr:`frames` and one row to :attr:`cycles`), counted a block at a time
+    appended to :attr:`frames` and its row to :attr:`cycles`), counted a block at a time
     in :meth:`flush`."""
+
+    #: Values per cycle in :attr:`cycles`.
+    WIDTH = 3 + len(SG.MASTER_COUNTERS)
 
     def __init__(self, out: SignalOut, master: Master, tick_ns: int) -> None:
         self.out = out
@@ -352,16 +379,19 @@ class BusSignals:
         self.tick_ns = tick_ns
         self.ch = out.add(BUS_SIGNAL_TOPIC, SG.BUS)
         self.wkc_expected = sum(w for _, _, w in master.plan.frames)
-        #: per cycle of the block: (its first tick, frames sent, frames received, the
-        #: master's counters once it ended: :data:`~hil.replay.signals.MASTER_COUNTERS`)
-        self.cycles: list[tuple[int, ...]] = []
+        #: per cycle of the block, :attr:`WIDTH` values one after the other (flat: one
+        #: array of the block is made ~4x faster from it than from a tuple per cycle): its
+        #: first tick, frames sent, frames received, the master's counters once it ended
+        #: (:data:`~hil.replay.signals.MASTER_COUNTERS`)
+        self.cycles: list[int] = []
         #: the block's frames, as the tap saw them (sent, then received, per cycle)
         self.frames: list[bytes] = []
+        self._rows: np.ndarray | None = None  # :attr:`cycles` as rows, made once per block
 
     def tap(self) -> Callable[[list[bytes], list[bytes], int], None]:
         """The per-cycle call (``sent``, ``received``, the cycle's first tick), once the
         master has ended the cycle: its frames and its row, one tuple, no other call."""
-        add, count = self.frames.extend, self.cycles.append
+        add, count = self.frames.extend, self.cycles.extend
         counters, stats = operator.attrgetter(*SG.MASTER_COUNTERS), self.master.stats
 
         def cycle(sent: list[bytes], received: list[bytes], tick: int) -> None:
@@ -370,10 +400,16 @@ class BusSignals:
             count((tick, len(sent), len(received), *counters(stats)))
         return cycle
 
+    def rows(self) -> np.ndarray:
+        """The block's cycles, (cycles, :attr:`WIDTH`) int64 (made once per block)."""
+        if self._rows is None:
+            self._rows = np.array(self.cycles, dtype=np.int64).reshape(-1, self.WIDTH)
+        return self._rows
+
     def frame_times(self) -> np.ndarray:
         """Each of :attr:`frames`' time (ns): its cycle's first tick, a reply 1 ns after
         it (as in the log)."""
-        a = np.array(self.cycles, dtype=np.int64).reshape(-1, 3 + len(SG.MASTER_COUNTERS))
+        a = self.rows()
         t0 = a[:, 0] * self.tick_ns
         return np.repeat(np.stack([t0, t0 + 1], axis=1).ravel(), a[:, 1:3].ravel())
 
@@ -381,7 +417,7 @@ class BusSignals:
         """Write the block's cycles and forget them and their frames (``t``: the frames'
         :meth:`frame_times`)."""
         if self.cycles:
-            a = np.array(self.cycles, dtype=np.int64)
+            a = self.rows()
             n_frames, wkc = _frames_and_wkc(self.frames, t % self.tick_ns != 0,
                                             np.cumsum(a[:, 1] + a[:, 2]))
             cycle = a[:, 0] // CYCLE_TICKS
@@ -391,6 +427,7 @@ class BusSignals:
             # stamped at the end of the cycle (when its replies are in)
             self.out.write(self.ch, (cycle + 1) * CYCLE_TICKS * self.tick_ns - 1, cols)
             self.cycles.clear()
+        self._rows = None
         self.frames.clear()
 
 
@@ -439,11 +476,12 @@ def run_logged(topo: Topology, cfg: Config, cycles: int, pc: Callable[[int, Mast
     import contextlib
 
     tick_ns = cfg.get("sim.tick_ns")
+    block = flush_cycles(level)
     with contextlib.ExitStack() as stack:
         log = None
         if log_path is not None:
             log = stack.enter_context(FrameLogWriter(
-                log_path, level=level, flush_every_ns=FLUSH_CYCLES * CYCLE_TICKS * tick_ns,
+                log_path, level=level, flush_every_ns=block * CYCLE_TICKS * tick_ns,
                 compression=compression))
         out = SignalOut(log, live)
         ch_bus = None
@@ -454,7 +492,7 @@ def run_logged(topo: Topology, cfg: Config, cycles: int, pc: Callable[[int, Mast
                                      schema_data=lay.schema())
         bus_sig: BusSignals | None = None
         # the frames of the last cycles, kept for /signals/bus and the log and written
-        # once per FLUSH_CYCLES (a message at a time costs ~9 us, see hil.framelog.batch),
+        # once per block (a message at a time costs ~9 us, see hil.framelog.batch),
         # taken a cycle at a time (the bus system's tap_cycle, at the end of each cycle:
         # one call, not one per frame, and the cycle's /signals/bus row with it)
         take_cycle: Callable[[list[bytes], list[bytes], int], None] | None = None
@@ -462,7 +500,7 @@ def run_logged(topo: Topology, cfg: Config, cycles: int, pc: Callable[[int, Mast
         def tap_cycle(cycle: int, tick: int, sent: list[bytes], received: list[bytes]
                       ) -> None:
             take_cycle(sent, received, tick)
-            if (cycle + 1) % FLUSH_CYCLES == 0:
+            if (cycle + 1) % block == 0:
                 flush_block()
 
         def flush_block() -> None:

@@ -29,7 +29,7 @@ from hil.framelog.layout import SCHEMA_ENCODING as LAYOUT_ENCODING
 from hil.framelog.layout import Layout
 from hil.replay import layouts as LY
 from hil.replay import signals as SG
-from hil.replay.record import FLUSH_CYCLES, UP_WIDTH, add_signal_channels, topics
+from hil.replay.record import FLUSH_CYCLES, UP_WIDTH, add_signal_channels, flush_cycles, topics
 from hil.replay.signal_kernel import ActuatorEncoder
 from hil.replay.signal_out import SignalOut
 from hil.replay.signal_records import RecordEncoder
@@ -38,8 +38,8 @@ from hil.sim.robot import RobotEngine
 from hil.sim.stack_rows import TapRows
 from plant.config import Config
 
-#: Cycles per written block: the per-actuator path's (100 ms), fewer at level "full",
-#: whose traces take ~640 bytes per actuator tick.
+#: Cycles per written block: the per-actuator path's (:func:`hil.replay.record.flush_cycles`),
+#: fewer at level "full", whose traces take ~640 bytes per actuator tick.
 BLOCK_CYCLES = {"full": 10}
 
 
@@ -67,7 +67,7 @@ class RobotRecorder:
         self.full = level == "full"
         per_cycle = engine.cycle_ticks // self.period
         self.every = 1 if self.full else per_cycle
-        self.cycles = BLOCK_CYCLES.get(level, FLUSH_CYCLES)
+        self.cycles = BLOCK_CYCLES.get(level, flush_cycles(level))
         n, rows = engine.n, self.cycles * per_cycle
         self.tap = TapRows(np.zeros((n, rows, UP_WIDTH), np.uint16),
                            np.zeros((n, rows, B.DOWN_WORDS), np.uint16),
@@ -153,15 +153,27 @@ class RobotRecorder:
         self.ch_up, self.ch_down, self.ch_trace, self.ch_raw, self.ch_words = [], [], [], [], []
         self.sig_rec: list[dict] = []
         self.sig_act: list[int] = []
+        # a record's layout and message depend on its box's slot kinds only: made once per
+        # kinds (hydra_full: 16 boxes, 4 layouts), their schemas' JSON with them
+        messages: dict = {}  # the record messages (add_signal_channels)
+        records: dict[tuple, Layout] = {}
+
+        def record(box, d: str) -> Layout:  # noqa: ANN001
+            key = (tuple(s.kind for s in box.slots), d)
+            lay = records.get(key)
+            if lay is None:
+                lay = records[key] = LY.process_record(box, d)
+            return lay
+
         for b in self.boxes:
             box = b.box
             if log is not None:
                 tp = topics(box.id)
-                self.ch_out.append(block(tp["outputs"], LY.process_record(box, "outputs"),
-                                         np.uint8, b.out_dtype.itemsize)
+                self.ch_out.append(block(tp["outputs"], record(box, "outputs"), np.uint8,
+                                         b.out_dtype.itemsize)
                                    if b.out_dtype.itemsize else None)
-                self.ch_in.append(block(tp["inputs"], LY.process_record(box, "inputs"),
-                                        np.uint8, b.in_dtype.itemsize))
+                self.ch_in.append(block(tp["inputs"], record(box, "inputs"), np.uint8,
+                                        b.in_dtype.itemsize))
                 for k in range(len(box.actuators)):
                     tk = topics(box.id, k)
                     self.ch_up.append(block(tk["up"], up, np.uint16, UP_WIDTH))
@@ -174,7 +186,7 @@ class RobotRecorder:
                             for d in ("down", "up")))
                         self.ch_raw.append(block(f"/sensors/{box.id}.{k}/raw", raw,
                                                  np.uint32, B.N_RAW))
-            rec, act = add_signal_channels(self.out, box, self.cfg, act_message)
+            rec, act = add_signal_channels(self.out, box, self.cfg, act_message, messages)
             self.sig_rec.append(rec)
             self.sig_act += act
 

@@ -66,7 +66,10 @@ PC_COMMAND = (
     Field("position_command_m", WIDE, "m", "PC position command (NaN unless mode 2)"),
 )
 
-ACTUATOR = MessageType(f"{PACKAGE}.ActuatorSignals", (
+#: The actuator message's fields grouped by where they come from (what the MCU wrote,
+#: what it read, status and errors, validity), in the order (and so with the field
+#: numbers) that logs before :data:`ACTUATOR`'s order had (:data:`ACTUATOR_SOURCE_ORDER`).
+_BY_SOURCE = (
     # what the MCU wrote to the board
     Field("iq_ref_a", WORD, "A", "q-axis current reference the MCU wrote"),
     Field("id_ref_a", WORD, "A", "d-axis current reference the MCU wrote"),
@@ -107,13 +110,43 @@ ACTUATOR = MessageType(f"{PACKAGE}.ActuatorSignals", (
     Field("upstream_valid", "bool", "",
           "false: no upstream sweep of the board has reached the MCU yet (its words all 0): "
           "the values read from the board are NaN"),
+)
+
+#: The values of an actuator message that change from one sample to the next on a
+#: running actuator (the noisy sensor words, the current loop, the piston): field
+#: numbers 1 to 15, whose protobuf keys are one byte (16 and up take two). Then
+#: :data:`SLOW_VALUES` (steady for many samples: a word that flips by one, a
+#: temperature, a reference that is mostly 0), then the rest (modes, status, counters,
+#: flags: constant for long stretches) as in :data:`_BY_SOURCE`. A chunk compressor
+#: at zstd's fast levels stores what it finds no match for as it is, so the values
+#: that differ from the previous sample are best together and small, and the steady
+#: fields one long run that matches the previous message's (docs/framelog.md,
+#: "Field order"): on a whole-robot log 7 % fewer bytes and 10 % less zstd time on
+#: the signal chunks than :data:`ACTUATOR_SOURCE_ORDER`.
+EVERY_SAMPLE = ("iq_ref_a", "p_pump_a_pa", "p_pump_b_pa", "p_cyl_a_pa", "p_cyl_b_pa",
+                "f_pressure_n", "f_strain_n", "x_piston_m", "v_piston_m_s", "iq_a", "id_a",
+                "ia_a", "ib_a", "vd_v", "vq_v")
+SLOW_VALUES = ("p_acc_pa", "temperature_c", "rod_temperature_c", "vq_ff_v", "omega_m_rad_s",
+               "id_ref_a")
+_FIELD = {f.name: f for f in _BY_SOURCE}
+if len(EVERY_SAMPLE) > 15 or not set(EVERY_SAMPLE + SLOW_VALUES) <= set(_FIELD):
+    raise ImportError("hil.replay.signals: EVERY_SAMPLE must name at most 15 fields of the "
+                      "actuator message, SLOW_VALUES fields of it")
+ACTUATOR = MessageType(f"{PACKAGE}.ActuatorSignals", (
+    *(_FIELD[name] for name in EVERY_SAMPLE + SLOW_VALUES),
+    *(f for f in _BY_SOURCE if f.name not in EVERY_SAMPLE + SLOW_VALUES),
 ), "one actuator, each MCU step")
 
+#: :data:`ACTUATOR` as logs before its field order wrote it: the same fields numbered
+#: in :data:`_BY_SOURCE` order.
+ACTUATOR_SOURCE_ORDER = MessageType(ACTUATOR.full_name, _BY_SOURCE, ACTUATOR.doc)
+
 #: :data:`ACTUATOR` as logs before the float fields wrote it: :data:`PC_COMMAND` first,
-#: every float a double (what the readers of old logs and the kernel's tests use).
+#: every float a double, in source order (what the readers of old logs and the
+#: kernel's tests use).
 ACTUATOR_ALL_DOUBLE = MessageType(ACTUATOR.full_name, tuple(
     Field(f.name, WIDE if f.kind == WORD else f.kind, f.unit, f.doc)
-    for f in (*PC_COMMAND, *ACTUATOR.fields)), ACTUATOR.doc)
+    for f in (*PC_COMMAND, *_BY_SOURCE)), ACTUATOR.doc)
 
 #: The fields of :data:`ACTUATOR` read from the board (upstream words) as numbers: NaN
 #: while no upstream sweep has reached the MCU (0 V through the MCU's formulas is not a

@@ -20,6 +20,9 @@ DATA_TYPES = {0x0002: "SINT", 0x0003: "INT", 0x0004: "DINT", 0x0005: "USINT",
 PHYSICS = {0x1: "Y", 0x3: "K", 0x4: "H"}
 FMMU_USE = {1: "Outputs", 2: "Inputs", 3: "MBoxState"}
 SM_TYPE = {1: "MBoxOut", 2: "MBoxIn", 3: "Outputs", 4: "Inputs"}
+#: A PDO category's SyncM for a PDO not assigned by default (no sync manager; a master
+#: sizing the image from the SII, as SOEM does, skips it); its ESI TxPdo has no Sm.
+NO_SM = 0xFF
 
 
 def _image(image: bytes) -> dict:
@@ -99,7 +102,7 @@ def test_every_esi_field_is_what_the_sii_image_says(topology: str) -> None:
                     _int(sm.get("ControlByte")), _int(sm.get("Enable")), sm.text) == \
                 (start, length, control, enable & 1, SM_TYPE[kind])
         for tag, key in (("RxPdo", "rx"), ("TxPdo", "tx")):
-            esi = [{"index": _int(p.find("Index").text), "sm": _int(p.get("Sm")),
+            esi = [{"index": _int(p.find("Index").text), "sm": _int(p.get("Sm", str(NO_SM))),
                     "name": p.find("Name").text,
                     "entries": [(_int(e.find("Index").text), _int(e.find("SubIndex").text),
                                  _int(e.find("BitLen").text), e.find("Name").text,

@@ -42,6 +42,12 @@ def _log(path: Path, compression: str, level: int | None, ours: bool) -> bytes:
                 w.write(one, int(t[-1]), bytes(rng.integers(0, 256, 30, dtype=np.uint8)))
                 if k == 6:
                     w.add_metadata("between", {"k": "6"})  # a record between two chunks
+                    # channels registered amid messages, one with a schema of its own
+                    late = w.add_channel("/late", "eha-hil/late-frame")
+                    js = w.add_json_channel("/late/json", {"x": "number"})
+                if k >= 6:
+                    w.write(late, int(t[0]), bytes([k]) * 20)
+                    w.write_json(js, int(t[1]), {"x": k / 3})
         return path.read_bytes()
     finally:
         if not ours:
@@ -94,7 +100,7 @@ def test_default_level_reads_back_with_crcs(tmp_path: Path) -> None:
         got = [[(c.topic, m.log_time, m.sequence, m.data) for _, c, m in
                 make_reader(io.BytesIO(f), validate_crcs=True).iter_messages(
                     log_time_order=order)] for f in files]
-        assert len(got[0]) == 24 and got[0] == got[1]
+        assert len(got[0]) == 36 and got[0] == got[1]
 
 
 @pytest.mark.parametrize(("compression", "level"), [("zstd", 23), ("lz4", -1),
@@ -125,6 +131,10 @@ def test_every_message_index_entry_points_at_its_message(tmp_path: Path,
                 w.write(one, int(t[-1]) + j, bytes([k, j]))
             w.write_messages_many(many, t + 10, np.full((3, 4, 5), k, np.uint8))
             w.write_messages(many[0], t + 20, [b"x" * (1 + i) for i in range(4)])
+        w.flush()  # a chunk of batches of single-frame messages alone
+        t = 4000 + np.arange(5)
+        w.write_messages(many[1], t, [b"y" * 3] * 5)
+        w.write_messages(many[2], t, [b"z" * (1 + i) for i in range(5)])
     records = list(StreamReader(io.BytesIO(path.read_bytes()), emit_chunks=True).records)
     chunks = {}
     pos = 0
@@ -148,9 +158,39 @@ def test_every_message_index_entry_points_at_its_message(tmp_path: Path,
                 assert isinstance(m, Message) and m.channel_id == ix.channel_id
                 assert m.log_time == t
                 entries += 1
-    assert entries == 6 * 5 + 6 * 3 + 6 * 3 * 4 + 6 * 4 and len(chunks) >= 6
+    assert entries == 6 * 5 + 6 * 3 + 6 * 3 * 4 + 6 * 4 + 10 and len(chunks) >= 7
     # most channels had one message in a chunk: the one-entry records were written
     assert sum(len(ix.records) == 1 for _, ixs in chunks.values() for ix in ixs) >= 25
+
+
+def test_chunk_indexes_point_at_their_message_indexes(tmp_path: Path) -> None:
+    """Each chunk index's ``message_index_offsets``: a MessageIndex record of that channel
+    at that file offset, the records one run right after the chunk, as long as
+    ``message_index_length``; for chunks of one block per channel, of one batch of many
+    messages per channel, and of both."""
+    path = tmp_path / "o.mcap"
+    with FrameLogWriter(path, chunk_size=1 << 20) as w:
+        blocks = [w.add_block_channel(f"/b{i}", "eha-hil/x", dtype=np.uint16, width=3)
+                  for i in range(4)]
+        many = [w.add_channel(f"/m{i}", "json") for i in range(3)]
+        for k in range(3):
+            t = 500 * k + np.arange(4)
+            w.write_blocks(blocks, t, np.full((4, 4, 3), k))
+            if k:
+                w.write_messages_many(many, t + 10, np.full((3, 4, 5), k, np.uint8))
+            w.flush()  # chunks: blocks alone, then blocks and messages
+        w.write_messages_many(many, 2000 + np.arange(4), np.zeros((3, 4, 5), np.uint8))
+    data = path.read_bytes()
+    indexes = make_reader(io.BytesIO(data)).get_summary().chunk_indexes
+    assert len(indexes) == 4
+    for ci in indexes:
+        assert ci.message_index_offsets and ci.message_index_length
+        at = ci.chunk_start_offset + ci.chunk_length
+        for cid, off in sorted(ci.message_index_offsets.items(), key=lambda kv: kv[1]):
+            assert off == at and data[off] == 0x07
+            assert int.from_bytes(data[off + 9:off + 11], "little") == cid
+            at = off + 9 + int.from_bytes(data[off + 1:off + 9], "little")
+        assert at == ci.chunk_start_offset + ci.chunk_length + ci.message_index_length
 
 
 def _record_length(r: object) -> int:
@@ -158,3 +198,22 @@ def _record_length(r: object) -> int:
     rb = RecordBuilder()
     r.write(rb)  # type: ignore[attr-defined]
     return len(rb.end())
+
+
+@pytest.mark.parametrize("level", [None, -7, 3])
+def test_writers_levels_give_checked_zstd_frames(level: int | None) -> None:
+    """The compressor of each zstd level the writer uses (its own levels with their tuned
+    match finder, and a level of zstd's own): frames that stock zstd decodes back to the
+    bytes, with their content size and zstd's checksum (the chunk's only integrity check),
+    and a flipped byte fails."""
+    rng = np.random.default_rng(3)
+    data = np.concatenate([np.zeros(40000, np.uint8), rng.integers(0, 4, 40000, np.uint8),
+                           np.tile(np.arange(250, dtype=np.uint8), 200)]).tobytes()
+    frame = chunk.compressor("zstd", level)(memoryview(data))
+    params = zstandard.get_frame_parameters(frame)
+    assert params.has_checksum and params.content_size == len(data)
+    assert zstandard.ZstdDecompressor().decompress(frame) == data
+    bad = bytearray(frame)
+    bad[len(bad) // 2] ^= 0x10
+    with pytest.raises(zstandard.ZstdError):
+        zstandard.ZstdDecompressor().decompress(bytes(bad))

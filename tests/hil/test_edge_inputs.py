@@ -232,7 +232,9 @@ CUT = re.compile(r"^eha-hil (log|replay|identify): (\S+): truncated: (.+); "
 @pytest.fixture(scope="module")
 def logs(tmp_path_factory) -> dict[str, Path]:
     d = tmp_path_factory.mktemp("logs")
-    assert main(["bus", "run", "--seconds", "0.3", "--log", str(d / "r.mcap"),
+    # 0.5 s: two whole blocks of the frame log and a partial one (record.FLUSH_CYCLES), so
+    # that the chunks before the cut hold whole MCU cycles to replay
+    assert main(["bus", "run", "--seconds", "0.5", "--log", str(d / "r.mcap"),
                  "--capture", str(d / "r.pcapng")]) == 0
     for suffix in (".blf", ".asc", ".log"):
         assert main(["bus", "run", "--seconds", "0.3", "--transport", "can",

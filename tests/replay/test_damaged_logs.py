@@ -23,7 +23,7 @@ from mcap.reader import make_reader
 
 from hil.fieldbus.topology import load_topology
 from hil.framelog.reader import MAGIC
-from hil.replay.record import run_logged
+from hil.replay.record import FLUSH_CYCLES, run_logged
 from hil.sim.pc import demo_pc
 from plant.config import load_config
 
@@ -31,6 +31,9 @@ from plant.config import load_config
 pytestmark = pytest.mark.slow
 
 EXE = shutil.which("eha-hil") or f"{sys.prefix}/bin/eha-hil"
+#: Three blocks of the log (FLUSH_CYCLES each, the last partial): the raw chunks before
+#: the last hold whole cycles to replay.
+CYCLES = 2 * FLUSH_CYCLES + 100
 COMMANDS = {"replay": ["replay", "{log}"], "info": ["log", "info", "{log}"],
             "export": ["log", "export", "{log}", "{out}"]}
 
@@ -70,7 +73,7 @@ def logs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     d = tmp_path_factory.mktemp("damaged")
     cfg = load_config("hydra_default")
     full = d / "full.mcap"
-    run_logged(load_topology("bench_one_box"), cfg, 300, demo_pc(), full)
+    run_logged(load_topology("bench_one_box"), cfg, CYCLES, demo_pc(), full)
     data = full.read_bytes()
     recs = _records(data)
     chunks = [pos for pos, op, _ in recs if op == 6]
@@ -215,7 +218,7 @@ def test_truncated_replay_says_so_and_where(results: dict) -> None:
     assert "TRUNCATED log (file ends inside a Chunk record at byte" in p.stdout
     assert "MCU steps" in p.stdout and "match bit for bit" in p.stdout
     steps = int(p.stdout.split("MCU steps")[0].split()[-1])
-    assert 0 < steps < 5 * 299  # a prefix: more than nothing, less than the whole run
+    assert 0 < steps < 5 * (CYCLES - 1)  # a prefix: more than nothing, less than the whole run
     assert "truncated: file ends inside a Chunk record at byte" in p.stderr
     assert "replayed up to t = " in p.stderr
 
@@ -226,7 +229,7 @@ def test_truncated_replay_json_says_truncated(logs: dict[str, Path]) -> None:
     assert p.returncode == 1
     data = json.loads(p.stdout)
     assert data["ok"] and data["truncated"] and data["stop_reason"].startswith("file ends")
-    assert data["mcu_steps"] == 5 * 299  # only the summary is lost: every step replayed
+    assert data["mcu_steps"] == 5 * (CYCLES - 1)  # only the summary is lost: every step replayed
 
 
 @pytest.mark.parametrize(("name", "cmd", "words"), [

@@ -17,7 +17,7 @@ from firmware_model.fpga import layout as B
 from hil.fieldbus.topology import load_topology
 from hil.framelog import FrameLogReader
 from hil.replay import signals as SG
-from hil.replay.record import run_logged
+from hil.replay.record import flush_cycles, run_logged
 from hil.replay.replay import replay_mcu as replay
 from hil.sim.pc import demo_pc
 from hil.sim.robot import RobotEngine
@@ -103,6 +103,47 @@ def test_the_robot_engine_logs_what_the_per_actuator_path_logs(logs, level, mode
         rt, rf = robot[topic]
         assert np.array_equal(t, rt), topic
         assert np.array_equal(f, rf), topic
+
+
+def test_the_robot_engine_cuts_the_raw_channels_into_the_per_actuator_paths_blocks(logs):
+    """At level mcu both paths write a raw channel's frames in the same blocks
+    (``flush_cycles``: one message per channel per block), so that a reader holds the
+    same span of each channel between blocks whichever path wrote the log."""
+    from mcap.reader import make_reader
+
+    def block_times(path) -> dict[str, list[int]]:
+        with open(path, "rb") as f:
+            out: dict[str, list[int]] = {}
+            for _, ch, m in make_reader(f).iter_messages(log_time_order=False):
+                if not ch.topic.startswith(("/signals/", "/fieldbus/")):
+                    out.setdefault(ch.topic, []).append(m.log_time)
+            return out
+
+    robot, stack = block_times(logs["robot", "mcu"]), block_times(logs["stack", "mcu"])
+    assert robot == stack
+    n_blocks = -(-200 // flush_cycles("mcu"))  # the fixture's 200 cycles
+    assert {len(t) for t in robot.values()} == {n_blocks}
+
+
+@pytest.mark.parametrize("level", ["mcu", "full"])
+def test_every_channel_has_the_per_actuator_paths_encoding_schema_and_metadata(logs, level):
+    """The engine's recorder makes each record layout and message once per slot kinds:
+    every box still gets the schema of its own slots (box 0 has two actuators, box 2
+    one, box 1 an IMU), as the per-actuator path gives it."""
+    from mcap.reader import make_reader
+
+    def channels(path) -> dict[str, tuple]:
+        with open(path, "rb") as f:
+            summary = make_reader(f).get_summary()
+        return {c.topic: (c.message_encoding, c.metadata, summary.schemas[c.schema_id].name,
+                          summary.schemas[c.schema_id].encoding,
+                          bytes(summary.schemas[c.schema_id].data))
+                for c in summary.channels.values()}
+
+    robot, stack = channels(logs["robot", level]), channels(logs["stack", level])
+    assert robot == stack
+    assert robot["/mcu/0/inputs"][1] != robot["/mcu/2/inputs"][1]  # (the layout)
+    assert robot["/signals/box/0/inputs"][2] != robot["/signals/box/2/inputs"][2]
 
 
 def test_a_robot_engine_log_replays_bit_for_bit(logs):

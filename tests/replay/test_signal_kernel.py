@@ -57,15 +57,17 @@ def _block(rng, blk: int, tick0: int, a: int, n: int, every: int):
     return up, down, t_steps, out_t, out_rows, out_got
 
 
-@pytest.mark.parametrize("layout", ["today", "all double"])
+@pytest.mark.parametrize("layout", ["today", "source order", "all double"])
 @pytest.mark.parametrize("unfitted", [(), ("rod_temperature",)])
 @pytest.mark.parametrize("every", [1, 5])
 def test_the_compiled_signals_are_the_reference_byte_for_byte(unfitted, every, layout):
-    """Today's layout (float fields, no PC command) and that of older logs (every value a
-    double, the PC's command first: its look-up of the boxes' output records)."""
+    """Today's layout (float fields, no PC command, the changing values first), the same
+    fields in the order before, and that of older logs (every value a double, the PC's
+    command first: its look-up of the boxes' output records)."""
     cal = calibration(load_config(None))
-    msg = SG.actuator_message(unfitted, SG.ACTUATOR if layout == "today"
-                              else SG.ACTUATOR_ALL_DOUBLE)
+    msg = SG.actuator_message(unfitted, {"today": SG.ACTUATOR,
+                                         "source order": SG.ACTUATOR_SOURCE_ORDER,
+                                         "all double": SG.ACTUATOR_ALL_DOUBLE}[layout])
     a, n = 3, 50
     enc = ActuatorEncoder(cal, msg, 200e-6, every, BOX_OF, SLOT_OFF, SPANS, 3 * SLOT)
     own = ActuatorEncoder(cal, msg, 200e-6, every, BOX_OF, SLOT_OFF, SPANS, 3 * SLOT)

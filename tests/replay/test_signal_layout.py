@@ -158,14 +158,16 @@ def _log(path, message: MessageType, cols: dict, n: int) -> None:
 
 def test_exports_keep_each_files_types(tmp_path):
     """A log of today's layout exports its float fields as float32 (Parquet ``float``, CSV
-    text that reads back to the same float32, and short), its doubles as float64; the
-    same values in the old all-double layout export as float64 throughout."""
+    text that reads back to the same float32, and short), its doubles as float64, and so
+    does one of the field order before; the same values in the old all-double layout
+    export as float64 throughout."""
     rng = np.random.default_rng(1)
     n = 40
     cols = {f.name: (rng.integers(-30000, 30000, n) * 1e-3 if f.kind in ("float", "double")
                      else rng.integers(0, 2, n)) for f in SG.ACTUATOR_ALL_DOUBLE.fields}
     cols["x_piston_m"] = (rng.integers(0, 1 << 30, n) - (1 << 29)) * 5e-9  # 30 bits
-    for layout, message in (("new", SG.ACTUATOR), ("old", SG.ACTUATOR_ALL_DOUBLE)):
+    for layout, message in (("new", SG.ACTUATOR), ("source order", SG.ACTUATOR_SOURCE_ORDER),
+                            ("old", SG.ACTUATOR_ALL_DOUBLE)):
         path = tmp_path / f"{layout}.mcap"
         _log(path, message, cols, n)
         export_parquet(path, tmp_path / f"{layout}.parquet")

@@ -123,7 +123,7 @@ class EscChain:
     def publish_inputs(self) -> None:
         """Every box's input record into its ESC's input buffer."""
         for i, (esc, box) in enumerate(zip(self.escs, self.boxes, strict=True)):
-            esc.set_inputs(self.mailboxes.select(i, box.inputs()))
+            esc.set_inputs(self.mailboxes.select(i, box.inputs(), self.stats.cycles))
 
     def watchdog_report(self) -> list[dict]:
         """Per slave: watchdog time, trips and the delay of the last trip [ms]."""

@@ -126,10 +126,12 @@ def _device(devices: ET.Element, d: SlaveDescription, image: bytes, box: Box,
     for sm, what in zip(d.sms, whats, strict=True):
         _sub(dev, "Sm", what, StartAddress=_hex(sm.start, 4), ControlByte=_hex(sm.control, 2),
              DefaultSize=str(sm.length), Enable="1" if sm.enable else "0")
-    for tag, pdos in (("RxPdo", d.rx_pdos), ("TxPdo", d.tx_pdos)):
+    for tag, pdos in (("RxPdo", d.rx_pdos), ("TxPdo", d.tx_pdos + d.tx_optional)):
         for p in pdos:
-            # with CoE a master may leave a PDO out of the assignment (0x1C12 / 0x1C13)
-            el = _sub(dev, tag, Fixed="1", Mandatory="0" if d.coe else "1", Sm=str(p.sm))
+            # with CoE a master may leave a PDO out of the assignment (0x1C12 / 0x1C13); one
+            # not assigned by default has no Sm (ETG.2000)
+            sm = {} if p.sm == sii.PDO_NOT_ASSIGNED else {"Sm": str(p.sm)}
+            el = _sub(dev, tag, Fixed="1", Mandatory="0" if d.coe else "1", **sm)
             _sub(el, "Index", _hex(p.index, 4))
             _sub(el, "Name", p.name)
             for e in p.entries:

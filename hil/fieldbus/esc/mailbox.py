@@ -13,7 +13,9 @@ behind it, run once per box cycle on the box's clock (never in the frame path).
 * a PDO assignment written in PREOP (0x1C12 / 0x1C13) makes the box exchange the smaller
   records: :meth:`Mailboxes.expand` and :meth:`Mailboxes.select` cut its full records to
   the assigned PDOs, and the ESC checks the master's sync managers against the new
-  lengths at SAFEOP;
+  lengths at SAFEOP; a TxPDO not assigned by default (the box's cycle counter,
+  :data:`~hil.fieldbus.esc.slaves.CYCLE_PDO`) follows the box model's record in the full
+  one;
 * emergencies: rising edges of each actuator's MCU command watchdog (CMD_TIMEOUT), link
   failure (LINK_ERROR) and driver-board trip (BOARD_FAULT) status bits.
 
@@ -41,6 +43,7 @@ EMERGENCY_BITS = ((mcu_status.CMD_TIMEOUT, coe.EMCY_MCU_WATCHDOG, coe.ERR_COMMUN
                   (mcu_status.BOARD_FAULT, coe.EMCY_DRIVER_TRIP, coe.ERR_GENERIC))
 _STATUS_OFF = pdo.ACTUATOR_IN_DTYPE.fields["status"][1]
 _U16 = struct.Struct("<H")
+_U32 = struct.Struct("<I")
 
 
 def software_version() -> str:
@@ -97,7 +100,8 @@ class BoxMailbox:
         self.od.on_assign = self._assign
         self.server = coe.CoeServer(self.od, desc.sms[0].length, lambda: port.state(i)[0])
         self.out_ranges = _ranges(desc.rx_pdos, [p.index for p in desc.rx_pdos])
-        self.in_ranges = _ranges(desc.tx_pdos, [p.index for p in desc.tx_pdos])
+        self.in_ranges = _ranges(desc.tx_pdos + desc.tx_optional,
+                                 [p.index for p in desc.tx_pdos])
         self.remapped = False
         self._status = [0] * len(self.actuators)
         self._status_at = [box._in_off[slot] + _STATUS_OFF for slot in self.actuators]
@@ -125,7 +129,7 @@ class BoxMailbox:
 
     def _assign(self, rx: list[int], tx: list[int]) -> None:
         self.out_ranges = _ranges(self.desc.rx_pdos, rx)
-        self.in_ranges = _ranges(self.desc.tx_pdos, tx)
+        self.in_ranges = _ranges(self.desc.tx_pdos + self.desc.tx_optional, tx)
         self.remapped = True
         self.port.set_pd_lengths(self.i, sum(n for _o, n in self.out_ranges),
                                  sum(n for _o, n in self.in_ranges))
@@ -143,10 +147,13 @@ class BoxMailbox:
             pos += n
         return bytes(full)
 
-    def select(self, rec: bytes) -> bytes:
-        """The box's full input record cut to the assigned PDOs."""
+    def select(self, rec: bytes, cycle: int) -> bytes:
+        """The box's input record (made by box cycle number ``cycle``) cut to the assigned
+        PDOs."""
         if not self.remapped:
             return rec
+        if self.desc.tx_optional:  # the full record: the box model's, then the counter
+            rec += _U32.pack(cycle & 0xFFFFFFFF)
         return b"".join(rec[off:off + n] for off, n in self.in_ranges)
 
     # --- once per box cycle -----------------------------------------------------------------
@@ -204,9 +211,11 @@ class Mailboxes:
         m = self.each[i]
         return rec if m is None else m.expand(rec)
 
-    def select(self, i: int, rec: bytes) -> bytes:
+    def select(self, i: int, rec: bytes, cycle: int) -> bytes:
+        """Box ``i``'s input record, made by its cycle number ``cycle`` (box cycles run so
+        far, that one included), as its assignment has it."""
         m = self.each[i]
-        return rec if m is None else m.select(rec)
+        return rec if m is None else m.select(rec, cycle)
 
     def stats(self) -> list[dict]:
         return [dict(m.server.stats) if m is not None else {} for m in self.each]

@@ -83,6 +83,8 @@ class ServedChain:
         #: The boxes' mailbox side (CoE), run on the box clock after each cycle.
         self.mailboxes = Mailboxes(described, self.boxes, self.arrays, cfg)
         self.engine = box_engine(model, self.boxes, cfg, overlap=False)
+        #: Box cycles run (the boxes' own clock; the optional cycle-counter TxPDO).
+        self.box_cycles = 0
         self.publish_inputs()
 
     def take_outputs(self) -> None:
@@ -97,12 +99,13 @@ class ServedChain:
 
     def publish_inputs(self) -> None:
         for i, box in enumerate(self.boxes):
-            self.arrays.set_inputs(i, self.mailboxes.select(i, box.inputs()))
+            self.arrays.set_inputs(i, self.mailboxes.select(i, box.inputs(), self.box_cycles))
 
     def cycle(self) -> None:
         """One 1 ms cycle of every box, exchanging process data with the ESCs."""
         self.take_outputs()
         self.advance()
+        self.box_cycles += 1
         self.mailboxes.step()
         self.publish_inputs()
         self._record_dc()

@@ -11,8 +11,15 @@ Objects: slot ``k`` of a box has RxPDO ``0x1600 + k`` (entries ``0x7000 + 0x10 k
 TxPDO ``0x1A00 + k`` (entries ``0x6000 + 0x10 k``), subindex = field number + 1; RxPDOs are
 assigned to SM2 (outputs, at 0x1100), TxPDOs to SM3 (inputs, at 0x1200). SM0 and SM1 are
 the CoE mailbox (:data:`MBX_SIZE` bytes each, at 0x1000 and 0x1080); the object dictionary
-is :mod:`firmware_model.esc.objects`. ``coe=False`` describes the same box without a
-mailbox (process data on SM0/SM1, as before the mailbox existed).
+is :mod:`firmware_model.esc.objects`.
+
+With CoE a box also offers TxPDO :data:`CYCLE_PDO`, not assigned by default (the default
+image stays the slots' records): its one entry is the box's cycle counter
+(:data:`firmware_model.esc.sii.PDO_NOT_ASSIGNED` in the SII, no ``Sm`` in the ESI). A master
+that appends it to 0x1C13 in PREOP reads with every input record the number of the box
+cycle that made it, so it can tell box cycles apart from its own. ``coe=False`` describes
+the same box without a mailbox (process data on SM0/SM1, as before the mailbox existed)
+and without that PDO.
 """
 
 from __future__ import annotations
@@ -33,6 +40,10 @@ SM_IN_CONTROL = 0x20    # buffered, ECAT reads, PDI IRQ
 MBX_OUT_START, MBX_IN_START, MBX_SIZE = 0x1000, 0x1080, 128
 MBX_OUT_CONTROL = 0x26  # mailbox (1-buffer), ECAT writes, PDI IRQ
 MBX_IN_CONTROL = 0x22   # mailbox, ECAT reads, PDI IRQ
+#: The optional TxPDO of the box's cycle counter and its entry's object.
+CYCLE_PDO, CYCLE_OBJECT = 0x1AFF, 0x6FFF
+CYCLE_TX = Pdo(CYCLE_PDO, "box cycle", sii.PDO_NOT_ASSIGNED,
+               (PdoEntry(CYCLE_OBJECT, 1, pdo.BOX_CYCLE.name, pdo.BOX_CYCLE.dtype),))
 
 
 def box_kind_counts(box: Box) -> tuple[int, int, int]:
@@ -78,7 +89,8 @@ def describe(box: Box, coe: bool = True) -> SlaveDescription:
            SyncManager(MBX_IN_START, MBX_SIZE, MBX_IN_CONTROL, True, sii.SM_MBX_IN))
     return SlaveDescription(VENDOR_ID, product_code(box), REVISION, box.id + 1,
                             product_name(box), "Hydra joint boxes", rx, tx,
-                            mbx + pd if coe else pd, coe=coe)
+                            mbx + pd if coe else pd, coe=coe,
+                            tx_optional=(CYCLE_TX,) if coe else ())
 
 
 def describe_all(topo: Topology, coe: bool = True) -> list[tuple[SlaveDescription, bytes]]:

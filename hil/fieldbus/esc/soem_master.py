@@ -24,7 +24,8 @@ inputs recorded; then the master stops
 sending, and after the watchdogs tripped it reads every slave's mailbox: the emergencies.
 Also each abort a probe SDO gets (a missing object, a read-only write, an out-of-range gain).
 MODE ``gain BOX OTHER KP NEWTONS N``: box BOX's force gain written by SDO, then a force step
-on slot 0 of BOX and OTHER (see :func:`gain`).
+on slot 0 of BOX and OTHER, each input stamped with the box cycle that made it (see
+:func:`gain`).
 """
 
 from __future__ import annotations
@@ -248,10 +249,23 @@ def coe(ifname: str, box: int, n: int) -> dict:
     return info
 
 
+def _assign_cycle_counter(s) -> None:  # noqa: ANN001
+    """Slave ``s``'s cycle-counter TxPDO appended to its TxPDO assignment (0x1C13, complete
+    access, in PREOP): its inputs end with the number of the box cycle that made them."""
+    from hil.fieldbus.esc.slaves import CYCLE_PDO
+
+    raw = s.sdo_read(0x1C13, 0, ca=True)
+    idx = [*struct.unpack_from(f"<{raw[0]}H", raw, 2), CYCLE_PDO]
+    s.sdo_write(0x1C13, 0, struct.pack(f"<BB{len(idx)}H", len(idx), 0, *idx), ca=True)
+
+
 def gain(ifname: str, box: int, other: int, kp: float, newtons: float, n: int) -> dict:
     """MODE gain: in PREOP box BOX's force gain of actuator slot 0 (0x2000:1) written by
-    SDO and read back (and box OTHER's read); OP; slot 0 of both enabled at 0 N for 200
-    cycles, then a NEWTONS step for the rest of N cycles; both f_pressure inputs per cycle."""
+    SDO and read back (and box OTHER's read), and both boxes' cycle counters assigned; OP;
+    slot 0 of both enabled at 0 N for 200 cycles, then a NEWTONS step for the rest of N
+    cycles; both f_pressure inputs per cycle, each with the box cycle that made it
+    (``box_cycle``), and the box cycles of the inputs the step's frame brought back
+    (``step_seen_cycle``: the boxes took the step in a later cycle)."""
     m = pysoem.Master()
     m.open(ifname)
     info: dict = {"found": m.config_init()}
@@ -259,6 +273,8 @@ def gain(ifname: str, box: int, other: int, kp: float, newtons: float, n: int) -
     a.sdo_write(0x2000, 1, struct.pack("<f", kp))
     info["kp_read"] = struct.unpack("<f", a.sdo_read(0x2000, 1))[0]
     info["kp_other"] = struct.unpack("<f", b.sdo_read(0x2000, 1))[0]
+    for s in (a, b):
+        _assign_cycle_counter(s)
     info["image_bytes"] = m.config_map()
     info["safeop"] = m.state_check(pysoem.SAFEOP_STATE, STATE_TIMEOUT_US)
     m.state = pysoem.OP_STATE
@@ -267,16 +283,22 @@ def gain(ifname: str, box: int, other: int, kp: float, newtons: float, n: int) -
     m.write_state()
     info["op"] = m.state_check(pysoem.OP_STATE, STATE_TIMEOUT_US)
     f: dict[int, list[float]] = {box: [], other: []}
+    cyc: dict[int, list[int]] = {box: [], other: []}
 
     def each(k: int) -> None:
         for s, key in ((a, box), (b, other)):
             out = bytearray(s.output)
             struct.pack_into("<BBi", out, 0, 1, 1, 0 if k < 200 else round(newtons / 0.01))
             s.output = bytes(out)
-            f[key].append(struct.unpack_from("<h", s.input, 6)[0] * 0.1)
+            inp = s.input
+            f[key].append(struct.unpack_from("<h", inp, 6)[0] * 0.1)
+            cyc[key].append(struct.unpack_from("<I", inp, len(inp) - 4)[0])
 
     info["bad_wkc"], info["bad_wkc_values"] = paced(m, n, each)
     info["f_pressure"] = [f[box], f[other]]
+    info["box_cycle"] = [cyc[box], cyc[other]]
+    # the inputs read at cycle 201 came back in the frame that carried the step (cycle 200)
+    info["step_seen_cycle"] = [cyc[box][201], cyc[other][201]] if n > 201 else None
     m.state = pysoem.INIT_STATE
     m.write_state()
     m.close()
