@@ -765,7 +765,9 @@ class _Loop:
         """Effects that come together: a residual with structure left and no candidate that
         passes alone, so the library's candidates are refitted in pairs (then as one
         triple), from the robust start, each judged on the validation part as a single one
-        is."""
+        is. Before the sets: the refit from the configured values (:meth:`restart_far`), then
+        the held parameters freed (:meth:`free_held_again`); where either explains the
+        record, no set is tried."""
         exp, defs_all = self.exp, self.defs_all
         if not (len(self.added) + 2 <= max_effects and self.rounds):
             return
