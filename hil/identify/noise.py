@@ -13,19 +13,7 @@ at the hydraulic resonance. Judged as if it were white sensor noise it looks lik
   with synthetic white noise of that level added to the current, minus one without): its
   spectrum is what the residual must hold even when the model is right. The residual
   analysis whitens each residual with that spectrum plus a white sensor floor before it tests
-  whiteness and predictability (:mod:`hil.identify.residuals`);
-* :func:`input_band` and :func:`lowpass_current` — the current the model is simulated from.
-  A logged current that samples a continuous one is a measurement: above the band where its
-  spectrum stands clear of the white floor it holds only the converter's noise, which the
-  plant never felt. Simulated, that noise rings the model's hydraulic resonance, and an
-  output-error fit then prefers parameters that damp the model's response to it (a longer
-  pressure lag, a softer friction law): the errors-in-variables bias, which moves the fit's
-  minimum away from the rig's even when the model is right. So the current is low-passed
-  (zero phase, 8th-order Butterworth run forward and back) at :data:`CUTOFF_FACTOR` times
-  the band's upper edge, for every model of the run alike; the noise inside the band stays
-  (it cannot be told from the signal) and the predicted noise part is that noise through the
-  same filter. A current logged as the command the motor got (``zoh``) is the input itself,
-  noise and all, and is not filtered; nor is one whose band reaches near the Nyquist rate.
+  whiteness and predictability (:mod:`hil.identify.residuals`).
 """
 
 from __future__ import annotations
@@ -34,7 +22,7 @@ import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.signal import butter, sosfiltfilt, welch
+from scipy.signal import welch
 
 from hil.identify.csvdata import MeasuredData
 from hil.identify.experiment import Experiment
@@ -51,13 +39,10 @@ class InputNoise:
     density_a2_per_hz: float
     band_hz: tuple[float, float]
     lsb_a: float  # the current's quantisation step, 0 if continuous
-    #: the low-pass the model's current went through (:func:`lowpass_current`), 0 if none
-    cutoff_hz: float = 0.0
 
     def as_dict(self) -> dict:
         return {"rms_a": self.rms_a, "density_a2_per_hz": self.density_a2_per_hz,
                 "band_hz": list(self.band_hz), "lsb_a": self.lsb_a,
-                "cutoff_hz": self.cutoff_hz or None,
                 "rms_lsb": self.rms_a / self.lsb_a if self.lsb_a > 0 else None}
 
 
@@ -76,64 +61,12 @@ def estimate_input_noise(iq: np.ndarray, fs: float, lsb_a: float = 0.0) -> Input
     return InputNoise(rms, density, (lo, hi), lsb_a)
 
 
-def noisy_experiment(exp: Experiment, rms_a: float, iq: np.ndarray | None = None,
-                     cutoff_hz: float = 0.0) -> Experiment:
+def noisy_experiment(exp: Experiment, rms_a: float, iq: np.ndarray | None = None) -> Experiment:
     """``exp`` with white noise of ``rms_a`` added to its logged current (fixed seed), or to
-    ``iq`` in its place; the noise low-passed at ``cutoff_hz`` first when > 0, as the
-    model's current was (:func:`lowpass_current`)."""
+    ``iq`` in its place."""
     rng = np.random.default_rng(NOISE_SEED)
     base = exp.iq if iq is None else iq
-    noise = rng.normal(0.0, rms_a, exp.n)
-    if cutoff_hz > 0:
-        noise = lowpass_current(noise, exp.data.sample_rate_hz, cutoff_hz)
-    return experiment_with_current(exp, base + noise)
-
-
-#: The low-pass's corner, in multiples of the band's upper edge: an 8th-order Butterworth run
-#: forward and back passes |H|^2 = 1 / (1 + (f/fc)^16)^2, at the edge (f/fc = 2/3) 0.9970
-#: in power, 0.15 % in amplitude, below the fit's own resolution of the gain.
-CUTOFF_FACTOR = 1.5
-#: Above this fraction of the Nyquist rate a low-pass would remove too little noise to matter
-#: (and the floor of :func:`estimate_input_noise` is taken there): no filter.
-CUTOFF_MAX_OF_NYQUIST = 0.8
-BUTTER_ORDER = 8
-
-
-#: Segments the band's spectrum averages at least: a noise-only bin of an average of ~2K
-#: degrees of freedom stands :data:`SIGNAL_LINE_FACTOR` above the floor with a probability
-#: far below one in the bins of a record (one segment: exp(-10 ln 2), a few bins per record).
-BAND_SEGMENTS = 8
-
-
-def input_band(iq: np.ndarray, fs: float) -> float:
-    """Upper edge (Hz) of the band where the current's Welch spectrum stands
-    :data:`SIGNAL_LINE_FACTOR` above its own white floor (the median over the upper half of
-    the band, as :func:`estimate_input_noise` takes it); 0 if it nowhere does."""
-    nper = max(16, min(_nperseg(iq.size, fs), 2 ** int(np.log2(2 * iq.size / (BAND_SEGMENTS + 1)))))
-    f, p = welch(iq - np.mean(iq), fs=fs, nperseg=nper)
-    sel = (f >= 0.25 * fs) & (f <= 0.49 * fs)
-    floor = float(np.median(p[sel])) if sel.any() else 0.0
-    if floor <= 0:
-        return 0.0
-    above = f[p > SIGNAL_LINE_FACTOR * floor]
-    return float(above.max()) if above.size else 0.0
-
-
-def current_cutoff(iq: np.ndarray, fs: float) -> float:
-    """The low-pass corner for the model's current (module docstring), 0 for none."""
-    edge = input_band(iq, fs)
-    cut = CUTOFF_FACTOR * edge
-    if edge <= 0 or cut > CUTOFF_MAX_OF_NYQUIST * 0.5 * fs:
-        return 0.0
-    return cut
-
-
-def lowpass_current(iq: np.ndarray, fs: float, cutoff_hz: float) -> np.ndarray:
-    """``iq`` through the zero-phase low-pass at ``cutoff_hz`` (module docstring); the ends
-    padded by odd reflection over ten periods of the corner (no start-up transient)."""
-    sos = butter(BUTTER_ORDER, cutoff_hz, fs=fs, output="sos")
-    pad = int(min(iq.size - 1, max(3 * 2 * BUTTER_ORDER, 10.0 * fs / cutoff_hz)))
-    return sosfiltfilt(sos, iq, padtype="odd", padlen=pad)
+    return experiment_with_current(exp, base + rng.normal(0.0, rms_a, exp.n))
 
 
 #: A line of the current's spectrum is kept as signal when its power exceeds this multiple of
@@ -168,7 +101,7 @@ def held_noise_models(exp: Experiment, noise: InputNoise) -> tuple:
 
     clean = clean_current(exp.iq, noise)
     return (FastModel(experiment_with_current(exp, clean)),
-            FastModel(noisy_experiment(exp, noise.rms_a, clean, noise.cutoff_hz)))
+            FastModel(noisy_experiment(exp, noise.rms_a, clean)))
 
 
 def predicted_residual(simulate_clean: dict[str, np.ndarray],
@@ -177,6 +110,5 @@ def predicted_residual(simulate_clean: dict[str, np.ndarray],
     return {c: simulate_noisy[c] - simulate_clean[c] for c in simulate_clean}
 
 
-__all__ = ["InputNoise", "clean_current", "current_cutoff", "estimate_input_noise",
-           "experiment_with_current", "held_noise_models", "input_band", "lowpass_current",
-           "noisy_experiment", "predicted_residual"]
+__all__ = ["InputNoise", "clean_current", "estimate_input_noise", "experiment_with_current",
+           "held_noise_models", "noisy_experiment", "predicted_residual"]
