@@ -173,11 +173,12 @@ def test_force_gain_written_by_soem_changes_that_box_only(netns, full, cfg, mode
         stop_serve(serve)
     assert (res["kp_read"], res["kp_other"]) == (KP, cfg.get("mcu.kp_force"))
     assert (res["op"], res["bad_wkc"]) == (8, 0)
-    # The boxes' MCUs had a fresh command every box cycle. (A box thread that fell more than
-    # command_timeout_s + safe_off_delay_s behind and caught up back to back runs those
-    # cycles on one record: its MCU switches the board off and the step never shows.)
+    # The boxes' MCUs had a fresh command every box cycle, on the master's time: a box
+    # thread that fell behind and caught up back to back counts the writes that reached
+    # the ESCs in each late cycle's millisecond (hil.fieldbus.box_clock), so a trip here
+    # means SOEM wrote nothing for command_timeout_s.
     assert not any(st & (mcu.CMD_TIMEOUT | mcu.SAFE_OFF) for st in res["status_seen"]), \
-        "an MCU command watchdog ran out: the box clock fell behind (serve's lag)"
+        "an MCU command watchdog ran out: the master did not write for 10 ms"
     tuned = _predicted(make_box(
         "stack", full.boxes[0], cfg.with_overrides({"mcu.kp_force": KP}, "kp")), cfg, 400)
     plain = _predicted(make_box("stack", full.boxes[0], cfg), cfg, 400)
