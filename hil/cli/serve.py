@@ -469,8 +469,6 @@ def _serve(args: argparse.Namespace, cfg, topo, capture: str | None,
                          late_us=args.late_us)
     frames = [{"lad": lad, "length": n, "wkc": wkc} for lad, n, wkc in chain.plan.frames]
     plan = ", ".join(f"LRW lad {f['lad']} len {f['length']} WKC {f['wkc']}" for f in frames)
-    rt.process()
-    rt.frame_thread()  # this thread answers the frames
     tty = sys.stderr.isatty()
 
     def progress(st: ServeStats) -> None:
@@ -485,8 +483,11 @@ def _serve(args: argparse.Namespace, cfg, topo, capture: str | None,
 
     try:
         # the boxes' first cycles before the ready line (the kernels compiled or loaded),
-        # while a signal still ends the command
+        # while a signal still ends the command, and before --realtime: a compile at
+        # SCHED_FIFO would hold a CPU from everything below it for minutes
         server.prepare()
+        rt.process()
+        rt.frame_thread()  # this thread answers the frames
         old = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
         print(f"eha-hil serve: ready on {where}; {topo.name}, {model} model, "
               f"{len(frames)} frame(s) per 1 ms cycle: {plan}; "
@@ -652,8 +653,10 @@ def _serve_ethercat(args: argparse.Namespace, cfg, topo, link, model: str,  # no
                     m.box = chain.boxes[m.i]
             chain.publish_inputs()  # (the recording boxes' own, equal to the replaced)
         _compute_workers(chain.engine, rt)
+        # (compiling on a cold cache: a signal still ends the command, and at the ordinary
+        # priority: under --realtime's SCHED_FIFO it would hold a CPU for minutes)
+        warm_up(chain)
         rt.process()
-        warm_up(chain)  # (compiling on a cold cache: a signal still ends the command)
 
         def ready() -> None:
             print(f"eha-hil serve: ready on {args.interface} (EtherType 0x88a4); {topo.name}, "

@@ -12,10 +12,13 @@ process data with the frame side through 3-buffers, never waiting for it.
   master wrote one since its previous cycle (its command watchdog counts the cycles
   without). A cycle run late, back to back with others to catch up, finds at most the one
   newest record, though the master wrote one in each of those cycles' milliseconds, on
-  time, as the hardware's sync manager would have got them: so each cycle also counts the
-  record it holds as fresh when a write arrived in its scheduled millisecond ``(since,
-  at]``, stamped by the frame side's clock (the slaves' clock on ethercat). A master that
-  did not write in that millisecond gets no such credit: its stalls still trip the MCUs.
+  time, as the hardware's sync manager would have got them: so a cycle that starts after
+  its scheduled millisecond ``(since, at]`` is over (a whole period past its release) also
+  counts the record it holds as fresh when a write arrived in that millisecond, stamped by
+  the frame side's clock (the slaves' clock on ethercat): :func:`take_outputs`. A master
+  that did not write in that millisecond gets no such credit: its stalls still trip the
+  MCUs. A cycle on time takes only what is new (no credit: a write it took early, between
+  the release and its start, would count twice).
 * :class:`ClockedBoxes` puts the boxes of a paced :class:`~hil.fieldbus.chain.Chain`
   (serial, udp) behind one output and one input 3-buffer each
   (:func:`firmware_model.esc.compiled.publish` / ``take``, as an ESC's process-data sync
@@ -201,6 +204,35 @@ def _sleep_until(deadline_ns: int) -> None:
     _sleeper.sleep_until(deadline_ns)
 
 
+def take_outputs(boxes: list, newest: Callable[[int], bytes | None], held: list,
+                 written: Callable[[int, int], np.ndarray], since_ns: int | None,
+                 at_ns: int | None, now: Callable[[], int]) -> int:
+    """Each box ``i`` applies ``newest(i)`` (its newest output record, None if nothing new)
+    and keeps it in ``held[i]``; with nothing new, a cycle run late (``now()`` a period or
+    more past its release ``at_ns``) applies ``held[i]`` again when ``written(since_ns,
+    at_ns)[i]``: the master's write in the cycle's scheduled millisecond. How many boxes
+    were fresh by that alone."""
+    credited, late, wrote = 0, None, None
+    for i, box in enumerate(boxes):
+        rec = newest(i)
+        if rec is not None:
+            held[i] = rec
+            box.apply(rec)
+            continue
+        if since_ns is None or held[i] is None:
+            continue
+        if late is None:
+            late = now() >= at_ns + PERIOD_NS
+        if not late:
+            continue
+        if wrote is None:
+            wrote = written(since_ns, at_ns)
+        if wrote[i]:
+            box.apply(held[i])
+            credited += 1
+    return credited
+
+
 class _Port:
     """What the frame side of a :class:`Chain` sees of box ``i`` once the boxes run on
     their own clock: ``apply`` publishes an output record, ``inputs`` is the newest
@@ -273,24 +305,16 @@ class ClockedBoxes:
         self.chain.boxes, self.chain.engine = self.boxes, self.engine
 
     def take_outputs(self, since_ns: int | None = None, at_ns: int | None = None) -> None:
-        """Each box takes its newest output record if new, else the one it holds again if
-        the master wrote one in the cycle's scheduled ``(since_ns, at_ns]`` (see the
-        module's docstring)."""
-        written = None
-        for i, box in enumerate(self.boxes):
-            k = take(self.oidx[i])
-            if k >= 0:
-                rec = self.taken[i] = self.obuf[i, k, :self.olen[i, k]].tobytes()
-                box.apply(rec)
-                continue
-            rec = self.taken[i]
-            if since_ns is None or rec is None:
-                continue
-            if written is None:
-                written = written_in(self.written_at, since_ns, at_ns)
-            if written[i]:
-                box.apply(rec)
-                self.fresh_by_schedule += 1
+        """Each box takes its newest output record if new; a late cycle also the one it
+        holds, if the master wrote one in its scheduled ``(since_ns, at_ns]``
+        (:func:`take_outputs`)."""
+        self.fresh_by_schedule += take_outputs(
+            self.boxes, self._newest, self.taken,
+            lambda a, b: written_in(self.written_at, a, b), since_ns, at_ns, self.clock)
+
+    def _newest(self, i: int) -> bytes | None:
+        k = take(self.oidx[i])
+        return None if k < 0 else self.obuf[i, k, :self.olen[i, k]].tobytes()
 
     def advance(self) -> None:
         advance_boxes(self.engine, self.boxes)

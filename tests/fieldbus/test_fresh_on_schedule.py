@@ -30,6 +30,7 @@ T0 = 10**12        # the slaves' zero on the monotonic clock (any)
 ON_TIME = 20       # box cycles on schedule first
 STALL = 40         # then the box thread stalls this many cycles (under MAX_LAG_CYCLES)
 WRITE_AT_NS = 300_000  # the master writes 0.3 ms into each of its milliseconds
+START_NS = 50_000      # a box cycle on time starts this long after its release
 
 
 class _Ethercat:
@@ -45,23 +46,33 @@ class _Ethercat:
         s = self.master.slaves[0]
         struct.pack_into("<BBi", self.master.image, s.out_lad, 1, pdo.FLAG_ENABLE, 10_000)
         self.box = 0  # the box cycles run so far
+        self.now = T0  # when the box thread runs (CLOCK_MONOTONIC)
+        self.chain.clock = lambda: self.now
+        box = self.chain.boxes[0]
+        self.applied = 0  # fresh commands box 0 took
+        box.apply = lambda data, apply=box.apply: (setattr(self, "applied", self.applied + 1),
+                                                   apply(data))
 
-    def write(self, ms: int) -> None:
-        """The master's cycle in millisecond ``ms`` of the slaves' clock."""
-        self.frames.tick(ms * PERIOD_NS + WRITE_AT_NS - self.frames.now())
+    def write(self, ms: int, at_ns: int = WRITE_AT_NS) -> None:
+        """The master's cycle ``at_ns`` into millisecond ``ms`` of the slaves' clock."""
+        self.frames.tick(ms * PERIOD_NS + at_ns - self.frames.now())
         self.master.cycle()
 
-    def run_box(self) -> int:
-        """The next box cycle with its scheduled millisecond; box 0's actuator 0 status."""
+    def run_box(self, at_now: bool = False) -> int:
+        """The next box cycle with its scheduled millisecond, on time (``START_NS`` after
+        its release) or at ``self.now`` (``at_now``); box 0's actuator 0 status."""
         self.box += 1
-        self.chain.cycle(T0 + (self.box - 1) * PERIOD_NS, T0 + self.box * PERIOD_NS)
+        at = T0 + self.box * PERIOD_NS
+        if not at_now:
+            self.now = max(self.now, at + START_NS)
+        self.chain.cycle(at - PERIOD_NS, at)
         return self.chain.boxes[0].model.status[0]
 
 
-def _on_time(e: _Ethercat, cycles: int) -> list[int]:
+def _on_time(e: _Ethercat, cycles: int, write_at_ns: int = WRITE_AT_NS) -> list[int]:
     out = []
     for _ in range(cycles):
-        e.write(e.box)         # the master's write in the millisecond before the release
+        e.write(e.box, write_at_ns)  # the master's write in the ms before the release
         out.append(e.run_box())
     return out
 
@@ -73,13 +84,30 @@ def test_box_cycles_run_late_keep_the_mcu_fed_on_the_masters_time(cfg):
     # the box thread stalls: the master writes on time every ms, no box cycle runs ...
     for ms in range(e.box, e.box + STALL):
         e.write(ms)
-    # ... then the late cycles run back to back (the master's next write comes after them)
-    late = [e.run_box() for _ in range(STALL)]
+    # ... then the late cycles run back to back, half a ms after the last one's release
+    # (the master's next write comes after them)
+    e.now = T0 + (e.box + STALL) * PERIOD_NS + PERIOD_NS // 2
+    late = [e.run_box(at_now=True) for _ in range(STALL)]
     assert not any(s & (CMD_TIMEOUT | SAFE_OFF) for s in late), [hex(s) for s in late]
-    # the first late cycle took the newest record; the others were fresh by the schedule
-    # (box 0 and box 2 have outputs; the IMU box none)
-    assert e.chain.fresh_by_schedule == 2 * (STALL - 1)
+    # the first late cycle took the newest record; those whose millisecond was over were
+    # fresh by the schedule (not the last: on time); box 0 and box 2 have outputs, the IMU
+    # box none
+    assert e.chain.fresh_by_schedule == 2 * (STALL - 2)
     assert not any(s & CMD_TIMEOUT for s in _on_time(e, 5))
+
+
+def test_box_cycles_on_time_take_each_write_once(cfg):
+    """A write that lands between a cycle's release and its start is that cycle's (it
+    takes the newest record as it starts) and not the next one's too, though it lies in the
+    next one's scheduled millisecond: on time there is no credit."""
+    e = _Ethercat(cfg)
+    writes = 0
+    for k in range(30):
+        if k % 2:  # every other millisecond, after the release, before the cycle starts
+            e.write(e.box + 1, START_NS // 5)
+            writes += 1
+        e.run_box()
+    assert e.applied == writes and e.chain.fresh_by_schedule == 0
 
 
 def test_a_master_that_stalls_still_trips_the_mcu(cfg):
@@ -91,7 +119,8 @@ def test_a_master_that_stalls_still_trips_the_mcu(cfg):
         _on_time(e, ON_TIME)
         silent = 70
         if late:  # the master's last write long before: stamped outside these cycles
-            status = [e.run_box() for _ in range(silent)]
+            e.now = T0 + (e.box + silent + 1) * PERIOD_NS
+            status = [e.run_box(at_now=True) for _ in range(silent)]
         else:
             status = []
             for _ in range(silent):
@@ -142,12 +171,13 @@ def test_clocked_boxes_credit_the_masters_writes_by_their_stamps(cfg):
         clocked.cycle(T0 + (k - 1) * PERIOD_NS, T0 + k * PERIOD_NS)
     for ms in range(k, k + STALL):
         write(ms)
+    now[0] = T0 + (k + STALL) * PERIOD_NS + PERIOD_NS // 2  # the box thread resumes
     status = []
     for j in range(k + 1, k + STALL + 1):
         clocked.cycle(T0 + (j - 1) * PERIOD_NS, T0 + j * PERIOD_NS)
         status.append(model.status[0])
     assert not any(s & (CMD_TIMEOUT | SAFE_OFF) for s in status), [hex(s) for s in status]
-    assert clocked.fresh_by_schedule == STALL - 1
+    assert clocked.fresh_by_schedule == STALL - 2
 
 
 def test_the_box_clock_hands_each_cycle_its_scheduled_millisecond():

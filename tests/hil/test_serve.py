@@ -313,5 +313,6 @@ def test_serve_log_of_the_robot_engine_replays_bit_for_bit(tmp_path):
     t, outs = FrameLogReader(log).blocks("/mcu/0/outputs")
     force = outs[:, 2:6].copy().view("<i4")[:, 0] * 0.01
     # a box cycle applies the newest record its master sent (two in one cycle: one; how
-    # many land in one cycle depends on the machine's load)
-    assert 1 <= len(t) <= 100 and (force == FORCE_N).all()
+    # many land in one cycle depends on the machine's load), or, run late, the one it
+    # holds if the master wrote in the cycle's millisecond (counted)
+    assert 1 <= len(t) <= 100 + served["fresh_by_schedule"] and (force == FORCE_N).all()

@@ -42,7 +42,7 @@ from firmware_model.esc import compiled as ec
 from firmware_model.esc import dc_compiled as dcc
 from firmware_model.esc.compiled import EscArrays
 from firmware_model.esc.dc import DcParams
-from hil.fieldbus.box_clock import PERIOD_NS, BoxClock, advance_boxes
+from hil.fieldbus.box_clock import PERIOD_NS, BoxClock, advance_boxes, take_outputs
 from hil.fieldbus.boxes import box_engine, make_box
 from hil.fieldbus.esc import frames as esc_frames
 from hil.fieldbus.esc.mailbox import Mailboxes
@@ -96,28 +96,24 @@ class ServedChain:
         self.fresh_by_schedule = 0
         #: The warm-up cycles have run (:func:`warm_up`).
         self.warmed = False
+        #: CLOCK_MONOTONIC [ns]: is a cycle late? (a test's own clock)
+        self.clock: Callable[[], int] = time.monotonic_ns
         self.publish_inputs()
 
     def take_outputs(self, since_ns: int | None = None, at_ns: int | None = None) -> None:
-        """Each box takes the newest output record its ESC holds, if new; else the record
-        it holds counts as fresh again if the master completed one in ``(since_ns, at_ns]``
-        [ns, CLOCK_MONOTONIC]: the cycle's scheduled millisecond, on the slaves' clock (a
-        cycle run late, back to back with others, finds only the newest of their records)."""
-        written = None
-        for i, box in enumerate(self.boxes):
-            out = self.arrays.pending_outputs(i)
-            if out is not None:
-                rec = self.taken[i] = self.mailboxes.expand(i, out)
-                box.apply(rec)
-                continue
-            rec = self.taken[i]
-            if since_ns is None or rec is None:
-                continue
-            if written is None:
-                written = self.arrays.outputs_written(since_ns - self.t0, at_ns - self.t0)
-            if written[i]:
-                box.apply(rec)
-                self.fresh_by_schedule += 1
+        """Each box takes the newest output record its ESC holds, if new; a cycle run late
+        (back to back with others, it finds only the newest of their records) also the one
+        it holds, if the master completed one in its scheduled ``(since_ns, at_ns]`` [ns,
+        CLOCK_MONOTONIC] of the slaves' clock (:func:`hil.fieldbus.box_clock.take_outputs`)."""
+        t0 = self.t0
+        self.fresh_by_schedule += take_outputs(
+            self.boxes, self._newest, self.taken,
+            lambda a, b: self.arrays.outputs_written(a - t0, b - t0), since_ns, at_ns,
+            self.clock)
+
+    def _newest(self, i: int) -> bytes | None:
+        out = self.arrays.pending_outputs(i)
+        return None if out is None else self.mailboxes.expand(i, out)
 
     def advance(self) -> None:
         advance_boxes(self.engine, self.boxes)
