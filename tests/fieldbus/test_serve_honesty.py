@@ -215,16 +215,23 @@ def test_udp_serve_runs_the_whole_robot_on_its_own_clock():
     p = subprocess.Popen([sys.executable, "-m", "hil.cli", "serve", "--transport", "udp",
                           "--port", "0", "--topology", "hydra_full", "--model", "robot",
                           "--json", "-q", "--max-lag-ms", "1e6",
-                          "--max-overrun-percent", "100", "--max-late-percent", "100"],
+                          "--max-overrun-percent", "100", "--max-late-percent", "100",
+                          # this master (the test, at the ordinary priority) may stall
+                          # longer than the stock 10 ms on a loaded machine: not tested here
+                          "--set", "mcu.command_timeout_s=1.0"],
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=_env())
     try:  # (it serves until SIGINT, after the master's last cycle: no wall-time budget)
         line = p.stderr.readline()  # (after its first cycles: compiled or loaded)
         assert "ready on udp 127.0.0.1:" in line and "robot model" in line, line
         port = int(line.split("ready on udp 127.0.0.1:")[1].split(";")[0])
         m = Master(load_topology("hydra_full"), crc_trailer=False)
-        status = 0
+        status = cycles = 0
+        deadline = time.monotonic() + 60.0
         with open_transport("udp", "master", remote_port=port) as end:
-            for _ in range(300):
+            # 300 cycles, and on until the board reports enabled (the boxes on their own
+            # clock may run late on a loaded machine)
+            while cycles < 300 or not (status & BOARD_ENABLED or time.monotonic() > deadline):
+                cycles += 1
                 m.set_actuator(0, "force", 200.0, enable=True)
                 for f in m.frames():
                     end.send(f)
@@ -243,6 +250,6 @@ def test_udp_serve_runs_the_whole_robot_on_its_own_clock():
             p.wait()
     rep = json.loads(out)
     assert rep["model"] == "robot" and p.returncode == 0, rep["failures"]
-    assert m.stats.frames_ok == 600 and m.stats.wkc_errors == 0
-    assert rep["frames_served"] == 600 and rep["cycles"] > 0
+    assert m.stats.frames_ok == 2 * cycles and m.stats.wkc_errors == 0
+    assert rep["frames_served"] == 2 * cycles and rep["cycles"] > 0
     assert status & BOARD_ENABLED
