@@ -101,9 +101,10 @@ def fill(rec: np.ndarray, channel_ids: np.ndarray, seq0: np.ndarray, log_ns: np.
     elif index.shape != (c, INDEX_HEAD + 16 * k) or index.dtype != np.uint8:
         raise ValueError(f"need index ({c}, {INDEX_HEAD + 16 * k}) uint8, got "
                          f"{index.shape} {index.dtype}")
-    _fill(rec, rec.shape[1] - 9, np.asarray(channel_ids, np.int64),
-          np.asarray(seq0, np.int64), np.asarray(log_ns, np.int64),
-          np.asarray(publish_ns, np.int64), index, int(base))
+    # contiguous int64 whatever comes in: one compiled signature (warm_up's)
+    _fill(rec, rec.shape[1] - 9, np.ascontiguousarray(channel_ids, np.int64),
+          np.ascontiguousarray(seq0, np.int64), np.ascontiguousarray(log_ns, np.int64),
+          np.ascontiguousarray(publish_ns, np.int64), index, int(base))
 
 
 def warm_up() -> None:
