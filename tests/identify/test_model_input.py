@@ -12,9 +12,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from scipy.signal import lfilter
 
 from hil.identify.experiment import prepare
-from hil.identify.noise import CUTOFF_FACTOR, lowpass_current, noisy_experiment
+from hil.identify.noise import CUTOFF_FACTOR, lowpass_current, noisy_experiment, white_above
 from hil.identify.pipeline import model_input
 from hil.identify.rig import generate_rig
 from plant.config import load_config
@@ -61,3 +62,27 @@ def test_the_lowpass_has_zero_phase_and_no_start_up_transient():
     x = 2.0 + np.sin(2 * np.pi * 50.0 * t + 0.3)
     y = lowpass_current(x, fs, 450.0)
     assert np.max(np.abs(y - x)) < 1e-3
+
+
+def test_a_current_fed_back_from_the_plant_is_taken_as_logged():
+    # the free piston under `slide`: a position loop on the encoder plus the friction's stick
+    # and slip put into the current, above the band's tenfold edge, a spectrum that falls
+    # over the octave above it; the plant felt that part, and cutting it moved the fit
+    cfg = load_config("hydra_default")
+    slide = generate_rig("free_piston", ("seal_friction",), seconds=1.0, seed=4,
+                         profile="slide")
+    exp, noise = model_input(prepare(slide.data, cfg, "bl"), lambda msg: None)
+    assert noise.cutoff_hz == 0.0
+    assert np.array_equal(exp.iq, slide.data.col("iq"))
+
+
+def test_white_above_tells_a_flat_floor_from_a_falling_spectrum():
+    fs = 5000.0
+    rng = np.random.default_rng(7)
+    white = rng.normal(0.0, 0.02, 30000)
+    assert white_above(white, fs, 450.0)
+    # the same floor with a loop's answer on top (white noise through a first-order lag at
+    # 300 Hz): 3.6x the floor at 450-550 Hz, 1.3x near Nyquist, as under `slide`
+    a = np.exp(-2.0 * np.pi * 300.0 / fs)
+    falling = white + lfilter([1.0 - a], [1.0, -a], rng.normal(0.0, 0.06, 30000))
+    assert not white_above(falling, fs, 450.0)
