@@ -18,7 +18,7 @@ import numpy as np
 
 from hil.identify.fit import FitResult
 from hil.identify.model import IDX, N_PARAMS
-from hil.identify.pipeline import START_MARGIN, _Loop
+from hil.identify.pipeline import PLAIN_NFEV, START_MARGIN, _Loop
 
 CONFIGURED = {"gain_n_per_a": 120.0, "ds": 6.8e4, "dp": 1.5e4, "dc": 413.0, "ks": 2.23e7,
               "jp": 118.0, "jc": 0.295, "k_rod": 1.52e6, "c_rod": 50.0}
@@ -67,7 +67,32 @@ def test_the_robust_refit_is_kept_only_when_lower_by_the_margin():
                               (plain_cost * (1.0 - 1e-15), "plain"),
                               (1.3 * plain_cost, "plain")):
         robust_fit = (_fit({}, robust_cost), {})
-        loop.refit_with = (lambda d, beta, robust=False, r=robust_fit: r if robust else plain)
+        runs = []
+
+        def refit(d, beta, robust=False, nfev=None, r=robust_fit, runs=runs):
+            runs.append(nfev)
+            return r if robust else plain
+
+        loop.refit_with = refit
         new, _, other = _Loop.start_chosen(loop, None, {}, plain, 0)
         assert (new is robust_fit[0]) == (kept == "robust"), robust_cost
-        assert other[0] is (plain[0] if kept == "robust" else robust_fit[0])
+        if kept == "robust":
+            # the short trial led, so the robust refit was run in full; the plain one is
+            # the other
+            assert runs == [PLAIN_NFEV, None]
+            assert other[0] is plain[0]
+        else:
+            # the short trial did not lead: no full robust refit, none to fall back on
+            assert runs == [PLAIN_NFEV]
+            assert other is None
+
+
+def test_a_trial_that_leads_but_ends_behind_is_the_other():
+    loop = _loop()
+    loop.current = _fit({"dc": 3.0 * 413.0})
+    plain = (_fit({}, 6000.0), {})
+    trial, full = (_fit({}, 5000.0), {}), (_fit({}, 5990.0), {})
+    loop.refit_with = lambda d, beta, robust=False, nfev=None: (
+        plain if not robust else trial if nfev == PLAIN_NFEV else full)
+    new, _, other = _Loop.start_chosen(loop, None, {}, plain, 0)
+    assert new is plain[0] and other[0] is full[0]
