@@ -36,7 +36,7 @@ def _fit(values: dict[str, float], cost: float = 0.0) -> FitResult:
 def _loop() -> SimpleNamespace:
     configured = _fit({}).theta
     loop = SimpleNamespace(exp=SimpleNamespace(start=dict(CONFIGURED)), configured=configured,
-                           est_mask=None, said=[])
+                           est_mask=None, said=[], unbiased=True)
     loop.say = loop.said.append
     loop.robust_start = lambda fit: _Loop.robust_start(loop, fit)
     loop.weighted_ss = lambda out, mask: float(out["cost"][0])
@@ -96,3 +96,11 @@ def test_a_trial_that_leads_but_ends_behind_is_the_other():
         plain if not robust else trial if nfev == PLAIN_NFEV else full)
     new, _, other = _Loop.start_chosen(loop, None, {}, plain, 0)
     assert new is plain[0] and other[0] is full[0]
+
+def test_a_noisy_input_starts_from_the_far_parameters_alone():
+    # without the low-pass the estimation cost carries the input noise's bias: the robust
+    # start is the far parameters only, the rod's damper and the lags left as fitted
+    loop = _loop()
+    loop.unbiased = False
+    absorbed = _fit({"dc": 2.71 * 413.0, "c_rod": 48.7 * 50.0, "lag_strain_s": 1e-3})
+    assert _Loop.robust_start(loop, absorbed) == ["dc"]
