@@ -246,7 +246,7 @@ class _Port:
         rec = np.frombuffer(data, dtype=np.uint8)
         publish(o.obuf[i], o.olen[i], o.oidx[i], rec, rec.size)
         k = o.writes[i]
-        o.written_at[i, k % OUT_RING] = o.clock()
+        o.written_at[i, k % o.written_at.shape[1]] = o.clock()  # (a ring)
         o.writes[i] = k + 1
 
     def inputs(self) -> bytes:
