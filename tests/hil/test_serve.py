@@ -110,6 +110,25 @@ def _stop(proc: subprocess.Popen, timeout_s: float = 120.0) -> tuple[dict, int]:
     return json.loads(out), proc.returncode
 
 
+def _cycle_over_udp(m: Master, port: int, cycles: int, command=None) -> None:
+    """``cycles`` master cycles over udp to the server on ``port``, each answered (every
+    reply within the reply timeout), 1 ms apart; ``command(m)`` before each cycle's frames."""
+    from hil.transports import open_transport
+
+    with open_transport("udp", "master", remote_port=port) as end:
+        for _ in range(cycles):
+            if command is not None:
+                command(m)
+            for f in m.frames():
+                end.send(f)
+            while not all(m._answered):
+                reply = end.recv(timeout=REPLY_TIMEOUT_S)
+                assert reply is not None
+                m.receive(reply)
+            m.end_cycle()
+            time.sleep(1e-3)
+
+
 def _master_loop(end, topo) -> tuple[Master, list[tuple[int, float, int]], int]:
     """1 kHz, paced to the wall clock; per cycle (cycle, f_pressure, status) of fresh
     inputs. A board switched off by the command watchdog (this process stalled for longer
@@ -246,23 +265,13 @@ def test_serve_udp_capture_holds_every_exchange(tmp_path):
     default, no CRC-32 trailer); the capture holds each request and reply as UDP between
     the master's port and the server's, and reads back as such."""
     from hil.fieldbus.traffic import read_traffic, summary
-    from hil.transports import open_transport
 
     cap = tmp_path / "serve.pcapng"
     topo = load_topology("bench_one_box")
     m = Master(topo, crc_trailer=False)
     with _udp_server("--model", "echo", "--capture", str(cap)) as (proc, port):
         assert "without CRC-32 trailer" in proc.stderr_lines[-1]
-        with open_transport("udp", "master", remote_port=port) as end:
-            for _ in range(100):
-                for f in m.frames():
-                    end.send(f)
-                while not all(m._answered):
-                    reply = end.recv(timeout=REPLY_TIMEOUT_S)
-                    assert reply is not None
-                    m.receive(reply)
-                m.end_cycle()
-                time.sleep(1e-3)
+        _cycle_over_udp(m, port, 100)
         served, code = _stop(proc)
     # exit 1 may only come from timing on a busy machine: overruns, late replies, lag (the
     # pacing and the thresholds have their own tests)
@@ -288,22 +297,12 @@ def test_serve_log_of_the_robot_engine_replays_bit_for_bit(tmp_path):
     runs until SIGINT, after the master's last cycle: no wall-time budget.)"""
     from hil.framelog import FrameLogReader
     from hil.replay.replay import replay_mcu
-    from hil.transports import open_transport
 
     log = tmp_path / "serve.mcap"
     m = Master(load_topology("bench_one_box"), crc_trailer=False)
     with _udp_server("--model", "robot", "--log", str(log)) as (proc, port):
-        with open_transport("udp", "master", remote_port=port) as end:
-            for _ in range(100):
-                m.set_actuator(0, "force", FORCE_N, enable=True)
-                for f in m.frames():
-                    end.send(f)
-                while not all(m._answered):
-                    reply = end.recv(timeout=REPLY_TIMEOUT_S)
-                    assert reply is not None
-                    m.receive(reply)
-                m.end_cycle()
-                time.sleep(1e-3)
+        _cycle_over_udp(m, port, 100,
+                        lambda m: m.set_actuator(0, "force", FORCE_N, enable=True))
         served, _code = _stop(proc)
     assert served["frames_served"] == 100, served["failures"]
     result = replay_mcu(log)
