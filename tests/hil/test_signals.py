@@ -27,15 +27,19 @@ pytestmark = pytest.mark.slow  # a console-script start each (numba's cache: 2-6
 EXE = shutil.which("eha-hil") or f"{sys.prefix}/bin/eha-hil"
 
 
+def _default_signals() -> None:
+    for s in (signal.SIGINT, signal.SIGHUP):
+        signal.signal(s, signal.SIG_DFL)
+
+
 class Running:
     """The console script, its stderr read as it comes."""
 
     def __init__(self, argv: list[str], cwd: Path) -> None:
-        # SIGINT back to its default in the child (a test run in the background ignores it)
+        # SIGINT and SIGHUP back to their defaults in the child (a test run in the background
+        # ignores SIGINT, one under nohup SIGHUP: the command rightly keeps an ignored SIGHUP)
         self.proc = subprocess.Popen([EXE, *argv], cwd=cwd, stdout=subprocess.PIPE,
-                                     stderr=subprocess.PIPE,
-                                     preexec_fn=lambda: signal.signal(signal.SIGINT,
-                                                                      signal.SIG_DFL))
+                                     stderr=subprocess.PIPE, preexec_fn=_default_signals)
         self.err = b""
         self.out = b""
         self._lock = threading.Lock()
