@@ -448,9 +448,9 @@ class _Loop:
         exp, current, configured = self.exp, self.current, self.configured
         ds_ = d if isinstance(d, list) else [d]
         theta0 = current.theta.copy()
-        if robust:
-            for p in self.robust_start(current):
-                theta0[IDX[p]] = configured[IDX[p]]
+        put_back = self.robust_start(current) if robust else []
+        for p in put_back:
+            theta0[IDX[p]] = configured[IDX[p]]
         credible = theta0.copy()
         new_free = list(current.free)
         for e in ds_:
@@ -467,7 +467,7 @@ class _Loop:
         scales = {p: nom for e in ds_ for p, nom in zip(e.params, e.nominal, strict=True)}
         refitter = OutputErrorFit(self.model, {**NUISANCE_SCALES(exp.dt),
                                                **_all_scales(self.defs_all), **scales})
-        moved = robust and self.unbiased and bool(self.robust_start(current))
+        moved = self.unbiased and bool(put_back)
         # from the robust start the absorbed parameters have the whole way back to walk: the
         # fit is given the Jacobians to arrive (conrod, seal friction, rig seed 1: stopped
         # after 16 with the pressure differences 1.3 % predictable, at 0.3 % one fit on)
