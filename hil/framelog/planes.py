@@ -48,33 +48,35 @@ def split(frames: np.ndarray, out: np.ndarray, deltas: bool) -> None:  # pragma:
 def low_widths(frames: np.ndarray, bits: int, stride: int, share: int,
                out: np.ndarray) -> None:  # pragma: no cover
     """``out[j]``: the noisy low bits of element ``j`` of ``frames`` ((k, count, width)
-    signed integers of ``bits`` bits): the fewest bits that hold all but ``1 / share`` of
-    a sample of its zigzag-coded differences (frame ``n`` minus frame ``n - 1`` for ``n``
-    = 1, 1 + ``stride``, ... of every one of the ``k`` channels): at most that share of
-    the values has bits above them."""
+    signed integers of ``bits`` bits), in whole bytes: 8 x the fewest bytes that hold all
+    but ``1 / share`` of a sample of its zigzag-coded differences (frame ``n`` minus frame
+    ``n - 1`` for ``n`` = 1, 1 + ``stride``, ... of every one of the ``k`` channels)."""
     k, count, width = frames.shape
     shift = 64 - bits
-    hist = np.zeros(65, np.int64)
-    for j in range(width):
-        hist[:] = 0
-        total = 0
-        for i in range(k):
-            for n in range(1, count, stride):
-                d = ((frames[i, n, j] - frames[i, n - 1, j]) << shift) >> shift
+    size = bits // 8
+    hist = np.zeros((width, 9), np.int64)  # samples per element and byte length
+    total = 0
+    for i in range(k):
+        for n in range(1, count, stride):
+            row = frames[i, n]
+            before = frames[i, n - 1]
+            for j in range(width):
+                d = ((row[j] - before[j]) << shift) >> shift
                 z = (d << 1) ^ (d >> 63)
                 length = 0
-                while z != 0:
-                    z = (z >> 1) & 0x7FFFFFFFFFFFFFFF
+                while z != 0:  # bytes, at most 8 steps (logical shift)
+                    z = (z >> 8) & 0x00FFFFFFFFFFFFFF
                     length += 1
-                hist[length] += 1
-                total += 1
-        allowed = total // share
+                hist[j, length] += 1
+            total += 1
+    allowed = total // share
+    for j in range(width):
         above = 0
-        length = bits
-        while length > 0 and above + hist[length] <= allowed:
-            above += hist[length]
+        length = size
+        while length > 0 and above + hist[j, length] <= allowed:
+            above += hist[j, length]
             length -= 1
-        out[j] = length
+        out[j] = 8 * length
 
 
 @njit(cache=True, nogil=True)
@@ -88,15 +90,15 @@ def split_bits(frames: np.ndarray, bits: int, widths: np.ndarray, low_at: np.nda
     = bit ``b`` of ``z`` of frame ``8 m + t``, 0 past the last frame), ``z >> w`` as its
     ``(bits - w + 7) // 8`` byte planes into ``high[i, high_at[j]:]`` (``count`` bytes
     each). The inner loops write through slices (an index that numba must check for a
-    negative value keeps LLVM from vectorising them); eight frames' low bytes are turned
-    into their eight bit planes' bytes by one 8 x 8 bit-matrix transposition."""
+    negative value keeps LLVM from vectorising them), the bit planes in their own function
+    (:func:`_bit_planes`: inline, they slow the loops around them by ~10 %)."""
     k, count, width = frames.shape
     shift = 64 - bits
     per_plane = (count + 7) // 8
     col = np.empty(count, np.int64)
     lows = np.zeros(8 * per_plane, np.uint8)  # past count: 0 for good
     words = lows.view(np.int64)
-    bytes8 = np.empty(per_plane, np.int64)
+    planes8 = np.empty(per_plane, np.int64)
     for i in range(k):
         for j in range(width):
             for n in range(count):
@@ -108,25 +110,8 @@ def split_bits(frames: np.ndarray, bits: int, widths: np.ndarray, low_at: np.nda
                 d = (col[0] << shift) >> shift
                 col[0] = (d << 1) ^ (d >> 63)
             w = widths[j]
-            p = low_at[j]
-            for byte in range((w + 7) // 8):
-                s = 8 * byte
-                for n in range(count):
-                    lows[n] = (col[n] >> s) & 0xFF
-                for m in range(per_plane):  # 8 x 8 bits transposed (arithmetic shifts:
-                    x = words[m]            # the masks drop the sign bits they bring)
-                    t = (x ^ (x >> 7)) & 0x00AA00AA00AA00AA
-                    x = x ^ t ^ (t << 7)
-                    t = (x ^ (x >> 14)) & 0x0000CCCC0000CCCC
-                    x = x ^ t ^ (t << 14)
-                    t = (x ^ (x >> 28)) & 0x00000000F0F0F0F0
-                    bytes8[m] = x ^ t ^ (t << 28)
-                for b in range(min(8, w - s)):
-                    plane = low[i, p:p + per_plane]
-                    sb = 8 * b
-                    for m in range(per_plane):
-                        plane[m] = (bytes8[m] >> sb) & 0xFF
-                    p += per_plane
+            if w:
+                _bit_planes(col, w, low[i, low_at[j]:low_at[j + 1]], lows, words, planes8)
             q = high_at[j]
             for b in range((bits - w + 7) // 8):
                 s = w + 8 * b
@@ -136,3 +121,34 @@ def split_bits(frames: np.ndarray, bits: int, widths: np.ndarray, low_at: np.nda
                 for n in range(count):
                     plane[n] = (col[n] >> s) & mask
                 q += count
+
+
+@njit(cache=True, nogil=True, inline="never")
+def _bit_planes(col: np.ndarray, w: int, out: np.ndarray, lows: np.ndarray,
+                words: np.ndarray, planes8: np.ndarray) -> None:  # pragma: no cover
+    """The ``w`` low bit planes of ``col`` (count,) into ``out`` (``w`` planes of
+    ``len(words)`` bytes): per byte of the values, eight values' bytes (``lows``, as the
+    int64 ``words``) turned into their eight bit planes' bytes by one 8 x 8 bit-matrix
+    transposition (``planes8``: byte ``b`` of word ``m`` = bit plane ``b`` of values
+    ``8 m`` to ``8 m + 7``). ``lows`` past ``len(col)``: 0."""
+    count = len(col)
+    per_plane = len(words)
+    p = 0
+    for byte in range((w + 7) // 8):
+        s = 8 * byte
+        for n in range(count):
+            lows[n] = (col[n] >> s) & 0xFF
+        for m in range(per_plane):  # arithmetic shifts: the masks drop the sign they bring
+            x = words[m]
+            t = (x ^ (x >> 7)) & 0x00AA00AA00AA00AA
+            x = x ^ t ^ (t << 7)
+            t = (x ^ (x >> 14)) & 0x0000CCCC0000CCCC
+            x = x ^ t ^ (t << 14)
+            t = (x ^ (x >> 28)) & 0x00000000F0F0F0F0
+            planes8[m] = x ^ t ^ (t << 28)
+        for b in range(min(8, w - s)):
+            plane = out[p:p + per_plane]
+            sb = 8 * b
+            for m in range(per_plane):
+                plane[m] = (planes8[m] >> sb) & 0xFF
+            p += per_plane

@@ -190,12 +190,12 @@ def pack_blocks(t_ns: np.ndarray, frames: np.ndarray, dtype: np.dtype,
     return rec
 
 
-#: The noisy low bits of an element (:func:`noisy_widths`): the bits that hold all but
+#: The noisy low bits of an element (:func:`noisy_widths`): the bytes that hold all but
 #: one in :data:`NOISE_SHARE` of its differences, in a sample of every
 #: :data:`NOISE_STRIDE`-th frame's. Bits above them are then nearly always 0 (byte planes
 #: of long runs, which zstd passes quickly), the bits below as bit planes hold a sensor's
-#: noise at about its entropy (bytes in which zstd finds no match and gives up at once,
-#: where a byte plane of 2-bit noise is its slowest input: docs/framelog.md, "The
+#: noise in bytes of nearly random values, in which zstd finds no match and gives up at
+#: once, where a byte plane of 2-bit noise is its slowest input (docs/framelog.md, "The
 #: noisy low bits").
 NOISE_SHARE = 100
 NOISE_STRIDE = 64
@@ -203,10 +203,14 @@ NOISE_STRIDE = 64
 
 def noisy_widths(frames: np.ndarray) -> np.ndarray:
     """The noisy low bits of each element of the frames ``(k, count, width)`` (integers
-    of one size, little endian), the same for all ``k`` channels: the fewest bits that
-    hold all but one in :data:`NOISE_SHARE` of the zigzag-coded differences of frame
-    ``n`` to frame ``n - 1`` for ``n`` = 1, 1 + :data:`NOISE_STRIDE`, ... (width,) int64.
-    Compiled for blocks worth it, else :func:`_noisy_widths_numpy` (the reference)."""
+    of one size, little endian), the same for all ``k`` channels, in whole bytes: 8 x the
+    fewest bytes that hold all but one in :data:`NOISE_SHARE` of the zigzag-coded
+    differences of frame ``n`` to frame ``n - 1`` for ``n`` = 1, 1 + :data:`NOISE_STRIDE`,
+    ... (width,) int64. Whole bytes: a sensor word's noisy low byte becomes eight bit
+    planes, its high byte stays a byte plane of runs, and the block keeps its size (bits
+    below a byte would leave the bytes above it two byte planes, one of them nearly all
+    zeros: 8 % more bytes for zstd and the chunks). Compiled for blocks worth it, else
+    :func:`_noisy_widths_numpy` (the reference)."""
     size = frames.dtype.itemsize
     out = np.empty(frames.shape[2], np.int64)
     if frames.size >= _COMPILED_FROM:
@@ -220,20 +224,21 @@ def noisy_widths(frames: np.ndarray) -> np.ndarray:
 def _noisy_widths_numpy(frames: np.ndarray) -> np.ndarray:
     """:func:`noisy_widths` in numpy."""
     k, count, width = frames.shape
-    bits = 8 * frames.dtype.itemsize
-    u = np.dtype(f"<u{frames.dtype.itemsize}")
+    size = frames.dtype.itemsize
+    bits = 8 * size
+    u = np.dtype(f"<u{size}")
     x = frames.view(u)
     d = (x[:, 1::NOISE_STRIDE] - x[:, 0:count - 1:NOISE_STRIDE]).reshape(-1, width)
     z = (d << 1) ^ np.negative(d >> (bits - 1))  # zigzag: d >> (bits - 1) is the sign
-    length = np.zeros(z.shape, np.int64)
-    for b in range(bits):
+    length = np.zeros(z.shape, np.int64)  # in bytes
+    for b in range(0, bits, 8):
         length += (z >> b) != 0
     allowed = len(z) // NOISE_SHARE
     out = np.zeros(width, np.int64)
     for j in range(width):
-        above = np.cumsum(np.bincount(length[:, j], minlength=bits + 1)[::-1])[::-1]
-        # above[w]: values of w bits or more; the fewest bits with at most `allowed` above
-        out[j] = int(np.argmax(np.append(above[1:], 0) <= allowed))
+        above = np.cumsum(np.bincount(length[:, j], minlength=size + 1)[::-1])[::-1]
+        # above[n]: values of n bytes or more; the fewest bytes with at most `allowed` above
+        out[j] = 8 * int(np.argmax(np.append(above[1:], 0) <= allowed))
     return out
 
 
