@@ -164,10 +164,10 @@ def pack_blocks(t_ns: np.ndarray, frames: np.ndarray, dtype: np.dtype,
         pre.append(b"\x40\x01")
     if low_bits:
         widths = noisy_widths(f)
-        low_at, high_at = bits_layout(widths, count, dt.itemsize)
+        w8 = widths.astype(np.uint8).tobytes()
+        low_at, high_at = _bits_layout(w8, count, dt.itemsize)
         # field 11 (low_widths), then 10 (low_bits) and 12 (high_deltas) around the planes
-        pre += [b"\x5a", _varint(width), widths.astype(np.uint8).tobytes(),
-                b"\x52", _varint(int(low_at[-1]))]
+        pre += [b"\x5a", _varint(width), w8, b"\x52", _varint(int(low_at[-1]))]
         mid = b"\x62" + _varint(int(high_at[-1]))
         prefix = b"".join(pre)
         layout = _bits_record(tuple(head), len(prefix), int(low_at[-1]), len(mid),
@@ -198,7 +198,7 @@ def pack_blocks(t_ns: np.ndarray, frames: np.ndarray, dtype: np.dtype,
 #: once, where a byte plane of 2-bit noise is its slowest input (docs/framelog.md, "The
 #: noisy low bits").
 NOISE_SHARE = 100
-NOISE_STRIDE = 64
+NOISE_STRIDE = 256
 
 
 def noisy_widths(frames: np.ndarray) -> np.ndarray:
@@ -240,6 +240,13 @@ def _noisy_widths_numpy(frames: np.ndarray) -> np.ndarray:
         # above[n]: values of n bytes or more; the fewest bytes with at most `allowed` above
         out[j] = 8 * int(np.argmax(np.append(above[1:], 0) <= allowed))
     return out
+
+
+@functools.lru_cache(maxsize=256)
+def _bits_layout(widths: bytes, count: int, size: int) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`bits_layout` of the widths as bytes, kept (a log's batches repeat a few;
+    the arrays are shared: not to be written)."""
+    return bits_layout(np.frombuffer(widths, np.uint8), count, size)
 
 
 def bits_layout(widths: np.ndarray, count: int, size: int) -> tuple[np.ndarray, np.ndarray]:
