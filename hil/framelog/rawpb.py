@@ -522,8 +522,10 @@ def unpack_block(data: memoryview | bytes) -> tuple[np.ndarray, np.ndarray]:
 
 def _join_bits(f: dict[int, object], count: int, width: int, dt: np.dtype) -> np.ndarray:
     """The frames (count, width) of a block whose differences are split at their noisy
-    low bits (fields 10-12, :func:`pack_blocks`): every element's bit planes and byte
-    planes weighted and summed at once (``np.add.reduceat``), no loop per element."""
+    low bits (fields 10-12, :func:`pack_blocks`), no loop per element: widths of whole
+    bytes (this writer's) by turning each eight bit planes back into a byte plane
+    (``np.unpackbits`` then ``np.packbits`` across them), any other by weighting every
+    bit plane and byte plane and summing each element's (``np.add.reduceat``)."""
     parts = [f.get(n, b"") for n in (10, 11, 12)]
     if not all(isinstance(p, memoryview | bytes) for p in parts):
         raise ValueError("block low_bits, low_widths or high_deltas is not length-delimited")
@@ -539,25 +541,62 @@ def _join_bits(f: dict[int, object], count: int, width: int, dt: np.dtype) -> np
         raise ValueError(f"block of {count} x {width} {dt} frames has {len(low_b)} bytes "
                          f"of low_bits and {len(high_b)} of high_deltas, not "
                          f"{low_at[-1]} and {high_at[-1]}")
+    u = np.dtype(f"<u{size}")
     per_plane = (count + 7) // 8
-    z = np.zeros((width, count), np.uint64)
+    if not (w % 8).any():  # whole bytes (this writer's): bit planes back to bytes in C
+        rows = np.frombuffer(high_b, np.uint8).reshape(-1, count)  # type: ignore[arg-type]
+        if len(low_b):  # each eight bit planes back into one byte plane
+            low_rows = _planes_to_bytes(np.frombuffer(low_b, np.uint8)  # type: ignore[arg-type]
+                                        .reshape(-1, 8, per_plane))[:, :count]
+            rows = np.concatenate([low_rows, rows])
+        # every element's bytes, low to high: its low bytes' rows, then its high planes
+        planes = rows[_byte_order(widths_b, size)].reshape(width, size, count)  # type: ignore[arg-type]
+        z = np.ascontiguousarray(planes.transpose(2, 0, 1)).view(u).reshape(count, width)
+        return undo_zigzag_deltas(z).view(dt)
+    z64 = np.zeros((width, count), np.uint64)
     # every bit plane (element j's planes: its bits 0, 1, ...) weighted by its bit
     planes = np.unpackbits(np.frombuffer(low_b, np.uint8).reshape(-1, per_plane), axis=1,
                            count=count, bitorder="little")  # type: ignore[arg-type]
     has = np.flatnonzero(w)
     if len(has):
         weight = np.concatenate([np.arange(n, dtype=np.uint64) for n in w[has]])
-        z[has] = np.add.reduceat(planes.astype(np.uint64) << weight[:, None],
-                                 (low_at[has] // per_plane), axis=0)
+        z64[has] = np.add.reduceat(planes.astype(np.uint64) << weight[:, None],
+                                   (low_at[has] // per_plane), axis=0)
     nb = (bits - w + 7) // 8
     has = np.flatnonzero(nb)
     if len(has) and count:
         shift = np.concatenate([w[j] + 8 * np.arange(nb[j], dtype=np.int64) for j in has])
         rows = np.frombuffer(high_b, np.uint8).reshape(-1, count)  # type: ignore[arg-type]
-        z[has] |= np.add.reduceat(rows.astype(np.uint64) << shift.astype(np.uint64)[:, None],
-                                  high_at[has] // count, axis=0)
-    u = np.dtype(f"<u{size}")
-    return undo_zigzag_deltas(np.ascontiguousarray(z.T).astype(u)).view(dt)
+        z64[has] |= np.add.reduceat(rows.astype(np.uint64) << shift.astype(np.uint64)[:, None],
+                                    high_at[has] // count, axis=0)
+    return undo_zigzag_deltas(np.ascontiguousarray(z64.T).astype(u)).view(dt)
+
+
+def _planes_to_bytes(planes: np.ndarray) -> np.ndarray:
+    """Byte planes (g, 8 * n) of values from their bit planes (g, 8, n) (bit ``t`` of byte
+    ``m`` of plane ``b`` = bit ``b`` of value ``8 m + t``): per eight values, their eight
+    planes' bytes as one 64-bit word, its 8 x 8 bits transposed (the compiled writer's
+    transposition, :func:`hil.framelog.planes._bit_planes`, is its own inverse)."""
+    g, _, n = planes.shape
+    x = np.ascontiguousarray(planes.transpose(0, 2, 1)).view("<u8").reshape(g, n)
+    for shift, mask in ((7, 0x00AA00AA00AA00AA), (14, 0x0000CCCC0000CCCC),
+                        (28, 0x00000000F0F0F0F0)):
+        t = (x ^ (x >> np.uint64(shift))) & np.uint64(mask)
+        x = x ^ t ^ (t << np.uint64(shift))
+    return x.view(np.uint8).reshape(g, 8 * n)
+
+
+@functools.lru_cache(maxsize=256)
+def _byte_order(widths: bytes, size: int) -> np.ndarray:
+    """For widths of whole bytes: the rows (the low bytes made of bit planes, in element
+    order, then the high byte planes, in element order) of each element's bytes, low to
+    high, element after element."""
+    w = np.frombuffer(widths, np.uint8).astype(np.int64) // 8
+    low_first = np.concatenate([[0], np.cumsum(w)])
+    high_first = np.concatenate([[0], np.cumsum(size - w)]) + low_first[-1]
+    return np.concatenate([np.concatenate([low_first[j] + np.arange(w[j]),
+                                           high_first[j] + np.arange(size - w[j])])
+                           for j in range(len(w))]).astype(np.int64)
 
 
 def _signed64(v: object) -> int:

@@ -132,3 +132,54 @@ def test_packing_leaves_the_frames_alone(width: int) -> None:
     rec = rawpb.pack_blocks(np.arange(6), frames, np.dtype(np.uint32))
     assert np.array_equal(frames, kept)
     assert np.array_equal(rawpb.unpack_block(rec[0].tobytes())[1], kept[0])
+
+
+@pytest.mark.parametrize("widths", [None, [3, 0, 16], [8, 1, 15]])
+def test_noisy_low_bits_are_where_the_doc_says(widths: list[int] | None,
+                                               monkeypatch: pytest.MonkeyPatch) -> None:
+    """Fields 10-12 by hand from the doc: element j's w_j bit planes (bit t of byte m =
+    bit b of z of frame 8 m + t), then z >> w_j as byte planes; read back by our reader
+    and by numpy alone on the stock-decoded message (tests/framelog/stock_blocks.py), for
+    the writer's own widths (whole bytes) and any others a writer may choose."""
+    from tests.framelog.stock_blocks import block_rows
+
+    rng = np.random.default_rng(4)
+    frames = (30_000 + rng.integers(-40, 41, (11, 3))).astype(np.uint16)
+    frames[:, 1] = 7  # constant
+    frames[1, 2] = 2  # a wide step where the sample looks (frame 1 - frame 0)
+    if widths is not None:
+        monkeypatch.setattr(rawpb, "noisy_widths", lambda f: np.array(widths, np.int64))
+    m = _stock("eha-hil/x", rawpb.pack_block(5 + 10 * np.arange(11), frames,
+                                             np.dtype(np.uint16)))
+    assert len(m.frames) == len(m.frame_deltas) == 0 and m.byte_planes
+    w = list(m.low_widths)
+    assert w == (widths or [8, 0, 16])  # noise: a byte; constant: none; a wide step: all
+    low, high = bytes(m.low_bits), bytes(m.high_deltas)
+    lo = hi = 0
+    for j in range(3):
+        z = _zigzag_deltas_by_hand([int(v) for v in frames[:, j]], 16)
+        for b in range(w[j]):
+            for i in range(11):
+                assert (low[lo + i // 8] >> (i % 8)) & 1 == (z[i] >> b) & 1
+            assert low[lo + 1] >> 3 == 0  # past the last frame: 0
+            lo += 2
+        for b in range((16 - w[j] + 7) // 8):
+            assert list(high[hi:hi + 11]) == [(v >> w[j] >> 8 * b) & 0xFF for v in z]
+            hi += 11
+    assert (lo, hi) == (len(low), len(high))
+    assert np.array_equal(block_rows(m)[1], frames)
+    got_t, got = rawpb.unpack_block(m.SerializeToString())
+    assert np.array_equal(got, frames) and got_t.tolist() == (5 + 10 * np.arange(11)).tolist()
+
+
+def test_noisy_low_bits_of_wrong_sizes_are_refused() -> None:
+    frames = np.arange(12, dtype=np.uint16).reshape(1, 6, 2)
+    m = _stock("eha-hil/x", rawpb.pack_blocks(np.arange(1, 7), frames, np.dtype(np.uint16))[0]
+               .tobytes())
+    for field, value, match in (("low_widths", bytes([17, 0]), "low_widths"),
+                                ("low_widths", bytes([8]), "low_widths"),
+                                ("high_deltas", b"\0" * 5, "high_deltas")):
+        bad = _stock("eha-hil/x", m.SerializeToString())
+        setattr(bad, field, value)
+        with pytest.raises(ValueError, match=match):
+            rawpb.unpack_block(bad.SerializeToString())
