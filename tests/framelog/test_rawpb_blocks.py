@@ -56,6 +56,9 @@ def test_byte_planes_are_where_the_doc_says(dtype: type, deltas: bool) -> None:
                 assert raw[(b * 3 + j) * 7 + i] == stored[i] >> (8 * b) & 0xFF
     got_t, got = rawpb.unpack_block(m.SerializeToString())
     assert np.array_equal(got_t, t) and np.array_equal(got, frames) and got.dtype == dtype
+    from tests.framelog.stock_blocks import block_rows
+
+    assert np.array_equal(block_rows(m)[1], frames)  # numpy alone, as logs before hold them
 
 
 @pytest.mark.parametrize("low_bits", [True, False])
