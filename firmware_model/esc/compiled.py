@@ -54,7 +54,16 @@ S_MBX0_START, S_MBX0_LEN, S_MBX1_START, S_MBX1_LEN = 19, 20, 21, 22
 # S_TRIP_SEEN: of the last watchdog trip, ns from the last output write to the tick of the
 # slave's clock that applied it (S_TRIP_DELAY: to the trip itself).
 S_TRIP_SEEN = dcc.DC_END
-N_ST = dcc.DC_END + 1
+# Output records published in OP (a master's complete writes of the output buffer): how many
+# (S_OUT_WRITES), and the slave's clock [ns] at each of the last OUT_RING of them, in a ring
+# indexed by that count. The box side asks whether its cycle's scheduled millisecond had a
+# write (:meth:`EscArrays.outputs_written`), whenever it runs that cycle.
+OUT_RING = 128
+S_OUT_WRITES = S_TRIP_SEEN + 1
+S_OUT_AT = S_OUT_WRITES + 1
+N_ST = S_OUT_AT + OUT_RING
+#: The ring's entries before any write (no interval of the slave's clock holds it).
+NEVER = -(1 << 62)
 #: Slots of ``obuf``/``olen`` after the output 3-buffer: the mailbox hand-over buffers.
 MBX_RX, MBX_TX = 3, 4
 N_OSLOTS = 5
@@ -83,6 +92,7 @@ class EscArrays:
         sii_max = max(len(img) for _d, img in described)
         self.sii = np.full((n, sii_max), 0xFF, dtype=np.uint8)
         self.st = np.zeros((n, N_ST), dtype=np.int64)
+        self.st[:, S_OUT_AT:S_OUT_AT + OUT_RING] = NEVER
         self.wmask = np.frombuffer(_WRITABLE, dtype=np.uint8).copy()
         self.obuf = np.zeros((n, N_OSLOTS, BUF), dtype=np.uint8)
         self.olen = np.zeros((n, N_OSLOTS), dtype=np.int64)
@@ -127,6 +137,12 @@ class EscArrays:
             return None
         return self.obuf[i, slot, :self.olen[i, slot]].tobytes()
 
+    def outputs_written(self, after_ns: int, until_ns: int) -> np.ndarray:
+        """Per slave: whether the master completed an output record in OP in ``(after_ns,
+        until_ns]`` of the slaves' clock, among its last :data:`OUT_RING` records (read
+        while the frame side writes: a slot is one aligned word, whole either way)."""
+        return written_in(self.st[:, S_OUT_AT:S_OUT_AT + OUT_RING], after_ns, until_ns)
+
     def take_mailbox(self, i: int) -> bytes | None:
         """Box ``i``'s application takes the master's mailbox request, if one is there."""
         st = self.st[i]
@@ -165,6 +181,12 @@ class EscArrays:
         """(AL state, error, AL status code) of slave ``i``."""
         st = self.st[i]
         return int(st[S_STATE]), bool(st[S_ERROR]), int(st[S_CODE])
+
+
+def written_in(at: np.ndarray, after_ns: int, until_ns: int) -> np.ndarray:
+    """Per row of write times ``at`` [ns] (a ring, :data:`NEVER` where unused): whether one
+    lies in ``(after_ns, until_ns]``."""
+    return ((at > after_ns) & (at <= until_ns)).any(axis=1)
 
 
 # --- lock-free 3-buffer -------------------------------------------------------------------------
@@ -464,6 +486,9 @@ def _ram_written(m, st, obuf, olen, oidx, lo, hi):
             _put16(m, r.WD_STATUS_PD, 1)
         if st[S_STATE] == _OP:
             _publish_out(obuf, olen, oidx, m, start, min(length, MEM - start))
+            k = st[S_OUT_WRITES]
+            st[S_OUT_AT + k % OUT_RING] = st[S_NOW]
+            st[S_OUT_WRITES] = k + 1
 
 
 @njit(cache=True, nogil=True)

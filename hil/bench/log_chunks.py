@@ -6,7 +6,10 @@ every chunk as the writer closes it (uncompressed), then compresses each chunk w
 codec and level the writer offers and reports the log's MB and the compression's CPU per
 simulated second (``time.process_time``, best of 3 per chunk, so a loaded machine reads
 high rather than noisy; quote ``uptime``). lz4 chunks also carry a CRC-32 of their
-uncompressed bytes (zstd's own checksum is in its time), listed apart.
+uncompressed bytes (zstd's own checksum is in its time), listed apart. Then the decoded
+signals' chunks (``/signals/``, which the writer compresses at a level of their own,
+:data:`hil.framelog.writer.SIGNAL_CHUNKS`) alone, at the levels of :data:`SIGNAL_CODECS`
+(best of 5 per chunk).
 """
 
 from __future__ import annotations
@@ -22,26 +25,40 @@ from pathlib import Path
 CODECS = (("zstd 3 (the mcap library's)", "zstd", 3), ("zstd 1", "zstd", 1),
           ("zstd -1 (default)", "zstd", -1), ("zstd -3", "zstd", -3),
           ("zstd -5", "zstd", -5), ("lz4 (its default)", "lz4", None))
+#: (label, compression, level) of each row of the decoded signals' chunks (the writer's
+#: levels with their tuned match finder, :data:`hil.framelog.chunk.TUNED`).
+SIGNAL_CODECS = (("zstd -9, table 2^11 (the writer's)", "zstd", -9),
+                 ("zstd -7, table 2^12 (before)", "zstd", -7),
+                 ("zstd -1, table 2^12", "zstd", -1))
 
 
 def capture(seconds: float, topology: str) -> list[bytes]:
     """The uncompressed chunks of a logged run of ``seconds`` of ``topology``."""
+    return [c for _, c in capture_kinds(seconds, topology)]
+
+
+def capture_kinds(seconds: float, topology: str) -> list[tuple[bool, bytes]]:
+    """:func:`capture`, each chunk with whether it is one of the decoded signals' (the
+    writer's chunks at the signals' level, :data:`hil.framelog.writer.SIGNAL_CHUNKS`)."""
     from hil.fieldbus.topology import load_topology
     from hil.framelog import chunk
+    from hil.framelog.writer import SIGNAL_CHUNKS
     from hil.replay.record import run_logged
     from hil.sim.pc import demo_pc
     from plant.config import load_config
 
     cfg = load_config(None, [])
     topo = load_topology(topology)
-    chunks: list[bytes] = []
+    chunks: list[tuple[bool, bytes]] = []
     make = chunk.compressor
+    signals = SIGNAL_CHUNKS["/signals/"]
 
     def keeping(compression: str, level: int | None) -> Callable[[memoryview], bytes]:
         inner = make(compression, level)
+        kind = (compression, level) == signals
 
         def compress(view: memoryview) -> bytes:
-            chunks.append(bytes(view))
+            chunks.append((kind, bytes(view)))
             return inner(view)
         return compress
 
@@ -57,42 +74,54 @@ def capture(seconds: float, topology: str) -> list[bytes]:
     return chunks
 
 
-def _cpu(fn: Callable[[bytes], object], data: bytes) -> float:
+def _cpu(fn: Callable[[bytes], object], data: bytes, tries: int = 3) -> float:
     best = float("inf")
-    for _ in range(3):
+    for _ in range(tries):
         t0 = time.process_time()
         fn(data)
         best = min(best, time.process_time() - t0)
     return best
 
 
-def measure(chunks: list[bytes]) -> list[tuple[str, float, float, float]]:
+def measure(chunks: list[bytes], codecs: tuple[tuple[str, str, int | None], ...] = CODECS,
+            tries: int = 3) -> list[tuple[str, float, float, float]]:
     """(label, compressed bytes, compression CPU s, CRC-32 CPU s) per codec of
-    :data:`CODECS`, summed over ``chunks``."""
+    ``codecs``, summed over ``chunks`` (CPU: the best of ``tries`` per chunk)."""
     from hil.framelog.chunk import compressor
 
     rows = []
-    crc = sum(_cpu(zlib.crc32, c) for c in chunks)
-    for label, codec, level in CODECS:
+    crc = sum(_cpu(zlib.crc32, c, tries) for c in chunks)
+    for label, codec, level in codecs:
         fn = compressor(codec, level)
         size = sum(len(fn(c)) for c in chunks)
-        rows.append((label, size, sum(_cpu(fn, c) for c in chunks),
+        rows.append((label, size, sum(_cpu(fn, c, tries) for c in chunks),
                      crc if codec == "lz4" else 0.0))
     return rows
+
+
+def _table(rows: list[tuple[str, float, float, float]], seconds: float) -> None:
+    print("codec, level | MB per simulated s | compression ms per simulated s (+ CRC-32)")
+    for label, size, cpu, crc in rows:
+        extra = f" (+ {crc / seconds * 1e3:.1f})" if crc else ""
+        print(f"{label} | {size / seconds / 1e6:.2f} | {cpu / seconds * 1e3:.1f}{extra}")
 
 
 def main(argv: list[str] | None = None) -> int:
     args = sys.argv[1:] if argv is None else argv
     seconds = float(args[0]) if args else 1.0
     topology = args[1] if len(args) > 1 else "hydra_full"
-    chunks = capture(seconds, topology)
+    kinds = capture_kinds(seconds, topology)
+    chunks = [c for _, c in kinds]
     raw = sum(map(len, chunks))
     print(f"{len(chunks)} chunks, {raw / seconds / 1e6:.1f} MB per simulated second "
           "uncompressed")
-    print("codec, level | MB per simulated s | compression ms per simulated s (+ CRC-32)")
-    for label, size, cpu, crc in measure(chunks):
-        extra = f" (+ {crc / seconds * 1e3:.1f})" if crc else ""
-        print(f"{label} | {size / seconds / 1e6:.2f} | {cpu / seconds * 1e3:.1f}{extra}")
+    _table(measure(chunks), seconds)
+    signals = [c for is_signal, c in kinds if is_signal]
+    if signals:
+        print(f"\nthe decoded signals' {len(signals)} chunks alone, "
+              f"{sum(map(len, signals)) / seconds / 1e6:.1f} MB per simulated second "
+              "uncompressed (best of 5)")
+        _table(measure(signals, SIGNAL_CODECS, 5), seconds)
     return 0
 
 

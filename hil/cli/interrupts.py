@@ -11,6 +11,13 @@ when the lock is released, in ordinary Python code, where the command's one-line
 interruption message takes over. numba announces the lock through its event API
 (``numba.core.event``, kind ``numba:compiler_lock``).
 
+Loading takes a fraction of a second; compiling a large kernel afresh (a cold cache, a
+changed kernel source) takes minutes on a loaded machine, and a signal deferred that long
+would leave a ``kill`` unanswered while the compiler's memory grows. So a signal still
+deferred after :data:`FORCE_AFTER_S` is raised inside the lock after all (from a timer, at
+the main thread's next bytecode: the compiler's own Python, which unwinds and releases the
+lock), and again every :data:`FORCE_AFTER_S` should one land where it cannot leave.
+
 SIGTERM and SIGHUP (a service manager stopping the command, a closed terminal) are handled
 as Ctrl-C: they raise :class:`Interrupted`, a ``KeyboardInterrupt`` that remembers its signal,
 so every ``with`` on the way out closes its file as for Ctrl-C, and the command exits with
@@ -19,21 +26,34 @@ so every ``with`` on the way out closes its file as for Ctrl-C, and the command 
 
 from __future__ import annotations
 
+import _thread
 import signal
 import threading
+from collections.abc import Callable
 from types import FrameType
 
 from numba.core import event
 
 from hil.cli.signals import SIGNALS, Interrupted, default_handler, raise_interrupted
 
+#: A signal deferred this long [s] is raised inside numba's compiler lock after all (loading
+#: a cached kernel takes 0.1-0.3 s; this is a compile).
+FORCE_AFTER_S = 3.0
+
 
 class DeferredInterrupt(event.Listener):
-    """Signal handler and compiler-lock listener: raise now, or at the lock's release."""
+    """Signal handler and compiler-lock listener: raise now, at the lock's release, or
+    ``force_after_s`` into a long compile (``interrupt(signum)``: runs the handler in the
+    main thread again, from the timer's thread)."""
 
-    def __init__(self) -> None:
+    def __init__(self, force_after_s: float = FORCE_AFTER_S,
+                 interrupt: Callable[[int], None] = _thread.interrupt_main) -> None:
         self.depth = 0  # the main thread's nesting in the (re-entrant) compiler lock
         self.pending: int | None = None  # the signal waiting for the lock's release
+        self.force_after_s = force_after_s
+        self.interrupt = interrupt
+        self.forcing = False  # the next call of the handler raises, lock or not
+        self._timer: threading.Timer | None = None
 
     @staticmethod
     def _main() -> bool:
@@ -47,15 +67,37 @@ class DeferredInterrupt(event.Listener):
         if not self._main():
             return
         self.depth = max(self.depth - 1, 0)
-        if self.depth == 0 and self.pending is not None:
-            signum, self.pending = self.pending, None
-            raise Interrupted(signum)
+        if self.depth == 0:
+            self.forcing = False
+            if self.pending is not None:
+                signum, self.pending = self.pending, None
+                raise Interrupted(signum)
 
     def handler(self, signum: int, frame: FrameType | None) -> None:
-        if self.depth > 0:
-            self.pending = signum  # raised when numba releases its lock
+        if self.depth > 0 and not self.forcing:
+            self.pending = signum  # raised when numba releases its lock ...
+            self._arm()            # ... or FORCE_AFTER_S from now
             return
+        if self.forcing:  # (kept pending: raised again at the lock's release, or forced
+            self.forcing = False  # again should this one be lost inside the compiler)
+            self._arm()
         raise Interrupted(signum)
+
+    def _arm(self) -> None:
+        if self._timer is not None and self._timer.is_alive():
+            return
+        self._timer = threading.Timer(self.force_after_s, self._force)
+        self._timer.daemon = True
+        self._timer.start()
+
+    def _force(self) -> None:
+        """(The timer's thread.) The signal is still deferred: raise it in the main thread."""
+        signum = self.pending
+        self._timer = None  # (the handler arms the next one)
+        if signum is None:
+            return
+        self.forcing = True
+        self.interrupt(signum)
 
 
 _INSTALLED: DeferredInterrupt | None = None

@@ -38,6 +38,7 @@ from hil.fieldbus import reply_times, wire
 from hil.fieldbus.box_clock import BoxClock, ClockedBoxes
 from hil.fieldbus.chain import Chain
 from hil.fieldbus.reply_times import ReplyTimes
+from hil.sim.cpu_account import run_delay_ns
 from hil.transports import TransportError
 from protocols import ethercat as ec
 
@@ -82,6 +83,10 @@ class ServeStats:
     sessions: int = 0           # runs of frames separated by more than SESSION_GAP_S
     send_errors: int = 0        # replies the transport refused
     lag_max_s: float = 0.0      # largest lag of simulated time behind wall time
+    fresh_by_schedule: int = 0  # box cycles fresh by a write in their scheduled ms only
+    # time the serving / box thread was runnable but waited for a CPU [ms] (None: unknown)
+    serve_run_delay_ms: float | None = None
+    box_run_delay_ms: float | None = None
 
     def as_dict(self) -> dict:
         d = asdict(self)
@@ -124,6 +129,7 @@ class PacedServer:
         self._idx: int | None = None
         self._covered = 0
         self._last_frame_t = -1e9
+        self._boxes: ClockedBoxes | None = None
 
     # --- frames ---------------------------------------------------------------------------
     def _serve(self, frame: bytes) -> None:
@@ -187,6 +193,21 @@ class PacedServer:
             self._serve(frame)
 
     # --- the loop -------------------------------------------------------------------------
+    def prepare(self) -> ClockedBoxes:
+        """The boxes taken onto their own clock and their first :data:`WARMUP_CYCLES` cycles
+        run (the kernels compiled or loaded), once: before the ready line, while a signal
+        still ends the command (a cold cache compiles for minutes on a loaded machine)."""
+        if self._boxes is None:
+            self._boxes = ClockedBoxes(self.chain)
+            for _ in range(WARMUP_CYCLES):
+                self._boxes.cycle()
+        return self._boxes
+
+    def release(self) -> None:
+        """The boxes handed back to the chain (after :meth:`run`, or instead of it)."""
+        if self._boxes is not None:
+            self._boxes.release()
+
     def run(self, seconds: float | None = None, stop: Callable[[], bool] = lambda: False,
             progress: Callable[[ServeStats], None] | None = None,
             progress_every_s: float = 1.0, box_setup: Callable[[], None] | None = None,
@@ -195,9 +216,7 @@ class PacedServer:
         (:class:`~hil.fieldbus.box_clock.BoxClock`); ``box_setup`` / ``box_behind``: the
         box thread's real-time hooks (:class:`hil.sim.realtime.RealtimePlan`)."""
         st, clock = self.stats, self.clock
-        boxes = ClockedBoxes(self.chain)
-        for _ in range(WARMUP_CYCLES):
-            boxes.cycle()
+        boxes = self.prepare()
         box_clock = BoxClock(boxes.cycle, box_setup, box_behind)
         gc.collect()
         gc.freeze()  # long-lived objects out of the collector's way: shorter pauses
@@ -205,6 +224,7 @@ class PacedServer:
         # frame waiting for the lock gets it after this long, not after the default 5 ms.
         switch = sys.getswitchinterval()
         sys.setswitchinterval(SWITCH_INTERVAL_S)
+        waited0 = run_delay_ns()
         start = clock()
         box_clock.begin(time.monotonic_ns())
         end = None if seconds is None else start + seconds  # wall seconds, whatever the lag
@@ -233,7 +253,11 @@ class PacedServer:
             sys.setswitchinterval(switch)
             gc.unfreeze()
             st.wall_s = clock() - start
+            waited = run_delay_ns()
             self._box_stats(box_clock.stats)
+            st.fresh_by_schedule = boxes.fresh_by_schedule
+            st.serve_run_delay_ms = _delay_ms(waited0, waited)
+            st.box_run_delay_ms = _delay_ms(0, box_clock.run_delay_ns)
         if box_clock.error is not None:
             raise box_clock.error
         return st
@@ -252,6 +276,10 @@ class PacedServer:
 
 
 # --- command line ------------------------------------------------------------------------------
+def _delay_ms(a: int | None, b: int | None) -> float | None:
+    return None if a is None or b is None else round((b - a) / 1e6, 3)
+
+
 def _usage(msg: str) -> Exception:
     return UsageError(msg)
 
@@ -441,14 +469,6 @@ def _serve(args: argparse.Namespace, cfg, topo, capture: str | None,
                          late_us=args.late_us)
     frames = [{"lad": lad, "length": n, "wkc": wkc} for lad, n, wkc in chain.plan.frames]
     plan = ", ".join(f"LRW lad {f['lad']} len {f['length']} WKC {f['wkc']}" for f in frames)
-    rt.process()
-    rt.frame_thread()  # this thread answers the frames
-    print(f"eha-hil serve: ready on {where}; {topo.name}, {model} model, "
-          f"{len(frames)} frame(s) per 1 ms cycle: {plan}; "
-          f"{'with' if trailer else 'without'} CRC-32 trailer"
-          + _realtime_note(rt), file=sys.stderr, flush=True)
-    _realtime_warnings(rt)
-
     tty = sys.stderr.isatty()
 
     def progress(st: ServeStats) -> None:
@@ -461,15 +481,29 @@ def _serve(args: argparse.Namespace, cfg, topo, capture: str | None,
     def on_signal(signum, frame) -> None:
         stopping.append(signum)
 
-    old = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
-    steal0 = steal_s()
     try:
-        st = server.run(args.seconds, stop=lambda: bool(stopping),
-                        progress=None if args.quiet else progress,
-                        box_setup=rt.box_thread, box_behind=rt.box_behind)
+        # the boxes' first cycles before the ready line (the kernels compiled or loaded),
+        # while a signal still ends the command, and before --realtime: a compile at
+        # SCHED_FIFO would hold a CPU from everything below it for minutes
+        server.prepare()
+        rt.process()
+        rt.frame_thread()  # this thread answers the frames
+        old = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+        print(f"eha-hil serve: ready on {where}; {topo.name}, {model} model, "
+              f"{len(frames)} frame(s) per 1 ms cycle: {plan}; "
+              f"{'with' if trailer else 'without'} CRC-32 trailer"
+              + _realtime_note(rt), file=sys.stderr, flush=True)
+        _realtime_warnings(rt)
+        steal0 = steal_s()
+        try:
+            st = server.run(args.seconds, stop=lambda: bool(stopping),
+                            progress=None if args.quiet else progress,
+                            box_setup=rt.box_thread, box_behind=rt.box_behind)
+        finally:
+            for s, h in old.items():
+                signal.signal(s, h)
     finally:
-        for s, h in old.items():
-            signal.signal(s, h)
+        server.release()
         transport = end.stats.as_dict()
         terrors = server.transport_errors()
         end.close()
@@ -602,7 +636,7 @@ def _serve_ethercat(args: argparse.Namespace, cfg, topo, link, model: str,  # no
     import threading
 
     from hil.fieldbus.chain import CYCLE_TICKS
-    from hil.fieldbus.esc.serve import ServedChain, serve
+    from hil.fieldbus.esc.serve import ServedChain, serve, warm_up
     from hil.sim.realtime import RealtimePlan
 
     rt = RealtimePlan(args.realtime)
@@ -619,6 +653,9 @@ def _serve_ethercat(args: argparse.Namespace, cfg, topo, link, model: str,  # no
                     m.box = chain.boxes[m.i]
             chain.publish_inputs()  # (the recording boxes' own, equal to the replaced)
         _compute_workers(chain.engine, rt)
+        # (compiling on a cold cache: a signal still ends the command, and at the ordinary
+        # priority: under --realtime's SCHED_FIFO it would hold a CPU for minutes)
+        warm_up(chain)
         rt.process()
 
         def ready() -> None:

@@ -2,12 +2,23 @@
 one 1 ms cycle at a time, paced to the wall clock by absolute deadlines, and exchanges
 process data with the frame side through 3-buffers, never waiting for it.
 
-* :class:`BoxClock` runs ``cycle()`` for cycle ``k`` at the absolute deadline
-  ``t0 + k * 1 ms`` (``clock_nanosleep``, ``TIMER_ABSTIME``: computed from ``t0``, never
-  from the previous wake-up, so nothing drifts). Behind its schedule it runs cycles back to
-  back; more than :data:`MAX_LAG_CYCLES` behind, it moves the schedule forward (slipped
-  cycles). It counts overruns, runs of them (stalls), the worst lateness and how far
-  simulated time fell behind wall time.
+* :class:`BoxClock` runs ``cycle(since, at)`` for cycle ``k`` at the absolute deadline
+  ``at = t0 + k * 1 ms`` (``clock_nanosleep``, ``TIMER_ABSTIME``: computed from ``t0``,
+  never from the previous wake-up, so nothing drifts; ``since``: the previous cycle's).
+  Behind its schedule it runs cycles back to back; more than :data:`MAX_LAG_CYCLES` behind,
+  it moves the schedule forward (slipped cycles). It counts overruns, runs of them
+  (stalls), the worst lateness and how far simulated time fell behind wall time.
+* Freshness on the master's time: a box's MCU takes a record as a fresh command when the
+  master wrote one since its previous cycle (its command watchdog counts the cycles
+  without). A cycle run late, back to back with others to catch up, finds at most the one
+  newest record, though the master wrote one in each of those cycles' milliseconds, on
+  time, as the hardware's sync manager would have got them: so a cycle that starts after
+  its scheduled millisecond ``(since, at]`` is over (a whole period past its release) also
+  counts the record it holds as fresh when a write arrived in that millisecond, stamped by
+  the frame side's clock (the slaves' clock on ethercat): :func:`take_outputs`. A master
+  that did not write in that millisecond gets no such credit: its stalls still trip the
+  MCUs. A cycle on time takes only what is new (no credit: a write it took early, between
+  the release and its start, would count twice).
 * :class:`ClockedBoxes` puts the boxes of a paced :class:`~hil.fieldbus.chain.Chain`
   (serial, udp) behind one output and one input 3-buffer each
   (:func:`firmware_model.esc.compiled.publish` / ``take``, as an ESC's process-data sync
@@ -28,7 +39,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from firmware_model.esc.compiled import B_READER, publish, take
+from firmware_model.esc.compiled import B_READER, NEVER, OUT_RING, publish, take, written_in
 from hil.fieldbus.chain import CYCLE_TICKS, Chain
 from hil.sim.cpu_account import run_delay_ns
 
@@ -57,11 +68,13 @@ class BoxClockStats:
 
 
 class BoxClock(threading.Thread):
-    """Runs ``cycle()`` every :data:`PERIOD_NS` of the monotonic clock from ``t0_ns``,
-    sleeping to absolute deadlines, until :meth:`stop`. ``on_start``: run first inside the
-    thread (its scheduling, its CPU)."""
+    """Runs ``cycle(since, at)`` every :data:`PERIOD_NS` of the monotonic clock from
+    ``t0_ns``, sleeping to absolute deadlines, until :meth:`stop`: ``at`` is the cycle's
+    release [ns, CLOCK_MONOTONIC] on the schedule (whenever it actually runs), ``since`` the
+    previous cycle's. ``on_start``: run first inside the thread (its scheduling, its CPU)."""
 
-    def __init__(self, cycle: Callable[[], None], on_start: Callable[[], None] | None = None,
+    def __init__(self, cycle: Callable[[int, int], None],
+                 on_start: Callable[[], None] | None = None,
                  behind: Callable[[int, float], None] | None = None,
                  sync0: Callable[[int], int | None] | None = None) -> None:
         super().__init__(name="box-clock", daemon=True)
@@ -126,7 +139,7 @@ class BoxClock(threading.Thread):
                     sleep_until(release)
                     continue
                 begin = clock()
-                self.cycle()
+                self.cycle(last, release)
                 done = clock()
                 last = release
                 if pulse is not None:
@@ -191,6 +204,35 @@ def _sleep_until(deadline_ns: int) -> None:
     _sleeper.sleep_until(deadline_ns)
 
 
+def take_outputs(boxes: list, newest: Callable[[int], bytes | None], held: list,
+                 written: Callable[[int, int], np.ndarray], since_ns: int | None,
+                 at_ns: int | None, now: Callable[[], int]) -> int:
+    """Each box ``i`` applies ``newest(i)`` (its newest output record, None if nothing new)
+    and keeps it in ``held[i]``; with nothing new, a cycle run late (``now()`` a period or
+    more past its release ``at_ns``) applies ``held[i]`` again when ``written(since_ns,
+    at_ns)[i]``: the master's write in the cycle's scheduled millisecond. How many boxes
+    were fresh by that alone."""
+    credited, late, wrote = 0, None, None
+    for i, box in enumerate(boxes):
+        rec = newest(i)
+        if rec is not None:
+            held[i] = rec
+            box.apply(rec)
+            continue
+        if since_ns is None or held[i] is None:
+            continue
+        if late is None:
+            late = now() >= at_ns + PERIOD_NS
+        if not late:
+            continue
+        if wrote is None:
+            wrote = written(since_ns, at_ns)
+        if wrote[i]:
+            box.apply(held[i])
+            credited += 1
+    return credited
+
+
 class _Port:
     """What the frame side of a :class:`Chain` sees of box ``i`` once the boxes run on
     their own clock: ``apply`` publishes an output record, ``inputs`` is the newest
@@ -203,6 +245,9 @@ class _Port:
         o, i = self.o, self.i
         rec = np.frombuffer(data, dtype=np.uint8)
         publish(o.obuf[i], o.olen[i], o.oidx[i], rec, rec.size)
+        k = o.writes[i]
+        o.written_at[i, k % o.written_at.shape[1]] = o.clock()  # (a ring)
+        o.writes[i] = k + 1
 
     def inputs(self) -> bytes:
         o, i = self.o, self.i
@@ -225,12 +270,14 @@ def advance_boxes(engine, boxes: list) -> None:  # noqa: ANN001 (RobotEngine | N
 class ClockedBoxes:
     """The boxes of a paced ``chain`` taken off its frame path onto their own clock:
     afterwards ``chain.handle`` answers from the 3-buffers and :meth:`cycle` (one 1 ms step
-    of every box: newest outputs in, advance, inputs out) is the box clock's."""
+    of every box: newest outputs in, advance, inputs out) is the box clock's. ``clock``
+    stamps each output record as the frame side publishes it [ns, the box clock's]."""
 
-    def __init__(self, chain: Chain) -> None:
+    def __init__(self, chain: Chain, clock: Callable[[], int] = time.monotonic_ns) -> None:
         if not chain.paced:
             raise ValueError("ClockedBoxes needs Chain(..., paced=True)")
         self.chain = chain
+        self.clock = clock
         self.boxes, self.engine = chain.boxes, chain.engine
         n = len(self.boxes)
         out_max = max([w.out_len for w in chain.plan.windows] + [1])
@@ -241,6 +288,13 @@ class ClockedBoxes:
         self.ilen = np.zeros((n, 3), dtype=np.int64)
         self.oidx = np.tile(np.array([0, 1, 2], dtype=np.int64), (n, 1))
         self.iidx = self.oidx.copy()
+        #: Per box: output records published, and when (CLOCK_MONOTONIC [ns], a ring).
+        self.writes = np.zeros(n, dtype=np.int64)
+        self.written_at = np.full((n, OUT_RING), NEVER, dtype=np.int64)
+        #: Per box: the output record it took last (None: none yet).
+        self.taken: list[bytes | None] = [None] * n
+        #: Box cycles (per box) fresh only by a write in their scheduled millisecond.
+        self.fresh_by_schedule = 0
         self.publish_inputs()
         chain.boxes = [_Port(self, i) for i in range(n)]
         chain.engine = None
@@ -250,11 +304,17 @@ class ClockedBoxes:
         serving, e.g. a log's replay metadata, reads the boxes themselves, not the ports)."""
         self.chain.boxes, self.chain.engine = self.boxes, self.engine
 
-    def take_outputs(self) -> None:
-        for i, box in enumerate(self.boxes):
-            k = take(self.oidx[i])
-            if k >= 0:
-                box.apply(self.obuf[i, k, :self.olen[i, k]].tobytes())
+    def take_outputs(self, since_ns: int | None = None, at_ns: int | None = None) -> None:
+        """Each box takes its newest output record if new; a late cycle also the one it
+        holds, if the master wrote one in its scheduled ``(since_ns, at_ns]``
+        (:func:`take_outputs`)."""
+        self.fresh_by_schedule += take_outputs(
+            self.boxes, self._newest, self.taken,
+            lambda a, b: written_in(self.written_at, a, b), since_ns, at_ns, self.clock)
+
+    def _newest(self, i: int) -> bytes | None:
+        k = take(self.oidx[i])
+        return None if k < 0 else self.obuf[i, k, :self.olen[i, k]].tobytes()
 
     def advance(self) -> None:
         advance_boxes(self.engine, self.boxes)
@@ -264,9 +324,11 @@ class ClockedBoxes:
             rec = np.frombuffer(box.inputs(), dtype=np.uint8)
             publish(self.ibuf[i], self.ilen[i], self.iidx[i], rec, rec.size)
 
-    def cycle(self) -> None:
-        """One 1 ms cycle of every box, exchanging process data with the frame side."""
-        self.take_outputs()
+    def cycle(self, since_ns: int | None = None, at_ns: int | None = None) -> None:
+        """One 1 ms cycle of every box, exchanging process data with the frame side;
+        ``(since_ns, at_ns]``: its scheduled millisecond (:class:`BoxClock`), None for a
+        cycle off the clock (warm-up)."""
+        self.take_outputs(since_ns, at_ns)
         self.advance()
         self.publish_inputs()
         chain = self.chain

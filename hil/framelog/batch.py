@@ -32,6 +32,7 @@ import numpy as np
 from mcap.records import MessageIndex, Opcode
 from mcap.writer import Writer
 
+from hil.framelog import heads
 from hil.framelog.chunk import ChunkBuffer, many_index, write_indexes
 
 _HEAD = struct.Struct("<BQHIQQ")  # opcode, record length, channel, sequence, log, publish
@@ -218,6 +219,7 @@ def _interleaved(data: Interleaved, channel_id: int, times: np.ndarray, seq0: in
 #: front of the payload fields of a record array.
 HEAD_FIELDS = [("op", "u1"), ("len", "<u8"), ("ch", "<u2"), ("seq", "<u4"), ("log", "<u8"),
                ("pub", "<u8")]
+_HEAD_NAMES = tuple(name for name, _ in HEAD_FIELDS)
 
 
 def records(w: Writer, dtype: np.dtype, n: int) -> tuple[np.ndarray, int | None]:
@@ -261,13 +263,8 @@ def add_records(w: Writer, channel_ids: Sequence[int], log_ns: np.ndarray,
     log = np.asarray(log_ns, dtype=np.int64)
     pub = np.asarray(publish_ns, dtype=np.int64)
     size = rec.dtype.itemsize
-    rec["op"] = Opcode.MESSAGE
-    rec["len"] = size - 9
-    recs = rec.reshape(c, k)
-    recs["ch"] = np.asarray(channel_ids)[:, None]
-    recs["seq"] = (np.asarray(seqs, dtype=np.int64)[:, None] + np.arange(k)) & 0xFFFFFFFF
-    recs["log"] = log
-    recs["pub"] = pub
+    if not rec.flags.c_contiguous or rec.dtype.names[:len(HEAD_FIELDS)] != _HEAD_NAMES:
+        raise ValueError("need contiguous records whose fields start with HEAD_FIELDS")
     t_first, t_last = int(log.min()), int(log.max())
     stats = w._Writer__statistics  # noqa: SLF001 - see the module docstring
     cb = w._Writer__chunk_builder  # noqa: SLF001
@@ -278,17 +275,13 @@ def add_records(w: Writer, channel_ids: Sequence[int], log_ns: np.ndarray,
     stats.message_end_time = max(t_last, stats.message_end_time)
     stats.message_count += c * k
     per = c if at is not None else max(1, w._Writer__chunk_size // (size * k))  # noqa: SLF001
-    # every channel's MessageIndex record (entries: log time, offset in the chunk) at once,
+    # the records' heads and every channel's MessageIndex record (entries: log time,
+    # offset in the chunk) in one compiled pass (hil.framelog.heads), the index records
     # kept with the chunk builder's batches for its closing (chunk.write_indexes)
     ix = np.empty(c, many_index(k))
-    ix["op"] = Opcode.MESSAGE_INDEX
-    ix["len"] = ix.dtype.itemsize - 9
-    ix["ch"] = channel_ids
-    ix["n"] = 16 * k
+    heads.fill(rec.view(np.uint8).reshape(c * k, size), np.asarray(channel_ids), seqs, log,
+               pub, ix.view(np.uint8).reshape(c, -1), 0 if at is None else at)
     pairs = ix["e"]
-    pairs[:, :, 0] = log.astype(np.uint64)
-    within = (np.arange(min(per, c), dtype=np.uint64)[:, None] * k
-              + np.arange(k, dtype=np.uint64)) * np.uint64(size)
     t0 = int(log[0])
     counts = stats.channel_message_counts
     indices = cb.message_indices
@@ -302,7 +295,9 @@ def add_records(w: Writer, channel_ids: Sequence[int], log_ns: np.ndarray,
         cb.message_end_time = max(cb.message_end_time, t_last)
         base = cb.record_writer.count if at is None else at
         n = min(per, c - lo)
-        pairs[lo:lo + n, :, 1] = within[:n] + np.uint64(base)
+        if at is None:  # entries of this slice: from where it starts in the chunk
+            pairs[lo:lo + n, :, 1] -= np.uint64(lo * k * size)
+            pairs[lo:lo + n, :, 1] += np.uint64(base)
         if batches is not None:
             batches.append((ix[lo:lo + n], list(channel_ids[lo:lo + n])))
         for j, cid in enumerate(channel_ids[lo:lo + per]):

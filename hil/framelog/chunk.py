@@ -44,17 +44,25 @@ from mcap.writer import IndexType, Writer
 #: compression time for ~15 % more bytes; against level 1, 12 % less time for 7 % more
 #: bytes (measured on the chunks of a whole-robot log, docs/framelog.md "The whole robot").
 ZSTD_LEVEL = -1
-#: What the writer's own zstd levels (:data:`ZSTD_LEVEL`, and -7 of the decoded signals'
-#: chunks, :data:`hil.framelog.writer.SIGNAL_CHUNKS`) change in zstd's parameters of that
-#: level: a match table of 2^12 entries (zstd's: 2^13; 16 KiB, which stays in the L1 cache
-#: beside the data) and matches of at least 7 bytes (zstd's: 6; a sensor word's noise makes
-#: many 6-byte matches that save little and cost a sequence each). On the chunks of a
-#: second of the whole robot (``python -m hil.bench.log_chunks``; docs/framelog.md,
-#: "Compression level"): at -1 ~9 % less compression CPU for ~3 % more bytes of those
-#: chunks, at -7 ~19 % less for ~5 % more. Any reader reads the frames (zstd's format
-#: leaves the match finder to the writer).
-TUNED = {"hash_log": 12, "min_match": 7}
-TUNED_LEVELS = (ZSTD_LEVEL, -7)
+#: zstd level of the decoded signals' chunks (:data:`hil.framelog.writer.SIGNAL_CHUNKS`):
+#: zstd's fast strategy with an acceleration of 9, which tries a match every ~10 bytes of
+#: the changing floats where -7 tries every ~8 (docs/framelog.md, "The match finder of the
+#: writer's levels").
+SIGNAL_LEVEL = -9
+#: What the writer's own zstd levels (:data:`ZSTD_LEVEL`, :data:`SIGNAL_LEVEL`, and -7,
+#: the signals' level before) change in zstd's parameters of that level: a smaller match
+#: table (zstd's: 2^13 entries; 2^12 is 16 KiB, which stays in the L1 cache beside the
+#: data; the signals' 2^11: a message's steady fields match the same field of the
+#: previous message, which the last few hundred bytes hold) and matches of at least 7 bytes
+#: (zstd's: 6; a sensor word's noise makes many 6-byte matches that save little and cost a
+#: sequence each). On the chunks of a second of the whole robot (``python -m
+#: hil.bench.log_chunks``; docs/framelog.md, "Compression level"): at -1 ~9 % less
+#: compression CPU for ~3 % more bytes of those chunks, at -7 ~19 % less for ~5 % more;
+#: the signals at -9 with 2^11 entries ~18 % less than at -7 with 2^12 for ~2.5 % more.
+#: Any reader reads the frames (zstd's format leaves the match finder to the writer).
+TUNED = {ZSTD_LEVEL: {"hash_log": 12, "min_match": 7}, -7: {"hash_log": 12, "min_match": 7},
+         SIGNAL_LEVEL: {"hash_log": 11, "min_match": 7}}
+TUNED_LEVELS = tuple(TUNED)
 #: Chunk record: opcode, record length, start and end time, uncompressed size and CRC.
 _HEAD = struct.Struct("<BQQQQI")
 _CHUNK_OPCODE = 0x06
@@ -136,13 +144,13 @@ def supported(w: Writer) -> bool:
 
 def compressor(compression: str, level: int | None) -> Callable[[memoryview], bytes]:
     """bytes-like -> compressed bytes, for ``zstd`` (``level`` None: :data:`ZSTD_LEVEL`;
-    the levels of :data:`TUNED_LEVELS` with the parameters :data:`TUNED`; frames with
+    the levels of :data:`TUNED_LEVELS` with their parameters in :data:`TUNED`; frames with
     zstd's content checksum) or ``lz4`` (None: the library's default)."""
     if compression == "zstd":
         lvl = ZSTD_LEVEL if level is None else level
         if lvl in TUNED_LEVELS:
             params = zstandard.ZstdCompressionParameters.from_level(
-                lvl, write_checksum=1, **TUNED)
+                lvl, write_checksum=1, **TUNED[lvl])
             return zstandard.ZstdCompressor(compression_params=params).compress
         return zstandard.ZstdCompressor(level=lvl, write_checksum=True).compress
     if compression == "lz4":

@@ -63,14 +63,15 @@ Compression = Literal["zstd", "lz4", "none"]
 _COMPRESSION = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4,
                 "none": CompressionType.NONE}
 #: Compression levels the codecs take (zstd's negative levels trade ratio for speed).
-_LEVELS = {"zstd": (-7, 22), "lz4": (0, 16)}
+_LEVELS = {"zstd": (chunk.SIGNAL_LEVEL, 22), "lz4": (0, 16)}
 _JSON_TYPES = ("number", "integer")
 #: The writer's default ``chunk_compression`` (with zstd at its default level): the decoded
 #: signals (``/signals/...``: doubles and floats of noisy sensor words, ~40 % of a
-#: whole-robot log's bytes and half of zstd's time) in chunks of zstd's fastest level,
-#: ~15 % less compression time for a log ~20 % larger (docs/framelog.md, "Chunks of
-#: their own compression"); the register words and frames keep :data:`chunk.ZSTD_LEVEL`.
-SIGNAL_CHUNKS: dict[str, tuple[Compression, int]] = {"/signals/": ("zstd", -7)}
+#: whole-robot log's bytes and half of zstd's time) in chunks of zstd's fastest level
+#: here (:data:`chunk.SIGNAL_LEVEL`), ~25 % less compression time for a log ~20 % larger
+#: (docs/framelog.md, "Chunks of their own compression"); the register words and frames
+#: keep :data:`chunk.ZSTD_LEVEL`.
+SIGNAL_CHUNKS: dict[str, tuple[Compression, int]] = {"/signals/": ("zstd", chunk.SIGNAL_LEVEL)}
 #: Keys of the "eha-hil" metadata record that the writer sets itself.
 RESERVED_METADATA = ("level", "version", "time")
 
@@ -150,8 +151,8 @@ class FrameLogWriter:
     channels' messages go to chunks of that kind, open beside the others (MCAP compresses
     per chunk, and every reader reads a file of mixed chunks), e.g. ``{"/signals/":
     "none"}`` keeps the decoded signals, on which zstd spends much time for little
-    (docs/framelog.md, "The whole robot"), out of zstd, and ``("zstd", -7)`` gives them
-    zstd's fastest level; the messages are the same either way. None (the default):
+    (docs/framelog.md, "The whole robot"), out of zstd, and ``("zstd", -9)`` gives them
+    the writer's fastest zstd level; the messages are the same either way. None (the default):
     :data:`SIGNAL_CHUNKS` when ``compression`` is zstd at its default level, else none.
 
     Times must be integers >= 0 (ns of simulated time) and non-decreasing per channel, so

@@ -17,17 +17,15 @@ the :class:`~hil.replay.signals.PistonCarry` it leaves are the reference's, byte
 from __future__ import annotations
 
 import math
-import sys
 
 import numpy as np
-from numba import njit, types
-from numba.core import cgutils
-from numba.extending import intrinsic
+from numba import njit
 
 from firmware_model.calibration import FirmwareCalibration
 from firmware_model.fpga import layout as B
 from firmware_model.mcu import measure
 from hil.fieldbus import pdo
+from hil.framelog.heads import store as _store
 from hil.framelog.protobuf import MessageType
 from hil.replay import signals as SG
 from protocols import pressure_adc as padc
@@ -85,31 +83,6 @@ _OUT = pdo.ACTUATOR_OUT_DTYPE
 if (_OUT.fields["mode"][1], _OUT.fields["flags"][1], _OUT.fields["command"][1],
         _OUT.fields["command"][0].str) != (0, 1, 2, "<i4"):
     raise ImportError("hil.replay.signal_kernel: the actuator output record changed")
-
-
-if sys.byteorder != "little":  # the stores below write the machine's own byte order
-    raise ImportError("hil.replay.signal_kernel needs a little-endian machine")
-
-
-@intrinsic
-def _store(typingctx, buf, row, at, value):
-    """``value`` (a float64 or integer scalar) stored in its own byte width at
-    ``buf[row, at]`` (``buf`` a 2-D uint8 array, rows of any stride), unaligned: one store
-    where a byte loop would take eight (a protobuf value follows its one-byte key, so it
-    is never aligned)."""
-    if not (isinstance(buf, types.Array) and buf.dtype == types.uint8 and buf.ndim == 2
-            and isinstance(value, (types.Float, types.Integer))):
-        return None
-
-    def codegen(context, builder, signature, args):
-        aryty = signature.args[0]
-        ary = context.make_array(aryty)(context, builder, args[0])
-        ptr = cgutils.get_item_pointer(context, builder, aryty, ary, [args[1], args[2]])
-        vty = context.get_value_type(signature.args[3])
-        builder.store(args[3], builder.bitcast(ptr, vty.as_pointer()), align=1)
-        return context.get_dummy_value()
-
-    return types.void(buf, row, at, value), codegen
 
 
 @njit(cache=True, inline="always")

@@ -122,10 +122,13 @@ def _log_signals(cfg) -> None:
 
 
 def _log_planes(cfg) -> None:
-    """The byte planes of a frame log's raw blocks (every ``--log``)."""
+    """The byte planes of a frame log's raw blocks and its batches' record heads (every
+    ``--log``)."""
+    from hil.framelog import heads
     from hil.framelog.rawpb import warm_up
 
     warm_up()
+    heads.warm_up()
 
 
 def _esc_frames(cfg) -> None:

@@ -111,9 +111,10 @@ def test_box_clock_runs_the_box_cycles_at_sync0(cfg):
         releases.append(rel)
         return rel
 
-    def cycle() -> None:
+    def cycle(since: int, at: int) -> None:
+        assert at == releases[-1] and since < at  # the pulse is the cycle's release
         begins.append((time.monotonic_ns(), releases[-1]))
-        chain.cycle()
+        chain.cycle(since, at)
 
     clock = BoxClock(cycle, sync0=sync0)
     clock.begin(t0)

@@ -9,6 +9,7 @@ import contextlib
 import io
 import json
 import shutil
+import signal
 import subprocess
 import sys
 import time
@@ -77,9 +78,22 @@ def _serve(ns: str, *args: str, master_s: float | None = None,
     return p.returncode, json.loads(out), time.monotonic() - t0
 
 
+#: What the end of a serving may take past its --seconds on an idle machine [s]: the
+#: serving thread's last look, then stopping the frame and box threads.
+STOP_S = 0.3
+
+
+def _waited_s(rep: dict) -> float:
+    """How long the serving threads were runnable but waited for a CPU [s] (the report's
+    figures; 0 where the kernel does not say): what a loaded machine adds to STOP_S."""
+    keys = ("serve_run_delay_ms", "box_run_delay_ms", "frame_run_delay_ms")
+    return sum(rep.get(k) or 0.0 for k in keys) / 1e3
+
+
 def test_seconds_are_wall_seconds_and_no_master_fails(netns):
     code, rep, _ = _serve(netns, "--seconds", "1.5", "--model", "echo")
-    assert 1.5 <= rep["wall_s"] < 1.5 + 0.3
+    # never short; late by the stop's work, plus what a loaded machine kept it waiting
+    assert 1.5 <= rep["wall_s"] < 1.5 + STOP_S + _waited_s(rep), rep
     assert code == 1 and rep["ok"] is False
     assert "no EtherCAT frame arrived from a master" in rep["failures"]
 
@@ -108,7 +122,7 @@ def test_udp_serve_seconds_are_wall_seconds():
         code = main(["serve", "--transport", "udp", "--port", "0", "--seconds", "1", "--json",
                      "-q"])
     rep = json.loads(out.getvalue())
-    assert 1.0 <= rep["wall_s"] < 1.3
+    assert 1.0 <= rep["wall_s"] < 1.0 + STOP_S + _waited_s(rep), rep
     assert code == 1 and "no frame was served" in " ".join(rep["failures"])
     assert rep["reply_us"]["p50"] is None and rep["lag_max_ms"] >= 0
 
@@ -188,7 +202,7 @@ def test_a_master_faster_than_the_boxes_is_answered_and_reported(netns):
     assert rep["frames_per_s"] > 1000  # faster than the boxes, and said so
 
 
-@pytest.mark.slow  # a server process with the whole-robot engine, ~10 s at load
+@pytest.mark.slow  # a server process with the whole-robot engine, ~5 s at load
 def test_udp_serve_runs_the_whole_robot_on_its_own_clock():
     """``serve --transport udp --model robot``: the whole-robot engine behind the 16 boxes of
     hydra_full on the box clock; a master's enable and force command cross the 3-buffers
@@ -200,29 +214,42 @@ def test_udp_serve_runs_the_whole_robot_on_its_own_clock():
 
     p = subprocess.Popen([sys.executable, "-m", "hil.cli", "serve", "--transport", "udp",
                           "--port", "0", "--topology", "hydra_full", "--model", "robot",
-                          "--seconds", "4", "--json", "-q", "--max-lag-ms", "1e6",
-                          "--max-overrun-percent", "100", "--max-late-percent", "100"],
+                          "--json", "-q", "--max-lag-ms", "1e6",
+                          "--max-overrun-percent", "100", "--max-late-percent", "100",
+                          # this master (the test, at the ordinary priority) may stall
+                          # longer than the stock 10 ms on a loaded machine: not tested here
+                          "--set", "mcu.command_timeout_s=1.0"],
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=_env())
-    line = p.stderr.readline()
-    assert "ready on udp 127.0.0.1:" in line and "robot model" in line, line
-    port = int(line.split("ready on udp 127.0.0.1:")[1].split(";")[0])
-    m = Master(load_topology("hydra_full"), crc_trailer=False)
-    status = 0
-    with open_transport("udp", "master", remote_port=port) as end:
-        for _ in range(300):
-            m.set_actuator(0, "force", 200.0, enable=True)
-            for f in m.frames():
-                end.send(f)
-            while not all(m._answered):
-                reply = end.recv(timeout=5.0)
-                assert reply is not None
-                m.receive(reply)
-            status = m.actuator_inputs(0)["status"]
-            m.end_cycle()
-            time.sleep(1e-3)
-    out, err = p.communicate(timeout=120)
+    try:  # (it serves until SIGINT, after the master's last cycle: no wall-time budget)
+        line = p.stderr.readline()  # (after its first cycles: compiled or loaded)
+        assert "ready on udp 127.0.0.1:" in line and "robot model" in line, line
+        port = int(line.split("ready on udp 127.0.0.1:")[1].split(";")[0])
+        m = Master(load_topology("hydra_full"), crc_trailer=False)
+        status = cycles = 0
+        deadline = time.monotonic() + 60.0
+        with open_transport("udp", "master", remote_port=port) as end:
+            # 300 cycles, and on until the board reports enabled (the boxes on their own
+            # clock may run late on a loaded machine)
+            while cycles < 300 or not (status & BOARD_ENABLED or time.monotonic() > deadline):
+                cycles += 1
+                m.set_actuator(0, "force", 200.0, enable=True)
+                for f in m.frames():
+                    end.send(f)
+                while not all(m._answered):
+                    reply = end.recv(timeout=5.0)
+                    assert reply is not None
+                    m.receive(reply)
+                status = m.actuator_inputs(0)["status"]
+                m.end_cycle()
+                time.sleep(1e-3)
+        p.send_signal(signal.SIGINT)
+        out, err = p.communicate(timeout=120)
+    finally:
+        if p.poll() is None:
+            p.kill()
+            p.wait()
     rep = json.loads(out)
     assert rep["model"] == "robot" and p.returncode == 0, rep["failures"]
-    assert m.stats.frames_ok == 600 and m.stats.wkc_errors == 0
-    assert rep["frames_served"] == 600 and rep["cycles"] > 300
+    assert m.stats.frames_ok == 2 * cycles and m.stats.wkc_errors == 0
+    assert rep["frames_served"] == 2 * cycles and rep["cycles"] > 0
     assert status & BOARD_ENABLED

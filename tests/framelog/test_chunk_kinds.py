@@ -144,7 +144,7 @@ def test_a_level_of_its_own_is_a_chunk_of_its_own(tmp_path: Path) -> None:
                                             ({"chunk_compression": {}}, False)])
 def test_signals_have_chunks_of_their_own_by_default(tmp_path: Path, kw: dict,
                                                      apart: bool) -> None:
-    """zstd at the writer's default level: /signals/ in chunks of their own (zstd -7);
+    """zstd at the writer's default level: /signals/ in chunks of their own (zstd -9);
     a level or a chunk_compression of one's own: one kind of chunk."""
     path = tmp_path / "d.mcap"
     with FrameLogWriter(path, chunk_size=1 << 20, **kw) as w:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import threading
+import time
 
 import pytest
 from numba.core import event
@@ -27,6 +28,30 @@ def test_inside_the_lock_it_waits_for_the_outermost_release():
         d.on_end(ev)
     d.on_end(ev)  # once raised, a later release does not raise again
     assert not d.pending
+
+
+def test_a_signal_deferred_into_a_long_compile_is_raised_there_after_a_while():
+    """A compile of minutes (a cold cache on a loaded machine) does not leave a SIGTERM
+    unanswered: after ``force_after_s`` the handler runs again and raises inside the lock,
+    and keeps the signal for the lock's release (and for another try)."""
+    forced: list[int] = []
+    d = DeferredInterrupt(force_after_s=0.05, interrupt=forced.append)
+    ev = event.Event("numba:compiler_lock", event.EventStatus.START)
+    d.on_start(ev)
+    d.handler(15, None)  # deferred at first
+    deadline = time.monotonic() + 10
+    while not forced and time.monotonic() < deadline:
+        time.sleep(0.005)
+    assert forced[:1] == [15]  # the timer asked for the handler again (the main thread's)
+    with pytest.raises(KeyboardInterrupt) as exc:
+        d.handler(15, None)
+    assert exc.value.signum == 15 and d.pending == 15
+    with pytest.raises(KeyboardInterrupt):  # once more at the release, then done
+        d.on_end(ev)
+    assert d.pending is None
+    tries = len(forced)
+    time.sleep(0.2)
+    assert len(forced) == tries  # nothing pending: no more tries
 
 
 def test_other_threads_holding_the_lock_do_not_defer_the_main_threads_ctrl_c():

@@ -253,6 +253,9 @@ ALLOWED = {
         "interpreter lock, and passes each frame to the ESC model's compiled frame path",
     ("hil/replay/fpga_replay.py", "kernel"):
         "feeds logged words through the board's compiled tick and compares its outputs",
+    ("hil/framelog/heads.py", "kernel"):
+        "a log batch's MCAP record heads and index entries written in one compiled pass: "
+        "bytes moved, no part's arithmetic",
     ("hil/framelog/planes.py", "kernel"):
         "a log's raw blocks split into byte planes (and frame-to-frame differences) in one "
         "compiled pass: bytes moved, no part's arithmetic",

@@ -11,7 +11,11 @@ runs: ``eha-hil serve --transport ethercat --interface IF --topology hydra_full`
   each box takes the newest output record its ESC holds, at its end it publishes its input
   record: the sync managers' 3-buffers (:mod:`firmware_model.esc.compiled`), so neither
   side ever sees half a record and neither waits for the other. How far simulated time
-  fell behind wall time is reported (``lag_max_ms``).
+  fell behind wall time is reported (``lag_max_ms``). A cycle run late (catching up) counts
+  the record its box holds as a fresh command when the master's write reached the ESC in
+  that cycle's scheduled millisecond of the slaves' clock (the ESCs stamp each output
+  record), as the hardware's MCU would have found it: the box thread's lateness is the
+  emulator's, not the master's, and must not trip the MCUs' command watchdogs.
   After each cycle the boxes' mailbox side (:mod:`hil.fieldbus.esc.mailbox`) serves the
   CoE requests the ESCs' SM0 handed over and posts answers and emergencies for SM1.
 
@@ -38,13 +42,13 @@ from firmware_model.esc import compiled as ec
 from firmware_model.esc import dc_compiled as dcc
 from firmware_model.esc.compiled import EscArrays
 from firmware_model.esc.dc import DcParams
-from hil.fieldbus.box_clock import PERIOD_NS, BoxClock, advance_boxes
+from hil.fieldbus.box_clock import PERIOD_NS, BoxClock, advance_boxes, take_outputs
 from hil.fieldbus.boxes import box_engine, make_box
 from hil.fieldbus.esc import frames as esc_frames
 from hil.fieldbus.esc.mailbox import Mailboxes
 from hil.fieldbus.esc.slaves import describe_all
 from hil.fieldbus.topology import Topology
-from hil.sim.cpu_account import steal_during, steal_s
+from hil.sim.cpu_account import run_delay_ns, steal_during, steal_s
 from hil.transports.rawether import RawEthernet
 from plant.config import Config
 
@@ -85,14 +89,31 @@ class ServedChain:
         self.engine = box_engine(model, self.boxes, cfg, overlap=False)
         #: Box cycles run (the boxes' own clock; the optional cycle-counter TxPDO).
         self.box_cycles = 0
+        #: Per box: the output record it took last (expanded to its full record), or None.
+        self.taken: list[bytes | None] = [None] * len(self.boxes)
+        #: Box cycles (per box) whose record was fresh by the slaves' clock alone (the
+        #: master's write in their scheduled millisecond; its newest record taken before).
+        self.fresh_by_schedule = 0
+        #: The warm-up cycles have run (:func:`warm_up`).
+        self.warmed = False
+        #: CLOCK_MONOTONIC [ns]: is a cycle late? (a test's own clock)
+        self.clock: Callable[[], int] = time.monotonic_ns
         self.publish_inputs()
 
-    def take_outputs(self) -> None:
-        """Each box takes the newest output record its ESC holds, if new."""
-        for i, box in enumerate(self.boxes):
-            out = self.arrays.pending_outputs(i)
-            if out is not None:
-                box.apply(self.mailboxes.expand(i, out))
+    def take_outputs(self, since_ns: int | None = None, at_ns: int | None = None) -> None:
+        """Each box takes the newest output record its ESC holds, if new; a cycle run late
+        (back to back with others, it finds only the newest of their records) also the one
+        it holds, if the master completed one in its scheduled ``(since_ns, at_ns]`` [ns,
+        CLOCK_MONOTONIC] of the slaves' clock (:func:`hil.fieldbus.box_clock.take_outputs`)."""
+        t0 = self.t0
+        self.fresh_by_schedule += take_outputs(
+            self.boxes, self._newest, self.taken,
+            lambda a, b: self.arrays.outputs_written(a - t0, b - t0), since_ns, at_ns,
+            self.clock)
+
+    def _newest(self, i: int) -> bytes | None:
+        out = self.arrays.pending_outputs(i)
+        return None if out is None else self.mailboxes.expand(i, out)
 
     def advance(self) -> None:
         advance_boxes(self.engine, self.boxes)
@@ -101,9 +122,10 @@ class ServedChain:
         for i, box in enumerate(self.boxes):
             self.arrays.set_inputs(i, self.mailboxes.select(i, box.inputs(), self.box_cycles))
 
-    def cycle(self) -> None:
-        """One 1 ms cycle of every box, exchanging process data with the ESCs."""
-        self.take_outputs()
+    def cycle(self, since_ns: int | None = None, at_ns: int | None = None) -> None:
+        """One 1 ms cycle of every box, exchanging process data with the ESCs; ``(since_ns,
+        at_ns]``: its scheduled millisecond (:class:`BoxClock`; None: off the clock)."""
+        self.take_outputs(since_ns, at_ns)
         self.advance()
         self.box_cycles += 1
         self.mailboxes.step()
@@ -172,6 +194,9 @@ class EcatServeStats:
     sync0_cycles: int = 0
     sync0_first_cycle: int = -1
     sync0_start_late_max_us: float = 0.0
+    #: Box cycles (per box) whose command was fresh by a write in their scheduled ms only
+    #: (run late, catching up: ServedChain.take_outputs).
+    fresh_by_schedule: int = 0
     frames_received: int = 0
     frames_answered: int = 0
     frames_late: int = 0
@@ -186,6 +211,8 @@ class EcatServeStats:
     #: Time the frame / box thread was runnable but waited for its CPU [ms] (None: unknown).
     frame_run_delay_ms: float | None = None
     box_run_delay_ms: float | None = None
+    #: ... and the serving thread's (it stops the other two at the end).
+    serve_run_delay_ms: float | None = None
     #: Per CPU: time the hypervisor did not run it during the serving [ms] (None: unknown).
     steal_ms: dict | None = None
     #: The first late replies: when, how long, wake-up and work (FrameThread.late_replies).
@@ -196,6 +223,18 @@ class EcatServeStats:
 
     def as_dict(self) -> dict:
         return asdict(self)
+
+
+def warm_up(chain: ServedChain) -> None:
+    """The boxes' first :data:`WARMUP_CYCLES` cycles and the frame loop compiled (or
+    loaded), once: what :func:`serve` needs before it answers a frame. A caller that must
+    stay interruptible meanwhile (a long compile on a cold cache) calls it first."""
+    if chain.warmed:
+        return
+    for _ in range(WARMUP_CYCLES):
+        chain.cycle()
+    esc_frames.warm_up()
+    chain.warmed = True
 
 
 def serve(chain: ServedChain, link: RawEthernet, seconds: float | None = None,
@@ -211,15 +250,14 @@ def serve(chain: ServedChain, link: RawEthernet, seconds: float | None = None,
     started after it finds every slave answering from its first frame). ``frame_setup`` /
     ``box_setup`` run first in the frame / box thread (priority, CPU)."""
     wake = wake or threading.Event()
-    for _ in range(WARMUP_CYCLES):
-        chain.cycle()
-    esc_frames.warm_up()
+    warm_up(chain)
     frames = esc_frames.FrameThread(link.sock, chain.arrays, late_us, frame_setup)
     boxes = BoxClock(chain.cycle, box_setup, box_behind, chain.sync0_release)
     gc.collect()
     gc.freeze()  # what exists now is never collected: no pause scans it
     clock = time.monotonic_ns
     steal0 = steal_s()
+    waited0 = run_delay_ns()
     start = clock()
     chain.t0 = start
     frames.start(start)
@@ -238,6 +276,7 @@ def serve(chain: ServedChain, link: RawEthernet, seconds: float | None = None,
         frames.stop()
         boxes.stop()
         wall = (clock() - start) * 1e-9
+        waited = run_delay_ns()
         steal1 = steal_s()
         gc.unfreeze()
     for err in (frames.error, boxes.error):
@@ -251,6 +290,7 @@ def serve(chain: ServedChain, link: RawEthernet, seconds: float | None = None,
                         worst_cycle_at=b.worst_cycle_at, sync0_cycles=b.sync0_cycles,
                         sync0_first_cycle=b.sync0_first_cycle,
                         sync0_start_late_max_us=b.sync0_start_late_max_us,
+                        fresh_by_schedule=chain.fresh_by_schedule,
                         frames_received=int(f[esc_frames.F_RECEIVED]),
                         frames_answered=int(f[esc_frames.F_ANSWERED]),
                         frames_late=int(f[esc_frames.F_LATE]),
@@ -262,6 +302,8 @@ def serve(chain: ServedChain, link: RawEthernet, seconds: float | None = None,
                         frame_work_max_us=int(f[esc_frames.F_MAX_WORK_NS]) / 1e3,
                         frame_run_delay_ms=_ms(frames.run_delay_ns),
                         box_run_delay_ms=_ms(boxes.run_delay_ns),
+                        serve_run_delay_ms=_ms(None if waited0 is None or waited is None
+                                               else waited - waited0),
                         steal_ms=steal_during(steal0, steal1),
                         late_replies=frames.late_replies(start),
                         start_monotonic_s=start * 1e-9)

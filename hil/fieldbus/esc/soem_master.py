@@ -43,6 +43,14 @@ import pysoem
 RECV_TIMEOUT_US = 2_000
 STATE_TIMEOUT_US = 2_000_000
 PROGRESS_S = 10.0
+#: How long MODE dc's own read of the slaves' clocks waits for its reply [us]: a frame of
+#: this process between SOEM's cycles, not SOEM's (whose cycles keep the stock 2 ms). What
+#: it measures is the clocks' spread, not the reply time (``bench ethercat --wire`` has
+#: that), so a loaded machine may take longer.
+DC_READ_TIMEOUT_US = 20_000
+#: How long MODE coe waits for the commanded box's emergencies after it stopped sending [s]
+#: (they come 10 ms of box cycles later; a loaded machine runs those late).
+EMCY_WAIT_S = 10.0
 #: Cycles right after OP left out of the round-trip figures (not the steady state).
 RTT_WARMUP = 20
 SYNC0_CYCLE_NS = 1_000_000
@@ -111,7 +119,7 @@ def _dc_reader(ifname: str, n: int):  # noqa: ANN202 - a function of no argument
 
     sock = socket.socket(socket.AF_PACKET, socket.SOCK_RAW, socket.htons(0x88A4))
     sock.bind((ifname, 0))
-    sock.settimeout(RECV_TIMEOUT_US * 1e-6)
+    sock.settimeout(DC_READ_TIMEOUT_US * 1e-6)
     dgs = []
     for i in range(n):
         station = 0x1001 + i   # SOEM's configured addresses
@@ -126,9 +134,9 @@ def _dc_reader(ifname: str, n: int):  # noqa: ANN202 - a function of no argument
                 sock.recv(2048)
         except BlockingIOError:
             pass
-        sock.settimeout(RECV_TIMEOUT_US * 1e-6)
+        sock.settimeout(DC_READ_TIMEOUT_US * 1e-6)
         sock.send(frame)
-        t_end = time.monotonic() + RECV_TIMEOUT_US * 1e-6
+        t_end = time.monotonic() + DC_READ_TIMEOUT_US * 1e-6
         while time.monotonic() < t_end:
             try:
                 got = sock.recv(2048)
@@ -232,14 +240,17 @@ def coe(ifname: str, box: int, n: int) -> dict:
     target.output = bytes(out)
     info["bad_wkc"], info["bad_wkc_values"] = paced(m, n)
     info["inputs_last"] = target.input.hex()
-    time.sleep(0.3)  # nothing sent: the MCU command watchdog, then the ESC's, trip
-    for s in m.slaves:  # SM1 holds one message; the box puts the next one a cycle later
-        for _ in range(6):
-            try:
-                s.mbx_receive()
-            except pysoem.Emergency as e:  # (raised when no callback takes it)
-                emcy.append([-1, e.error_code, e.error_reg, e.b1, e.w1, e.w2])
-            time.sleep(0.003)
+    # Nothing sent from now on: the MCU command watchdogs trip (after their 10 ms of box
+    # cycles), then the ESCs' (100 ms of their clock). The emergencies are read until the
+    # commanded box's actuators all sent theirs (however late a loaded machine runs the
+    # boxes, up to EMCY_WAIT_S), then once more for any that should not be there.
+    slots = len(target.output) // 10
+    deadline = time.monotonic() + EMCY_WAIT_S
+    while (sum(e[0] in (max(box, 0), -1) for e in emcy) < slots
+           and time.monotonic() < deadline):
+        _read_mailboxes(m, emcy, 1)
+        time.sleep(0.01)
+    _read_mailboxes(m, emcy, 6)
     info["emergencies"] = emcy
     m.read_state()
     info["after_stop"] = [s.state for s in m.slaves]
@@ -247,6 +258,19 @@ def coe(ifname: str, box: int, n: int) -> dict:
     m.write_state()
     m.close()
     return info
+
+
+def _read_mailboxes(m: pysoem.Master, emcy: list, rounds: int) -> None:
+    """Every slave's mailbox read ``rounds`` times, 3 ms apart (SM1 holds one message; a box
+    puts the next one a cycle later); emergencies no callback took go to ``emcy``."""
+    for s in m.slaves:
+        for _ in range(rounds):
+            try:
+                s.mbx_receive()
+            except pysoem.Emergency as e:  # (raised when no callback takes it)
+                emcy.append([-1, e.error_code, e.error_reg, e.b1, e.w1, e.w2])
+            if rounds > 1:
+                time.sleep(0.003)
 
 
 def _assign_cycle_counter(s) -> None:  # noqa: ANN001
