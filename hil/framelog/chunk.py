@@ -325,50 +325,56 @@ def _nothing() -> None:
 def _finalize(w: Writer, compress: Callable[[memoryview], bytes] | None, name: bytes,
               crc_on: bool, cb: object = None) -> None:
     """The library's ``__finalize_chunk`` (same records, same order) without its copies,
-    of the chunk builder ``cb`` (None: the Writer's)."""
+    of the chunk builder ``cb`` (None: the Writer's): the chunk record's head, its
+    compressed records and its message indexes handed to the stream as one write
+    (:func:`write_parts`; the library: three, the indexes copied through its record
+    builder)."""
     if cb is None:
         cb = w._Writer__chunk_builder  # noqa: SLF001 - see the module docstring
     if cb is None or cb.num_messages == 0:
         return
     w._Writer__statistics.chunk_count += 1  # noqa: SLF001
     buf = cb.record_writer._buffer  # noqa: SLF001
+    rb = w._Writer__record_builder  # noqa: SLF001
+    if rb.count:  # records buffered before the chunk go first
+        w._Writer__flush()  # noqa: SLF001
+    stream = w._Writer__stream  # noqa: SLF001
+    start = stream.tell()
     view = buf.getbuffer()
     try:
         size = len(view)
         data = view if compress is None else compress(view)
         crc = zlib.crc32(view) if crc_on and w._Writer__enable_crcs else 0  # noqa: SLF001
-        w._Writer__flush()  # noqa: SLF001 - records buffered before the chunk go first
-        stream = w._Writer__stream  # noqa: SLF001
-        start = stream.tell()
-        body = 8 + 8 + 8 + 4 + 4 + len(name) + 8 + len(data)
+        compressed = len(data)
+        body = 8 + 8 + 8 + 4 + 4 + len(name) + 8 + compressed
         head = b"".join((_HEAD.pack(_CHUNK_OPCODE, body, cb.message_start_time,
                                     cb.message_end_time, size, crc),
-                         struct.pack("<I", len(name)), name, struct.pack("<Q", len(data))))
+                         struct.pack("<I", len(name)), name, struct.pack("<Q", compressed)))
+        index = ChunkIndex(message_start_time=cb.message_start_time,
+                           message_end_time=cb.message_end_time, chunk_start_offset=start,
+                           chunk_length=len(head) + compressed, message_index_offsets={},
+                           message_index_length=0, compression=name.decode(),
+                           compressed_size=compressed, uncompressed_size=size)
+        parts = [head, data]
+        if w._Writer__index_types & IndexType.MESSAGE:  # noqa: SLF001
+            indexes = _Collect()
+            write_indexes(cb.message_indices, indexes, start + len(head) + compressed,
+                          index.message_index_offsets, getattr(cb, "eha_batches", None))
+            index.message_index_length = indexes.count
+            parts += indexes.parts
         if w._Writer__enable_data_crcs:  # noqa: SLF001
-            w._Writer__data_section_crc = zlib.crc32(  # noqa: SLF001
-                data, zlib.crc32(head, w._Writer__data_section_crc))  # noqa: SLF001
-        stream.write(head)
-        stream.write(data)
-        compressed = len(data)
+            at = w._Writer__data_section_crc  # noqa: SLF001
+            for part in parts:
+                at = zlib.crc32(part, at)
+            w._Writer__data_section_crc = at  # noqa: SLF001
+        write_parts(stream, parts)
     finally:
-        data = None
+        data = parts = None
         view.release()
     if isinstance(buf, ChunkBuffer):
         buf.reset()
     else:
         cb.record_writer._buffer = BytesIO()  # noqa: SLF001 - the records are written
-    index = ChunkIndex(message_start_time=cb.message_start_time,
-                       message_end_time=cb.message_end_time, chunk_start_offset=start,
-                       chunk_length=len(head) + compressed, message_index_offsets={},
-                       message_index_length=0, compression=name.decode(),
-                       compressed_size=compressed, uncompressed_size=size)
-    rb = w._Writer__record_builder  # noqa: SLF001
-    at = stream.tell()
-    if w._Writer__index_types & IndexType.MESSAGE:  # noqa: SLF001
-        write_indexes(cb.message_indices, rb, at + rb.count, index.message_index_offsets,
-                      getattr(cb, "eha_batches", None))
-    index.message_index_length = rb.count
-    w._Writer__flush()  # noqa: SLF001
     w._Writer__chunk_indices.append(index)  # noqa: SLF001
     # ChunkBuilder.reset, less its copy of the (already replaced) buffer
     cb.message_end_time = 0
@@ -377,6 +383,30 @@ def _finalize(w: Writer, compress: Callable[[memoryview], bytes] | None, name: b
         cb.eha_batches.clear()
     cb.message_start_time = 0
     cb.num_messages = 0
+
+
+class _Collect:
+    """What :func:`write_indexes` writes, kept as its parts (``write``) and their length
+    (``count``), to go out with the chunk in one write."""
+
+    def __init__(self) -> None:
+        self.parts: list[bytes] = []
+        self.count = 0
+
+    def write(self, data: bytes) -> None:
+        self.parts.append(data)
+        self.count += len(data)
+
+
+def write_parts(stream: object, parts: list) -> None:
+    """``parts`` (bytes-likes) written to ``stream`` in order: one ``writev`` where the
+    stream has one (the writer's file: one system call), else a ``write`` each."""
+    writev = getattr(stream, "writev", None)
+    if writev is not None:
+        writev(parts)
+        return
+    for part in parts:
+        stream.write(part)  # type: ignore[attr-defined]
 
 
 #: A MessageIndex record of one entry (a channel with one message in the chunk: a block).

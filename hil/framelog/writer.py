@@ -104,6 +104,17 @@ class _DirectFile:
             self._pos += n
         return len(data)
 
+    def writev(self, parts: list) -> int:
+        """``parts`` (bytes-likes) one after the other, in one system call (more only if
+        the kernel takes less than all of them)."""
+        total = sum(memoryview(p).nbytes for p in parts)
+        n = os.writev(self._fd, parts)
+        self._pos += n
+        if n < total:  # rare (a signal, a full disk): the rest by write
+            rest = memoryview(b"".join(parts))[n:]
+            self.write(rest)
+        return total
+
     def tell(self) -> int:
         return self._pos
 
