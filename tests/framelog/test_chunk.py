@@ -4,6 +4,7 @@ library writes; at ours, a file the mcap reader reads back with every CRC checke
 from __future__ import annotations
 
 import io
+import os
 from pathlib import Path
 
 import numpy as np
@@ -60,6 +61,23 @@ def test_library_level_gives_the_librarys_file(tmp_path: Path, compression: str,
     ours = _log(tmp_path / "ours.mcap", compression, level, True)
     lib = _log(tmp_path / "lib.mcap", compression, level, False)
     assert ours == lib
+
+
+def test_a_short_writev_is_completed(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A chunk goes out in one ``os.writev``; where the kernel takes only part of it (a
+    signal, a nearly full disk), the rest follows: the same file as whole writes give."""
+    whole = _log(tmp_path / "whole.mcap", "zstd", None, True)
+    writev = os.writev
+    short = []
+
+    def writev_some(fd: int, parts: list) -> int:
+        data = b"".join(bytes(p) for p in parts)
+        short.append(len(data) > 7)
+        return writev(fd, [data[:7]])
+
+    monkeypatch.setattr(os, "writev", writev_some)
+    assert _log(tmp_path / "short.mcap", "zstd", None, True) == whole
+    assert any(short)
 
 
 def _records(data: bytes) -> list:
