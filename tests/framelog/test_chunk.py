@@ -235,3 +235,26 @@ def test_writers_levels_give_checked_zstd_frames(level: int | None) -> None:
     bad[len(bad) // 2] ^= 0x10
     with pytest.raises(zstandard.ZstdError):
         zstandard.ZstdDecompressor().decompress(bytes(bad))
+
+
+def test_chunk_buffer_does_what_bytesio_does_across_grows() -> None:
+    """The chunk buffer against ``BytesIO`` (what the mcap library builds chunks in): the
+    same bytes after writes of every kind of buffer, seeks back (the library's record
+    lengths), a grow by a write and one by a reserved array filled in place."""
+    ours, ref = chunk.ChunkBuffer(10), io.BytesIO()
+    rng = np.random.default_rng(3)
+    writes = [bytes(rng.integers(0, 256, 40_000, dtype=np.uint8)), bytearray(b"ab"),
+              memoryview(np.arange(6, dtype=np.uint16).reshape(2, 3)),  # not format "B"
+              np.arange(50_000, dtype=np.uint8).view(np.uint8)]
+    for data in writes:
+        assert ours.write(data) == ref.write(data)
+        assert ours.tell() == ref.tell()
+    ours.seek(3), ref.seek(3)
+    ours.write(b"xyz"), ref.write(b"xyz")
+    ours.seek(0, 2), ref.seek(0, 2)
+    got = ours.reserve(70_000)  # a grow
+    got[:] = 7
+    ref.write(bytes([7]) * 70_000)
+    assert ours.getvalue() == ref.getvalue() and bytes(ours.getbuffer()) == ref.getvalue()
+    ours.reset()
+    assert ours.tell() == 0 and ours.getvalue() == b""
