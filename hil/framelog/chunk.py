@@ -30,7 +30,6 @@ from __future__ import annotations
 import contextlib
 import functools
 import struct
-import zlib
 from collections.abc import Callable, Iterator
 from io import BytesIO
 
@@ -39,6 +38,11 @@ import numpy as np
 import zstandard
 from mcap.records import ChunkIndex
 from mcap.writer import IndexType, Writer
+
+try:  # zlib-ng's CRC-32: the same function as zlib's, ~9x faster here (carry-less multiply)
+    from zlib_ng.zlib_ng import crc32
+except ImportError:  # an environment made before that dependency: zlib's
+    from zlib import crc32
 
 #: zstd level of our logs when none is given: against the library's 3, about half the
 #: compression time for ~15 % more bytes; against level 1, 12 % less time for 7 % more
@@ -275,7 +279,7 @@ class Chunks:
             w._Writer__flush()  # noqa: SLF001
             data = bytes(buf.getbuffer())
             if w._Writer__enable_data_crcs:  # noqa: SLF001
-                w._Writer__data_section_crc = zlib.crc32(  # noqa: SLF001
+                w._Writer__data_section_crc = crc32(  # noqa: SLF001
                     data, w._Writer__data_section_crc)  # noqa: SLF001
             w._Writer__stream.write(data)  # noqa: SLF001
             buf.reset()
@@ -364,7 +368,7 @@ def _finalize(w: Writer, compress: Callable[[memoryview], bytes] | None, name: b
     try:
         size = len(view)
         data = view if compress is None else compress(view)
-        crc = zlib.crc32(view) if crc_on and w._Writer__enable_crcs else 0  # noqa: SLF001
+        crc = crc32(view) if crc_on and w._Writer__enable_crcs else 0  # noqa: SLF001
         compressed = len(data)
         body = 8 + 8 + 8 + 4 + 4 + len(name) + 8 + compressed
         head = b"".join((_HEAD.pack(_CHUNK_OPCODE, body, cb.message_start_time,
@@ -385,7 +389,7 @@ def _finalize(w: Writer, compress: Callable[[memoryview], bytes] | None, name: b
         if w._Writer__enable_data_crcs:  # noqa: SLF001
             at = w._Writer__data_section_crc  # noqa: SLF001
             for part in parts:
-                at = zlib.crc32(part, at)
+                at = crc32(part, at)
             w._Writer__data_section_crc = at  # noqa: SLF001
         write_parts(stream, parts)
     finally:
