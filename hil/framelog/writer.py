@@ -278,9 +278,10 @@ class FrameLogWriter:
         if topic in self._topics:
             raise ValueError(f"topic {topic!r} already has a channel")
         ch.kind = next((k for p, k in self._kinds if topic.startswith(p)), self._kind)
-        with chunk.definitions(self._writer):
+        with chunk.definitions(self._writer) as made:
             cid = self._writer.register_channel(topic, message_encoding, schema_id,
                                                 {str(k): str(v) for k, v in metadata.items()})
+        chunk.keep_channel(self._writer, cid, made)
         self._topics.add(topic)
         self._channels[cid] = ch
         return cid
