@@ -201,7 +201,9 @@ def install(w: Writer, compression: str, level: int | None, chunk_size: int,
     buf.write(rw._buffer.getvalue())  # noqa: SLF001 - empty before the first record
     buf.seek(rw._buffer.tell())  # noqa: SLF001
     rw._buffer = buf  # noqa: SLF001
-    w._Writer__chunk_builder.eha_batches = []  # noqa: SLF001 - see :func:`write_indexes`
+    from hil.framelog import batch
+
+    batch.lazy(w._Writer__chunk_builder)  # noqa: SLF001 - see :func:`write_indexes`
     first = _Kind(w._Writer__chunk_builder, compression, level)  # noqa: SLF001
     if not others:
         # an instance attribute: the Writer's own ``self.__finalize_chunk()`` finds it first
@@ -232,7 +234,9 @@ def _new_builder(chunk_size: int) -> object:
     from mcap._chunk_builder import ChunkBuilder
 
     cb = ChunkBuilder()
-    cb.eha_batches = []  # see write_indexes
+    from hil.framelog import batch
+
+    batch.lazy(cb)  # see write_indexes
     cb.record_writer._buffer = ChunkBuffer(_capacity(chunk_size))  # noqa: SLF001
     return cb
 
@@ -447,7 +451,7 @@ def _finalize(w: Writer, compress: Callable[[memoryview], bytes] | None, name: b
         if w._Writer__index_types & IndexType.MESSAGE:  # noqa: SLF001
             indexes = _Collect()
             write_indexes(cb.message_indices, indexes, start + len(head) + compressed,
-                          index.message_index_offsets, getattr(cb, "eha_batches", None))
+                          index.message_index_offsets, _kept(cb))
             index.message_index_length = indexes.count
             parts += indexes.parts
         if w._Writer__enable_data_crcs:  # noqa: SLF001
@@ -466,9 +470,7 @@ def _finalize(w: Writer, compress: Callable[[memoryview], bytes] | None, name: b
     w._Writer__chunk_indices.append(index)  # noqa: SLF001
     # ChunkBuilder.reset, less its copy of the (already replaced) buffer
     cb.message_end_time = 0
-    cb.message_indices.clear()
-    if getattr(cb, "eha_batches", None):
-        cb.eha_batches.clear()
+    _forget(cb)
     cb.message_start_time = 0
     cb.num_messages = 0
 
@@ -497,6 +499,24 @@ def write_parts(stream: object, parts: list) -> None:
         stream.write(part)  # type: ignore[attr-defined]
 
 
+def _kept(cb: object) -> list[tuple[np.ndarray, list[int]]] | None:
+    """The batches chunk builder ``cb`` kept when they are its chunk's indexes
+    (:func:`hil.framelog.batch.clean`); else None, their entries put into its message
+    indexes first (:func:`hil.framelog.batch.settle`)."""
+    from hil.framelog import batch
+
+    if batch.clean(cb):
+        return cb.eha_batches
+    batch.settle(cb)
+    return None
+
+
+def _forget(cb: object) -> None:
+    from hil.framelog import batch
+
+    batch.forget(cb)
+
+
 #: A MessageIndex record of one entry (a channel with one message in the chunk: a block).
 _ONE_INDEX = np.dtype([("op", "u1"), ("len", "<u8"), ("ch", "<u2"), ("n", "<u4"),
                        ("t", "<u8"), ("off", "<u8")])
@@ -516,13 +536,13 @@ def write_indexes(indices: dict, rb: object, at: int, offsets: dict[int, int],
     """The chunk's MessageIndex records, in the order of ``indices`` (channel -> an index
     whose ``records`` are (log time, offset) pairs and (n, 2) arrays of them), as one write
     to ``rb`` starting at file offset ``at``; ``offsets[channel]`` set to each record's.
-    ``batches``: the chunk builder's ``eha_batches`` (:func:`hil.framelog.batch.add_records`:
-    each batch's MessageIndex records already built, and their channels): when the chunk
-    is those batches' channels alone, one entry each, their records are written as they
-    are.
+    ``batches``: instead of ``indices``, the chunk's indexes as the batches that made them
+    (:func:`hil.framelog.batch.keep`: each batch's MessageIndex records already built, and
+    their channels; each channel in one batch), written as they are.
     The bytes the library's ``MessageIndex.write`` makes, one by one; the records of one
     entry (most: a block channel's one message) built as one array."""
-    if _write_batches(indices, batches, rb, at, offsets):
+    if batches:
+        _write_batches(batches, rb, at, offsets)
         return
     items = list(indices.items())
     one = [i for i, (_, mi) in enumerate(items)
@@ -587,21 +607,13 @@ def write_indexes(indices: dict, rb: object, at: int, offsets: dict[int, int],
     rb.write(b"".join(parts))  # type: ignore[attr-defined]
 
 
-def _write_batches(indices: dict, batches: list[tuple[np.ndarray, list[int]]] | None,
-                   rb: object, at: int, offsets: dict[int, int]) -> bool:
-    """:func:`write_indexes` of a chunk whose channels are, in order, those of
-    ``batches`` (each batch's MessageIndex records as an array of :func:`many_index`
-    records, its channels), each with its batch's entry alone; False (nothing written)
-    for any other chunk."""
-    if not batches:
-        return False
-    ids = [cid for _, cids in batches for cid in cids]
-    if ids != list(indices) or any(len(indices[cid].records) != 1 for cid in ids):
-        return False
+def _write_batches(batches: list[tuple[np.ndarray, list[int]]], rb: object, at: int,
+                   offsets: dict[int, int]) -> None:
+    """:func:`write_indexes` of a chunk whose indexes are ``batches`` (each batch's
+    MessageIndex records as an array of :func:`many_index` records, its channels)."""
     pos = at
     for arr, cids in batches:
         size = arr.dtype.itemsize
         offsets.update(zip(cids, range(pos, pos + len(cids) * size, size), strict=True))
         pos += len(cids) * size
     rb.write(b"".join(arr.tobytes() for arr, _ in batches))  # type: ignore[attr-defined]
-    return True

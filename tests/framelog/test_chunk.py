@@ -132,6 +132,54 @@ def test_bad_level_is_one_line(tmp_path: Path, compression: str, level: int) -> 
                        compression_level=level)
 
 
+def _checked_indexes(path: Path) -> tuple[int, dict]:
+    """The index entries of ``path`` (their count, and each chunk's records and
+    MessageIndex records), checked with the mcap library: one MessageIndex per channel of
+    a chunk, each entry's offset a Message record of that channel at that log time."""
+    records = list(StreamReader(io.BytesIO(path.read_bytes()), emit_chunks=True).records)
+    chunks: dict = {}
+    pos = 0
+    for rec in records:  # chunk records in file order, then the indexes that follow each
+        if isinstance(rec, Chunk):
+            pos += 1
+            chunks[pos] = breakup_chunk(rec, validate_crc=True), []
+        elif isinstance(rec, MessageIndex):
+            chunks[pos][1].append(rec)
+    entries = 0
+    for inner, indexes in chunks.values():
+        offsets, at = {}, 0
+        for r in inner:  # each record's offset inside the uncompressed chunk
+            offsets[at] = r
+            at += _record_length(r)
+        assert {ix.channel_id for ix in indexes} == {r.channel_id for r in inner
+                                                     if isinstance(r, Message)}
+        assert len({ix.channel_id for ix in indexes}) == len(indexes)  # one per channel
+        for ix in indexes:
+            for t, off in ix.records:
+                m = offsets[off]
+                assert isinstance(m, Message) and m.channel_id == ix.channel_id
+                assert m.log_time == t
+                entries += 1
+    return entries, chunks
+
+
+def test_channels_batched_twice_in_one_chunk_have_one_index_each(tmp_path: Path) -> None:
+    """Batches alone in a chunk (their index records written as they were built), with
+    every channel in several of them: one MessageIndex per channel, every entry right."""
+    path = tmp_path / "twice.mcap"
+    with FrameLogWriter(path, compression="none", chunk_size=1 << 20) as w:
+        blocks = [w.add_block_channel(f"/b{i}", "eha-hil/x", dtype=np.uint16, width=3)
+                  for i in range(3)]
+        many = [w.add_channel(f"/m{i}", "json") for i in range(2)]
+        for k in range(3):
+            w.write_blocks(blocks, 100 * k + np.arange(4), np.full((3, 4, 3), k))
+            w.write_messages_many(many, 100 * k + 50 + np.arange(5),
+                                  np.full((2, 5, 4), k, np.uint8))
+            w.write_messages(many[1], 100 * k + 60 + np.arange(2), [b"a", b"bc"])
+    entries, chunks = _checked_indexes(path)
+    assert len(chunks) == 1 and entries == 3 * 3 + 3 * 2 * 5 + 3 * 2
+
+
 @pytest.mark.parametrize("compression", ["zstd", "none"])
 def test_every_message_index_entry_points_at_its_message(tmp_path: Path,
                                                          compression: str) -> None:
@@ -156,29 +204,7 @@ def test_every_message_index_entry_points_at_its_message(tmp_path: Path,
         t = 4000 + np.arange(5)
         w.write_messages(many[1], t, [b"y" * 3] * 5)
         w.write_messages(many[2], t, [b"z" * (1 + i) for i in range(5)])
-    records = list(StreamReader(io.BytesIO(path.read_bytes()), emit_chunks=True).records)
-    chunks = {}
-    pos = 0
-    for rec in records:  # chunk records in file order, then the indexes that follow each
-        if isinstance(rec, Chunk):
-            pos += 1
-            chunks[pos] = breakup_chunk(rec, validate_crc=True), []
-        elif isinstance(rec, MessageIndex):
-            chunks[pos][1].append(rec)
-    entries = 0
-    for inner, indexes in chunks.values():
-        offsets, at = {}, 0
-        for r in inner:  # each record's offset inside the uncompressed chunk
-            offsets[at] = r
-            at += _record_length(r)
-        assert {ix.channel_id for ix in indexes} == {r.channel_id for r in inner
-                                                     if isinstance(r, Message)}
-        for ix in indexes:
-            for t, off in ix.records:
-                m = offsets[off]
-                assert isinstance(m, Message) and m.channel_id == ix.channel_id
-                assert m.log_time == t
-                entries += 1
+    entries, chunks = _checked_indexes(path)
     assert entries == 6 * 5 + 6 * 3 + 6 * 3 * 4 + 6 * 4 + 10 and len(chunks) >= 7
     # most channels had one message in a chunk: the one-entry records were written
     assert sum(len(ix.records) == 1 for _, ixs in chunks.values() for ix in ixs) >= 25
