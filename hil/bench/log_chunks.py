@@ -52,7 +52,9 @@ def capture_kinds(seconds: float, topology: str) -> list[tuple[str | None, bytes
     topo = load_topology(topology)
     chunks: list[tuple[str | None, bytes]] = []
     make = chunk.compressor
-    signals = {k: prefix for prefix, k in SIGNAL_CHUNKS.items()}
+    signals: dict[tuple, str] = {}  # kind -> its topic prefixes
+    for prefix, k in SIGNAL_CHUNKS.items():
+        signals[k] = f"{signals[k]} + {prefix}" if k in signals else prefix
 
     def keeping(compression: str, level: int | None) -> Callable[[memoryview], bytes]:
         inner = make(compression, level)

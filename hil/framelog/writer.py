@@ -72,10 +72,12 @@ _JSON_TYPES = ("number", "integer")
 #: (docs/framelog.md, "Chunks of their own compression"); the register words and frames
 #: keep :data:`chunk.ZSTD_LEVEL`.
 #: The actuators' signals (two thirds of the signals' bytes) at a faster level of their own
-#: (:data:`chunk.ACTUATOR_SIGNAL_LEVEL`).
+#: (:data:`chunk.ACTUATOR_SIGNAL_LEVEL`), with the bus's rows (~1 % of the signals' bytes,
+#: written just before them: in their chunk, not in a small one of their own per block).
 SIGNAL_CHUNKS: dict[str, tuple[Compression, int]] = {
     "/signals/": ("zstd", chunk.SIGNAL_LEVEL),
-    "/signals/actuator/": ("zstd", chunk.ACTUATOR_SIGNAL_LEVEL)}
+    "/signals/actuator/": ("zstd", chunk.ACTUATOR_SIGNAL_LEVEL),
+    "/signals/bus": ("zstd", chunk.ACTUATOR_SIGNAL_LEVEL)}
 #: Keys of the "eha-hil" metadata record that the writer sets itself.
 RESERVED_METADATA = ("level", "version", "time")
 
