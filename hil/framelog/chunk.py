@@ -53,6 +53,13 @@ ZSTD_LEVEL = -1
 #: the changing floats where -7 tries every ~8 (docs/framelog.md, "The match finder of the
 #: writer's levels").
 SIGNAL_LEVEL = -9
+#: zstd level of the actuators' decoded signals' chunks (``/signals/actuator/``, 47,000
+#: messages per simulated second of the whole robot: two thirds of the signals' bytes):
+#: an acceleration of 19 with a table of 2^8 entries, ~2 ms per simulated second less
+#: compression than :data:`SIGNAL_LEVEL` for ~1.4 MB more (a step of 20 bytes through each
+#: message's changing floats finds its steady fields a few bytes later; docs/framelog.md,
+#: "The actuators' signal chunks at -19").
+ACTUATOR_SIGNAL_LEVEL = -19
 #: What the writer's own zstd levels (:data:`ZSTD_LEVEL`, :data:`SIGNAL_LEVEL`, and -7,
 #: the signals' level before) change in zstd's parameters of that level: a smaller match
 #: table (zstd's: 2^13 entries; 2^12 is 16 KiB, which stays in the L1 cache beside the
@@ -65,7 +72,8 @@ SIGNAL_LEVEL = -9
 #: the signals at -9 with 2^11 entries ~18 % less than at -7 with 2^12 for ~2.5 % more.
 #: Any reader reads the frames (zstd's format leaves the match finder to the writer).
 TUNED = {ZSTD_LEVEL: {"hash_log": 12, "min_match": 7}, -7: {"hash_log": 12, "min_match": 7},
-         SIGNAL_LEVEL: {"hash_log": 11, "min_match": 7}}
+         SIGNAL_LEVEL: {"hash_log": 11, "min_match": 7},
+         ACTUATOR_SIGNAL_LEVEL: {"hash_log": 8, "min_match": 7}}
 TUNED_LEVELS = tuple(TUNED)
 #: A chunk buffer's first capacity, in chunks (:class:`ChunkBuffer`: address space; the
 #: memory is what the largest chunk and the batch that closed it write), up to

@@ -63,7 +63,7 @@ Compression = Literal["zstd", "lz4", "none"]
 _COMPRESSION = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4,
                 "none": CompressionType.NONE}
 #: Compression levels the codecs take (zstd's negative levels trade ratio for speed).
-_LEVELS = {"zstd": (chunk.SIGNAL_LEVEL, 22), "lz4": (0, 16)}
+_LEVELS = {"zstd": (min(chunk.TUNED_LEVELS), 22), "lz4": (0, 16)}
 _JSON_TYPES = ("number", "integer")
 #: The writer's default ``chunk_compression`` (with zstd at its default level): the decoded
 #: signals (``/signals/...``: doubles and floats of noisy sensor words, ~40 % of a
@@ -71,7 +71,13 @@ _JSON_TYPES = ("number", "integer")
 #: here (:data:`chunk.SIGNAL_LEVEL`), ~25 % less compression time for a log ~20 % larger
 #: (docs/framelog.md, "Chunks of their own compression"); the register words and frames
 #: keep :data:`chunk.ZSTD_LEVEL`.
-SIGNAL_CHUNKS: dict[str, tuple[Compression, int]] = {"/signals/": ("zstd", chunk.SIGNAL_LEVEL)}
+#: The actuators' signals (two thirds of the signals' bytes) at a faster level of their own
+#: (:data:`chunk.ACTUATOR_SIGNAL_LEVEL`), with the bus's rows (~1 % of the signals' bytes,
+#: written just before them: in their chunk, not in a small one of their own per block).
+SIGNAL_CHUNKS: dict[str, tuple[Compression, int]] = {
+    "/signals/": ("zstd", chunk.SIGNAL_LEVEL),
+    "/signals/actuator/": ("zstd", chunk.ACTUATOR_SIGNAL_LEVEL),
+    "/signals/bus": ("zstd", chunk.ACTUATOR_SIGNAL_LEVEL)}
 #: Keys of the "eha-hil" metadata record that the writer sets itself.
 RESERVED_METADATA = ("level", "version", "time")
 

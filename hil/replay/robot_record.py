@@ -295,8 +295,11 @@ class RobotRecorder:
         # the steps first: their reads' validity is the box reports' piston flags
         self._write_steps(k)
         flags = SG.report_flags(self.carry, k.t_steps, k.in_t) if c else None
-        for key, members in groups.items():
-            self._write_records(key[0], times[key], members, flags)
+        # smallest first: the chunk of the boxes' signals closes by its size (the writer's
+        # chunk_size) at the block's largest batch, its last, not one batch before the end
+        # (which left a small chunk of the last group alone in every block)
+        for key in sorted(groups, key=lambda g: sum(r.nbytes for _, r in groups[g])):
+            self._write_records(key[0], times[key], groups[key], flags)
 
     def _write_records(self, d: str, t: np.ndarray, members: list[tuple[int, np.ndarray]],
                        flags: tuple[np.ndarray, np.ndarray] | None) -> None:

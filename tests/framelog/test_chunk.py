@@ -247,7 +247,8 @@ def _record_length(r: object) -> int:
     return len(rb.end())
 
 
-@pytest.mark.parametrize("level", [None, -7, chunk.SIGNAL_LEVEL, 3])
+@pytest.mark.parametrize("level", [None, -7, chunk.SIGNAL_LEVEL, chunk.ACTUATOR_SIGNAL_LEVEL,
+                                   3])
 def test_writers_levels_give_checked_zstd_frames(level: int | None) -> None:
     """The compressor of each zstd level the writer uses (its own levels with their tuned
     match finder, and a level of zstd's own): frames that stock zstd decodes back to the
