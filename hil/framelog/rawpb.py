@@ -14,8 +14,13 @@ protobuf reader understands -- Foxglove Studio, PlotJuggler, ``mcap-protobuf-sup
   ``(b * width + j) * count + i``, each element little endian): a register word or a
   trace column changes little from frame to frame and its high bytes hardly at all, so
   zstd finds long runs there and compresses a whole-robot log twice as fast into a third
-  fewer bytes than the frames row by row (docs/framelog.md, "The whole robot"). Blocks
-  without ``byte_planes`` (logs before) hold the frames row by row and ``t_ns``;
+  fewer bytes than the frames row by row (docs/framelog.md, "The whole robot"); and it
+  stores the planes of the frames' zigzag-coded differences, split at each element's
+  noisy low bits: those as bit planes (``low_bits``, their widths in ``low_widths``), the
+  rest as byte planes (``high_deltas``), since a byte plane of a sensor's few noisy
+  values is zstd's slowest input ("The noisy low bits of the raw blocks"). Blocks of
+  logs before hold all of the differences as byte planes (``frame_deltas``), the frames'
+  own planes, or (without ``byte_planes``) the frames row by row and ``t_ns``;
 * a **single** frame (``add_channel`` with an encoding that is not a stock MCAP message
   encoding) is one message ``eha_hil.raw.<Encoding>``: ``frame`` (``bytes``, the frame as
   it was logged) and, for encodings that have them, the frame's header fields decoded
