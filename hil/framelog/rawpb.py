@@ -141,9 +141,10 @@ def pack_blocks(t_ns: np.ndarray, frames: np.ndarray, dtype: np.dtype,
     differences (:func:`zigzag_deltas`) split at each element's noisy low bits
     (:func:`noisy_widths`, the same for the ``k`` channels: one message size): those bits
     as bit planes in ``low_bits``, their widths in ``low_widths``, the rest as byte planes
-    in ``high_deltas``. ``low_bits`` False: all of the differences as byte planes in
-    ``frame_deltas`` (logs before); ``deltas`` False: the frames' own byte planes in
-    ``frames``, and ``byte_planes`` False as well: row by row, as logs before wrote them.
+    in ``high_deltas``. ``low_bits`` False, or elements of one byte: all of the
+    differences as byte planes in ``frame_deltas`` (as logs before); ``deltas`` False: the
+    frames' own byte planes in ``frames``, and ``byte_planes`` False as well: row by row,
+    as logs before wrote them.
     ``alloc(dtype, k)`` gives the array to fill (every byte is written; default a new
     one). ``spacing``: the times' spacing if the caller has it (:func:`even_spacing`'s
     answer), -1: work it out here."""
@@ -154,7 +155,9 @@ def pack_blocks(t_ns: np.ndarray, frames: np.ndarray, dtype: np.dtype,
     t = np.asarray(t_ns, dtype=_T_NS)
     step = None if not count else even_spacing(t) if spacing == -1 else spacing
     deltas = deltas and byte_planes
-    low_bits = low_bits and deltas
+    # elements of one byte (the boards' traces): as bit planes no faster to compress (the
+    # raw chunks of a robot second: 9.8 ms of zstd either way), only more calls' set-up
+    low_bits = low_bits and deltas and dt.itemsize > 1
     f = np.asarray(frames, dtype=dt)
     if f.strides[-1] != dt.itemsize:  # the byte views below need whole elements in a row
         f = np.ascontiguousarray(f)
