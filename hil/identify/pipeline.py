@@ -524,7 +524,9 @@ class _Loop:
         """A candidate that takes over a nuisance pinned at its bound, judged at its own fit
         (the refit it would get if selected, kept for that)."""
         self.say(f"fitting {d.label} to judge it (the fit's skew sits at its bound)")
-        new, held_now = self.prefit[d.label] = self.refit_with(d, {p: 0.0 for p in d.params})
+        # judged by its own parameters' credibility first: the guard stops at their hold
+        new, held_now = self.prefit[d.label] = self.refit_with(d, {p: 0.0 for p in d.params},
+                                                               judged_alone=True)
         own = [p for p in held_now if p in d.params]
         if own:
             return FitJudgement(refused=f"not credible at its own fit ({own[0]}: "
