@@ -7,9 +7,9 @@ codec and level the writer offers and reports the log's MB and the compression's
 simulated second (``time.process_time``, best of 3 per chunk, so a loaded machine reads
 high rather than noisy; quote ``uptime``). lz4 chunks also carry a CRC-32 of their
 uncompressed bytes (zstd's own checksum is in its time), listed apart. Then the decoded
-signals' chunks (``/signals/``, which the writer compresses at a level of their own,
-:data:`hil.framelog.writer.SIGNAL_CHUNKS`) alone, at the levels of :data:`SIGNAL_CODECS`
-(best of 5 per chunk).
+signals' chunks of each kind the writer gives them (:data:`hil.framelog.writer.SIGNAL_CHUNKS`:
+the actuators' ``/signals/actuator/``, the rest of ``/signals/``) alone, at the levels of
+:data:`SIGNAL_CODECS` (best of 5 per chunk).
 """
 
 from __future__ import annotations
@@ -27,8 +27,9 @@ CODECS = (("zstd 3 (the mcap library's)", "zstd", 3), ("zstd 1", "zstd", 1),
           ("zstd -5", "zstd", -5), ("lz4 (its default)", "lz4", None))
 #: (label, compression, level) of each row of the decoded signals' chunks (the writer's
 #: levels with their tuned match finder, :data:`hil.framelog.chunk.TUNED`).
-SIGNAL_CODECS = (("zstd -9, table 2^11 (the writer's)", "zstd", -9),
-                 ("zstd -7, table 2^12 (before)", "zstd", -7),
+SIGNAL_CODECS = (("zstd -19, table 2^8 (the writer's, actuators)", "zstd", -19),
+                 ("zstd -9, table 2^11 (the writer's, the rest)", "zstd", -9),
+                 ("zstd -7, table 2^12", "zstd", -7),
                  ("zstd -1, table 2^12", "zstd", -1))
 
 
@@ -37,9 +38,9 @@ def capture(seconds: float, topology: str) -> list[bytes]:
     return [c for _, c in capture_kinds(seconds, topology)]
 
 
-def capture_kinds(seconds: float, topology: str) -> list[tuple[bool, bytes]]:
-    """:func:`capture`, each chunk with whether it is one of the decoded signals' (the
-    writer's chunks at the signals' level, :data:`hil.framelog.writer.SIGNAL_CHUNKS`)."""
+def capture_kinds(seconds: float, topology: str) -> list[tuple[str | None, bytes]]:
+    """:func:`capture`, each chunk with the topic prefix of the decoded signals' kind of
+    chunk it is (:data:`hil.framelog.writer.SIGNAL_CHUNKS`; None: the raw channels')."""
     from hil.fieldbus.topology import load_topology
     from hil.framelog import chunk
     from hil.framelog.writer import SIGNAL_CHUNKS
@@ -49,13 +50,15 @@ def capture_kinds(seconds: float, topology: str) -> list[tuple[bool, bytes]]:
 
     cfg = load_config(None, [])
     topo = load_topology(topology)
-    chunks: list[tuple[bool, bytes]] = []
+    chunks: list[tuple[str | None, bytes]] = []
     make = chunk.compressor
-    signals = SIGNAL_CHUNKS["/signals/"]
+    signals: dict[tuple, str] = {}  # kind -> its topic prefixes
+    for prefix, k in SIGNAL_CHUNKS.items():
+        signals[k] = f"{signals[k]} + {prefix}" if k in signals else prefix
 
     def keeping(compression: str, level: int | None) -> Callable[[memoryview], bytes]:
         inner = make(compression, level)
-        kind = (compression, level) == signals
+        kind = signals.get((compression, level))
 
         def compress(view: memoryview) -> bytes:
             chunks.append((kind, bytes(view)))
@@ -116,11 +119,11 @@ def main(argv: list[str] | None = None) -> int:
     print(f"{len(chunks)} chunks, {raw / seconds / 1e6:.1f} MB per simulated second "
           "uncompressed")
     _table(measure(chunks), seconds)
-    signals = [c for is_signal, c in kinds if is_signal]
-    if signals:
-        print(f"\nthe decoded signals' {len(signals)} chunks alone, "
-              f"{sum(map(len, signals)) / seconds / 1e6:.1f} MB per simulated second "
-              "uncompressed (best of 5)")
+    for prefix in dict.fromkeys(k for k, _ in kinds if k is not None):
+        signals = [c for k, c in kinds if k == prefix]
+        print(f"\nthe decoded signals' chunks of {prefix} (the writer's kind for it), "
+              f"{len(signals)}, alone: {sum(map(len, signals)) / seconds / 1e6:.1f} MB per "
+              "simulated second uncompressed (best of 5)")
         _table(measure(signals, SIGNAL_CODECS, 5), seconds)
     return 0
 

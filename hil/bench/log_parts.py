@@ -6,12 +6,12 @@ extra CPU (logged minus bare, both measured here) into:
 
 * **file side** (``hil/framelog``: building records, compressing and writing chunks,
   opening and closing the file) and **producer side** (``hil/replay``: the engine's hooks
-  per cycle, the fieldbus tap per frame, decoding and encoding the signals, set-up): each
+  per cycle, the fieldbus tap per cycle, decoding and encoding the signals, set-up): each
   function of :data:`PARTS` is wrapped for the run and its *own* CPU (``time.thread_time``
   of the thread that runs it, less the wrapped functions it calls) summed, so the parts
   add up without double counting; zstd is timed inside the chunk closing
-  (``hil.framelog.chunk``); the fieldbus tap (a closure of ``run_logged``) where the bus
-  system is given it;
+  (``hil.framelog.chunk``); the fieldbus tap (the closure of
+  ``hil.replay.record.BusSignals.tap`` the bus system calls each cycle) as it is made;
 * **in the engine's compiled calls**: the CPU of the cycle's compiled calls in every
   compute thread (the calling thread's share, :meth:`RobotEngine._compute`, and the helper
   threads' whole CPU, by their POSIX thread clocks) of the logged run less the bare run's:
@@ -87,8 +87,8 @@ PARTS: tuple[tuple[str, str, str], ...] = (
     ("hil.replay.record", "BusSignals.flush", "producer"),
 )
 SIDES = ("file", "producer")
-#: The label of the fieldbus tap's own CPU (run_logged's closure, wrapped where the bus
-#: system takes it).
+#: The label of the fieldbus tap's own CPU (the closure :meth:`BusSignals.tap
+#: <hil.replay.record.BusSignals.tap>` makes for the bus system, wrapped as it is made).
 TAP = "producer: fieldbus tap (per cycle)"
 
 
@@ -182,8 +182,8 @@ def _install(timer: _Timer) -> list[tuple[object, str, object]]:
     put back."""
     import importlib
 
-    from hil.fieldbus import system
     from hil.framelog import chunk
+    from hil.replay import record
 
     undo = []
     for module, path, side in PARTS:
@@ -199,15 +199,13 @@ def _install(timer: _Timer) -> list[tuple[object, str, object]]:
     make = chunk.compressor
     undo.append((chunk, "compressor", make))
     chunk.compressor = lambda c, lvl: timer.wrap(make(c, lvl), "file: zstd (in _finalize)")
-    init = system.BusSystem.__init__
+    tap = record.BusSignals.tap
 
-    def bus_init(bs, *args, **kwargs):  # noqa: ANN001, ANN002, ANN003, ANN202
-        if kwargs.get("tap_cycle") is not None:
-            kwargs["tap_cycle"] = timer.wrap(kwargs["tap_cycle"], TAP)
-        init(bs, *args, **kwargs)
+    def bus_tap(signals, *args, **kwargs):  # noqa: ANN001, ANN002, ANN003, ANN202
+        return timer.wrap(tap(signals, *args, **kwargs), TAP)
 
-    undo.append((system.BusSystem, "__init__", init))
-    system.BusSystem.__init__ = bus_init
+    undo.append((record.BusSignals, "tap", tap))
+    record.BusSignals.tap = bus_tap
     return undo
 
 

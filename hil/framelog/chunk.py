@@ -30,15 +30,19 @@ from __future__ import annotations
 import contextlib
 import functools
 import struct
-import zlib
 from collections.abc import Callable, Iterator
 from io import BytesIO
 
 import lz4.frame
 import numpy as np
 import zstandard
-from mcap.records import ChunkIndex
+from mcap.records import Channel, ChunkIndex, Opcode
 from mcap.writer import IndexType, Writer
+
+try:  # zlib-ng's CRC-32: the same function as zlib's, ~9x faster here (carry-less multiply)
+    from zlib_ng.zlib_ng import crc32
+except ImportError:  # an environment made before that dependency: zlib's
+    from zlib import crc32
 
 #: zstd level of our logs when none is given: against the library's 3, about half the
 #: compression time for ~15 % more bytes; against level 1, 12 % less time for 7 % more
@@ -49,6 +53,13 @@ ZSTD_LEVEL = -1
 #: the changing floats where -7 tries every ~8 (docs/framelog.md, "The match finder of the
 #: writer's levels").
 SIGNAL_LEVEL = -9
+#: zstd level of the actuators' decoded signals' chunks (``/signals/actuator/``, 47,000
+#: messages per simulated second of the whole robot: two thirds of the signals' bytes):
+#: an acceleration of 19 with a table of 2^8 entries, ~2 ms per simulated second less
+#: compression than :data:`SIGNAL_LEVEL` for ~1.4 MB more (a step of 20 bytes through each
+#: message's changing floats finds its steady fields a few bytes later; docs/framelog.md,
+#: "The actuators' signal chunks at -19").
+ACTUATOR_SIGNAL_LEVEL = -19
 #: What the writer's own zstd levels (:data:`ZSTD_LEVEL`, :data:`SIGNAL_LEVEL`, and -7,
 #: the signals' level before) change in zstd's parameters of that level: a smaller match
 #: table (zstd's: 2^13 entries; 2^12 is 16 KiB, which stays in the L1 cache beside the
@@ -61,8 +72,14 @@ SIGNAL_LEVEL = -9
 #: the signals at -9 with 2^11 entries ~18 % less than at -7 with 2^12 for ~2.5 % more.
 #: Any reader reads the frames (zstd's format leaves the match finder to the writer).
 TUNED = {ZSTD_LEVEL: {"hash_log": 12, "min_match": 7}, -7: {"hash_log": 12, "min_match": 7},
-         SIGNAL_LEVEL: {"hash_log": 11, "min_match": 7}}
+         SIGNAL_LEVEL: {"hash_log": 11, "min_match": 7},
+         ACTUATOR_SIGNAL_LEVEL: {"hash_log": 8, "min_match": 7}}
 TUNED_LEVELS = tuple(TUNED)
+#: A chunk buffer's first capacity, in chunks (:class:`ChunkBuffer`: address space; the
+#: memory is what the largest chunk and the batch that closed it write), up to
+#: :data:`RESERVE_MAX` bytes (at least 1.25 chunks).
+RESERVE = 16
+RESERVE_MAX = 1 << 28
 #: Chunk record: opcode, record length, start and end time, uncompressed size and CRC.
 _HEAD = struct.Struct("<BQQQQI")
 _CHUNK_OPCODE = 0x06
@@ -71,27 +88,38 @@ _PRIVATE = ("chunk_builder", "statistics", "enable_crcs", "enable_data_crcs",
 
 
 class ChunkBuffer:
-    """The open chunk's records in one ``bytearray`` kept for the file (grown when a batch
-    needs more, never shrunk): the part of ``BytesIO`` the mcap library's ``RecordBuilder``
+    """The open chunk's records in one array kept for the file (grown when a batch needs
+    more, never shrunk): the part of ``BytesIO`` the mcap library's ``RecordBuilder``
     uses (``write``, ``tell``, ``seek``, ``getvalue``, ``getbuffer``), :meth:`reserve` for
     records built in place, :meth:`reset` when the chunk is written. No fresh pages per
-    chunk, no copy out of it."""
+    chunk, no copy out of it.
+
+    The array is ``numpy.empty``: memory the kernel maps as it is first written, never
+    zeroed here. So ``capacity`` can be generous (:func:`install` gives
+    :data:`RESERVE` chunks' worth): what is never written costs address space only, and
+    a batch several chunks large (one ``write_blocks`` of every actuator of the whole
+    robot: ~4 MB) finds its room without a grow. A ``bytearray`` is zeroed when made and
+    each grow made a new one and copied into it: the whole robot's log grew its buffers
+    three times to 8 MB, ~6 ms per run."""
 
     def __init__(self, capacity: int) -> None:
-        self._buf = bytearray(max(capacity, 1 << 16))
+        self._buf = np.empty(max(capacity, 1 << 16), np.uint8)
+        self._mv = memoryview(self._buf)
         self._pos = 0
         self._end = 0
 
     def _room(self, n: int) -> None:
         if self._pos + n > len(self._buf):  # a new array: views of the old one stay valid
-            grown = bytearray(max(self._pos + n, 2 * len(self._buf)))
-            grown[:self._end] = memoryview(self._buf)[:self._end]
-            self._buf = grown
+            grown = np.empty(max(self._pos + n, 2 * len(self._buf)), np.uint8)
+            grown[:self._end] = self._buf[:self._end]
+            self._buf, self._mv = grown, memoryview(grown)
 
     def write(self, data: bytes | bytearray | memoryview) -> int:
-        n = len(data) if isinstance(data, bytes | bytearray) else memoryview(data).nbytes
+        if not isinstance(data, bytes | bytearray):
+            data = memoryview(data).cast("B")
+        n = len(data)
         self._room(n)
-        self._buf[self._pos:self._pos + n] = data
+        self._mv[self._pos:self._pos + n] = data
         self._pos += n
         self._end = max(self._end, self._pos)
         return n
@@ -100,7 +128,7 @@ class ChunkBuffer:
         """``n`` bytes at the write position as a writable uint8 array (their content is
         whatever was there: fill every byte), the position moved past them."""
         self._room(n)
-        out = np.frombuffer(self._buf, np.uint8, n, self._pos)
+        out = self._buf[self._pos:self._pos + n]
         self._pos += n
         self._end = max(self._end, self._pos)
         return out
@@ -118,16 +146,20 @@ class ChunkBuffer:
         return self._pos
 
     def getbuffer(self) -> memoryview:
-        return memoryview(self._buf)[:self._end]
+        return self._mv[:self._end]
 
     def getvalue(self) -> bytes:
-        return bytes(memoryview(self._buf)[:self._end])
+        return bytes(self._mv[:self._end])
 
     def close(self) -> None:
         pass  # the array is kept for the next chunk
 
     def reset(self) -> None:
         self._pos = self._end = 0
+
+
+def _capacity(chunk_size: int) -> int:
+    return max(chunk_size + (chunk_size >> 2), min(RESERVE * chunk_size, RESERVE_MAX))
 
 
 def supported(w: Writer) -> bool:
@@ -173,11 +205,13 @@ def install(w: Writer, compression: str, level: int | None, chunk_size: int,
     if not supported(w):
         return False
     rw = w._Writer__chunk_builder.record_writer  # noqa: SLF001 - see the module docstring
-    buf = ChunkBuffer(chunk_size + (chunk_size >> 2))
+    buf = ChunkBuffer(_capacity(chunk_size))
     buf.write(rw._buffer.getvalue())  # noqa: SLF001 - empty before the first record
     buf.seek(rw._buffer.tell())  # noqa: SLF001
     rw._buffer = buf  # noqa: SLF001
-    w._Writer__chunk_builder.eha_batches = []  # noqa: SLF001 - see :func:`write_indexes`
+    from hil.framelog import batch
+
+    batch.lazy(w._Writer__chunk_builder)  # noqa: SLF001 - see :func:`write_indexes`
     first = _Kind(w._Writer__chunk_builder, compression, level)  # noqa: SLF001
     if not others:
         # an instance attribute: the Writer's own ``self.__finalize_chunk()`` finds it first
@@ -208,8 +242,10 @@ def _new_builder(chunk_size: int) -> object:
     from mcap._chunk_builder import ChunkBuilder
 
     cb = ChunkBuilder()
-    cb.eha_batches = []  # see write_indexes
-    cb.record_writer._buffer = ChunkBuffer(chunk_size + (chunk_size >> 2))  # noqa: SLF001
+    from hil.framelog import batch
+
+    batch.lazy(cb)  # see write_indexes
+    cb.record_writer._buffer = ChunkBuffer(_capacity(chunk_size))  # noqa: SLF001
     return cb
 
 
@@ -255,7 +291,7 @@ class Chunks:
             w._Writer__flush()  # noqa: SLF001
             data = bytes(buf.getbuffer())
             if w._Writer__enable_data_crcs:  # noqa: SLF001
-                w._Writer__data_section_crc = zlib.crc32(  # noqa: SLF001
+                w._Writer__data_section_crc = crc32(  # noqa: SLF001
                     data, w._Writer__data_section_crc)  # noqa: SLF001
             w._Writer__stream.write(data)  # noqa: SLF001
             buf.reset()
@@ -286,19 +322,28 @@ def use_first(w: Writer) -> None:
         chunks.defs_pending = True
 
 
+class Made:
+    """The bytes of the records made inside :func:`definitions` (``data``; empty where
+    the chunk buffer is not installed)."""
+
+    data: bytes = b""
+
+
 @contextlib.contextmanager
-def definitions(w: Writer) -> Iterator[None]:
+def definitions(w: Writer) -> Iterator[Made]:
     """Schema and channel records registered inside go to the first kind's chunk
     (:func:`use_first`), each built in a ``BytesIO`` and put into the chunk's
     :class:`ChunkBuffer` as one write: the library's ``Channel.write`` makes ~27 small
     writes per record, each a Python call here (~6 ms for the 200 channels of a
-    whole-robot log). The chunk's size is checked once, after."""
+    whole-robot log). The chunk's size is checked once, after. Yields a :class:`Made`
+    that holds the records' bytes once the block ends (:func:`keep_channel`)."""
     use_first(w)
+    made = Made()
     cb = w._Writer__chunk_builder  # noqa: SLF001 - see the module docstring
     rw = getattr(cb, "record_writer", None)
     buf = getattr(rw, "_buffer", None)
     if not isinstance(buf, ChunkBuffer):
-        yield
+        yield made
         return
     had = "_Writer__maybe_finalize_chunk" in vars(w)
     check = w._Writer__maybe_finalize_chunk  # noqa: SLF001
@@ -307,15 +352,70 @@ def definitions(w: Writer) -> Iterator[None]:
     tmp = BytesIO()
     rw._buffer = tmp  # noqa: SLF001
     try:
-        yield
+        yield made
     finally:
         rw._buffer = buf  # noqa: SLF001
-        buf.write(tmp.getbuffer())
+        made.data = tmp.getvalue()
+        buf.write(made.data)
         if had:
             w._Writer__maybe_finalize_chunk = check  # noqa: SLF001
         else:
             del w._Writer__maybe_finalize_chunk  # noqa: SLF001 - the class's method again
     check()
+
+
+class _WrittenChannel(Channel):
+    """A channel whose record (the bytes :meth:`Channel.write` makes) is kept: the
+    summary's copy of it is written as they are (the library: ~27 small writes per
+    channel at the file's end, ~1.2 ms for the 200 channels of a whole-robot log)."""
+
+    record: bytes = b""
+
+    def write(self, stream) -> None:  # noqa: ANN001 - mcap's RecordBuilder
+        stream.write(self.record)
+
+
+def keep_channel(w: Writer, channel_id: int, made: Made) -> None:
+    """Keep the record of the channel ``channel_id`` just registered inside
+    :func:`definitions` (``made``) for the summary, when ``made`` holds that record
+    alone (else the library writes it again from its fields)."""
+    channels = getattr(w, "_Writer__channels", None)
+    ch = channels.get(channel_id) if isinstance(channels, dict) else None
+    data = made.data
+    if type(ch) is not Channel or len(data) < 9 or data[0] != Opcode.CHANNEL \
+            or int.from_bytes(data[1:9], "little") != len(data) - 9:
+        return
+    kept = _WrittenChannel(id=ch.id, topic=ch.topic, message_encoding=ch.message_encoding,
+                           metadata=ch.metadata, schema_id=ch.schema_id)
+    kept.record = data
+    channels[channel_id] = kept
+
+
+class _ChunkIndex(ChunkIndex):
+    """A ChunkIndex written as one write, its offsets (channel, offset) as one array (the
+    library's: two writes per channel of the chunk, ~50 per chunk of a whole-robot log);
+    the same bytes."""
+
+    def write(self, stream) -> None:  # noqa: ANN001 - mcap's RecordBuilder
+        offsets = self.message_index_offsets
+        pairs = np.empty(len(offsets), _OFFSET)
+        if offsets:
+            pairs["ch"] = list(offsets)
+            pairs["off"] = list(offsets.values())
+        name = self.compression.encode()
+        body = b"".join((
+            _INDEX_TIMES.pack(self.message_start_time, self.message_end_time,
+                              self.chunk_start_offset, self.chunk_length, pairs.nbytes),
+            pairs.tobytes(), _INDEX_NAME.pack(self.message_index_length, len(name)), name,
+            _INDEX_SIZES.pack(self.compressed_size, self.uncompressed_size)))
+        stream.write(_REC.pack(Opcode.CHUNK_INDEX, len(body)) + body)
+
+
+_OFFSET = np.dtype([("ch", "<u2"), ("off", "<u8")])
+_REC = struct.Struct("<BQ")
+_INDEX_TIMES = struct.Struct("<QQQQI")
+_INDEX_NAME = struct.Struct("<QI")
+_INDEX_SIZES = struct.Struct("<QQ")
 
 
 def _nothing() -> None:
@@ -325,58 +425,104 @@ def _nothing() -> None:
 def _finalize(w: Writer, compress: Callable[[memoryview], bytes] | None, name: bytes,
               crc_on: bool, cb: object = None) -> None:
     """The library's ``__finalize_chunk`` (same records, same order) without its copies,
-    of the chunk builder ``cb`` (None: the Writer's)."""
+    of the chunk builder ``cb`` (None: the Writer's): the chunk record's head, its
+    compressed records and its message indexes handed to the stream as one write
+    (:func:`write_parts`; the library: three, the indexes copied through its record
+    builder)."""
     if cb is None:
         cb = w._Writer__chunk_builder  # noqa: SLF001 - see the module docstring
     if cb is None or cb.num_messages == 0:
         return
     w._Writer__statistics.chunk_count += 1  # noqa: SLF001
     buf = cb.record_writer._buffer  # noqa: SLF001
+    rb = w._Writer__record_builder  # noqa: SLF001
+    if rb.count:  # records buffered before the chunk go first
+        w._Writer__flush()  # noqa: SLF001
+    stream = w._Writer__stream  # noqa: SLF001
+    start = stream.tell()
     view = buf.getbuffer()
     try:
         size = len(view)
         data = view if compress is None else compress(view)
-        crc = zlib.crc32(view) if crc_on and w._Writer__enable_crcs else 0  # noqa: SLF001
-        w._Writer__flush()  # noqa: SLF001 - records buffered before the chunk go first
-        stream = w._Writer__stream  # noqa: SLF001
-        start = stream.tell()
-        body = 8 + 8 + 8 + 4 + 4 + len(name) + 8 + len(data)
+        crc = crc32(view) if crc_on and w._Writer__enable_crcs else 0  # noqa: SLF001
+        compressed = len(data)
+        body = 8 + 8 + 8 + 4 + 4 + len(name) + 8 + compressed
         head = b"".join((_HEAD.pack(_CHUNK_OPCODE, body, cb.message_start_time,
                                     cb.message_end_time, size, crc),
-                         struct.pack("<I", len(name)), name, struct.pack("<Q", len(data))))
+                         struct.pack("<I", len(name)), name, struct.pack("<Q", compressed)))
+        index = _ChunkIndex(message_start_time=cb.message_start_time,
+                           message_end_time=cb.message_end_time, chunk_start_offset=start,
+                           chunk_length=len(head) + compressed, message_index_offsets={},
+                           message_index_length=0, compression=name.decode(),
+                           compressed_size=compressed, uncompressed_size=size)
+        parts = [head, data]
+        if w._Writer__index_types & IndexType.MESSAGE:  # noqa: SLF001
+            indexes = _Collect()
+            write_indexes(cb.message_indices, indexes, start + len(head) + compressed,
+                          index.message_index_offsets, _kept(cb))
+            index.message_index_length = indexes.count
+            parts += indexes.parts
         if w._Writer__enable_data_crcs:  # noqa: SLF001
-            w._Writer__data_section_crc = zlib.crc32(  # noqa: SLF001
-                data, zlib.crc32(head, w._Writer__data_section_crc))  # noqa: SLF001
-        stream.write(head)
-        stream.write(data)
-        compressed = len(data)
+            at = w._Writer__data_section_crc  # noqa: SLF001
+            for part in parts:
+                at = crc32(part, at)
+            w._Writer__data_section_crc = at  # noqa: SLF001
+        write_parts(stream, parts)
     finally:
-        data = None
+        data = parts = None
         view.release()
     if isinstance(buf, ChunkBuffer):
         buf.reset()
     else:
         cb.record_writer._buffer = BytesIO()  # noqa: SLF001 - the records are written
-    index = ChunkIndex(message_start_time=cb.message_start_time,
-                       message_end_time=cb.message_end_time, chunk_start_offset=start,
-                       chunk_length=len(head) + compressed, message_index_offsets={},
-                       message_index_length=0, compression=name.decode(),
-                       compressed_size=compressed, uncompressed_size=size)
-    rb = w._Writer__record_builder  # noqa: SLF001
-    at = stream.tell()
-    if w._Writer__index_types & IndexType.MESSAGE:  # noqa: SLF001
-        write_indexes(cb.message_indices, rb, at + rb.count, index.message_index_offsets,
-                      getattr(cb, "eha_batches", None))
-    index.message_index_length = rb.count
-    w._Writer__flush()  # noqa: SLF001
     w._Writer__chunk_indices.append(index)  # noqa: SLF001
     # ChunkBuilder.reset, less its copy of the (already replaced) buffer
     cb.message_end_time = 0
-    cb.message_indices.clear()
-    if getattr(cb, "eha_batches", None):
-        cb.eha_batches.clear()
+    _forget(cb)
     cb.message_start_time = 0
     cb.num_messages = 0
+
+
+class _Collect:
+    """What :func:`write_indexes` writes, kept as its parts (``write``) and their length
+    (``count``), to go out with the chunk in one write."""
+
+    def __init__(self) -> None:
+        self.parts: list[bytes] = []
+        self.count = 0
+
+    def write(self, data: bytes) -> None:
+        self.parts.append(data)
+        self.count += len(data)
+
+
+def write_parts(stream: object, parts: list) -> None:
+    """``parts`` (bytes-likes) written to ``stream`` in order: one ``writev`` where the
+    stream has one (the writer's file: one system call), else a ``write`` each."""
+    writev = getattr(stream, "writev", None)
+    if writev is not None:
+        writev(parts)
+        return
+    for part in parts:
+        stream.write(part)  # type: ignore[attr-defined]
+
+
+def _kept(cb: object) -> list[tuple[np.ndarray, list[int]]] | None:
+    """The batches chunk builder ``cb`` kept when they are its chunk's indexes
+    (:func:`hil.framelog.batch.clean`); else None, their entries put into its message
+    indexes first (:func:`hil.framelog.batch.settle`)."""
+    from hil.framelog import batch
+
+    if batch.clean(cb):
+        return cb.eha_batches
+    batch.settle(cb)
+    return None
+
+
+def _forget(cb: object) -> None:
+    from hil.framelog import batch
+
+    batch.forget(cb)
 
 
 #: A MessageIndex record of one entry (a channel with one message in the chunk: a block).
@@ -398,13 +544,13 @@ def write_indexes(indices: dict, rb: object, at: int, offsets: dict[int, int],
     """The chunk's MessageIndex records, in the order of ``indices`` (channel -> an index
     whose ``records`` are (log time, offset) pairs and (n, 2) arrays of them), as one write
     to ``rb`` starting at file offset ``at``; ``offsets[channel]`` set to each record's.
-    ``batches``: the chunk builder's ``eha_batches`` (:func:`hil.framelog.batch.add_records`:
-    each batch's MessageIndex records already built, and their channels): when the chunk
-    is those batches' channels alone, one entry each, their records are written as they
-    are.
+    ``batches``: instead of ``indices``, the chunk's indexes as the batches that made them
+    (:func:`hil.framelog.batch.keep`: each batch's MessageIndex records already built, and
+    their channels; each channel in one batch), written as they are.
     The bytes the library's ``MessageIndex.write`` makes, one by one; the records of one
     entry (most: a block channel's one message) built as one array."""
-    if _write_batches(indices, batches, rb, at, offsets):
+    if batches:
+        _write_batches(batches, rb, at, offsets)
         return
     items = list(indices.items())
     one = [i for i, (_, mi) in enumerate(items)
@@ -469,21 +615,13 @@ def write_indexes(indices: dict, rb: object, at: int, offsets: dict[int, int],
     rb.write(b"".join(parts))  # type: ignore[attr-defined]
 
 
-def _write_batches(indices: dict, batches: list[tuple[np.ndarray, list[int]]] | None,
-                   rb: object, at: int, offsets: dict[int, int]) -> bool:
-    """:func:`write_indexes` of a chunk whose channels are, in order, those of
-    ``batches`` (each batch's MessageIndex records as an array of :func:`many_index`
-    records, its channels), each with its batch's entry alone; False (nothing written)
-    for any other chunk."""
-    if not batches:
-        return False
-    ids = [cid for _, cids in batches for cid in cids]
-    if ids != list(indices) or any(len(indices[cid].records) != 1 for cid in ids):
-        return False
+def _write_batches(batches: list[tuple[np.ndarray, list[int]]], rb: object, at: int,
+                   offsets: dict[int, int]) -> None:
+    """:func:`write_indexes` of a chunk whose indexes are ``batches`` (each batch's
+    MessageIndex records as an array of :func:`many_index` records, its channels)."""
     pos = at
     for arr, cids in batches:
         size = arr.dtype.itemsize
         offsets.update(zip(cids, range(pos, pos + len(cids) * size, size), strict=True))
         pos += len(cids) * size
     rb.write(b"".join(arr.tobytes() for arr, _ in batches))  # type: ignore[attr-defined]
-    return True

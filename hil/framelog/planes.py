@@ -42,3 +42,113 @@ def split(frames: np.ndarray, out: np.ndarray, deltas: bool) -> None:  # pragma:
                 s = 8 * b
                 for n in range(count):
                     plane[n] = (col[n] >> s) & 0xFF
+
+
+@njit(cache=True, nogil=True)
+def low_widths(frames: np.ndarray, bits: int, stride: int, share: int,
+               out: np.ndarray) -> None:  # pragma: no cover
+    """``out[j]``: the noisy low bits of element ``j`` of ``frames`` ((k, count, width)
+    signed integers of ``bits`` bits), in whole bytes: 8 x the fewest bytes that hold all
+    but ``1 / share`` of a sample of its zigzag-coded differences (frame ``n`` minus frame
+    ``n - 1`` for ``n`` = 1, 1 + ``stride``, ... of every one of the ``k`` channels)."""
+    k, count, width = frames.shape
+    shift = 64 - bits
+    size = bits // 8
+    hist = np.zeros((width, 9), np.int64)  # samples per element and byte length
+    total = 0
+    for i in range(k):
+        for n in range(1, count, stride):
+            row = frames[i, n]
+            before = frames[i, n - 1]
+            for j in range(width):
+                d = ((row[j] - before[j]) << shift) >> shift
+                z = (d << 1) ^ (d >> 63)
+                length = 0
+                while z != 0:  # bytes, at most 8 steps (logical shift)
+                    z = (z >> 8) & 0x00FFFFFFFFFFFFFF
+                    length += 1
+                hist[j, length] += 1
+            total += 1
+    allowed = total // share
+    for j in range(width):
+        above = 0
+        length = size
+        while length > 0 and above + hist[j, length] <= allowed:
+            above += hist[j, length]
+            length -= 1
+        out[j] = 8 * length
+
+
+@njit(cache=True, nogil=True)
+def split_bits(frames: np.ndarray, bits: int, widths: np.ndarray, low_at: np.ndarray,
+               high_at: np.ndarray, low: np.ndarray, high: np.ndarray
+               ) -> None:  # pragma: no cover
+    """Element ``j``'s zigzag-coded differences ``z`` (as :func:`split`'s ``deltas``) of
+    frames ``frames[i]`` ((k, count, width) signed integers of ``bits`` bits) split at
+    ``widths[j]`` = ``w`` bits: the low ``w`` bits as ``w`` bit planes into
+    ``low[i, low_at[j]:]`` (plane ``b``: ``(count + 7) // 8`` bytes, bit ``t`` of byte ``m``
+    = bit ``b`` of ``z`` of frame ``8 m + t``, 0 past the last frame), ``z >> w`` as its
+    ``(bits - w + 7) // 8`` byte planes into ``high[i, high_at[j]:]`` (``count`` bytes
+    each). The inner loops write through slices (an index that numba must check for a
+    negative value keeps LLVM from vectorising them), the bit planes in their own function
+    (:func:`_bit_planes`: inline, they slow the loops around them by ~10 %)."""
+    k, count, width = frames.shape
+    shift = 64 - bits
+    per_plane = (count + 7) // 8
+    col = np.empty(count, np.int64)
+    lows = np.zeros(8 * per_plane, np.uint8)  # past count: 0 for good
+    words = lows.view(np.int64)
+    planes8 = np.empty(per_plane, np.int64)
+    for i in range(k):
+        for j in range(width):
+            for n in range(count):
+                col[n] = frames[i, n, j]  # sign-extended
+            for n in range(count - 1, 0, -1):
+                d = ((col[n] - col[n - 1]) << shift) >> shift
+                col[n] = (d << 1) ^ (d >> 63)
+            if count:
+                d = (col[0] << shift) >> shift
+                col[0] = (d << 1) ^ (d >> 63)
+            w = widths[j]
+            if w:
+                _bit_planes(col, w, low[i, low_at[j]:low_at[j + 1]], lows, words, planes8)
+            q = high_at[j]
+            for b in range((bits - w + 7) // 8):
+                s = w + 8 * b
+                # the top plane's bits past the element's: 0 (the shift brings the sign)
+                mask = 0xFF if bits - s >= 8 else (1 << (bits - s)) - 1
+                plane = high[i, q:q + count]
+                for n in range(count):
+                    plane[n] = (col[n] >> s) & mask
+                q += count
+
+
+@njit(cache=True, nogil=True, inline="never")
+def _bit_planes(col: np.ndarray, w: int, out: np.ndarray, lows: np.ndarray,
+                words: np.ndarray, planes8: np.ndarray) -> None:  # pragma: no cover
+    """The ``w`` low bit planes of ``col`` (count,) into ``out`` (``w`` planes of
+    ``len(words)`` bytes): per byte of the values, eight values' bytes (``lows``, as the
+    int64 ``words``) turned into their eight bit planes' bytes by one 8 x 8 bit-matrix
+    transposition (``planes8``: byte ``b`` of word ``m`` = bit plane ``b`` of values
+    ``8 m`` to ``8 m + 7``). ``lows`` past ``len(col)``: 0."""
+    count = len(col)
+    per_plane = len(words)
+    p = 0
+    for byte in range((w + 7) // 8):
+        s = 8 * byte
+        for n in range(count):
+            lows[n] = (col[n] >> s) & 0xFF
+        for m in range(per_plane):  # arithmetic shifts: the masks drop the sign they bring
+            x = words[m]
+            t = (x ^ (x >> 7)) & 0x00AA00AA00AA00AA
+            x = x ^ t ^ (t << 7)
+            t = (x ^ (x >> 14)) & 0x0000CCCC0000CCCC
+            x = x ^ t ^ (t << 14)
+            t = (x ^ (x >> 28)) & 0x00000000F0F0F0F0
+            planes8[m] = x ^ t ^ (t << 28)
+        for b in range(min(8, w - s)):
+            plane = out[p:p + per_plane]
+            sb = 8 * b
+            for m in range(per_plane):
+                plane[m] = (planes8[m] >> sb) & 0xFF
+            p += per_plane

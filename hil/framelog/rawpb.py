@@ -60,7 +60,10 @@ _BLOCK_TYPES = {"t_ns": (1, _FD.TYPE_SFIXED64, True), "frames": (2, _FD.TYPE_BYT
                 "dtype": (5, _FD.TYPE_STRING, False), "t0_ns": (6, _FD.TYPE_SFIXED64, False),
                 "dt_ns": (7, _FD.TYPE_SFIXED64, False),
                 "byte_planes": (8, _FD.TYPE_BOOL, False),
-                "frame_deltas": (9, _FD.TYPE_BYTES, False)}
+                "frame_deltas": (9, _FD.TYPE_BYTES, False),
+                "low_bits": (10, _FD.TYPE_BYTES, False),
+                "low_widths": (11, _FD.TYPE_BYTES, False),
+                "high_deltas": (12, _FD.TYPE_BYTES, False)}
 _T_NS = np.dtype("<i8")
 
 
@@ -123,17 +126,22 @@ def even_spacing(t_ns: np.ndarray) -> int | None:
 def pack_blocks(t_ns: np.ndarray, frames: np.ndarray, dtype: np.dtype,
                 head: list[tuple] = (), byte_planes: bool = True,
                 alloc: Callable[[np.dtype, int], np.ndarray] | None = None,
-                deltas: bool = True, spacing: int | None = -1) -> np.ndarray:
+                deltas: bool = True, spacing: int | None = -1,
+                low_bits: bool = True) -> np.ndarray:
     """The block messages of ``k`` channels at once, frames ``(k, count, width)`` at the
     same times ``t_ns`` (count,): a (k,) structured array whose row ``i`` holds, after
     the fields ``head`` (left 0, e.g. :data:`hil.framelog.batch.HEAD_FIELDS`), the block
     message of ``frames[i]`` (one pass over the frames, no bytes object): ``t0_ns`` and
-    ``dt_ns`` if the times are evenly spaced, else ``t_ns``; the frames as the byte planes
-    of their zigzag-coded differences in ``frame_deltas`` (:func:`zigzag_deltas`; ``deltas``
-    False: the frames' own byte planes in ``frames``, and ``byte_planes`` False as well:
-    row by row, as logs before wrote them). ``alloc(dtype, k)`` gives the array to fill
-    (every byte is written; default a new one). ``spacing``: the times' spacing if the
-    caller has it (:func:`even_spacing`'s answer), -1: work it out here."""
+    ``dt_ns`` if the times are evenly spaced, else ``t_ns``; the frames' zigzag-coded
+    differences (:func:`zigzag_deltas`) split at each element's noisy low bits
+    (:func:`noisy_widths`, the same for the ``k`` channels: one message size): those bits
+    as bit planes in ``low_bits``, their widths in ``low_widths``, the rest as byte planes
+    in ``high_deltas``. ``low_bits`` False: all of the differences as byte planes in
+    ``frame_deltas`` (logs before); ``deltas`` False: the frames' own byte planes in
+    ``frames``, and ``byte_planes`` False as well: row by row, as logs before wrote them.
+    ``alloc(dtype, k)`` gives the array to fill (every byte is written; default a new
+    one). ``spacing``: the times' spacing if the caller has it (:func:`even_spacing`'s
+    answer), -1: work it out here."""
     k, count, width = frames.shape
     dt = np.dtype(dtype).newbyteorder("<")
     name = np.dtype(dtype).name.encode()
@@ -141,6 +149,10 @@ def pack_blocks(t_ns: np.ndarray, frames: np.ndarray, dtype: np.dtype,
     t = np.asarray(t_ns, dtype=_T_NS)
     step = None if not count else even_spacing(t) if spacing == -1 else spacing
     deltas = deltas and byte_planes
+    low_bits = low_bits and deltas
+    f = np.asarray(frames, dtype=dt)
+    if f.strides[-1] != dt.itemsize:  # the byte views below need whole elements in a row
+        f = np.ascontiguousarray(f)
     # everything but the frames is the same bytes in every channel's message: built once
     pre = [b"\x1d", struct.pack("<I", count), b"\x25", struct.pack("<I", width),
            b"\x2a", _varint(len(name)), name]
@@ -150,15 +162,27 @@ def pack_blocks(t_ns: np.ndarray, frames: np.ndarray, dtype: np.dtype,
         pre += [b"\x31", struct.pack("<q", int(t[0])), b"\x39", struct.pack("<q", step)]
     if byte_planes:
         pre.append(b"\x40\x01")
+    if low_bits:
+        widths = noisy_widths(f)
+        w8 = widths.astype(np.uint8).tobytes()
+        low_at, high_at = _bits_layout(w8, count, dt.itemsize)
+        # field 11 (low_widths), then 10 (low_bits) and 12 (high_deltas) around the planes
+        pre += [b"\x5a", _varint(width), w8, b"\x52", _varint(int(low_at[-1]))]
+        mid = b"\x62" + _varint(int(high_at[-1]))
+        prefix = b"".join(pre)
+        layout = _bits_record(tuple(head), len(prefix), int(low_at[-1]), len(mid),
+                              int(high_at[-1]))
+        rec = np.zeros(k, layout) if alloc is None else alloc(layout, k)
+        rec["pre"] = np.frombuffer(prefix, np.uint8)
+        rec["mid"] = np.frombuffer(mid, np.uint8)
+        _bits(f, widths, low_at, high_at, rec["lo"], rec["hi"])
+        return rec
     # field 9 (frame_deltas) or 2 (frames), length-delimited
     pre += [b"\x4a" if deltas else b"\x12", _varint(size)]
     prefix = b"".join(pre)
     layout = _layout(tuple(head), len(prefix), size)
     rec = np.zeros(k, layout) if alloc is None else alloc(layout, k)
     rec["pre"] = np.frombuffer(prefix, np.uint8)
-    f = np.asarray(frames, dtype=dt)
-    if f.strides[-1] != dt.itemsize:  # the byte views below need whole elements in a row
-        f = np.ascontiguousarray(f)
     if byte_planes:
         _planes(f, rec["f"].reshape(k, dt.itemsize, width, count), deltas)
     else:
@@ -166,17 +190,95 @@ def pack_blocks(t_ns: np.ndarray, frames: np.ndarray, dtype: np.dtype,
     return rec
 
 
+#: The noisy low bits of an element (:func:`noisy_widths`): the bytes that hold all but
+#: one in :data:`NOISE_SHARE` of its differences, in a sample of every
+#: :data:`NOISE_STRIDE`-th frame's. Bits above them are then nearly always 0 (byte planes
+#: of long runs, which zstd passes quickly), the bits below as bit planes hold a sensor's
+#: noise in bytes of nearly random values, in which zstd finds no match and gives up at
+#: once, where a byte plane of 2-bit noise is its slowest input (docs/framelog.md, "The
+#: noisy low bits").
+NOISE_SHARE = 100
+NOISE_STRIDE = 256
+
+
+def noisy_widths(frames: np.ndarray) -> np.ndarray:
+    """The noisy low bits of each element of the frames ``(k, count, width)`` (integers
+    of one size, little endian), the same for all ``k`` channels, in whole bytes: 8 x the
+    fewest bytes that hold all but one in :data:`NOISE_SHARE` of the zigzag-coded
+    differences of frame ``n`` to frame ``n - 1`` for ``n`` = 1, 1 + :data:`NOISE_STRIDE`,
+    ... (width,) int64. Whole bytes: a sensor word's noisy low byte becomes eight bit
+    planes, its high byte stays a byte plane of runs, and the block keeps its size (bits
+    below a byte would leave the bytes above it two byte planes, one of them nearly all
+    zeros: 8 % more bytes for zstd and the chunks). Compiled for blocks worth it, else
+    :func:`_noisy_widths_numpy` (the reference)."""
+    size = frames.dtype.itemsize
+    out = np.empty(frames.shape[2], np.int64)
+    if frames.size >= _COMPILED_FROM:
+        from hil.framelog.planes import low_widths
+
+        low_widths(frames.view(f"<i{size}"), 8 * size, NOISE_STRIDE, NOISE_SHARE, out)
+        return out
+    return _noisy_widths_numpy(frames)
+
+
+def _noisy_widths_numpy(frames: np.ndarray) -> np.ndarray:
+    """:func:`noisy_widths` in numpy."""
+    k, count, width = frames.shape
+    size = frames.dtype.itemsize
+    bits = 8 * size
+    u = np.dtype(f"<u{size}")
+    x = frames.view(u)
+    d = (x[:, 1::NOISE_STRIDE] - x[:, 0:count - 1:NOISE_STRIDE]).reshape(-1, width)
+    z = (d << 1) ^ np.negative(d >> (bits - 1))  # zigzag: d >> (bits - 1) is the sign
+    length = np.zeros(z.shape, np.int64)  # in bytes
+    for b in range(0, bits, 8):
+        length += (z >> b) != 0
+    allowed = len(z) // NOISE_SHARE
+    out = np.zeros(width, np.int64)
+    for j in range(width):
+        above = np.cumsum(np.bincount(length[:, j], minlength=size + 1)[::-1])[::-1]
+        # above[n]: values of n bytes or more; the fewest bytes with at most `allowed` above
+        out[j] = 8 * int(np.argmax(np.append(above[1:], 0) <= allowed))
+    return out
+
+
+@functools.lru_cache(maxsize=256)
+def _bits_layout(widths: bytes, count: int, size: int) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`bits_layout` of the widths as bytes, kept (a log's batches repeat a few;
+    the arrays are shared: not to be written)."""
+    return bits_layout(np.frombuffer(widths, np.uint8), count, size)
+
+
+def bits_layout(widths: np.ndarray, count: int, size: int) -> tuple[np.ndarray, np.ndarray]:
+    """Where element ``j``'s bit planes start in ``low_bits`` (``widths[j]`` planes of
+    ``(count + 7) // 8`` bytes) and its byte planes in ``high_deltas`` (``(8 size -
+    widths[j] + 7) // 8`` planes of ``count`` bytes): two (width + 1,) int64 arrays, the
+    last entry each field's length."""
+    w = np.asarray(widths, np.int64)
+    low_at = np.zeros(len(w) + 1, np.int64)
+    high_at = np.zeros(len(w) + 1, np.int64)
+    np.cumsum(w * ((count + 7) // 8), out=low_at[1:])
+    np.cumsum((8 * size - w + 7) // 8 * count, out=high_at[1:])
+    return low_at, high_at
+
+
 def warm_up() -> None:
-    """Compile (or load from numba's cache) the byte-plane pass for every element size,
+    """Compile (or load from numba's cache) the byte- and bit-plane passes for every element size,
     with the frames contiguous or a view of a larger array (the engine's taps), into a
     record's field (strided), as logs call it (``python -m hil.sim.warmup``)."""
-    from hil.framelog.planes import split
+    from hil.framelog.planes import low_widths, split, split_bits
 
     for size in (1, 2, 4, 8):
         frames = np.zeros((2, 3, 4), f"<i{size}")
         out = np.zeros((2, size + 1, 4, 3), np.uint8)[:, :size]
+        widths = np.ones(4, np.int64)
+        records = np.zeros((2, 40), np.uint8)  # strided: fields of a record
         for f in (frames, frames[:, :2]):
             split(f, out[..., :f.shape[1]], True)
+            low_widths(f, 8 * size, NOISE_STRIDE, NOISE_SHARE, widths)
+            low_at, high_at = bits_layout(widths, f.shape[1], size)
+            split_bits(f, 8 * size, widths, low_at, high_at, records[:, :10],
+                       records[:, 10:])
 
 
 @functools.lru_cache(maxsize=64)
@@ -184,6 +286,52 @@ def _layout(head: tuple, prefix: int, size: int) -> np.dtype:
     """A block record: the fields ``head``, the message's ``prefix`` bytes (every field but
     the frames), the ``size`` bytes of frames."""
     return np.dtype([*head, ("pre", "u1", (prefix,)), ("f", "u1", (size,))])
+
+
+@functools.lru_cache(maxsize=64)
+def _bits_record(head: tuple, prefix: int, low: int, mid: int, high: int) -> np.dtype:
+    """A block record of the noisy low bits apart: the fields ``head``, ``prefix`` bytes
+    (every field up to ``low_bits``' key and length), the ``low`` bytes of bit planes,
+    ``mid`` bytes (``high_deltas``' key and length), its ``high`` bytes."""
+    return np.dtype([*head, ("pre", "u1", (prefix,)), ("lo", "u1", (low,)),
+                     ("mid", "u1", (mid,)), ("hi", "u1", (high,))])
+
+
+def _bits(frames: np.ndarray, widths: np.ndarray, low_at: np.ndarray,
+          high_at: np.ndarray, low: np.ndarray, high: np.ndarray) -> None:
+    """The bit planes of the frames' ((k, count, width)) noisy low bits into ``low`` (k,
+    low_at[-1]) and the byte planes of the rest into ``high`` (k, high_at[-1]), as
+    :func:`hil.framelog.planes.split_bits` lays them out: compiled for blocks worth it,
+    else :func:`_bits_numpy` (the reference)."""
+    size = frames.dtype.itemsize
+    if frames.size >= _COMPILED_FROM:
+        from hil.framelog.planes import split_bits
+
+        split_bits(frames.view(f"<i{size}"), 8 * size, widths, low_at, high_at, low, high)
+        return
+    _bits_numpy(frames, widths, low_at, high_at, low, high)
+
+
+def _bits_numpy(frames: np.ndarray, widths: np.ndarray, low_at: np.ndarray,
+                high_at: np.ndarray, low: np.ndarray, high: np.ndarray) -> None:
+    """:func:`_bits` in numpy: the differences of each element, its low bits one plane
+    at a time (``np.packbits``), the rest shifted down and split into bytes."""
+    size = frames.dtype.itemsize
+    u = np.dtype(f"<u{size}")
+    k, count, width = frames.shape
+    z = zigzag_deltas(np.ascontiguousarray(frames.view(u).transpose(0, 2, 1)))
+    for j in range(width):
+        w = int(widths[j])
+        col = z[:, j]  # (k, count)
+        if w:
+            bits = (col[:, None, :] >> np.arange(w, dtype=u)[:, None]) & 1
+            low[:, low_at[j]:low_at[j + 1]] = np.packbits(
+                bits.astype(np.uint8), axis=-1, bitorder="little").reshape(k, -1)
+        planes = (8 * size - w + 7) // 8
+        if planes:
+            rest = col >> np.asarray(w, u)
+            rows = rest.astype(u).view(np.uint8).reshape(k, count, size)[:, :, :planes]
+            high[:, high_at[j]:high_at[j + 1]] = rows.transpose(0, 2, 1).reshape(k, -1)
 
 
 def _planes(frames: np.ndarray, out: np.ndarray, deltas: bool) -> None:
@@ -329,13 +477,16 @@ def block_count(data: memoryview | bytes) -> int:
 
 def unpack_block(data: memoryview | bytes) -> tuple[np.ndarray, np.ndarray]:
     """``(t_ns (count,) int64, frames (count, width))`` of a block message: frames as
-    byte planes or row by row (then a view, no copy), times as ``t_ns`` or ``t0_ns`` +
-    ``dt_ns``; ValueError if a field is missing or the sizes disagree."""
+    noisy low bits apart, byte planes or row by row (then a view, no copy), times as
+    ``t_ns`` or ``t0_ns`` + ``dt_ns``; ValueError if a field is missing or the sizes
+    disagree."""
     f = _fields(data)
     count, width, dname = f.get(3), f.get(4), f.get(5)
+    split = 11 in f or 12 in f or 10 in f
     times, frames = f.get(1, b""), f.get(9, f.get(2, b""))
-    if 9 in f and len(f.get(2, b"")):  # type: ignore[arg-type]
-        raise ValueError("block message has both frames and frame_deltas")
+    if bool(2 in f and len(f[2])) + (9 in f) + split > 1:  # type: ignore[arg-type]
+        raise ValueError("block message has more than one of frames, frame_deltas and "
+                         "high_deltas")
     if not isinstance(frames, memoryview | bytes) or not isinstance(times, memoryview | bytes):
         raise ValueError("block frames or times are not length-delimited")
     if not isinstance(count, int) or not isinstance(width, int) or \
@@ -344,16 +495,19 @@ def unpack_block(data: memoryview | bytes) -> tuple[np.ndarray, np.ndarray]:
     dt = _DTYPES.get(bytes(dname).decode("ascii", "replace"))
     if dt is None:
         raise ValueError(f"block dtype {bytes(dname)!r} unknown")
-    if len(frames) != count * width * dt.itemsize or (
-            len(times) != 8 * count and (len(times) or not count or 6 not in f)):
+    if len(times) != 8 * count and (len(times) or not count or 6 not in f):
         raise ValueError(f"block of {count} x {width} {dt} frames has {len(times)} bytes of "
-                         f"times and {len(frames)} of frames"
-                         + ("" if len(times) or 6 in f else " and no t0_ns"))
+                         "times" + ("" if len(times) or 6 in f else " and no t0_ns"))
+    if not split and len(frames) != count * width * dt.itemsize:
+        raise ValueError(f"block of {count} x {width} {dt} frames has {len(frames)} bytes "
+                         "of frames")
     if len(times) or not count:
         t = np.frombuffer(times, _T_NS, count)
     else:
         t0, step = (_signed64(f.get(n, 0)) for n in (6, 7))
         t = t0 + step * np.arange(count, dtype=np.int64)
+    if split:  # noisy low bits as bit planes, the rest as byte planes
+        return t, _join_bits(f, count, width, dt)
     if 9 in f:  # zigzag-coded differences of consecutive frames, as byte planes
         u = np.dtype(f"<u{dt.itemsize}")
         fr = np.frombuffer(f[9], np.uint8).reshape(dt.itemsize, width, count)
@@ -364,6 +518,46 @@ def unpack_block(data: memoryview | bytes) -> tuple[np.ndarray, np.ndarray]:
         return t, np.ascontiguousarray(fr.transpose(2, 1, 0)).view(dt).reshape(count, width)
     fr = np.frombuffer(frames, dt, count * width)
     return t, fr.reshape(count, width)
+
+
+def _join_bits(f: dict[int, object], count: int, width: int, dt: np.dtype) -> np.ndarray:
+    """The frames (count, width) of a block whose differences are split at their noisy
+    low bits (fields 10-12, :func:`pack_blocks`): every element's bit planes and byte
+    planes weighted and summed at once (``np.add.reduceat``), no loop per element."""
+    parts = [f.get(n, b"") for n in (10, 11, 12)]
+    if not all(isinstance(p, memoryview | bytes) for p in parts):
+        raise ValueError("block low_bits, low_widths or high_deltas is not length-delimited")
+    low_b, widths_b, high_b = parts
+    size = dt.itemsize
+    bits = 8 * size
+    w = np.frombuffer(widths_b, np.uint8).astype(np.int64)  # type: ignore[arg-type]
+    if len(w) != width or bool((w > bits).any()):
+        raise ValueError(f"block of {width} elements of {bits} bits has low_widths "
+                         f"{w.tolist()[:8]}{'...' if len(w) > 8 else ''}")
+    low_at, high_at = bits_layout(w, count, size)
+    if len(low_b) != low_at[-1] or len(high_b) != high_at[-1]:  # type: ignore[arg-type]
+        raise ValueError(f"block of {count} x {width} {dt} frames has {len(low_b)} bytes "
+                         f"of low_bits and {len(high_b)} of high_deltas, not "
+                         f"{low_at[-1]} and {high_at[-1]}")
+    per_plane = (count + 7) // 8
+    z = np.zeros((width, count), np.uint64)
+    # every bit plane (element j's planes: its bits 0, 1, ...) weighted by its bit
+    planes = np.unpackbits(np.frombuffer(low_b, np.uint8).reshape(-1, per_plane), axis=1,
+                           count=count, bitorder="little")  # type: ignore[arg-type]
+    has = np.flatnonzero(w)
+    if len(has):
+        weight = np.concatenate([np.arange(n, dtype=np.uint64) for n in w[has]])
+        z[has] = np.add.reduceat(planes.astype(np.uint64) << weight[:, None],
+                                 (low_at[has] // per_plane), axis=0)
+    nb = (bits - w + 7) // 8
+    has = np.flatnonzero(nb)
+    if len(has) and count:
+        shift = np.concatenate([w[j] + 8 * np.arange(nb[j], dtype=np.int64) for j in has])
+        rows = np.frombuffer(high_b, np.uint8).reshape(-1, count)  # type: ignore[arg-type]
+        z[has] |= np.add.reduceat(rows.astype(np.uint64) << shift.astype(np.uint64)[:, None],
+                                  high_at[has] // count, axis=0)
+    u = np.dtype(f"<u{size}")
+    return undo_zigzag_deltas(np.ascontiguousarray(z.T).astype(u)).view(dt)
 
 
 def _signed64(v: object) -> int:

@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import os
 import struct
-import zlib
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -30,6 +29,7 @@ import numpy as np
 import zstandard
 
 from hil.framelog import rawpb
+from hil.framelog.chunk import crc32
 from hil.framelog.formats import (
     BLOCK_HEADER,
     BLOCK_MAGIC,
@@ -325,7 +325,7 @@ class FrameLogReader:
         with open(self.path, "rb") as f:
             f.read(len(MAGIC))
             pos = len(MAGIC)
-            crc = zlib.crc32(MAGIC)
+            crc = crc32(MAGIC)
             keep: dict[int, bool] = {}
             first = True
             while True:
@@ -366,7 +366,7 @@ class FrameLogReader:
                         if stored and stored != crc:
                             raise _Corrupt("data section CRC mismatch")
                     else:
-                        crc = zlib.crc32(body, zlib.crc32(head, crc))
+                        crc = crc32(body, crc32(head, crc))
                     if op == OP_CHUNK:
                         scan.chunks += 1
                         yield from self._chunk(body, scan, wanted, keep)
@@ -414,7 +414,7 @@ class FrameLogReader:
         buf = _decompress(compression, data, usize)  # type: ignore[arg-type]
         if len(buf) != usize:
             raise _Corrupt(f"chunk holds {len(buf)} bytes, its header says {usize}")
-        if ucrc and zlib.crc32(buf) != ucrc:
+        if ucrc and crc32(buf) != ucrc:
             raise _Corrupt("chunk CRC mismatch")
         mv = memoryview(buf)
         p, n = 0, len(buf)

@@ -63,7 +63,7 @@ Compression = Literal["zstd", "lz4", "none"]
 _COMPRESSION = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4,
                 "none": CompressionType.NONE}
 #: Compression levels the codecs take (zstd's negative levels trade ratio for speed).
-_LEVELS = {"zstd": (chunk.SIGNAL_LEVEL, 22), "lz4": (0, 16)}
+_LEVELS = {"zstd": (min(chunk.TUNED_LEVELS), 22), "lz4": (0, 16)}
 _JSON_TYPES = ("number", "integer")
 #: The writer's default ``chunk_compression`` (with zstd at its default level): the decoded
 #: signals (``/signals/...``: doubles and floats of noisy sensor words, ~40 % of a
@@ -71,7 +71,13 @@ _JSON_TYPES = ("number", "integer")
 #: here (:data:`chunk.SIGNAL_LEVEL`), ~25 % less compression time for a log ~20 % larger
 #: (docs/framelog.md, "Chunks of their own compression"); the register words and frames
 #: keep :data:`chunk.ZSTD_LEVEL`.
-SIGNAL_CHUNKS: dict[str, tuple[Compression, int]] = {"/signals/": ("zstd", chunk.SIGNAL_LEVEL)}
+#: The actuators' signals (two thirds of the signals' bytes) at a faster level of their own
+#: (:data:`chunk.ACTUATOR_SIGNAL_LEVEL`), with the bus's rows (~1 % of the signals' bytes,
+#: written just before them: in their chunk, not in a small one of their own per block).
+SIGNAL_CHUNKS: dict[str, tuple[Compression, int]] = {
+    "/signals/": ("zstd", chunk.SIGNAL_LEVEL),
+    "/signals/actuator/": ("zstd", chunk.ACTUATOR_SIGNAL_LEVEL),
+    "/signals/bus": ("zstd", chunk.ACTUATOR_SIGNAL_LEVEL)}
 #: Keys of the "eha-hil" metadata record that the writer sets itself.
 RESERVED_METADATA = ("level", "version", "time")
 
@@ -103,6 +109,17 @@ class _DirectFile:
             view = view[n:]
             self._pos += n
         return len(data)
+
+    def writev(self, parts: list) -> int:
+        """``parts`` (bytes-likes) one after the other, in one system call (more only if
+        the kernel takes less than all of them)."""
+        total = sum(memoryview(p).nbytes for p in parts)
+        n = os.writev(self._fd, parts)
+        self._pos += n
+        if n < total:  # rare (a signal, a full disk): the rest by write
+            rest = memoryview(b"".join(parts))[n:]
+            self.write(rest)
+        return total
 
     def tell(self) -> int:
         return self._pos
@@ -267,9 +284,10 @@ class FrameLogWriter:
         if topic in self._topics:
             raise ValueError(f"topic {topic!r} already has a channel")
         ch.kind = next((k for p, k in self._kinds if topic.startswith(p)), self._kind)
-        with chunk.definitions(self._writer):
+        with chunk.definitions(self._writer) as made:
             cid = self._writer.register_channel(topic, message_encoding, schema_id,
                                                 {str(k): str(v) for k, v in metadata.items()})
+        chunk.keep_channel(self._writer, cid, made)
         self._topics.add(topic)
         self._channels[cid] = ch
         return cid

@@ -388,16 +388,21 @@ class BusSignals:
         self.frames: list[bytes] = []
         self._rows: np.ndarray | None = None  # :attr:`cycles` as rows, made once per block
 
-    def tap(self) -> Callable[[list[bytes], list[bytes], int], None]:
-        """The per-cycle call (``sent``, ``received``, the cycle's first tick), once the
-        master has ended the cycle: its frames and its row, one tuple, no other call."""
+    def tap(self, every: int, flush: Callable[[], None]
+            ) -> Callable[[int, int, list[bytes], list[bytes]], None]:
+        """The bus system's per-cycle call (:data:`hil.fieldbus.system.CycleTapFn`: the
+        cycle's number and first tick, the frames sent and received), once the master has
+        ended the cycle: its frames and its row, one tuple, and ``flush()`` after every
+        ``every``-th cycle; no other call per cycle."""
         add, count = self.frames.extend, self.cycles.extend
         counters, stats = operator.attrgetter(*SG.MASTER_COUNTERS), self.master.stats
 
-        def cycle(sent: list[bytes], received: list[bytes], tick: int) -> None:
+        def cycle(number: int, tick: int, sent: list[bytes], received: list[bytes]) -> None:
             add(sent)  # (bytes: the master's sealed frames, what the transport returns)
             add(received)
             count((tick, len(sent), len(received), *counters(stats)))
+            if (number + 1) % every == 0:
+                flush()
         return cycle
 
     def rows(self) -> np.ndarray:
@@ -491,17 +496,6 @@ def run_logged(topo: Topology, cfg: Config, cycles: int, pc: Callable[[int, Mast
                                      schema_name=ENC_FIELDBUS, schema_encoding=LAYOUT_ENCODING,
                                      schema_data=lay.schema())
         bus_sig: BusSignals | None = None
-        # the frames of the last cycles, kept for /signals/bus and the log and written
-        # once per block (a message at a time costs ~9 us, see hil.framelog.batch),
-        # taken a cycle at a time (the bus system's tap_cycle, at the end of each cycle:
-        # one call, not one per frame, and the cycle's /signals/bus row with it)
-        take_cycle: Callable[[list[bytes], list[bytes], int], None] | None = None
-
-        def tap_cycle(cycle: int, tick: int, sent: list[bytes], received: list[bytes]
-                      ) -> None:
-            take_cycle(sent, received, tick)
-            if (cycle + 1) % block == 0:
-                flush_block()
 
         def flush_block() -> None:
             t = bus_sig.frame_times()
@@ -509,10 +503,13 @@ def run_logged(topo: Topology, cfg: Config, cycles: int, pc: Callable[[int, Mast
                 log.write_messages(ch_bus, t, bus_sig.frames)
             bus_sig.flush(t)
 
-        with BusSystem(topo, cfg, "inproc", model=model, tap=capture,
-                       tap_cycle=tap_cycle) as bs:
+        with BusSystem(topo, cfg, "inproc", model=model, tap=capture) as bs:
             bus_sig = BusSignals(out, bs.master, tick_ns)
-            take_cycle = bus_sig.tap()
+            # the frames of the last cycles, kept for /signals/bus and the log and written
+            # once per block (a message at a time costs ~9 us, see hil.framelog.batch),
+            # taken a cycle at a time (the bus system's tap_cycle, at the end of each
+            # cycle: one call, not one per frame, the cycle's /signals/bus row with it)
+            bs.tap_cycle = bus_sig.tap(block, flush_block)
             engine = bs.chain.engine
             if engine is None:
                 boxes = [RecordingStackBox(b, cfg, log, out) for b in topo.boxes]

@@ -14,6 +14,24 @@ def block_rows(m) -> tuple[np.ndarray, np.ndarray]:  # noqa: ANN001 - a decoded 
         t = np.asarray(m.t_ns, np.int64)
     else:  # evenly spaced: the first time and the spacing
         t = m.t0_ns + m.dt_ns * np.arange(m.count, dtype=np.int64)
+    if len(m.low_widths):  # the differences' noisy low bits as bit planes, the rest bytes
+        u = np.dtype(f"<u{dt.itemsize}")
+        bits, per_plane = 8 * dt.itemsize, (m.count + 7) // 8
+        low = np.frombuffer(m.low_bits, np.uint8)
+        high = np.frombuffer(m.high_deltas, np.uint8)
+        z = np.zeros((m.count, m.width), np.uint64)
+        lo = hi = 0
+        for j, w in enumerate(m.low_widths):  # bytes: one int per element
+            for b in range(w):  # bit b of frame i: bit i % 8 of byte i // 8 of the plane
+                plane = np.unpackbits(low[lo:lo + per_plane], bitorder="little")
+                z[:, j] |= plane[:m.count].astype(np.uint64) << np.uint64(b)
+                lo += per_plane
+            for b in range((bits - w + 7) // 8):  # byte b of z >> w
+                z[:, j] |= high[hi:hi + m.count].astype(np.uint64) << np.uint64(w + 8 * b)
+                hi += m.count
+        z = z.astype(u)
+        d = (z >> 1) ^ (0 - (z & 1)).astype(u)  # the signed differences, modulo 2^bits
+        return t, np.cumsum(d, axis=0, dtype=u).view(dt)
     if len(m.frame_deltas):  # byte planes of the zigzag-coded frame-to-frame differences
         u = np.dtype(f"<u{dt.itemsize}")
         raw = np.frombuffer(m.frame_deltas, np.uint8).reshape(dt.itemsize, m.width, m.count)

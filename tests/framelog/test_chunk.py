@@ -4,11 +4,15 @@ library writes; at ours, a file the mcap reader reads back with every CRC checke
 from __future__ import annotations
 
 import io
+import os
+import zlib
 from pathlib import Path
 
 import numpy as np
 import pytest
 import zstandard
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from mcap.data_stream import RecordBuilder
 from mcap.reader import make_reader
 from mcap.records import (
@@ -62,6 +66,23 @@ def test_library_level_gives_the_librarys_file(tmp_path: Path, compression: str,
     assert ours == lib
 
 
+def test_a_short_writev_is_completed(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A chunk goes out in one ``os.writev``; where the kernel takes only part of it (a
+    signal, a nearly full disk), the rest follows: the same file as whole writes give."""
+    whole = _log(tmp_path / "whole.mcap", "zstd", None, True)
+    writev = os.writev
+    short = []
+
+    def writev_some(fd: int, parts: list) -> int:
+        data = b"".join(bytes(p) for p in parts)
+        short.append(len(data) > 7)
+        return writev(fd, [data[:7]])
+
+    monkeypatch.setattr(os, "writev", writev_some)
+    assert _log(tmp_path / "short.mcap", "zstd", None, True) == whole
+    assert any(short)
+
+
 def _records(data: bytes) -> list:
     """Every record of a file, chunks as (start, end, size, records inside)."""
     out = []
@@ -111,6 +132,54 @@ def test_bad_level_is_one_line(tmp_path: Path, compression: str, level: int) -> 
                        compression_level=level)
 
 
+def _checked_indexes(path: Path) -> tuple[int, dict]:
+    """The index entries of ``path`` (their count, and each chunk's records and
+    MessageIndex records), checked with the mcap library: one MessageIndex per channel of
+    a chunk, each entry's offset a Message record of that channel at that log time."""
+    records = list(StreamReader(io.BytesIO(path.read_bytes()), emit_chunks=True).records)
+    chunks: dict = {}
+    pos = 0
+    for rec in records:  # chunk records in file order, then the indexes that follow each
+        if isinstance(rec, Chunk):
+            pos += 1
+            chunks[pos] = breakup_chunk(rec, validate_crc=True), []
+        elif isinstance(rec, MessageIndex):
+            chunks[pos][1].append(rec)
+    entries = 0
+    for inner, indexes in chunks.values():
+        offsets, at = {}, 0
+        for r in inner:  # each record's offset inside the uncompressed chunk
+            offsets[at] = r
+            at += _record_length(r)
+        assert {ix.channel_id for ix in indexes} == {r.channel_id for r in inner
+                                                     if isinstance(r, Message)}
+        assert len({ix.channel_id for ix in indexes}) == len(indexes)  # one per channel
+        for ix in indexes:
+            for t, off in ix.records:
+                m = offsets[off]
+                assert isinstance(m, Message) and m.channel_id == ix.channel_id
+                assert m.log_time == t
+                entries += 1
+    return entries, chunks
+
+
+def test_channels_batched_twice_in_one_chunk_have_one_index_each(tmp_path: Path) -> None:
+    """Batches alone in a chunk (their index records written as they were built), with
+    every channel in several of them: one MessageIndex per channel, every entry right."""
+    path = tmp_path / "twice.mcap"
+    with FrameLogWriter(path, compression="none", chunk_size=1 << 20) as w:
+        blocks = [w.add_block_channel(f"/b{i}", "eha-hil/x", dtype=np.uint16, width=3)
+                  for i in range(3)]
+        many = [w.add_channel(f"/m{i}", "json") for i in range(2)]
+        for k in range(3):
+            w.write_blocks(blocks, 100 * k + np.arange(4), np.full((3, 4, 3), k))
+            w.write_messages_many(many, 100 * k + 50 + np.arange(5),
+                                  np.full((2, 5, 4), k, np.uint8))
+            w.write_messages(many[1], 100 * k + 60 + np.arange(2), [b"a", b"bc"])
+    entries, chunks = _checked_indexes(path)
+    assert len(chunks) == 1 and entries == 3 * 3 + 3 * 2 * 5 + 3 * 2
+
+
 @pytest.mark.parametrize("compression", ["zstd", "none"])
 def test_every_message_index_entry_points_at_its_message(tmp_path: Path,
                                                          compression: str) -> None:
@@ -135,29 +204,7 @@ def test_every_message_index_entry_points_at_its_message(tmp_path: Path,
         t = 4000 + np.arange(5)
         w.write_messages(many[1], t, [b"y" * 3] * 5)
         w.write_messages(many[2], t, [b"z" * (1 + i) for i in range(5)])
-    records = list(StreamReader(io.BytesIO(path.read_bytes()), emit_chunks=True).records)
-    chunks = {}
-    pos = 0
-    for rec in records:  # chunk records in file order, then the indexes that follow each
-        if isinstance(rec, Chunk):
-            pos += 1
-            chunks[pos] = breakup_chunk(rec, validate_crc=True), []
-        elif isinstance(rec, MessageIndex):
-            chunks[pos][1].append(rec)
-    entries = 0
-    for inner, indexes in chunks.values():
-        offsets, at = {}, 0
-        for r in inner:  # each record's offset inside the uncompressed chunk
-            offsets[at] = r
-            at += _record_length(r)
-        assert {ix.channel_id for ix in indexes} == {r.channel_id for r in inner
-                                                     if isinstance(r, Message)}
-        for ix in indexes:
-            for t, off in ix.records:
-                m = offsets[off]
-                assert isinstance(m, Message) and m.channel_id == ix.channel_id
-                assert m.log_time == t
-                entries += 1
+    entries, chunks = _checked_indexes(path)
     assert entries == 6 * 5 + 6 * 3 + 6 * 3 * 4 + 6 * 4 + 10 and len(chunks) >= 7
     # most channels had one message in a chunk: the one-entry records were written
     assert sum(len(ix.records) == 1 for _, ixs in chunks.values() for ix in ixs) >= 25
@@ -200,7 +247,8 @@ def _record_length(r: object) -> int:
     return len(rb.end())
 
 
-@pytest.mark.parametrize("level", [None, -7, chunk.SIGNAL_LEVEL, 3])
+@pytest.mark.parametrize("level", [None, -7, chunk.SIGNAL_LEVEL, chunk.ACTUATOR_SIGNAL_LEVEL,
+                                   3])
 def test_writers_levels_give_checked_zstd_frames(level: int | None) -> None:
     """The compressor of each zstd level the writer uses (its own levels with their tuned
     match finder, and a level of zstd's own): frames that stock zstd decodes back to the
@@ -217,3 +265,35 @@ def test_writers_levels_give_checked_zstd_frames(level: int | None) -> None:
     bad[len(bad) // 2] ^= 0x10
     with pytest.raises(zstandard.ZstdError):
         zstandard.ZstdDecompressor().decompress(bytes(bad))
+
+
+def test_chunk_buffer_does_what_bytesio_does_across_grows() -> None:
+    """The chunk buffer against ``BytesIO`` (what the mcap library builds chunks in): the
+    same bytes after writes of every kind of buffer, seeks back (the library's record
+    lengths), a grow by a write and one by a reserved array filled in place."""
+    ours, ref = chunk.ChunkBuffer(10), io.BytesIO()
+    rng = np.random.default_rng(3)
+    writes = [bytes(rng.integers(0, 256, 40_000, dtype=np.uint8)), bytearray(b"ab"),
+              memoryview(np.arange(6, dtype=np.uint16).reshape(2, 3)),  # not format "B"
+              np.arange(50_000, dtype=np.uint8).view(np.uint8)]
+    for data in writes:
+        assert ours.write(data) == ref.write(data)
+        assert ours.tell() == ref.tell()
+    ours.seek(3), ref.seek(3)
+    ours.write(b"xyz"), ref.write(b"xyz")
+    ours.seek(0, 2), ref.seek(0, 2)
+    got = ours.reserve(70_000)  # a grow
+    got[:] = 7
+    ref.write(bytes([7]) * 70_000)
+    assert ours.getvalue() == ref.getvalue() and bytes(ours.getbuffer()) == ref.getvalue()
+    ours.reset()
+    assert ours.tell() == 0 and ours.getvalue() == b""
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.binary(max_size=3000), st.integers(0, 2**32 - 1))
+def test_the_logs_crc32_is_zlibs(data: bytes, start: int) -> None:
+    """The CRC-32 of the writer's and reader's checks (zlib-ng's where installed) is
+    zlib's, continued from any value (MCAP's data-section CRC runs over many records)."""
+    assert chunk.crc32(data, start) == zlib.crc32(data, start)
+    assert chunk.crc32(memoryview(data)) == zlib.crc32(data)

@@ -144,18 +144,23 @@ def test_a_level_of_its_own_is_a_chunk_of_its_own(tmp_path: Path) -> None:
                                             ({"chunk_compression": {}}, False)])
 def test_signals_have_chunks_of_their_own_by_default(tmp_path: Path, kw: dict,
                                                      apart: bool) -> None:
-    """zstd at the writer's default level: /signals/ in chunks of their own (zstd -9);
-    a level or a chunk_compression of one's own: one kind of chunk."""
+    """zstd at the writer's default level: /signals/ in chunks of their own (zstd -9),
+    the actuators' /signals/actuator/ in others (zstd -19); a level or a
+    chunk_compression of one's own: one kind of chunk."""
     path = tmp_path / "d.mcap"
     with FrameLogWriter(path, chunk_size=1 << 20, **kw) as w:
         s = w.add_channel("/signals/x", "json")
+        a = w.add_channel("/signals/actuator/0.0", "json")
         b = w.add_block_channel("/lvds/0/up", "eha-hil/t", dtype=np.uint16, width=2)
         w.write_messages(s, np.arange(3), [b"{}"] * 3)
+        w.write_messages(a, np.arange(3), [b"{}"] * 3)
         w.write_block(b, np.arange(3), np.ones((3, 2), np.uint16))
     with open(path, "rb") as f:
-        chunks = make_reader(f).get_summary().chunk_indexes
+        reader = make_reader(f, validate_crcs=True)
+        chunks = reader.get_summary().chunk_indexes
+        assert len(list(reader.iter_messages())) == 7
     assert {c.compression for c in chunks} == {"zstd"}
-    assert len(chunks) == (2 if apart else 1)
+    assert len(chunks) == (3 if apart else 1)
 
 
 @pytest.mark.parametrize(("kind", "match"), [("brotli", "'/signals/'.*zstd, lz4, none"),

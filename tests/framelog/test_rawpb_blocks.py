@@ -39,7 +39,8 @@ def test_byte_planes_are_where_the_doc_says(dtype: type, deltas: bool) -> None:
     frames[2, 1] = 0x7A  # a byte of its own, to be found at its place
     frames[4, 0] = -5 if np.dtype(dtype).kind == "i" else 250  # a step down, a sign
     t = 1000 + 50 * np.arange(7)
-    rec = rawpb.pack_blocks(t, frames[None], np.dtype(dtype), deltas=deltas)
+    rec = rawpb.pack_blocks(t, frames[None], np.dtype(dtype), deltas=deltas,
+                            low_bits=False)  # field 9: logs before the noisy bits apart
     m = _stock("eha-hil/x", rec[0].tobytes())
     size = np.dtype(dtype).itemsize
     bits = 8 * size
@@ -57,10 +58,12 @@ def test_byte_planes_are_where_the_doc_says(dtype: type, deltas: bool) -> None:
     assert np.array_equal(got_t, t) and np.array_equal(got, frames) and got.dtype == dtype
 
 
+@pytest.mark.parametrize("low_bits", [True, False])
 @pytest.mark.parametrize("dtype", [np.uint8, np.int16, np.uint32, np.int64, np.float32,
                                    np.float64])
-def test_frame_deltas_give_back_every_bit(dtype: type) -> None:
-    """Extremes, wrap-arounds and float bit patterns (NaN, -0.0, inf) come back exactly."""
+def test_frame_deltas_give_back_every_bit(dtype: type, low_bits: bool) -> None:
+    """Extremes, wrap-arounds and float bit patterns (NaN, -0.0, inf) come back exactly,
+    with the noisy low bits apart and (logs before) without."""
     rng = np.random.default_rng(5)
     size = np.dtype(dtype).itemsize
     bits = rng.integers(0, 256, (2, 40, 4 * size), dtype=np.uint8)
@@ -69,7 +72,9 @@ def test_frame_deltas_give_back_every_bit(dtype: type) -> None:
     frames = bits.view(dtype).reshape(2, 40, 4)
     if np.dtype(dtype).kind == "f":
         frames[1, :3, 0] = [np.nan, -0.0, np.inf]
-    rec = rawpb.pack_blocks(np.arange(40) * 3, frames, np.dtype(dtype), deltas=True)
+    rec = rawpb.pack_blocks(np.arange(40) * 3, frames, np.dtype(dtype), deltas=True,
+                            low_bits=low_bits)
+    assert ("hi" in rec.dtype.names) == low_bits
     for i in range(2):
         _, got = rawpb.unpack_block(rec[i].tobytes())
         assert got.dtype == np.dtype(dtype) and got.tobytes() == frames[i].tobytes()
@@ -78,10 +83,15 @@ def test_frame_deltas_give_back_every_bit(dtype: type) -> None:
 def test_a_block_with_frames_and_deltas_is_refused() -> None:
     frames = np.arange(6, dtype=np.uint16).reshape(1, 3, 2)
     m = _stock("eha-hil/x", rawpb.pack_blocks(np.arange(3), frames, np.dtype(np.uint16),
-                                             deltas=True)[0]
+                                             deltas=True, low_bits=False)[0]
                .tobytes())
     m.frames = bytes(m.frame_deltas)
-    with pytest.raises(ValueError, match="both frames and frame_deltas"):
+    with pytest.raises(ValueError, match="more than one of frames, frame_deltas"):
+        rawpb.unpack_block(m.SerializeToString())
+    m = _stock("eha-hil/x", rawpb.pack_blocks(np.arange(3), frames, np.dtype(np.uint16))[0]
+               .tobytes())
+    m.frame_deltas = bytes(6 * 2)
+    with pytest.raises(ValueError, match="more than one of frames, frame_deltas"):
         rawpb.unpack_block(m.SerializeToString())
 
 
