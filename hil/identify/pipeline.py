@@ -437,14 +437,18 @@ class _Loop:
                       and fit.theta[IDX[p]] != self.configured[IDX[p]]]
 
     def refit_with(self, d: EffectDef | list[EffectDef], start: dict[str, float],
-                   robust: bool = False, nfev: int | None = None
+                   robust: bool = False, nfev: int | None = None, judged_alone: bool = False
                    ) -> tuple[FitResult, dict[str, str]]:
         """``current`` refitted with the effect ``d`` (or several at once) in, their
         parameters from ``start``. ``robust``: from the robust start (:meth:`robust_start`)
         where the fit without them is far from the configured values (the effects may have
         been what moved it there). ``nfev``: the Jacobians a pass, in place of the
         default (:data:`ROBUST_NFEV` from a robust start that moved something, else
-        :data:`PLAIN_NFEV`)."""
+        :data:`PLAIN_NFEV`). ``judged_alone``: the refit is judged by :meth:`verdict_on`
+        alone (no cost of it compared), which refuses it once a parameter of the effects is
+        held: the guard stops at that hold (:func:`~hil.identify.fit.guarded_fit`'s
+        ``refuse``; free piston, both frictions under ``slide``: the seal's static level
+        held at 0, then two more holds and refits, 1.2 s of CPU, for a refused refit)."""
         exp, current, configured = self.exp, self.current, self.configured
         ds_ = d if isinstance(d, list) else [d]
         theta0 = current.theta.copy()
@@ -473,8 +477,11 @@ class _Loop:
         # after 16 with the pressure differences 1.3 % predictable, at 0.3 % one fit on)
         if nfev is None:
             nfev = ROBUST_NFEV if moved else PLAIN_NFEV
+        own = frozenset(p for e in ds_ for p in e.params) if judged_alone else frozenset()
         new, held_now = guarded_fit(refitter, theta0, new_free, credible, sigma=current.sigma,
-                                    configured=configured, max_nfev=nfev)
+                                    configured=configured, max_nfev=nfev, refuse=own)
+        if own.intersection(held_now):
+            return new, held_now
         # a shape parameter that took the effect's law to a degenerate one: held at its
         # start (the guard's interval test cannot see it: no sample informs the
         # degenerate part, so its interval is as narrow as the arithmetic makes it)
@@ -517,7 +524,9 @@ class _Loop:
         """A candidate that takes over a nuisance pinned at its bound, judged at its own fit
         (the refit it would get if selected, kept for that)."""
         self.say(f"fitting {d.label} to judge it (the fit's skew sits at its bound)")
-        new, held_now = self.prefit[d.label] = self.refit_with(d, {p: 0.0 for p in d.params})
+        # judged by its own parameters' credibility first: the guard stops at their hold
+        new, held_now = self.prefit[d.label] = self.refit_with(d, {p: 0.0 for p in d.params},
+                                                               judged_alone=True)
         own = [p for p in held_now if p in d.params]
         if own:
             return FitJudgement(refused=f"not credible at its own fit ({own[0]}: "
@@ -569,9 +578,10 @@ class _Loop:
                 other: tuple[FitResult, dict[str, str]] | None = None
             else:
                 say(f"round {rnd}: adding {best.label}; refit")
-                new, held_now = self.refit_with(d, best.beta)
+                chosen = bool(far and not self.added and self.unbiased)
+                new, held_now = self.refit_with(d, best.beta, judged_alone=not chosen)
                 other = None
-                if far and not self.added and self.unbiased:
+                if chosen:
                     # from the baseline only, and only where the estimation cost is free of
                     # the input noise's bias (it ranks the two minima; without the low-pass
                     # it ranked them wrong: docs/identify.md): its far parameters took what
@@ -589,7 +599,8 @@ class _Loop:
                 # frictions on a free piston: J_c 40x, d_c 4.5x), a start the refit does not
                 # come back from; or the robust start was the one refused
                 say(f"round {rnd}: {best.label} {why}; the refit from the other start")
-                new2, held2 = other or self.refit_with(d, best.beta, robust=True)
+                new2, held2 = other or self.refit_with(d, best.beta, robust=True,
+                                                       judged_alone=True)
                 why2 = self.verdict_on([d], new2, held2)
                 if not why2:
                     new, held_now, why = new2, held2, ""
