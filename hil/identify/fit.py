@@ -501,6 +501,7 @@ def guarded_fit(fitter: OutputErrorFit, theta0: np.ndarray, free: list[str],
                 credible: np.ndarray, sigma: dict[str, float] | None = None,
                 passes: int = 2, guard: list[str] | None = None, max_nfev: int = 40,
                 configured: np.ndarray | None = None, first: FitResult | None = None,
+                refuse: frozenset[str] = frozenset(),
                 ) -> tuple[FitResult, dict[str, str]]:
     """Fit, then hold every non-credible parameter (of ``guard``, default all free) at its
     last credible value (from ``credible``), worst first, refitting after each hold.
@@ -513,6 +514,10 @@ def guarded_fit(fitter: OutputErrorFit, theta0: np.ndarray, free: list[str],
     does not.
 
     ``first``: that first fit, when the caller has made it already.
+
+    ``refuse``: parameters whose hold refuses the fit for the caller (an effect's own
+    parameter not credible): the guard stops at the first such hold and returns the fit it
+    held it in, the hold named; the further holds and refits would be thrown away with it.
 
     Returns the fit and ``{parameter: why it was held}``.
     """
@@ -538,6 +543,8 @@ def guarded_fit(fitter: OutputErrorFit, theta0: np.ndarray, free: list[str],
                     where = f" (the configured value: the last fit's {value:.4g} fits worse)"
                     value = alt
         held[name] = f"{why}; held at {value:.4g}{where}"
+        if name in refuse:
+            break
         free.remove(name)
         theta = result.theta.copy()
         theta[IDX[name]] = value

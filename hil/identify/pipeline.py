@@ -437,14 +437,18 @@ class _Loop:
                       and fit.theta[IDX[p]] != self.configured[IDX[p]]]
 
     def refit_with(self, d: EffectDef | list[EffectDef], start: dict[str, float],
-                   robust: bool = False, nfev: int | None = None
+                   robust: bool = False, nfev: int | None = None, judged_alone: bool = False
                    ) -> tuple[FitResult, dict[str, str]]:
         """``current`` refitted with the effect ``d`` (or several at once) in, their
         parameters from ``start``. ``robust``: from the robust start (:meth:`robust_start`)
         where the fit without them is far from the configured values (the effects may have
         been what moved it there). ``nfev``: the Jacobians a pass, in place of the
         default (:data:`ROBUST_NFEV` from a robust start that moved something, else
-        :data:`PLAIN_NFEV`)."""
+        :data:`PLAIN_NFEV`). ``judged_alone``: the refit is judged by :meth:`verdict_on`
+        alone (no cost of it compared), which refuses it once a parameter of the effects is
+        held: the guard stops at that hold (:func:`~hil.identify.fit.guarded_fit`'s
+        ``refuse``; free piston, both frictions under ``slide``: the seal's static level
+        held at 0, then two more holds and refits, 1.2 s of CPU, for a refused refit)."""
         exp, current, configured = self.exp, self.current, self.configured
         ds_ = d if isinstance(d, list) else [d]
         theta0 = current.theta.copy()
@@ -473,8 +477,11 @@ class _Loop:
         # after 16 with the pressure differences 1.3 % predictable, at 0.3 % one fit on)
         if nfev is None:
             nfev = ROBUST_NFEV if moved else PLAIN_NFEV
+        own = frozenset(p for e in ds_ for p in e.params) if judged_alone else frozenset()
         new, held_now = guarded_fit(refitter, theta0, new_free, credible, sigma=current.sigma,
-                                    configured=configured, max_nfev=nfev)
+                                    configured=configured, max_nfev=nfev, refuse=own)
+        if own.intersection(held_now):
+            return new, held_now
         # a shape parameter that took the effect's law to a degenerate one: held at its
         # start (the guard's interval test cannot see it: no sample informs the
         # degenerate part, so its interval is as narrow as the arithmetic makes it)
@@ -517,7 +524,9 @@ class _Loop:
         """A candidate that takes over a nuisance pinned at its bound, judged at its own fit
         (the refit it would get if selected, kept for that)."""
         self.say(f"fitting {d.label} to judge it (the fit's skew sits at its bound)")
-        new, held_now = self.prefit[d.label] = self.refit_with(d, {p: 0.0 for p in d.params})
+        # judged by its own parameters' credibility first: the guard stops at their hold
+        new, held_now = self.prefit[d.label] = self.refit_with(d, {p: 0.0 for p in d.params},
+                                                               judged_alone=True)
         own = [p for p in held_now if p in d.params]
         if own:
             return FitJudgement(refused=f"not credible at its own fit ({own[0]}: "
@@ -569,9 +578,10 @@ class _Loop:
                 other: tuple[FitResult, dict[str, str]] | None = None
             else:
                 say(f"round {rnd}: adding {best.label}; refit")
-                new, held_now = self.refit_with(d, best.beta)
+                chosen = bool(far and not self.added and self.unbiased)
+                new, held_now = self.refit_with(d, best.beta, judged_alone=not chosen)
                 other = None
-                if far and not self.added and self.unbiased:
+                if chosen:
                     # from the baseline only, and only where the estimation cost is free of
                     # the input noise's bias (it ranks the two minima; without the low-pass
                     # it ranked them wrong: docs/identify.md): its far parameters took what
@@ -582,6 +592,10 @@ class _Loop:
                     # 8-41 % above the plain one's, both seeds) for 8-17 s of CPU a record
                     new, held_now, other = self.start_chosen(d, best.beta, (new, held_now),
                                                              rnd)
+                elif far and self.unbiased:
+                    # effects in already, and the fit still far: what it absorbed may be
+                    # shared out between the new effect and those in (others_held_chosen)
+                    new, held_now = self.others_held_chosen(d, best.beta, (new, held_now), rnd)
             why = self.verdict_on([d], new, held_now)
             if why and far:
                 # forward from a robust baseline: the fit without the effect may have
@@ -589,7 +603,8 @@ class _Loop:
                 # frictions on a free piston: J_c 40x, d_c 4.5x), a start the refit does not
                 # come back from; or the robust start was the one refused
                 say(f"round {rnd}: {best.label} {why}; the refit from the other start")
-                new2, held2 = other or self.refit_with(d, best.beta, robust=True)
+                new2, held2 = other or self.refit_with(d, best.beta, robust=True,
+                                                       judged_alone=True)
                 why2 = self.verdict_on([d], new2, held2)
                 if not why2:
                     new, held_now, why = new2, held2, ""
@@ -643,6 +658,46 @@ class _Loop:
                      f"{', '.join(self.robust_start(self.current))} ends lower")
             return *robust, plain
         return *plain, robust
+
+    def others_held_chosen(self, d: EffectDef, beta: dict[str, float],
+                           plain: tuple[FitResult, dict[str, str]], rnd: int
+                           ) -> tuple[FitResult, dict[str, str]]:
+        """The refit of ``d`` where effects are in already and the fit without ``d`` is
+        still far from the configuration (:meth:`forward`): besides the plain refit (made),
+        one from the robust start with the effects already in held at their values, then
+        everything freed for a polish of :data:`PLAIN_NFEV` Jacobians; kept where its
+        estimation cost is lower than the plain one's by :data:`START_MARGIN`. With those
+        effects free from the start, the new one's refit shares what the far parameters
+        took out between them, and lands in a minimum behind a ridge from the rig's
+        (conrod, pump and seal friction, rig seed 1: the seal's refit after the pump
+        friction, from every start with the pump friction free, ends with the pressure
+        differences 63 % predictable; with it held, then freed, at 1.5 %, an estimation cost
+        1.6x lower; docs/identify.md, "The conrod's two frictions")."""
+        current = self.current
+        others = [p for e in self.added
+                  for p in (*self.defs_all[e.label].params,
+                            *(q for q, _ in self.defs_all[e.label].refit_extra))
+                  if p in current.free]
+        if not others:
+            return plain
+        self.current = dataclasses.replace(current, free=[p for p in current.free
+                                                          if p not in others])
+        try:
+            first, held_first = self.refit_with(d, beta, robust=True)
+        finally:
+            self.current = current
+        refitter = OutputErrorFit(self.model, {**NUISANCE_SCALES(self.exp.dt),
+                                               **_all_scales(self.defs_all)})
+        free = list(first.free) + [p for p in others if p not in first.free]
+        alt, held_alt = guarded_fit(refitter, first.theta, free, first.theta,
+                                    sigma=current.sigma, configured=self.configured,
+                                    max_nfev=PLAIN_NFEV)
+        mask = self.est_mask
+        if (self.weighted_ss(alt.outputs, mask)
+                < (1.0 - START_MARGIN) * self.weighted_ss(plain[0].outputs, mask)):
+            self.say(f"round {rnd}: the refit with {', '.join(others)} held first ends lower")
+            return alt, {**held_first, **held_alt}
+        return plain
 
     def skew_again(self) -> None:
         """The skew pinned at +T/2 may have been an effect's doing: once one is in, the delay

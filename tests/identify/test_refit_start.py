@@ -104,3 +104,48 @@ def test_a_noisy_input_starts_from_the_far_parameters_alone():
     loop.unbiased = False
     absorbed = _fit({"dc": 2.71 * 413.0, "c_rod": 48.7 * 50.0, "lag_strain_s": 1e-3})
     assert _Loop.robust_start(loop, absorbed) == ["dc"]
+
+
+def test_a_later_effect_is_refitted_with_those_in_held_first(monkeypatch):
+    """Effects in already and the fit still far: the new effect's refit from the robust start
+    with the effects in held, then all freed; kept only when lower by the margin, and the
+    loop's fit is left as it was whichever is kept."""
+    from hil.identify import pipeline
+
+    pump = SimpleNamespace(params=("pc_force_n",), nominal=(40.0,),
+                           refit_extra=(("pc_shape", None),))
+    loop = _loop()
+    loop.added = [SimpleNamespace(label="pump")]
+    loop.defs_all = {"pump": pump}
+    loop.model = None
+    loop.exp.dt = 2e-4
+    current = _fit({"dc": 3.0 * 413.0})
+    current.free = [*FREE, "pc_force_n", "pc_shape"]
+    loop.current = current
+    plain = (_fit({}, 6000.0), {})
+    seen = {}
+
+    def refit(d, beta, robust=False, nfev=None):
+        seen["free"], seen["robust"] = list(loop.current.free), robust
+        return _fit({}, 5000.0), {"c_rod": "held"}
+
+    def polish(fitter, theta0, free, credible, **kw):
+        seen["polish_free"] = list(free)
+        return _fit({}, seen["polish_cost"]), {}
+
+    loop.refit_with = refit
+    monkeypatch.setattr(pipeline, "OutputErrorFit", lambda *a, **k: None)
+    monkeypatch.setattr(pipeline, "guarded_fit", polish)
+    for cost, kept in ((3000.0, True), ((1.0 - 0.5 * START_MARGIN) * 6000.0, False)):
+        seen["polish_cost"] = cost
+        new, held = _Loop.others_held_chosen(loop, None, {}, plain, 1)
+        assert (new is not plain[0]) == kept
+        assert held == ({"c_rod": "held"} if kept else {})
+        assert seen["robust"] and "pc_force_n" not in seen["free"]
+        assert "pc_shape" not in seen["free"] and "dc" in seen["free"]
+        assert {"pc_force_n", "pc_shape"} <= set(seen["polish_free"])
+        assert loop.current is current
+    # no effect of those in free: nothing to hold, the plain refit as it is, no refit run
+    loop.current = _fit({"dc": 3.0 * 413.0})
+    seen.clear()
+    assert _Loop.others_held_chosen(loop, None, {}, plain, 1) is plain and not seen
