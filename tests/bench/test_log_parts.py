@@ -40,31 +40,31 @@ def _block():  # noqa: ANN202
     return np.arange(3), np.zeros((3, 2), np.uint16), np.dtype(np.uint16)
 
 
-def test_the_fieldbus_tap_is_timed_where_the_bus_system_takes_it() -> None:
-    """run_logged's tap is a closure: the breakdown wraps it as the bus system is made; it
-    is called once per cycle with every frame sent and received."""
+def test_the_fieldbus_tap_is_timed_as_the_bus_signals_make_it(tmp_path) -> None:  # noqa: ANN001
+    """run_logged's per-cycle tap is the closure ``BusSignals.tap`` makes for the bus
+    system: the breakdown wraps it as it is made; it is called once per cycle, and the
+    log holds every frame the bus system's per-frame tap saw, in its order."""
     from hil.bench.log_parts import TAP
-    from hil.fieldbus.system import BusSystem
     from hil.fieldbus.topology import load_topology
+    from hil.framelog import FrameLogReader
+    from hil.replay.record import run_logged
     from hil.sim.pc import demo_pc
     from plant.config import load_config
 
-    seen, each = [], []
+    each = []
     timer = _Timer()
     undo = _install(timer)
     try:
-        with BusSystem(load_topology("bench_one_box"), load_config(None), "inproc",
-                       tap=lambda *frame: each.append(frame),
-                       tap_cycle=lambda *cycle: seen.append(cycle)) as bs:
-            rec = bs.run(5, demo_pc(), keep=1)
+        rec = run_logged(load_topology("bench_one_box"), load_config(None), 5, demo_pc(),
+                         tmp_path / "t.mcap", capture=lambda *frame: each.append(frame))
     finally:
         for owner, name, fn in reversed(undo):
             setattr(owner, name, fn)
-    assert timer.calls[TAP] == len(seen) == 5
-    # the per-cycle tap holds what the per-frame tap saw, in its order
-    flat = [e for c, t, sent, got in seen
-            for e in [(c, t, f, "tx") for f in sent] + [(c, t, f, "rx") for f in got]]
-    assert flat == each and sum(len(s[2]) for s in seen) == rec.master["frames_sent"] > 0
+    assert timer.calls[TAP] == 5
+    logged = [f for _, _, f in FrameLogReader(tmp_path / "t.mcap").frames(
+        ["/fieldbus/frames"], order="file")]
+    assert logged == [frame[2] for frame in each]
+    assert sum(d == "tx" for *_, d in each) == rec.master["frames_sent"] > 0
 
 
 def test_the_split_adds_up_to_what_the_logging_costs() -> None:

@@ -96,7 +96,7 @@ ROOMS: dict[str, set[str]] = {
     "scenarios": {"analysis", "fieldbus", "identify", "output", "sim"},
     "sweep": {"output", "scenarios", "workers"},
     "verify": {"sim"},
-    "bench": {"fieldbus", "framelog", "replay", "sim", "sweep", "transports"},
+    "bench": {"fieldbus", "framelog", "identify", "replay", "sim", "sweep", "transports"},
     "cli": {"analysis", "bench", "fieldbus", "framelog", "identify", "output", "replay",
             "scenarios", "sim", "sweep", "transports", "verify"},
 }
