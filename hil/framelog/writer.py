@@ -512,9 +512,11 @@ class FrameLogWriter:
                      frames: np.ndarray) -> None:
         """:meth:`write_block` of ``frames[i]`` on ``channel_ids[i]`` for every ``i``, all
         at the times ``t_ns``: frames ``(k, n, width)``, the channels' one dtype and width
-        (e.g. every actuator's upstream words of a block of MCU steps). The same messages
+        (e.g. every actuator's upstream words of a block of MCU steps). The same frames
         as one :meth:`write_block` each, built as one array (:func:`rawpb.pack_blocks`)
-        and put into the chunk from it (:func:`batch.add_records`)."""
+        and put into the chunk from it (:func:`batch.add_records`); the noisy low bits'
+        widths are chosen once for the batch (from all its channels), so the messages'
+        bytes may differ from one-channel writes' while decoding to the same frames."""
         chs, blocks, _ = self._group(channel_ids)
         f = np.asarray(frames)
         if not blocks or f.ndim != 3 or len(f) != len(chs) or not self._fast:
