@@ -592,9 +592,12 @@ class _Loop:
                     # 8-41 % above the plain one's, both seeds) for 8-17 s of CPU a record
                     new, held_now, other = self.start_chosen(d, best.beta, (new, held_now),
                                                              rnd)
-                elif far and self.unbiased:
-                    # effects in already, and the fit still far: what it absorbed may be
-                    # shared out between the new effect and those in (others_held_chosen)
+                elif far and self.unbiased and structure_excess(self.judged(new)[0]) > 0.0:
+                    # effects in already, the fit still far, and its residual still holds
+                    # material structure: what it absorbed may be shared out between the new
+                    # effect and those in (others_held_chosen). A refit that leaves the
+                    # residual white needs no other start (conrod, pump friction after the
+                    # pulsation: the second refit was never kept, +2-3 s a record)
                     new, held_now = self.others_held_chosen(d, best.beta, (new, held_now), rnd)
             why = self.verdict_on([d], new, held_now)
             if why and far:
