@@ -165,8 +165,9 @@ def warm(out=sys.stderr) -> int:
     except Exception as exc:  # nothing to warm without a configuration
         print(f"eha-hil warmup: skipped ({type(exc).__name__}: {exc})", file=out)
         return len(STEPS)
-    print("eha-hil warmup: compiling the numba kernels once (15-30 s on a fresh "
-          "install, a second when they are cached) ...", file=out, flush=True)
+    print("eha-hil warmup: compiling the numba kernels once (about 3 min on a fresh "
+          "install of an idle 2-core machine, a second when they are cached) ...",
+          file=out, flush=True)
     for name, step in STEPS:
         try:
             step(cfg)
