@@ -413,6 +413,12 @@ class _Loop:
         clean, noisy = self._held_noise
         return predicted_residual(clean.outputs(theta), noisy.outputs(theta))
 
+    def refitter(self) -> OutputErrorFit:
+        """A fitter with the nuisance parameters' and every library effect's scales: the one
+        the refits, the polish and the freeing use."""
+        return OutputErrorFit(self.model, {**NUISANCE_SCALES(self.exp.dt),
+                                           **_all_scales(self.defs_all)})
+
     def robust_start(self, fit: FitResult) -> list[str]:
         """The parameters a refit with an effect in starts from their configured values: none
         where ``fit`` (the fit without it) is near the configuration; else those far from it
@@ -689,8 +695,7 @@ class _Loop:
             first, held_first = self.refit_with(d, beta, robust=True)
         finally:
             self.current = current
-        refitter = OutputErrorFit(self.model, {**NUISANCE_SCALES(self.exp.dt),
-                                               **_all_scales(self.defs_all)})
+        refitter = self.refitter()
         free = list(first.free) + [p for p in others if p not in first.free]
         alt, held_alt = guarded_fit(refitter, first.theta, free, first.theta,
                                     sigma=current.sigma, configured=self.configured,
@@ -713,7 +718,7 @@ class _Loop:
         """An effect added early, by a local test, may have shrunk to nothing once a later
         one was in (a pump friction standing in for a pulsation): drop it and refit without
         it."""
-        exp, held = self.exp, self.held
+        held = self.held
         for e in list(self.added):
             d = self.defs_all[e.label]
             current = self.current
@@ -729,8 +734,7 @@ class _Loop:
             for p in drop:
                 theta[IDX[p]] = 0.0
                 held.pop(p, None)
-            refitter = OutputErrorFit(self.model, {**NUISANCE_SCALES(exp.dt),
-                                                   **_all_scales(self.defs_all)})
+            refitter = self.refitter()
             self.current, held_now = guarded_fit(
                 refitter, theta, [p for p in current.free if p not in drop], theta,
                 sigma=current.sigma, passes=1, max_nfev=9)
@@ -806,8 +810,7 @@ class _Loop:
         theta0 = self.current.theta.copy()
         for p in far:
             theta0[IDX[p]] = self.configured[IDX[p]]
-        refitter = OutputErrorFit(self.model, {**NUISANCE_SCALES(self.exp.dt),
-                                               **_all_scales(self.defs_all)})
+        refitter = self.refitter()
         new, held_now = guarded_fit(refitter, theta0, list(self.current.free), theta0,
                                     sigma=self.current.sigma, configured=self.configured)
         own = [p for p in held_now if any(p in e.params for e in ds_)]
@@ -989,8 +992,7 @@ class _Loop:
                  and p not in current.free]
         if not (self.added and retry):
             return False
-        fitter = OutputErrorFit(self.model, {**NUISANCE_SCALES(self.exp.dt),
-                                             **_all_scales(self.defs_all)})
+        fitter = self.refitter()
         # One Jacobian tells which of them the data pin now: one whose interval at the
         # current fit is still wider than its value would be held again by the guard, after
         # a refit with all of them free and another without it (a third of a 16 s record's

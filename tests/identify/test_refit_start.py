@@ -134,7 +134,7 @@ def test_a_later_effect_is_refitted_with_those_in_held_first(monkeypatch):
         return _fit({}, seen["polish_cost"]), {}
 
     loop.refit_with = refit
-    monkeypatch.setattr(pipeline, "OutputErrorFit", lambda *a, **k: None)
+    loop.refitter = lambda: None
     monkeypatch.setattr(pipeline, "guarded_fit", polish)
     for cost, kept in ((3000.0, True), ((1.0 - 0.5 * START_MARGIN) * 6000.0, False)):
         seen["polish_cost"] = cost
