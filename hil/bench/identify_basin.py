@@ -21,6 +21,14 @@ two frictions"); the truth's refit leaving the same structure is the model's.
 Run: ``python -m hil.bench.identify_basin --load conrod_fixed --effect pump_coulomb_friction
 --effect seal_friction --seed 1`` (6 s records, as ``identify-check``; ``--seconds 16 --seed
 3`` is the CPU bench's record).
+
+Where the loop's fit is reached only by the joint search (the free piston's two frictions
+under the multisine: neither passes alone), ``--through joint`` runs the loop to the end of
+:meth:`~hil.identify.pipeline._Loop.joint`. ``--free NAME`` frees more parameters in both
+refits (``jc`` held since the baseline, the seal's ``sf_eps_m_per_s`` from the preset);
+``--truth linear`` or ``--truth frictions`` puts only that part of the truth into the
+start, the rest as the loop's fit has it (:func:`partial_truth`): which part of the start
+decides the basin.
 """
 
 from __future__ import annotations
@@ -73,6 +81,30 @@ def truth_vector(theta: np.ndarray, idx: Mapping[str, int],
     return th, names
 
 
+#: Parameters printed for each fit (those it has free): where two basins differ.
+SHOWN = ("gain_n_per_a", "ks", "jp", "jc", "lag_pressure_s", "pc_force_n", "pc_shape",
+         "sf_coulomb_n", "sf_static_n", "sf_eps_m_per_s", "sf_shape")
+#: The groups of :func:`truth_vector`'s names that ``--truth`` can put in alone: the
+#: frictions' levels, velocities and shapes, and the linear parameters.
+FRICTION_PREFIXES = ("pc_", "sf_")
+
+
+def partial_truth(theta: np.ndarray, truth_theta: np.ndarray, names: list[str],
+                  idx: Mapping[str, int], group: str) -> tuple[np.ndarray, list[str]]:
+    """``theta`` with the entries of ``names`` (set by :func:`truth_vector` in
+    ``truth_theta``) of one ``group`` taken from ``truth_theta``: ``all``, ``frictions``
+    (the names with a :data:`FRICTION_PREFIXES` prefix) or ``linear`` (the others).
+    Returns the vector and the names put in."""
+    if group not in ("all", "frictions", "linear"):
+        raise ValueError(f"truth group {group!r}: all, frictions or linear")
+    put = [n for n in names if group == "all"
+           or (n.startswith(FRICTION_PREFIXES) == (group == "frictions"))]
+    th = np.array(theta, dtype=float)
+    for n in put:
+        th[idx[n]] = truth_theta[idx[n]]
+    return th, put
+
+
 def line_costs(cost: Callable[[np.ndarray], float], a: np.ndarray, b: np.ndarray,
                log_idx: set[int], points: int = 11) -> list[float]:
     """``cost`` at ``points`` evenly spaced points from ``a`` to ``b``; the entries of
@@ -117,6 +149,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--seconds", type=float, default=6.0)
     ap.add_argument("--profile", default="multisine")
+    ap.add_argument("--through", default="forward", choices=("forward", "joint"),
+                    help="the loop's steps run before the comparison (joint: forward, the "
+                    "shrunk effects dropped, the joint search)")
+    ap.add_argument("--free", action="append", default=[],
+                    help="a parameter freed in both refits besides the loop's (repeatable)")
+    ap.add_argument("--truth", default="all", choices=("all", "frictions", "linear"),
+                    help="the part of the truth put into the second refit's start")
     args = ap.parse_args(argv)
     cfg = load_config("hydra_default")
     rig = generate_rig(args.load, args.effect, seconds=args.seconds, seed=args.seed,
@@ -125,19 +164,36 @@ def main(argv: list[str] | None = None) -> int:
     with threadpool_limits(limits=1, user_api="blas"):
         loop = _Loop(rig.data, cfg, lambda msg: None, None)
         loop.forward(6)
+        if args.through == "joint":
+            loop.drop_shrunk()
+            loop.joint(6)
         found = loop.current
         fitter = OutputErrorFit(loop.model, {**NUISANCE_SCALES(loop.exp.dt),
                                              **_all_scales(loop.defs_all)})
-        start, names = truth_vector(found.theta, IDX, rig.truth)
-        truth, held = guarded_fit(fitter, start, list(found.free), start, sigma=found.sigma,
+        free = list(found.free) + [n for n in args.free if n not in found.free]
+        base = found.theta.copy()
+        for n in args.free:
+            if n == "sf_eps_m_per_s" and not base[IDX[n]]:
+                base[IDX[n]] = loop.exp.const.eps_seal  # 0 stands for the preset's
+        whole, names = truth_vector(base, IDX, rig.truth)
+        start, names = partial_truth(base, whole, names, IDX, args.truth)
+        if args.free:
+            found, _ = guarded_fit(fitter, base, free, base, sigma=found.sigma,
+                                   configured=loop.configured)
+        truth, held = guarded_fit(fitter, start, free, start, sigma=found.sigma,
                                   configured=loop.configured)
         rows = []
-        for label, fit in (("the loop's fit", found), ("refit from the rig's truth", truth)):
+        first = "the loop's fit" + (f", {', '.join(args.free)} freed" if args.free else "")
+        second = ("refit from the rig's truth"
+                  + ("" if args.truth == "all" else f" ({args.truth} only)"))
+        for label, fit in ((first, found), (second, truth)):
             loop.current = fit
             residual, disagree = loop.structure()
             rows.append((label, fitter.cost(fit.theta, found.sigma),
                          _val_cost(loop.exp, fit.outputs, loop.sigma_ref),
-                         residual or "none", disagree or "none"))
+                         residual or "none", disagree or "none",
+                         ", ".join(f"{n} {fit.value(n):.4g}" for n in SHOWN
+                                   if n in fit.free)))
         line = line_costs(lambda th: fitter.cost(th, found.sigma), found.theta, truth.theta,
                           {IDX[n] for n in LOG_PARAMS})
     print(f"{args.load} {' + '.join(args.effect) or 'null'}, seed {args.seed}, "
@@ -145,8 +201,10 @@ def main(argv: list[str] | None = None) -> int:
     print(f"truth put in: {', '.join(names)}; held in the truth's refit: {held or 'none'}")
     print("| fit | estimation cost | validation cost | residual structure | parameters "
           "disagreeing |\n|---|---|---|---|---|")
-    for label, est, val, left, disagree in rows:
+    for label, est, val, left, disagree, _ in rows:
         print(f"| {label} | {est:.6g} | {val:.6g} | {left} | {disagree} |")
+    for label, *_, values in rows:
+        print(f"{label}: {values}")
     print("estimation cost on the line from the loop's fit to the truth's refit: "
           + ", ".join(f"{c:.4g}" for c in line))
     print("diagnosis: " + diagnosis(rows[0][1], rows[1][1], rows[1][3] != "none",

@@ -5,8 +5,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
-from hil.bench.identify_basin import diagnosis, line_costs, truth_vector
+from hil.bench.identify_basin import diagnosis, line_costs, partial_truth, truth_vector
 from hil.identify.model import IDX, N_PARAMS, _friction_sign
 
 TRUTH = {"parameters": {"dc": 383.8, "jc": 0.3065, "c_rod": 56.9, "precharge_pa": 6.4e5},
@@ -52,3 +53,19 @@ def test_diagnosis_names_the_search_only_where_the_truth_is_lower():
                                                      "lower, and explained")
     assert "still leaves parameters disagreeing" in diagnosis(100.0, 40.0, False, True)
     assert diagnosis(100.0, 100.0, True, False).startswith("the model")
+
+
+def test_partial_truth_puts_in_one_group_and_keeps_the_loops_values_elsewhere():
+    loop_theta = np.full(N_PARAMS, 7.0)
+    whole, names = truth_vector(loop_theta, IDX, TRUTH)
+    fr, put_fr = partial_truth(loop_theta, whole, names, IDX, "frictions")
+    assert fr[IDX["sf_static_n"]] == 35.0 and fr[IDX["pc_force_n"]] == 80.0
+    assert fr[IDX["dc"]] == 7.0 and fr[IDX["jc"]] == 7.0  # linear: the loop's
+    lin, put_lin = partial_truth(loop_theta, whole, names, IDX, "linear")
+    assert lin[IDX["dc"]] == 383.8 and lin[IDX["c_rod"]] == 56.9
+    assert lin[IDX["sf_static_n"]] == 7.0
+    assert sorted(put_fr + put_lin) == sorted(names)
+    every, _ = partial_truth(loop_theta, whole, names, IDX, "all")
+    assert np.array_equal(every, whole)
+    with pytest.raises(ValueError, match="truth group"):
+        partial_truth(loop_theta, whole, names, IDX, "some")
