@@ -618,10 +618,17 @@ def write_indexes(indices: dict, rb: object, at: int, offsets: dict[int, int],
 def _write_batches(batches: list[tuple[np.ndarray, list[int]]], rb: object, at: int,
                    offsets: dict[int, int]) -> None:
     """:func:`write_indexes` of a chunk whose indexes are ``batches`` (each batch's
-    MessageIndex records as an array of :func:`many_index` records, its channels)."""
+    MessageIndex records as rows of bytes, its channels): the arrays handed to ``rb``
+    as they are (:class:`_Collect` keeps them for the chunk's one write; no copy)."""
     pos = at
+    parts = getattr(rb, "parts", None)
     for arr, cids in batches:
-        size = arr.dtype.itemsize
+        size = arr.shape[1]
         offsets.update(zip(cids, range(pos, pos + len(cids) * size, size), strict=True))
         pos += len(cids) * size
-    rb.write(b"".join(arr.tobytes() for arr, _ in batches))  # type: ignore[attr-defined]
+        if parts is not None:
+            parts.append(arr)
+    if parts is not None:
+        rb.count += pos - at  # type: ignore[attr-defined]
+    else:
+        rb.write(b"".join(arr.tobytes() for arr, _ in batches))  # type: ignore[attr-defined]
