@@ -27,7 +27,8 @@ CODECS = (("zstd 3 (the mcap library's)", "zstd", 3), ("zstd 1", "zstd", 1),
           ("zstd -5", "zstd", -5), ("lz4 (its default)", "lz4", None))
 #: (label, compression, level) of each row of the decoded signals' chunks (the writer's
 #: levels with their tuned match finder, :data:`hil.framelog.chunk.TUNED`).
-SIGNAL_CODECS = (("zstd -19, table 2^8 (the writer's, actuators)", "zstd", -19),
+SIGNAL_CODECS = (("zstd -60, table 2^8 (the writer's, actuators)", "zstd", -60),
+                 ("zstd -19, table 2^8 (the actuators' before)", "zstd", -19),
                  ("zstd -9, table 2^11 (the writer's, the rest)", "zstd", -9),
                  ("zstd -7, table 2^12", "zstd", -7),
                  ("zstd -1, table 2^12", "zstd", -1))

@@ -180,7 +180,7 @@ def _index(cb: object, channel_id: int, entries: np.ndarray) -> None:
     rec["ch"] = channel_id
     rec["n"] = 16 * len(entries)
     rec["e"][0] = entries
-    keep(cb, rec, [channel_id])
+    keep(cb, rec.view(np.uint8).reshape(1, -1), [channel_id])
 
 
 # --- a chunk's message indexes, kept per batch --------------------------------------------
@@ -212,8 +212,9 @@ def lazy(cb: object) -> None:
 
 
 def keep(cb: object, rec: np.ndarray, channel_ids: list[int]) -> None:
-    """A batch's MessageIndex records ``rec`` (of :func:`many_index` entries) of
-    ``channel_ids``, one each, kept with chunk builder ``cb``'s batches."""
+    """A batch's MessageIndex records ``rec`` ((channels, bytes) uint8: each row a record
+    of :func:`many_index` entries) of ``channel_ids``, one each, kept with chunk builder
+    ``cb``'s batches."""
     seen = cb.eha_seen
     if not cb.eha_twice and not seen.isdisjoint(channel_ids):
         cb.eha_twice = True
@@ -236,7 +237,7 @@ def settle(cb: object) -> None:
         return
     indices = cb.message_indices
     for rec, cids in batches[cb.eha_settled:]:
-        entries = rec["e"]
+        entries = rec[:, heads.INDEX_HEAD:].view("<u8").reshape(len(cids), -1, 2)
         for j, cid in enumerate(cids):
             index = indices.get(cid)
             if type(index) is not _MessageIndex:  # none yet, or the library's own
@@ -308,6 +309,18 @@ def records(w: Writer, dtype: np.dtype, n: int) -> tuple[np.ndarray, int | None]
     return buf.reserve(n * dtype.itemsize).view(dtype), at
 
 
+def rows(w: Writer, n: int, size: int) -> tuple[np.ndarray, int | None]:
+    """:func:`records` as ``n`` rows of ``size`` bytes ((n, size) uint8: a record's head,
+    :data:`heads.HEAD <hil.framelog.heads.HEAD>` bytes, then its message) for
+    :func:`add_records`."""
+    cb = w._Writer__chunk_builder  # noqa: SLF001 - see the module docstring
+    buf = cb.record_writer._buffer  # noqa: SLF001
+    if not isinstance(buf, ChunkBuffer):
+        return np.empty((n, size), np.uint8), None
+    at = buf.tell()
+    return buf.reserve(n * size).reshape(n, size), at
+
+
 def drop(w: Writer, at: int | None) -> None:
     """Take records reserved by :func:`records` at ``at`` out of the chunk again (their
     filling failed); nothing for None."""
@@ -315,29 +328,41 @@ def drop(w: Writer, at: int | None) -> None:
         w._Writer__chunk_builder.record_writer._buffer.drop(at)  # noqa: SLF001
 
 
-def add_records(w: Writer, channel_ids: Sequence[int], log_ns: np.ndarray,
+def add_records(w: Writer, channel_ids: Sequence[int] | np.ndarray, log_ns: np.ndarray,
                 publish_ns: np.ndarray, seqs: Sequence[int], rec: np.ndarray,
-                at: int | None = None) -> None:
+                at: int | None = None, ordered: bool = False) -> None:
     """``k`` messages on each channel of ``channel_ids`` (``c`` of them), channel-major:
     ``rec`` ((c * k,) structured, fields starting with :data:`HEAD_FIELDS`, filled here;
     the payload after them filled by the caller, e.g.
-    :func:`hil.framelog.rawpb.pack_blocks`) holds channel ``j``'s records at
+    :func:`hil.framelog.rawpb.pack_blocks`; or the same records as a (c * k, record
+    bytes) uint8 array) holds channel ``j``'s records at
     ``[j * k, (j + 1) * k)``, at log times ``log_ns`` and publish times ``publish_ns``
     ((k,) each, the same for every channel), sequences from ``seqs[j]`` on. As
     ``add_message`` per message, with no bytes object each: ``rec`` made by
     :func:`records` lies in the chunk at ``at`` already; any other array goes into the
     chunk buffer straight from the array, a slice of channels at a time that keeps a chunk
-    near its size."""
+    near its size. ``ordered``: the caller has checked that ``log_ns`` does not decrease
+    (its first and last are then its least and greatest)."""
     c = len(channel_ids)
     if not c:
         return
-    k = len(rec) // c
+    if rec.ndim == 2 and rec.dtype == np.uint8:  # records as rows of bytes
+        size = rec.shape[1]
+        if size < heads.HEAD or not rec.flags.c_contiguous:
+            raise ValueError("need contiguous records of at least the head's bytes")
+        rows = rec
+    else:
+        if not rec.flags.c_contiguous or rec.dtype.names[:len(HEAD_FIELDS)] != _HEAD_NAMES:
+            raise ValueError("need contiguous records whose fields start with HEAD_FIELDS")
+        size = rec.dtype.itemsize
+        rows = rec.view(np.uint8).reshape(len(rec), size)
+    k = len(rows) // c
     log = np.asarray(log_ns, dtype=np.int64)
     pub = np.asarray(publish_ns, dtype=np.int64)
-    size = rec.dtype.itemsize
-    if not rec.flags.c_contiguous or rec.dtype.names[:len(HEAD_FIELDS)] != _HEAD_NAMES:
-        raise ValueError("need contiguous records whose fields start with HEAD_FIELDS")
-    t_first, t_last = int(log.min()), int(log.max())
+    if ordered or len(log) == 1:
+        t_first, t_last = int(log[0]), int(log[-1])
+    else:
+        t_first, t_last = int(log.min()), int(log.max())
     stats = w._Writer__statistics  # noqa: SLF001 - see the module docstring
     cb = w._Writer__chunk_builder  # noqa: SLF001
     if stats.message_count == 0:
@@ -349,40 +374,50 @@ def add_records(w: Writer, channel_ids: Sequence[int], log_ns: np.ndarray,
     per = c if at is not None else max(1, w._Writer__chunk_size // (size * k))  # noqa: SLF001
     # the records' heads and every channel's MessageIndex record (entries: log time,
     # offset in the chunk) in one compiled pass (hil.framelog.heads), the index records
-    # kept with the chunk builder's batches for its closing (chunk.write_indexes)
-    ix = np.empty(c, many_index(k))
-    heads.fill(rec.view(np.uint8).reshape(c * k, size), np.asarray(channel_ids), seqs, log,
-               pub, ix.view(np.uint8).reshape(c, -1), 0 if at is None else at)
-    pairs = ix["e"]
-    t0 = int(log[0])
+    # (rows of bytes) kept with the chunk builder's batches for its closing
+    # (chunk.write_indexes)
+    ix = np.empty((c, heads.INDEX_HEAD + 16 * k), np.uint8)
+    heads.fill(rows, channel_ids, seqs, log, pub, ix, 0 if at is None else at)
     counts = stats.channel_message_counts
-    indices = cb.message_indices
-    lazily = getattr(cb, "eha_batches", None) is not None
+    ids = channel_ids.tolist() if isinstance(channel_ids, np.ndarray) else list(channel_ids)
+    if at is not None:  # (the usual case: one slice, the records in the chunk already)
+        _batch_in_chunk(w, cb, ids, ix, counts, k, t_first, t_last, c * k)
+        return
+    pairs = ix[:, heads.INDEX_HEAD:].view("<u8").reshape(c, k, 2)
     for lo in range(0, c, per):
-        part = rec[lo * k:(lo + per) * k]
-        if cb.num_messages == 0:
-            cb.message_start_time = t_first
-        else:
-            cb.message_start_time = min(cb.message_start_time, t_first)
-        cb.message_end_time = max(cb.message_end_time, t_last)
-        base = cb.record_writer.count if at is None else at
         n = min(per, c - lo)
-        if at is None:  # entries of this slice: from where it starts in the chunk
-            pairs[lo:lo + n, :, 1] -= np.uint64(lo * k * size)
-            pairs[lo:lo + n, :, 1] += np.uint64(base)
-        ids = list(channel_ids[lo:lo + n])
-        for cid in ids:
-            counts[cid] += k
-        if lazily:
-            keep(cb, ix[lo:lo + n], ids)
-        else:
-            for j, cid in enumerate(ids):
-                index = indices.get(cid)
-                if type(index) is not _MessageIndex:  # none yet, or the library's own
-                    index = indices[cid] = _MessageIndex(
-                        channel_id=cid, records=list(index.records) if index else [])
-                index.records.append((t0, base + j * k * size) if k == 1 else pairs[lo + j])
-        cb.num_messages += len(part)
-        if at is None:
-            cb.record_writer._buffer.write(part.view(np.uint8))  # noqa: SLF001
-        w._Writer__maybe_finalize_chunk()  # noqa: SLF001
+        base = cb.record_writer.count
+        # entries of this slice: from where it starts in the chunk
+        pairs[lo:lo + n, :, 1] -= np.uint64(lo * k * size)
+        pairs[lo:lo + n, :, 1] += np.uint64(base)
+        cb.record_writer._buffer.write(rows[lo * k:(lo + n) * k])  # noqa: SLF001
+        _batch_in_chunk(w, cb, ids[lo:lo + n], ix[lo:lo + n], counts, k, t_first, t_last,
+                        n * k)
+
+
+def _batch_in_chunk(w: Writer, cb: object, ids: list[int], ix: np.ndarray, counts: dict,
+                    k: int, t_first: int, t_last: int, n: int) -> None:
+    """The chunk builder's and the statistics' share of ``n`` records of channels ``ids``
+    (``k`` each) already in the chunk, their MessageIndex records ``ix`` (rows of bytes);
+    then the chunk-size check (the chunk may close)."""
+    if cb.num_messages == 0:
+        cb.message_start_time = t_first
+    else:
+        cb.message_start_time = min(cb.message_start_time, t_first)
+    cb.message_end_time = max(cb.message_end_time, t_last)
+    for cid in ids:
+        counts[cid] += k
+    if getattr(cb, "eha_batches", None) is not None:
+        keep(cb, ix, ids)
+    else:
+        indices = cb.message_indices
+        entries = ix[:, heads.INDEX_HEAD:].view("<u8").reshape(len(ids), k, 2)
+        for j, cid in enumerate(ids):
+            index = indices.get(cid)
+            if type(index) is not _MessageIndex:  # none yet, or the library's own
+                index = indices[cid] = _MessageIndex(
+                    channel_id=cid, records=list(index.records) if index else [])
+            index.records.append((int(entries[j, 0, 0]), int(entries[j, 0, 1])) if k == 1
+                                 else entries[j])
+    cb.num_messages += n
+    w._Writer__maybe_finalize_chunk()  # noqa: SLF001

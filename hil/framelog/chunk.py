@@ -55,16 +55,20 @@ ZSTD_LEVEL = -1
 SIGNAL_LEVEL = -9
 #: zstd level of the actuators' decoded signals' chunks (``/signals/actuator/``, 47,000
 #: messages per simulated second of the whole robot: two thirds of the signals' bytes):
-#: an acceleration of 19 with a table of 2^8 entries, ~2 ms per simulated second less
-#: compression than :data:`SIGNAL_LEVEL` for ~1.4 MB more (a step of 20 bytes through each
-#: message's changing floats finds its steady fields a few bytes later; docs/framelog.md,
-#: "The actuators' signal chunks at -19").
-ACTUATOR_SIGNAL_LEVEL = -19
-#: What the writer's own zstd levels (:data:`ZSTD_LEVEL`, :data:`SIGNAL_LEVEL`, and -7,
-#: the signals' level before) change in zstd's parameters of that level: a smaller match
-#: table (zstd's: 2^13 entries; 2^12 is 16 KiB, which stays in the L1 cache beside the
-#: data; the signals' 2^11: a message's steady fields match the same field of the
-#: previous message, which the last few hundred bytes hold) and matches of at least 7 bytes
+#: an acceleration of 60 with a table of 2^8 entries. Each record of these chunks is one
+#: run of changing floats (~110 of its ~245 bytes, which zstd stores as they are) and one
+#: steady run; a step of 61 bytes lands in the steady run at its first or second try, so
+#: zstd tries a match a third as often as at -19 for ~10 % more bytes: ~35 % less
+#: compression CPU (-19 was ~2 ms per simulated second less than :data:`SIGNAL_LEVEL`;
+#: docs/framelog.md, "The actuators' signal chunks at -19" and "The signals' batches and
+#: the actuators' chunks at -60").
+ACTUATOR_SIGNAL_LEVEL = -60
+#: What the writer's own zstd levels (:data:`ZSTD_LEVEL`, :data:`SIGNAL_LEVEL`,
+#: :data:`ACTUATOR_SIGNAL_LEVEL`, and -7 and -19, levels of the signals before) change in
+#: zstd's parameters of that level: a smaller match table (zstd's: 2^13 entries; 2^12 is
+#: 16 KiB, which stays in the L1 cache beside the data; the signals' 2^11: a message's
+#: steady fields match the same field of the previous message, which the last few hundred
+#: bytes hold) and matches of at least 7 bytes
 #: (zstd's: 6; a sensor word's noise makes many 6-byte matches that save little and cost a
 #: sequence each). On the chunks of a second of the whole robot (``python -m
 #: hil.bench.log_chunks``; docs/framelog.md, "Compression level"): at -1 ~9 % less
@@ -73,6 +77,7 @@ ACTUATOR_SIGNAL_LEVEL = -19
 #: Any reader reads the frames (zstd's format leaves the match finder to the writer).
 TUNED = {ZSTD_LEVEL: {"hash_log": 12, "min_match": 7}, -7: {"hash_log": 12, "min_match": 7},
          SIGNAL_LEVEL: {"hash_log": 11, "min_match": 7},
+         -19: {"hash_log": 8, "min_match": 7},  # the actuators' signals' level before
          ACTUATOR_SIGNAL_LEVEL: {"hash_log": 8, "min_match": 7}}
 TUNED_LEVELS = tuple(TUNED)
 #: A chunk buffer's first capacity, in chunks (:class:`ChunkBuffer`: address space; the
@@ -618,10 +623,17 @@ def write_indexes(indices: dict, rb: object, at: int, offsets: dict[int, int],
 def _write_batches(batches: list[tuple[np.ndarray, list[int]]], rb: object, at: int,
                    offsets: dict[int, int]) -> None:
     """:func:`write_indexes` of a chunk whose indexes are ``batches`` (each batch's
-    MessageIndex records as an array of :func:`many_index` records, its channels)."""
+    MessageIndex records as rows of bytes, its channels): the arrays handed to ``rb``
+    as they are (:class:`_Collect` keeps them for the chunk's one write; no copy)."""
     pos = at
+    parts = getattr(rb, "parts", None)
     for arr, cids in batches:
-        size = arr.dtype.itemsize
+        size = arr.shape[1]
         offsets.update(zip(cids, range(pos, pos + len(cids) * size, size), strict=True))
         pos += len(cids) * size
-    rb.write(b"".join(arr.tobytes() for arr, _ in batches))  # type: ignore[attr-defined]
+        if parts is not None:
+            parts.append(arr)
+    if parts is not None:
+        rb.count += pos - at  # type: ignore[attr-defined]
+    else:
+        rb.write(b"".join(arr.tobytes() for arr, _ in batches))  # type: ignore[attr-defined]

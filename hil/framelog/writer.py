@@ -35,7 +35,7 @@ import numpy as np
 from mcap.exceptions import UnsupportedCompressionError
 from mcap.writer import CompressionType, Writer
 
-from hil.framelog import batch, chunk, rawpb
+from hil.framelog import batch, chunk, heads, rawpb
 from hil.framelog.formats import (
     BLOCK_MESSAGE_ENCODING,
     DTYPE_CODES,
@@ -251,6 +251,7 @@ class FrameLogWriter:
         self._topics: set[str] = set()
         self._schemas: dict[tuple[str, str, bytes], int] = {}
         self._groups: dict[tuple[int, ...], tuple[list[_Channel], bool, bool]] = {}
+        self._id_arrays: dict[tuple[int, ...], np.ndarray] = {}
         self._flush_every = flush_every_ns
         self._last_flush_ns = 0
         self._closed = False
@@ -615,8 +616,8 @@ class FrameLogWriter:
                              f"got {t.shape} {t.dtype}")
         if not len(t) or not chs:
             return
-        times = t.astype(np.int64)
-        if times[0] < 0 or (len(times) > 1 and bool(np.any(times[1:] < times[:-1]))):
+        times = t if t.dtype == np.int64 else t.astype(np.int64)
+        if times[0] < 0 or (len(times) > 1 and (times[1:] < times[:-1]).any()):
             raise ValueError(f"{chs[0].topic}: message times must be >= 0 and "
                              "non-decreasing")
         first, last = int(times[0]), int(times[-1])
@@ -624,19 +625,28 @@ class FrameLogWriter:
         self._advance_all(chs, first, last)
         self._to(chs[0])
         c_n, k = len(chs), len(times)
-        rec, at = batch.records(self._writer, np.dtype([*batch.HEAD_FIELDS,
-                                                        ("data", "u1", (size,))]), c_n * k)
+        # the records as rows of bytes (head, then the message): no structured dtype
+        # to make and view per call
+        rows, at = batch.rows(self._writer, c_n * k, heads.HEAD + size)
         try:
-            fill(rec["data"].reshape(c_n, k, size))
+            fill(rows[:, heads.HEAD:].reshape(c_n, k, size))
         except BaseException:
             batch.drop(self._writer, at)  # no half-filled records left in the chunk
             for c, t_last in zip(chs, before, strict=True):
                 c.last_ns = t_last
             raise
-        batch.add_records(self._writer, channel_ids, times, times, [c.count for c in chs],
-                          rec, at)
+        batch.add_records(self._writer, self._ids(channel_ids), times, times,
+                          [c.count for c in chs], rows, at, ordered=True)
         for c in chs:
             c.count += k
+
+    def _ids(self, channel_ids: list[int]) -> np.ndarray:
+        """``channel_ids`` as an int64 array, made once per group of channels."""
+        key = tuple(channel_ids)
+        ids = self._id_arrays.get(key)
+        if ids is None:
+            ids = self._id_arrays[key] = np.array(channel_ids, np.int64)
+        return ids
 
     def write_messages(self, channel_id: int, t_ns: np.ndarray,
                        messages: list[bytes] | np.ndarray) -> None:

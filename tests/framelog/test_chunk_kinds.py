@@ -145,7 +145,7 @@ def test_a_level_of_its_own_is_a_chunk_of_its_own(tmp_path: Path) -> None:
 def test_signals_have_chunks_of_their_own_by_default(tmp_path: Path, kw: dict,
                                                      apart: bool) -> None:
     """zstd at the writer's default level: /signals/ in chunks of their own (zstd -9),
-    the actuators' /signals/actuator/ in others (zstd -19); a level or a
+    the actuators' /signals/actuator/ in others (zstd -60); a level or a
     chunk_compression of one's own: one kind of chunk."""
     path = tmp_path / "d.mcap"
     with FrameLogWriter(path, chunk_size=1 << 20, **kw) as w:
