@@ -75,21 +75,16 @@ def _bandlimited(u: np.ndarray, dt: float, n_sub: int, delay_s: float) -> np.nda
     if hit is None:
         ext = np.concatenate([u, u[::-1]])
         f = np.fft.rfftfreq(ext.size, dt)
-        # the phase ramp's factor 2 pi j f, as the ramp 2j pi f shift has it first
-        hit = (np.fft.rfft(ext) * np.sinc(f * h), 2j * np.pi * f, ext.size)
+        hit = (np.fft.rfft(ext) * np.sinc(f * h), f, ext.size)
         if len(_BL_CACHE) >= _BL_SLOTS:
             _BL_CACHE.clear()
         _BL_CACHE[key] = hit
-    spec, ramp, size = hit
-    # every sub-step's shifted spectrum in one array, inverted in one batched transform
-    # (the same values as a transform each, the phase ramps built in place)
-    shifted = np.empty((n_sub, spec.size), dtype=complex)
+    spec, f, size = hit
+    out = np.empty((n, n_sub))
     for j in range(n_sub):
         shift = (j + 0.5) * h - delay_s  # value at t_k + shift
-        np.multiply(ramp, shift, out=shifted[j])
-        np.exp(shifted[j], out=shifted[j])
-        np.multiply(spec, shifted[j], out=shifted[j])
-    return np.fft.irfft(shifted, size, axis=1)[:, :n].T.ravel()
+        out[:, j] = np.fft.irfft(spec * np.exp(2j * np.pi * f * shift), size)[:n]
+    return out.ravel()
 
 
 #: The last inputs' even-extension spectra times the sub-step box filter.

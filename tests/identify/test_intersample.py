@@ -1,43 +1,13 @@
-"""The band-limited input's sub-step averages: one batched transform for every sub-step must
-give, to the bit, the spectrum's inverse transform per sub-step with its phase ramp (the
-fit's outputs, and so its path, hang on the last bits of the input), and that is the
-average of the band-limited signal over each sub-step."""
+"""The band-limited input's sub-step averages: the average of the band-limited signal behind
+the samples over each model sub-step, shifted by the delay."""
 
 from __future__ import annotations
 
 import math
 
 import numpy as np
-import pytest
 
-from hil.identify.intersample import _BL_CACHE, substep_average
-
-
-def _per_substep(u: np.ndarray, dt: float, n_sub: int, delay_s: float) -> np.ndarray:
-    """The definition: sinc interpolation by the even extension's spectrum, the sub-step's
-    box filter, the shift as a phase ramp, one inverse transform per sub-step."""
-    n = u.size
-    h = dt / n_sub
-    ext = np.concatenate([u, u[::-1]])
-    f = np.fft.rfftfreq(ext.size, dt)
-    spec = np.fft.rfft(ext) * np.sinc(f * h)
-    out = np.empty((n, n_sub))
-    for j in range(n_sub):
-        shift = (j + 0.5) * h - delay_s
-        out[:, j] = np.fft.irfft(spec * np.exp(2j * np.pi * f * shift), ext.size)[:n]
-    return out.ravel()
-
-
-@pytest.mark.parametrize("n_sub", [1, 2, 4])
-@pytest.mark.parametrize("delay_s", [0.0, 3.7e-5, -1.1e-4])
-def test_batched_transform_is_a_transform_per_substep(n_sub, delay_s):
-    rng = np.random.default_rng(n_sub)
-    u = np.cumsum(rng.normal(size=3000)) * 0.01
-    _BL_CACHE.clear()
-    got = substep_average(u, 2e-4, n_sub, delay_s, "bl")
-    assert np.array_equal(got, _per_substep(u, 2e-4, n_sub, delay_s))
-    # from the kept spectrum too
-    assert np.array_equal(substep_average(u, 2e-4, n_sub, delay_s, "bl"), got)
+from hil.identify.intersample import substep_average
 
 
 def test_a_slow_sine_averages_over_each_substep():
