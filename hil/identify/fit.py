@@ -180,30 +180,53 @@ class OutputErrorFit:
         """The weighted residual on ``mask``; ``states``: the simulation of ``theta`` when
         the caller has it (only :data:`OUTPUT_ONLY` parameters differ from the ones that
         made it)."""
-        # the model is causal: samples after the last one compared need no simulation
-        n_stop = fast_stop(int(np.flatnonzero(mask)[-1]) + 1, self.exp.n)
+        n_stop, lo, hi = self._span(mask)
         if states is None:
             self.n_sims += 1
             states = self.model.states(theta, n_stop)
         # the outputs of the samples up to n_stop only (the mask has none after them)
         out = self.model.outputs(theta, states, n_stop=n_stop)
         n = next(iter(out.values())).size
-        head = mask[:n]
-        parts = []
-        for c in self.exp.channels:
-            e = self.exp.measured[c][:n] - out[c]
+        channels = self.exp.channels
+        if lo is None:
+            head = mask[:n]
+            m = int(head.sum())
+        else:
+            # the compared samples are one run (a fit's, a cost's): the residual is written
+            # channel by channel into one array, no masked copy and concatenation of each
+            m = hi - lo
+        r = np.empty(len(channels) * m)
+        for i, c in enumerate(channels):
+            seg = r[i * m:(i + 1) * m]
+            if lo is None:
+                e = self.exp.measured[c][:n] - out[c]
+            else:
+                e = np.subtract(self.exp.measured[c][lo:hi], out[c][lo:hi], out=seg)
             clipped = self._clipped.get(c)
             if clipped is not None and theta[IDX[f"sat_{c}"]] == 0.0 and (
                     c not in PRESSURE_CHANNELS or theta[IDX[SAT_PRESSURE]] == 0.0):
-                e = np.where(clipped[:n], np.maximum(e, 0.0), e)
-            parts.append(_finite(e[head] / sigma[c]))
-        return np.concatenate(parts)
+                e = np.where(clipped[:n] if lo is None else clipped[lo:hi],
+                             np.maximum(e, 0.0), e)
+            if lo is None:
+                e = e[head]
+            np.divide(e, sigma[c], out=seg)
+        return _finite(r)
+
+    def _span(self, mask: np.ndarray) -> tuple[int, int | None, int | None]:
+        """``(n_stop, lo, hi)`` of a mask of compared samples: the samples to simulate (the
+        model is causal: none after the last one compared), and ``lo:hi`` the compared
+        samples where they are one run (None, None where not: a gap of undefined
+        samples)."""
+        where = np.flatnonzero(mask)
+        n_stop = fast_stop(int(where[-1]) + 1, self.exp.n)
+        lo, hi = int(where[0]), int(where[-1]) + 1
+        return (n_stop, lo, hi) if hi - lo == where.size else (n_stop, None, None)
 
     def _problem(self, free: list[str], theta0: np.ndarray, sigma: dict[str, float],
                  mask: np.ndarray):
         """Residual function and its forward-difference Jacobian (columns in parallel)."""
         cache: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
-        n_stop = fast_stop(int(np.flatnonzero(mask)[-1]) + 1, self.exp.n)
+        n_stop = self._span(mask)[0]
 
         def fun(x: np.ndarray) -> np.ndarray:
             theta = self._to_theta(x, free, theta0)
