@@ -628,6 +628,8 @@ class _Loop:
                     held[p] = f"after adding {best.label}: {held_now.pop(p)}"
             for p, why in held_now.items():
                 held[p] = f"after adding {best.label}: {why}"
+            for p in [p for p in held if p in new.free]:
+                del held[p]  # freed again in the refit kept (others_held_chosen)
             self.current = new
             self.skew_again()
             best.selected = True
@@ -681,7 +683,16 @@ class _Loop:
         (conrod, pump and seal friction, rig seed 1: the seal's refit after the pump
         friction, from every start with the pump friction free, ends with the pressure
         differences 63 % predictable; with it held, then freed, at 1.5 %, an estimation cost
-        1.6x lower; docs/identify.md, "The conrod's two frictions")."""
+        1.6x lower; docs/identify.md, "The conrod's two frictions").
+
+        The held-first refit also frees the baseline parameters the guard held in an earlier
+        effect's refit (:meth:`held_since_baseline`), from their held values: held while
+        the effects now in were still missing, they may be pinned now, and held they keep
+        the rig's basin out of reach (conrod, pump friction, seal friction and pulsation,
+        rig seed 1: ``k_s`` held at the preset, 1.08x the rig's, in the pulsation's round;
+        the seal's refit, held-first or not, then ends with the pressure differences 68 %
+        predictable; with ``k_s`` free in it, explained). The guard holds them again where
+        they are still not credible."""
         current = self.current
         others = [p for e in self.added
                   for p in (*self.defs_all[e.label].params,
@@ -689,8 +700,9 @@ class _Loop:
                   if p in current.free]
         if not others:
             return plain
+        again = self.held_since_baseline()
         self.current = dataclasses.replace(current, free=[p for p in current.free
-                                                          if p not in others])
+                                                          if p not in others] + again)
         try:
             first, held_first = self.refit_with(d, beta, robust=True)
         finally:
@@ -703,9 +715,17 @@ class _Loop:
         mask = self.est_mask
         if (self.weighted_ss(alt.outputs, mask)
                 < (1.0 - START_MARGIN) * self.weighted_ss(plain[0].outputs, mask)):
-            self.say(f"round {rnd}: the refit with {', '.join(others)} held first ends lower")
+            freed = [p for p in again if p in alt.free]
+            self.say(f"round {rnd}: the refit with {', '.join(others)} held first"
+                     + (f" and {', '.join(freed)} free again" if freed else "") + " ends lower")
             return alt, {**held_first, **held_alt}
         return plain
+
+    def held_since_baseline(self) -> list[str]:
+        """Baseline parameters held by the guard in an effect's refit (not by the baseline
+        fit): held in a model that lacked the effects added after it."""
+        return [p for p in self.held if p in BASELINE_LABELS and p not in self.base.held
+                and p not in self.current.free]
 
     def skew_again(self) -> None:
         """The skew pinned at +T/2 may have been an effect's doing: once one is in, the delay

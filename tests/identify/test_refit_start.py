@@ -122,6 +122,7 @@ def test_a_later_effect_is_refitted_with_those_in_held_first(monkeypatch):
     current = _fit({"dc": 3.0 * 413.0})
     current.free = [*FREE, "pc_force_n", "pc_shape"]
     loop.current = current
+    loop.held_since_baseline = lambda: []
     plain = (_fit({}, 6000.0), {})
     seen = {}
 
@@ -149,3 +150,49 @@ def test_a_later_effect_is_refitted_with_those_in_held_first(monkeypatch):
     loop.current = _fit({"dc": 3.0 * 413.0})
     seen.clear()
     assert _Loop.others_held_chosen(loop, None, {}, plain, 1) is plain and not seen
+
+
+def test_a_parameter_held_in_an_earlier_effects_refit_is_free_in_the_held_first_refit(
+        monkeypatch):
+    """Conrod, pump friction, seal friction and pulsation, rig seed 1: ``k_s`` held in the
+    pulsation's round (the frictions still missing) kept the seal's refit out of the rig's
+    basin, held-first or not. The held-first refit frees it (from its held value) and the
+    polish keeps it free; a parameter the baseline itself held (``J_c`` at its bound) stays
+    held."""
+    from hil.identify import pipeline
+
+    pump = SimpleNamespace(params=("pc_force_n",), nominal=(40.0,), refit_extra=())
+    loop = _loop()
+    loop.added = [SimpleNamespace(label="pump")]
+    loop.defs_all = {"pump": pump}
+    loop.held = {"jc": "ran to its bound; held at 0.295",
+                 "ks": "after adding the pulsation: interval wider than the value"}
+    loop.base = SimpleNamespace(held={"jc": loop.held["jc"]})
+    current = _fit({"dc": 3.0 * 413.0})
+    current.free = [p for p in FREE if p not in ("jc", "ks")] + ["pc_force_n"]
+    loop.current = current
+    loop.held_since_baseline = lambda: _Loop.held_since_baseline(loop)
+    assert loop.held_since_baseline() == ["ks"]
+    seen = {}
+
+    def refit(d, beta, robust=False, nfev=None):
+        seen["free"] = list(loop.current.free)
+        first = _fit({}, 5000.0)
+        first.free = list(loop.current.free)
+        return first, {}
+
+    def polish(fitter, theta0, free, credible, **kw):
+        seen["polish_free"] = list(free)
+        return _fit({}, 3000.0), {}
+
+    loop.refit_with = refit
+    loop.refitter = lambda: None
+    monkeypatch.setattr(pipeline, "guarded_fit", polish)
+    new, _ = _Loop.others_held_chosen(loop, None, {}, (_fit({}, 6000.0), {}), 2)
+    assert "ks" in seen["free"] and "jc" not in seen["free"]
+    assert "pc_force_n" not in seen["free"]
+    assert {"ks", "pc_force_n"} <= set(seen["polish_free"]) and "jc" not in seen["polish_free"]
+    assert "ks free again" in loop.said[-1] and loop.current is current
+    # a parameter free in the fit as it stands is not "held since the baseline"
+    loop.current = _fit({})
+    assert loop.held_since_baseline() == []
