@@ -443,8 +443,8 @@ class _Loop:
                       and fit.theta[IDX[p]] != self.configured[IDX[p]]]
 
     def refit_with(self, d: EffectDef | list[EffectDef], start: dict[str, float],
-                   robust: bool = False, nfev: int | None = None, judged_alone: bool = False
-                   ) -> tuple[FitResult, dict[str, str]]:
+                   robust: bool = False, nfev: int | None = None, judged_alone: bool = False,
+                   model: FastModel | None = None) -> tuple[FitResult, dict[str, str]]:
         """``current`` refitted with the effect ``d`` (or several at once) in, their
         parameters from ``start``. ``robust``: from the robust start (:meth:`robust_start`)
         where the fit without them is far from the configured values (the effects may have
@@ -454,7 +454,9 @@ class _Loop:
         alone (no cost of it compared), which refuses it once a parameter of the effects is
         held: the guard stops at that hold (:func:`~hil.identify.fit.guarded_fit`'s
         ``refuse``; free piston, both frictions under ``slide``: the seal's static level
-        held at 0, then two more holds and refits, 1.2 s of CPU, for a refused refit)."""
+        held at 0, then two more holds and refits, 1.2 s of CPU, for a refused refit).
+        ``model``: the model the refit simulates, in place of the loop's (a search whose end
+        is refitted on the loop's model, :meth:`others_held_chosen`)."""
         exp, current, configured = self.exp, self.current, self.configured
         ds_ = d if isinstance(d, list) else [d]
         theta0 = current.theta.copy()
@@ -475,8 +477,8 @@ class _Loop:
             EFFECTS[e.name].prepare_refit(theta0, credible, new_free, exp, current.free,
                                           self.est_mask)
         scales = {p: nom for e in ds_ for p, nom in zip(e.params, e.nominal, strict=True)}
-        refitter = OutputErrorFit(self.model, {**NUISANCE_SCALES(exp.dt),
-                                               **_all_scales(self.defs_all), **scales})
+        refitter = OutputErrorFit(model or self.model, {**NUISANCE_SCALES(exp.dt),
+                                                        **_all_scales(self.defs_all), **scales})
         moved = self.unbiased and bool(put_back)
         # from the robust start the absorbed parameters have the whole way back to walk: the
         # fit is given the Jacobians to arrive (conrod, seal friction, rig seed 1: stopped
@@ -704,7 +706,12 @@ class _Loop:
         self.current = dataclasses.replace(current, free=[p for p in current.free
                                                           if p not in others] + again)
         try:
-            first, held_first = self.refit_with(d, beta, robust=True)
+            # the held refit is a search for the basin, and the polish below refits its end
+            # on the loop's model: half the sub-steps (the score tests' model) find the same
+            # basin at half the cost a simulation, and in fewer Jacobians (conrod, pump and
+            # seal friction, 16 s, rig seed 3: 24 where 40 did not end the descent; the
+            # polished fit's estimation cost 19155 against 19157, docs/identify.md)
+            first, held_first = self.refit_with(d, beta, robust=True, model=self.test_model)
         finally:
             self.current = current
         refitter = self.refitter()

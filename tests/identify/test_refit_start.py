@@ -108,8 +108,9 @@ def test_a_noisy_input_starts_from_the_far_parameters_alone():
 
 def test_a_later_effect_is_refitted_with_those_in_held_first(monkeypatch):
     """Effects in already and the fit still far: the new effect's refit from the robust start
-    with the effects in held, then all freed; kept only when lower by the margin, and the
-    loop's fit is left as it was whichever is kept."""
+    with the effects in held, a search on the score tests' cheaper model, then all freed and
+    polished on the loop's own; kept only when lower by the margin, and the loop's fit is
+    left as it was whichever is kept."""
     from hil.identify import pipeline
 
     pump = SimpleNamespace(params=("pc_force_n",), nominal=(40.0,),
@@ -117,7 +118,7 @@ def test_a_later_effect_is_refitted_with_those_in_held_first(monkeypatch):
     loop = _loop()
     loop.added = [SimpleNamespace(label="pump")]
     loop.defs_all = {"pump": pump}
-    loop.model = None
+    loop.model, loop.test_model = "the loop's model", "half the sub-steps"
     loop.exp.dt = 2e-4
     current = _fit({"dc": 3.0 * 413.0})
     current.free = [*FREE, "pc_force_n", "pc_shape"]
@@ -126,16 +127,16 @@ def test_a_later_effect_is_refitted_with_those_in_held_first(monkeypatch):
     plain = (_fit({}, 6000.0), {})
     seen = {}
 
-    def refit(d, beta, robust=False, nfev=None):
-        seen["free"], seen["robust"] = list(loop.current.free), robust
+    def refit(d, beta, robust=False, nfev=None, model=None):
+        seen["free"], seen["robust"], seen["model"] = list(loop.current.free), robust, model
         return _fit({}, 5000.0), {"c_rod": "held"}
 
     def polish(fitter, theta0, free, credible, **kw):
-        seen["polish_free"] = list(free)
+        seen["polish_free"], seen["polish_model"] = list(free), fitter
         return _fit({}, seen["polish_cost"]), {}
 
     loop.refit_with = refit
-    loop.refitter = lambda: None
+    loop.refitter = lambda: loop.model
     monkeypatch.setattr(pipeline, "guarded_fit", polish)
     for cost, kept in ((3000.0, True), ((1.0 - 0.5 * START_MARGIN) * 6000.0, False)):
         seen["polish_cost"] = cost
@@ -145,6 +146,9 @@ def test_a_later_effect_is_refitted_with_those_in_held_first(monkeypatch):
         assert seen["robust"] and "pc_force_n" not in seen["free"]
         assert "pc_shape" not in seen["free"] and "dc" in seen["free"]
         assert {"pc_force_n", "pc_shape"} <= set(seen["polish_free"])
+        # the search on the cheap model, the polish (the fit kept) on the loop's
+        assert seen["model"] == "half the sub-steps"
+        assert seen["polish_model"] == "the loop's model"
         assert loop.current is current
     # no effect of those in free: nothing to hold, the plain refit as it is, no refit run
     loop.current = _fit({"dc": 3.0 * 413.0})
