@@ -176,10 +176,11 @@ def test_a_parameter_held_in_an_earlier_effects_refit_is_free_in_the_held_first_
     current.free = [p for p in FREE if p not in ("jc", "ks")] + ["pc_force_n"]
     loop.current = current
     loop.held_since_baseline = lambda: _Loop.held_since_baseline(loop)
+    loop.model, loop.test_model = "the loop's model", "half the sub-steps"
     assert loop.held_since_baseline() == ["ks"]
     seen = {}
 
-    def refit(d, beta, robust=False, nfev=None):
+    def refit(d, beta, robust=False, nfev=None, model=None):
         seen["free"] = list(loop.current.free)
         first = _fit({}, 5000.0)
         first.free = list(loop.current.free)
