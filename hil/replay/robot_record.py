@@ -35,12 +35,15 @@ from hil.replay.signal_out import SignalOut
 from hil.replay.signal_records import RecordEncoder
 from hil.sim.actuator import TRACE_WIDTH, TRACE_WORDS
 from hil.sim.robot import RobotEngine
-from hil.sim.stack_rows import TapRows
+from hil.sim.stack_rows import ImageRows, TapRows
 from plant.config import Config
 
 #: Cycles per written block: the per-actuator path's (:func:`hil.replay.record.flush_cycles`),
 #: fewer at level "full", whose traces take ~640 bytes per actuator tick.
 BLOCK_CYCLES = {"full": 10}
+#: (measuring) the cycles' images copied by the engine's compiled call; False: by
+#: :meth:`RobotRecorder.finished` in Python, as before
+IMAGES_IN_KERNEL = True
 
 
 class RobotRecorder:
@@ -94,7 +97,11 @@ class RobotRecorder:
         self.other_in = [np.zeros((c, b.in_dtype.itemsize), np.uint8) for b in self.others]
         self.in_t = np.zeros(c, np.int64)
         self.n_cycles = 0
-        self._taken = False  # outputs taken for a cycle that has not ended (yet)
+        self._take_written: int | None = None  # the tick of a take ahead flush wrote
+        #: the engine copies each cycle's images into these rows (its compiled
+        #: give_inputs) and moves the tap's row on
+        self.images = ImageRows(self.out_rows, self.out_got_act, self.in_rows, self.out_t,
+                                self.in_t, np.zeros(1, np.int64))
         self._box_first = np.asarray(engine._first[:-1], np.intp)
         # per cycle (1 kHz), in :meth:`finished`: each copy a memoryview's slice assignment
         # of one row made here (a row of the block and its source, both looked up once:
@@ -135,6 +142,9 @@ class RobotRecorder:
                                         len(engine.out_image))
                         if self.sig_act else None)
         engine.log_rows = self.tap
+        if IMAGES_IN_KERNEL:
+            engine.log_images = self.images
+            engine.log_takes = False
         engine.log = self
 
     # --- channels ------------------------------------------------------------------------
@@ -197,29 +207,24 @@ class RobotRecorder:
             self.sig_rec.append(rec)
             self.sig_act += act
 
-    # --- the engine's hooks (hil.sim.robot.EngineLog) -------------------------------------
-    # Once per fieldbus cycle each: a few row copies, no Python loop over boxes.
-    def took_outputs(self, tick: int) -> None:
-        # The outputs are copied when the cycle ends (:meth:`finished`): until then the
-        # engine keeps them as taken (``out_image`` and ``_got`` change only at the next
-        # take, which comes after that end), and the take's tick is the end's less the
-        # cycle's ticks. One copy-free call here; the outputs of a take no end followed
-        # (the run's last) are copied by :meth:`flush`.
-        self._taken = True
-
+    # --- the engine's hook (hil.sim.robot.EngineLog) --------------------------------------
+    # Once per fieldbus cycle: the engine's compiled give_inputs has copied the cycle's
+    # images into row ``n_cycles`` (:attr:`images`) and moved the tap's row on; here only
+    # the boxes outside the engine (a view's copy each) and the count. Outputs taken for a
+    # cycle that never ended (the run's last) are copied by :meth:`flush`.
     def finished(self, tick: int, periods: int) -> None:
         c = self.n_cycles
-        self._out_row[c][:] = self._out_src
-        self._got_row[c][:] = self._got_src
-        self._in_row[c][:] = self._in_src
-        self._out_tv[c] = tick - periods * self.period
-        self._in_tv[c] = tick
+        if not IMAGES_IN_KERNEL:
+            self._out_row[c][:] = self._out_src
+            self._got_row[c][:] = self._got_src
+            self._in_row[c][:] = self._in_src
+            self._out_tv[c] = tick - periods * self.period
+            self._in_tv[c] = tick
+            self._tap_row[0] = self._rows + periods
         for rows, inputs in self._other_inputs:
             rows[c][:] = inputs if type(inputs) is memoryview else inputs()
-        self._taken = False
         self.n_cycles = c = c + 1
         self._rows = r = self._rows + periods
-        self._tap_row[0] = r
         if c == self.cycles or r > self._last_row_start:
             self.flush()
 
@@ -229,14 +234,16 @@ class RobotRecorder:
         signals of every box and actuator (in the background with ``background``: the
         block is copied and the engine's next cycle does not wait for the writing)."""
         c, r = self.n_cycles, int(self.tap.row[0])
-        if self._taken:  # the run's last outputs, taken for a cycle never run (at its tick)
+        # the run's last outputs, taken for a cycle never run (at its tick), once
+        taken = self.engine.taken_ahead and self._take_written != self.engine.tick
+        if taken:
             self._out_row[c][:] = self._out_src
             self._got_row[c][:] = self._got_src
-            self._out_tv[c] = self.engine.tick
-        c_out = c + self._taken
+            self._out_tv[c] = self._take_written = self.engine.tick
+        c_out = c + taken
         self.n_cycles = 0
-        self._taken = False
         self.tap.row[0] = self._rows = 0
+        self.images.at[0] = 0
         if not c_out and not r:
             return
         end = int(self.in_t[c - 1]) if c else self.engine.tick
