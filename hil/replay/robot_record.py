@@ -6,11 +6,12 @@ so ``eha-hil replay`` and ``log export`` read either.
 The engine's compiled kernel copies each MCU step's words (the 32 upstream words and the
 CRC-error count the program read, the 16 downstream words it wrote) and, at level
 ``full``, the driver boards' trace of every tick into block arrays
-(:class:`hil.sim.stack_rows.TapRows`, actuator-major); this recorder is told when a
-cycle's outputs are taken and when a cycle ends (one array copy of every box's process
-record each), and every :data:`BLOCK_CYCLES` cycles writes the block: one message per raw
-channel, and the decoded signals of all actuators computed and encoded as whole arrays
-(:func:`hil.replay.signals.actuator_block`). No Python runs per tick or per actuator step.
+(:class:`hil.sim.stack_rows.TapRows`, actuator-major) and, at each cycle's end, the cycle's
+process images into the rows of :class:`hil.sim.stack_rows.ImageRows`; this recorder is
+told when a cycle ends, and every :data:`BLOCK_CYCLES` cycles writes the block: one
+message per raw channel, and the decoded signals of all actuators computed and encoded as
+whole arrays (:func:`hil.replay.signals.actuator_block`). No Python runs per tick or per
+actuator step.
 """
 
 from __future__ import annotations
@@ -41,9 +42,6 @@ from plant.config import Config
 #: Cycles per written block: the per-actuator path's (:func:`hil.replay.record.flush_cycles`),
 #: fewer at level "full", whose traces take ~640 bytes per actuator tick.
 BLOCK_CYCLES = {"full": 10}
-#: (measuring) the cycles' images copied by the engine's compiled call; False: by
-#: :meth:`RobotRecorder.finished` in Python, as before
-IMAGES_IN_KERNEL = True
 
 
 class RobotRecorder:
@@ -103,17 +101,14 @@ class RobotRecorder:
         self.images = ImageRows(self.out_rows, self.out_got_act, self.in_rows, self.out_t,
                                 self.in_t, np.zeros(1, np.int64))
         self._box_first = np.asarray(engine._first[:-1], np.intp)
-        # per cycle (1 kHz), in :meth:`finished`: each copy a memoryview's slice assignment
-        # of one row made here (a row of the block and its source, both looked up once:
-        # the engine keeps its arrays for its life and fills them in place). ~0.2 us a
-        # copy where a numpy row assignment (``rows[c] = image``: the index parsed, a view
-        # made, the copy dispatched) takes ~0.8 us: per cycle ~1.5 us of Python less.
-        self._out_row, self._got_row, self._in_row = (
-            [memoryview(r) for r in a] for a in (self.out_rows, self.out_got_act, self.in_rows))
-        self._out_src, self._got_src, self._in_src = (
-            memoryview(a) for a in (engine.out_image, engine._got, engine.in_image))
-        self._out_tv, self._in_tv, self._tap_row = (
-            memoryview(a) for a in (self.out_t, self.in_t, self.tap.row))
+        # the copies :meth:`flush` makes of outputs taken ahead, and per cycle (1 kHz) in
+        # :meth:`finished` those of the boxes outside the engine: each a memoryview's slice
+        # assignment of one row made here (a row of the block and its source, both looked
+        # up once), ~0.2 us where a numpy row assignment takes ~0.8 us
+        self._out_row, self._got_row = (
+            [memoryview(r) for r in a] for a in (self.out_rows, self.out_got_act))
+        self._out_src, self._got_src = (memoryview(a) for a in (engine.out_image, engine._got))
+        self._out_tv = memoryview(self.out_t)
         self._other_inputs = [([memoryview(row) for row in r], _input_source(b))
                               for r, b in zip(self.other_in, self.others, strict=True)]
         self._rows = 0  # the tap's rows filled (tap.row[0], as a Python int)
@@ -142,9 +137,7 @@ class RobotRecorder:
                                         len(engine.out_image))
                         if self.sig_act else None)
         engine.log_rows = self.tap
-        if IMAGES_IN_KERNEL:
-            engine.log_images = self.images
-            engine.log_takes = False
+        engine.log_images = self.images
         engine.log = self
 
     # --- channels ------------------------------------------------------------------------
@@ -214,13 +207,6 @@ class RobotRecorder:
     # cycle that never ended (the run's last) are copied by :meth:`flush`.
     def finished(self, tick: int, periods: int) -> None:
         c = self.n_cycles
-        if not IMAGES_IN_KERNEL:
-            self._out_row[c][:] = self._out_src
-            self._got_row[c][:] = self._got_src
-            self._in_row[c][:] = self._in_src
-            self._out_tv[c] = tick - periods * self.period
-            self._in_tv[c] = tick
-            self._tap_row[0] = self._rows + periods
         for rows, inputs in self._other_inputs:
             rows[c][:] = inputs if type(inputs) is memoryview else inputs()
         self.n_cycles = c = c + 1
