@@ -72,7 +72,6 @@ PARTS: tuple[tuple[str, str, str], ...] = (
     ("hil.replay.signals", "pc_command_block", "producer"),
     ("hil.replay.signals", "report_flags", "producer"),
     ("hil.replay.robot_record", "RobotRecorder.__init__", "producer"),
-    ("hil.replay.robot_record", "RobotRecorder.took_outputs", "producer"),
     ("hil.replay.robot_record", "RobotRecorder.finished", "producer"),
     ("hil.replay.robot_record", "RobotRecorder.flush", "producer"),
     ("hil.replay.robot_record", "RobotRecorder._write_records", "producer"),

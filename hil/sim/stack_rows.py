@@ -76,6 +76,23 @@ class TapRows(NamedTuple):
     row: np.ndarray  #: (1,) int64: the row of the call's first MCU step
 
 
+class ImageRows(NamedTuple):
+    """What the robot engine's compiled :func:`~hil.sim.robot.give_inputs` copies out for
+    a frame log at the end of each fieldbus cycle, into row ``at[0]`` (then moved on; no
+    copy once it reaches the rows' end): ``out`` the output image the cycle's compute took
+    (uint8, (cycles, output bytes)), ``got`` which actuators' boxes had sent theirs (bool,
+    (cycles, actuators)), ``inp`` the input image it gave back (uint8, (cycles, input
+    bytes)), ``t_out``/``t_in`` the ticks of the take and of the end (int64, (cycles,)).
+    The tap's ``row`` (:class:`TapRows`) moves on by the cycle's MCU steps with it. Rows 0:
+    nothing is copied."""
+    out: np.ndarray
+    got: np.ndarray
+    inp: np.ndarray
+    t_out: np.ndarray
+    t_in: np.ndarray
+    at: np.ndarray  #: (1,) int64: the row the next cycle's images go to
+
+
 class LinkSensorLanes(NamedTuple):
     """One compute thread's lane buffers (:func:`hil.sim.robot.advance_robot_lanes`): the
     LVDS links' counters and word logs of the batch it holds
@@ -100,4 +117,4 @@ SOURCES = (
 
 
 __all__ = ["SOURCES", "BoardRows", "LinkRows", "LinkSensorLanes", "McuRows", "PlantRows",
-           "SensorRows", "StackRows", "TapRows"]
+           "SensorRows", "StackRows", "TapRows", "ImageRows"]

@@ -480,3 +480,43 @@ def test_a_logged_run_keeps_the_engines_path(topo, tmp_path, monkeypatch):
     run_logged(topo, cfg, 120, demo_pc(), tmp_path / "path.mcap", model="robot")
     assert len(made) == 2  # the bare run's and the logged run's, each once
     assert made[0][:4] == made[1][:4] and (made[0][4], made[1][4]) == (False, True)
+
+
+def test_the_engine_copies_each_cycles_images_until_the_log_rows_are_full(topo):
+    """At each cycle's end the engine's compiled call (give_inputs) copies the images of the
+    cycle (the input image it gave, the outputs and received flags it took) and its ticks
+    into the log's next row and moves the tap's row on by the cycle's MCU steps; once the
+    rows are full it copies nothing (the recorder flushes before that)."""
+    from hil.fieldbus.system import BusSystem
+    from hil.sim.stack_rows import ImageRows
+
+    with BusSystem(topo, load_config(None), "inproc", model="robot") as bs:
+        e = bs.chain.engine
+        rows = 2
+        images = ImageRows(np.zeros((rows, len(e.out_image)), np.uint8),
+                           np.zeros((rows, e.n), bool),
+                           np.zeros((rows, len(e.in_image)), np.uint8),
+                           np.zeros(rows, np.int64), np.zeros(rows, np.int64),
+                           np.zeros(1, np.int64))
+        e.log_images = images
+        seen = []
+        give = e._give_inputs
+
+        def spy(ticks: int) -> None:  # what the engine holds at each cycle's end
+            give(ticks)
+            seen.append((e.in_image.copy(), e.out_image.copy(), e._got.copy(), e.tick, ticks))
+
+        e._give_inputs = spy
+        bs.run(5, demo_pc(400.0, 20.0))
+        e.wait()
+        tap_row = int(e.log_rows.row[0])
+    assert len(seen) > rows  # cycles ended after the rows were full
+    assert int(images.at[0]) == rows
+    for j in range(rows):
+        inp, out, got, tick, ticks = seen[j]
+        assert np.array_equal(images.inp[j], inp)
+        assert np.array_equal(images.out[j], out)
+        assert np.array_equal(images.got[j], got)
+        assert (images.t_in[j], images.t_out[j]) == (tick, tick - ticks)
+    assert tap_row == sum(ticks // e.period for *_, ticks in seen[:rows])
+    assert images.got[0].any() and images.inp[1].any()  # (real images, not the zeros)
