@@ -1,13 +1,16 @@
-"""The byte planes of a block of frames in one compiled pass (:func:`split`).
+"""The byte and bit planes of a block of frames in compiled passes.
 
-A whole-robot log turns ~23 MB of register words per simulated second into byte planes
+A whole-robot log turns ~23 MB of register words per simulated second into planes
 (:func:`hil.framelog.rawpb.pack_blocks`). With numpy that is a transposed copy and a shift
-per byte, and the zigzag-coded differences (field ``frame_deltas``) four passes more: each
-pass over the data costs ~3-8 ms per simulated second on the project's 2-core machine, more
-than the smaller planes save zstd. Here every element is read once and each of its bytes
-written once into its plane. The numpy path (``rawpb._planes_numpy``, with
-:func:`hil.framelog.rawpb.zigzag_deltas`) stays the readable reference;
-``tests/framelog/test_planes.py`` compares the two byte for byte.
+per byte, and the zigzag-coded differences four passes more: each pass over the data costs
+~3-8 ms per simulated second on the project's 2-core machine, more than the smaller planes
+save zstd. Here every element of the engine's block is read once: :func:`split` (the byte
+planes of the frames or of their differences, field 9) or :func:`zigzag_columns` (the
+differences into one contiguous column per element, with the OR of each element's codes
+that decides which planes a trimmed block keeps) and :func:`split_columns` (those columns'
+bit and byte planes). The numpy paths (``rawpb._planes_numpy``, ``rawpb._zigzag_numpy``,
+``rawpb._split_numpy``) stay the readable references; ``tests/framelog/test_planes.py``
+compares them byte for byte.
 """
 
 from __future__ import annotations

@@ -47,6 +47,11 @@ import threading
 import zlib
 from collections.abc import Callable, Sequence
 
+try:  # zlib-ng's CRC-32: the same function as zlib's, ~3x faster on a block's bus frames
+    from zlib_ng.zlib_ng import crc32
+except ImportError:  # an environment made before that dependency: zlib's
+    from zlib import crc32
+
 import numpy as np
 from google.protobuf import descriptor_pb2
 
@@ -273,9 +278,6 @@ def bits_layout(widths: np.ndarray, count: int, size: int,
     return low_at, high_at
 
 
-TRIM = True  # (A/B measurement switch: removed before the final commit)
-
-
 def _pack_bits(f: np.ndarray, k: int, count: int, width: int, size: int, pre: list[bytes],
                head: list[tuple], alloc: Callable[[np.dtype, int], np.ndarray] | None,
                trimmed: bool) -> np.ndarray:
@@ -291,7 +293,6 @@ def _pack_bits(f: np.ndarray, k: int, count: int, width: int, size: int, pre: li
     before (frame 0's difference to 0, every plane): readers that predate 13-14 then read
     it, and refuse the trimmed ones (``high_deltas`` shorter than every plane)."""
     bits = 8 * size
-    trimmed = trimmed and TRIM
     w8 = noisy_widths(f)
     first = f[:, 0] if trimmed and count else np.zeros((k, width), f.dtype)
     z, spans = _zigzag(f, first)
@@ -916,7 +917,9 @@ _CRC_RESIDUE = 0x2144DF1C
 def _ethercat_fcs_many(frames: np.ndarray, each: Sequence[bytes]) -> np.ndarray | None:
     """The messages of frames of one length (:func:`wrap_many`; ``each``: the same
     frames as bytes): the datagram layout of the first, taken for every frame whose layout
-    bytes agree (None if one does not)."""
+    bytes agree (None if one does not). Each header field of every datagram of every frame
+    by one numpy gather (a bus frame carries a datagram per box and more: a loop per
+    datagram cost ~1 ms per block of 800 frames)."""
     k, size = frames.shape
     if size < 6:
         return None
@@ -924,34 +927,41 @@ def _ethercat_fcs_many(frames: np.ndarray, each: Sequence[bytes]) -> np.ndarray 
     if used and not bool((frames[:, used] == frames[0, used]).all()):
         return None
     pdu = frames[:, :-4]
-    fcs_ok = np.fromiter(map(zlib.crc32, each), np.uint32, k) == _CRC_RESIDUE
+    fcs_ok = np.fromiter(map(crc32, each), np.uint32, k) == _CRC_RESIDUE
     n = len(dgs)
-
-    def u16(col: int) -> np.ndarray:
-        return pdu[:, col].astype(np.uint32) | pdu[:, col + 1].astype(np.uint32) << 8
-
-    lengths = [int(u16(p + 6)[0]) & 0x7FF for p in dgs]
-    cols = [[pdu[:, p] for p in dgs], [pdu[:, p + 1] for p in dgs],
-            [u16(p + 2) | u16(p + 4) << 16 for p in dgs], [np.full(k, ln) for ln in lengths],
-            [u16(p + 10 + ln) for p, ln in zip(dgs, lengths, strict=True)]]
-    fl = _varint(size)
-    layout = [("k1", "u1"), ("flen", "u1", (len(fl),)), ("frame", "u1", (size,)),
-              ("k2", "u1"), ("fcs", "u1"), ("k3", "u1"), ("pdu", "u1"), ("k4", "u1"),
-              ("n", "<u4")]
-    vl = _varint(4 * n)
-    if n:
-        for c in range(5):
-            layout += [(f"key{c}", "u1"), (f"len{c}", "u1", (len(vl),)),
-                       (f"v{c}", "<u4", (n,))]
-    rec = np.zeros(k, np.dtype(layout))
-    rec["k1"], rec["flen"], rec["frame"] = 0x0A, np.frombuffer(fl, np.uint8), frames
+    rec = np.zeros(k, _ethercat_record(size, n))
+    rec["k1"], rec["flen"], rec["frame"] = 0x0A, np.frombuffer(_varint(size), np.uint8), frames
     rec["k2"], rec["fcs"], rec["k3"], rec["pdu"] = 0x10, fcs_ok, 0x18, whole
     rec["k4"], rec["n"] = 0x25, n
-    for c in range(5 if n else 0):
-        rec[f"key{c}"] = (5 + c) << 3 | 2
-        rec[f"len{c}"] = np.frombuffer(vl, np.uint8)
-        rec[f"v{c}"] = np.stack(cols[c], axis=1)
+    if n:
+        at = np.asarray(dgs, np.int64)
+
+        def u16(cols: np.ndarray) -> np.ndarray:
+            return pdu[:, cols].astype(np.uint32) | pdu[:, cols + 1].astype(np.uint32) << 8
+
+        lengths = (pdu[0, at + 6].astype(np.int64) | pdu[0, at + 7].astype(np.int64) << 8) & 0x7FF
+        cols = (pdu[:, at], pdu[:, at + 1], u16(at + 2) | u16(at + 4) << 16, lengths,
+                u16(at + 10 + lengths))
+        vl = np.frombuffer(_varint(4 * n), np.uint8)
+        for c in range(5):
+            rec[f"key{c}"] = (5 + c) << 3 | 2
+            rec[f"len{c}"] = vl
+            rec[f"v{c}"] = cols[c]
     return rec.view(np.uint8).reshape(k, -1)
+
+
+@functools.lru_cache(maxsize=64)
+def _ethercat_record(size: int, n: int) -> np.dtype:
+    """The message of a frame of ``size`` bytes with ``n`` datagrams, as one record: the
+    frame (field 1), fcs_ok, pdu_ok, datagrams, then the five packed fields."""
+    layout = [("k1", "u1"), ("flen", "u1", (len(_varint(size)),)), ("frame", "u1", (size,)),
+              ("k2", "u1"), ("fcs", "u1"), ("k3", "u1"), ("pdu", "u1"), ("k4", "u1"),
+              ("n", "<u4")]
+    if n:
+        for c in range(5):
+            layout += [(f"key{c}", "u1"), (f"len{c}", "u1", (len(_varint(4 * n)),)),
+                       (f"v{c}", "<u4", (n,))]
+    return np.dtype(layout)
 
 
 _ECAT_FIELDS = [("fcs_ok", 2, _FD.TYPE_BOOL, False), ("pdu_ok", 3, _FD.TYPE_BOOL, False),
