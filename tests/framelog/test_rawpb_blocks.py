@@ -202,7 +202,7 @@ def test_trimmed_blocks_are_where_the_doc_says() -> None:
     rng = np.random.default_rng(6)
     frames = (30_000 + rng.integers(-3, 4, (2, 11, 4))).astype(np.uint16)
     frames[:, :, 1] = [[7], [9]]  # constant, a different value per channel
-    frames[0, 4, 2] = 0x0400  # one wide step down and back: beyond the noisy byte
+    frames[0, 4, 2] = 29_000  # one step down and back: 11 bits, beyond the noisy byte
     frames[:, :, 3] = 0x8000 + 5 * np.arange(11)  # a ramp: 4 bits, no byte plane
     rec = rawpb.pack_blocks(5 + 10 * np.arange(11), frames, np.dtype(np.uint16))
     bits = 16
@@ -220,7 +220,7 @@ def test_trimmed_blocks_are_where_the_doc_says() -> None:
         assert w == [min(a, b) for a, b in zip(w8, top, strict=True)]
         assert planes == [(max(t - a, 0) + 7) // 8 for t, a in zip(top, w, strict=True)]
         assert w[1] == top[1] == 0 and w[3] == top[3] == 4  # constant; a ramp of 5s
-        assert top[2] == 16 and planes[2] == 1  # the step: its bits above w8 in one plane
+        assert top[2] == 11 and planes[2] == 1  # the step: its 3 bits above w8 in one plane
         low, high = bytes(m.low_bits), bytes(m.high_deltas)
         lo = hi = 0
         for j in range(4):
