@@ -19,6 +19,9 @@ def block_rows(m) -> tuple[np.ndarray, np.ndarray]:  # noqa: ANN001 - a decoded 
         bits, per_plane = 8 * dt.itemsize, (m.count + 7) // 8
         low = np.frombuffer(m.low_bits, np.uint8)
         high = np.frombuffer(m.high_deltas, np.uint8)
+        # byte planes of z >> w kept per element (trimmed blocks), else all of them
+        planes = (list(m.high_planes) if len(m.high_planes)
+                  else [(bits - w + 7) // 8 for w in m.low_widths])
         z = np.zeros((m.count, m.width), np.uint64)
         lo = hi = 0
         for j, w in enumerate(m.low_widths):  # bytes: one int per element
@@ -26,12 +29,14 @@ def block_rows(m) -> tuple[np.ndarray, np.ndarray]:  # noqa: ANN001 - a decoded 
                 plane = np.unpackbits(low[lo:lo + per_plane], bitorder="little")
                 z[:, j] |= plane[:m.count].astype(np.uint64) << np.uint64(b)
                 lo += per_plane
-            for b in range((bits - w + 7) // 8):  # byte b of z >> w
+            for b in range(planes[j]):  # byte b of z >> w
                 z[:, j] |= high[hi:hi + m.count].astype(np.uint64) << np.uint64(w + 8 * b)
                 hi += m.count
         z = z.astype(u)
         d = (z >> 1) ^ (0 - (z & 1)).astype(u)  # the signed differences, modulo 2^bits
-        return t, np.cumsum(d, axis=0, dtype=u).view(dt)
+        # frame -1 of the differences: first_frame where the block has one, else 0
+        first = np.frombuffer(m.first_frame, u) if len(m.first_frame) else np.zeros(1, u)
+        return t, (np.cumsum(d, axis=0, dtype=u) + first).view(dt)
     if len(m.frame_deltas):  # byte planes of the zigzag-coded frame-to-frame differences
         u = np.dtype(f"<u{dt.itemsize}")
         raw = np.frombuffer(m.frame_deltas, np.uint8).reshape(dt.itemsize, m.width, m.count)

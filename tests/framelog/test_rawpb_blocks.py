@@ -141,7 +141,8 @@ def test_packing_leaves_the_frames_alone(width: int) -> None:
 def test_noisy_low_bits_are_where_the_doc_says(widths: list[int] | None,
                                                monkeypatch: pytest.MonkeyPatch) -> None:
     """Fields 10-12 by hand from the doc: element j's w_j bit planes (bit t of byte m =
-    bit b of z of frame 8 m + t), then z >> w_j as byte planes; read back by our reader
+    bit b of z of frame 8 m + t), then z >> w_j as byte planes (all of them: blocks before
+    the trimmed ones, still written where trimming leaves nothing out); read back by our reader
     and by numpy alone on the stock-decoded message (tests/framelog/stock_blocks.py), for
     the writer's own widths (whole bytes) and any others a writer may choose."""
     from tests.framelog.stock_blocks import block_rows
@@ -152,9 +153,11 @@ def test_noisy_low_bits_are_where_the_doc_says(widths: list[int] | None,
     frames[1, 2] = 2  # a wide step where the sample looks (frame 1 - frame 0)
     if widths is not None:
         monkeypatch.setattr(rawpb, "noisy_widths", lambda f: np.array(widths, np.int64))
-    m = _stock("eha-hil/x", rawpb.pack_block(5 + 10 * np.arange(11), frames,
-                                             np.dtype(np.uint16)))
-    assert len(m.frames) == len(m.frame_deltas) == 0 and m.byte_planes
+    m = _stock("eha-hil/x", rawpb.pack_blocks(5 + 10 * np.arange(11), frames[None],
+                                              np.dtype(np.uint16), trimmed=False)[0]
+               .tobytes())  # every plane (logs before the trimmed blocks)
+    assert len(m.frames) == len(m.frame_deltas) == len(m.first_frame) == 0 and m.byte_planes
+    assert len(m.high_planes) == 0
     w = list(m.low_widths)
     assert w == (widths or [8, 0, 16])  # noise: a byte; constant: none; a wide step: all
     low, high = bytes(m.low_bits), bytes(m.high_deltas)
@@ -182,6 +185,87 @@ def test_noisy_low_bits_of_wrong_sizes_are_refused() -> None:
     for field, value, match in (("low_widths", bytes([17, 0]), "low_widths"),
                                 ("low_widths", bytes([8]), "low_widths"),
                                 ("high_deltas", b"\0" * 5, "high_deltas")):
+        bad = _stock("eha-hil/x", m.SerializeToString())
+        setattr(bad, field, value)
+        with pytest.raises(ValueError, match=match):
+            rawpb.unpack_block(bad.SerializeToString())
+
+
+def test_trimmed_blocks_are_where_the_doc_says() -> None:
+    """Fields 13-14 by hand from the doc: the differences taken from the first frame
+    (frame 0's is 0), each element's bit planes up to its highest bit ever 1 (below the
+    noisy width), and only the byte planes of z >> w_j that hold a 1 (high_planes); read
+    back by our reader and by numpy alone on the stock-decoded message, and refused by a
+    reader of the blocks before (high_deltas shorter than every plane)."""
+    from tests.framelog.stock_blocks import block_rows
+
+    rng = np.random.default_rng(6)
+    frames = (30_000 + rng.integers(-3, 4, (2, 11, 4))).astype(np.uint16)
+    frames[:, :, 1] = [[7], [9]]  # constant, a different value per channel
+    frames[0, 4, 2] = 29_000  # one step down and back: 11 bits, beyond the noisy byte
+    frames[:, :, 3] = 0x8000 + 5 * np.arange(11)  # a ramp: 4 bits, no byte plane
+    rec = rawpb.pack_blocks(5 + 10 * np.arange(11), frames, np.dtype(np.uint16))
+    bits = 16
+    for i in range(2):
+        m = _stock("eha-hil/x", rec[i].tobytes())
+        w, planes = list(m.low_widths), list(m.high_planes)
+        assert np.frombuffer(m.first_frame, "<u2").tolist() == frames[i, 0].tolist()
+        zs = []
+        for j in range(4):  # the differences from the first frame, by hand
+            col = [int(v) for v in frames[:, :, j].ravel()]  # both channels' (one layout)
+            zs.append([_zigzag_deltas_by_hand([c[0]] + c, bits)[1:]
+                       for c in (col[:11], col[11:])])
+        top = [max(max(z) for z in zs[j]).bit_length() for j in range(4)]
+        w8 = rawpb.noisy_widths(frames).tolist()  # (its sample: frame 1 - frame 0)
+        assert w == [min(a, b) for a, b in zip(w8, top, strict=True)]
+        assert planes == [(max(t - a, 0) + 7) // 8 for t, a in zip(top, w, strict=True)]
+        assert w[1] == top[1] == 0 and w[3] == top[3] == 4  # constant; a ramp of 5s
+        assert top[2] == 11 and planes[2] == 1  # the step: its 3 bits above w8 in one plane
+        low, high = bytes(m.low_bits), bytes(m.high_deltas)
+        lo = hi = 0
+        for j in range(4):
+            z = zs[j][i]
+            assert z[0] == 0
+            for b in range(w[j]):
+                for n in range(11):
+                    assert (low[lo + n // 8] >> (n % 8)) & 1 == (z[n] >> b) & 1
+                lo += 2
+            for b in range(planes[j]):
+                assert list(high[hi:hi + 11]) == [(v >> w[j] >> 8 * b) & 0xFF for v in z]
+                hi += 11
+        assert (lo, hi) == (len(low), len(high)) == (2 * sum(w), 11 * sum(planes))
+        assert np.array_equal(block_rows(m)[1], frames[i])
+        got_t, got = rawpb.unpack_block(m.SerializeToString())
+        assert np.array_equal(got, frames[i])
+        # a reader of the blocks before takes every byte plane: the sizes disagree
+        old = _stock("eha-hil/x", m.SerializeToString())
+        old.ClearField("high_planes")
+        with pytest.raises(ValueError, match="high_deltas"):
+            rawpb.unpack_block(old.SerializeToString())
+
+
+def test_a_block_with_nothing_to_trim_is_written_as_before() -> None:
+    """Noise over every bit (nothing to leave out): no first_frame or high_planes, the
+    bytes of the untrimmed writer, so readers of the blocks before read it."""
+    rng = np.random.default_rng(8)
+    frames = rng.integers(0, 2**16, (2, 30, 3)).astype(np.uint16)
+    rec = rawpb.pack_blocks(np.arange(30), frames, np.dtype(np.uint16))
+    assert rec.tobytes() == rawpb.pack_blocks(np.arange(30), frames, np.dtype(np.uint16),
+                                              trimmed=False).tobytes()
+    m = _stock("eha-hil/x", rec[1].tobytes())
+    assert len(m.first_frame) == len(m.high_planes) == 0 and list(m.low_widths) == [16] * 3
+    assert np.array_equal(rawpb.unpack_block(rec[1].tobytes())[1], frames[1])
+
+
+def test_trimmed_blocks_of_wrong_sizes_are_refused() -> None:
+    frames = (100 + np.arange(24, dtype=np.uint16) % 3).reshape(1, 12, 2)
+    m = _stock("eha-hil/x", rawpb.pack_blocks(np.arange(1, 13), frames, np.dtype(np.uint16))[0]
+               .tobytes())
+    assert len(m.first_frame) == 4 and list(m.high_planes) == [0, 0]
+    for field, value, match in (("high_planes", bytes([3, 0]), "high_planes"),
+                                ("high_planes", bytes([0]), "high_planes"),
+                                ("high_planes", bytes([1, 0]), "high_deltas"),
+                                ("first_frame", b"\0" * 3, "first_frame")):
         bad = _stock("eha-hil/x", m.SerializeToString())
         setattr(bad, field, value)
         with pytest.raises(ValueError, match=match):
