@@ -16,7 +16,9 @@ MODE ``dc N CHECK``: as far as OP with distributed clocks (config_dc after confi
 SYNC0 every 1 ms on every slave), N process-data cycles at 1 kHz (SOEM adds its FRMW on
 the reference clock's system time to each); every CHECK cycles, between two of SOEM's
 cycles, one frame of this process's own (raw socket) reads every slave's system time
-(0x0910) and filtered difference (0x092C): their spread and largest magnitude.
+(0x0910) and filtered difference (0x092C): their spread and largest magnitude, each
+slave's, when and how long. Also when its cycles went out and its stalls (gaps between
+two sends over STALL_S).
 MODE ``coe BOX N``: in PREOP every slave's identity read by SDO (0x1018:1..4), then box BOX's
 first TxPDO left out of 0x1C13 (complete access write; BOX < 0: no remap), config_map, OP,
 N cycles with force commands on BOX's actuators (100 N per slot number + 1), its last
@@ -54,6 +56,9 @@ EMCY_WAIT_S = 10.0
 #: Cycles right after OP left out of the round-trip figures (not the steady state).
 RTT_WARMUP = 20
 SYNC0_CYCLE_NS = 1_000_000
+#: MODE dc reports a gap between two of its cycles' sends longer than this [s] as a stall
+#: (cycle, gap [ms]): the slaves' clocks went that long without a drift compensation.
+STALL_S = 5e-3
 
 
 def bring_up(ifname: str, dc: bool = False) -> tuple[pysoem.Master, dict]:
@@ -366,7 +371,12 @@ def main(argv: list[str]) -> None:
         info["cycles"] = n
         info["bad_wkc"], info["bad_wkc_values"] = paced(
             m, n, between, sent=lambda _k, t: sends.append(t))
-        info["send_times"] = sends
+        # when its cycles went out (CLOCK_MONOTONIC [s], every CHECK-th and the last: to
+        # match them with serve's record on the slaves' clock), and its stalls
+        info["cycle_at_s"] = sends[::check]
+        info["last_cycle_at_s"] = sends[-1] if sends else None
+        info["stalls"] = [[k, round((sends[k] - sends[k - 1]) * 1e3, 1)]
+                          for k in range(1, len(sends)) if sends[k] - sends[k - 1] > STALL_S]
         info["dc_checks"] = checks
         info["dc_time"] = m.dc_time
     if mode == "cycles":
