@@ -795,8 +795,8 @@ def ethercat_table(d: dict) -> str:
         spread = dc["spread_ns"]
         rows.append(["distributed clocks", f"SYNC0 on {sum(s['sync0'] for s in dc['slaves'])} "
                      f"of {len(dc['slaves'])} slaves; box cycles at SYNC0 {d['sync0_cycles']}; "
-                     f"system-time spread, last {dc['spread_window_cycles']} cycles "
-                     f"{spread[-1] if spread else 0} ns; out-of-order writes "
+                     f"system-time spread, last {dc['spread_window_ms']:g} ms "
+                     f"{next((v for v in reversed(spread) if v >= 0), 0)} ns; out-of-order writes "
                      f"{sum(s['out_of_order_writes'] for s in dc['slaves'])}"])
     hist = ", ".join(f"{k}: {v}" for k, v in d["reply_histogram_us"].items() if v)
     late = sorted(d["late_replies"], key=lambda e: -e["reply_us"])[:5]

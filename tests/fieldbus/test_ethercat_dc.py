@@ -28,6 +28,17 @@ SETTLE_CYCLES = 1_000
 pytestmark = pytest.mark.slow
 
 
+def settled_spread(res: dict, dc: dict) -> list[int]:
+    """serve's spread record (largest per window of the slaves' clock) over the master's
+    cycles from SETTLE_CYCLES to its last, windows the frame thread woke in. Matched on
+    CLOCK_MONOTONIC, not on box cycles: those fall behind wall time on a loaded machine."""
+    w = dc["spread_window_ms"] * 1e-3
+    t_from = res["cycle_at_s"][SETTLE_CYCLES // CHECK_EVERY] - dc["spread_origin_monotonic_s"]
+    t_to = res["last_cycle_at_s"] - dc["spread_origin_monotonic_s"]
+    return [v for k, v in enumerate(dc["spread_ns"], dc["spread_first_window"])
+            if k * w >= t_from and (k + 1) * w <= t_to and v >= 0]
+
+
 @pytest.fixture
 def netns():
     try:
@@ -50,12 +61,15 @@ def test_soem_distributed_clocks_on_hydra_full(netns, full):
     n = len(full.boxes)
     late = [got for k, got in res["dc_checks"] if k >= SETTLE_CYCLES and got] or [(0, 0)]
     err = max(abs(s["delay_ns"] - s["simulated_delay_ns"]) for s in report["dc"]["slaves"])
+    truth = settled_spread(res, report["dc"])
     print(f"DC figures: delay error max {err} ns; "
           f"after {SETTLE_CYCLES} cycles: read spread max {max(g[0] for g in late)} ns, "
           f"0x092C max {max(g[1] for g in late)} ns, model spread max "
-          f"{max(report['dc']['spread_ns'][SETTLE_CYCLES // 100 + 2:])} ns; bad WKC "
-          f"{res['bad_wkc']} of {res['cycles']}; box cycles at SYNC0 {report['sync0_cycles']} "
-          f"of {report['cycles']}, start late max {report['sync0_start_late_max_us']:.0f} us")
+          f"{max(truth, default=None)} ns over {len(truth)} windows; bad WKC "
+          f"{res['bad_wkc']} of {res['cycles']}; master stalls (cycle, ms) "
+          f"{res['stalls'][:10]}; box cycles at SYNC0 {report['sync0_cycles']} "
+          f"of {report['cycles']}, start late max {report['sync0_start_late_max_us']:.0f} us, "
+          f"box lag max {report['lag_max_ms']:.0f} ms")
     assert (res["found"], res["image_bytes"], res["op"]) == (n, 1552, 8)
     assert set(res["states"]) == {8}
     dc = report["dc"]["slaves"]
@@ -80,11 +94,14 @@ def test_soem_distributed_clocks_on_hydra_full(netns, full):
     assert max(got[0] for _k, got in checks) < 100, checks[:5]
     assert max(got[1] for _k, got in checks) < 100, checks[:5]
     # the model's truth (every slave's system time against the reference's at one
-    # instant, largest per 100 box cycles) agrees, over the same 10 s
-    spread = report["dc"]["spread_ns"]
-    tail = spread[-(CYCLES - SETTLE_CYCLES) // report["dc"]["spread_window_cycles"]:]
-    assert len(tail) >= 90 and max(tail) < 100, tail[:10]
+    # instant, largest per 100 ms of the slaves' clock) agrees, over the same 10 s
+    assert len(truth) >= 90 and max(truth) < 100, truth[:10]
+    # ... and saw the clocks apart before drift compensation began (100 ppm from the
+    # offsets config_dc wrote to the first cycle, tens of ms: microseconds)
+    assert max(report["dc"]["spread_ns"]) > 1_000
     # the boxes' cycles ran at SYNC0 once it started (100 ms after SOEM set it up), every
-    # one of them from then on
+    # one of them from then on, most of them (counted against the boxes' own cycles: on a
+    # loaded machine the box clock falls behind the master's, slipping cycles)
     first = report["sync0_first_cycle"]
-    assert 0 <= first and report["sync0_cycles"] == report["cycles"] - first > 0.5 * CYCLES
+    assert 0 <= first and report["sync0_cycles"] == report["cycles"] - first
+    assert report["sync0_cycles"] > 0.5 * report["cycles"]

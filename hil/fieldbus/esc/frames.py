@@ -10,6 +10,12 @@ slaves' clock (their process-data watchdogs, on the wall clock as an ESC's) and 
 its stop word. Per answered frame it measures the reply time: from the kernel's receive
 time stamp of the frame to the return of ``send`` (so the wake-up of this thread counts),
 into a 1 us histogram.
+
+It also keeps the distributed clocks' truth on the slaves' clock: at every wake-up the
+slaves' system-time spread (:func:`firmware_model.esc.dc_compiled.tick`), its largest per
+:data:`SPREAD_WINDOW_NS` of the slaves' clock, in a ring (:meth:`FrameThread.dc_spread`).
+Kept here, not by the box thread: the boxes' cycles fall behind wall time on a loaded
+machine, so a record per so many box cycles drifts off the times it claims to cover.
 """
 
 from __future__ import annotations
@@ -20,7 +26,15 @@ import threading
 import numpy as np
 from numba import njit, types
 
-from firmware_model.esc.compiled import DROPPED, NOT_ETHERCAT, EscArrays, handle_frame, tick
+from firmware_model.esc.compiled import (
+    DROPPED,
+    NOT_ETHERCAT,
+    S_NOW,
+    EscArrays,
+    handle_frame,
+    tick,
+)
+from firmware_model.esc.dc_compiled import D_SPREAD
 from hil.fieldbus.reply_times import HIST_US
 from hil.sim.cpu_account import run_delay_ns
 
@@ -34,8 +48,12 @@ MSG_DONTWAIT = 0x40
 C_STOP, C_T0, C_LATE_NS = 0, 1, 2
 N_CTL = 3
 (F_RECEIVED, F_ANSWERED, F_OTHER, F_DROPPED, F_LATE, F_SEND_ERRORS, F_MAX_NS,
- F_RECV_ERRORS, F_NO_STAMP, F_ERRNO, F_MAX_GAP_NS, F_MAX_WORK_NS) = range(12)
-N_STATS = 12
+ F_RECV_ERRORS, F_NO_STAMP, F_ERRNO, F_MAX_GAP_NS, F_MAX_WORK_NS, F_SPREAD_WINDOWS) = range(13)
+N_STATS = 13
+#: Windows of the slaves' clock [ns] the DC spread record keeps its largest value per.
+SPREAD_WINDOW_NS = 100_000_000
+#: Windows the ring holds (about 55 min); a window the thread never woke in holds -1.
+SPREAD_RING = 1 << 15
 #: Late replies logged (the first ones), each (L_AT, L_REPLY, L_WAKE, L_WORK) in ns.
 LATE_LOG = 256
 L_AT, L_REPLY, L_WAKE, L_WORK = range(4)
@@ -58,8 +76,26 @@ def _now(ts, clock):
 
 
 @njit(cache=True, nogil=True)
-def frame_loop(fd, ctl, stats, hist, late_log, buf, mem, sii, st, wmask, obuf, olen, oidx,
-               ibuf, ilen, iidx, scratch):
+def record_spread(ring, stats, now, spread):
+    """``spread`` [ns] seen at ``now`` of the slaves' clock into the largest-per-window ring
+    (``stats[F_SPREAD_WINDOWS]``: windows begun so far); windows passed without a call
+    hold -1 (unknown)."""
+    n = ring.shape[0]
+    w = now // SPREAD_WINDOW_NS
+    begun = stats[F_SPREAD_WINDOWS]
+    if w < begun - 1:
+        return
+    for j in range(max(begun, w + 1 - n), w + 1):
+        ring[j % n] = -1
+    if w + 1 > begun:
+        stats[F_SPREAD_WINDOWS] = w + 1
+    if spread > ring[w % n]:
+        ring[w % n] = spread
+
+
+@njit(cache=True, nogil=True)
+def frame_loop(fd, ctl, stats, hist, late_log, spread_ring, buf, mem, sii, st, wmask, obuf,
+               olen, oidx, ibuf, ilen, iidx, scratch):
     """Serve frames on socket ``fd`` until ``ctl[C_STOP]`` is set (by another thread).
 
     Besides the reply times: the longest gap between two returns of ``poll`` beyond its
@@ -83,6 +119,8 @@ def frame_loop(fd, ctl, stats, hist, late_log, buf, mem, sii, st, wmask, obuf, o
         if now > last:
             tick(mem, st, obuf, olen, oidx, now - last)
             last = now
+            if mem.shape[0]:
+                record_spread(spread_ring, stats, st[0, S_NOW], st[0, D_SPREAD])
         if ready <= 0:
             continue
         # CLOCK_REALTIME (the kernel's receive stamps) minus CLOCK_MONOTONIC, this wake-up
@@ -147,6 +185,7 @@ class FrameThread:
         self.stats = np.zeros(N_STATS, dtype=np.int64)
         self.hist = np.zeros(HIST_US + 1, dtype=np.int64)
         self.late_log = np.zeros((LATE_LOG, 4), dtype=np.int64)
+        self.spread_ring = np.full(SPREAD_RING, -1, dtype=np.int64)
         self.buf = np.zeros(2048, dtype=np.uint8)
         self.on_start = on_start
         self.error: BaseException | None = None
@@ -171,7 +210,7 @@ class FrameThread:
                 self._set_up.set()
             d0 = run_delay_ns()
             frame_loop(self.sock.fileno(), self.ctl, self.stats, self.hist, self.late_log,
-                       self.buf, *self.arrays.frame_args())
+                       self.spread_ring, self.buf, *self.arrays.frame_args())
             d1 = run_delay_ns()
             if d0 is not None and d1 is not None:
                 self.run_delay_ns = d1 - d0
@@ -191,6 +230,14 @@ class FrameThread:
                  "wake_us": round(int(r[L_WAKE]) / 1e3, 1),
                  "work_us": round(int(r[L_WORK]) / 1e3, 1)} for r in self.late_log[:n]]
 
+    def dc_spread(self) -> tuple[int, list[int]]:
+        """(index of the first window held, the largest spread [ns] per window of
+        :data:`SPREAD_WINDOW_NS` of the slaves' clock from it on; -1: no wake-up in it)."""
+        begun = int(self.stats[F_SPREAD_WINDOWS])
+        n = self.spread_ring.shape[0]
+        first = max(begun - n, 0)
+        return first, [int(self.spread_ring[j % n]) for j in range(first, begun)]
+
     def alive(self) -> bool:
         return self._thread.is_alive()
 
@@ -206,7 +253,7 @@ def warm_up() -> None:
         ctl[C_STOP] = 1
         frame_loop(a.fileno(), ctl, np.zeros(N_STATS, dtype=np.int64),
                    np.zeros(2, dtype=np.int64), np.zeros((1, 4), dtype=np.int64),
-                   np.zeros(2048, dtype=np.uint8),
+                   np.full(1, -1, dtype=np.int64), np.zeros(2048, dtype=np.uint8),
                    *arrays.frame_args())
     finally:
         a.close()

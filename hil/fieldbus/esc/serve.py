@@ -67,9 +67,6 @@ class ServedChain:
     slaves have their CoE mailbox (False: none, process data on SM0/SM1). ``dc``: the
     slaves' clocks and delays (:func:`firmware_model.esc.dc.dc_line` by default)."""
 
-    #: Box cycles per window of the DC spread record (:meth:`dc_report`).
-    DC_WINDOW_CYCLES = 100
-
     def __init__(self, topo: Topology, cfg: Config, model: str = "echo",
                  stack_boxes: tuple[int, ...] = (), coe: bool = True,
                  dc: list[DcParams] | None = None) -> None:
@@ -79,9 +76,11 @@ class ServedChain:
         self.arrays = EscArrays(described, dc)
         #: CLOCK_MONOTONIC time [ns] of the slaves' clock zero (set by :func:`serve`).
         self.t0 = 0
-        #: Largest system-time spread [ns] of the slaves, per window of box cycles.
+        #: Largest system-time spread [ns] of the slaves per window of the slaves' clock
+        #: (the frame thread's record, :meth:`FrameThread.dc_spread`, set by :func:`serve`)
+        #: from window ``dc_spread_first`` on.
         self.dc_spread_ns: list[int] = []
-        self._dc_cycle = 0
+        self.dc_spread_first = 0
         self.boxes = [make_box("stack" if b.id in stack_boxes and model != "robot" else model,
                                b, cfg) for b in topo.boxes]
         #: The boxes' mailbox side (CoE), run on the box clock after each cycle.
@@ -130,7 +129,6 @@ class ServedChain:
         self.box_cycles += 1
         self.mailboxes.step()
         self.publish_inputs()
-        self._record_dc()
 
     # --- distributed clocks --------------------------------------------------------------------
     def sync0_release(self, after_ns: int) -> int | None:
@@ -150,20 +148,21 @@ class ServedChain:
             return at - round(k * cyc)
         return None
 
-    def _record_dc(self) -> None:
-        spread = int(self.arrays.st[0, dcc.D_SPREAD])
-        if self._dc_cycle % self.DC_WINDOW_CYCLES == 0:
-            self.dc_spread_ns.append(spread)
-        elif spread > self.dc_spread_ns[-1]:
-            self.dc_spread_ns[-1] = spread
-        self._dc_cycle += 1
-
     def dc_report(self) -> dict:
         """Per slave what the master set (offset, delay, SYNC0) beside the simulated clock,
-        the loop's compares, out-of-order writes; the spread record."""
+        the loop's compares, out-of-order writes; the spread record: window ``k`` of
+        ``spread_ns`` covers ``[(first + k) w, (first + k + 1) w)`` of the slaves' clock (``w``
+        = ``spread_window_ms``, ``first`` = ``spread_first_window``), whose zero is
+        ``spread_origin_monotonic_s`` (CLOCK_MONOTONIC); -1: the frame thread never woke in
+        it."""
         a = self.arrays
         slaves = [{"slave": i, **dcc.slave_report(a.mem[i], a.st[i])} for i in range(a.n)]
-        return {"slaves": slaves, "spread_window_cycles": self.DC_WINDOW_CYCLES,
+        return {"slaves": slaves,
+                "spread_window_ms": esc_frames.SPREAD_WINDOW_NS / 1e6,
+                # (the same window in 1 ms bus cycles, for readers of the older record)
+                "spread_window_cycles": esc_frames.SPREAD_WINDOW_NS // PERIOD_NS,
+                "spread_first_window": self.dc_spread_first,
+                "spread_origin_monotonic_s": self.t0 * 1e-9,
                 "spread_ns": list(self.dc_spread_ns)}
 
     def watchdog_report(self) -> list[dict]:
@@ -279,6 +278,7 @@ def serve(chain: ServedChain, link: RawEthernet, seconds: float | None = None,
         waited = run_delay_ns()
         steal1 = steal_s()
         gc.unfreeze()
+    chain.dc_spread_first, chain.dc_spread_ns = frames.dc_spread()
     for err in (frames.error, boxes.error):
         if err is not None:
             raise err

@@ -16,7 +16,9 @@ MODE ``dc N CHECK``: as far as OP with distributed clocks (config_dc after confi
 SYNC0 every 1 ms on every slave), N process-data cycles at 1 kHz (SOEM adds its FRMW on
 the reference clock's system time to each); every CHECK cycles, between two of SOEM's
 cycles, one frame of this process's own (raw socket) reads every slave's system time
-(0x0910) and filtered difference (0x092C): their spread and largest magnitude.
+(0x0910) and filtered difference (0x092C): their spread and largest magnitude, each
+slave's, when and how long. Also when its cycles went out and its stalls (gaps between
+two sends over STALL_S).
 MODE ``coe BOX N``: in PREOP every slave's identity read by SDO (0x1018:1..4), then box BOX's
 first TxPDO left out of 0x1C13 (complete access write; BOX < 0: no remap), config_map, OP,
 N cycles with force commands on BOX's actuators (100 N per slot number + 1), its last
@@ -54,6 +56,9 @@ EMCY_WAIT_S = 10.0
 #: Cycles right after OP left out of the round-trip figures (not the steady state).
 RTT_WARMUP = 20
 SYNC0_CYCLE_NS = 1_000_000
+#: MODE dc reports a gap between two of its cycles' sends longer than this [s] as a stall
+#: (cycle, gap [ms]): the slaves' clocks went that long without a drift compensation.
+STALL_S = 5e-3
 
 
 def bring_up(ifname: str, dc: bool = False) -> tuple[pysoem.Master, dict]:
@@ -80,11 +85,12 @@ def bring_up(ifname: str, dc: bool = False) -> tuple[pysoem.Master, dict]:
     return m, info
 
 
-def paced(m: pysoem.Master, n: int, each=None, rtt=None, progress=None  # noqa: ANN001
-           ) -> tuple[int, list[int]]:
+def paced(m: pysoem.Master, n: int, each=None, rtt=None, progress=None,  # noqa: ANN001
+          sent=None) -> tuple[int, list[int]]:  # noqa: ANN001
     """n cycles at 1 kHz; (cycles with a WKC other than expected, the first few WKCs).
     ``rtt(us)``: called with each cycle's send + receive time; ``progress(k, bad)``: every
-    PROGRESS_S seconds."""
+    PROGRESS_S seconds; ``sent(k, t)``: each cycle's CLOCK_MONOTONIC time [s] just before
+    its send."""
     bad, seen = 0, []
     clock = time.perf_counter
     t_next = clock()
@@ -93,6 +99,8 @@ def paced(m: pysoem.Master, n: int, each=None, rtt=None, progress=None  # noqa: 
         if each is not None:
             each(k)
         t0 = clock()
+        if sent is not None:
+            sent(k, t0)
         m.send_processdata()
         wkc = m.receive_processdata(RECV_TIMEOUT_US)
         if rtt is not None:
@@ -127,7 +135,7 @@ def _dc_reader(ifname: str, n: int):  # noqa: ANN202 - a function of no argument
                 ec.Datagram(ec.Command.FPRD, 0x81 + 2 * i, station, r.DC_SYSTEM_DIFF, bytes(4))]
     frame = ec.encode_frame(dgs)
 
-    def read() -> tuple[int, int] | None:
+    def read() -> tuple | None:
         sock.setblocking(False)   # SOEM's frames since the last read: not ours
         try:
             while True:
@@ -135,8 +143,9 @@ def _dc_reader(ifname: str, n: int):  # noqa: ANN202 - a function of no argument
         except BlockingIOError:
             pass
         sock.settimeout(DC_READ_TIMEOUT_US * 1e-6)
+        t_sent = time.monotonic()
         sock.send(frame)
-        t_end = time.monotonic() + DC_READ_TIMEOUT_US * 1e-6
+        t_end = t_sent + DC_READ_TIMEOUT_US * 1e-6
         while time.monotonic() < t_end:
             try:
                 got = sock.recv(2048)
@@ -153,7 +162,10 @@ def _dc_reader(ifname: str, n: int):  # noqa: ANN202 - a function of no argument
                 continue
             times = [struct.unpack("<q", d.data)[0] for d in back[0::2]]
             diffs = [struct.unpack("<I", d.data)[0] & 0x7FFFFFFF for d in back[1::2]]
-            return max(times) - min(times), max(diffs)
+            # (spread, largest 0x092C, each slave's time after the reference's, each
+            # 0x092C, when the frame went out [s] and how long its reply took [us])
+            return (max(times) - min(times), max(diffs), [t - times[0] for t in times], diffs,
+                    t_sent, round((time.monotonic() - t_sent) * 1e6))
         return None
 
     return read
@@ -350,13 +362,21 @@ def main(argv: list[str]) -> None:
         n, check = int(argv[2]), int(argv[3])
         read = _dc_reader(ifname, len(m.slaves))
         checks: list = []
+        sends: list[float] = []
 
         def between(k: int) -> None:
             if k and k % check == 0:
                 checks.append((k, read()))
 
         info["cycles"] = n
-        info["bad_wkc"], info["bad_wkc_values"] = paced(m, n, between)
+        info["bad_wkc"], info["bad_wkc_values"] = paced(
+            m, n, between, sent=lambda _k, t: sends.append(t))
+        # when its cycles went out (CLOCK_MONOTONIC [s], every CHECK-th and the last: to
+        # match them with serve's record on the slaves' clock), and its stalls
+        info["cycle_at_s"] = sends[::check]
+        info["last_cycle_at_s"] = sends[-1] if sends else None
+        info["stalls"] = [[k, round((sends[k] - sends[k - 1]) * 1e3, 1)]
+                          for k in range(1, len(sends)) if sends[k] - sends[k - 1] > STALL_S]
         info["dc_checks"] = checks
         info["dc_time"] = m.dc_time
     if mode == "cycles":
