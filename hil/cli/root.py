@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import argparse
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 from hil.cli import interrupts
 from hil.cli.args import Parser
@@ -32,7 +32,97 @@ def _version() -> str:
         return "unknown (not installed)"
 
 
-def build_parser() -> argparse.ArgumentParser:
+def _plant(sub, bsub) -> None:  # noqa: ANN001 - argparse's sub-parsers
+    from hil.cli import plant
+
+    plant.add_parsers(sub)
+
+
+def _bus(sub, bsub) -> None:  # noqa: ANN001
+    from hil.cli import bus
+
+    bus.add_parsers(sub, bsub)
+
+
+def _serve(sub, bsub) -> None:  # noqa: ANN001
+    from hil.cli import serve
+
+    serve.add_parser(sub)
+
+
+def _ethercat(sub, bsub) -> None:  # noqa: ANN001
+    from hil.cli import ethercat
+
+    ethercat.add_parsers(sub, bsub)
+
+
+def _log(sub, bsub) -> None:  # noqa: ANN001
+    from hil.cli.log import configure_log
+
+    configure_log(sub.add_parser("log", help="frame logs (MCAP, captures, CAN logs): info, "
+                                 "export to CSV or Parquet"))
+
+
+def _identify(sub, bsub) -> None:  # noqa: ANN001
+    from hil.cli import identify
+
+    identify.add_parsers(sub, bsub)
+
+
+def _sweep(sub, bsub) -> None:  # noqa: ANN001
+    from hil.cli import sweep
+
+    sweep.add_parsers(sub, bsub)
+
+
+def _run(sub, bsub) -> None:  # noqa: ANN001
+    from hil.cli import run
+
+    run.add_parser(sub)
+
+
+def _verify(sub, bsub) -> None:  # noqa: ANN001
+    from hil.cli import verify
+
+    verify.add_parsers(sub)
+
+
+def _config(sub, bsub) -> None:  # noqa: ANN001
+    from hil.cli import config
+
+    config.add_parser(sub)
+
+
+#: The groups of commands in the order they are listed, each with the top-level words it
+#: registers (``bench`` is the root's own: every group may add a target to it).
+GROUPS: tuple[tuple[tuple[str, ...], Callable[..., None]], ...] = (
+    (("main", "plant"), _plant),
+    (("bus", "replay"), _bus),
+    (("serve",), _serve),
+    (("esi",), _ethercat),
+    (("log",), _log),
+    (("identify", "identify-synth", "identify-check"), _identify),
+    (("sweep",), _sweep),
+    (("run",), _run),
+    (("verify",), _verify),
+    (("config",), _config),
+)
+
+
+def command_word(argv: Sequence[str] | None) -> str | None:
+    """The command a command line names first (``bus`` of ``bus run --seconds 1``), when
+    it is one of :data:`GROUPS`' words; None otherwise (``--help``, ``bench``, a typo)."""
+    argv = sys.argv[1:] if argv is None else argv
+    if argv and any(argv[0] in words for words, _ in GROUPS):
+        return argv[0]
+    return None
+
+
+def build_parser(only: str | None = None) -> argparse.ArgumentParser:
+    """The registry: every command, or (``only``, a word of :data:`GROUPS`) the one group
+    that holds that command. A command line parses the same either way; building one group
+    imports only that group's modules, which the console script, started once per command,
+    pays for at every start (the whole registry: ~0.5 s of imports)."""
     parser = Parser(
         prog="eha-hil",
         description="Emulator and HIL test harness for the Hydra electro-hydrostatic actuator.",
@@ -43,24 +133,20 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    if only is not None:
+        register = next(reg for words, reg in GROUPS if only in words)
+        # the group's bench targets go to a parser nobody parses with
+        register(sub, argparse.ArgumentParser().add_subparsers())
+        return parser
 
-    from hil.cli import bench, bus, config, ethercat, identify, plant, run, serve, sweep, verify
-    from hil.cli.log import configure_log
+    from hil.cli import bench
 
-    plant.add_parsers(sub)
+    GROUPS[0][1](sub, None)  # main, plant: listed before bench
     bench_parser = sub.add_parser("bench", help="benchmarks (real-time factor, throughput)")
     bsub = bench_parser.add_subparsers(dest="bench_command", metavar="TARGET", required=True)
     bench.add_parsers(bsub)
-    bus.add_parsers(sub, bsub)
-    serve.add_parser(sub)
-    ethercat.add_parsers(sub, bsub)
-    configure_log(sub.add_parser("log", help="frame logs (MCAP, captures, CAN logs): info, "
-                                 "export to CSV or Parquet"))
-    identify.add_parsers(sub, bsub)
-    sweep.add_parsers(sub, bsub)
-    run.add_parser(sub)
-    verify.add_parsers(sub)
-    config.add_parser(sub)
+    for _, register in GROUPS[1:]:
+        register(sub, bsub)
     return parser
 
 
@@ -81,7 +167,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run one command: parse, run, print its outcome; every error as one line."""
     interrupts.install()  # Ctrl-C, SIGTERM, SIGHUP raised, never lost in numba's loading
     try:
-        args = build_parser().parse_args(argv)
+        word = command_word(argv)
+        args = (build_parser(word) if word else build_parser()).parse_args(argv)
     except KeyboardInterrupt as exc:
         return execute(_raise(exc), argparse.Namespace(), "eha-hil")
     return execute(args.run, args, _verb(args))

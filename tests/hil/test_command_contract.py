@@ -75,8 +75,8 @@ def _planted(monkeypatch, leaf_prog: str, run) -> None:  # noqa: ANN001
     """Build the registry with ``run`` in place of the command of ``leaf_prog``."""
     build = root.build_parser
 
-    def patched() -> argparse.ArgumentParser:
-        parser = build()
+    def patched(only: str | None = None) -> argparse.ArgumentParser:
+        parser = build(only)
         for p in walk(parser):
             if p.prog == leaf_prog:
                 p.set_defaults(run=run)

@@ -7,6 +7,7 @@ the verification; the harness holds no model arithmetic of a hardware part."""
 from __future__ import annotations
 
 import ast
+import functools
 import importlib
 import re
 import shutil
@@ -15,6 +16,14 @@ from pathlib import Path
 from hil.transports import BACKENDS
 
 ROOT = Path(__file__).resolve().parents[2]
+
+
+@functools.cache
+def _parse(source: str) -> ast.Module:
+    """The tree of a source text, parsed once for all the checks here (each walks every
+    module of hil/, and the planted copy repeats most of them: parsing was most of their
+    time). The trees are only read."""
+    return ast.parse(source)
 
 
 def _sources(package: str, skip: tuple[str, ...] = ()) -> list[Path]:
@@ -43,7 +52,7 @@ def _branches_on_backend_name(tree: ast.AST) -> list[int]:
 def test_only_the_transports_package_branches_on_a_transport_name():
     bad = {}
     for path in _sources("hil", skip=("hil/transports/",)):
-        lines = _branches_on_backend_name(ast.parse(path.read_text()))
+        lines = _branches_on_backend_name(_parse(path.read_text()))
         if lines:
             bad[str(path.relative_to(ROOT))] = lines
     assert not bad
@@ -56,7 +65,7 @@ def test_the_check_finds_a_branch():
 
 def _imports(path: Path) -> set[str]:
     names = set()
-    for node in ast.walk(ast.parse(path.read_text())):
+    for node in ast.walk(_parse(path.read_text())):
         if isinstance(node, ast.Import):
             names.update(a.name.split(".")[0] for a in node.names)
         elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
@@ -120,7 +129,7 @@ def hil_imports(root: Path) -> dict[str, set[str]]:
     graph = {}
     for path in sorted((root / "hil").rglob("*.py")):
         names = set()
-        for node in ast.walk(ast.parse(path.read_text())):
+        for node in ast.walk(_parse(path.read_text())):
             if isinstance(node, ast.Import):
                 names.update(a.name for a in node.names)
             elif isinstance(node, ast.ImportFrom) and node.module == "hil":
@@ -300,7 +309,7 @@ def part_arithmetic(source: str) -> list[tuple[int, str]]:
     """(line, what) of every numba kernel defined in ``source``, and of every arithmetic or
     bit operation with a numeric constant of a part's module (a scale, an offset, a mask,
     a code's mid-scale: not an index or a size) as an operand."""
-    tree = ast.parse(source)
+    tree = _parse(source)
     consts, modules = _part_names(tree)
     found = []
     for node in ast.walk(tree):
