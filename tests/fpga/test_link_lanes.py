@@ -122,7 +122,7 @@ def test_link_and_sensor_lanes_compile_to_vector_instructions():
 
     @njit(**opts)
     def codes(sb, tick):
-        SL._codes(sb, tick)
+        SL._all_codes(sb, tick)
 
     book(LL.link_lane_buffer())
     codes(SL.sensor_lane_buffer(), 7)
