@@ -70,61 +70,6 @@ def pick(typingctx, c, a, b):
     return types.float64(types.boolean, types.float64, types.float64), codegen
 
 
-
-@intrinsic
-def pick_int(typingctx, c, a, b):
-    """``a if c else b`` for two integers of one type already computed, as one LLVM
-    ``select`` (:func:`pick`'s integer twin)."""
-    if c != types.boolean or not isinstance(a, types.Integer) or a != b:
-        return None
-
-    def codegen(context, builder, signature, args):
-        return builder.select(args[0], args[1], args[2])
-
-    return a(types.boolean, a, b), codegen
-
-
-# int64 <-> float64 without the packed conversions of AVX-512DQ (vcvtqq2pd, vcvttpd2qq):
-# on AVX2 LLVM converts such a vector lane by lane (extract, scalar vcvtsi2sd/vcvttsd2si,
-# insert). Adding 1.5 * 2**52 to an integral double |x| < 2**51 puts x in the low mantissa
-# bits; the bits minus those of 1.5 * 2**52 are x as an int64 (and back). Integer adds and
-# float adds only, which every vector width has; on AVX-512 they cost about what the one
-# packed conversion does.
-_SHIFTER_BITS = 0x4338000000000000   # the bits of 1.5 * 2**52
-_TWO52 = 4503599627370496.0
-_TWO52_BITS = 0x4330000000000000
-_TWO32 = 4294967296.0
-#: Bound below which :func:`integral_to_int` and :func:`small_int_to_float` are exact.
-INT_EXACT = 2251799813685248.0       # 2**51
-
-
-@njit(cache=True, inline="always")
-def integral_to_int(x):
-    """``np.int64(x)`` of an integral float64 ``x`` with ``|x| <`` :data:`INT_EXACT`."""
-    return _bits(x + _SHIFTER) - _SHIFTER_BITS
-
-
-@njit(cache=True, inline="always")
-def trunc_to_int(x):
-    """``np.int64(x)`` (towards zero) of a float64 ``x`` with ``|x| <`` :data:`INT_EXACT`."""
-    return _bits(np.trunc(x) + _SHIFTER) - _SHIFTER_BITS
-
-
-@njit(cache=True, inline="always")
-def small_int_to_float(n):
-    """``np.float64(n)`` of an int64 ``n`` with ``|n| < 2**51``."""
-    return _from_bits(n + _SHIFTER_BITS) - _SHIFTER
-
-
-@njit(cache=True, inline="always")
-def int_to_float(n):
-    """``np.float64(n)`` of any int64 ``n``, bit for bit: its high 32 bits (signed) and its
-    low 32 bits as exact doubles, then ``hi * 2**32`` (exact) ``+ lo``: one rounding, to
-    nearest even, as the conversion rounds."""
-    hi = _from_bits((n >> 32) + _SHIFTER_BITS) - _SHIFTER
-    lo = _from_bits((n & 0xFFFFFFFF) | _TWO52_BITS) - _TWO52
-    return hi * _TWO32 + lo
-
 # exp: x = k ln2 + r, |r| <= ln2 / 2; ln2 in two parts, the first with 32 bits so k ln2_hi
 # is exact for |k| < 2**20.
 _LN2_HI = 6.93147180369123816490e-01
@@ -277,6 +222,4 @@ def tanh_r(x, numerics):
     return tanh3(x) if numerics >= 3.0 else math.tanh(x)
 
 
-__all__ = ["INT_EXACT", "exp3", "exp_r", "int_to_float", "integral_to_int", "log4", "pick",
-           "pick_int", "sin3", "sin_r", "sincos3", "small_int_to_float", "tanh3", "tanh_r",
-           "trunc_to_int"]
+__all__ = ["exp3", "exp_r", "log4", "pick", "sin3", "sin_r", "sincos3", "tanh3", "tanh_r"]

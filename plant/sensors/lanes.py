@@ -34,17 +34,17 @@ from numba import njit
 
 from firmware_model.fpga import lanes as fpl
 from firmware_model.fpga import layout as B
-from plant import layout as L
-from plant.blocks.lanemath import (
+from firmware_model.lane_int import (
     INT_EXACT,
-    _bits,
-    _from_bits,
     int_to_float,
     integral_to_int,
     pick_int,
     small_int_to_float,
     trunc_to_int,
 )
+from firmware_model.lane_int import bits as _bits
+from firmware_model.lane_int import from_bits as _from_bits
+from plant import layout as L
 from plant.lanes import LANES, LW
 from plant.lanes import YO as PYO
 from plant.sensors import chips as K
