@@ -6,8 +6,10 @@ one flat float64 **lane buffer** (structure of arrays: row ``r`` of lane ``j`` a
 ``r * LW + j``); per tick :func:`digitise_lanes` copies the plant outputs the chips read
 from the plant's lane buffer (:mod:`plant.lanes`, where the tick before left them) into it,
 computes every raw word of every lane in one branch-free pass over the lanes (LLVM
-vectorises it: ``floor``, float64 <-> int64 conversions, 64-bit multiplies and variable
-shifts all have AVX-512 forms), and writes them into the board lanes
+vectorises it on AVX-512 and on AVX2: ``floor``, 64-bit multiplies and variable shifts
+have packed forms on both; the float64 <-> int64 conversions, which have packed forms only
+with AVX-512DQ, are :mod:`firmware_model.lane_int`'s, with a general pass as a fallback,
+:func:`_all_codes`), and writes them into the board lanes
 (:mod:`firmware_model.fpga.lanes`, rows ``RO``: the board's inputs) in a second branch-free
 pass, holding what the scalar code holds (a dead encoder's count, a rejected strain read).
 No actuator row is read or written per tick, except for a lane on the scalar code below.
