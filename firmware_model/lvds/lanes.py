@@ -47,6 +47,7 @@ from numba import njit
 from firmware_model.fpga import lanes as fpl
 from firmware_model.fpga import layout as B
 from firmware_model.fpga.lanes import LANES, LW
+from firmware_model.lane_int import int_to_float, trunc_to_int
 from firmware_model.lvds import link as LK
 
 #: Rows of the lane buffer per direction (offset ``D`` for downstream, ``U`` upstream).
@@ -79,8 +80,10 @@ def _floordiv_den(acc):
     """``acc // _WORD_DEN`` (floor) without an integer division, which has no vector form
     for 64-bit lanes: a float64 estimate (a product with 1 / ``_WORD_DEN``, off by at most
     one for any int64 ``acc``: the quotient is below 2^28) corrected by one compare each
-    way."""
-    q = np.int64(np.float64(acc) * _INV_DEN)
+    way. ``acc`` to float64 and the estimate back without the packed conversions AVX2
+    lacks (:mod:`firmware_model.lane_int`: exact for any ``acc``, and the estimate is well
+    inside the 1.5 * 2**52 trick's range)."""
+    q = trunc_to_int(int_to_float(acc) * _INV_DEN)
     r = acc - q * _DEN
     q = q - 1 if r < 0 else q
     r = r + _DEN if r < 0 else r
@@ -89,7 +92,8 @@ def _floordiv_den(acc):
 
 @njit(cache=True, inline="always", error_model="numpy")
 def _book(lb, o, size, hist):
-    """One tick's bookkeeping of direction ``o`` (:data:`D` or :data:`U`) in every lane:
+    """One tick's bookkeeping of direction ``o`` (:data:`D` or :data:`U`) in every lane (a
+    vector loop), then the word log's slots (a loop per lane):
     ``_words_this_tick`` and ``_remember`` (the ring row written, ``_WROW``; the row the
     words are read from, ``_SRC``), the words sent (``_N``: none when stopped) from the
     pointer ``_P0``, the pointer and word count after them, the word log's count,
@@ -112,13 +116,17 @@ def _book(lb, o, size, hist):
         lb[_ix(o + _PTR, j)] = (p0 + n) % size
         lb[_ix(o + _WORDS, j)] += n
         lb[_ix(wl, j)] = n if n < LK.MAX_WORDS_TICK else LK.MAX_WORDS_TICK
-        # the word log's slots (inside the loop over the lanes: as a loop of its own
-        # around it, LLVM left it scalar)
-        for k in range(LK.MAX_WORDS_TICK):
-            on = k < n
-            a = (p0 + k) % size
-            lb[_ix(wl + 1 + 3 * k, j)] = a if on else lb[_ix(wl + 1 + 3 * k, j)]
-            lb[_ix(wl + 3 + 3 * k, j)] = LK.WORD_OK if on else lb[_ix(wl + 3 + 3 * k, j)]
+    # The word log's slots below the count, lane by lane. In the loop above, a slot kept
+    # where ``k >= n`` is a conditional store: a scatter (AVX-512) or a ``vpmaskmovq``
+    # (AVX2; microcoded on AMD: that vector loop ran slower than the scalar one, and LLVM's
+    # cost model left it scalar); as a loop of their own, ~11 plain stores of two rows per
+    # lane, and the loop above vectorises on both.
+    for j in range(LW):
+        n = lb[_ix(wl, j)]
+        p0 = lb[_ix(o + _P0, j)]
+        for k in range(n):
+            lb[_ix(wl + 1 + 3 * k, j)] = (p0 + k) % size
+            lb[_ix(wl + 3 + 3 * k, j)] = LK.WORD_OK
 
 
 @njit(cache=True, inline="always", error_model="numpy")

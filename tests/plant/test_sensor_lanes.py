@@ -63,6 +63,33 @@ def test_digitise_in_lanes_is_the_scalar_digitise_bit_for_bit(data, ks, extra, t
                                                               seed):
     """Up to LW actuators in one batch (rows of a larger array, out of order): after each
     tick every raw word equals what the scalar digitise gives each actuator alone."""
+    _against_scalar(ks, extra, tick0, ticks, seed, lambda: outputs(data.draw))
+
+
+def _far_outputs(draw):
+    """Plant outputs some of which are beyond the lanes' fast conversions (a count or a
+    code of 2**51 or more, a NaN): the lanes then take the general conversions."""
+    y = outputs(draw)
+    far = st.sampled_from([1e16, -3e17, 1e22, -1e30, np.inf, np.nan])
+    for r in (L.Y_THETA_M, L.Y_X_PISTON, L.Y_F_STRAIN, L.Y_IA, ANALOG_ROWS[0]):
+        if draw(st.booleans()):
+            y[r] = draw(far)
+    return y
+
+
+@settings(max_examples=25, deadline=None)
+@given(data=st.data(), ks=st.lists(chips(), min_size=1, max_size=LW),
+       tick0=st.integers(0, 1 << 36), ticks=st.integers(1, 3), seed=st.integers(0, 2**32))
+def test_digitise_in_lanes_beyond_the_fast_conversions_range(data, ks, tick0, ticks, seed):
+    """Outputs far beyond any real one (counts and codes past 2**51, past int64, NaN) in
+    some lanes: the raw words still equal the scalar digitise's, bit for bit."""
+    _against_scalar(ks, 0, tick0, ticks, seed, lambda: _far_outputs(data.draw))
+
+
+def _against_scalar(ks, extra, tick0, ticks, seed, draw_outputs):
+    """The batch of chips ``ks`` (rows of a larger array, out of order) in lanes for
+    ``ticks`` ticks from ``tick0``, fresh outputs each tick from ``draw_outputs``, against
+    the scalar digitise of each actuator alone."""
     rng = np.random.default_rng(seed)
     n = len(ks) + extra
     rows = rng.permutation(n)[:len(ks)]
@@ -84,7 +111,7 @@ def test_digitise_in_lanes_is_the_scalar_digitise_bit_for_bit(data, ks, extra, t
     y = np.zeros((n, L.N_OUTPUTS))
     for t in range(tick0, tick0 + ticks):
         for r in rows:
-            y[r] = outputs(data.draw)
+            y[r] = draw_outputs()
         load_outputs(pb, y, np.zeros((n, 1), np.uint64), block, m)
         SL.digitise_lanes(sb, pb, fb, k, block, m, t, y, raw)
         fpl.store_board(fb, state, raw, down, block, m)
