@@ -54,3 +54,33 @@ def test_batched_signals_are_filtered_each_as_alone_and_a_gap_falls_back():
     gap[100] = np.nan
     out = sensor_lag(gap, 1e-4, 2e-4)
     assert np.isfinite(out[:100]).all() and np.isnan(out[100])
+
+
+def test_a_constant_signal_s_lag_is_remembered_to_the_bit():
+    """A constant (a free piston's strain: the offset alone) is filtered once per value,
+    lag and length; the remembered result is the transform's own to the bit, for each
+    value (+0 and -0 apart) and length, and a caller writing into its copy changes none."""
+    from hil.identify import lag
+
+    dt = 2e-4
+    cases = [(np.full(3072, 1.5e3), 1e-4, None), (np.full(3072, 1.5e3), 2e-4, None),
+             (np.full(3072, 1.5e3), 1e-4, 1000), (np.full(3072, -7.0), 1e-4, None),
+             (np.full(3072, 0.0), 1e-4, None), (np.full(3072, -0.0), 1e-4, None)]
+    lag._CONSTANT_CACHE.clear()
+    fresh = []
+    for y, tau, n in cases:  # each computed with nothing remembered
+        lag._CONSTANT_CACHE.clear()
+        fresh.append(sensor_lag(y, tau, dt, n_valid=n))
+    lag._CONSTANT_CACHE.clear()
+    for _ in range(3):  # remembered: the first pass fills, the others read
+        for (y, tau, n), want in zip(cases, fresh, strict=True):
+            got = sensor_lag(y, tau, dt, n_valid=n)
+            assert got.tobytes() == want.tobytes()
+            got[:] = 99.0  # the caller's copy: the memo keeps its own
+    assert lag._CONSTANT_CACHE
+    # a signal that is not constant is not remembered (one sample moved)
+    lag._CONSTANT_CACHE.clear()
+    y = np.full(3072, 1.5e3)
+    y[1500] += 1.0
+    sensor_lag(y, 1e-4, dt)
+    assert not lag._CONSTANT_CACHE
