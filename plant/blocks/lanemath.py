@@ -22,37 +22,15 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from llvmlite import ir
 from numba import njit, types
 from numba.extending import intrinsic
+
+from firmware_model.lane_int import bits as _bits
+from firmware_model.lane_int import from_bits as _from_bits
 
 #: Inlined where called; numpy's error model: a division here never has a zero divisor,
 #: and the check numba would add is a branch that stops a loop from vectorising.
 MATH = {"cache": True, "inline": "always", "error_model": "numpy"}
-
-
-@intrinsic
-def _bits(typingctx, x):
-    """The IEEE-754 bits of a float64, as an int64 (a register move, no conversion)."""
-    if x != types.float64:
-        return None
-
-    def codegen(context, builder, signature, args):
-        return builder.bitcast(args[0], ir.IntType(64))
-
-    return types.int64(types.float64), codegen
-
-
-@intrinsic
-def _from_bits(typingctx, n):
-    """The float64 with the IEEE-754 bits ``n`` (an int64)."""
-    if n != types.int64:
-        return None
-
-    def codegen(context, builder, signature, args):
-        return builder.bitcast(args[0], ir.DoubleType())
-
-    return types.float64(types.int64), codegen
 
 
 @intrinsic
