@@ -7,7 +7,7 @@ codec and level the writer offers and reports the log's MB and the compression's
 simulated second (``time.process_time``, best of 3 per chunk, so a loaded machine reads
 high rather than noisy; quote ``uptime``). lz4 chunks also carry a CRC-32 of their
 uncompressed bytes (zstd's own checksum is in its time), listed apart. Then the decoded
-signals' chunks of each kind the writer gives them (:data:`hil.framelog.writer.SIGNAL_CHUNKS`:
+signals' chunks of each kind the writer gives them (:data:`hil.framelog.writer.CHUNK_KINDS`:
 the actuators' ``/signals/actuator/``, the rest of ``/signals/``) alone, at the levels of
 :data:`SIGNAL_CODECS` (best of 5 per chunk).
 """
@@ -41,10 +41,10 @@ def capture(seconds: float, topology: str) -> list[bytes]:
 
 def capture_kinds(seconds: float, topology: str) -> list[tuple[str | None, bytes]]:
     """:func:`capture`, each chunk with the topic prefix of the decoded signals' kind of
-    chunk it is (:data:`hil.framelog.writer.SIGNAL_CHUNKS`; None: the raw channels')."""
+    chunk it is (:data:`hil.framelog.writer.CHUNK_KINDS`; None: the other raw channels')."""
     from hil.fieldbus.topology import load_topology
     from hil.framelog import chunk
-    from hil.framelog.writer import SIGNAL_CHUNKS
+    from hil.framelog.writer import CHUNK_KINDS
     from hil.replay.record import run_logged
     from hil.sim.pc import demo_pc
     from plant.config import load_config
@@ -54,7 +54,7 @@ def capture_kinds(seconds: float, topology: str) -> list[tuple[str | None, bytes
     chunks: list[tuple[str | None, bytes]] = []
     make = chunk.compressor
     signals: dict[tuple, str] = {}  # kind -> its topic prefixes
-    for prefix, k in SIGNAL_CHUNKS.items():
+    for prefix, k in CHUNK_KINDS.items():
         signals[k] = f"{signals[k]} + {prefix}" if k in signals else prefix
 
     def keeping(compression: str, level: int | None) -> Callable[[memoryview], bytes]:
