@@ -7,8 +7,9 @@ codec and level the writer offers and reports the log's MB and the compression's
 simulated second (``time.process_time``, best of 3 per chunk, so a loaded machine reads
 high rather than noisy; quote ``uptime``). lz4 chunks also carry a CRC-32 of their
 uncompressed bytes (zstd's own checksum is in its time), listed apart. Then the decoded
-signals' chunks of each kind the writer gives them (:data:`hil.framelog.writer.SIGNAL_CHUNKS`:
-the actuators' ``/signals/actuator/``, the rest of ``/signals/``) alone, at the levels of
+signals' and register words' chunks of each kind the writer gives them
+(:data:`hil.framelog.writer.CHUNK_KINDS`: the register words' ``/lvds/``, the actuators'
+``/signals/actuator/``, the rest of ``/signals/``) alone, at the levels of
 :data:`SIGNAL_CODECS` (best of 5 per chunk).
 """
 
@@ -28,6 +29,7 @@ CODECS = (("zstd 3 (the mcap library's)", "zstd", 3), ("zstd 1", "zstd", 1),
 #: (label, compression, level) of each row of the decoded signals' chunks (the writer's
 #: levels with their tuned match finder, :data:`hil.framelog.chunk.TUNED`).
 SIGNAL_CODECS = (("zstd -60, table 2^8 (the writer's, actuators)", "zstd", -60),
+                 ("zstd -30, table 2^10 (the writer's, register words)", "zstd", -30),
                  ("zstd -19, table 2^8 (the actuators' before)", "zstd", -19),
                  ("zstd -9, table 2^11 (the writer's, the rest)", "zstd", -9),
                  ("zstd -7, table 2^12", "zstd", -7),
@@ -41,10 +43,10 @@ def capture(seconds: float, topology: str) -> list[bytes]:
 
 def capture_kinds(seconds: float, topology: str) -> list[tuple[str | None, bytes]]:
     """:func:`capture`, each chunk with the topic prefix of the decoded signals' kind of
-    chunk it is (:data:`hil.framelog.writer.SIGNAL_CHUNKS`; None: the raw channels')."""
+    chunk it is (:data:`hil.framelog.writer.CHUNK_KINDS`; None: the other raw channels')."""
     from hil.fieldbus.topology import load_topology
     from hil.framelog import chunk
-    from hil.framelog.writer import SIGNAL_CHUNKS
+    from hil.framelog.writer import CHUNK_KINDS
     from hil.replay.record import run_logged
     from hil.sim.pc import demo_pc
     from plant.config import load_config
@@ -54,7 +56,7 @@ def capture_kinds(seconds: float, topology: str) -> list[tuple[str | None, bytes
     chunks: list[tuple[str | None, bytes]] = []
     make = chunk.compressor
     signals: dict[tuple, str] = {}  # kind -> its topic prefixes
-    for prefix, k in SIGNAL_CHUNKS.items():
+    for prefix, k in CHUNK_KINDS.items():
         signals[k] = f"{signals[k]} + {prefix}" if k in signals else prefix
 
     def keeping(compression: str, level: int | None) -> Callable[[memoryview], bytes]:
@@ -122,7 +124,7 @@ def main(argv: list[str] | None = None) -> int:
     _table(measure(chunks), seconds)
     for prefix in dict.fromkeys(k for k, _ in kinds if k is not None):
         signals = [c for k, c in kinds if k == prefix]
-        print(f"\nthe decoded signals' chunks of {prefix} (the writer's kind for it), "
+        print(f"\nthe chunks of {prefix} (the writer's kind for it), "
               f"{len(signals)}, alone: {sum(map(len, signals)) / seconds / 1e6:.1f} MB per "
               "simulated second uncompressed (best of 5)")
         _table(measure(signals, SIGNAL_CODECS, 5), seconds)

@@ -249,10 +249,14 @@ class Parts:
                 "rest": self.rest * per, "total": self.extra * per}
 
 
-#: Cycles of the warm-up runs before the timed ones: more than one block of the log
+#: Cycles of the warm-up runs before the timed ones: more than two blocks of the log
 #: (:data:`hil.replay.record.FLUSH_CYCLES`), so that every compiled call and import of a
-#: block's writing is done before the timing starts.
-WARM_CYCLES = 220
+#: block's writing is done before the timing starts. Two: the first block of a run ends a
+#: few MCU steps short (the engine's first cycle), so its raw blocks are views of the tap's
+#: rows, and only the second is the whole (contiguous) rows, which numba compiles apart;
+#: loading each such kernel from the cache costs ~6-9 ms at its first call, which with one
+#: block of warm-up fell into the first timed logged run.
+WARM_CYCLES = 420
 
 
 @contextlib.contextmanager

@@ -63,6 +63,14 @@ SIGNAL_LEVEL = -9
 #: docs/framelog.md, "The actuators' signal chunks at -19" and "The signals' batches and
 #: the actuators' chunks at -60").
 ACTUATOR_SIGNAL_LEVEL = -60
+#: zstd level of the register words' blocks (``/lvds/...``: the MCU words as raw blocks,
+#: ~5.6 MB per simulated second of the whole robot after their planes of zeros are cut,
+#: nearly half of it the sensors' noisy low bits as bit planes, in which zstd finds no
+#: match): an acceleration of 30 with a table of 2^10 entries. On those blocks of a robot
+#: second, ~60 % less compression CPU than :data:`ZSTD_LEVEL` for ~19 % more of their
+#: compressed bytes (2.74 -> 3.26 MB; the log ~4 % larger); docs/framelog.md, "The
+#: register words' chunks at -30".
+REGISTER_BLOCK_LEVEL = -30
 #: What the writer's own zstd levels (:data:`ZSTD_LEVEL`, :data:`SIGNAL_LEVEL`,
 #: :data:`ACTUATOR_SIGNAL_LEVEL`, and -7 and -19, levels of the signals before) change in
 #: zstd's parameters of that level: a smaller match table (zstd's: 2^13 entries; 2^12 is
@@ -78,7 +86,8 @@ ACTUATOR_SIGNAL_LEVEL = -60
 TUNED = {ZSTD_LEVEL: {"hash_log": 12, "min_match": 7}, -7: {"hash_log": 12, "min_match": 7},
          SIGNAL_LEVEL: {"hash_log": 11, "min_match": 7},
          -19: {"hash_log": 8, "min_match": 7},  # the actuators' signals' level before
-         ACTUATOR_SIGNAL_LEVEL: {"hash_log": 8, "min_match": 7}}
+         ACTUATOR_SIGNAL_LEVEL: {"hash_log": 8, "min_match": 7},
+         REGISTER_BLOCK_LEVEL: {"hash_log": 10, "min_match": 7}}
 TUNED_LEVELS = tuple(TUNED)
 #: A chunk buffer's first capacity, in chunks (:class:`ChunkBuffer`: address space; the
 #: memory is what the largest chunk and the batch that closed it write), up to

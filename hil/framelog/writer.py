@@ -78,6 +78,16 @@ SIGNAL_CHUNKS: dict[str, tuple[Compression, int]] = {
     "/signals/": ("zstd", chunk.SIGNAL_LEVEL),
     "/signals/actuator/": ("zstd", chunk.ACTUATOR_SIGNAL_LEVEL),
     "/signals/bus": ("zstd", chunk.ACTUATOR_SIGNAL_LEVEL)}
+#: The writer's default ``chunk_compression`` (with zstd at its default level): the decoded
+#: signals' kinds (:data:`SIGNAL_CHUNKS`) and the register words' blocks (``/lvds/...``, the
+#: largest raw channels, most of their bytes the sensors' noise) at a faster level of their
+#: own (:data:`chunk.REGISTER_BLOCK_LEVEL`); the fieldbus frames and the boxes' records,
+#: which compress ~5:1 at :data:`chunk.ZSTD_LEVEL`, keep it. The register words first: a
+#: flush closes the kinds' chunks in this order after the first kind's, so that the raw
+#: channels a replay reads come before the decoded signals in the file (a log cut short
+#: keeps them as it did when they shared the first kind's chunk).
+CHUNK_KINDS: dict[str, tuple[Compression, int]] = {
+    "/lvds/": ("zstd", chunk.REGISTER_BLOCK_LEVEL), **SIGNAL_CHUNKS}
 #: Keys of the "eha-hil" metadata record that the writer sets itself.
 RESERVED_METADATA = ("level", "version", "time")
 
@@ -170,7 +180,7 @@ class FrameLogWriter:
     "none"}`` keeps the decoded signals, on which zstd spends much time for little
     (docs/framelog.md, "The whole robot"), out of zstd, and ``("zstd", -9)`` gives them
     the writer's fastest zstd level; the messages are the same either way. None (the default):
-    :data:`SIGNAL_CHUNKS` when ``compression`` is zstd at its default level, else none.
+    :data:`CHUNK_KINDS` when ``compression`` is zstd at its default level, else none.
 
     Times must be integers >= 0 (ns of simulated time) and non-decreasing per channel, so
     that each channel reads back in time order.
@@ -198,7 +208,7 @@ class FrameLogWriter:
         if chunk_size < 1:
             raise ValueError(f"chunk_size must be >= 1 byte, got {chunk_size}")
         if chunk_compression is None:
-            chunk_compression = SIGNAL_CHUNKS \
+            chunk_compression = CHUNK_KINDS \
                 if compression == "zstd" and compression_level is None else {}
         kinds: dict[str, chunk.Kind] = {}
         for prefix, kind in chunk_compression.items():

@@ -163,6 +163,38 @@ def test_signals_have_chunks_of_their_own_by_default(tmp_path: Path, kw: dict,
     assert len(chunks) == (3 if apart else 1)
 
 
+def test_register_words_in_chunks_of_their_level_by_default(tmp_path: Path) -> None:
+    """zstd at the writer's default level: the /lvds/ blocks in chunks of their own, each
+    the frame zstd makes at chunk.REGISTER_BLOCK_LEVEL; the fieldbus frames at ZSTD_LEVEL."""
+    import zstandard
+
+    from hil.framelog import chunk
+
+    path = tmp_path / "r.mcap"
+    rng = np.random.default_rng(5)
+    # a pattern that repeats every 37 frames: matches that the two levels find apart
+    words = np.tile(rng.integers(0, 1 << 16, (37, 34)), (60, 1))[:2000]
+    with FrameLogWriter(path, chunk_size=1 << 20) as w:
+        b = w.add_block_channel("/lvds/0/up", "eha-hil/t", dtype=np.uint16, width=34)
+        f = w.add_channel("/fieldbus/frames", "eha-hil/f")
+        w.write_block(b, np.arange(2000), words)
+        w.write_messages(f, np.arange(50), [bytes(200) + bytes([i]) for i in range(50)])
+    topics: dict[int, str] = {}
+    levels: dict[str, list[int]] = {}
+    for rec in StreamReader(io.BytesIO(path.read_bytes()), emit_chunks=True).records:
+        if isinstance(rec, Chunk):
+            inner = breakup_chunk(rec, validate_crc=True)
+            topics.update({r.id: r.topic for r in inner if isinstance(r, Channel)})
+            data = zstandard.ZstdDecompressor().decompress(rec.data)
+            for r in inner:
+                if isinstance(r, Message):
+                    levels[topics[r.channel_id]] = [
+                        lvl for lvl in (chunk.ZSTD_LEVEL, chunk.REGISTER_BLOCK_LEVEL)
+                        if chunk.compressor("zstd", lvl)(data) == rec.data]
+    assert levels == {"/lvds/0/up": [chunk.REGISTER_BLOCK_LEVEL],
+                      "/fieldbus/frames": [chunk.ZSTD_LEVEL]}
+
+
 @pytest.mark.parametrize(("kind", "match"), [("brotli", "'/signals/'.*zstd, lz4, none"),
                                              (("zstd", 30), "zstd level 30 is outside"),
                                              (("none", 1), "takes no level")])
