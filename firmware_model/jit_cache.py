@@ -11,17 +11,36 @@ edit elsewhere (the CLI, scenarios, docs) keeps the cache.
 Imported by the ``__init__`` of every package with kernels, before any kernel is defined
 (numba picks a kernel's cache folder when its decorator runs). A ``NUMBA_CACHE_DIR`` the
 user set is kept as the parent folder.
+
+numba itself is not imported here: its import is most of a command's start-up, and a
+command that runs no kernel (a log's summary, a mistake in the arguments) need not pay it.
+Before numba is loaded the folder is handed to it through ``NUMBA_CACHE_DIR``, which numba
+reads when it is imported (and which child processes inherit: :data:`_OURS` tells them the
+folder is this module's, not the user's parent folder).
 """
 
 from __future__ import annotations
 
 import hashlib
+import json
+import os
+import sys
 from pathlib import Path
-
-import numba
 
 _ROOT = Path(__file__).resolve().parent.parent
 _PACKAGES = ("protocols", "firmware_model", "plant")
+#: The environment variable numba reads its cache folder from.
+_NUMBA_VAR = "NUMBA_CACHE_DIR"
+#: Set beside :data:`_NUMBA_VAR` when this module put the folder there.
+_OURS = "EHA_HIL_KERNEL_CACHE"
+#: The last fingerprint and the files' sizes and times it was taken at (saves reading
+#: every source at each start; any file changed, added or removed takes the hash again).
+_STAMP = _ROOT / "firmware_model" / "__pycache__" / "kernels-stamp.json"
+
+
+def _candidates() -> list[Path]:
+    return sorted([f for p in _PACKAGES for f in (_ROOT / p).rglob("*.py")]
+                  + list((_ROOT / "hil").rglob("*.py")))
 
 
 def _sources() -> list[Path]:
@@ -30,20 +49,63 @@ def _sources() -> list[Path]:
     return sorted(files)
 
 
-def fingerprint() -> str:
-    """Hash of the kernels' sources (path and content of each file)."""
+def _content_hash() -> str:
     h = hashlib.sha256()
     for f in _sources():
         h.update(f.relative_to(_ROOT).as_posix().encode() + b"\0" + f.read_bytes() + b"\0")
     return h.hexdigest()[:16]
 
 
+def _stat_key() -> str:
+    h = hashlib.sha256()
+    for f in _candidates():
+        st = f.stat()
+        h.update(f"{f.relative_to(_ROOT).as_posix()}\0{st.st_size}\0{st.st_mtime_ns}\0"
+                 .encode())
+    return h.hexdigest()
+
+
+def fingerprint() -> str:
+    """Hash of the kernels' sources (path and content of each file); taken again only when
+    a file's size or modification time differs from the last time it was taken."""
+    key = _stat_key()
+    try:
+        stamp = json.loads(_STAMP.read_text())
+        if stamp.get("key") == key and isinstance(stamp.get("fingerprint"), str):
+            return stamp["fingerprint"]
+    except (OSError, ValueError, AttributeError):
+        pass
+    value = _content_hash()
+    try:  # (a read-only checkout just takes the hash at every start)
+        _STAMP.parent.mkdir(parents=True, exist_ok=True)
+        tmp = _STAMP.with_name(f"{_STAMP.name}.{os.getpid()}")
+        tmp.write_text(json.dumps({"key": key, "fingerprint": value}))
+        tmp.replace(_STAMP)
+    except OSError:
+        pass
+    return value
+
+
+def _parent() -> Path:
+    """The folder the kernel folders live in: the user's ``NUMBA_CACHE_DIR``, or ours."""
+    numba = sys.modules.get("numba")
+    given = numba.config.CACHE_DIR if numba is not None else os.environ.get(_NUMBA_VAR, "")
+    if given and given == os.environ.get(_OURS):  # a parent process's choice: its parent
+        return Path(given).parent
+    return Path(given) if given else _ROOT / "firmware_model" / "__pycache__"
+
+
 def cache_dir() -> Path:
-    parent = Path(numba.config.CACHE_DIR) if numba.config.CACHE_DIR else \
-        _ROOT / "firmware_model" / "__pycache__"
-    return parent / f"kernels-{fingerprint()}"
+    return _parent() / f"kernels-{fingerprint()}"
 
 
-if not getattr(numba.config, "_EHA_HIL_CACHE", None):
-    numba.config.CACHE_DIR = str(cache_dir())
-    numba.config._EHA_HIL_CACHE = numba.config.CACHE_DIR
+def _configure() -> None:
+    numba = sys.modules.get("numba")
+    if numba is None:  # numba reads the variable when (if ever) it is imported
+        os.environ[_NUMBA_VAR] = os.environ[_OURS] = str(cache_dir())
+    elif not getattr(numba.config, "_EHA_HIL_CACHE", None):
+        numba.config.CACHE_DIR = str(cache_dir())
+        numba.config._EHA_HIL_CACHE = numba.config.CACHE_DIR
+
+
+_configure()

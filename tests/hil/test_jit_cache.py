@@ -46,3 +46,70 @@ def test_the_console_script_imports_neither_numpy_nor_numba_before_main():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True, cwd=ROOT).stdout.strip()
     assert out == "[]"
+
+
+def test_the_command_line_and_the_configuration_import_no_numba():
+    """numba's import is most of a command's start-up: the command line's root and the
+    configuration (the presets, the layouts) leave it to the commands that run a kernel."""
+    import subprocess
+    import sys
+
+    code = ("import sys, hil.cli.root, plant.config, firmware_model.fpga.layout; "
+            "print('numba' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True, cwd=ROOT).stdout.strip()
+    assert out == "False"
+
+
+def test_a_child_process_keeps_the_same_cache_folder():
+    """The folder reaches numba through NUMBA_CACHE_DIR, which child processes inherit: a
+    child of the same sources finds the same folder, not one nested inside it."""
+    import os
+    import subprocess
+    import sys
+
+    code = "import numba, hil.sim; print(numba.config.CACHE_DIR)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True, cwd=ROOT, env=dict(os.environ)).stdout.strip()
+    assert out == numba.config.CACHE_DIR
+
+
+def test_a_user_s_cache_folder_is_the_parent(tmp_path):
+    import os
+    import subprocess
+    import sys
+
+    env = {k: v for k, v in os.environ.items() if k != jit_cache._OURS}
+    env["NUMBA_CACHE_DIR"] = str(tmp_path)
+    code = "import hil.sim, numba; print(numba.config.CACHE_DIR)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True, cwd=ROOT, env=env).stdout.strip()
+    assert Path(out) == tmp_path / f"kernels-{jit_cache.fingerprint()}"
+
+
+def test_the_remembered_fingerprint_follows_every_file(tmp_path, monkeypatch):
+    """The hash is remembered with the files' sizes and times: a file edited, added or
+    removed takes it again, from the contents."""
+    import os
+
+    for rel, text in (("protocols/a.py", "A = 1\n"), ("firmware_model/b.py", "B = 2\n"),
+                      ("plant/c.py", "C = 3\n"), ("hil/k.py", "# njit kernel\n"),
+                      ("hil/cli.py", "X = 0\n")):
+        (tmp_path / rel).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / rel).write_text(text)
+    monkeypatch.setattr(jit_cache, "_ROOT", tmp_path)
+    monkeypatch.setattr(jit_cache, "_STAMP", tmp_path / "stamp.json")
+    first = jit_cache.fingerprint()
+    assert first == jit_cache._content_hash() and (tmp_path / "stamp.json").exists()
+    assert jit_cache.fingerprint() == first  # remembered
+    seen = {first}
+    for edit in (lambda: (tmp_path / "plant/c.py").write_text("C = 4\n"),  # same size
+                 lambda: (tmp_path / "hil/cli.py").write_text("X = 0  # njit now\n"),
+                 lambda: (tmp_path / "protocols/new.py").write_text("N = 1\n"),
+                 lambda: (tmp_path / "firmware_model/b.py").unlink()):
+        edit()
+        st = (tmp_path / "stamp.json").stat()
+        os.utime(tmp_path / "stamp.json", ns=(st.st_atime_ns, st.st_mtime_ns))
+        now = jit_cache.fingerprint()
+        assert now == jit_cache._content_hash() and now not in seen
+        seen.add(now)
