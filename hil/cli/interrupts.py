@@ -18,6 +18,10 @@ deferred after :data:`FORCE_AFTER_S` is raised inside the lock after all (from a
 the main thread's next bytecode: the compiler's own Python, which unwinds and releases the
 lock), and again every :data:`FORCE_AFTER_S` should one land where it cannot leave.
 
+numba is imported only by the commands that run a kernel (its import is most of a command's
+start-up), so :func:`install` registers the listener when ``numba.core.event`` is first
+imported (an import hook), or at once if it already is.
+
 SIGTERM and SIGHUP (a service manager stopping the command, a closed terminal) are handled
 as Ctrl-C: they raise :class:`Interrupted`, a ``KeyboardInterrupt`` that remembers its signal,
 so every ``with`` on the way out closes its file as for Ctrl-C, and the command exits with
@@ -27,12 +31,14 @@ so every ``with`` on the way out closes its file as for Ctrl-C, and the command 
 from __future__ import annotations
 
 import _thread
+import importlib.abc
+import importlib.machinery
 import signal
+import sys
 import threading
-from collections.abc import Callable
-from types import FrameType
-
-from numba.core import event
+from collections.abc import Callable, Sequence
+from types import FrameType, ModuleType
+from typing import Any
 
 from hil.cli.signals import SIGNALS, Interrupted, default_handler, raise_interrupted
 
@@ -41,10 +47,15 @@ from hil.cli.signals import SIGNALS, Interrupted, default_handler, raise_interru
 FORCE_AFTER_S = 3.0
 
 
-class DeferredInterrupt(event.Listener):
+#: numba's event module, whose compiler-lock events the handler listens to.
+_EVENT_MODULE = "numba.core.event"
+
+
+class DeferredInterrupt:
     """Signal handler and compiler-lock listener: raise now, at the lock's release, or
     ``force_after_s`` into a long compile (``interrupt(signum)``: runs the handler in the
-    main thread again, from the timer's thread)."""
+    main thread again, from the timer's thread). numba's listener is :func:`_listener`
+    of it (numba's ``Listener`` class is made where numba is loaded)."""
 
     def __init__(self, force_after_s: float = FORCE_AFTER_S,
                  interrupt: Callable[[int], None] = _thread.interrupt_main) -> None:
@@ -59,11 +70,11 @@ class DeferredInterrupt(event.Listener):
     def _main() -> bool:
         return threading.current_thread() is threading.main_thread()
 
-    def on_start(self, ev: event.Event) -> None:
+    def on_start(self, ev: Any) -> None:
         if self._main():
             self.depth += 1
 
-    def on_end(self, ev: event.Event) -> None:
+    def on_end(self, ev: Any) -> None:
         if not self._main():
             return
         self.depth = max(self.depth - 1, 0)
@@ -100,6 +111,53 @@ class DeferredInterrupt(event.Listener):
         self.interrupt(signum)
 
 
+def _listener(target: DeferredInterrupt, event: ModuleType) -> Any:
+    """numba's ``Listener`` passing the compiler lock's start and end on to ``target``."""
+
+    class _Lock(event.Listener):
+        def on_start(self, ev: Any) -> None:
+            target.on_start(ev)
+
+        def on_end(self, ev: Any) -> None:
+            target.on_end(ev)
+
+    return _Lock()
+
+
+def _register(event: ModuleType) -> None:
+    if _INSTALLED is not None:
+        event.register("numba:compiler_lock", _listener(_INSTALLED, event))
+
+
+class _WhenImported(importlib.abc.MetaPathFinder):
+    """Calls ``then(module)`` once the module ``name`` has been executed (its first import),
+    and takes itself off ``sys.meta_path``: the module is found and loaded as usual."""
+
+    def __init__(self, name: str, then: Callable[[ModuleType], None]) -> None:
+        self.name = name
+        self.then = then
+
+    def find_spec(self, fullname: str, path: Sequence[str] | None,
+                  target: ModuleType | None = None) -> importlib.machinery.ModuleSpec | None:
+        if fullname != self.name:
+            return None
+        if self in sys.meta_path:
+            sys.meta_path.remove(self)
+        spec = importlib.machinery.PathFinder.find_spec(fullname, path)
+        loader = None if spec is None else spec.loader
+        if loader is None or not hasattr(loader, "exec_module"):
+            return spec  # (not a file-system module: imported as usual, nobody told)
+        run = loader.exec_module
+        then = self.then
+
+        def exec_module(module: ModuleType) -> None:
+            run(module)
+            then(module)
+
+        loader.exec_module = exec_module  # type: ignore[method-assign]
+        return spec
+
+
 _INSTALLED: DeferredInterrupt | None = None
 
 
@@ -111,7 +169,11 @@ def install() -> None:
     if _INSTALLED is not None or not DeferredInterrupt._main():
         return
     _INSTALLED = DeferredInterrupt()
-    event.register("numba:compiler_lock", _INSTALLED)
+    event = sys.modules.get(_EVENT_MODULE)
+    if event is not None:
+        _register(event)
+    else:  # numba not loaded (yet): listen from its import on, if it comes
+        sys.meta_path.insert(0, _WhenImported(_EVENT_MODULE, _register))
     for signum in SIGNALS:
         if signal.getsignal(signum) in (default_handler(signum), raise_interrupted):
             signal.signal(signum, _INSTALLED.handler)

@@ -139,6 +139,35 @@ def _esc_frames(cfg) -> None:
     warm_up()
 
 
+def _lanes_one_by_one(cfg) -> None:
+    """The lanes' stages called one at a time from Python (``bench robot --stages`` and the
+    lanes' tests), where the robot engine calls them inside its own kernel: the sensor
+    chips, the plant's outputs and the board's buffers loaded and stored, one tick."""
+    from firmware_model.fpga import lanes as fpl
+    from firmware_model.fpga import layout as B
+    from plant import lanes
+    from plant import layout as L
+    from plant.lane_outputs import load_outputs
+    from plant.sensors import chips as K
+    from plant.sensors import lanes as SL
+    from plant.sensors.harness import digitise
+
+    n, m = 2, 1
+    k = np.tile(K.chip_params(cfg), (n, 1))
+    raw = np.zeros((n, B.N_RAW), np.int64)
+    block = np.zeros(lanes.LW, dtype=np.int64)
+    sb, pb, fb = SL.sensor_lane_buffer(), lanes.lane_buffer(), fpl.board_buffer()
+    SL.load_chips(sb, k, block, m)
+    params, state = np.zeros((n, B.N_PARAMS), np.int64), np.zeros((n, B.N_STATE), np.int64)
+    down = np.zeros((n, B.DOWN_WORDS), np.int64)
+    fpl.load_board(fb, params, state, raw, down, block, m)
+    y = np.zeros((n, L.N_OUTPUTS))
+    load_outputs(pb, y, np.zeros((n, 1), np.uint64), block, m)
+    SL.digitise_lanes(sb, pb, fb, k, block, m, 0, y, raw)
+    fpl.store_board(fb, state, raw, down, block, m)
+    digitise(y[0], k[0], 0, raw[0].copy())
+
+
 STEPS: list[tuple[str, Callable]] = [
     ("plant", _plant),
     ("driver board + link", _fpga_value_level),
@@ -151,6 +180,7 @@ STEPS: list[tuple[str, Callable]] = [
     ("frame log signals", _log_signals),
     ("frame log byte planes", _log_planes),
     ("EtherCAT frame path", _esc_frames),
+    ("lanes' stages one by one", _lanes_one_by_one),
 ]
 
 

@@ -5,6 +5,7 @@ faults, sensor errors, another calibration's parameters, a speed ring just reset
 
 from __future__ import annotations
 
+import functools
 import re
 
 import numba
@@ -176,9 +177,21 @@ def test_board_in_lanes_is_the_scalar_tick_bit_for_bit(boards, seed, ticks):
     np.testing.assert_array_equal(raw, rraw)
 
 
-@cfunc(types.void(types.voidptr))
-def _rtl_stand_in(handle):  # noqa: ARG001 - the outputs stay what the buffer holds
-    pass
+@functools.cache
+def _rtl_stand_in() -> int:
+    """The address of a compiled call that leaves the exchange buffer's outputs as they are
+    (compiled on first use, not at import: numba cannot cache a ``cfunc``, and every test
+    worker collects this file)."""
+
+    @cfunc(types.void(types.voidptr))
+    def stand_in(handle):  # noqa: ARG001 - the outputs stay what the buffer holds
+        pass
+
+    _KEEP.append(stand_in)
+    return stand_in.address
+
+
+_KEEP: list[object] = []  # (the compiled stand-in lives as long as the tests)
 
 
 def _rtl_rows():
@@ -187,7 +200,7 @@ def _rtl_rows():
     c = np.array([_BASE[0], _BASE[0]])
     io = np.zeros(rtl_abi.IO_WORDS, dtype=np.int64)
     io[rtl_abi.IO_OUT + O_COUNT_A:rtl_abi.IO_OUT + O_COUNT_A + 3] = (100, 600, 1100)
-    c[1, B.C_RTL_TICK] = _rtl_stand_in.address
+    c[1, B.C_RTL_TICK] = _rtl_stand_in()
     c[1, B.C_RTL_IO] = io.ctypes.data
     s = np.zeros((2, B.N_STATE), dtype=np.int64)
     s[:, B.F_TICK] = 5

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
 import threading
 import time
 
@@ -84,3 +86,31 @@ def test_numba_announces_its_compiler_lock():
     finally:
         event.unregister("numba:compiler_lock", rec)
     assert seen and seen.count("start") == seen.count("end") and seen[0] == "start"
+
+
+def test_installed_before_numba_it_listens_once_numba_is_imported():
+    """The command line installs the handlers before numba is loaded (numba's import is most
+    of a start-up a command without kernels need not pay): the listener is registered when
+    numba's event module is first imported, and a signal during a compile is deferred."""
+    code = """
+import sys
+from hil.cli import interrupts
+interrupts.install()
+assert "numba" not in sys.modules, "install() imported numba"
+from numba.core import event
+from numba import njit
+hit = []
+real = interrupts._INSTALLED.on_start
+def on_start(ev):
+    real(ev)
+    hit.append(interrupts._INSTALLED.depth)
+interrupts._INSTALLED.on_start = on_start
+njit(lambda x: x + 1)(1)
+assert hit and hit[0] >= 1, hit
+assert interrupts._INSTALLED.depth == 0
+assert not any(isinstance(f, interrupts._WhenImported) for f in sys.meta_path)
+print("ok")
+"""
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=False)
+    assert out.returncode == 0 and out.stdout.strip() == "ok", out.stderr
