@@ -35,54 +35,45 @@ def test_every_room_with_kernels_sets_the_cache_folder_first():
     assert not missing
 
 
-def test_the_console_script_imports_neither_numpy_nor_numba_before_main():
-    """What ``eha-hil`` imports before main() runs (hil, hil.cli) is light, so that a signal
-    in the first second meets main's handlers (one line), not a traceback."""
+def _child(code: str, env: dict[str, str] | None = None) -> str:
+    """What a fresh Python process running ``code`` in the checkout prints."""
     import subprocess
     import sys
 
+    return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          check=True, cwd=ROOT, env=env).stdout.strip()
+
+
+def test_the_console_script_imports_neither_numpy_nor_numba_before_main():
+    """What ``eha-hil`` imports before main() runs (hil, hil.cli) is light, so that a signal
+    in the first second meets main's handlers (one line), not a traceback."""
     code = ("import sys, hil.cli; "
             "print(sorted(m for m in ('numpy', 'numba') if m in sys.modules))")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                         check=True, cwd=ROOT).stdout.strip()
-    assert out == "[]"
+    assert _child(code) == "[]"
 
 
 def test_the_command_line_and_the_configuration_import_no_numba():
     """numba's import is most of a command's start-up: the command line's root and the
     configuration (the presets, the layouts) leave it to the commands that run a kernel."""
-    import subprocess
-    import sys
-
     code = ("import sys, hil.cli.root, plant.config, firmware_model.fpga.layout; "
             "print('numba' in sys.modules)")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                         check=True, cwd=ROOT).stdout.strip()
-    assert out == "False"
+    assert _child(code) == "False"
 
 
 def test_a_child_process_keeps_the_same_cache_folder():
     """The folder reaches numba through NUMBA_CACHE_DIR, which child processes inherit: a
     child of the same sources finds the same folder, not one nested inside it."""
     import os
-    import subprocess
-    import sys
 
-    code = "import numba, hil.sim; print(numba.config.CACHE_DIR)"
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                         check=True, cwd=ROOT, env=dict(os.environ)).stdout.strip()
+    out = _child("import numba, hil.sim; print(numba.config.CACHE_DIR)", dict(os.environ))
     assert out == numba.config.CACHE_DIR
 
 
 def test_a_user_s_cache_folder_is_the_parent(tmp_path):
     import os
-    import subprocess
-    import sys
 
     env = {k: v for k, v in os.environ.items() if k != jit_cache._OURS}
     env["NUMBA_CACHE_DIR"] = str(tmp_path)
     code = "import hil.sim, numba; print(numba.config.CACHE_DIR)"
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                         check=True, cwd=ROOT, env=env).stdout.strip()
-    assert Path(out) == tmp_path / f"kernels-{jit_cache.fingerprint()}"
+    assert Path(_child(code, env)) == tmp_path / f"kernels-{jit_cache.fingerprint()}"
 
