@@ -21,7 +21,15 @@ residual, which costs no simulation), in three splits:
   covariance is a Bartlett sum over :data:`BIN_LAGS` bins; over frequency, unequal noise
   levels are what the sandwich is for;
 * **time segments**: :data:`N_SEGMENTS` consecutive stretches of the estimation part (a
-  parameter that drifts: a viscosity with the oil's temperature, air coming out of the oil);
+  parameter that drifts: a viscosity with the oil's temperature, air coming out of the oil).
+  This split is judged by a *trend*, not by homogeneity: a weighted straight line through
+  the segments' log-estimates against the segments' mid-times, its slope tested against its
+  interval (chi^2 on one degree of freedom) and its change over the estimation part held
+  against the material ratio. A record whose slow input gives each few-second segment a
+  different operating point (the free piston's multisine: one segment mostly stuck in the
+  seal's linear zone, the next mostly sliding) makes a consistent rig's dampers scatter
+  between segments beyond their intervals without any drift; homogeneity rejected such a
+  rig, a trend does not. A parameter that goes and comes back within the record is missed;
 * **channel groups** (piston fixed or on the conrod): the pressures and the strain (the
   forces) against the encoders. Each sees the parameters through a different path (the
   rotor's equation with the measured force in it, the hydraulics that make that force), and
@@ -35,7 +43,8 @@ to its whole-record value (:data:`PRIOR_SHARE` of its whole-record information),
 that does not pin a parameter leaves it there instead of making the system singular.
 
 A parameter is *inconsistent* when the parts disagree beyond their confidence intervals
-(the chi^2 homogeneity statistic over the parts, Holm-corrected over the parameters and the
+(the chi^2 homogeneity statistic over the parts, or the time split's trend statistic,
+Holm-corrected over the parameters and the
 splits, below :data:`ALPHA`) by a material amount (the furthest parts at least
 :data:`MATERIAL_RATIO` apart). The report names the parameter, the two parts furthest apart,
 their estimates with 95 % intervals and the ratio.
@@ -125,9 +134,12 @@ class ParameterSplit:
     dof: int
     p_value: float
     p_holm: float = 1.0
-    #: the two parts furthest apart (indices into ``parts``) and their ratio (>= 1)
+    #: the two parts furthest apart (indices into ``parts``, the lower first) and their ratio
+    #: (>= 1); for a trend the first and last segments and the line's change over the record
     far: tuple[int, int] = (0, 0)
     ratio: float = 1.0
+    #: a trend's relative change per second (log-units/s), None for a homogeneity test
+    slope_per_s: float | None = None
 
     @property
     def inconsistent(self) -> bool:
@@ -136,15 +148,23 @@ class ParameterSplit:
 
     def describe(self, symbol: str) -> str:
         a, b = (self.parts[i] for i in self.far)
+        if self.slope_per_s is not None:
+            return (f"{symbol} drifts {100 * self.slope_per_s:+.2g} %/s "
+                    f"({self.ratio:.2f}x over the record, p={self.p_holm:.2g}): "
+                    f"{b.value:.4g} [{b.ci_low:.4g}, {b.ci_high:.4g}] at {b.part} vs "
+                    f"{a.value:.4g} [{a.ci_low:.4g}, {a.ci_high:.4g}] at {a.part}")
         return (f"{symbol} {b.value:.4g} [{b.ci_low:.4g}, {b.ci_high:.4g}] at {b.part} vs "
                 f"{a.value:.4g} [{a.ci_low:.4g}, {a.ci_high:.4g}] at {a.part} "
                 f"({self.ratio:.2f}x, p={self.p_holm:.2g})")
 
     def as_dict(self) -> dict:
-        return {"parameter": self.name, "split": self.split, "statistic": self.statistic,
-                "dof": self.dof, "p_value": self.p_value, "p_holm": self.p_holm,
-                "ratio": self.ratio, "inconsistent": self.inconsistent,
-                "parts": [p.as_dict() for p in self.parts]}
+        out = {"parameter": self.name, "split": self.split, "statistic": self.statistic,
+               "dof": self.dof, "p_value": self.p_value, "p_holm": self.p_holm,
+               "ratio": self.ratio, "inconsistent": self.inconsistent,
+               "parts": [p.as_dict() for p in self.parts]}
+        if self.slope_per_s is not None:
+            out["slope_per_s"] = self.slope_per_s
+        return out
 
 
 @dataclass
@@ -226,6 +246,33 @@ def _homogeneity(name: str, split: str, x: np.ndarray, se: np.ndarray, labels: l
     hi = int(idx[np.argmax(x[ok])])
     return ParameterSplit(name, split, parts, q, dof, float(sps.chi2.sf(q, dof)),
                           far=(lo, hi), ratio=_exp(float(x[hi] - x[lo])))
+
+
+def _trend(name: str, x: np.ndarray, se: np.ndarray, times: np.ndarray, labels: list[str],
+           value: float, duration: float) -> ParameterSplit | None:
+    """Test that the segments' log-estimates ``x`` (standard errors ``se``, mid-times
+    ``times``) lie on a flat line: the weighted least-squares slope against its own
+    interval (chi^2 on 1 degree of freedom); the ratio is the line's change over
+    ``duration`` seconds. Scatter about the line (a segment's operating point) is not a
+    drift and does not count."""
+    ok = np.isfinite(x) & np.isfinite(se) & (se > 0)
+    if ok.sum() < 2:
+        return None
+    w = 1.0 / se[ok] ** 2
+    tc = times[ok] - float(np.sum(w * times[ok]) / np.sum(w))
+    sxx = float(np.sum(w * tc * tc))
+    if not sxx > 0:
+        return None
+    slope = float(np.sum(w * tc * x[ok]) / sxx)
+    q = slope * slope * sxx  # (slope / its standard error)^2
+    parts = [PartEstimate(lbl, value * _exp(xi), value * _exp(xi - Z95 * s),
+                          value * _exp(xi + Z95 * s))
+             for lbl, xi, s in zip(labels, x, se, strict=True)]
+    idx = np.flatnonzero(ok)
+    first, last = int(idx[0]), int(idx[-1])
+    far = (first, last) if slope >= 0 else (last, first)
+    return ParameterSplit(name, "time", parts, q, 1, float(sps.chi2.sf(q, 1)), far=far,
+                          ratio=_exp(abs(slope) * duration), slope_per_s=slope)
 
 
 def _exp(v: float) -> float:
@@ -316,6 +363,9 @@ def consistency(fit: FitResult, exp: Experiment, mask: np.ndarray,
     t = exp.data.t
     segments = [(slice(None), slice(a, b), f"{t[rows[a]]:.3g}-{t[rows[b - 1]]:.3g} s")
                 for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
+    mid_times = np.array([float(np.mean(t[rows[a:b]]))
+                          for a, b in zip(bounds[:-1], bounds[1:], strict=True)])
+    duration = float(t[rows[-1]] - t[rows[0]])
     groups = [([k for k, c in enumerate(exp.channels) if c not in SPEEDS], "the forces"),
               ([k for k, c in enumerate(exp.channels) if c in SPEEDS], "the encoders")]
     # with the piston free the forces are the few newtons the piston needs: they pin little,
@@ -332,9 +382,13 @@ def consistency(fit: FitResult, exp: Experiment, mask: np.ndarray,
             if split == "channels" and name not in CHANNEL_JUDGED:
                 continue
             i = col[name]
-            s = _homogeneity(name, split, np.array([f[0][i] for f in fits]),
-                             np.array([math.sqrt(max(f[1][i, i], 0.0)) for f in fits]),
-                             [lbl for _, _, lbl in parts], fit.value(name))
+            x = np.array([f[0][i] for f in fits])
+            se = np.array([math.sqrt(max(f[1][i, i], 0.0)) for f in fits])
+            labels = [lbl for _, _, lbl in parts]
+            if split == "time":
+                s = _trend(name, x, se, mid_times, labels, fit.value(name), duration)
+            else:
+                s = _homogeneity(name, split, x, se, labels, fit.value(name))
             if s is not None:
                 splits.append(s)
 
