@@ -316,6 +316,10 @@ def run_pair(topo, cfg, cycles: int, path: Path, level: str, model: str,  # noqa
             bs.run(n, demo_pc(), keep=1)
 
     def logged(n: int = cycles) -> None:
+        # a new file, as a user's run writes: rewriting the last run's file would have
+        # ext4 truncate it (~10 ms per 130 MB) and flush it at close (its "replace by
+        # truncate" heuristic, ~10 ms more), a cost of the bench's reuse of one path only
+        path.unlink(missing_ok=True)
         run_logged(topo, cfg, n, demo_pc(), path, level=level, model=model,
                    compression=compression)
 

@@ -132,3 +132,25 @@ def test_each_timed_run_collects_its_own_garbage_and_none_from_before() -> None:
         if was:
             gc.enable()
     assert run.cpu >= 0.0 and run.wall >= 0.0 and run.faults >= 0
+
+
+def test_each_logged_run_writes_a_new_file(tmp_path) -> None:  # noqa: ANN001
+    """The bench's logged runs write a new file each (as a user's run does), not the last
+    run's truncated: ext4 would charge the truncation and a flush at close to the logging."""
+    from hil.bench.log_parts import run_pair
+    from hil.fieldbus.topology import load_topology
+    from plant.config import load_config
+
+    path = tmp_path / "bench.mcap"
+    _bare, logged = run_pair(load_topology("bench_one_box"), load_config(None), 3, path,
+                             "mcu", "stack", "zstd")
+    logged()
+    first = path.stat()
+    keep = path.open("rb")  # the old inode stays readable while it is open
+    try:
+        logged()
+        again = path.stat()
+        assert again.st_ino != first.st_ino
+        assert len(keep.read()) == first.st_size  # the first run's file left whole
+    finally:
+        keep.close()
