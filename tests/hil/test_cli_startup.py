@@ -1,0 +1,74 @@
+"""The command line starts without the simulation: building the parser, any ``--help`` and
+an argument mistake import no numba (its kernels are the commands' to load), and the names
+the help lists without them (:mod:`hil.cli.names`) are their sources', word for word."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+from hil.cli import names
+
+#: Run in a fresh interpreter (this one has the kernels loaded by other tests): build the
+#: whole registry and each group alone, print every parser's help, make argument mistakes
+#: through the root; report each mistake's exit code and stderr, then what got imported.
+_PROBE = r"""
+import contextlib, io, json, sys
+from hil.cli.args import walk
+from hil.cli.root import GROUPS, build_parser, main
+
+helps = 0
+for word in [None] + [w for words, _ in GROUPS for w in words]:
+    for p in walk(build_parser(word)):
+        helps += bool(p.format_help())
+mistakes = {}
+for argv in (["bus", "run", "--bogus"], ["log", "info"], ["run", "f5", "--bogus"],
+             ["sweep", "f5", "--samples", "0"], ["identify-synth", "x.csv", "--profile", "no"],
+             ["serve", "--bogus"], ["bench", "bus", "--bogus"], ["log", "--help"]):
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+        try:
+            code = main(argv)
+        except SystemExit as exc:  # --help ends in argparse's exit
+            code = exc.code
+    mistakes[" ".join(argv)] = [code, err.getvalue()]
+heavy = sorted(m for m in ("numba", "llvmlite", "scipy") if m in sys.modules)
+print(json.dumps({"helps": helps, "mistakes": mistakes, "heavy": heavy}))
+"""
+
+
+def test_parser_help_and_mistakes_import_no_numba():
+    out = subprocess.run([sys.executable, "-c", _PROBE], capture_output=True, text=True,
+                         check=True, timeout=120)
+    probe = json.loads(out.stdout)
+    assert probe["helps"] > 50  # every command's parser was built and printed
+    assert probe["heavy"] == [], probe["heavy"]
+    for argv, (code, err) in probe["mistakes"].items():
+        if argv.endswith("--help"):
+            assert code == 0 and err == "", argv
+            continue
+        assert code == 2, (argv, code, err)
+        assert err.count("\n") == 1 and err.startswith("eha-hil "), (argv, err)
+
+
+def test_scenario_names_summaries_and_settings_are_the_registrys():
+    from hil.scenarios import SCENARIOS
+    from hil.scenarios import names as registered
+
+    registry = tuple((n, SCENARIOS[n].summary, tuple(k.name for k in SCENARIOS[n].knobs))
+                     for n in registered())  # registered() loads every scenario module
+    assert names.SCENARIOS == registry, (
+        "hil/cli/names.py SCENARIOS differs from hil.scenarios: list the scenarios there as "
+        "the registry has them")
+    assert names.scenario_names() == [n for n, _, _ in registry]
+
+
+def test_record_options_are_the_generators():
+    from hil.identify import rig, synth
+
+    assert names.RIG_TEMPERATURE_SHAPES == tuple(rig.TEMPERATURE_SHAPES)
+    assert names.RIG_INTERSAMPLE == rig.INTERSAMPLE
+    assert names.SYNTH_PROFILES == synth.PROFILES
+    assert names.rig_effects() == rig.RIG_EFFECTS
+    assert names.synth_effects() == synth.ALL_SYNTH_EFFECTS
