@@ -167,14 +167,10 @@ def _size_check(path: str, max_rows: int, progress) -> str:  # noqa: ANN001
 
 def configure_synth(parser: argparse.ArgumentParser) -> None:
     """Arguments of ``eha-hil identify-synth``."""
-    # the names only: the generators themselves load the simulation (hil.cli.names)
-    from hil.cli.names import (
-        RIG_INTERSAMPLE,
-        RIG_TEMPERATURE_SHAPES,
-        SYNTH_PROFILES,
-        rig_effects,
-        synth_effects,
-    )
+    # the names only, from light modules: the generators themselves load the simulation
+    from hil.identify.record_options import INTERSAMPLE, SYNTH_PROFILES, TEMPERATURE_SHAPES
+    from hil.identify.rig_effects import RIG_EFFECTS
+    from hil.identify.synth_effects import ALL_SYNTH_EFFECTS
 
     parser.add_argument("out", metavar="OUT.csv", type=output_file((".csv",), text=True),
                         help="CSV file to write (an existing file only if it is text)")
@@ -187,7 +183,7 @@ def configure_synth(parser: argparse.ArgumentParser) -> None:
     # validated in run_synth: the two generators know different effects
     parser.add_argument("--effect", action="append", default=[], metavar="NAME",
                         help="effect to switch on (repeatable); none gives the null dataset. "
-                        f"plant: {', '.join(synth_effects())}; rig: {', '.join(rig_effects())}")
+                        f"plant: {', '.join(ALL_SYNTH_EFFECTS)}; rig: {', '.join(RIG_EFFECTS)}")
     parser.add_argument("--magnitude", action="append", default=[], metavar="EFFECT.KEY=V",
                         help="override a magnitude, e.g. pump_coulomb_friction.force_n=60")
     parser.add_argument("--seconds", type=float_range(1.0, 600.0, open_lo=True, unit="s"),
@@ -207,14 +203,14 @@ def configure_synth(parser: argparse.ArgumentParser) -> None:
                         "strong 0.7-2 kHz band over a 0.5 Hz position sweep, makes k_s(x) "
                         "identifiable); slide (piston free: triangle sweep at constant "
                         "speed, quick reversals, avoids the seal's stick-slip)")
-    parser.add_argument("--temperature", default=None, choices=RIG_TEMPERATURE_SHAPES,
+    parser.add_argument("--temperature", default=None, choices=tuple(TEMPERATURE_SHAPES),
                         help="rig: oil temperature shape (default constant, or ramp_level "
                         "when an effect needs a moving temperature)")
     parser.add_argument("--current-noise-lsb", type=float_range(0.0, 100.0, unit="LSB"),
                         default=None, metavar="X",
                         help="rig: noise of the logged current, LSB of the 12-bit +-40 A "
                         "converter (default 1)")
-    parser.add_argument("--intersample", default=None, choices=RIG_INTERSAMPLE,
+    parser.add_argument("--intersample", default=None, choices=INTERSAMPLE,
                         help="rig: continuous current (default) or the logged value held")
     parser.add_argument("--header-intersample", action="store_true",
                         help="rig: write '# intersample: ...' into the CSV header")

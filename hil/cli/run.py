@@ -182,18 +182,18 @@ def cmd_run(args: argparse.Namespace, ctx: Context) -> Outcome:
 
 def add_parser(sub) -> None:  # noqa: ANN001 - argparse's sub-parsers
     """Register ``run``."""
-    from hil.cli.names import SCENARIOS  # not hil.scenarios: it loads the simulation
+    # the catalogue, not the scenarios themselves: they load the simulation
+    from hil.scenarios.catalog import CATALOG
 
-    scen = sorted(SCENARIOS)
+    scen = sorted(CATALOG)
     p = sub.add_parser("run", parents=[common()],
                        help="run a scenario on the simulated stack (thesis, "
-                       + ", ".join(n for n, _, _ in scen) + "; exit 1 if a requirement is "
-                       "missed)",
+                       + ", ".join(scen) + "; exit 1 if a requirement is missed)",
                        epilog="Scenarios: thesis: the thesis experiments (F1m, F3-F9); "
-                       + "; ".join(f"{n}: {summary}" for n, summary, _ in scen)
+                       + "; ".join(f"{n}: {CATALOG[n].summary}" for n in scen)
                        + ". Scenario settings (--set scenario.NAME=VALUE; sweepable): "
-                       + "; ".join(f"{n}: " + ", ".join(knobs) for n, _, knobs in scen
-                                   if knobs)
+                       + "; ".join(f"{n}: " + ", ".join(k.name for k in CATALOG[n].knobs)
+                                   for n in scen if CATALOG[n].knobs)
                        + " (docs/scenarios.md).")
     p.add_argument("scenario", metavar="SCENARIO",
                    help="scenario name, or 'thesis' for the thesis experiments (F1m, F3-F9); "

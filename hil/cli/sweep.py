@@ -211,7 +211,8 @@ def cmd_bench_sweep(args: argparse.Namespace, ctx: Context) -> Outcome:
 
 def add_parsers(sub: Any, bsub: Any) -> None:
     """Register ``sweep`` and ``bench sweep``."""
-    from hil.cli.names import scenario_names  # not hil.scenarios: it loads the simulation
+    # the catalogue, not the scenarios themselves: they load the simulation
+    from hil.scenarios.catalog import CATALOG
 
     p = sub.add_parser(
         "sweep", parents=[common(plot=False)],
@@ -219,7 +220,7 @@ def add_parsers(sub: Any, bsub: Any) -> None:
         "plots; local process pool or a Dask cluster",
         epilog="Example: eha-hil sweep f7 --tolerance effects.seal_friction.coulomb_n,"
         "effects.seal_friction.static_n=30% --tolerance hydraulics.jp_kg=10% --samples 50 "
-        "--out f7.parquet --plot-dir f7-plots. Scenarios: " + ", ".join(scenario_names())
+        "--out f7.parquet --plot-dir f7-plots. Scenarios: " + ", ".join(sorted(CATALOG))
         + ". Exit codes: 0 every point ran; 1 a point failed with an error or a yield is "
         "below --min-yield; 2 a mistake; 130 interrupted (resume with --resume).")
     p.add_argument("scenario", metavar="SCENARIO", help="a scenario of eha-hil run; the "

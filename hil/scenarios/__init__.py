@@ -93,14 +93,17 @@ class Scenario:
 SCENARIOS: dict[str, Scenario] = {}
 
 
-def register(name: str, summary: str, knobs: tuple[Knob, ...] = (),
-             validate: Callable[[dict[str, Any]], None] | None = None
+def register(name: str, validate: Callable[[dict[str, Any]], None] | None = None
              ) -> Callable[[Callable[..., ScenarioResult]], Callable[..., ScenarioResult]]:
-    """Decorator adding a scenario runner to :data:`SCENARIOS` (with its own settings,
-    ``knobs``, and their joint check ``validate``: :class:`Scenario`)."""
+    """Decorator adding a scenario runner to :data:`SCENARIOS` under ``name``, a name of
+    :data:`hil.scenarios.catalog.CATALOG` (its summary and settings come from there), with
+    the settings' joint check ``validate`` (:class:`Scenario`)."""
+    from hil.scenarios.catalog import CATALOG
+
+    entry = CATALOG[name]  # a KeyError here: list the scenario in hil/scenarios/catalog.py
 
     def deco(fn: Callable[..., ScenarioResult]) -> Callable[..., ScenarioResult]:
-        SCENARIOS[name] = Scenario(name, summary, fn, tuple(knobs), validate)
+        SCENARIOS[name] = Scenario(name, entry.summary, fn, entry.knobs, validate)
         return fn
 
     return deco

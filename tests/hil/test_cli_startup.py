@@ -1,6 +1,6 @@
 """The command line starts without the simulation: building the parser, any ``--help`` and
-an argument mistake import no numba (its kernels are the commands' to load), and the names
-the help lists without them (:mod:`hil.cli.names`) are their sources', word for word."""
+an argument mistake import no numba (its kernels are the commands' to load); the scenarios
+the help lists come from the catalogue their runners register under."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import json
 import subprocess
 import sys
 
-from hil.cli import names
+import pytest
 
 #: Run in a fresh interpreter (this one has the kernels loaded by other tests): build the
 #: whole registry and each group alone, print every parser's help, make argument mistakes
@@ -52,23 +52,20 @@ def test_parser_help_and_mistakes_import_no_numba():
         assert err.count("\n") == 1 and err.startswith("eha-hil "), (argv, err)
 
 
-def test_scenario_names_summaries_and_settings_are_the_registrys():
+def test_every_listed_scenario_runs_and_every_runner_is_listed():
+    """The help lists the catalogue (hil.scenarios.catalog); the runners register under its
+    names (hil.scenarios.register takes the summary and settings from it)."""
     from hil.scenarios import SCENARIOS
     from hil.scenarios import names as registered
+    from hil.scenarios.catalog import CATALOG
 
-    registry = tuple((n, SCENARIOS[n].summary, tuple(k.name for k in SCENARIOS[n].knobs))
-                     for n in registered())  # registered() loads every scenario module
-    assert names.SCENARIOS == registry, (
-        "hil/cli/names.py SCENARIOS differs from hil.scenarios: list the scenarios there as "
-        "the registry has them")
-    assert names.scenario_names() == [n for n, _, _ in registry]
+    assert registered() == sorted(CATALOG)  # registered() loads every scenario module
+    assert all(SCENARIOS[n].summary == e.summary and SCENARIOS[n].knobs == e.knobs
+               for n, e in CATALOG.items())
 
 
-def test_record_options_are_the_generators():
-    from hil.identify import rig, synth
+def test_a_runner_under_a_name_not_listed_is_refused():
+    from hil.scenarios import register
 
-    assert names.RIG_TEMPERATURE_SHAPES == tuple(rig.TEMPERATURE_SHAPES)
-    assert names.RIG_INTERSAMPLE == rig.INTERSAMPLE
-    assert names.SYNTH_PROFILES == synth.PROFILES
-    assert names.rig_effects() == rig.RIG_EFFECTS
-    assert names.synth_effects() == synth.ALL_SYNTH_EFFECTS
+    with pytest.raises(KeyError, match="f99"):
+        register("f99")
