@@ -46,7 +46,7 @@ def _resolve_scenario(args: argparse.Namespace) -> str:
     if args.scenario == "thesis":
         raise _usage("one scenario at a time (f3 .. f8, not 'thesis')")
     try:
-        scenarios.get(args.scenario)
+        scenarios.check_name(args.scenario)
     except KeyError as exc:
         raise _usage(str(exc.args[0])) from None
     if args.config is None and args.scenario in scenarios.ON_THESIS_PRESET:
@@ -69,12 +69,6 @@ def _reporter(scenario: str, enabled: bool) -> Callable[[dict | None, Any], None
 
 
 def cmd_sweep(args: argparse.Namespace, ctx: Context) -> Outcome:
-    from hil.sweep import plots, requirements, summary, table
-    from hil.sweep.backends import BackendError, make_backend
-    from hil.sweep.engine import run_sweep
-    from hil.sweep.journal import Journal, JournalError, journal_path, readable
-    from plant.config import load_config
-
     scenario = _resolve_scenario(args)
     if args.resume and not args.out:
         raise _usage("--resume: needs --out FILE (the journal lives beside it)")
@@ -82,8 +76,14 @@ def cmd_sweep(args: argparse.Namespace, ctx: Context) -> Outcome:
         raise _usage(f"--workers: the cluster at {args.dask} has its own workers")
     if not (args.param or args.tolerance or args.seeds):
         raise _usage("nothing to vary; give --param, --tolerance or --seeds")
+    # after the checks above: the sweep's modules load pandas (~1 s of CPU)
     from hil import scenarios
     from hil.scenarios.knobs import split_sets
+    from hil.sweep import plots, requirements, summary, table
+    from hil.sweep.backends import BackendError, make_backend
+    from hil.sweep.engine import run_sweep
+    from hil.sweep.journal import Journal, JournalError, journal_path, readable
+    from plant.config import load_config
 
     scen = scenarios.get(scenario)
     config_sets, fixed_knobs = split_sets(args.set or ())

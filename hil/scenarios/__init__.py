@@ -110,13 +110,21 @@ def register(name: str, validate: Callable[[dict[str, Any]], None] | None = None
 
 
 def get(name: str) -> Scenario:
-    """A scenario by name; KeyError with the list of known names."""
+    """A scenario by name; KeyError with the list of known names (:func:`check_name`)."""
+    check_name(name)
     _load_all()
-    try:
-        return SCENARIOS[name]
-    except KeyError:
-        raise KeyError(f"unknown scenario {name!r} (known: {', '.join(sorted(SCENARIOS))})"
-                       ) from None
+    return SCENARIOS[name]
+
+
+def check_name(name: str) -> None:
+    """KeyError with the list of known names unless ``name`` is a scenario's: one of the
+    catalogue (its module not loaded yet: that loads the simulation) or one put into
+    :data:`SCENARIOS` directly."""
+    from hil.scenarios.catalog import CATALOG
+
+    if name not in CATALOG and name not in SCENARIOS:
+        known = ", ".join(sorted({*CATALOG, *SCENARIOS}))
+        raise KeyError(f"unknown scenario {name!r} (known: {known})")
 
 
 def names() -> list[str]:
@@ -154,4 +162,4 @@ def _load_all() -> None:
 
 
 __all__ = ["MAIN", "ON_THESIS_PRESET", "THESIS", "Metric", "SCENARIOS", "Scenario",
-           "ScenarioResult", "get", "names", "register"]
+           "ScenarioResult", "check_name", "get", "names", "register"]

@@ -11,8 +11,9 @@ import sys
 import pytest
 
 #: Run in a fresh interpreter (this one has the kernels loaded by other tests): build the
-#: whole registry and each group alone, print every parser's help, make argument mistakes
-#: through the root; report each mistake's exit code and stderr, then what got imported.
+#: whole registry and each group alone, print every parser's help, make mistakes through
+#: the root (bad options, an unknown scenario, a sweep of nothing); report each one's exit
+#: code and stderr, then what got imported.
 _PROBE = r"""
 import contextlib, io, json, sys
 from hil.cli.args import walk
@@ -25,7 +26,8 @@ for word in [None] + [w for words, _ in GROUPS for w in words]:
 mistakes = {}
 for argv in (["bus", "run", "--bogus"], ["log", "info"], ["run", "f5", "--bogus"],
              ["sweep", "f5", "--samples", "0"], ["identify-synth", "x.csv", "--profile", "no"],
-             ["serve", "--bogus"], ["bench", "bus", "--bogus"], ["log", "--help"]):
+             ["serve", "--bogus"], ["bench", "bus", "--bogus"], ["log", "--help"],
+             ["run", "nosuch"], ["sweep", "nosuch"], ["sweep", "f5"]):
     err = io.StringIO()
     with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
         try:
@@ -33,7 +35,7 @@ for argv in (["bus", "run", "--bogus"], ["log", "info"], ["run", "f5", "--bogus"
         except SystemExit as exc:  # --help ends in argparse's exit
             code = exc.code
     mistakes[" ".join(argv)] = [code, err.getvalue()]
-heavy = sorted(m for m in ("numba", "llvmlite", "scipy") if m in sys.modules)
+heavy = sorted(m for m in ("numba", "llvmlite", "scipy", "pandas") if m in sys.modules)
 print(json.dumps({"helps": helps, "mistakes": mistakes, "heavy": heavy}))
 """
 
