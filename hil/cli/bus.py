@@ -6,6 +6,7 @@ import argparse
 import json
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from hil.cli import progress as cli_progress
 from hil.cli.args import common, float_range, input_file, int_range, output_file
@@ -18,9 +19,9 @@ from hil.cli.contract import (
     UsageError,
     command,
 )
-from hil.fieldbus.master import Master
-from hil.output.tables import table
-from hil.sim.pc import demo_pc
+
+if TYPE_CHECKING:  # the simulation (numba) is imported by the commands, not the parser
+    from hil.fieldbus.master import Master
 
 #: Cycles between two progress updates of ``bus run`` (a tenth of a simulated second).
 PROGRESS_CYCLES = 100
@@ -205,6 +206,9 @@ def _live_view(address: str | None):
 
 
 def cmd_bus_run(args: argparse.Namespace, ctx: Context) -> Outcome:
+    from hil.output.tables import table
+    from hil.sim.pc import demo_pc
+
     cfg = ctx.config()
     topo = _topology(args.topology)
     cycles = int(round(args.seconds * 1000))
@@ -375,6 +379,7 @@ def cmd_bench_bus(args: argparse.Namespace, ctx: Context) -> Outcome:
 
         from hil.replay.record import run_logged
         from hil.replay.replay import replay_mcu
+        from hil.sim.pc import demo_pc
 
         with tempfile.TemporaryDirectory() as d:
             log = Path(d) / "bench.mcap"

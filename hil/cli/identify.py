@@ -167,8 +167,10 @@ def _size_check(path: str, max_rows: int, progress) -> str:  # noqa: ANN001
 
 def configure_synth(parser: argparse.ArgumentParser) -> None:
     """Arguments of ``eha-hil identify-synth``."""
-    from hil.identify.rig import INTERSAMPLE, RIG_EFFECTS, TEMPERATURE_SHAPES
-    from hil.identify.synth import ALL_SYNTH_EFFECTS, PROFILES
+    # the names only, from light modules: the generators themselves load the simulation
+    from hil.identify.record_options import INTERSAMPLE, SYNTH_PROFILES, TEMPERATURE_SHAPES
+    from hil.identify.rig_effects import RIG_EFFECTS
+    from hil.identify.synth_effects import ALL_SYNTH_EFFECTS
 
     parser.add_argument("out", metavar="OUT.csv", type=output_file((".csv",), text=True),
                         help="CSV file to write (an existing file only if it is text)")
@@ -196,7 +198,7 @@ def configure_synth(parser: argparse.ArgumentParser) -> None:
                         "parameters)")
     parser.add_argument("--set", action="append", metavar="SECTION.KEY=VALUE",
                         help="override one configuration value (repeatable)")
-    parser.add_argument("--profile", default="multisine", choices=PROFILES,
+    parser.add_argument("--profile", default="multisine", choices=SYNTH_PROFILES,
                         help="excitation: multisine (default); resonance (piston free: "
                         "strong 0.7-2 kHz band over a 0.5 Hz position sweep, makes k_s(x) "
                         "identifiable); slide (piston free: triangle sweep at constant "

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from hil.cli.contract import (
     EXIT_FAILED,
@@ -21,8 +22,9 @@ from hil.cli.contract import (
     command,
     standalone,
 )
-from hil.framelog.export import export_csv, export_parquet, summary_text
-from hil.framelog.reader import FrameLogError, FrameLogReader, LogInfo
+
+if TYPE_CHECKING:  # hil.framelog loads its compiled kernels (numba): imported by the commands
+    from hil.framelog.reader import LogInfo
 
 
 def configure_log(parser: argparse.ArgumentParser) -> None:
@@ -76,6 +78,7 @@ def _truncated(info: LogInfo, text: str | None, data: object = None) -> Outcome:
 def _traffic_info(args: argparse.Namespace) -> Outcome:
     """A capture or CAN log (hil.fieldbus.traffic): 1 if it is cut or damaged."""
     from hil.fieldbus.traffic import TrafficError, read_traffic, summary, summary_text
+    from hil.framelog.reader import FrameLogError
 
     try:
         traffic = read_traffic(args.log)
@@ -92,6 +95,8 @@ def _traffic_info(args: argparse.Namespace) -> Outcome:
 
 def _info(args: argparse.Namespace) -> Outcome:
     from hil.fieldbus.traffic import is_traffic_file
+    from hil.framelog.export import summary_text
+    from hil.framelog.reader import FrameLogReader
 
     if is_traffic_file(args.log):
         return _traffic_info(args)
@@ -100,6 +105,9 @@ def _info(args: argparse.Namespace) -> Outcome:
 
 
 def _export(args: argparse.Namespace) -> Outcome:
+    from hil.framelog.export import export_csv, export_parquet
+    from hil.framelog.reader import FrameLogError, FrameLogReader
+
     out = Path(args.out)  # checked by its argument type (directory, writable, not the LOG)
     fmt = args.format
     if fmt == "identify":
@@ -152,6 +160,8 @@ def _written(out: str, fn) -> bool:  # noqa: ANN001 - fn(path) writes the export
 def run_log(args: argparse.Namespace, ctx: Context) -> Outcome:
     """Run ``args.log_command``: exit 0 on success, 1 for a truncated log, 2 for a file
     that cannot be read or a bad option; each non-zero code with one line on stderr."""
+    from hil.framelog.reader import FrameLogError
+
     try:
         if args.log_command == "info":
             return _info(args)

@@ -182,18 +182,18 @@ def cmd_run(args: argparse.Namespace, ctx: Context) -> Outcome:
 
 def add_parser(sub) -> None:  # noqa: ANN001 - argparse's sub-parsers
     """Register ``run``."""
-    from hil.scenarios import SCENARIOS, names
+    # the catalogue, not the scenarios themselves: they load the simulation
+    from hil.scenarios.catalog import CATALOG
 
-    scen = names()
+    scen = sorted(CATALOG)
     p = sub.add_parser("run", parents=[common()],
                        help="run a scenario on the simulated stack (thesis, "
                        + ", ".join(scen) + "; exit 1 if a requirement is missed)",
                        epilog="Scenarios: thesis: the thesis experiments (F1m, F3-F9); "
-                       + "; ".join(
-                           f"{n}: {SCENARIOS[n].summary}" for n in scen)
+                       + "; ".join(f"{n}: {CATALOG[n].summary}" for n in scen)
                        + ". Scenario settings (--set scenario.NAME=VALUE; sweepable): "
-                       + "; ".join(f"{n}: " + ", ".join(k.name for k in SCENARIOS[n].knobs)
-                                   for n in scen if SCENARIOS[n].knobs)
+                       + "; ".join(f"{n}: " + ", ".join(k.name for k in CATALOG[n].knobs)
+                                   for n in scen if CATALOG[n].knobs)
                        + " (docs/scenarios.md).")
     p.add_argument("scenario", metavar="SCENARIO",
                    help="scenario name, or 'thesis' for the thesis experiments (F1m, F3-F9); "

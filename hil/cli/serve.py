@@ -31,16 +31,19 @@ import sys
 import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
+from typing import TYPE_CHECKING
 
 from hil.cli.args import common, float_range, int_range, output_file
 from hil.cli.contract import EXIT_FAILED, EXIT_OK, Context, Outcome, UsageError, command
 from hil.fieldbus import reply_times, wire
-from hil.fieldbus.box_clock import BoxClock, ClockedBoxes
-from hil.fieldbus.chain import Chain
 from hil.fieldbus.reply_times import ReplyTimes
 from hil.sim.cpu_account import run_delay_ns
 from hil.transports import TransportError
 from protocols import ethercat as ec
+
+if TYPE_CHECKING:  # the boxes' kernels (numba) are imported by the command, not the parser
+    from hil.fieldbus.box_clock import ClockedBoxes
+    from hil.fieldbus.chain import Chain
 
 #: One fieldbus cycle of wall time [s].
 PERIOD_S = 1e-3
@@ -198,6 +201,8 @@ class PacedServer:
         run (the kernels compiled or loaded), once: before the ready line, while a signal
         still ends the command (a cold cache compiles for minutes on a loaded machine)."""
         if self._boxes is None:
+            from hil.fieldbus.box_clock import ClockedBoxes
+
             self._boxes = ClockedBoxes(self.chain)
             for _ in range(WARMUP_CYCLES):
                 self._boxes.cycle()
@@ -215,6 +220,8 @@ class PacedServer:
         """Serve frames in this thread while the boxes run on their own clock in another
         (:class:`~hil.fieldbus.box_clock.BoxClock`); ``box_setup`` / ``box_behind``: the
         box thread's real-time hooks (:class:`hil.sim.realtime.RealtimePlan`)."""
+        from hil.fieldbus.box_clock import BoxClock
+
         st, clock = self.stats, self.clock
         boxes = self.prepare()
         box_clock = BoxClock(boxes.cycle, box_setup, box_behind)
@@ -438,6 +445,7 @@ _LOG_CHECK = {"log": _readable_log}
 def _serve(args: argparse.Namespace, cfg, topo, capture: str | None,
            log_path: str | None = None) -> Outcome:
     from hil.fieldbus.capture import CaptureError, CaptureWriter
+    from hil.fieldbus.chain import Chain
     from hil.sim.cpu_account import steal_during, steal_s
     from hil.sim.realtime import RealtimePlan
     from hil.transports import backend

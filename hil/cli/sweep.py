@@ -46,7 +46,7 @@ def _resolve_scenario(args: argparse.Namespace) -> str:
     if args.scenario == "thesis":
         raise _usage("one scenario at a time (f3 .. f8, not 'thesis')")
     try:
-        scenarios.get(args.scenario)
+        scenarios.check_name(args.scenario)
     except KeyError as exc:
         raise _usage(str(exc.args[0])) from None
     if args.config is None and args.scenario in scenarios.ON_THESIS_PRESET:
@@ -69,12 +69,6 @@ def _reporter(scenario: str, enabled: bool) -> Callable[[dict | None, Any], None
 
 
 def cmd_sweep(args: argparse.Namespace, ctx: Context) -> Outcome:
-    from hil.sweep import plots, requirements, summary, table
-    from hil.sweep.backends import BackendError, make_backend
-    from hil.sweep.engine import run_sweep
-    from hil.sweep.journal import Journal, JournalError, journal_path, readable
-    from plant.config import load_config
-
     scenario = _resolve_scenario(args)
     if args.resume and not args.out:
         raise _usage("--resume: needs --out FILE (the journal lives beside it)")
@@ -82,8 +76,14 @@ def cmd_sweep(args: argparse.Namespace, ctx: Context) -> Outcome:
         raise _usage(f"--workers: the cluster at {args.dask} has its own workers")
     if not (args.param or args.tolerance or args.seeds):
         raise _usage("nothing to vary; give --param, --tolerance or --seeds")
+    # after the checks above: the sweep's modules load pandas (~1 s of CPU)
     from hil import scenarios
     from hil.scenarios.knobs import split_sets
+    from hil.sweep import plots, requirements, summary, table
+    from hil.sweep.backends import BackendError, make_backend
+    from hil.sweep.engine import run_sweep
+    from hil.sweep.journal import Journal, JournalError, journal_path, readable
+    from plant.config import load_config
 
     scen = scenarios.get(scenario)
     config_sets, fixed_knobs = split_sets(args.set or ())
@@ -211,7 +211,8 @@ def cmd_bench_sweep(args: argparse.Namespace, ctx: Context) -> Outcome:
 
 def add_parsers(sub: Any, bsub: Any) -> None:
     """Register ``sweep`` and ``bench sweep``."""
-    from hil.scenarios import names
+    # the catalogue, not the scenarios themselves: they load the simulation
+    from hil.scenarios.catalog import CATALOG
 
     p = sub.add_parser(
         "sweep", parents=[common(plot=False)],
@@ -219,7 +220,7 @@ def add_parsers(sub: Any, bsub: Any) -> None:
         "plots; local process pool or a Dask cluster",
         epilog="Example: eha-hil sweep f7 --tolerance effects.seal_friction.coulomb_n,"
         "effects.seal_friction.static_n=30% --tolerance hydraulics.jp_kg=10% --samples 50 "
-        "--out f7.parquet --plot-dir f7-plots. Scenarios: " + ", ".join(names())
+        "--out f7.parquet --plot-dir f7-plots. Scenarios: " + ", ".join(sorted(CATALOG))
         + ". Exit codes: 0 every point ran; 1 a point failed with an error or a yield is "
         "below --min-yield; 2 a mistake; 130 interrupted (resume with --resume).")
     p.add_argument("scenario", metavar="SCENARIO", help="a scenario of eha-hil run; the "

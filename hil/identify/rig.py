@@ -55,8 +55,12 @@ import numpy as np
 from numba import njit
 
 from hil.identify.csvdata import LOAD_CASES, MeasuredData
+from hil.identify.record_options import INTERSAMPLE, RIG_PROFILES, TEMPERATURE_SHAPES
 from hil.identify.rig_effects import (
+    LIBRARY_EFFECTS,
+    OUTSIDE_EFFECTS,
     POSITIVE_KEYS,
+    RIG_EFFECTS,
     RIG_REGISTRY,
     KernelSetup,
     RigRecord,
@@ -119,13 +123,6 @@ from plant.config import Config, load_config
 # Defaults
 # --------------------------------------------------------------------------------------
 
-#: Effects of the identification library, as the rig implements them
-#: (:mod:`hil.identify.rig_effects`, one class per effect).
-LIBRARY_EFFECTS: tuple[str, ...] = tuple(n for n, e in RIG_REGISTRY.items() if e.library)
-#: Effects outside the library (for "unexplained" tests).
-OUTSIDE_EFFECTS: tuple[str, ...] = tuple(n for n, e in RIG_REGISTRY.items() if not e.library)
-RIG_EFFECTS: tuple[str, ...] = LIBRARY_EFFECTS + OUTSIDE_EFFECTS
-
 #: Realistic default magnitudes. Pulsation: further orders by suffix (``order_2``,
 #: ``amplitude_2``, ``phase_rad_2``, ``torque_n_2``, ``torque_phase_rad_2``; order 0 = off).
 #: Friction regularisation and Stribeck velocities differ from the fit's defaults on purpose
@@ -154,19 +151,11 @@ SENSORS: dict[str, float] = {
     "temperature_lsb_c": 0.0625,
 }
 
-#: Oil temperature shapes, degC, over a record of length R (s).
-TEMPERATURE_SHAPES: dict[str, str] = {
-    "constant": "25 degC (the preset's reference)",
-    "ramp": "15 -> 25 degC linearly",
-    "ramp_level": "15 + 7 (1 - exp(-3 t / R)): heats, then levels off near 22 degC",
-    "steps": "15 degC, then +2.5 degC at R/4, R/2, 3R/4 (first-order, time constant R/60)",
-    "oscillation": "20 + 3 sin(4 pi t / R): period R/2",
-}
+#: The kernel's number of each oil temperature shape. The shapes (:data:`TEMPERATURE_SHAPES`),
+#: the excitation profiles and :data:`INTERSAMPLE` are defined in
+#: :mod:`hil.identify.record_options`, which the command line lists without the kernels.
 _SHAPE_ID = {name: i for i, name in enumerate(TEMPERATURE_SHAPES)}
-
-#: Excitation profiles.
-PROFILES: tuple[str, ...] = ("multisine", "slide", "resonance")
-INTERSAMPLE: tuple[str, ...] = ("continuous", "zoh")
+PROFILES = RIG_PROFILES
 
 #: Position loop of the free piston (A per m of error, per profile) and the current-loop
 #: bandwidth (Hz). Under the default multisine the slow lines push the piston by up to

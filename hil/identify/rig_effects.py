@@ -328,5 +328,12 @@ RIG_REGISTRY: dict[str, RigEffect] = {e.name: e for e in (
     ViscosityTemperature(), StrainThermalDrift(), InputDelay(), SensorSaturation(),
     HoseViscoelastic(), MainsHum(), Backlash())}
 
-__all__ = ["KernelSetup", "POSITIVE_KEYS", "RIG_REGISTRY", "RigEffect", "RigRecord",
-           "ks_of_x", "pulsation_orders"]
+#: Effects of the identification library, as the rig implements them.
+LIBRARY_EFFECTS: tuple[str, ...] = tuple(n for n, e in RIG_REGISTRY.items() if e.library)
+#: Effects outside the library (for "unexplained" tests).
+OUTSIDE_EFFECTS: tuple[str, ...] = tuple(n for n, e in RIG_REGISTRY.items() if not e.library)
+RIG_EFFECTS: tuple[str, ...] = LIBRARY_EFFECTS + OUTSIDE_EFFECTS
+
+__all__ = ["LIBRARY_EFFECTS", "OUTSIDE_EFFECTS", "RIG_EFFECTS", "KernelSetup",
+           "POSITIVE_KEYS", "RIG_REGISTRY", "RigEffect", "RigRecord", "ks_of_x",
+           "pulsation_orders"]

@@ -193,12 +193,25 @@ class CaseResult:
     #: :func:`report_digest` of the identification's report ("" when refused): two runs of
     #: a case with the same code and seed give the same, wherever the case ran
     digest: str = ""
+    #: the report's reason for an ``unexplained`` verdict (the channel, the structure left);
+    #: "" when the verdict is ``explained`` or the record was refused
+    unexplained_detail: str = ""
+
+    @property
+    def verdict(self) -> str:
+        """``refused``, ``unexplained`` or ``explained``: the table's verdict column."""
+        return ("refused" if self.refused else
+                "unexplained" if self.unexplained else "explained")
 
     def as_dict(self) -> dict[str, Any]:
+        """The ``--json`` / ``--rows`` row: every column of the table, and what the table
+        leaves out (the report's reason for ``unexplained``, parameter errors, digest)."""
         return {"case": self.case.label, "load": self.case.load,
                 "effects": list(self.case.effects), "profile": self.case.profile,
                 "seed": self.seed, "right": self.right, "why": self.why,
-                "found": self.found, "unexplained": self.unexplained,
+                "found": self.found, "verdict": self.verdict,
+                "unexplained": self.unexplained,
+                "unexplained_detail": self.unexplained_detail,
                 "refused": self.refused,
                 "magnitudes": [{"what": w, "truth": t, "found": f}
                                for w, t, f in self.magnitudes],
@@ -305,7 +318,8 @@ def identify_and_judge(case: Case, seed: int, rig: Any, cfg: Any, t0: float,
     return CaseResult(case, seed, right, why, list(case.effects), labels, rep.unexplained,
                       magnitudes=mags, wall_s=time.perf_counter() - t0,
                       cpu_s=time.process_time() - c0, param_error=param_error,
-                      digest=report_digest(rep))
+                      digest=report_digest(rep),
+                      unexplained_detail=rep.unexplained_detail if rep.unexplained else "")
 
 
 def report_text(rep: Any) -> str:
@@ -387,10 +401,8 @@ def markdown(results: Sequence[CaseResult]) -> str:
     for r in results:
         mags = "; ".join(_fmt_mag(*m) for m in r.magnitudes) or "-"
         found = ", ".join(r.found) or "none"
-        verdict = ("refused" if r.refused else
-                   "unexplained" if r.unexplained else "explained")
         ok = "yes" if r.right else f"**no**: {r.why}"
-        lines.append(f"| {r.case.label} | {r.seed} | {mags} | {found} | {verdict} | {ok} "
+        lines.append(f"| {r.case.label} | {r.seed} | {mags} | {found} | {r.verdict} | {ok} "
                      f"| {r.cpu_s:.0f} |")
     n_right = sum(r.right for r in results)
     cpu = sum(r.cpu_s for r in results)

@@ -32,7 +32,14 @@ from typing import Any
 import numpy as np
 
 from hil.identify.csvdata import LOAD_CASES, MeasuredData
-from hil.identify.synth_effects import SYNTH_REGISTRY
+from hil.identify.record_options import SYNTH_PROFILES
+from hil.identify.synth_effects import (  # the lists here too, as before
+    ALL_SYNTH_EFFECTS,
+    OUTSIDE_EFFECTS,
+    PLANT_EFFECTS,
+    SYNTH_REGISTRY,
+    WRAPPER_EFFECTS,
+)
 from plant import layout as L
 from plant.config import Config, load_config
 from plant.model import Plant, stiffness_range  # noqa: F401  (re-exported for docs)
@@ -42,12 +49,9 @@ from plant.model import Plant, stiffness_range  # noqa: F401  (re-exported for d
 DEFAULT_MAGNITUDES: dict[str, dict[str, float]] = {
     n: dict(e.defaults) for n, e in SYNTH_REGISTRY.items()}
 
-PLANT_EFFECTS = tuple(n for n, e in SYNTH_REGISTRY.items() if e.kind == "plant")
-WRAPPER_EFFECTS = tuple(n for n, e in SYNTH_REGISTRY.items() if e.kind == "wrapper")
-OUTSIDE_EFFECTS = tuple(n for n, e in SYNTH_REGISTRY.items() if e.kind == "outside")
-ALL_SYNTH_EFFECTS = PLANT_EFFECTS + WRAPPER_EFFECTS + OUTSIDE_EFFECTS
-#: Excitation profiles of :func:`generate`.
-PROFILES = ("multisine", "resonance", "slide")
+#: Excitation profiles of :func:`generate` (defined beside the rig's options, which the
+#: command line lists without loading this module).
+PROFILES = SYNTH_PROFILES
 
 
 @dataclass
@@ -265,5 +269,6 @@ def _backlash(theta: np.ndarray, width: float) -> np.ndarray:
     return out
 
 
-__all__ = ["ALL_SYNTH_EFFECTS", "DEFAULT_MAGNITUDES", "PROFILES", "SynthResult", "generate",
-           "multisine", "synth_config"]
+__all__ = ["ALL_SYNTH_EFFECTS", "DEFAULT_MAGNITUDES", "OUTSIDE_EFFECTS", "PLANT_EFFECTS",
+           "PROFILES", "SynthResult", "WRAPPER_EFFECTS", "generate", "multisine",
+           "synth_config"]

@@ -184,4 +184,10 @@ SYNTH_REGISTRY: dict[str, SynthEffect] = {e.name: e for e in (
     ViscosityTemperature(), StrainThermalDrift(), InputDelay(), SensorSaturation(),
     PumpPulsationExtra(), MainsHum(), Backlash())}
 
-__all__ = ["SYNTH_REGISTRY", "SynthEffect", "ks_span"]
+PLANT_EFFECTS = tuple(n for n, e in SYNTH_REGISTRY.items() if e.kind == "plant")
+WRAPPER_EFFECTS = tuple(n for n, e in SYNTH_REGISTRY.items() if e.kind == "wrapper")
+OUTSIDE_EFFECTS = tuple(n for n, e in SYNTH_REGISTRY.items() if e.kind == "outside")
+ALL_SYNTH_EFFECTS = PLANT_EFFECTS + WRAPPER_EFFECTS + OUTSIDE_EFFECTS
+
+__all__ = ["ALL_SYNTH_EFFECTS", "OUTSIDE_EFFECTS", "PLANT_EFFECTS", "SYNTH_REGISTRY",
+           "SynthEffect", "WRAPPER_EFFECTS", "ks_span"]

@@ -93,27 +93,38 @@ class Scenario:
 SCENARIOS: dict[str, Scenario] = {}
 
 
-def register(name: str, summary: str, knobs: tuple[Knob, ...] = (),
-             validate: Callable[[dict[str, Any]], None] | None = None
+def register(name: str, validate: Callable[[dict[str, Any]], None] | None = None
              ) -> Callable[[Callable[..., ScenarioResult]], Callable[..., ScenarioResult]]:
-    """Decorator adding a scenario runner to :data:`SCENARIOS` (with its own settings,
-    ``knobs``, and their joint check ``validate``: :class:`Scenario`)."""
+    """Decorator adding a scenario runner to :data:`SCENARIOS` under ``name``, a name of
+    :data:`hil.scenarios.catalog.CATALOG` (its summary and settings come from there), with
+    the settings' joint check ``validate`` (:class:`Scenario`)."""
+    from hil.scenarios.catalog import CATALOG
+
+    entry = CATALOG[name]  # a KeyError here: list the scenario in hil/scenarios/catalog.py
 
     def deco(fn: Callable[..., ScenarioResult]) -> Callable[..., ScenarioResult]:
-        SCENARIOS[name] = Scenario(name, summary, fn, tuple(knobs), validate)
+        SCENARIOS[name] = Scenario(name, entry.summary, fn, entry.knobs, validate)
         return fn
 
     return deco
 
 
 def get(name: str) -> Scenario:
-    """A scenario by name; KeyError with the list of known names."""
+    """A scenario by name; KeyError with the list of known names (:func:`check_name`)."""
+    check_name(name)
     _load_all()
-    try:
-        return SCENARIOS[name]
-    except KeyError:
-        raise KeyError(f"unknown scenario {name!r} (known: {', '.join(sorted(SCENARIOS))})"
-                       ) from None
+    return SCENARIOS[name]
+
+
+def check_name(name: str) -> None:
+    """KeyError with the list of known names unless ``name`` is a scenario's: one of the
+    catalogue (its module not loaded yet: that loads the simulation) or one put into
+    :data:`SCENARIOS` directly."""
+    from hil.scenarios.catalog import CATALOG
+
+    if name not in CATALOG and name not in SCENARIOS:
+        known = ", ".join(sorted({*CATALOG, *SCENARIOS}))
+        raise KeyError(f"unknown scenario {name!r} (known: {known})")
 
 
 def names() -> list[str]:
@@ -151,4 +162,4 @@ def _load_all() -> None:
 
 
 __all__ = ["MAIN", "ON_THESIS_PRESET", "THESIS", "Metric", "SCENARIOS", "Scenario",
-           "ScenarioResult", "get", "names", "register"]
+           "ScenarioResult", "check_name", "get", "names", "register"]

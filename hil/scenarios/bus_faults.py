@@ -11,7 +11,8 @@ switched off (``SAFE_OFF``), frames lost and discarded, the share of stale input
 far the measured force strayed from the command. The fault is the scenario's settings
 (``scenario.link``, ``scenario.kind``, ``scenario.rate`` ...), so ``eha-hil sweep
 bus-faults --param scenario.rate=0.5:0.9:5`` asks how the watchdog behaves as the loss rate
-grows; ``sim.seed`` seeds the fault draws.
+grows; ``sim.seed`` seeds the fault draws. The settings themselves (defaults, ranges,
+choices) are listed with the summary in :data:`hil.scenarios.catalog.BUS_FAULT_KNOBS`.
 """
 
 from __future__ import annotations
@@ -23,40 +24,13 @@ from typing import Any
 import numpy as np
 
 from firmware_model.mcu.mcu import CMD_TIMEOUT, SAFE_OFF, flag_set
-from hil.fieldbus.faults import KINDS, LINKS, SENSOR_SIGNALS
+from hil.fieldbus.faults import KINDS
 from hil.scenarios import Metric, Progress, ScenarioResult, register
-from hil.scenarios.knobs import Knob
 from plant.config import Config, ConfigError
 
 CYCLE_S = 1e-3
-#: Topologies the scenario offers (the shipped ones).
-TOPOLOGIES = ("bench_one_box", "hydra_full")
 #: The force error is taken from this time on (the boards boot and the force settles).
 SETTLE_S = 0.05
-
-KNOBS = (
-    Knob("topology", "bench_one_box", "the robot on the bus", choices=TOPOLOGIES),
-    Knob("model", "auto", "box model: stack (plant, board, link, MCU) or echo; auto: stack "
-         "up to 5 actuators", choices=("auto", "stack", "echo")),
-    Knob("seconds", 0.5, "simulated time", "s", lo=0.01, hi=600.0),
-    Knob("link", "fieldbus.down", "where the fault hits (none: a clean run)",
-         choices=("none", *LINKS)),
-    Knob("kind", "drop", "what the fault does (hil.fieldbus.faults)",
-         choices=tuple(sorted({k for ks in KINDS.values() for k in ks}))),
-    Knob("rate", 0.05, "probability per frame (fieldbus) or 1/N of the words (lvds)",
-         lo=0.0, hi=1.0),
-    Knob("start_s", 0.1, "the fault's window opens", "s", lo=0.0),
-    Knob("end_s", math.inf, "the fault's window closes", "s", lo=0.0),
-    Knob("delay", 3, "delay: fieldbus cycles (fieldbus) or 50 us ticks (lvds)", lo=1, hi=63),
-    Knob("bits", 1, "bits flipped per hit frame (fieldbus bitflip)", lo=1, hi=64),
-    Knob("box", 0, "box of an lvds or sensor fault", lo=0),
-    Knob("slot", 0, "slot of an lvds or sensor fault", lo=0),
-    Knob("signal", "p_cyl_a", "the sensor's signal (sensor faults)",
-         choices=tuple(SENSOR_SIGNALS)),
-    Knob("sigma", 1e5, "noise of a noisy sensor, 1 sigma in the signal's SI unit", lo=0.0),
-    Knob("amplitude_n", 300.0, "force command sine amplitude", "N", lo=0.0, hi=1e5),
-    Knob("frequency_hz", 2.0, "force command sine frequency", "Hz", lo=0.0, hi=500.0),
-)
 
 
 def fault_entry(v: dict[str, Any], seed: int) -> dict[str, Any] | None:
@@ -108,9 +82,7 @@ def check_settings(v: dict[str, Any]) -> None:
                           f"({v['start_s']:g} s)")
 
 
-@register("bus-faults", "a force sine over the fieldbus with one declared fault: watchdog "
-          "trips, safe-offs, lost frames, stale inputs, force error", knobs=KNOBS,
-          validate=check_settings)
+@register("bus-faults", validate=check_settings)
 def bus_faults(cfg: Config, progress: Progress, v: dict[str, Any]) -> ScenarioResult:
     from hil.fieldbus.faults import FaultError, check_topology, parse_faults
     from hil.fieldbus.system import BusSystem

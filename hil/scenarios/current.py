@@ -51,8 +51,7 @@ def step_metrics(t: np.ndarray, i: np.ndarray, target: float, t0: float
     return t90 - t10, overshoot, float(tail.mean() - target)
 
 
-@register("current-step", "iq 0 -> 10 A on the driver board, piston fixed: rise, overshoot, "
-          "steady-state error")
+@register("current-step")
 def current_step(cfg: Config, progress: Progress = None) -> ScenarioResult:
     cfg = _fixed(cfg)
     stack = FpgaStack(cfg)
@@ -172,8 +171,7 @@ def bandwidth_3db(freqs_hz: np.ndarray, h: np.ndarray) -> float:
     return float(math.exp(f0 + (-3.0 - d0) * (f1 - f0) / (d1 - d0)))
 
 
-@register("current-bode", "closed current loop frequency response, piston fixed: -3 dB "
-          "bandwidth (>= 1 kHz)")
+@register("current-bode")
 def current_bode(cfg: Config, progress: Progress = None) -> ScenarioResult:
     freqs = np.geomspace(50.0, 5000.0, 15)
     h = closed_loop_response(cfg, freqs, progress=progress)

@@ -229,9 +229,7 @@ def calibrate_air_fraction(cfg: Config, target_hz: float,
     return 0.5 * (lo + hi)
 
 
-@register("f1-measured", "thesis F1 as measured: stepped-sine open loop, piston held at the "
-          "cylinder end or through the testbed's rod path (resonance ~25 Hz measured, "
-          "~60 Hz model)")
+@register("f1-measured")
 def f1_measured(cfg: Config, progress: Progress = None) -> ScenarioResult:
     freqs = F1_MEASURED_FREQS
     n = len(freqs)

@@ -205,14 +205,12 @@ def f9_result(cfg: Config, freqs: tuple[float, ...], progress: Progress = None,
                           series={"bodes": bodes}, plot=_plot, notes=notes)
 
 
-@register("f9", "thesis F9: hip pitch position control through the whole stack, 0.25 deg "
-          "sine: position and torque bandwidth 30-40 Hz, unreinforced beside it")
+@register("f9")
 def f9(cfg: Config, progress: Progress = None) -> ScenarioResult:
     return f9_result(cfg, F9_FREQS_HZ, progress)
 
 
-@register("f9-roll", "thesis Fig. 6.22: F9 on the hip roll (K_p 6000 Nm/rad): position "
-          "bandwidth 30-40 Hz, torque gain falling before 30 Hz")
+@register("f9-roll")
 def f9_roll(cfg: Config, progress: Progress = None) -> ScenarioResult:
     return f9_result(cfg, F9_FREQS_HZ, progress, axis=1)
 

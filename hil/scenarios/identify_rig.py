@@ -8,7 +8,9 @@ the configuration. The result is judged as ``eha-hil identify-check`` judges a c
 magnitudes within 10 % (amplitudes 20 %), ``unexplained`` exactly when an effect outside
 the library is in the record. ``sim.seed`` seeds the rig (its parameter draw and noise), so
 ``eha-hil sweep identify-rig --seeds 0..19 --param scenario.magnitude=0.25:2:8`` asks from
-which size on an effect is found, and how often.
+which size on an effect is found, and how often. The settings themselves (defaults,
+ranges, choices) are listed with the summary in
+:data:`hil.scenarios.catalog.IDENTIFY_RIG_KNOBS`.
 """
 
 from __future__ import annotations
@@ -18,13 +20,8 @@ import time
 from typing import Any
 
 from hil.scenarios import Metric, Progress, ScenarioResult, register
-from hil.scenarios.knobs import Knob
 from plant.config import Config, ConfigError
 
-_LOADS = ("fixed_piston", "free_piston", "conrod_fixed")
-_EFFECTS = ("pump_pulsation", "pump_coulomb_friction", "seal_friction",
-            "stiffness_vs_position", "viscosity_temperature", "strain_thermal_drift",
-            "input_delay", "sensor_saturation", "hose_viscoelastic", "mains_hum", "backlash")
 #: The rig magnitudes ``scenario.magnitude`` scales, per effect (the size of the effect;
 #: shapes, orders, phases and corner frequencies stay). A saturation grows as its level
 #: falls, so its level is divided.
@@ -41,23 +38,6 @@ SCALED: dict[str, tuple[str, ...]] = {
     "mains_hum": ("amplitude_pa",),
     "backlash": ("width_rad",),
 }
-
-KNOBS = (
-    Knob("load", "fixed_piston", "the rig's load case", choices=_LOADS),
-    Knob("effect", "none", "an effect in the record (none: the linear model's physics only)",
-         choices=("none", *_EFFECTS)),
-    Knob("effect2", "none", "a second effect in the record", choices=("none", *_EFFECTS)),
-    Knob("magnitude", 1.0, "size of the effects relative to the rig's default magnitudes",
-         lo=0.0, hi=20.0),
-    Knob("profile", "multisine", "excitation (slide, resonance: free_piston only)",
-         choices=("multisine", "slide", "resonance")),
-    Knob("seconds", 6.0, "record length", "s", lo=1.0, hi=120.0),
-    Knob("rate_hz", 5000.0, "sample rate of the record", "Hz", lo=500.0, hi=20000.0),
-    Knob("noise_lsb", 1.0, "logged current noise, 1 sigma in LSB of the +-40 A converter",
-         "LSB", lo=0.0, hi=50.0),
-    Knob("spread", 0.15, "relative range of the rig's parameter draws off the preset",
-         lo=0.0, hi=0.5),
-)
 
 
 def effects_of(v: dict[str, Any]) -> dict[str, dict[str, float]]:
@@ -90,9 +70,7 @@ def check_settings(v: dict[str, Any]) -> None:
                           "use scenario.effect=none")
 
 
-@register("identify-rig", "identification of a record from the independent rig (effects, "
-          "size, rate, noise as settings), judged against the rig's truth", knobs=KNOBS,
-          validate=check_settings)
+@register("identify-rig", validate=check_settings)
 def identify_rig(cfg: Config, progress: Progress, v: dict[str, Any]) -> ScenarioResult:
     from hil.identify.rig import generate_rig
     from hil.identify.rigcheck import Case, identify_and_judge

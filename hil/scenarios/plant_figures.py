@@ -36,8 +36,7 @@ def within_band(key: str, value: float) -> bool:
     return lo <= value <= hi
 
 
-@register("f1", "thesis F1: open-loop response tau_p -> tau_q of the plant, piston fixed "
-          "(resonance ~60 Hz model / ~25 Hz measured)")
+@register("f1")
 def f1(cfg: Config, progress: Progress = None) -> ScenarioResult:
     from hil.analysis.bode import simulate_bode
 
@@ -71,8 +70,7 @@ def _plot_f1(res: ScenarioResult, path: Path) -> None:
         (THESIS_F1["measured_peak_hz"], f"measured {THESIS_F1['measured_peak_hz']:g} Hz")])
 
 
-@register("f2", "thesis F2: T-N curve at 18 A on the plant alone (stall ~1700 N, no-load "
-          "~150 mm/s, peak efficiency ~40 %)")
+@register("f2")
 def f2(cfg: Config, progress: Progress = None) -> ScenarioResult:
     from hil.analysis.tn_curve import simulate_tn_curve
 

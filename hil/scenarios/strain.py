@@ -157,8 +157,7 @@ def f7_run(cfg: Config, feedback: str, coulomb_n: float | None = None) -> dict[s
     }
 
 
-@register("f7", "thesis F7: low-gain position control, cart moved by hand, seal friction: "
-          "RMS force error 12.1 N (pressure fb) -> 1.3 N (strain fb)")
+@register("f7")
 def f7(cfg: Config, progress: Progress = None) -> ScenarioResult:
     runs = {}
     for i, fb in enumerate(("pressure", "strain")):
@@ -276,8 +275,7 @@ def complementary(f_pres: np.ndarray, f_strain: np.ndarray, cutoff_hz: float, dt
     return f_pres + lfilter([a], [1.0, -a], du)
 
 
-@register("f8", "thesis F8: push/pull on a fixed force gauge while heating: RMS error of "
-          "strain gauge 15.1 N > pressure 6.58 N > complementary filter 4.18 N")
+@register("f8")
 def f8(cfg: Config, progress: Progress = None) -> ScenarioResult:
     over = {"load.kind": "conrod", "mcu.force_feedback": F8_FEEDBACK, **seal_overrides(cfg)}
     cfg = cfg.with_overrides(over, "F8")

@@ -46,8 +46,7 @@ def _f3_run(cfg: Config, controller: str) -> tuple[float, np.ndarray, np.ndarray
     return rise, t - STEP_AT_S, tq
 
 
-@register("f3", "thesis F3: 550 N pressure step, piston fixed: rise via current loop (5 ms) "
-          "and via velocity loop (40 ms)")
+@register("f3")
 def f3(cfg: Config, progress: Progress = None) -> ScenarioResult:
     rise_c, t_c, f_c = _f3_run(cfg, "current")
     if progress:
@@ -123,8 +122,7 @@ def _f4_run(cfg: Config, controller: str) -> tuple[np.ndarray, np.ndarray, float
     return centres[ok], mean[ok], pp
 
 
-@register("f4", "thesis F4: pressure tracking error vs pump rotor angle with pulsation: "
-          "p-p 0.63 MPa (velocity) -> 0.16 MPa (current), -74 %")
+@register("f4")
 def f4(cfg: Config, progress: Progress = None) -> ScenarioResult:
     th_v, e_v, pp_v = _f4_run(cfg, "velocity")
     if progress:
@@ -206,8 +204,7 @@ def force_bode(cfg: Config, freqs: np.ndarray, amplitude_n: float, output: str,
     return out
 
 
-@register("f5", "thesis F5: closed-loop pressure Bode, piston fixed, 0.85 MPa: -3 dB near "
-          "100 Hz")
+@register("f5")
 def f5(cfg: Config, progress: Progress = None) -> ScenarioResult:
     cfg = cfg.with_overrides({"load.kind": "fixed", "mcu.controller": "current"}, "F5")
     amp = F5_AMPLITUDE_PA * cfg.get("hydraulics.kc_m2")
@@ -235,8 +232,7 @@ def beam_bode(cfg: Config, k_axial: float, progress: Progress = None) -> np.ndar
                       progress)
 
 
-@register("f6", "thesis F6: force Bode with the connecting rod fixed: 22 Hz weak beam, "
-          "53 Hz reinforced")
+@register("f6")
 def f6(cfg: Config, progress: Progress = None) -> ScenarioResult:
     freqs = F6_FREQS
     bodes = []

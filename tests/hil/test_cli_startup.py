@@ -1,0 +1,73 @@
+"""The command line starts without the simulation: building the parser, any ``--help`` and
+an argument mistake import no numba (its kernels are the commands' to load); the scenarios
+the help lists come from the catalogue their runners register under."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+#: Run in a fresh interpreter (this one has the kernels loaded by other tests): build the
+#: whole registry and each group alone, print every parser's help, make mistakes through
+#: the root (bad options, an unknown scenario, a sweep of nothing); report each one's exit
+#: code and stderr, then what got imported.
+_PROBE = r"""
+import contextlib, io, json, sys
+from hil.cli.args import walk
+from hil.cli.root import GROUPS, build_parser, main
+
+helps = 0
+for word in [None] + [w for words, _ in GROUPS for w in words]:
+    for p in walk(build_parser(word)):
+        helps += bool(p.format_help())
+mistakes = {}
+for argv in (["bus", "run", "--bogus"], ["log", "info"], ["run", "f5", "--bogus"],
+             ["sweep", "f5", "--samples", "0"], ["identify-synth", "x.csv", "--profile", "no"],
+             ["serve", "--bogus"], ["bench", "bus", "--bogus"], ["log", "--help"],
+             ["run", "nosuch"], ["sweep", "nosuch"], ["sweep", "f5"]):
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+        try:
+            code = main(argv)
+        except SystemExit as exc:  # --help ends in argparse's exit
+            code = exc.code
+    mistakes[" ".join(argv)] = [code, err.getvalue()]
+heavy = sorted(m for m in ("numba", "llvmlite", "scipy", "pandas") if m in sys.modules)
+print(json.dumps({"helps": helps, "mistakes": mistakes, "heavy": heavy}))
+"""
+
+
+def test_parser_help_and_mistakes_import_no_numba():
+    out = subprocess.run([sys.executable, "-c", _PROBE], capture_output=True, text=True,
+                         check=True, timeout=120)
+    probe = json.loads(out.stdout)
+    assert probe["helps"] > 50  # every command's parser was built and printed
+    assert probe["heavy"] == [], probe["heavy"]
+    for argv, (code, err) in probe["mistakes"].items():
+        if argv.endswith("--help"):
+            assert code == 0 and err == "", argv
+            continue
+        assert code == 2, (argv, code, err)
+        assert err.count("\n") == 1 and err.startswith("eha-hil "), (argv, err)
+
+
+def test_every_listed_scenario_runs_and_every_runner_is_listed():
+    """The help lists the catalogue (hil.scenarios.catalog); the runners register under its
+    names (hil.scenarios.register takes the summary and settings from it)."""
+    from hil.scenarios import SCENARIOS
+    from hil.scenarios import names as registered
+    from hil.scenarios.catalog import CATALOG
+
+    assert registered() == sorted(CATALOG)  # registered() loads every scenario module
+    assert all(SCENARIOS[n].summary == e.summary and SCENARIOS[n].knobs == e.knobs
+               for n, e in CATALOG.items())
+
+
+def test_a_runner_under_a_name_not_listed_is_refused():
+    from hil.scenarios import register
+
+    with pytest.raises(KeyError, match="f99"):
+        register("f99")
