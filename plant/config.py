@@ -518,7 +518,7 @@ def load_config(
     for item in overrides:
         key, value = parse_override(item)
         where = f"--set {key}"
-        _set_checked(data, key, value, where)
+        _set_checked(data, key, value, "--set")  # its messages name the key themselves
         _check_consistency(data, where)
         sources.append(where)
     _check_consistency(data, sources[-1])

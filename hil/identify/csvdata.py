@@ -268,8 +268,23 @@ def read_measured(path: str | Path, load: str | None = None,
     try:
         with fh:
             return _read_open(path, fh, load, sample_rate_hz, max_rows, progress)
-    except UnicodeDecodeError as exc:
-        raise CsvError(path, None, None, f"cannot read: {exc}") from None
+    except UnicodeDecodeError:
+        line, byte = _first_undecodable(path)
+        raise CsvError(path, line, None, f"not UTF-8 text (byte 0x{byte:02x}): save the "
+                       "record as UTF-8 (or ASCII) CSV") from None
+
+
+def _first_undecodable(path: Path) -> tuple[int | None, int]:
+    """(line number from 1, the byte) of the first byte of ``path`` that UTF-8 cannot
+    decode: the streamed read's error knows only its place in a chunk. Read again line by
+    line, and only on that error."""
+    with open(path, "rb") as fh:
+        for number, raw in enumerate(fh, start=1):
+            try:
+                raw.decode("utf-8-sig" if number == 1 else "utf-8")
+            except UnicodeDecodeError as exc:
+                return number, raw[exc.start]
+    return None, 0  # (the file changed since: say so without a line)
 
 
 def _read_open(path: Path, fh, load: str | None, sample_rate_hz: float | None,  # noqa: ANN001

@@ -347,6 +347,18 @@ def test_cli_bad_input_one_line_exit_2(capsys, tmp_path, text, extra, words):
     assert words in err and "Traceback" not in err
 
 
+def test_cli_text_that_is_not_utf8_names_its_line(capsys, tmp_path):
+    """A record saved in another code page (a Latin-1 degree sign in a comment) is refused
+    in one line naming the line and the byte, not with the codec's message."""
+    path = _write(tmp_path, _text(_data()))
+    lines = path.read_bytes().split(b"\n")
+    lines.insert(3, b"# oil at 40 \xb0C")
+    path.write_bytes(b"\n".join(lines))
+    code, out, err = _run(capsys, str(path), "--quiet")
+    assert code == 2 and out == "" and err.count("\n") == 1, err
+    assert f"{path}:4:" in err and "0xb0" in err and "UTF-8" in err and "codec" not in err
+
+
 def test_cli_sample_rate_must_be_positive(capsys, tmp_path):
     path = _write(tmp_path, _text(_data()))
     code, _, err = _run(capsys, str(path), "--sample-rate", "-5")

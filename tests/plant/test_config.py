@@ -155,6 +155,7 @@ def test_out_of_range_values_are_refused(override, fragment):
     with pytest.raises(ConfigError) as err:
         load_config(None, [override])
     assert key in str(err.value) and fragment in str(err.value)
+    assert str(err.value).count(key) == 1, err.value  # named once, not "--set k: k: ..."
 
 
 @pytest.mark.parametrize("name, text, fragment", [
