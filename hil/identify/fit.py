@@ -73,11 +73,6 @@ ITERATION_SAMPLES = 30_000
 WEIGHTING_JACOBIANS = 3
 #: A step that lowers the cost by less than this many residual variances ends the fit.
 CONVERGED_GAIN = 1.0
-#: Accepted steps in a row after which the Jacobian is taken by finite differences again;
-#: between them it is carried by Broyden's rank-1 secant update (the residual's change along
-#: the step just taken, for free), instead of one simulation per free parameter. 0: every
-#: Jacobian by finite differences.
-SECANT_STEPS = 0
 
 #: Levels of the seal's friction law F(v) = (F_c + (F_s - F_c) exp(-(v/v_s)^2)) s(v): the
 #: law dissipates (F(v) v >= 0 at every v) only with both levels >= 0. A negative static
@@ -468,13 +463,8 @@ def levenberg_marquardt(
     rows and the parameters a dozen, so each step costs one product ``J'J`` (a library solver
     takes an SVD of ``J`` per step, and most of the fit's time with it). Steps leaving the box
     are clipped to it. Stops when a step lowers the cost by less than 1e-9 of it, the step
-    is below 1e-8, or after ``max_jac`` Jacobians (steps). ``final_jac=False`` returns the
-    last Jacobian computed rather than one at the returned point (for a last small step).
-
-    With :data:`SECANT_STEPS` > 0, up to that many steps in a row that were accepted at the
-    first try take Broyden's secant update of the Jacobian instead of a new finite-difference
-    one; a refused step, a stop and the Jacobian returned for the covariance are decided on a
-    finite-difference Jacobian.
+    is below 1e-8, or after ``max_jac`` Jacobians. ``final_jac=False`` returns the last
+    Jacobian computed rather than one at the returned point (for a last small step).
     """
     x = np.clip(np.asarray(x0, dtype=float), lo, hi)
     r = fun(x) if r0 is None else r0
@@ -482,11 +472,6 @@ def levenberg_marquardt(
     cost = float(r @ r)
     lam = 1e-3
     n_jac = 1
-    # ``secant``: accepted steps since ``j`` was last taken by finite differences (0: it is
-    # one). A secant Jacobian is exact only along the steps it has seen: its steps are
-    # trusted while they are accepted at once, and neither a refused step nor a stop is
-    # decided on it (a fresh Jacobian at the same point decides those).
-    secant = 0
     while True:
         a = j.T @ j
         g = j.T @ r
@@ -494,7 +479,6 @@ def levenberg_marquardt(
         an = a / np.outer(d, d)
         gn = g / d
         improved = False
-        refused_secant = False
         # parameters on a bound that the gradient pushes outward stay there for this step:
         # a step computed with them and then clipped is no descent step, and LM would shrink
         # its steps around it (zig-zagging through a dozen Jacobians)
@@ -503,12 +487,9 @@ def levenberg_marquardt(
         at_hi = (hi - x <= 1e-9 * span) & (gn < 0)
         move = ~(at_lo | at_hi)
         if not move.any():
-            if secant:
-                j, secant = jac(x), 0
-                continue
             return x, r, j, True
         an_m = an[np.ix_(move, move)]
-        for trial in range(12):
+        for _ in range(12):
             step = np.zeros_like(x)
             try:
                 step[move] = -np.linalg.solve(an_m + lam * np.eye(an_m.shape[0]),
@@ -521,42 +502,21 @@ def levenberg_marquardt(
             cost_new = float(r_new @ r_new)
             if np.isfinite(cost_new) and cost_new < cost:
                 gain = cost - cost_new
-                first_try = trial == 0
-                s_x = x_new - x
-                dr = r_new - r
                 x, r, cost = x_new, r_new, cost_new
                 lam = max(lam / 5.0, 1e-9)
                 improved = True
                 break
-            if secant:
-                refused_secant = True
-                break
             lam *= 8.0
-        if refused_secant:
-            j, secant = jac(x), 0
-            continue
         # a cost change below one residual variance moves no parameter by more than about
         # one standard error of white residuals: a fraction of the real one, the residuals
         # being correlated over tens of samples (the covariance is HAC for that reason)
         converged = (not improved or gain <= CONVERGED_GAIN * cost / r.size
                      or np.max(np.abs(step)) < 1e-8)
-        if converged and secant:
-            converged = False  # judged on a secant Jacobian: a fresh one decides
-            use_secant = False
-        else:
-            use_secant = improved and first_try and secant < SECANT_STEPS
         if converged or n_jac >= max_jac:
             if improved and final_jac:
                 j = jac(x)  # the Jacobian at the returned point, for the covariance
             return x, r, j, converged
-        if use_secant:
-            # Broyden: the Jacobian that maps the step just taken onto the residual's change
-            ss = float(s_x @ s_x)
-            if ss > 0.0:
-                j = j + np.outer(dr - j @ s_x, s_x / ss)
-            secant += 1
-        else:
-            j, secant = jac(x), 0
+        j = jac(x)
         n_jac += 1
 
 
