@@ -64,11 +64,8 @@ Z95 = 1.959963984540054
 #: Relative change of every channel's residual rms under which the weights count as settled
 #: (a weighted least-squares optimum moves little with its weights; a pass costs a fit).
 WEIGHTS_SETTLED = 0.5
-#: Estimation samples a long record's fit iterates on before its last step on all of them
-#: (3 s at 5 kHz). The iterations only bring the parameters near the optimum; the last step
-#: on all samples and its Jacobian, for the covariance, see the whole record. A head of 6 s
-#: made the iterations ~40 % of a two-effect record's simulated samples (docs/identify.md).
-ITERATION_SAMPLES = 15_000
+#: Estimation samples a long record's fit iterates on before its last step on all of them.
+ITERATION_SAMPLES = 30_000
 #: Jacobians the first of several passes takes, on weights carried over from an earlier fit,
 #: before they are re-estimated: a refit starts from a linearised guess, often far from the
 #: optimum (a Coulomb friction's score-test size), where the residual is up to ten times its
