@@ -71,10 +71,8 @@ ITERATION_SAMPLES = 30_000
 #: optimum (a Coulomb friction's score-test size), where the residual is up to ten times its
 #: final size; a few steps bring it near that, and the next pass goes on from there.
 WEIGHTING_JACOBIANS = 3
-#: A step that lowers the cost by less than this many residual variances ends the fit: a
-#: pass that creeps down a flat valley gains 30-50 a step, each at one simulation per free
-#: parameter, and moves its parameters by a fraction of their (HAC) standard errors.
-CONVERGED_GAIN = 50.0
+#: A step that lowers the cost by less than this many residual variances ends the fit.
+CONVERGED_GAIN = 1.0
 
 #: Levels of the seal's friction law F(v) = (F_c + (F_s - F_c) exp(-(v/v_s)^2)) s(v): the
 #: law dissipates (F(v) v >= 0 at every v) only with both levels >= 0. A negative static
@@ -510,10 +508,8 @@ def levenberg_marquardt(
                 break
             lam *= 8.0
         # a cost change below one residual variance moves no parameter by more than about
-        # one standard error of white residuals; the residuals are correlated over tens of
-        # samples (the covariance is HAC for that reason), so a real standard error is
-        # several times that, and a gain of CONVERGED_GAIN variances is still a move
-        # within it
+        # one standard error of white residuals: a fraction of the real one, the residuals
+        # being correlated over tens of samples (the covariance is HAC for that reason)
         converged = (not improved or gain <= CONVERGED_GAIN * cost / r.size
                      or np.max(np.abs(step)) < 1e-8)
         if converged or n_jac >= max_jac:
