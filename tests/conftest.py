@@ -48,3 +48,30 @@ def pytest_collection_modifyitems(config, items):  # noqa: ANN001, ANN201 - pyte
     test that happened to be collected last (tests/verify/ sorts after the rest)."""
     slow_files = {item.path for item in items if item.get_closest_marker("slow")}
     items.sort(key=lambda item: item.path not in slow_files)
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_protocol(item, nextitem):  # noqa: ANN001, ANN201 - pytest's hook
+    """With ``EHA_HIL_TEST_CPU=FILE`` set, each test's CPU seconds (this process and the
+    child processes it waited for, set-up and tear-down included: a module's fixtures are
+    charged to its first test) are appended to FILE as ``user+sys<TAB>children<TAB>id``.
+    The suite's budget is CPU on a loaded machine, where ``--durations`` (wall) misleads."""
+    import os
+
+    path = os.environ.get("EHA_HIL_TEST_CPU")
+    if not path:
+        return (yield)
+    import resource
+
+    def cpu() -> tuple[float, float]:
+        me = resource.getrusage(resource.RUSAGE_SELF)
+        kids = resource.getrusage(resource.RUSAGE_CHILDREN)
+        return me.ru_utime + me.ru_stime, kids.ru_utime + kids.ru_stime
+
+    before = cpu()
+    try:
+        return (yield)
+    finally:
+        after = cpu()
+        with open(path, "a") as fh:
+            fh.write(f"{after[0] - before[0]:.3f}\t{after[1] - before[1]:.3f}\t{item.nodeid}\n")
