@@ -1,7 +1,8 @@
 # Two commands do all set-up on a fresh machine with only python3:
 #   make run   - create .venv, install eha-hil, run the main job on the default actuator
 #   make test  - create .venv, install eha-hil with its test extra, run the whole suite
-#   make test-fast - the same without the tests marked slow (under a minute)
+#   make test-fast - the same without the tests marked slow, each property test (hypothesis)
+#                  on a quarter of its examples (under a minute)
 #   make system-deps - (root, apt) the system tools some tests use, else they skip:
 #                  tshark + dumpcap (capture tests), iproute2 (ip netns: UDP capture, the
 #                  pysoem EtherCAT master on a veth pair; gcc builds pysoem), the Arm cross
@@ -49,7 +50,7 @@ test: $(TSTAMP)
 	$(PYTEST)
 
 test-fast: $(TSTAMP)
-	$(PYTEST) -m "not slow"
+	$(PYTEST) -m "not slow" --examples-fraction 0.25
 
 bench: $(STAMP)
 	$(BIN)/eha-hil bench plant

@@ -26,6 +26,13 @@ def _parse(source: str) -> ast.Module:
     return ast.parse(source)
 
 
+@functools.cache
+def _nodes(tree: ast.AST) -> tuple[ast.AST, ...]:
+    """Every node of ``tree`` in ``ast.walk``'s order, listed once: several checks walk
+    each module's whole tree, and walking (not parsing) was most of this file's time."""
+    return tuple(ast.walk(tree))
+
+
 def _sources(package: str, skip: tuple[str, ...] = ()) -> list[Path]:
     return [p for p in sorted((ROOT / package).rglob("*.py"))
             if not any(str(p.relative_to(ROOT)).startswith(s) for s in skip)]
@@ -35,7 +42,7 @@ def _branches_on_backend_name(tree: ast.AST) -> list[int]:
     """Lines comparing something with a backend's name (==, !=, in, match case)."""
     names = set(BACKENDS)
     lines = []
-    for node in ast.walk(tree):
+    for node in _nodes(tree):
         if isinstance(node, ast.Compare):
             parts = [node.left, *node.comparators]
             consts = [p for p in parts if isinstance(p, ast.Constant) and p.value in names]
@@ -65,7 +72,7 @@ def test_the_check_finds_a_branch():
 
 def _imports(path: Path) -> set[str]:
     names = set()
-    for node in ast.walk(_parse(path.read_text())):
+    for node in _nodes(_parse(path.read_text())):
         if isinstance(node, ast.Import):
             names.update(a.name.split(".")[0] for a in node.names)
         elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
@@ -129,7 +136,7 @@ def hil_imports(root: Path) -> dict[str, set[str]]:
     graph = {}
     for path in sorted((root / "hil").rglob("*.py")):
         names = set()
-        for node in ast.walk(_parse(path.read_text())):
+        for node in _nodes(_parse(path.read_text())):
             if isinstance(node, ast.Import):
                 names.update(a.name for a in node.names)
             elif isinstance(node, ast.ImportFrom) and node.module == "hil":
@@ -287,7 +294,7 @@ def _numeric(module: str, name: str) -> bool:
 def _part_names(tree: ast.AST) -> tuple[dict[str, str], dict[str, str]]:
     """(numeric constants, modules) imported from the parts' packages: local name -> full."""
     consts, modules = {}, {}
-    for node in ast.walk(tree):
+    for node in _nodes(tree):
         if isinstance(node, ast.ImportFrom) and node.module and node.level == 0 \
                 and node.module.split(".")[0] in PARTS:
             for a in node.names:
@@ -312,7 +319,7 @@ def part_arithmetic(source: str) -> list[tuple[int, str]]:
     tree = _parse(source)
     consts, modules = _part_names(tree)
     found = []
-    for node in ast.walk(tree):
+    for node in _nodes(tree):
         if isinstance(node, ast.FunctionDef):
             for d in node.decorator_list:
                 f = d.func if isinstance(d, ast.Call) else d

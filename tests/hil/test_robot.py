@@ -12,6 +12,7 @@ from firmware_model.fpga import layout as B
 from firmware_model.fpga.driver_board import LinkMemory
 from firmware_model.mcu.c_abi import IN_COMMAND, IN_ENABLE, INPUT, OUTPUT, config_record
 from firmware_model.mcu.mcu import Mcu
+from hil.fieldbus.faults import CYCLE_S
 from hil.fieldbus.system import BusSystem
 from hil.fieldbus.topology import load_topology
 from hil.sim.pc import demo_pc
@@ -74,7 +75,10 @@ def _run(topo, cfg, model, cycles, faults=None, workers=1, overlap=True, sample=
 
 @pytest.mark.slow
 def test_robot_engine_is_the_per_actuator_path_bit_for_bit_with_faults():
-    topo, cfg, cycles = load_topology("hydra_full"), load_config("hydra_default"), 2000
+    topo, cfg = load_topology("hydra_full"), load_config("hydra_default")
+    # Every fault's window, then 200 cycles after the last one ends (recovery): the
+    # per-actuator reference costs ~15 ms of CPU a cycle, most of this test's time.
+    cycles = round(max(f["end_s"] for f in FAULTS) / CYCLE_S) + 200
     ref, (ref_words, ref_plant) = _run(topo, cfg, "stack", cycles, FAULTS, sample=True)
     one, (words, plant) = _run(topo, cfg, "robot", cycles, FAULTS, 1, overlap=False,
                                sample=True)
