@@ -16,7 +16,8 @@ kernel stood in for once per vector), so the lanes see what a fit's columns see.
 Run: ``python -m hil.bench.identify_batch`` (the three cases, 2, 4, 8 and 13 lanes, the
 fits' 30,000-sample head of a 16 s, 5 kHz rig record); ``--case``, ``--lanes``,
 ``--samples 0`` (the whole record), ``--reps``. CPU times are medians of the repetitions,
-the two ways taking turns; quote them with ``uptime``.
+the two ways taking turns; quote them with ``uptime``. ``--split``: where one Jacobian's
+CPU goes instead (:func:`jacobian_split`).
 
 Found (docs/identify.md, "Jacobian columns simulated together"): no gain, and the bits
 are ``_simulate``'s only for the linear model and the pump's friction; LLVM compiles the
@@ -320,6 +321,75 @@ def probe(case: str, lanes: list[int], samples: int | None, reps: int,
     return rows
 
 
+def jacobian_split(case: str, reps: int, seconds: float = 16.0, seed: int = 3) -> dict:
+    """CPU of one forward-difference Jacobian of ``case``'s record at the fits' iteration
+    head (the baseline's free parameters and the case's effect parameters, the sensors'
+    lags on, one thread), split into the simulation kernel, the sensor lags' transforms,
+    the rest of the outputs and the stacked residuals, the input's band-limiting (a skew
+    column's) and the transposing copy: ``{"columns", "rows", "cpu_ms", part: ms}``."""
+    from hil.identify import fit
+    from hil.identify.experiment import prepare
+    from hil.identify.rig import generate_rig
+    from plant.config import load_config
+
+    load, effects, params = CASES[case]
+    rig = generate_rig(load, list(effects), seconds=seconds, seed=seed)
+    exp = prepare(rig.data, load_config("hydra_default"), "bl")
+    model = fast.FastModel(exp)
+    theta = model.start_vector()
+    for name, value in {**params, "lag_pressure_s": 1e-4, "lag_strain_s": 1.2e-4}.items():
+        theta[fast.IDX[name]] = value
+    free = fit.baseline_free(exp) + list(params)
+    fitter = fit.OutputErrorFit(model, fit.NUISANCE_SCALES(exp.dt))
+    fitter._ref = {n: theta[fast.IDX[n]] for n in free if n in fit.LOG_PARAMS}
+    mask = fitter.fit_mask()
+    mask[np.flatnonzero(mask)[fit.ITERATION_SAMPLES]:] = False
+    sigma = {c: float(np.nanstd(exp.measured[c])) or 1.0 for c in exp.channels}
+    fun, jac = fitter._problem(free, theta, sigma, mask)
+    x = fitter._to_x(theta, free)
+    spent = {"kernel": 0.0, "sensor lags": 0.0, "outputs": 0.0, "residuals": 0.0,
+             "applied input": 0.0, "transposing copy": 0.0}
+    wrapped = [(fast, "_simulate", "kernel"), (fast, "sensor_lags", "sensor lags"),
+               (fast.FastModel, "outputs", "outputs"), (fit.OutputErrorFit, "_stack",
+                                                        "residuals"),
+               (fast.FastModel, "applied_current", "applied input"),
+               (fit.np, "ascontiguousarray", "transposing copy")]
+    saved = [(owner, name, getattr(owner, name)) for owner, name, _ in wrapped]
+
+    def timed(fn, part):  # noqa: ANN001, ANN202 - any callable
+        def call(*a, **k):  # noqa: ANN002, ANN003, ANN202
+            c = time.process_time()
+            try:
+                return fn(*a, **k)
+            finally:
+                spent[part] += time.process_time() - c
+        return call
+
+    threads = fast._WORKERS
+    fast.set_threads(1)
+    try:
+        for (owner, name, part), (_, _, fn) in zip(wrapped, saved, strict=True):
+            setattr(owner, name, timed(fn, part))
+        fun(x)
+        for part in spent:
+            spent[part] = 0.0
+        c = time.process_time()
+        for _ in range(reps):
+            model._runs.clear()
+            j = jac(x)
+        total = time.process_time() - c
+    finally:
+        for owner, name, fn in saved:
+            setattr(owner, name, fn)
+        fast.set_threads(threads)
+    ms = {k: 1e3 * v / reps for k, v in spent.items()}
+    # nested parts: the residuals hold the outputs, the outputs the lags
+    ms["residuals"] -= ms["outputs"]
+    ms["outputs"] -= ms["sensor lags"]
+    return {"case": case, "columns": len(free), "rows": j.shape[0],
+            "cpu_ms": 1e3 * total / reps, **ms}
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m hil.bench.identify_batch",
                                      description=__doc__.split("\n\n")[0])
@@ -329,6 +399,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--samples", type=int, default=30_000,
                         help="samples simulated (the fits' head; 0: the whole record)")
     parser.add_argument("--reps", type=int, default=5)
+    parser.add_argument("--split", action="store_true",
+                        help="instead: where one Jacobian's CPU goes, per case")
     parser.add_argument("--json", action="store_true", help="print JSON")
     args = parser.parse_args(argv)
     try:
@@ -338,6 +410,18 @@ def main(argv: list[str] | None = None) -> int:
     if min(lanes) < 1 or args.reps < 1 or args.samples < 0:
         parser.error("--lanes, --reps need at least 1, --samples at least 0")
     rows = []
+    if args.split:
+        for case in args.case or list(CASES):
+            rows.append(jacobian_split(case, args.reps))
+            if not args.json:
+                r = rows[-1]
+                parts = ", ".join(f"{k} {r[k]:.0f}" for k in r if k not in (
+                    "case", "columns", "rows", "cpu_ms"))
+                print(f"{case:6s} Jacobian of {r['columns']} columns x {r['rows']} rows: "
+                      f"CPU {r['cpu_ms']:.0f} ms; {parts} ms", flush=True)
+        if args.json:
+            print(json.dumps(rows, indent=1))
+        return 0
     for case in args.case or list(CASES):
         rows += probe(case, lanes, args.samples or None, args.reps)
         if not args.json:
