@@ -63,9 +63,10 @@ from hil.identify.noise import (
     current_cutoff,
     estimate_input_noise,
     experiment_with_current,
-    held_noise_models,
+    held_noise_draws,
     lowpass_current,
     noisy_experiment,
+    predicted_draws,
     predicted_residual,
 )
 from hil.identify.residuals import ResidualAnalysis, analyse
@@ -367,7 +368,7 @@ class _Loop:
         self.unbiased = noise.cutoff_hz > 0
         self.noisy_model = (FastModel(noisy_experiment(exp, noise.rms_a, None, noise.cutoff_hz))
                             if noise.rms_a > 0 else None)
-        self._held_noise: tuple[FastModel, FastModel] | None = None
+        self._held_noise: tuple[FastModel, list[FastModel]] | None = None
 
         say(f"baseline fit ({exp.load}, {exp.n} samples, channels {', '.join(exp.channels)})")
         self.base = base = fit_baseline(model, theta0=theta_prov)
@@ -407,11 +408,12 @@ class _Loop:
         if theta[IDX["sf_coulomb_n"]] == 0.0:
             return predicted_residual(self.model.outputs(theta), self.noisy_model.outputs(theta))
         # a seal that can hold the piston makes the noise's path depend on where it starts:
-        # the increment is taken from a cleaned current, as the rig felt it (noise.py)
+        # the increment is taken from a cleaned current, as the rig felt it, and over several
+        # draws of the noise, whose parts differ widely in power there (noise.py)
         if self._held_noise is None:
-            self._held_noise = held_noise_models(self.exp, self.noise)
+            self._held_noise = held_noise_draws(self.exp, self.noise)
         clean, noisy = self._held_noise
-        return predicted_residual(clean.outputs(theta), noisy.outputs(theta))
+        return predicted_draws(clean.outputs(theta), [m.outputs(theta) for m in noisy])
 
     def refitter(self) -> OutputErrorFit:
         """A fitter with the nuisance parameters' and every library effect's scales: the one
