@@ -13,7 +13,10 @@ at the hydraulic resonance. Judged as if it were white sensor noise it looks lik
   with synthetic white noise of that level added to the current, minus one without): its
   spectrum is what the residual must hold even when the model is right. The residual
   analysis whitens each residual with that spectrum plus a white sensor floor before it tests
-  whiteness and predictability (:mod:`hil.identify.residuals`);
+  whiteness and predictability (:mod:`hil.identify.residuals`). Where a seal friction can
+  hold the piston the part is predicted from several draws of the noise
+  (:func:`held_noise_draws`, :func:`predicted_draws`): its power there differs widely from
+  one draw to the next;
 * :func:`input_band` and :func:`lowpass_current` — the current the model is simulated from.
   A logged current that samples a continuous one is a measurement: above the band where its
   spectrum stands clear of the white floor it holds only the converter's noise, which the
@@ -34,6 +37,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy.signal import butter, sosfiltfilt, welch
@@ -41,7 +45,11 @@ from scipy.signal import butter, sosfiltfilt, welch
 from hil.identify.csvdata import MeasuredData
 from hil.identify.experiment import Experiment
 
-#: Seed of the synthetic noise realisation (the prediction is a spectrum, any seed does).
+if TYPE_CHECKING:
+    from hil.identify.model import FastModel
+
+#: Seed of the synthetic noise realisation (the prediction is a spectrum, any seed does for a
+#: linear noise path; a held piston's draws take the seeds after it).
 NOISE_SEED = 20240611
 
 
@@ -79,11 +87,11 @@ def estimate_input_noise(iq: np.ndarray, fs: float, lsb_a: float = 0.0) -> Input
 
 
 def noisy_experiment(exp: Experiment, rms_a: float, iq: np.ndarray | None = None,
-                     cutoff_hz: float = 0.0) -> Experiment:
-    """``exp`` with white noise of ``rms_a`` added to its logged current (fixed seed), or to
-    ``iq`` in its place; the noise low-passed at ``cutoff_hz`` first when > 0, as the
-    model's current was (:func:`lowpass_current`)."""
-    rng = np.random.default_rng(NOISE_SEED)
+                     cutoff_hz: float = 0.0, draw: int = 0) -> Experiment:
+    """``exp`` with white noise of ``rms_a`` added to its logged current (fixed seed, the
+    ``draw``-th realisation), or to ``iq`` in its place; the noise low-passed at
+    ``cutoff_hz`` first when > 0, as the model's current was (:func:`lowpass_current`)."""
+    rng = np.random.default_rng(NOISE_SEED + draw)
     base = exp.iq if iq is None else iq
     noise = rng.normal(0.0, rms_a, exp.n)
     if cutoff_hz > 0:
@@ -198,11 +206,31 @@ def experiment_with_current(exp: Experiment, iq: np.ndarray) -> Experiment:
 def held_noise_models(exp: Experiment, noise: InputNoise) -> tuple:
     """(model from the cleaned current, model from it plus a noise of the logged level): the
     input-noise increment of a model whose friction can hold the piston (module docstring)."""
+    clean, noisy = held_noise_draws(exp, noise, 1)
+    return clean, noisy[0]
+
+
+#: Realisations of the input noise a held piston's noise part is predicted from. Through a
+#: seal that holds the piston the part is intermittent (each break-away the noise shifts
+#: rings the piston's resonance) and its power varies widely from one noise draw to the
+#: next: on the conrod with both frictions and the pulsation (rig seed 2, at the rig's
+#: basin) 16 draws gave 681-2672 Pa rms on the pressure difference, the record's own 1585.
+#: Eight draws span about the 11th to the 89th percentile of that power
+#: (:func:`hil.identify.residuals.whiten`); each is one simulation more per judged fit.
+HELD_DRAWS = 8
+
+
+def held_noise_draws(exp: Experiment, noise: InputNoise, draws: int = HELD_DRAWS
+                     ) -> tuple[FastModel, list[FastModel]]:
+    """(model from the cleaned current, ``draws`` models from it plus independent noises of
+    the logged level): the input-noise increments of a model whose friction can hold the
+    piston, one per draw (module docstring). The first draw is :func:`held_noise_models`'s."""
     from hil.identify.model import FastModel
 
     clean = clean_current(exp.iq, noise)
     return (FastModel(experiment_with_current(exp, clean)),
-            FastModel(noisy_experiment(exp, noise.rms_a, clean, noise.cutoff_hz)))
+            [FastModel(noisy_experiment(exp, noise.rms_a, clean, noise.cutoff_hz, draw=j))
+             for j in range(draws)])
 
 
 def predicted_residual(simulate_clean: dict[str, np.ndarray],
@@ -211,6 +239,15 @@ def predicted_residual(simulate_clean: dict[str, np.ndarray],
     return {c: simulate_noisy[c] - simulate_clean[c] for c in simulate_clean}
 
 
+def predicted_draws(simulate_clean: dict[str, np.ndarray],
+                    simulate_noisy: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
+    """Per channel, the parts of the outputs that input noise alone makes in each draw, one
+    row a draw (draws x samples): :func:`hil.identify.residuals.whiten` takes their
+    spectra's spread as the spread of the record's own noise part."""
+    return {c: np.stack([noisy[c] - simulate_clean[c] for noisy in simulate_noisy])
+            for c in simulate_clean}
+
+
 __all__ = ["InputNoise", "clean_current", "current_cutoff", "estimate_input_noise",
-           "experiment_with_current", "held_noise_models", "input_band", "lowpass_current",
-           "noisy_experiment", "predicted_residual"]
+           "experiment_with_current", "held_noise_draws", "held_noise_models", "input_band",
+           "lowpass_current", "noisy_experiment", "predicted_draws", "predicted_residual"]

@@ -115,7 +115,8 @@ def text(rep: IdentifyReport) -> str:
         cost = "" if change is None else f"validation cost {change:+.1%}, "
         out.append(f"  tried together: {' + '.join(j['effects'])}: {cost}{j['outcome']}")
     for r in rep.restarts:
-        out.append(f"  refitted from the configured {', '.join(r['from_configured'])}: "
+        start = r.get("from") or f"the configured {', '.join(r['from_configured'])}"
+        out.append(f"  refitted from {start}: "
                    f"validation cost {r['validation_cost_change']:+.1%}, {r['outcome']}")
     rows = []
     b, a = rep.residual_before.channels, rep.residual_after.channels
