@@ -889,8 +889,9 @@ class _Loop:
         new = current
         held_now: dict[str, str] = {}
         for _ in range(2):
-            new, held_now = guarded_fit(refitter, theta0, free, theta0, sigma=current.sigma,
-                                        configured=self.configured)
+            new, held_pass = guarded_fit(refitter, theta0, free, theta0, sigma=current.sigma,
+                                         configured=self.configured)
+            held_now.update(held_pass)  # the run-on starts with the first pass's holds
             if own.intersection(held_now):
                 break
             self.current = new
