@@ -280,6 +280,9 @@ ALLOWED = {
     ("hil/identify/rig.py", "kernel"):
         "identification: the independent generator of rig data, which must differ from "
         "the plant's model (DESIGN.md, data formats)",
+    ("hil/bench/identify_batch.py", "kernel"):
+        "a probe: the identification model's kernel (hil.identify.model) with a lane index, "
+        "timed and compared bit for bit against single calls; no part's model",
 }
 
 
