@@ -203,13 +203,6 @@ def experiment_with_current(exp: Experiment, iq: np.ndarray) -> Experiment:
     return dataclasses.replace(exp, data=data)
 
 
-def held_noise_models(exp: Experiment, noise: InputNoise) -> tuple:
-    """(model from the cleaned current, model from it plus a noise of the logged level): the
-    input-noise increment of a model whose friction can hold the piston (module docstring)."""
-    clean, noisy = held_noise_draws(exp, noise, 1)
-    return clean, noisy[0]
-
-
 #: Realisations of the input noise a held piston's noise part is predicted from. Through a
 #: seal that holds the piston the part is intermittent (each break-away the noise shifts
 #: rings the piston's resonance) and its power varies widely from one noise draw to the
@@ -224,7 +217,8 @@ def held_noise_draws(exp: Experiment, noise: InputNoise, draws: int = HELD_DRAWS
                      ) -> tuple[FastModel, list[FastModel]]:
     """(model from the cleaned current, ``draws`` models from it plus independent noises of
     the logged level): the input-noise increments of a model whose friction can hold the
-    piston, one per draw (module docstring). The first draw is :func:`held_noise_models`'s."""
+    piston, one per draw (module docstring). The first draw is the seed
+    :data:`NOISE_SEED`'s."""
     from hil.identify.model import FastModel
 
     clean = clean_current(exp.iq, noise)
@@ -249,5 +243,5 @@ def predicted_draws(simulate_clean: dict[str, np.ndarray],
 
 
 __all__ = ["InputNoise", "clean_current", "current_cutoff", "estimate_input_noise",
-           "experiment_with_current", "held_noise_draws", "held_noise_models", "input_band",
+           "experiment_with_current", "held_noise_draws", "input_band",
            "lowpass_current", "noisy_experiment", "predicted_draws", "predicted_residual"]

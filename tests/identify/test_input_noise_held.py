@@ -20,7 +20,7 @@ from hil.identify.model import IDX, FastModel
 from hil.identify.noise import (
     clean_current,
     estimate_input_noise,
-    held_noise_models,
+    held_noise_draws,
     predicted_residual,
 )
 from hil.identify.pipeline import MATERIAL_SHARE
@@ -70,7 +70,7 @@ def test_held_seal_at_the_rig_truth_leaves_no_material_structure(ident_cfg):
     residual = {c: exp.measured[c] - y[c] for c in exp.channels}
     noise = estimate_input_noise(exp.iq, exp.data.sample_rate_hz, quantum(exp.iq))
     assert noise.rms_a > 0
-    clean, noisy = held_noise_models(exp, noise)
+    clean, (noisy,) = held_noise_draws(exp, noise, 1)
     part = predicted_residual(clean.outputs(theta), noisy.outputs(theta))
     a = analyse(exp, residual, exp.val, part)
     for c in ("p_pump_a-p_pump_b", "p_cyl_a-p_cyl_b", "f_strain"):
