@@ -132,8 +132,10 @@ def test_bus_run_log_is_finalised(sig, tmp_path):
 
     from hil.framelog.reader import FrameLogReader
 
-    run = Running(["bus", "run", "--seconds", "120", "--log", "run.mcap"], tmp_path)
-    run.wait_for(r"bus run: [1-9]\d*/120000 cycles")
+    # A logged run reports its progress every twentieth of the run: 30 s puts the first
+    # report (busy, the log several blocks long) at 1.5 s simulated, 28.5 s before the end.
+    run = Running(["bus", "run", "--seconds", "30", "--log", "run.mcap"], tmp_path)
+    run.wait_for(r"bus run: [1-9]\d*/30000 cycles")
     code, lines = run.stop(sig)
     last = _ended(code, lines, sig, "bus run")
     by = "" if sig == signal.SIGINT else f"by {signal.Signals(sig).name} "

@@ -26,6 +26,7 @@ from hil.framelog.reader import MAGIC
 from hil.replay.record import FLUSH_CYCLES, run_logged
 from hil.sim.pc import demo_pc
 from plant.config import load_config
+from tests.session_once import made_once
 
 #: A real log made twice and 34 commands run (a few as processes): ~6 s, not in make test-fast.
 pytestmark = pytest.mark.slow
@@ -69,8 +70,12 @@ def _flip(data: bytes, at: int, mask: int = 0xFF) -> bytes:
 
 @pytest.fixture(scope="module")
 def logs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
-    """Name -> damaged file (or directory), all made from two real logs."""
-    d = tmp_path_factory.mktemp("damaged")
+    """Name -> damaged file (or directory), all made from two real logs, once per run (the
+    module's tests may run on both xdist workers)."""
+    return made_once(tmp_path_factory, "damaged-logs", _damaged_logs)
+
+
+def _damaged_logs(d: Path) -> dict[str, Path]:
     cfg = load_config("hydra_default")
     full = d / "full.mcap"
     run_logged(load_topology("bench_one_box"), cfg, CYCLES, demo_pc(), full)
@@ -171,9 +176,14 @@ def _jobs() -> list[tuple[str, str]]:
 @pytest.fixture(scope="module")
 def results(logs: dict[str, Path], tmp_path_factory: pytest.TempPathFactory
             ) -> dict[tuple[str, str], subprocess.CompletedProcess[str]]:
-    """Every (case, command) run once: the console script's cases two processes at a time,
-    the rest through ``main`` here."""
-    out_dir = tmp_path_factory.mktemp("csv")
+    """Every (case, command) run once per run (not once per xdist worker): the console
+    script's cases two processes at a time, the rest through ``main`` here."""
+    return made_once(tmp_path_factory, "damaged-logs-results",
+                     lambda out_dir: _results(logs, out_dir))
+
+
+def _results(logs: dict[str, Path], out_dir: Path
+             ) -> dict[tuple[str, str], subprocess.CompletedProcess[str]]:
     script = [job for job in _jobs() if job[0] in THROUGH_SCRIPT]
     with ThreadPoolExecutor(max_workers=2) as pool:
         done = dict(zip(script, pool.map(
