@@ -140,6 +140,8 @@ class OutputErrorFit:
         self.scales = scales or {}
         self.n_sims = 0
         self.skew_limit = SKEW_LIMIT
+        #: residual variances a step must gain for a pass to go on (:func:`levenberg_marquardt`)
+        self.converged_gain = CONVERGED_GAIN
         # Samples on a channel's clip plateau say only "at least the level": until the
         # saturation effect models the clip, they count only where the model is below it
         # (a censored residual), so the clip does not bias the linear fit.
@@ -364,7 +366,8 @@ class OutputErrorFit:
             # samples follows (that step takes its own)
             final_jac = iter_mask is mask or k < passes - 1
             x, r, j, converged = levenberg_marquardt(fun, jac, x, lo, hi, max_jac=max_jac,
-                                                     r0=r, j0=j, final_jac=final_jac)
+                                                     r0=r, j0=j, final_jac=final_jac,
+                                                     converged_gain=self.converged_gain)
             used = sigma
             theta = self._to_theta(x, free, theta0)
             out = self.model.outputs(theta)
@@ -455,6 +458,7 @@ def levenberg_marquardt(
     r0: np.ndarray | None = None,
     j0: np.ndarray | None = None,
     final_jac: bool = True,
+    converged_gain: float | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
     """Minimise ``|fun(x)|^2`` within the box ``lo <= x <= hi``; returns ``(x, r, J,
     converged)``, ``converged`` False when it stopped at ``max_jac`` Jacobians.
@@ -462,10 +466,13 @@ def levenberg_marquardt(
     Levenberg-Marquardt on the normal equations: the residual has hundreds of thousands of
     rows and the parameters a dozen, so each step costs one product ``J'J`` (a library solver
     takes an SVD of ``J`` per step, and most of the fit's time with it). Steps leaving the box
-    are clipped to it. Stops when a step lowers the cost by less than 1e-9 of it, the step
-    is below 1e-8, or after ``max_jac`` Jacobians. ``final_jac=False`` returns the last
+    are clipped to it. Stops when no step lowers the cost, an accepted one lowers it by no
+    more than ``converged_gain`` residual variances (default :data:`CONVERGED_GAIN`), the
+    step is below 1e-8, or after ``max_jac`` Jacobians. ``final_jac=False`` returns the last
     Jacobian computed rather than one at the returned point (for a last small step).
     """
+    if converged_gain is None:
+        converged_gain = CONVERGED_GAIN
     x = np.clip(np.asarray(x0, dtype=float), lo, hi)
     r = fun(x) if r0 is None else r0
     j = jac(x) if j0 is None else j0
@@ -510,7 +517,7 @@ def levenberg_marquardt(
         # a cost change below one residual variance moves no parameter by more than about
         # one standard error of white residuals: a fraction of the real one, the residuals
         # being correlated over tens of samples (the covariance is HAC for that reason)
-        converged = (not improved or gain <= CONVERGED_GAIN * cost / r.size
+        converged = (not improved or gain <= converged_gain * cost / r.size
                      or np.max(np.abs(step)) < 1e-8)
         if converged or n_jac >= max_jac:
             if improved and final_jac:
