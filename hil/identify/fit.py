@@ -72,7 +72,7 @@ ITERATION_SAMPLES = 30_000
 #: final size; a few steps bring it near that, and the next pass goes on from there.
 WEIGHTING_JACOBIANS = 3
 #: A step that lowers the cost by less than this many residual variances ends the fit.
-CONVERGED_GAIN = 1.0
+CONVERGED_GAIN = 50.0
 
 #: Levels of the seal's friction law F(v) = (F_c + (F_s - F_c) exp(-(v/v_s)^2)) s(v): the
 #: law dissipates (F(v) v >= 0 at every v) only with both levels >= 0. A negative static
@@ -467,9 +467,9 @@ def levenberg_marquardt(
     rows and the parameters a dozen, so each step costs one product ``J'J`` (a library solver
     takes an SVD of ``J`` per step, and most of the fit's time with it). Steps leaving the box
     are clipped to it. Stops when no step lowers the cost, an accepted one lowers it by no
-    more than one residual variance, two in a row lower it by no more than
-    ``converged_gain`` variances each (default :data:`CONVERGED_GAIN`), the step is below
-    1e-8, or after ``max_jac`` Jacobians. ``final_jac=False`` returns the last
+    more than ``converged_gain`` residual variances (default :data:`CONVERGED_GAIN`; the
+    pass's first step: one variance), the step is below 1e-8, or after ``max_jac``
+    Jacobians. ``final_jac=False`` returns the last
     Jacobian computed rather than one at the returned point (for a last small step).
     """
     if converged_gain is None:
@@ -480,7 +480,6 @@ def levenberg_marquardt(
     cost = float(r @ r)
     lam = 1e-3
     n_jac = 1
-    small_before = False  # the last accepted step gained no more than converged_gain
     while True:
         a = j.T @ j
         g = j.T @ r
@@ -519,15 +518,13 @@ def levenberg_marquardt(
         # a cost change below one residual variance moves no parameter by more than about
         # one standard error of white residuals: a fraction of the real one, the residuals
         # being correlated over tens of samples (the covariance is HAC for that reason).
-        # A looser stop needs two such steps in a row: one damped step in a bend of the
-        # valley gains little before the descent picks up again (free piston, both
-        # frictions under slide, rig seed 2: the seal's refit gained 20 variances in its
-        # first step, then 2,000 and 7,000 in its next)
+        # A looser stop does not end a pass at its first step: a pass begins with the
+        # damping at its floor and, in a bend of the valley, with a step that gains little
+        # before the descent picks up (free piston, both frictions under slide, rig seed
+        # 2: the seal's refit gained 20 variances in its first step, then 2,000 and 7,000)
         variance = cost / r.size if improved else 0.0
-        small = improved and gain <= converged_gain * variance
-        converged = (not improved or (small and (small_before or gain <= variance))
-                     or np.max(np.abs(step)) < 1e-8)
-        small_before = small
+        limit = converged_gain * variance if n_jac > 2 else min(converged_gain, 1.0) * variance
+        converged = (not improved or gain <= limit or np.max(np.abs(step)) < 1e-8)
         if converged or n_jac >= max_jac:
             if improved and final_jac:
                 j = jac(x)  # the Jacobian at the returned point, for the covariance
