@@ -72,7 +72,7 @@ ITERATION_SAMPLES = 30_000
 #: final size; a few steps bring it near that, and the next pass goes on from there.
 WEIGHTING_JACOBIANS = 3
 #: A step that lowers the cost by less than this many residual variances ends the fit.
-CONVERGED_GAIN = 50.0
+CONVERGED_GAIN = 1.0
 #: Jacobians of a pass before :data:`CONVERGED_GAIN` may end it (one variance ends it
 #: earlier): a pass's first steps, in a bend of the valley, may gain little before the
 #: descent picks up (free piston, both frictions under slide, rig seed 2: the seal's refit
