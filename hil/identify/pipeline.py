@@ -661,8 +661,9 @@ class _Loop:
         there rarely is after :data:`ROBUST_NFEV`, and the long run is made only for a start
         that already leads (conrod, pump and seal friction, the pump friction's refit from
         the baseline: both starts end in the same minimum, 1e-5 apart), or that is still
-        descending at the budget's end within :data:`RUN_ON_BAND` above the plain one (two
-        costs at unequal progress decide nothing). Returns the kept
+        descending at the budget's end above the plain one by more than the margin and
+        less than :data:`RUN_ON_BAND` (two costs at unequal progress decide nothing; within
+        the margin the two are one minimum, the conrod's pulsation 1e-4 apart). Returns the kept
         refit and the other where it was run in full (None: :meth:`forward` refits from the
         robust start if the plain one is refused)."""
         mask = self.est_mask
@@ -670,12 +671,13 @@ class _Loop:
         lead = (1.0 - START_MARGIN) * plain_cost
         trial = self.refit_with(d, beta, robust=True, nfev=PLAIN_NFEV)
         trial_cost = self.weighted_ss(trial[0].outputs, mask)
-        # a trial still descending at its budget's end and not far above the plain refit
-        # says nothing yet: where its budget ran out decided (conrod, seal friction, rig
-        # seed 1: 4 % above the plain refit with the fits stopped at 50 variances, 37 %
-        # below at 1, the same basin at the end of both): it is run on, the full refit
-        if not trial_cost < lead and (trial[0].converged
-                                      or not trial_cost < (1.0 + RUN_ON_BAND) * plain_cost):
+        # a trial still descending at its budget's end above the plain refit's minimum (by
+        # more than the margin: within it, the same minimum) and not far above it says
+        # nothing yet: where its budget ran out decided (conrod, seal friction, rig seed 1:
+        # 4 % above the plain refit with the fits stopped at 50 variances, 37 % below at 1,
+        # the same basin at the end of both): it is run on, the full refit
+        behind = (1.0 + START_MARGIN) * plain_cost <= trial_cost < (1.0 + RUN_ON_BAND) * plain_cost
+        if not trial_cost < lead and (trial[0].converged or not behind):
             return *plain, None
         robust = self.refit_with(d, beta, robust=True)
         if self.weighted_ss(robust[0].outputs, mask) < lead:

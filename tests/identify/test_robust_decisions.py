@@ -104,10 +104,10 @@ def _chooser(plain_cost: float, trial: FitResult, full: FitResult):
     return new, plain[0], runs
 
 
-@pytest.mark.parametrize("above", [-1.5 * START_MARGIN, -0.5 * START_MARGIN, 0.03, 0.2])
+@pytest.mark.parametrize("above", [-1.5 * START_MARGIN, 1.5 * START_MARGIN, 0.2])
 def test_a_trial_still_descending_near_the_plain_refit_is_run_on(above):
-    # the same trial, its budget run out a few per cent either side of the margin: the
-    # full refit decides, and the same basin is kept whichever side the trial ended
+    # the same trial, its budget run out a few per cent below the margin's line or above
+    # the plain refit: the full refit decides, and the same basin is kept either way
     plain_cost = 6000.0
     full = _result(0.62 * plain_cost)
     new, _, runs = _chooser(plain_cost, _result((1.0 + above) * plain_cost, converged=False),
@@ -116,11 +116,14 @@ def test_a_trial_still_descending_near_the_plain_refit_is_run_on(above):
     assert runs == [PLAIN_NFEV, None]
 
 
-def test_a_converged_or_far_trial_costs_no_full_refit():
+def test_a_converged_far_or_level_trial_costs_no_full_refit():
+    # converged; far above; or within the margin of the plain refit (one minimum)
     plain_cost = 6000.0
     full = _result(0.62 * plain_cost)
     for trial in (_result(1.03 * plain_cost, converged=True),
-                  _result((1.0 + 2.0 * RUN_ON_BAND) * plain_cost, converged=False)):
+                  _result((1.0 + 2.0 * RUN_ON_BAND) * plain_cost, converged=False),
+                  _result((1.0 + 0.5 * START_MARGIN) * plain_cost, converged=False),
+                  _result((1.0 - 0.5 * START_MARGIN) * plain_cost, converged=False)):
         new, plain, runs = _chooser(plain_cost, trial, full)
         assert new is plain and runs == [PLAIN_NFEV]
 
