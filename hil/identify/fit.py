@@ -73,6 +73,11 @@ ITERATION_SAMPLES = 30_000
 WEIGHTING_JACOBIANS = 3
 #: A step that lowers the cost by less than this many residual variances ends the fit.
 CONVERGED_GAIN = 1.0
+#: Jacobians of a pass before :data:`CONVERGED_GAIN` may end it (one variance ends it
+#: earlier): a pass's first steps, in a bend of the valley, may gain little before the
+#: descent picks up (free piston, both frictions under slide, rig seed 2: the seal's refit
+#: gained 20 and 5 variances in its first two steps, then thousands a step at a stop of 1)
+LOOSE_AFTER_JACOBIANS = 2
 
 #: Levels of the seal's friction law F(v) = (F_c + (F_s - F_c) exp(-(v/v_s)^2)) s(v): the
 #: law dissipates (F(v) v >= 0 at every v) only with both levels >= 0. A negative static
@@ -121,6 +126,8 @@ class FitResult:
     cov: np.ndarray | None = None  # HAC covariance of the free parameters (their units)
     jac: np.ndarray | None = None  # weighted Jacobian (estimation samples x free), x-space
     weights: dict[str, float] = field(default_factory=dict)  # sigma the Jacobian is scaled by
+    #: the last pass stopped at its gain (False: at its Jacobian limit, still descending)
+    converged: bool = True
 
     def value(self, name: str) -> float:
         return float(self.theta[IDX[name]])
@@ -140,6 +147,8 @@ class OutputErrorFit:
         self.scales = scales or {}
         self.n_sims = 0
         self.skew_limit = SKEW_LIMIT
+        #: residual variances a step must gain for a pass to go on (:func:`levenberg_marquardt`)
+        self.converged_gain = CONVERGED_GAIN
         # Samples on a channel's clip plateau say only "at least the level": until the
         # saturation effect models the clip, they count only where the model is below it
         # (a censored residual), so the clip does not bias the linear fit.
@@ -364,13 +373,15 @@ class OutputErrorFit:
             # samples follows (that step takes its own)
             final_jac = iter_mask is mask or k < passes - 1
             x, r, j, converged = levenberg_marquardt(fun, jac, x, lo, hi, max_jac=max_jac,
-                                                     r0=r, j0=j, final_jac=final_jac)
+                                                     r0=r, j0=j, final_jac=final_jac,
+                                                     converged_gain=self.converged_gain)
             used = sigma
             theta = self._to_theta(x, free, theta0)
             out = self.model.outputs(theta)
             res = self.residual_channels(out)
             sigma = {c: float(np.sqrt(np.nanmean(res[c][mask] ** 2))) or 1.0
                      for c in self.exp.channels}
+        descended_to_end = converged
         if iter_mask is not mask:
             fun, jac = self._problem(free, theta0, sigma, mask)
             x, r, j, _ = levenberg_marquardt(fun, jac, x, lo, hi, max_jac=1, final_jac=False)
@@ -380,7 +391,7 @@ class OutputErrorFit:
         out = self.model.outputs(theta, states)
         se, cov = self.hac_se(j, r, mask.sum(), theta, free)
         return FitResult(theta, list(free), se, sigma, out, states, n_sims=self.n_sims, cov=cov,
-                         jac=j, weights=dict(used))
+                         jac=j, weights=dict(used), converged=descended_to_end)
 
     def standard_errors(self, theta: np.ndarray, free: list[str], sigma: dict[str, float]
                         ) -> dict[str, float]:
@@ -455,6 +466,7 @@ def levenberg_marquardt(
     r0: np.ndarray | None = None,
     j0: np.ndarray | None = None,
     final_jac: bool = True,
+    converged_gain: float | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
     """Minimise ``|fun(x)|^2`` within the box ``lo <= x <= hi``; returns ``(x, r, J,
     converged)``, ``converged`` False when it stopped at ``max_jac`` Jacobians.
@@ -462,10 +474,14 @@ def levenberg_marquardt(
     Levenberg-Marquardt on the normal equations: the residual has hundreds of thousands of
     rows and the parameters a dozen, so each step costs one product ``J'J`` (a library solver
     takes an SVD of ``J`` per step, and most of the fit's time with it). Steps leaving the box
-    are clipped to it. Stops when a step lowers the cost by less than 1e-9 of it, the step
-    is below 1e-8, or after ``max_jac`` Jacobians. ``final_jac=False`` returns the last
+    are clipped to it. Stops when no step lowers the cost, an accepted one lowers it by no
+    more than ``converged_gain`` residual variances (default :data:`CONVERGED_GAIN`; within
+    the first :data:`LOOSE_AFTER_JACOBIANS` Jacobians: one variance), the step is below
+    1e-8, or after ``max_jac`` Jacobians. ``final_jac=False`` returns the last
     Jacobian computed rather than one at the returned point (for a last small step).
     """
+    if converged_gain is None:
+        converged_gain = CONVERGED_GAIN
     x = np.clip(np.asarray(x0, dtype=float), lo, hi)
     r = fun(x) if r0 is None else r0
     j = jac(x) if j0 is None else j0
@@ -509,9 +525,12 @@ def levenberg_marquardt(
             lam *= 8.0
         # a cost change below one residual variance moves no parameter by more than about
         # one standard error of white residuals: a fraction of the real one, the residuals
-        # being correlated over tens of samples (the covariance is HAC for that reason)
-        converged = (not improved or gain <= CONVERGED_GAIN * cost / r.size
-                     or np.max(np.abs(step)) < 1e-8)
+        # being correlated over tens of samples (the covariance is HAC for that reason).
+        # (a looser stop only after LOOSE_AFTER_JACOBIANS: a slow start is no end)
+        variance = cost / r.size if improved else 0.0
+        limit = variance * (converged_gain if n_jac > LOOSE_AFTER_JACOBIANS
+                            else min(converged_gain, 1.0))
+        converged = (not improved or gain <= limit or np.max(np.abs(step)) < 1e-8)
         if converged or n_jac >= max_jac:
             if improved and final_jac:
                 j = jac(x)  # the Jacobian at the returned point, for the covariance
