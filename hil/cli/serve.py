@@ -292,10 +292,11 @@ def _usage(msg: str) -> Exception:
 
 
 def serve_backends() -> list[str]:
-    """The transports ``eha-hil serve`` offers (each backend says whether it can)."""
-    from hil.transports import BACKENDS, backend
+    """The transports ``eha-hil serve`` offers, known without importing them (the parser is
+    built at every start: a class's import can be python-can's)."""
+    from hil.transports import SERVING_BACKENDS
 
-    return [b for b in BACKENDS if backend(b).serves_remote_masters]
+    return list(SERVING_BACKENDS)
 
 
 def _open_end(args: argparse.Namespace):

@@ -1,6 +1,7 @@
 """The command line starts without the simulation: building the parser, any ``--help`` and
-an argument mistake import no numba (its kernels are the commands' to load); the scenarios
-the help lists come from the catalogue their runners register under."""
+an argument mistake import no numba (its kernels are the commands' to load), and a help
+imports no numerical, log or bus library at all; the scenarios the help lists come from the
+catalogue their runners register under."""
 
 from __future__ import annotations
 
@@ -52,6 +53,47 @@ def test_parser_help_and_mistakes_import_no_numba():
             continue
         assert code == 2, (argv, code, err)
         assert err.count("\n") == 1 and err.startswith("eha-hil "), (argv, err)
+
+
+#: Run in a fresh interpreter: one command line through the console script's entry point,
+#: then the top-level packages it imported.
+_HELP_PROBE = r"""
+import contextlib, io, json, sys
+from hil.cli import main
+
+out = io.StringIO()
+with contextlib.redirect_stdout(out):
+    try:
+        code = main(sys.argv[1:])
+    except SystemExit as exc:  # --help ends in argparse's exit
+        code = exc.code
+print(json.dumps({"code": code, "help": out.getvalue(),
+                  "packages": sorted({m.split(".")[0] for m in sys.modules})}))
+"""
+
+#: Libraries a help has no use for, each a noticeable part of a start of the console script
+#: (numpy is not one of them: the configuration and the identification's effect names, which
+#: the root's help lists, are made with it).
+_HEAVY = {"numba", "llvmlite", "scipy", "pandas", "pyarrow", "dask", "matplotlib",
+          "can", "serial", "mcap", "dpkt", "unicorn"}
+
+
+@pytest.mark.parametrize("argv", [["--help"], ["serve", "--help"], ["identify", "--help"]],
+                         ids=" ".join)
+def test_help_imports_no_heavy_library(argv):
+    out = subprocess.run([sys.executable, "-c", _HELP_PROBE, *argv], capture_output=True,
+                         text=True, check=True, timeout=120)
+    probe = json.loads(out.stdout)
+    assert probe["code"] == 0 and probe["help"].startswith("usage: eha-hil")
+    assert sorted(_HEAVY & set(probe["packages"])) == []
+
+
+def test_the_root_help_lists_the_shipped_presets():
+    """The root finds the presets without the configuration module; the same list."""
+    from hil.cli.root import build_parser
+    from plant.config import preset_names
+
+    assert build_parser().epilog.startswith(f"Presets: {', '.join(preset_names())}. ")
 
 
 def test_every_listed_scenario_runs_and_every_runner_is_listed():
