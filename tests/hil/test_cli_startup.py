@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
@@ -56,7 +57,7 @@ def test_parser_help_and_mistakes_import_no_numba():
 
 
 #: Run in a fresh interpreter: one command line through the console script's entry point,
-#: then the top-level packages it imported.
+#: then what it printed and the top-level packages it imported.
 _HELP_PROBE = r"""
 import contextlib, io, json, sys
 from hil.cli import main
@@ -86,6 +87,16 @@ def test_help_imports_no_heavy_library(argv):
     probe = json.loads(out.stdout)
     assert probe["code"] == 0 and probe["help"].startswith("usage: eha-hil")
     assert sorted(_HEAVY & set(probe["packages"])) == []
+
+
+def test_log_info_reads_a_log_without_the_kernels():
+    """Reading a log's summary needs its reader, not the writer's compiled byte planes."""
+    log = Path(__file__).parents[1] / "data" / "replay" / "recipe3_robot.mcap"
+    out = subprocess.run([sys.executable, "-c", _HELP_PROBE, "log", "info", str(log)],
+                         capture_output=True, text=True, check=True, timeout=120)
+    probe = json.loads(out.stdout)
+    assert probe["code"] == 0 and "recipe3_robot.mcap" in probe["help"]
+    assert sorted({"numba", "llvmlite", "scipy", "pandas"} & set(probe["packages"])) == []
 
 
 def test_the_root_help_lists_the_shipped_presets():
