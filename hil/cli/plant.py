@@ -101,11 +101,11 @@ def _band_mark(key: str, value: float) -> str:
 def cmd_main(args: argparse.Namespace, ctx: Context) -> Outcome:
     """Plant summary and the comparison with the thesis's figures F1 and F2 (the scenarios
     ``f1`` and ``f2`` of :mod:`hil.scenarios.plant_figures`)."""
+    cfg = ctx.config()  # a bad configuration is one line before the simulation loads
     from hil import scenarios
     from hil.scenarios.plant_figures import F2_BANDS, THESIS_F1, THESIS_F2
     from plant.model import Plant, motor_torque_constant, stiffness_range
 
-    cfg = ctx.config()
     plant = Plant(cfg)
     ks_min, ks_max = stiffness_range(cfg)
     info = {

@@ -403,13 +403,13 @@ def _open_log(args: argparse.Namespace, path: str | None, model: str):  # noqa: 
 
 def _close_log(log, recs: list, topo, cfg, chain, model: str, cycles: int) -> None:  # noqa: ANN001
     """Write out the recorders' last blocks and what a replay needs; close the log."""
-    from hil.replay.record import replay_metadata
-
     try:
         for r in recs:
             getattr(r, "close", r.flush)()
     finally:
         if log is not None:
+            from hil.replay.record import replay_metadata  # (mcap with it: only for a log)
+
             log.add_metadata("eha-hil.replay", replay_metadata(topo, cfg, chain.boxes, model,
                                                                cycles))
             log.close()
