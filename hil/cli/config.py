@@ -7,7 +7,6 @@ import json
 
 from hil.cli.args import common
 from hil.cli.contract import Context, Outcome, command
-from plant.config import preset_names
 
 
 # --- config ----------------------------------------------------------------------------------
@@ -30,6 +29,8 @@ def cmd_config_show(args: argparse.Namespace, ctx: Context) -> Outcome:
 
 
 def cmd_config_presets(args: argparse.Namespace, ctx: Context) -> Outcome:
+    from plant.config import preset_names  # (numpy with it: not for the parser's sake)
+
     names = preset_names()
     return Outcome("\n".join(names), names)
 

@@ -6,14 +6,13 @@ from __future__ import annotations
 import argparse
 from collections.abc import Sequence
 
-import numpy as np
-
 from hil.cli import progress as cli_progress
 from hil.cli.args import common, float_range, int_range, positive_float
 from hil.cli.contract import EXIT_FAILED, EXIT_OK, Context, Outcome, UsageError, command
 from hil.output.tables import table
-from hil.scenarios.plant_figures import F2_BANDS, THESIS_F1, THESIS_F2, within_band
-from plant.config import load_config
+
+# numpy, the configuration (numpy with it) and the thesis's figures are imported by the
+# commands: registering their parsers is part of every start of the console script.
 
 
 # --- plant bode ------------------------------------------------------------------------------
@@ -29,6 +28,10 @@ def cmd_plant_bode(args: argparse.Namespace, ctx: Context) -> Outcome:
         raise UsageError("--fmin/--fmax: need fmin < fmax")
     if args.linear and args.config is not None:
         raise UsageError("--linear and --config: give one (--linear means -c hydra_linear)")
+    import numpy as np
+
+    from plant.config import load_config
+
     cfg = load_config("hydra_linear" if args.linear else args.config, args.set or ())
     loads = ["fixed", "free"] if args.load == "both" else [args.load]
     results = _bode_results(cfg, loads, args.fmin, args.fmax, args.points)
@@ -90,16 +93,19 @@ def cmd_plant_tn(args: argparse.Namespace, ctx: Context) -> Outcome:
 
 # --- main job --------------------------------------------------------------------------------
 def _band_mark(key: str, value: float) -> str:
+    from hil.scenarios.plant_figures import within_band
+
     return "ok" if within_band(key, value) else "OUT"
 
 
 def cmd_main(args: argparse.Namespace, ctx: Context) -> Outcome:
     """Plant summary and the comparison with the thesis's figures F1 and F2 (the scenarios
     ``f1`` and ``f2`` of :mod:`hil.scenarios.plant_figures`)."""
+    cfg = ctx.config()  # a bad configuration is one line before the simulation loads
     from hil import scenarios
+    from hil.scenarios.plant_figures import F2_BANDS, THESIS_F1, THESIS_F2
     from plant.model import Plant, motor_torque_constant, stiffness_range
 
-    cfg = ctx.config()
     plant = Plant(cfg)
     ks_min, ks_max = stiffness_range(cfg)
     info = {

@@ -20,7 +20,6 @@ from collections.abc import Callable, Sequence
 from hil.cli import interrupts
 from hil.cli.args import Parser
 from hil.cli.contract import execute
-from plant.config import preset_names
 
 
 def _version() -> str:
@@ -30,6 +29,28 @@ def _version() -> str:
         return version("eha-hil")
     except PackageNotFoundError:  # running from a source tree that was never installed
         return "unknown (not installed)"
+
+
+class _Version(argparse._VersionAction):
+    """``--version``, argparse's, with the installed version looked up only when asked for:
+    reading the package metadata costs every start of the console script ~25 ms."""
+
+    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace,
+                 values: object, option_string: str | None = None) -> None:
+        self.version = f"{parser.prog} {_version()}"
+        super().__call__(parser, namespace, values, option_string)
+
+
+def _preset_names() -> list[str]:
+    """The shipped presets, as :func:`plant.config.preset_names` lists them, found without
+    importing :mod:`plant.config` (it loads numpy: the root's help would pay for it at every
+    start). ``find_spec`` of the top package does not run its ``__init__`` either."""
+    from importlib.util import find_spec
+    from pathlib import Path
+
+    spec = find_spec("plant")
+    folders = [] if spec is None else list(spec.submodule_search_locations or ())
+    return sorted(p.stem for f in folders for p in Path(f, "presets").glob("*.toml"))
 
 
 def _plant(sub, bsub) -> None:  # noqa: ANN001 - argparse's sub-parsers
@@ -126,12 +147,12 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     parser = Parser(
         prog="eha-hil",
         description="Emulator and HIL test harness for the Hydra electro-hydrostatic actuator.",
-        epilog="Presets: " + ", ".join(preset_names()) + ". Example: eha-hil plant bode "
+        epilog="Presets: " + ", ".join(_preset_names()) + ". Example: eha-hil plant bode "
         "--set effects.pulsation.enabled=false --plot bode.png. Exit codes: 0 ok, 1 a "
         "requirement missed (or stdout could not be written), 2 a mistake on the command "
         "line or in a configuration, 130 interrupted (Ctrl-C), 143 SIGTERM, 129 SIGHUP.",
     )
-    parser.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
+    parser.add_argument("--version", action=_Version)
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     if only is not None:
         register = next(reg for words, reg in GROUPS if only in words)

@@ -12,7 +12,6 @@ from hil.cli.contract import EXIT_FAILED, EXIT_OK, Context, Outcome, UsageError,
 from hil.cli.outputs import Later
 from hil.cli.verify import add_rtl_option, rtl_sets, rtl_verdict
 from hil.output.tables import table
-from plant.config import load_config
 
 #: Preset the thesis scenarios run on unless -c is given (calibrated effect magnitudes).
 THESIS_PRESET = "hydra_thesis"
@@ -139,6 +138,8 @@ def cmd_run(args: argparse.Namespace, ctx: Context) -> Outcome:
             parse_address(args.foxglove)
         except ValueError as exc:
             raise UsageError(str(exc)) from None
+    from plant.config import load_config  # (numpy with it: not for the parser's sake)
+
     config_sets, knob_values = split_sets(args.set or ())
     cfg = load_config(args.config, [*config_sets, *rtl_sets(args)])
     _image_profile(cfg, "")  # this command's steps only

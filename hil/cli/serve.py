@@ -35,12 +35,10 @@ from typing import TYPE_CHECKING
 
 from hil.cli.args import common, float_range, int_range, output_file
 from hil.cli.contract import EXIT_FAILED, EXIT_OK, Context, Outcome, UsageError, command
-from hil.fieldbus import reply_times, wire
-from hil.fieldbus.reply_times import ReplyTimes
-from hil.sim.cpu_account import run_delay_ns
 from hil.transports import TransportError
-from protocols import ethercat as ec
 
+# The fieldbus, the engines and their reply statistics (numpy) are imported where they are
+# used, not here: the parser is built at every start of the console script.
 if TYPE_CHECKING:  # the boxes' kernels (numba) are imported by the command, not the parser
     from hil.fieldbus.box_clock import ClockedBoxes
     from hil.fieldbus.chain import Chain
@@ -116,6 +114,12 @@ class PacedServer:
                  late_us: float = 1000.0) -> None:
         if not chain.paced:
             raise ValueError("PacedServer needs Chain(..., paced=True)")
+        from hil.fieldbus import wire
+        from hil.fieldbus.reply_times import ReplyTimes
+        from protocols import ethercat as ec
+
+        self._open_frame = wire.open_frame  # (bound once: looked up at every frame)
+        self._lrw = ec.Command.LRW
         self.chain = chain
         self.end = end
         self.period = period_s
@@ -166,12 +170,12 @@ class PacedServer:
     def _audit(self, frame: bytes, t: float) -> None:
         """Track the master's cycle numbers: skipped ones and cycles not covering every box
         (the last cycle of a session is not judged: it may be cut short)."""
-        dgs = wire.open_frame(frame, self.chain.crc_trailer)
+        dgs = self._open_frame(frame, self.chain.crc_trailer)
         if not dgs:
             return
         covered = 0
         for d in dgs:
-            if d.cmd != ec.Command.LRW:
+            if d.cmd != self._lrw:
                 continue
             lo, hi = d.lad, d.lad + len(d.data)
             for k, (a, b) in enumerate(self._windows):
@@ -221,6 +225,7 @@ class PacedServer:
         (:class:`~hil.fieldbus.box_clock.BoxClock`); ``box_setup`` / ``box_behind``: the
         box thread's real-time hooks (:class:`hil.sim.realtime.RealtimePlan`)."""
         from hil.fieldbus.box_clock import BoxClock
+        from hil.sim.cpu_account import run_delay_ns
 
         st, clock = self.stats, self.clock
         boxes = self.prepare()
@@ -292,10 +297,11 @@ def _usage(msg: str) -> Exception:
 
 
 def serve_backends() -> list[str]:
-    """The transports ``eha-hil serve`` offers (each backend says whether it can)."""
-    from hil.transports import BACKENDS, backend
+    """The transports ``eha-hil serve`` offers, known without importing them (the parser is
+    built at every start: a class's import can be python-can's)."""
+    from hil.transports import SERVING_BACKENDS
 
-    return [b for b in BACKENDS if backend(b).serves_remote_masters]
+    return list(SERVING_BACKENDS)
 
 
 def _open_end(args: argparse.Namespace):
@@ -397,13 +403,13 @@ def _open_log(args: argparse.Namespace, path: str | None, model: str):  # noqa: 
 
 def _close_log(log, recs: list, topo, cfg, chain, model: str, cycles: int) -> None:  # noqa: ANN001
     """Write out the recorders' last blocks and what a replay needs; close the log."""
-    from hil.replay.record import replay_metadata
-
     try:
         for r in recs:
             getattr(r, "close", r.flush)()
     finally:
         if log is not None:
+            from hil.replay.record import replay_metadata  # (mcap with it: only for a log)
+
             log.add_metadata("eha-hil.replay", replay_metadata(topo, cfg, chain.boxes, model,
                                                                cycles))
             log.close()
@@ -444,6 +450,7 @@ _LOG_CHECK = {"log": _readable_log}
 
 def _serve(args: argparse.Namespace, cfg, topo, capture: str | None,
            log_path: str | None = None) -> Outcome:
+    from hil.fieldbus import reply_times
     from hil.fieldbus.capture import CaptureError, CaptureWriter
     from hil.fieldbus.chain import Chain
     from hil.sim.cpu_account import steal_during, steal_s
@@ -643,6 +650,7 @@ def _serve_ethercat(args: argparse.Namespace, cfg, topo, link, model: str,  # no
                     log_path: str | None, dc) -> Outcome:  # noqa: ANN001
     import threading
 
+    from hil.fieldbus import reply_times
     from hil.fieldbus.chain import CYCLE_TICKS
     from hil.fieldbus.esc.serve import ServedChain, serve, warm_up
     from hil.sim.realtime import RealtimePlan
@@ -774,6 +782,7 @@ def ethercat_failures(st, args: argparse.Namespace) -> list[str]:
 
 
 def ethercat_table(d: dict) -> str:
+    from hil.fieldbus import reply_times
     from hil.output.tables import table
 
     rows = [

@@ -45,6 +45,12 @@ _REGISTRY: dict[str, str] = {
 #: The backend names, in the order the error messages list them.
 BACKENDS: tuple[str, ...] = tuple(_REGISTRY)
 
+#: The backends ``eha-hil serve`` offers, in :data:`BACKENDS`' order: those whose class says
+#: :attr:`Transport.serves_remote_masters`, named here as well so that the command line can
+#: list them without importing every backend (python-can's import alone is ~0.1 s of each
+#: start of the console script). tests/transports/test_transport_api.py checks they agree.
+SERVING_BACKENDS: tuple[str, ...] = ("udp", "serial")
+
 
 class TransportError(Exception):
     """A transport cannot be opened or used; the message is one line naming the cause."""

@@ -7,9 +7,11 @@ import pytest
 
 from hil.transports import (
     BACKENDS,
+    SERVING_BACKENDS,
     Transport,
     TransportError,
     TransportStats,
+    backend,
     open_transport,
     round_trip_rate,
     transport_pair,
@@ -25,6 +27,11 @@ def one_line(exc: pytest.ExceptionInfo[TransportError]) -> str:
 
 def test_backends_listed() -> None:
     assert BACKENDS == ("inproc", "udp", "serial", "can")
+
+
+def test_the_serving_backends_are_those_whose_class_says_so() -> None:
+    """The command line lists ``SERVING_BACKENDS`` without importing the backends."""
+    assert SERVING_BACKENDS == tuple(b for b in BACKENDS if backend(b).serves_remote_masters)
 
 
 def test_image_frames_both_ways(pair: tuple[Transport, Transport]) -> None:
