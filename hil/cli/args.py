@@ -66,9 +66,15 @@ class Parser(argparse.ArgumentParser):
             dest, allowed = scope
             chosen = getattr(ns, dest, None)
             if chosen not in allowed:
-                self.error(f"argument {'/'.join(action.option_strings)}: only with "
-                           f"--{dest.replace('_', '-')} {' or '.join(allowed)} "
-                           f"(not {chosen}): it would be ignored")
+                flag = f"--{dest.replace('_', '-')}"
+                if allowed == (True,):  # a switch: ``--wire``
+                    need = f"only with {flag}"
+                elif allowed == (False,):
+                    need = f"not with {flag}"
+                else:
+                    need = f"only with {flag} {' or '.join(map(str, allowed))} (not {chosen})"
+                self.error(f"argument {'/'.join(action.option_strings)}: {need}: it would "
+                           "be ignored")
 
     def error(self, message: str) -> NoReturn:
         # argparse prints the whole usage block first; one line says the same and keeps
@@ -92,10 +98,11 @@ def _given(action: argparse.Action, argv: list[str]) -> bool:
     return False
 
 
-def only_with(action: argparse.Action, dest: str, *allowed: str) -> argparse.Action:
+def only_with(action: argparse.Action, dest: str, *allowed: str | bool) -> argparse.Action:
     """Mark an option as meaningful only when option ``dest`` is one of ``allowed`` (e.g.
-    ``--baudrate`` only with ``--transport serial``); :class:`Parser` refuses it otherwise
-    with one line, before any work."""
+    ``--baudrate`` only with ``--transport serial``; ``True``: only with the switch
+    ``--dest`` given, ``False``: only without it); :class:`Parser` refuses it otherwise with
+    one line, before any work."""
     action.only_with = (dest, tuple(allowed))  # type: ignore[attr-defined]
     return action
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from hil.cli.args import common, float_range, int_range
+from hil.cli.args import common, float_range, int_range, only_with
 from hil.cli.contract import Context, Outcome, UsageError, command
 
 
@@ -22,22 +22,27 @@ def add_parsers(sub, bsub) -> None:  # noqa: ANN001 - argparse's sub-parsers
     p = bsub.add_parser("ethercat", parents=[common(plot=False)],
                         help="round trip and box-cycle time per bus cycle of the ESC chain "
                         "(hydra_full; echo boxes, and the full stack behind one box)")
-    p.add_argument("--cycles", type=int_range(10, 1_000_000), default=2000,
-                   help="timed cycles of the echo row (the stack row: a quarter), 10..1e6")
+    only_with(p.add_argument("--cycles", type=int_range(10, 1_000_000), default=2000,
+                             help="timed cycles of the echo row (the stack row: a quarter), "
+                             "10..1e6; not with --wire"), "wire", False)
     p.add_argument("--wire", action="store_true",
                    help="instead: SOEM (pysoem) as the master over a veth pair, serve "
                    "--realtime on the other end (root; makes and removes its own network "
                    "namespace)")
-    p.add_argument("--model", choices=("robot", "stack", "echo"), default="robot",
-                   help="--wire: the boxes behind every slave (default robot: the full "
-                   "stack of all 47 actuators)")
-    p.add_argument("--seconds", type=float_range(1.0, 86_400.0, unit="s"), default=60.0,
-                   help="--wire: wall seconds of 1 kHz cycles (default 60)")
-    p.add_argument("--bring-ups", type=int_range(0, 1000), default=25,
-                   help="--wire: bring-ups to OP counted first (default 25)")
-    p.add_argument("--busy-cpu", type=int_range(0, 4095), metavar="CPU",
-                   help="--wire: a process of the benchmark's own keeps CPU busy during the "
-                   "cycles (the figures with one core held busy)")
+    wire_only = (
+        p.add_argument("--model", choices=("robot", "stack", "echo"), default="robot",
+                       help="--wire: the boxes behind every slave (default robot: the full "
+                       "stack of all 47 actuators)"),
+        p.add_argument("--seconds", type=float_range(1.0, 86_400.0, unit="s"), default=60.0,
+                       help="--wire: wall seconds of 1 kHz cycles (default 60)"),
+        p.add_argument("--bring-ups", type=int_range(0, 1000), default=25,
+                       help="--wire: bring-ups to OP counted first (default 25)"),
+        p.add_argument("--busy-cpu", type=int_range(0, 4095), metavar="CPU",
+                       help="--wire: a process of the benchmark's own keeps CPU busy during "
+                       "the cycles (the figures with one core held busy)"),
+    )
+    for action in wire_only:  # the echo and stack rows have no use for them
+        only_with(action, "wire", True)
     command(p, _cmd_bench)
 
 

@@ -174,15 +174,30 @@ VALUES = {"--baudrate": "9600", "--host": "0.0.0.0", "--port": "pty", "--interfa
           "--dc-drift-ppm": "50", "--dc-hop-ns": "500"}
 
 
+#: Values of the options that only one side of a switch reads (refused before any work).
+SWITCHED = {"--model": "echo", "--seconds": "2", "--bring-ups": "3", "--busy-cpu": "0",
+            "--cycles": "100"}
+
+
 def test_serve_options_are_scoped():
     names = {o for _, o, _, _ in _scoped()}
     assert {"--baudrate", "--stack-box", "--host", "--interface"} <= names
+    # the SOEM-on-a-wire options, and the in-process rows' cycle count, each on its side
+    assert {o for p, o, d, _ in _scoped() if d == "wire"} == set(SWITCHED)
 
 
 @pytest.mark.parametrize("case", _scoped(), ids=lambda c: f"{c[0][8:]} {c[1]}")
 def test_option_of_another_transport_refused(case, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     prog, opt, dest, allowed = case
+    if allowed in ((True,), (False,)):  # an option of a switch's side (bench ethercat --wire)
+        switch = [] if allowed == (True,) else [f"--{dest.replace('_', '-')}"]
+        code, out, err = _run([*prog.split()[1:], *switch, f"{opt}={SWITCHED[opt]}"])
+        line = _one_line(err)
+        side = "only with" if allowed == (True,) else "not with"
+        assert code == 2 and opt in line and f"{side} --{dest}" in line, line
+        assert out == ""
+        return
     choices = next(a.choices for p in walk(build_parser()) if p.prog == prog
                    for a in p._actions if a.dest == dest)
     for other in [c for c in choices if c not in allowed]:
