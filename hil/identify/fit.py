@@ -85,6 +85,12 @@ LOOSE_AFTER_JACOBIANS = 2
 #: (a missing pump friction), never a seal: the fit keeps them >= 0.
 NON_NEGATIVE = frozenset({"sf_coulomb_n", "sf_static_n"})
 
+#: A Jacobian's simulated columns from one tangent-linear simulation of the states'
+#: derivatives (:mod:`hil.identify.tangent`) rather than a simulation per column.
+TANGENT = False
+#: Fewest such columns worth the tangent's simulation (it costs more than one column's).
+TANGENT_MIN_COLUMNS = 2
+
 #: Longest first-order sensor lag the baseline may fit (a 160 Hz sensor).
 MAX_SENSOR_LAG_S = 1e-3
 #: The timing skew is a sub-sample alignment: |skew| <= SKEW_LIMIT x the sample period.
@@ -252,6 +258,7 @@ class OutputErrorFit:
                 last = cache["last"]
             _, r0, z0 = last
             steps = 1e-6 * np.maximum(1.0, np.abs(x))
+            tangent = self._tangent_columns(x, free, theta0, steps, n_stop)
 
             def column(i: int) -> np.ndarray:
                 xx = x.copy()
@@ -260,6 +267,11 @@ class OutputErrorFit:
                 # an offset, a drift, a lag, a clip: the same states, new outputs
                 if free[i] in OUTPUT_ONLY:
                     z = z0
+                elif i in tangent:
+                    # the simulation at the step, to first order: the tangent's states
+                    sens = tangent[i]
+                    z = z0.copy()
+                    z[:sens.shape[0]] += steps[i] * sens
                 else:
                     self.n_sims += 1
                     z = self.model.states(theta, n_stop, keep=False)
@@ -276,6 +288,37 @@ class OutputErrorFit:
             return np.ascontiguousarray(out_t.T)
 
         return fun, jac
+
+    def _tangent_columns(self, x: np.ndarray, free: list[str], theta0: np.ndarray,
+                         steps: np.ndarray, n_stop: int) -> dict[int, np.ndarray]:
+        """``{column: dz/dx}`` of the simulated columns one tangent-linear simulation gives
+        (:mod:`hil.identify.tangent`): every column that keeps the kernel's code paths
+        over its step, when there are at least :data:`TANGENT_MIN_COLUMNS`; the others
+        are simulated one by one (empty: all of them)."""
+        if not TANGENT:
+            return {}
+        from hil.identify.tangent import on_path, state_sensitivities
+
+        theta = self._to_theta(x, free, theta0)
+        cols, plus, minus = [], [], []
+        for i, name in enumerate(free):
+            if name in OUTPUT_ONLY:
+                continue
+            xp = x.copy()
+            xp[i] += steps[i]
+            xm = x.copy()
+            xm[i] -= steps[i]
+            tp = self._to_theta(xp, free, theta0)
+            tm = self._to_theta(xm, free, theta0)
+            if on_path(self.model, theta, tp, tm):
+                cols.append(i)
+                plus.append(tp)
+                minus.append(tm)
+        if len(cols) < TANGENT_MIN_COLUMNS:
+            return {}
+        self.n_sims += 1
+        sens = state_sensitivities(self.model, theta, plus, minus, steps[cols], n_stop)
+        return {i: sens[c] for c, i in enumerate(cols)}
 
     def fit_mask(self) -> np.ndarray:
         """Estimation samples where every channel is defined."""
