@@ -54,7 +54,6 @@ from hil.identify.model import (
     _initial_state,
     _solve_friction,
     continuous,
-    discretise,
 )
 
 
@@ -448,6 +447,34 @@ def _tangent(ad, bd, z0, tau_p, ks, ds, dp, dc, eff, angle, has_angle, xs, has_x
 _FORCE_IDX = (IDX["gain_n_per_a"], IDX["skew_s"], IDX["delay_s"])
 
 
+def expm_derivatives(m: np.ndarray, dms: np.ndarray, h: float) -> np.ndarray:
+    """The derivatives of ``expm(m h)`` along each ``dms[j]`` (``dms``: P x n x n): the
+    Taylor series of the exponential and its derivative, ``S_k = (S_{k-1} a + T_{k-1} da)
+    / k`` beside ``T_k = T_{k-1} a / k``, on ``h / 2^s`` with ``|m h / 2^s|_1 <= 1/2``, then
+    the squarings ``D <- D E + E D``, ``E <- E E``. (scipy's Pade exponential takes ~8 ms
+    on a free piston's Van Loan block, its intermediate powers running into subnormal
+    numbers: a Jacobian's eight linear columns would spend a tenth of a second in it.)"""
+    a = m * h
+    norm = float(np.abs(a).sum(axis=0).max())
+    squarings = max(0, math.ceil(math.log2(norm / 0.5))) if norm > 0.5 else 0
+    scale = 0.5 ** squarings
+    a = a * scale
+    da = dms * (h * scale)
+    e = np.eye(m.shape[0])
+    t = e.copy()
+    d = np.zeros_like(da)
+    s = np.zeros_like(da)
+    for k in range(1, 15):  # (1/2)^15 / 15! = 2e-17
+        s = (s @ a + t @ da) / k
+        t = t @ a / k
+        e = e + t
+        d = d + s
+    for _ in range(squarings):
+        d = d @ e + e @ d
+        e = e @ e
+    return d
+
+
 def _switches(model: FastModel, theta: np.ndarray) -> tuple:
     """The kernel's code paths for ``theta``: which effects run, how many pulsation orders,
     which friction shapes come from the preset. A column whose step changes one of them is
@@ -496,6 +523,8 @@ def state_sensitivities(model: FastModel, theta: np.ndarray, plus: list[np.ndarr
     sel = np.zeros((eff.size, n_col))
     tau_cols = []
     dtau = []
+    # the continuous (A, B)'s derivatives, as Van Loan blocks, of the linear part's columns
+    d_big = np.zeros((n_lin, 9, 9))
 
     def force(th: np.ndarray) -> np.ndarray:
         return th[IDX["gain_n_per_a"]] * model.applied_current(
@@ -504,18 +533,10 @@ def state_sensitivities(model: FastModel, theta: np.ndarray, plus: list[np.ndarr
     for c, j in enumerate(order):
         tp, tm, two = plus[j], minus[j], 2.0 * steps[j]
         if moves_lin[j]:
-            # over half a sub-step by central differences; the full sub-step is its square
-            # ([Ad Bd; 0 I] = [Adh Bdh; 0 I]^2), so its derivative needs no exponential
             ap, bp = continuous(tp, exp)
             am, bm = continuous(tm, exp)
-            adp, bdp = discretise(ap, bp, 0.5 * h)
-            adm, bdm = discretise(am, bm, 0.5 * h)
-            d_adh = (adp - adm) / two
-            d_bdh = (bdp - bdm) / two
-            dadh[:, :, c] = d_adh
-            dbdh[:, :, c] = d_bdh
-            dad[:, :, c] = d_adh @ adh + adh @ d_adh
-            dbd[:, :, c] = d_adh @ bdh + adh @ d_bdh + d_bdh
+            d_big[c, :5, :5] = (ap - am) / two
+            d_big[c, :5, 5:] = (bp - bm) / two
         if moves_force[j]:
             fp, fm = force(tp), force(tm)
             tau_cols.append(c)
@@ -532,6 +553,18 @@ def state_sensitivities(model: FastModel, theta: np.ndarray, plus: list[np.ndarr
         for arr, name in ((dks, "ks"), (dds, "ds"), (ddp, "dp"), (ddc, "dc")):
             arr[c] = (tp[IDX[name]] - tm[IDX[name]]) / two
         sel[:, c] = (model.effect_array(tp) - model.effect_array(tm)) / two
+    if n_lin:
+        a, b = continuous(theta, exp)
+        big = np.zeros((9, 9))
+        big[:5, :5] = a
+        big[:5, 5:] = b
+        d_half = expm_derivatives(big, d_big, 0.5 * h)
+        dadh[:] = d_half[:, :5, :5].transpose(1, 2, 0)
+        dbdh[:] = d_half[:, :5, 5:].transpose(1, 2, 0)
+        # the full sub-step is the half one's square ([Ad Bd; 0 I] = [Adh Bdh; 0 I]^2)
+        dad[:] = (d_half[:, :5, :5] @ adh + adh @ d_half[:, :5, :5]).transpose(1, 2, 0)
+        dbd[:] = (d_half[:, :5, :5] @ bdh + adh @ d_half[:, :5, 5:]
+                  + d_half[:, :5, 5:]).transpose(1, 2, 0)
     n_run = exp.n if n_stop is None else max(2, min(n_stop, exp.n))
     sens = np.zeros((n_run, 5, n_col))
     e = np.zeros(1)
