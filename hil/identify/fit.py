@@ -293,13 +293,16 @@ class OutputErrorFit:
                          steps: np.ndarray, n_stop: int) -> dict[int, np.ndarray]:
         """``{column: dz/dx}`` of the simulated columns one tangent-linear simulation gives
         (:mod:`hil.identify.tangent`): every column that keeps the kernel's code paths
-        over its step, when there are at least :data:`TANGENT_MIN_COLUMNS`; the others
-        are simulated one by one (empty: all of them)."""
+        over its step, when the simulation runs an effect and there are at least
+        :data:`TANGENT_MIN_COLUMNS` such columns; the others are simulated one by one
+        (empty: all of them)."""
         if not TANGENT:
             return {}
-        from hil.identify.tangent import on_path, state_sensitivities
+        from hil.identify.tangent import effects_on, on_path, state_sensitivities
 
         theta = self._to_theta(x, free, theta0)
+        if not effects_on(self.model, theta):
+            return {}
         cols, plus, minus = [], [], []
         for i, name in enumerate(free):
             if name in OUTPUT_ONLY:
@@ -318,7 +321,7 @@ class OutputErrorFit:
             return {}
         self.n_sims += 1
         sens = state_sensitivities(self.model, theta, plus, minus, steps[cols], n_stop)
-        return {i: sens[c] for c, i in enumerate(cols)}
+        return dict(zip(cols, sens, strict=True))
 
     def fit_mask(self) -> np.ndarray:
         """Estimation samples where every channel is defined."""

@@ -433,7 +433,11 @@ def _tangent(ad, bd, z0, tau_p, ks, ds, dp, dc, eff, angle, has_angle, xs, has_x
                         dzn[i, j] -= dbd[i, 3, j] * fs
             for i in range(ns):
                 z[i] = zn[i]
-            dz, dzn = dzn, dz
+            # (a copy: swapping the two arrays' names costs reference counting every
+            # sub-step, a fifth of a linear model's tangent)
+            for i in range(5):
+                for j in range(npar):
+                    dz[i, j] = dzn[i, j]
         if has_angle:
             offset += alpha * (angle[k + 1] - z[0] * kc_kp - offset)
             for j in range(npar):
@@ -487,6 +491,14 @@ def _switches(model: FastModel, theta: np.ndarray) -> tuple:
             theta[IDX["sf_eps_m_per_s"]] == 0.0)
 
 
+def effects_on(model: FastModel, theta: np.ndarray) -> bool:
+    """True when the simulation of ``theta`` runs an effect (a friction's solve, the
+    pulsation, k_s(x), a viscosity law): only then does one tangent simulation cost less
+    than the columns' simulations; the linear model's sub-step is a few multiply-adds,
+    and its columns are cheaper simulated."""
+    n_ord, pc, sf, ksx, visc = _switches(model, theta)[:5]
+    return n_ord > 0 or pc or sf or ksx or visc
+
 def on_path(model: FastModel, theta: np.ndarray, plus: np.ndarray, minus: np.ndarray) -> bool:
     """True when the column from ``minus`` to ``plus`` keeps ``theta``'s code paths."""
     here = _switches(model, theta)
@@ -495,8 +507,8 @@ def on_path(model: FastModel, theta: np.ndarray, plus: np.ndarray, minus: np.nda
 
 def state_sensitivities(model: FastModel, theta: np.ndarray, plus: list[np.ndarray],
                         minus: list[np.ndarray], steps: np.ndarray, n_stop: int | None
-                        ) -> np.ndarray:
-    """``S[j] = dz/dx_j`` (columns x samples x 5) along the columns that move ``theta`` to
+                        ) -> list[np.ndarray]:
+    """``S[j] = dz/dx_j`` (samples x 5, a view each) along the columns that move ``theta`` to
     ``plus[j]`` and ``minus[j]`` by ``+-steps[j]`` in their coordinate: the parameter
     partials as central differences of the kernel's inputs (no simulation), the states'
     by one tangent-linear simulation of the first ``n_stop`` samples."""
@@ -566,7 +578,7 @@ def state_sensitivities(model: FastModel, theta: np.ndarray, plus: list[np.ndarr
         dbd[:] = (d_half[:, :5, :5] @ bdh + adh @ d_half[:, :5, 5:]
                   + d_half[:, :5, 5:]).transpose(1, 2, 0)
     n_run = exp.n if n_stop is None else max(2, min(n_stop, exp.n))
-    sens = np.zeros((n_run, 5, n_col))
+    sens = np.empty((n_run, 5, n_col))  # (every sample is written)
     e = np.zeros(1)
     _tangent(ad, bd, z0, tau_p, theta[IDX["ks"]], theta[IDX["ds"]], theta[IDX["dp"]],
              theta[IDX["dc"]], eff,
@@ -577,7 +589,7 @@ def state_sensitivities(model: FastModel, theta: np.ndarray, plus: list[np.ndarr
              adh, bdh, dad, dbd, dadh, dbdh, dks, dds, ddp, ddc, dz0,
              np.array(dtau) if dtau else np.zeros((0, 1)),
              np.array(tau_cols, dtype=np.int64), sel, sens)
-    # back in the callers' column order, a column's samples x states
-    out = np.empty((n_col, n_run, 5))
-    out[order] = sens.transpose(2, 0, 1)
-    return out
+    # the callers' columns, as views (a transposing copy of every column was half the
+    # kernel's time on a linear model)
+    where = {j: c for c, j in enumerate(order)}
+    return [sens[:, :, where[j]] for j in range(n_col)]
