@@ -9,7 +9,9 @@ unknown per-channel variances, in two passes).
 
 Positive physical parameters (d_s, d_p, d_c, k_s, K, k_rod, c_rod) are fitted as logarithms;
 effect parameters linearly, scaled by their nominal size. A Levenberg-Marquardt on the normal
-equations (box bounds, forward-difference Jacobian, columns simulated in parallel) does the work.
+equations (box bounds, forward-difference Jacobian, columns simulated in parallel) does the work;
+where the simulation runs an effect, the simulated columns' states come from one tangent-linear
+simulation (:mod:`hil.identify.tangent`, :data:`TANGENT`) instead of one simulation each.
 
 Confidence intervals come from the Jacobian ``J`` at the optimum: ``cov = H^-1 S H^-1`` with
 ``H = J'J`` and ``S`` the Newey-West long-run covariance of the per-sample scores (the sum
@@ -239,7 +241,9 @@ class OutputErrorFit:
 
     def _problem(self, free: list[str], theta0: np.ndarray, sigma: dict[str, float],
                  mask: np.ndarray):
-        """Residual function and its forward-difference Jacobian (columns in parallel)."""
+        """Residual function and its forward-difference Jacobian (columns in parallel; the
+        simulated columns' states from the tangent where :meth:`_tangent_columns` gives
+        them: ``z + step dz/dx``, mapped to outputs and residuals as a simulated column's)."""
         cache: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         n_stop = self._span(mask)[0]
 
