@@ -89,7 +89,7 @@ NON_NEGATIVE = frozenset({"sf_coulomb_n", "sf_static_n"})
 
 #: A Jacobian's simulated columns from one tangent-linear simulation of the states'
 #: derivatives (:mod:`hil.identify.tangent`) rather than a simulation per column.
-TANGENT = False
+TANGENT = True
 #: Fewest such columns worth the tangent's simulation (it costs more than one column's).
 TANGENT_MIN_COLUMNS = 2
 
