@@ -510,8 +510,9 @@ def state_sensitivities(model: FastModel, theta: np.ndarray, plus: list[np.ndarr
                         ) -> list[np.ndarray]:
     """``S[j] = dz/dx_j`` (samples x 5, a view each) along the columns that move ``theta`` to
     ``plus[j]`` and ``minus[j]`` by ``+-steps[j]`` in their coordinate: the parameter
-    partials as central differences of the kernel's inputs (no simulation), the states'
-    by one tangent-linear simulation of the first ``n_stop`` samples."""
+    partials as central differences of the kernel's inputs (no simulation; the input's
+    timing forward, to ``plus[j]`` only), the states' by one tangent-linear simulation of
+    the first ``n_stop`` samples."""
     exp = model.exp
     h = exp.dt / model.n_sub
     ad, bd, adh, bdh, z0, tau_p, eff = model.kernel_inputs(theta)
@@ -549,14 +550,26 @@ def state_sensitivities(model: FastModel, theta: np.ndarray, plus: list[np.ndarr
             am, bm = continuous(tm, exp)
             d_big[c, :5, :5] = (ap - am) / two
             d_big[c, :5, 5:] = (bp - bm) / two
-        if moves_force[j]:
-            fp, fm = force(tp), force(tm)
+        timing = moves_force[j] and (tp[IDX["delay_s"]] + tp[IDX["skew_s"]]
+                                     != theta[IDX["delay_s"]] + theta[IDX["skew_s"]])
+        if timing:
+            # the input's timing forward only, as the simulated column had it: the
+            # band-limited sub-step average is 10-15 ms a delay, a second one per
+            # Jacobian was a twentieth of a free piston's record
+            fp = force(tp)
             tau_cols.append(c)
-            dtau.append((fp - fm) / two)
-            u0p, u0m = fp[0], fm[0]
-        else:
-            u0p = u0m = tau_p[0]
-        if moves_lin[j] or moves_force[j]:
+            dtau.append((fp - tau_p) / steps[j])
+            ap, bp = continuous(tp, exp)
+            zp = _initial_state(ap, bp, np.array([fp[0], 0.0, 0.0, 0.0]), exp.load)
+            dz0[:, c] = (zp - z0) / steps[j]
+        elif moves_lin[j] or moves_force[j]:
+            if moves_force[j]:  # the gain: the force is linear in it
+                fp, fm = force(tp), force(tm)
+                tau_cols.append(c)
+                dtau.append((fp - fm) / two)
+                u0p, u0m = fp[0], fm[0]
+            else:
+                u0p = u0m = tau_p[0]
             ap, bp = continuous(tp, exp)
             am, bm = continuous(tm, exp)
             zp = _initial_state(ap, bp, np.array([u0p, 0.0, 0.0, 0.0]), exp.load)

@@ -57,7 +57,7 @@ def _model(load: str, effects: list[str], seconds: float = 0.4) -> FastModel:
 def _columns(model: FastModel, theta: np.ndarray, names: tuple[str, ...]):
     plus, minus, steps = [], [], []
     for name in names:
-        step = (1e-3 * model.exp.dt if name in ("skew_s", "delay_s")
+        step = (1e-5 * model.exp.dt if name in ("skew_s", "delay_s")
                 else 1e-5 * max(abs(theta[IDX[name]]), 1e-3))
         tp = theta.copy()
         tp[IDX[name]] += step
