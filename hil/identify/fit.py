@@ -9,7 +9,9 @@ unknown per-channel variances, in two passes).
 
 Positive physical parameters (d_s, d_p, d_c, k_s, K, k_rod, c_rod) are fitted as logarithms;
 effect parameters linearly, scaled by their nominal size. A Levenberg-Marquardt on the normal
-equations (box bounds, forward-difference Jacobian, columns simulated in parallel) does the work.
+equations (box bounds, forward-difference Jacobian, columns simulated in parallel) does the work;
+where the simulation runs an effect, the simulated columns' states come from one tangent-linear
+simulation (:mod:`hil.identify.tangent`, :data:`TANGENT`) instead of one simulation each.
 
 Confidence intervals come from the Jacobian ``J`` at the optimum: ``cov = H^-1 S H^-1`` with
 ``H = J'J`` and ``S`` the Newey-West long-run covariance of the per-sample scores (the sum
@@ -84,6 +86,12 @@ LOOSE_AFTER_JACOBIANS = 2
 #: level is a seal that pushes the piston along near rest, a stand-in for another effect
 #: (a missing pump friction), never a seal: the fit keeps them >= 0.
 NON_NEGATIVE = frozenset({"sf_coulomb_n", "sf_static_n"})
+
+#: A Jacobian's simulated columns from one tangent-linear simulation of the states'
+#: derivatives (:mod:`hil.identify.tangent`) rather than a simulation per column.
+TANGENT = True
+#: Fewest such columns worth the tangent's simulation (it costs more than one column's).
+TANGENT_MIN_COLUMNS = 2
 
 #: Longest first-order sensor lag the baseline may fit (a 160 Hz sensor).
 MAX_SENSOR_LAG_S = 1e-3
@@ -233,7 +241,9 @@ class OutputErrorFit:
 
     def _problem(self, free: list[str], theta0: np.ndarray, sigma: dict[str, float],
                  mask: np.ndarray):
-        """Residual function and its forward-difference Jacobian (columns in parallel)."""
+        """Residual function and its forward-difference Jacobian (columns in parallel; the
+        simulated columns' states from the tangent where :meth:`_tangent_columns` gives
+        them: ``z + step dz/dx``, mapped to outputs and residuals as a simulated column's)."""
         cache: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         n_stop = self._span(mask)[0]
 
@@ -252,6 +262,7 @@ class OutputErrorFit:
                 last = cache["last"]
             _, r0, z0 = last
             steps = 1e-6 * np.maximum(1.0, np.abs(x))
+            tangent = self._tangent_columns(x, free, theta0, steps, n_stop)
 
             def column(i: int) -> np.ndarray:
                 xx = x.copy()
@@ -260,6 +271,11 @@ class OutputErrorFit:
                 # an offset, a drift, a lag, a clip: the same states, new outputs
                 if free[i] in OUTPUT_ONLY:
                     z = z0
+                elif i in tangent:
+                    # the simulation at the step, to first order: the tangent's states
+                    sens = tangent[i]
+                    z = z0.copy()
+                    z[:sens.shape[0]] += steps[i] * sens
                 else:
                     self.n_sims += 1
                     z = self.model.states(theta, n_stop, keep=False)
@@ -276,6 +292,40 @@ class OutputErrorFit:
             return np.ascontiguousarray(out_t.T)
 
         return fun, jac
+
+    def _tangent_columns(self, x: np.ndarray, free: list[str], theta0: np.ndarray,
+                         steps: np.ndarray, n_stop: int) -> dict[int, np.ndarray]:
+        """``{column: dz/dx}`` of the simulated columns one tangent-linear simulation gives
+        (:mod:`hil.identify.tangent`): every column that keeps the kernel's code paths
+        over its step, when the simulation runs an effect and there are at least
+        :data:`TANGENT_MIN_COLUMNS` such columns; the others are simulated one by one
+        (empty: all of them)."""
+        if not TANGENT:
+            return {}
+        from hil.identify.tangent import effects_on, on_path, state_sensitivities
+
+        theta = self._to_theta(x, free, theta0)
+        if not effects_on(self.model, theta):
+            return {}
+        cols, plus, minus = [], [], []
+        for i, name in enumerate(free):
+            if name in OUTPUT_ONLY:
+                continue
+            xp = x.copy()
+            xp[i] += steps[i]
+            xm = x.copy()
+            xm[i] -= steps[i]
+            tp = self._to_theta(xp, free, theta0)
+            tm = self._to_theta(xm, free, theta0)
+            if on_path(self.model, theta, tp, tm):
+                cols.append(i)
+                plus.append(tp)
+                minus.append(tm)
+        if len(cols) < TANGENT_MIN_COLUMNS:
+            return {}
+        self.n_sims += 1
+        sens = state_sensitivities(self.model, theta, plus, minus, steps[cols], n_stop)
+        return dict(zip(cols, sens, strict=True))
 
     def fit_mask(self) -> np.ndarray:
         """Estimation samples where every channel is defined."""

@@ -548,7 +548,10 @@ class FastModel:
                 del self._runs[next(iter(self._runs))]
         return out
 
-    def _simulate_states(self, theta: np.ndarray, n_stop: int | None) -> np.ndarray:
+    def kernel_inputs(self, theta: np.ndarray) -> tuple[np.ndarray, ...]:
+        """What the simulation kernel takes for ``theta`` besides the record: the linear
+        part discretised over a sub-step and over half of one ``(ad, bd, adh, bdh)``, the
+        start state, the applied force per sub-step and the flat effect array."""
         exp = self.exp
         h = exp.dt / self.n_sub
         # Jacobian columns of effect parameters share the linear part: discretise it once
@@ -573,6 +576,12 @@ class FastModel:
             a, b = continuous(theta, exp)
             u0 = np.array([tau_p[0], 0.0, 0.0, 0.0])
             z0 = self._start_cache[z0_key] = _initial_state(a, b, u0, exp.load)
+        return ad, bd, adh, bdh, z0, tau_p, self.effect_array(theta)
+
+    def effect_array(self, theta: np.ndarray) -> np.ndarray:
+        """The flat effect array the simulation kernel reads, for ``theta``."""
+        exp = self.exp
+        h = exp.dt / self.n_sub
         eff = np.zeros(_N_EFF)
         eff[:32] = theta[IDX["puls1_flow_s"]: IDX["puls1_flow_s"] + 32]
         eff[_E_PC] = theta[IDX["pc_force_n"]]
@@ -592,6 +601,11 @@ class FastModel:
         eff[_E_H_SUB] = h
         eff[_E_ALPHA] = 1.0 - math.exp(-2.0 * math.pi * ANGLE_CROSSOVER_HZ * exp.dt)
         eff[_E_SOLVE_TOL] = self.solve_tol
+        return eff
+
+    def _simulate_states(self, theta: np.ndarray, n_stop: int | None) -> np.ndarray:
+        exp = self.exp
+        ad, bd, adh, bdh, z0, tau_p, eff = self.kernel_inputs(theta)
         out = np.zeros((exp.n, 5))
         e = self._empty
         sim = out if n_stop is None else out[: max(2, min(n_stop, exp.n))]

@@ -97,7 +97,22 @@ def _identify_model(cfg) -> None:
     from hil.identify.synth import generate
 
     model = FastModel(prepare(generate(seconds=0.2, noise=False).data, cfg))
-    model.outputs(model.start_vector())
+    theta = model.start_vector()
+    model.outputs(theta)
+    # and the fits' tangent-linear simulation (hil.identify.tangent): two columns, the
+    # applied force's and the linear part's
+    from hil.identify.model import IDX
+    from hil.identify.tangent import state_sensitivities
+
+    plus, minus = [], []
+    for name in ("gain_n_per_a", "ks"):
+        step = 1e-6 * theta[IDX[name]]
+        plus.append(theta.copy())
+        plus[-1][IDX[name]] += step
+        minus.append(theta.copy())
+        minus[-1][IDX[name]] -= step
+    state_sensitivities(model, theta, plus, minus,
+                        np.array([1e-6 * theta[IDX[n]] for n in ("gain_n_per_a", "ks")]), None)
 
 
 def _robot(cfg) -> None:

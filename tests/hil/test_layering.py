@@ -277,6 +277,9 @@ ALLOWED = {
         "compiled pass: bytes moved, no part's arithmetic",
     ("hil/identify/model.py", "kernel"):
         "identification: the reduced model fitted to measured data, not the plant's parts",
+    ("hil/identify/tangent.py", "kernel"):
+        "identification: the reduced model's tangent-linear simulation (its derivatives in "
+        "the fitted parameters), not the plant's parts",
     ("hil/identify/rig.py", "kernel"):
         "identification: the independent generator of rig data, which must differ from "
         "the plant's model (DESIGN.md, data formats)",

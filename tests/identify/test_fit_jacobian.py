@@ -39,6 +39,10 @@ def test_output_only_parameters_leave_the_states_alone():
 
 
 def test_the_shortcut_gives_the_jacobian_of_a_simulation_per_column(monkeypatch):
+    import hil.identify.fit as fit_module
+
+    # the forward differences' shortcut (the tangent's columns: tests/identify/test_tangent.py)
+    monkeypatch.setattr(fit_module, "TANGENT", False)
     model = _model()
     theta = model.start_vector()
     theta[IDX["lag_pressure_s"]] = 6e-5
@@ -55,8 +59,6 @@ def test_the_shortcut_gives_the_jacobian_of_a_simulation_per_column(monkeypatch)
     _, jac = fitter._problem(free, theta, sigma, mask)
     fast = jac(x)
     sims_fast = fitter.n_sims
-    import hil.identify.fit as fit_module
-
     monkeypatch.setattr(fit_module, "OUTPUT_ONLY", frozenset())
     _, jac_all = fitter._problem(free, theta, sigma, mask)
     slow = jac_all(x)
