@@ -92,6 +92,9 @@ NON_NEGATIVE = frozenset({"sf_coulomb_n", "sf_static_n"})
 TANGENT = True
 #: Fewest such columns worth the tangent's simulation (it costs more than one column's).
 TANGENT_MIN_COLUMNS = 2
+#: A linear model's simulated columns from the recursion of their states' differences
+#: (:mod:`hil.identify.linear_columns`) rather than a simulation each.
+LINEAR_COLUMNS = False
 
 #: Longest first-order sensor lag the baseline may fit (a 160 Hz sensor).
 MAX_SENSOR_LAG_S = 1e-3
@@ -262,7 +265,8 @@ class OutputErrorFit:
                 last = cache["last"]
             _, r0, z0 = last
             steps = 1e-6 * np.maximum(1.0, np.abs(x))
-            tangent = self._tangent_columns(x, free, theta0, steps, n_stop)
+            tangent = (self._tangent_columns(x, free, theta0, steps, n_stop)
+                       or self._linear_columns(x, free, theta0, steps, n_stop, z0))
 
             def column(i: int) -> np.ndarray:
                 xx = x.copy()
@@ -326,6 +330,37 @@ class OutputErrorFit:
         self.n_sims += 1
         sens = state_sensitivities(self.model, theta, plus, minus, steps[cols], n_stop)
         return dict(zip(cols, sens, strict=True))
+
+    def _linear_columns(self, x: np.ndarray, free: list[str], theta0: np.ndarray,
+                        steps: np.ndarray, n_stop: int, z0: np.ndarray
+                        ) -> dict[int, np.ndarray]:
+        """``{column: (z_j - z0) / step}`` of the simulated columns of a linear model
+        (:mod:`hil.identify.linear_columns`: the forward difference's states by a recursion
+        of their difference, no simulation), where :data:`LINEAR_COLUMNS` is on and the
+        point and every such column simulate no effect; the others are simulated (empty:
+        all of them)."""
+        if not LINEAR_COLUMNS:
+            return {}
+        from hil.identify import linear_columns
+
+        theta = self._to_theta(x, free, theta0)
+        if not linear_columns.linear(self.model, theta):
+            return {}
+        cols, vectors = [], []
+        for i, name in enumerate(free):
+            if name in OUTPUT_ONLY:
+                continue
+            xp = x.copy()
+            xp[i] += steps[i]
+            tp = self._to_theta(xp, free, theta0)
+            if linear_columns.applies(self.model, theta, tp):
+                cols.append(i)
+                vectors.append(tp)
+        if not cols:
+            return {}
+        diff = linear_columns.state_differences(self.model, theta, z0, vectors, steps[cols],
+                                                n_stop)
+        return dict(zip(cols, diff, strict=True))
 
     def fit_mask(self) -> np.ndarray:
         """Estimation samples where every channel is defined."""
