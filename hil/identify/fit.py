@@ -94,7 +94,7 @@ TANGENT = True
 TANGENT_MIN_COLUMNS = 2
 #: A linear model's simulated columns from the recursion of their states' differences
 #: (:mod:`hil.identify.linear_columns`) rather than a simulation each.
-LINEAR_COLUMNS = False
+LINEAR_COLUMNS = True
 
 #: Longest first-order sensor lag the baseline may fit (a 160 Hz sensor).
 MAX_SENSOR_LAG_S = 1e-3
