@@ -93,8 +93,11 @@ TANGENT = True
 #: Fewest such columns worth the tangent's simulation (it costs more than one column's).
 TANGENT_MIN_COLUMNS = 2
 #: A linear model's simulated columns from the recursion of their states' differences
-#: (:mod:`hil.identify.linear_columns`) rather than a simulation each.
-LINEAR_COLUMNS = True
+#: (:mod:`hil.identify.linear_columns`) rather than a simulation each. Off: the columns
+#: differ from the simulated ones by the simulations' rounding (1e-10), which moves the
+#: baselines' paths along their flat valleys, and a row of the identify-check matrix
+#: (conrod, k_rod 4x, null, seed 2) turned unexplained with it on (docs/identify.md).
+LINEAR_COLUMNS = False
 
 #: Longest first-order sensor lag the baseline may fit (a 160 Hz sensor).
 MAX_SENSOR_LAG_S = 1e-3
