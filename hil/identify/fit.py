@@ -27,6 +27,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -42,6 +43,12 @@ from hil.identify.model import (
     fast_stop,
     map_threads,
 )
+
+if TYPE_CHECKING:  # (the consistency module imports this one)
+    from hil.identify.consistency import Consistency
+
+#: Computes a fit's consistency across parts of the record (``consistency(fit, exp, mask)``).
+Judge = Callable[["FitResult", Experiment, np.ndarray], "Consistency"]
 
 #: Baseline parameters that can be fitted per load kind (others have no effect there).
 BASELINE_FREE: dict[str, tuple[str, ...]] = {
@@ -724,7 +731,8 @@ def _far(result: FitResult, configured: np.ndarray, factor: float) -> dict[str, 
 
 
 def hold_unsupported(fitter: OutputErrorFit, result: FitResult, configured: np.ndarray,
-                     factor: float = PROFILE_FACTOR) -> tuple[FitResult, dict[str, str]]:
+                     factor: float = PROFILE_FACTOR, judge: Judge | None = None
+                     ) -> tuple[FitResult, dict[str, str]]:
     """Hold at its configured value every free physical parameter that the fit moved beyond
     ``factor`` of it where the data do not ask for that value, one at a time, the fit
     repeated after each hold:
@@ -752,9 +760,15 @@ def hold_unsupported(fitter: OutputErrorFit, result: FitResult, configured: np.n
     differ by thousands, the threshold is a few units), and the consistency test has
     p-values of 1e-14 where it decides: the far value is kept only where the data support it
     over the configured one consistently, and then it is a finding about the rig.
+    ``judge``: computes the consistency in place of
+    :func:`~hil.identify.consistency.consistency` (the identification loop's, which keeps
+    the one of the fit returned: it judges that fit again).
     Returns the fit and ``{parameter: why held}``.
     """
     from hil.identify.consistency import consistency  # (it imports this module)
+
+    if judge is None:
+        judge = consistency
 
     held: dict[str, str] = {}
     tested: set[str] = set()
@@ -770,7 +784,7 @@ def hold_unsupported(fitter: OutputErrorFit, result: FitResult, configured: np.n
         far = _far(result, configured, factor)
         if not far:
             break
-        spread = [s for s in consistency(result, fitter.exp, mask).inconsistent
+        spread = [s for s in judge(result, fitter.exp, mask).inconsistent
                   if s.name in far]
         if spread:
             s = max(spread, key=lambda s: (abs(np.log(far[s.name])), s.name))
@@ -826,12 +840,14 @@ def baseline_free(exp: Experiment) -> list[str]:
 
 
 def fit_baseline(model: FastModel, theta0: np.ndarray | None = None,
-                 extra_free: tuple[str, ...] = (), scales: dict[str, float] | None = None
-                 ) -> FitResult:
+                 extra_free: tuple[str, ...] = (), scales: dict[str, float] | None = None,
+                 judge: Judge | None = None) -> FitResult:
     """Fit the linear model of thesis ch. 2 (plus ``extra_free`` effect parameters).
 
     Parameters that are not credible (a bound reached, or a confidence interval wider than
-    the value) are held at the preset's values, one at a time, and the fit is repeated.
+    the value) are held at the preset's values, one at a time, and the fit is repeated;
+    so are those far from the configuration that the data do not ask for
+    (:func:`hold_unsupported`, its consistency computed by ``judge``).
     """
     exp = model.exp
     theta = model.start_vector() if theta0 is None else theta0.copy()
@@ -840,7 +856,7 @@ def fit_baseline(model: FastModel, theta0: np.ndarray | None = None,
     scales = {**NUISANCE_SCALES(exp.dt), **(scales or {})}
     fitter = OutputErrorFit(model, scales)
     result, held = guarded_fit(fitter, theta, free, model.start_vector())
-    result, profiled = hold_unsupported(fitter, result, model.start_vector())
+    result, profiled = hold_unsupported(fitter, result, model.start_vector(), judge=judge)
     held.update(profiled)
     result.held = {n: f"not identifiable from this record: {why}" for n, why in held.items()}
     result.n_sims = fitter.n_sims
