@@ -101,9 +101,10 @@ TANGENT = True
 TANGENT_MIN_COLUMNS = 2
 #: A linear model's simulated columns from the recursion of their states' differences
 #: (:mod:`hil.identify.linear_columns`) rather than a simulation each. Off: the columns
-#: differ from the simulated ones by the simulations' rounding (1e-10), which moves the
-#: baselines' paths along their flat valleys, and a row of the identify-check matrix
-#: (conrod, k_rod 4x, null, seed 2) turned unexplained with it on (docs/identify.md).
+#: lack the simulated ones' rounding noise (up to 1e-4 of a small column at the 1e-6
+#: steps), which moves the baselines' paths along their flat valleys, and a row of the
+#: identify-check matrix (conrod, k_rod 4x, null, seed 2) turned unexplained with it on
+#: (docs/identify.md).
 LINEAR_COLUMNS = False
 
 #: Longest first-order sensor lag the baseline may fit (a 160 Hz sensor).
