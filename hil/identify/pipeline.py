@@ -371,8 +371,9 @@ class _Loop:
                             if noise.rms_a > 0 else None)
         self._held_noise: tuple[FastModel, list[FastModel]] | None = None
 
+        self.est_mask = OutputErrorFit(model).fit_mask()
         say(f"baseline fit ({exp.load}, {exp.n} samples, channels {', '.join(exp.channels)})")
-        self.base = base = fit_baseline(model, theta0=theta_prov)
+        self.base = base = fit_baseline(model, theta0=theta_prov, judge=self.agreement_of)
         check_fit(exp, base)
         self.skew_fitter = OutputErrorFit(model, NUISANCE_SCALES(exp.dt))
         if "skew_s" in base.free and self.skew_fitter.at_bound(base, "skew_s"):
@@ -383,8 +384,7 @@ class _Loop:
                              "sampling alignment")
         self.names = [n for n in BASELINE_LABELS if n in base.free or n in base.held]
         self.baseline_est = _estimates(base, self.names)
-        residual0 = {c: exp.measured[c] - base.outputs[c] for c in exp.channels}
-        self.analysis0 = analyse(exp, residual0, exp.val, self.noise_part(base.theta))
+        self.analysis0 = self.analysis_of(base)
         self.sigma_ref = dict(base.sigma)
         self.current = base
         self.held = dict(base.held)
@@ -397,7 +397,6 @@ class _Loop:
         self.joint_rows: list[dict] = []
         self.joint_why = ""
         self.restarts: list[dict] = []
-        self.est_mask = OutputErrorFit(model).fit_mask()
         self.configured = model.start_vector()
         self.prefit: dict[str, tuple[FitResult, dict[str, str]]] = {}
         #: the fit :meth:`free_held_again` was last tried at
@@ -787,9 +786,9 @@ class _Loop:
                                  f"({sizes[p_max]:.1%} of a realistic size) once the others "
                                  "were in; dropped")
 
-    #: the last few fits judged by :meth:`judged`, with their residual analyses and
-    #: consistencies, latest last
-    _judged: tuple[tuple[FitResult, ResidualAnalysis, Consistency], ...] = ()
+    #: the last few fits' residual analyses and consistencies, each latest last
+    _analyses: tuple[tuple[FitResult, ResidualAnalysis], ...] = ()
+    _agreements: tuple[tuple[FitResult, Consistency], ...] = ()
     JUDGED_KEPT = 3
 
     def judged(self, fit: FitResult) -> tuple[ResidualAnalysis, Consistency]:
@@ -798,15 +797,38 @@ class _Loop:
         fit is judged by several steps (the joint step's gate, the freed refit's run-on and
         its keeping, the report, which judges the fit before the freeing again where that
         was not kept), each a few simulations and spectra for the same answer."""
-        for f, analysis, agree in self._judged:
+        return self.analysis_of(fit), self.agreement_of(fit)
+
+    def analysis_of(self, fit: FitResult) -> ResidualAnalysis:
+        """:meth:`judged`'s residual analysis, kept (the baseline's is the report's first
+        one, and judged again while the baseline is the loop's fit)."""
+        for f, analysis in self._analyses:
             if f is fit:
-                return analysis, agree
+                return analysis
         exp = self.exp
         residual = {c: exp.measured[c] - fit.outputs[c] for c in exp.channels}
         analysis = analyse(exp, residual, exp.val, self.noise_part(fit.theta))
-        agree = consistency(fit, exp, self.est_mask)
-        self._judged = (*self._judged, (fit, analysis, agree))[-self.JUDGED_KEPT:]
-        return analysis, agree
+        self._analyses = (*self._analyses, (fit, analysis))[-self.JUDGED_KEPT:]
+        return analysis
+
+    def agreement_of(self, fit: FitResult, exp: Experiment | None = None,
+                     mask: np.ndarray | None = None) -> Consistency:
+        """:meth:`judged`'s consistency, kept; with ``exp`` and ``mask`` as
+        :func:`~hil.identify.consistency.consistency` takes them (the baseline's holds
+        judge the fit they end in, which the loop judges again: free piston, both
+        frictions, 0.4 s a record), kept only for the loop's record and estimation
+        samples."""
+        ours = ((exp is None or exp is self.exp)
+                and (mask is None or np.array_equal(mask, self.est_mask)))
+        if ours:
+            for f, agree in self._agreements:
+                if f is fit:
+                    return agree
+        agree = consistency(fit, self.exp if exp is None else exp,
+                            self.est_mask if mask is None else mask)
+        if ours:
+            self._agreements = (*self._agreements, (fit, agree))[-self.JUDGED_KEPT:]
+        return agree
 
     def structure(self) -> tuple[str, str]:
         """What the current fit leaves unexplained, by the judge of the report's verdict, in

@@ -280,6 +280,9 @@ ALLOWED = {
     ("hil/identify/tangent.py", "kernel"):
         "identification: the reduced model's tangent-linear simulation (its derivatives in "
         "the fitted parameters), not the plant's parts",
+    ("hil/identify/linear_columns.py", "kernel"):
+        "identification: the reduced linear model's Jacobian columns by the recursion of "
+        "their states' differences, not the plant's parts",
     ("hil/identify/rig.py", "kernel"):
         "identification: the independent generator of rig data, which must differ from "
         "the plant's model (DESIGN.md, data formats)",

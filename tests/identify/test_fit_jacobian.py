@@ -43,6 +43,8 @@ def test_the_shortcut_gives_the_jacobian_of_a_simulation_per_column(monkeypatch)
 
     # the forward differences' shortcut (the tangent's columns: tests/identify/test_tangent.py)
     monkeypatch.setattr(fit_module, "TANGENT", False)
+    # (and the linear model's recursion: tests/identify/test_linear_columns.py)
+    monkeypatch.setattr(fit_module, "LINEAR_COLUMNS", False)
     model = _model()
     theta = model.start_vector()
     theta[IDX["lag_pressure_s"]] = 6e-5

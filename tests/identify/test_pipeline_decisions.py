@@ -151,10 +151,10 @@ def test_freed_parameters_kept_only_where_they_explain_the_record(monkeypatch,
     loop.current = before
     assert loop.worse_than(worse).startswith("it still leaves residual structure")
     structure["left"] = False
-    loop._judged = ()  # the judges changed under the same fit
+    loop._analyses = loop._agreements = ()  # the judges changed under the same fit
     assert loop.worse_than(worse).startswith("it still leaves parameters disagree")
     splits["ks"] = [_split("ks", False)]
-    loop._judged = ()
+    loop._analyses = loop._agreements = ()
     assert loop.worse_than(worse) == ""
 
 
@@ -280,7 +280,8 @@ def test_a_fit_is_judged_once(monkeypatch, free_piston_loop):
     monkeypatch.setattr(pipeline, "_verdict", lambda analysis: (False, ""))
     monkeypatch.setattr(pipeline, "consistency",
                         lambda fit, exp, mask: calls.append("consistency") or Consistency([]))
-    loop.noisy_model, loop.est_mask, loop._judged = None, loop.exp.est, ()
+    loop.noisy_model, loop.est_mask = None, loop.exp.est
+    loop._analyses = loop._agreements = ()
     loop.current = _fit_at(loop.model, theta, free)
     assert loop.structure_left() == "" and loop.structure_left() == ""
     assert calls == ["analyse", "consistency"]

@@ -155,7 +155,9 @@ def test_a_fit_with_the_tangent_reaches_the_forward_difference_fits_optimum(monk
 
 def test_a_linear_model_keeps_a_simulation_per_column(monkeypatch):
     """Without an effect on the path the model's sub-step is a few multiply-adds, and the
-    tangent would cost more than the columns it replaces: every column is simulated."""
+    tangent would cost more than the columns it replaces: every column is simulated (with
+    the linear model's own recursion switched off: tests/identify/test_linear_columns.py)."""
+    monkeypatch.setattr(fit_module, "LINEAR_COLUMNS", False)
     fitter, theta, free = _fit_problem(True, monkeypatch)
     theta[IDX["pc_force_n"]] = 0.0
     free.remove("pc_force_n")
