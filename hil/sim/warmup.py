@@ -111,8 +111,13 @@ def _identify_model(cfg) -> None:
         plus[-1][IDX[name]] += step
         minus.append(theta.copy())
         minus[-1][IDX[name]] -= step
-    state_sensitivities(model, theta, plus, minus,
-                        np.array([1e-6 * theta[IDX[n]] for n in ("gain_n_per_a", "ks")]), None)
+    steps = np.array([1e-6 * theta[IDX[n]] for n in ("gain_n_per_a", "ks")])
+    state_sensitivities(model, theta, plus, minus, steps, None)
+    # and a linear model's difference-recursion columns (hil.identify.linear_columns, off
+    # in the fits by default; its tests call it)
+    from hil.identify.linear_columns import state_differences
+
+    state_differences(model, theta, model.states(theta), plus, steps, None)
 
 
 def _robot(cfg) -> None:
