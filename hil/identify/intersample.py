@@ -29,6 +29,9 @@ import scipy.fft
 from hil.identify import lag
 
 MODES = ("zoh", "foh", "bl")
+#: The band-limited input from the input's DCT (:func:`_bandlimited_dct`) rather than an
+#: inverse FFT of its even extension per sub-step.
+DCT = False
 #: Samples of held value padded on each side so a shifted window never leaves the record.
 _PAD = 4
 
@@ -69,7 +72,7 @@ def substep_average(u: np.ndarray, dt: float, n_sub: int, delay_s: float, mode: 
 def _bandlimited(u: np.ndarray, dt: float, n_sub: int, delay_s: float) -> np.ndarray:
     """Sinc interpolation by FFT on the even extension (no jump at the record's ends), the
     sub-step average as the box filter ``sinc(f h)`` and the shift as a phase ramp."""
-    if lag.DCT:
+    if DCT:
         return _bandlimited_dct(u, dt, n_sub, delay_s)
     n = u.size
     h = dt / n_sub

@@ -32,14 +32,14 @@ def test_the_dct_form_is_the_fft_form_to_rounding(n, n_sub, monkeypatch):
     """The band-limited average from the input's DCT (the default) against an inverse FFT
     of the even extension per sub-step, delays of either sign and beyond a sample: the
     same values to rounding; asked again (its transform kept), the same bits."""
-    from hil.identify import intersample, lag
+    from hil.identify import intersample
 
     u = np.random.default_rng(n).normal(size=n).cumsum()
     dt = 2e-4
     for delay in (0.0, 3.1e-5, -7e-5, 2.7e-4):
-        monkeypatch.setattr(lag, "DCT", False)
+        monkeypatch.setattr(intersample, "DCT", False)
         want = substep_average(u, dt, n_sub, delay, "bl")
-        monkeypatch.setattr(lag, "DCT", True)
+        monkeypatch.setattr(intersample, "DCT", True)
         intersample._BL_CACHE.clear()
         got = substep_average(u, dt, n_sub, delay, "bl")
         assert got.shape == want.shape
