@@ -17,7 +17,7 @@ import scipy.fft
 
 #: The lag (and :mod:`hil.identify.intersample`'s band-limited input) by DCTs of the signal
 #: rather than FFTs of its even extension.
-DCT = True
+DCT = False
 
 
 def even_filtered(c: np.ndarray, re: np.ndarray, im: np.ndarray) -> np.ndarray:
