@@ -31,7 +31,7 @@ from hil.identify import lag
 MODES = ("zoh", "foh", "bl")
 #: The band-limited input from the input's DCT (:func:`_bandlimited_dct`) rather than an
 #: inverse FFT of its even extension per sub-step.
-DCT = False
+DCT = True
 #: Samples of held value padded on each side so a shifted window never leaves the record.
 _PAD = 4
 
