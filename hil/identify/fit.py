@@ -40,6 +40,7 @@ from hil.identify.model import (
     PRESSURE_CHANNELS,
     SAT_PRESSURE,
     FastModel,
+    channels_moved_by,
     fast_stop,
     map_threads,
 )
@@ -207,16 +208,19 @@ class OutputErrorFit:
         return {c: self.exp.measured[c] - outputs[c] for c in self.exp.channels}
 
     def _stack(self, theta: np.ndarray, sigma: dict[str, float], mask: np.ndarray,
-               states: np.ndarray | None = None) -> np.ndarray:
+               states: np.ndarray | None = None, only: frozenset[str] | None = None,
+               base: np.ndarray | None = None) -> np.ndarray:
         """The weighted residual on ``mask``; ``states``: the simulation of ``theta`` when
         the caller has it (only :data:`OUTPUT_ONLY` parameters differ from the ones that
-        made it)."""
+        made it). ``only``: the channels ``theta`` changes from the point whose residual is
+        ``base``; the others' rows are ``base``'s (the same computation on the same
+        states: the same bits, without their outputs and sensor lags)."""
         n_stop, lo, hi = self._span(mask)
         if states is None:
             self.n_sims += 1
             states = self.model.states(theta, n_stop)
         # the outputs of the samples up to n_stop only (the mask has none after them)
-        out = self.model.outputs(theta, states, n_stop=n_stop)
+        out = self.model.outputs(theta, states, n_stop=n_stop, channels=only)
         n = next(iter(out.values())).size
         channels = self.exp.channels
         if lo is None:
@@ -226,8 +230,10 @@ class OutputErrorFit:
             # the compared samples are one run (a fit's, a cost's): the residual is written
             # channel by channel into one array, no masked copy and concatenation of each
             m = hi - lo
-        r = np.empty(len(channels) * m)
+        r = np.empty(len(channels) * m) if only is None else base.copy()
         for i, c in enumerate(channels):
+            if only is not None and c not in only:
+                continue
             seg = r[i * m:(i + 1) * m]
             if lo is None:
                 e = self.exp.measured[c][:n] - out[c]
@@ -279,29 +285,38 @@ class OutputErrorFit:
             tangent = (self._tangent_columns(x, free, theta0, steps, n_stop)
                        or self._linear_columns(x, free, theta0, steps, n_stop, z0))
 
-            def column(i: int) -> np.ndarray:
-                xx = x.copy()
-                xx[i] += steps[i]
-                theta = self._to_theta(xx, free, theta0)
-                # an offset, a drift, a lag, a clip: the same states, new outputs
-                if free[i] in OUTPUT_ONLY:
-                    z = z0
-                elif i in tangent:
-                    # the simulation at the step, to first order: the tangent's states
-                    sens = tangent[i]
-                    z = z0.copy()
-                    z[:sens.shape[0]] += steps[i] * sens
-                else:
-                    self.n_sims += 1
-                    z = self.model.states(theta, n_stop, keep=False)
-                return (self._stack(theta, sigma, mask, z) - r0) / steps[i]
-
             # one row per column, then one transposing copy: writing each column into
             # the (rows x columns) array strides across all of it once per column
             out_t = np.empty((x.size, r0.size))
 
             def fill(i: int) -> None:
-                out_t[i] = column(i)
+                xx = x.copy()
+                xx[i] += steps[i]
+                theta = self._to_theta(xx, free, theta0)
+                only = None
+                # an offset, a drift, a lag, a clip: the same states, new outputs, and
+                # only on the channels it moves (the others' rows of the column are 0)
+                if free[i] in OUTPUT_ONLY:
+                    z = z0
+                    only = channels_moved_by(free[i]) & set(self.exp.channels)
+                    if not only:
+                        out_t[i] = 0.0
+                        return
+                elif i in tangent:
+                    # the simulation at the step, to first order: the tangent's states,
+                    # on the samples the outputs read (elementwise: the same bits)
+                    sens = tangent[i]
+                    n_out = min(fast_stop(n_stop, self.exp.n), z0.shape[0])
+                    z = z0[:n_out].copy()
+                    m = min(sens.shape[0], n_out)
+                    z[:m] += steps[i] * sens[:m]
+                else:
+                    self.n_sims += 1
+                    z = self.model.states(theta, n_stop, keep=False)
+                # (r - r0) / step written into the column's row: no temporaries
+                row = out_t[i]
+                np.subtract(self._stack(theta, sigma, mask, z, only, r0), r0, out=row)
+                np.divide(row, steps[i], out=row)
 
             list(map_threads(fill, range(x.size)))
             return np.ascontiguousarray(out_t.T)

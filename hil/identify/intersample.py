@@ -24,8 +24,14 @@ Before the first sample the first value is held, after the last the last one.
 from __future__ import annotations
 
 import numpy as np
+import scipy.fft
+
+from hil.identify import lag
 
 MODES = ("zoh", "foh", "bl")
+#: The band-limited input from the input's DCT (:func:`_bandlimited_dct`) rather than an
+#: inverse FFT of its even extension per sub-step.
+DCT = True
 #: Samples of held value padded on each side so a shifted window never leaves the record.
 _PAD = 4
 
@@ -66,6 +72,8 @@ def substep_average(u: np.ndarray, dt: float, n_sub: int, delay_s: float, mode: 
 def _bandlimited(u: np.ndarray, dt: float, n_sub: int, delay_s: float) -> np.ndarray:
     """Sinc interpolation by FFT on the even extension (no jump at the record's ends), the
     sub-step average as the box filter ``sinc(f h)`` and the shift as a phase ramp."""
+    if DCT:
+        return _bandlimited_dct(u, dt, n_sub, delay_s)
     n = u.size
     h = dt / n_sub
     key = (hash(u.tobytes()), n, dt, n_sub)
@@ -87,7 +95,40 @@ def _bandlimited(u: np.ndarray, dt: float, n_sub: int, delay_s: float) -> np.nda
     return out.ravel()
 
 
-#: The last inputs' even-extension spectra times the sub-step box filter.
+def _bandlimited_dct(u: np.ndarray, dt: float, n_sub: int, delay_s: float) -> np.ndarray:
+    """:func:`_bandlimited` from the input's DCT-II (the even extension's spectrum but for
+    a phase) and, per sub-step, one DCT-III and one DST-III of ``n`` samples back
+    (:func:`hil.identify.lag.even_filtered`), all sub-steps in one batch: the same values
+    to ~1e-15, in under half the time of an inverse FFT of ``2n`` samples per sub-step."""
+    n = u.size
+    h = dt / n_sub
+    key = ("dct", hash(u.tobytes()), n, dt, n_sub)
+    hit = _BL_CACHE.get(key)
+    if hit is None:
+        f = np.fft.rfftfreq(2 * n, dt)[:n]
+        w = 2.0 * np.pi * f
+        # the box filter and the inverse transform's 1/2n kept with the input's transform,
+        # and each sub-step's phase from the first one's (j h later): a delay then costs
+        # one cosine and one sine per bin, not one per bin and sub-step
+        c = scipy.fft.dct(u, 2) * (np.sinc(f * h) / (2 * n))
+        offset = np.multiply.outer(np.arange(n_sub) * h, w)
+        hit = (c * np.cos(offset), c * np.sin(offset), w)
+        if len(_BL_CACHE) >= _BL_SLOTS:
+            _BL_CACHE.clear()
+        _BL_CACHE[key] = hit
+    c_cos, c_sin, w = hit
+    phase = w * (0.5 * h - delay_s)  # the first sub-step's value at t_k + h/2 - delay
+    cos, sin = np.cos(phase), np.sin(phase)
+    # c H on sub-step j: c exp(i (phase + j h w)), its real and imaginary parts
+    a = c_cos * cos
+    a -= c_sin * sin
+    b = c_sin * cos
+    b += c_cos * sin
+    values = lag.even_filtered_parts(a, b)
+    return values.T.ravel()
+
+
+#: The last inputs' even-extension spectra times the sub-step box filter (or DCTs).
 _BL_CACHE: dict[tuple, tuple] = {}
 _BL_SLOTS = 4
 

@@ -134,6 +134,17 @@ OUTPUT_ONLY = frozenset({"strain_offset_n", "drift_n_per_c", "lag_pressure_s", "
                          SAT_PRESSURE, *(f"sat_{c}" for c in SAT_CHANNELS)})
 
 
+def channels_moved_by(name: str) -> frozenset[str]:
+    """The channels an :data:`OUTPUT_ONLY` parameter changes, as whole sensor-lag groups
+    (the pressures share their lag's transform, and a channel filtered alone or among
+    them need not round alike)."""
+    if name in ("strain_offset_n", "drift_n_per_c", "lag_strain_s", "sat_f_strain"):
+        return frozenset({"f_strain"})
+    if name == "lag_pressure_s" or name == SAT_PRESSURE or name.startswith("sat_p_"):
+        return frozenset(PRESSURE_CHANNELS)
+    raise KeyError(name)
+
+
 def discretise(a: np.ndarray, b: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:
     """Exact zero-order-hold discretisation: (A_d, B_d) for step ``h`` s."""
     n, m = b.shape
@@ -619,11 +630,14 @@ class FastModel:
         return out
 
     def outputs(self, theta: np.ndarray, z: np.ndarray | None = None,
-                n_stop: int | None = None) -> dict[str, np.ndarray]:
+                n_stop: int | None = None, channels: frozenset[str] | None = None
+                ) -> dict[str, np.ndarray]:
         """Model channels (same names and units as :attr:`Experiment.measured`); with
         ``n_stop``, only the first :func:`fast_stop` ``(n_stop)`` samples (the arrays have
         that length: a fit's iterations compare a head of the record, and every output is
-        causal in the states, so the head's values are those of the whole record's)."""
+        causal in the states, so the head's values are those of the whole record's); with
+        ``channels``, only those (each with the same bits as among all channels, given as
+        whole :func:`channels_moved_by` groups, whose sensors are filtered together)."""
         exp = self.exp
         n = exp.n
         if n_stop is not None:
@@ -666,6 +680,8 @@ class FastModel:
             return sides[key]
 
         for ch in exp.channels:
+            if channels is not None and ch not in channels:
+                continue
             if ch == "p_pump_a":
                 y = side(tq, 1.0)
             elif ch == "p_pump_b":

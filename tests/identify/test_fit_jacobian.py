@@ -96,3 +96,44 @@ def test_columns_are_not_kept_and_one_thread_gives_the_same_jacobian():
     finally:
         set_threads(None)
     assert np.array_equal(one, several)
+
+
+def test_the_assembled_jacobian_is_the_column_by_column_one():
+    """The Jacobian as assembled (the tangent's columns on the outputs' samples only, an
+    output-only column on the channels it moves, each written into its row) against each
+    column computed whole: the base states copied and stepped along the tangent, every
+    channel's residual, ``(r - r0) / step``; to the bit, on a head of the record (the
+    iterations' mask) and on all of it."""
+    model = _model()
+    theta = model.start_vector()
+    theta[IDX["pc_force_n"]] = 40.0
+    theta[IDX["lag_pressure_s"]] = 6e-5
+    theta[IDX["lag_strain_s"]] = 1.5e-4
+    free = ["gain_n_per_a", "ks", "k_rod", "pc_force_n", "strain_offset_n",
+            "lag_pressure_s", "lag_strain_s", "drift_n_per_c"]
+    fitter = OutputErrorFit(model, {"pc_force_n": 10.0})
+    fitter._ref = {n: theta[IDX[n]] for n in ("gain_n_per_a", "ks", "k_rod")}
+    sigma = {c: 1.0 + i for i, c in enumerate(model.exp.channels)}
+    full = fitter.fit_mask()
+    head = full.copy()
+    head[np.flatnonzero(full)[full.sum() // 3]:] = False
+    for mask in (head, full):
+        fun, jac = fitter._problem(free, theta, sigma, mask)
+        x = fitter._to_x(theta, free)
+        r0 = fun(x)
+        got = jac(x)
+        z0 = model.states(theta, fitter._span(mask)[0])
+        steps = 1e-6 * np.maximum(1.0, np.abs(x))
+        tangent = fitter._tangent_columns(x, free, theta, steps, fitter._span(mask)[0])
+        assert len(tangent) == 4  # every simulated column from the tangent
+        for i, name in enumerate(free):
+            xx = x.copy()
+            xx[i] += steps[i]
+            th = fitter._to_theta(xx, free, theta)
+            z = z0
+            if i in tangent:
+                z = z0.copy()
+                z[:tangent[i].shape[0]] += steps[i] * tangent[i]
+            want = (fitter._stack(th, sigma, mask, z) - r0) / steps[i]
+            assert np.array_equal(got[:, i], want), name
+            assert np.any(want != 0.0), name

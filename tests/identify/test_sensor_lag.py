@@ -84,3 +84,47 @@ def test_a_constant_signal_s_lag_is_remembered_to_the_bit():
     y[1500] += 1.0
     sensor_lag(y, 1e-4, dt)
     assert not lag._CONSTANT_CACHE
+
+
+def _filtered_by_fft(y: np.ndarray, tau: float, dt: float, n: int) -> np.ndarray:
+    from hil.identify import lag
+
+    old = lag.DCT
+    try:
+        lag.DCT = False
+        return sensor_lag(y, tau, dt, n_valid=n)
+    finally:
+        lag.DCT = old
+
+
+@pytest.mark.parametrize("n", [2, 3, 8, 999, 3072])
+def test_the_dct_form_is_the_even_extension_s_fft_to_rounding(n, monkeypatch):
+    """The lag from a DCT-II and a DCT-III/DST-III of the signal (the default) against the
+    FFT of the even extension: random walks, a step, an alternating (Nyquist) signal and a
+    constant, odd and even lengths, all or a head filtered (``n_valid`` < size)."""
+    from hil.identify import lag
+
+    monkeypatch.setattr(lag, "DCT", True)
+    rng = np.random.default_rng(n)
+    size = 3072
+    signals = [rng.normal(size=size).cumsum() * 1e3, np.where(np.arange(size) < size // 3,
+                                                              -5.0, 2e5),
+               (-1.0) ** np.arange(size) * 7.0, np.full(size, 3.25)]
+    for y in signals:
+        for tau in (3e-5, 4e-4):
+            lag._CONSTANT_CACHE.clear()
+            got = sensor_lag(y, tau, 2e-4, n_valid=n)
+            want = _filtered_by_fft(y, tau, 2e-4, n)
+            assert np.max(np.abs(got - want)) <= 1e-13 * max(np.abs(y).max(), 1.0)
+            assert np.array_equal(got[n:], y[n:])
+
+
+def test_the_dct_form_falls_back_on_a_gap_as_the_fft_form(monkeypatch):
+    from hil.identify import lag
+
+    monkeypatch.setattr(lag, "DCT", True)
+    y = np.random.default_rng(5).normal(size=400).cumsum()
+    y[150] = np.nan
+    got = sensor_lag(y, 1e-4, 2e-4)
+    want = _filtered_by_fft(y, 1e-4, 2e-4, y.size)
+    assert np.array_equal(got, want, equal_nan=True)
