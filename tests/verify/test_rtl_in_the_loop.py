@@ -238,9 +238,16 @@ def test_rtl_runs_in_the_single_actuator_stack_only(default_cfg):
                           default_cfg.with_overrides({"fpga.impl": "rtl"}))
 
 
-def test_bench_fpga_puts_the_board_models_figure_beside_the_rtls(rtl_lib, capsys):
+def test_bench_fpga_puts_the_board_models_figure_beside_the_rtls(rtl_lib, capsys, monkeypatch):
+    import functools
     import json
 
+    from hil.bench import engines
+
+    # The per-tick call cost is timed over a million ticks whatever --seconds says (~4 s of
+    # CPU); the table's rows and their order do not depend on how many ticks are timed.
+    monkeypatch.setattr(engines, "bench_loop_call",
+                        functools.partial(engines.bench_loop_call, ticks=10_000))
     assert main(["bench", "fpga", "--set", "fpga.impl=rtl", "--seconds", "0.05",
                  "--bit-seconds", "0.002", "--json"]) == 0
     data = json.loads(capsys.readouterr().out)
