@@ -3,10 +3,12 @@ band-limited signal behind the samples (:func:`sensor_lag`). A fit maps every si
 through it: the transforms are about a sixth of a fit's CPU on the bench's records (a
 module of its own, so that work on it does not recompile the simulation kernels).
 
-The even extension's filtered transform is had from a DCT-II of the signal itself and a
-DCT-III and a DST-III back (:func:`even_filtered`: three transforms of ``n`` samples for
-two of ``2n``, less than half the time, the same values to ~1e-15 but not to the bit;
-:data:`DCT` off: the FFT of the even extension, as before)."""
+The even extension's filtered transform can be had from a DCT-II of the signal itself and
+a DCT-III and a DST-III back (:func:`even_filtered`: three transforms of ``n`` samples for
+two of ``2n``, a third of the time, the same values to ~1e-15 but not to the bit). For the
+lags it is off (:data:`DCT`): with it the whole matrix is right, but the bench's
+free-piston record, whose path forks on last bits, adds no effect (see docs/identify.md);
+:mod:`hil.identify.intersample`'s band-limited input uses it."""
 
 from __future__ import annotations
 
@@ -15,8 +17,8 @@ import math
 import numpy as np
 import scipy.fft
 
-#: The lag (and :mod:`hil.identify.intersample`'s band-limited input) by DCTs of the signal
-#: rather than FFTs of its even extension.
+#: The lags by DCTs of the signal rather than FFTs of its even extension (off: see the
+#: module docstring).
 DCT = False
 
 

@@ -99,7 +99,7 @@ def _filtered_by_fft(y: np.ndarray, tau: float, dt: float, n: int) -> np.ndarray
 
 @pytest.mark.parametrize("n", [2, 3, 8, 999, 3072])
 def test_the_dct_form_is_the_even_extension_s_fft_to_rounding(n, monkeypatch):
-    """The lag from a DCT-II and a DCT-III/DST-III of the signal (the default) against the
+    """The lag from a DCT-II and a DCT-III/DST-III of the signal (``lag.DCT``) against the
     FFT of the even extension: random walks, a step, an alternating (Nyquist) signal and a
     constant, odd and even lengths, all or a head filtered (``n_valid`` < size)."""
     from hil.identify import lag
