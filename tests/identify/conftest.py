@@ -64,3 +64,21 @@ def identified(dataset, ident_cfg) -> Callable[..., tuple[SynthResult, IdentifyR
         return syn, _RUNS[k]
 
     return run
+
+
+@pytest.fixture(scope="session")
+def jacobian_at() -> Callable:
+    """``jacobian_at(fitter, free, theta)`` -> (the fit's Jacobian at ``theta`` over
+    ``free`` with unit weights on its estimation mask, the simulations it took)."""
+    import numpy as np
+
+    def at(fitter, free: list[str], theta: np.ndarray) -> tuple[np.ndarray, int]:
+        fun, jac = fitter._problem(free, theta, {c: 1.0 for c in fitter.exp.channels},
+                                   fitter.fit_mask())
+        x = fitter._to_x(theta, free)
+        fun(x)
+        before = fitter.n_sims
+        out = jac(x)
+        return out, fitter.n_sims - before
+
+    return at

@@ -86,7 +86,7 @@ def test_a_column_that_switches_an_effect_on_or_moves_the_outputs_only_is_not_ta
     assert not linear_columns.linear(model, on)
 
 
-def _jacobian(model: FastModel, on: bool, monkeypatch) -> tuple[np.ndarray, int]:
+def _jacobian(model: FastModel, on: bool, monkeypatch, jacobian_at) -> tuple[np.ndarray, int]:
     monkeypatch.setattr(fit_module, "LINEAR_COLUMNS", on)
     theta = _point(model)
     free = ["gain_n_per_a", "ds", "dp", "dc", "ks", "k_rod", "c_rod", "skew_s",
@@ -94,23 +94,17 @@ def _jacobian(model: FastModel, on: bool, monkeypatch) -> tuple[np.ndarray, int]
     theta[IDX["lag_pressure_s"]] = 1e-4
     fitter = OutputErrorFit(model, fit_module.NUISANCE_SCALES(model.exp.dt))
     fitter._ref = {n: theta[IDX[n]] for n in free if n in fit_module.LOG_PARAMS}
-    fun, jac = fitter._problem(free, theta, {c: 1.0 for c in fitter.exp.channels},
-                               fitter.fit_mask())
-    x = fitter._to_x(theta, free)
-    fun(x)
-    before = fitter.n_sims
-    out = jac(x)
-    return out, fitter.n_sims - before
+    return jacobian_at(fitter, free, theta)
 
 
 def test_the_fits_jacobian_is_the_forward_difference_one_without_its_simulations(
-        monkeypatch):
+        monkeypatch, jacobian_at):
     """Every simulated column of a linear conrod model from the recursion (no simulation),
     each within the forward difference's own rounding (1e-6 steps: a 1e-10 of a state in
     the difference of two runs, amplified where a column is small) of the simulated one."""
     model = _model("conrod_fixed", seconds=1.0)
-    fd, sims_fd = _jacobian(model, False, monkeypatch)
-    rec, sims_rec = _jacobian(model, True, monkeypatch)
+    fd, sims_fd = _jacobian(model, False, monkeypatch, jacobian_at)
+    rec, sims_rec = _jacobian(model, True, monkeypatch, jacobian_at)
     assert (sims_fd, sims_rec) == (8, 0)  # the offset and the lag map the same states
     rel = np.linalg.norm(rec - fd, axis=0) / np.linalg.norm(fd, axis=0)
     assert np.all(rel < 1e-5), rel

@@ -153,7 +153,7 @@ def test_a_fit_with_the_tangent_reaches_the_forward_difference_fits_optimum(monk
             name, tan.value(name), fd.value(name), se)
 
 
-def test_a_linear_model_keeps_a_simulation_per_column(monkeypatch):
+def test_a_linear_model_keeps_a_simulation_per_column(monkeypatch, jacobian_at):
     """Without an effect on the path the model's sub-step is a few multiply-adds, and the
     tangent would cost more than the columns it replaces: every column is simulated (with
     the linear model's own recursion switched off: tests/identify/test_linear_columns.py)."""
@@ -162,10 +162,5 @@ def test_a_linear_model_keeps_a_simulation_per_column(monkeypatch):
     theta[IDX["pc_force_n"]] = 0.0
     free.remove("pc_force_n")
     fitter._ref = {n: theta[IDX[n]] for n in free if n in fit_module.LOG_PARAMS}
-    fun, jac = fitter._problem(free, theta, {c: 1.0 for c in fitter.exp.channels},
-                               fitter.fit_mask())
-    x = fitter._to_x(theta, free)
-    fun(x)
-    before = fitter.n_sims
-    jac(x)
-    assert fitter.n_sims - before == len(free) - 1  # the offset maps the same states
+    _, sims = jacobian_at(fitter, free, theta)
+    assert sims == len(free) - 1  # the offset maps the same states
