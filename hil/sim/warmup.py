@@ -131,6 +131,16 @@ def _robot(cfg) -> None:
         bs.chain.engine.wait()
 
 
+def _hip_box(cfg) -> None:
+    """The hip box's loop: two stacks and the thigh coupled tick by tick (``bus run`` on the
+    hip topology), with the joint's pose and anchors placed from Python."""
+    from hil.fieldbus.hip_box import HipBox
+    from hil.fieldbus.topology import load_topology
+    from hil.sim.hip_stack import hip_config
+
+    HipBox(load_topology("hip_one_box").boxes[0], hip_config(cfg, reinforced=True)).advance(2)
+
+
 def _log_signals(cfg) -> None:
     """The decoded actuator signals of a frame log (``bus run --model robot --log``)."""
     from firmware_model.calibration import calibration
@@ -197,6 +207,7 @@ STEPS: list[tuple[str, Callable]] = [
     ("current loop RTL (Verilator)", _rtl),
     ("identification model", _identify_model),
     ("robot engine", _robot),
+    ("hip box", _hip_box),
     ("frame log signals", _log_signals),
     ("frame log byte planes", _log_planes),
     ("EtherCAT frame path", _esc_frames),
