@@ -45,6 +45,8 @@ def terminate(pool: ProcessPoolExecutor) -> None:
     """End the pool's workers now (not after their current task) and wait for them.
     Python 3.11 has no public way (3.14: ``terminate_workers``)."""
     procs = list((getattr(pool, "_processes", None) or {}).values())
+    # (taken before the shutdown below, which forgets it)
+    manager = getattr(pool, "_executor_manager_thread", None)
     for proc in procs:
         with contextlib.suppress(OSError, ValueError, AttributeError):
             proc.terminate()
@@ -55,6 +57,12 @@ def terminate(pool: ProcessPoolExecutor) -> None:
             if proc.is_alive():
                 proc.kill()
                 proc.join()
+    # The pool's manager thread closes its wake-up pipe as it ends; concurrent.futures' exit
+    # hook wakes every such thread without a lock, and a pipe closed between its check and
+    # its write printed "OSError: [Errno 9] Bad file descriptor" after the command's last
+    # line (Python 3.11). Once the thread has ended, the hook sees the pipe closed.
+    if manager is not None:
+        manager.join(5.0)
 
 
 @contextlib.contextmanager
