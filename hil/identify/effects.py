@@ -194,6 +194,15 @@ def stuck_share(exp: Experiment) -> float:
     return float(np.mean(np.abs(v) < 2.0 * exp.const.eps_seal)) if v.size else 0.0
 
 
+def top_speed(exp: Experiment) -> float:
+    """The record's top measured piston speed (0 without a piston encoder)."""
+    v = exp.measured.get("v_piston")
+    if v is None:
+        return 0.0
+    v = np.abs(v[np.isfinite(v)])
+    return float(v.max()) if v.size else 0.0
+
+
 class SealFriction(Effect):
     name = "seal_friction"
     description = ("rod-seal Coulomb + Stribeck friction on the piston; v_s and the sign "
@@ -226,6 +235,12 @@ class SealFriction(Effect):
             return {"sf_vs_m_per_s": (f"the Stribeck velocity ran to {vs:.3g} m/s, far below "
                                       f"the regularisation velocity {eps:.3g} m/s (a "
                                       "degenerate law); held at its start")}
+        top = top_speed(exp)
+        if top > 0.0 and vs > top:
+            return {"sf_vs_m_per_s": (f"the Stribeck velocity ran to {vs:.3g} m/s, above the "
+                                      f"record's top piston speed {top:.3g} m/s (a degenerate "
+                                      "law: no sample reaches the Coulomb level); held at its "
+                                      "start")}
         return {}
 
     def describe(self, d: EffectDef, fit: FitResult, exp: Experiment
