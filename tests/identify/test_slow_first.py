@@ -82,3 +82,105 @@ def test_a_gap_in_a_pressure_is_refused():
     exp.measured["omega_m"][3] = np.nan
     exp.measured["p_cyl_a"][17] = 0.0
     assert pressures_finite(exp)
+
+
+# --- the loop's step (:meth:`_Loop.restart_slow_first`), on stand-ins --------------------
+
+def _slow_loop(monkeypatch, left_after: bool, seal: bool = True, line=(1.84e7, 1241.0, 1371.0)):
+    """A loop at the free piston's pair (``K``, ``d_s``, ``k_s``, ``J_c`` held since the
+    baseline); the full band's refit leaves structure where ``left_after``."""
+    from hil.identify import pipeline
+    from hil.identify.model import IDX, N_PARAMS
+
+    calls: dict = {"slow": [], "full": [], "cutoff": []}
+
+    class Fitter:
+        def __init__(self, model, scales):
+            self.model = model
+
+        def fit(self, theta0, free, sigma=None, passes=2, max_nfev=40):
+            calls["slow"].append((theta0.copy(), list(free)))
+            theta = theta0.copy()
+            theta[IDX["gain_n_per_a"]] = 101.0  # the slow part's gain
+            return SimpleNamespace(theta=theta, free=list(free))
+
+    def full(fitter, theta0, free, credible, sigma=None, configured=None):
+        calls["full"].append((theta0.copy(), list(free), fitter.converged_gain))
+        return SimpleNamespace(theta=theta0.copy(), free=list(free), outputs=1.0,
+                               left=left_after), {}
+
+    def low_passed(model, cutoff_hz):
+        calls["cutoff"].append(cutoff_hz)
+        return model
+
+    monkeypatch.setattr(pipeline, "stiffness_at_line", lambda exp, theta, out: line)
+    monkeypatch.setattr(pipeline, "pressures_finite", lambda exp: True)
+    monkeypatch.setattr(pipeline, "OutputErrorFit", Fitter)
+    monkeypatch.setattr(pipeline, "LowPassedPressures", low_passed)
+    monkeypatch.setattr(pipeline, "NUISANCE_SCALES", lambda dt: {})
+    monkeypatch.setattr(pipeline, "_all_scales", lambda defs: {})
+    monkeypatch.setattr(pipeline, "guarded_fit", full)
+    monkeypatch.setattr(pipeline, "_val_cost", lambda exp, out, sigma: float(out))
+    theta = np.zeros(N_PARAMS)
+    theta[IDX["gain_n_per_a"]] = 119.4
+    theta[IDX["ks"]] = 2.24e7
+    current = SimpleNamespace(theta=theta, free=["dp", "jp", "sf_coulomb_n"], outputs=2.0,
+                              sigma={}, left=True)
+    added = [SimpleNamespace(name="pump_coulomb_friction", label="pump_coulomb_friction")]
+    defs = {"pump_coulomb_friction": SimpleNamespace(params=("pc_force_n",))}
+    if seal:
+        added.append(SimpleNamespace(name="seal_friction", label="seal_friction"))
+        defs["seal_friction"] = SimpleNamespace(params=("sf_coulomb_n", "sf_static_n"))
+    held = {p: "held at the preset" for p in ("gain_n_per_a", "ds", "ks", "jc")}
+    loop = SimpleNamespace(current=current, added=added, defs_all=defs, held=held,
+                           exp=SimpleNamespace(dt=2e-4, const=SimpleNamespace(eps_seal=2e-3)),
+                           model=None, configured=None, sigma_ref=None, restarts=[],
+                           say=lambda msg: None,
+                           refitter=lambda: SimpleNamespace(converged_gain=50.0))
+    loop.structure_left = lambda: "structure" if loop.current.left else ""
+    return loop, calls
+
+
+def test_the_slow_part_frees_the_gain_and_the_seals_eps_then_the_line_frees_ks_jc(monkeypatch):
+    from hil.identify import pipeline
+    from hil.identify.model import IDX
+
+    loop, calls = _slow_loop(monkeypatch, left_after=False)
+    before = loop.current
+    assert pipeline._Loop.restart_slow_first(loop)
+    (theta0, free1), = calls["slow"]
+    # below the line: the held baseline parameters but the line's two, and the seal's eps
+    # from the preset
+    assert {"gain_n_per_a", "ds", "sf_eps_m_per_s"} <= set(free1)
+    assert not {"ks", "jc"} & set(free1)
+    assert theta0[IDX["sf_eps_m_per_s"]] == 2e-3
+    assert calls["cutoff"] == [pipeline.SLOW_CUTOFF * 1241.0]
+    # the full band from the slow part's end, k_s at the line, k_s and J_c free, at the
+    # tight stop
+    (theta2, free2, gain), = calls["full"]
+    assert theta2[IDX["gain_n_per_a"]] == 101.0 and theta2[IDX["ks"]] == 1.84e7
+    assert {"ks", "jc"} <= set(free2) and gain == pipeline.JUDGED_GAIN
+    # kept: explained, cheaper; the freed parameters no longer held
+    assert loop.current is not before and not loop.held
+    assert loop.restarts[-1]["outcome"] == "kept"
+
+
+def test_the_slow_first_refit_is_not_kept_with_structure_left(monkeypatch):
+    from hil.identify import pipeline
+
+    loop, calls = _slow_loop(monkeypatch, left_after=True)
+    before, held = loop.current, dict(loop.held)
+    assert not pipeline._Loop.restart_slow_first(loop)
+    assert loop.current is before and loop.held == held
+    assert loop.restarts[-1]["outcome"] == "not kept (structure left)"
+
+
+def test_no_line_no_refit_and_no_seal_no_eps(monkeypatch):
+    from hil.identify import pipeline
+
+    loop, calls = _slow_loop(monkeypatch, left_after=False, line=None)
+    assert not pipeline._Loop.restart_slow_first(loop)
+    assert not calls["slow"] and not calls["full"] and not loop.restarts
+    loop, calls = _slow_loop(monkeypatch, left_after=False, seal=False)
+    assert pipeline._Loop.restart_slow_first(loop)
+    assert "sf_eps_m_per_s" not in calls["slow"][0][1]
