@@ -244,9 +244,9 @@ def _log_planes(cfg) -> None:
 
 def _log_one_channel() -> None:
     """A block of one channel (``rawpb.pack_block``: the writer's channels written one by
-    one), whose arrays are C-contiguous where a batch's are strided: the noisy low bits'
-    split for the elements of 2, 4 and 8 bytes, the byte planes of a read-only byte
-    trace."""
+    one; the log tests), whose arrays are C-contiguous where a batch's are strided: the
+    noisy low bits' split for the elements of 2, 4 and 8 bytes, the byte planes of frames
+    of one byte read from a buffer (read-only)."""
     from hil.framelog import rawpb
 
     t = np.arange(512, dtype=np.int64) * 200_000
