@@ -602,12 +602,14 @@ class _Loop:
                     # 8-41 % above the plain one's, both seeds) for 8-17 s of CPU a record
                     new, held_now, other = self.start_chosen(d, best.beta, (new, held_now),
                                                              rnd)
-                elif far and self.unbiased and structure_excess(self.judged(new)[0]) > 0.0:
+                elif far and self.unbiased and structure_excess(self.analysis_of(new)) > 0.0:
                     # effects in already, the fit still far, and its residual still holds
                     # material structure: what it absorbed may be shared out between the new
                     # effect and those in (others_held_chosen). A refit that leaves the
                     # residual white needs no other start (conrod, pump friction after the
-                    # pulsation: the second refit was never kept, +2-3 s a record)
+                    # pulsation: the second refit was never kept, +2-3 s a record). The
+                    # residual alone decides: the parameters' consistency across parts of
+                    # the record (0.4 s on a 16 s record) is judged of the refit kept
                     new, held_now = self.others_held_chosen(d, best.beta, (new, held_now), rnd)
             why = self.verdict_on([d], new, held_now)
             if why and far:
