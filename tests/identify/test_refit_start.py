@@ -39,6 +39,8 @@ def _loop() -> SimpleNamespace:
                            est_mask=None, said=[], unbiased=True)
     loop.say = loop.said.append
     loop.robust_start = lambda fit: _Loop.robust_start(loop, fit)
+    loop.held_first = lambda d, beta: _Loop.held_first(loop, d, beta)
+    loop.others_held = lambda: _Loop.others_held(loop)
     loop.weighted_ss = lambda out, mask: float(out["cost"][0])
     return loop
 

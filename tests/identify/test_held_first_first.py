@@ -1,0 +1,192 @@
+"""A friction that can hold the piston takes its held-first refit first.
+
+Conrod, pump and seal friction (16 s, rig seed 3): the seal's plain refit (4.2 s of CPU) and
+its residual analysis (1.4 s) were made only to be compared with the held-first refit, which
+leaves the residual white and is kept. For the seal (``STICK_SLIP``) the held-first refit is
+made first; where it leaves the residual white and passes the verdict, no plain refit is
+made. Its polish frees the baseline's holds the search's end pins (``J_c``), unless the
+search freed a later round's hold; where that polish is not white, the one without them is
+the one compared with the plain refit, as before. Elsewhere the rule is as before: the
+plain refit, and the held-first one beside it where the plain one leaves structure, made
+once. No model is simulated: the rule alone, on stubs.
+"""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from hil.identify import pipeline
+from hil.identify.fit import FitResult
+from hil.identify.model import IDX, N_PARAMS
+from hil.identify.pipeline import START_MARGIN, STICK_SLIP, _Loop
+
+SEAL = SimpleNamespace(label="seal_friction", params=("sf_coulomb_n", "sf_static_extra_n"))
+PUMP = SimpleNamespace(label="pump_coulomb_friction", params=("pc_force_n",))
+
+
+def _fit(cost: float, excess: float) -> FitResult:
+    # the estimation cost and the residual's structure a stub loop reads back
+    return FitResult(np.zeros(N_PARAMS), ["dc"], {}, {},
+                     {"cost": np.array([cost]), "excess": np.array([excess])},
+                     np.zeros((1, 5)))
+
+
+def _loop(monkeypatch, made: tuple | None, plain: FitResult, refused: str = "") -> SimpleNamespace:
+    monkeypatch.setattr(pipeline, "structure_excess", lambda a: a)
+    calls: list[str] = []
+    loop = SimpleNamespace(added=[SimpleNamespace(label="other")], unbiased=True, est_mask=None,
+                           said=[], calls=calls)
+    loop.say = loop.said.append
+    loop.analysis_of = lambda fit: float(fit.outputs["excess"][0])
+    loop.weighted_ss = lambda out, mask: float(out["cost"][0])
+    loop.verdict_on = lambda ds_, new, held: refused
+
+    def held_first(d, beta, base_too=False):
+        calls.append("held_first, the baseline's holds too" if base_too else "held_first")
+        return made
+
+    def refit_with(d, beta, **kw):
+        calls.append("plain")
+        return plain, {}
+
+    loop.held_first = held_first
+    loop.refit_with = refit_with
+    loop.white_and_passes = lambda d, m: _Loop.white_and_passes(loop, d, m)
+    loop.others_held_chosen = (lambda d, beta, p, rnd, m=None:
+                               _Loop.others_held_chosen(loop, d, beta, p, rnd, m))
+    return loop
+
+
+def test_the_seal_is_a_stick_slip_friction_and_the_pump_friction_is_not():
+    assert STICK_SLIP.intersection(SEAL.params)
+    assert not STICK_SLIP.intersection(PUMP.params)
+    assert "sf_coulomb_n" in IDX
+
+
+def test_a_white_held_first_refit_of_the_seal_is_kept_without_a_plain_refit(monkeypatch):
+    made = (_fit(19155.0, 0.0), {"c_rod": "held"}, "the refit with pc_force_n held first")
+    loop = _loop(monkeypatch, made, _fit(28600.0, 68.0))
+    new, held, other = _Loop.refit_added(loop, SEAL, {}, ["dc"], 1)
+    assert new is made[0] and held == {"c_rod": "held"} and other is None
+    assert loop.calls == ["held_first, the baseline's holds too"]
+    assert "white" in loop.said[-1]
+
+
+@pytest.mark.parametrize("refused", ["", "not credible after the refit (sf_coulomb_n: held)"])
+def test_a_held_first_refit_that_leaves_structure_is_compared_with_the_plain_one(
+        monkeypatch, refused):
+    # not white (or white but refused by the verdict): the plain refit is made, and the
+    # held-first one already made is the one compared with it (not made again)
+    plain = _fit(9734.0, 64.0)
+    cases = [(8769.0, 36.0, True), ((1.0 - 0.5 * START_MARGIN) * 9734.0, 36.0, False)]
+    if refused:
+        cases.append((5000.0, 0.0, True))  # white, refused: compared, kept where lower
+    for cost, excess, kept in cases:
+        made = (_fit(cost, excess), {}, "the refit with pc_force_n held first")
+        loop = _loop(monkeypatch, made, plain, refused)
+        new, _, _ = _Loop.refit_added(loop, SEAL, {}, ["dc"], 1)
+        assert loop.calls == ["held_first, the baseline's holds too", "plain"]
+        assert (new is made[0]) == kept, (cost, excess)
+
+
+def test_other_effects_keep_the_plain_refit_first(monkeypatch):
+    made = (_fit(100.0, 0.0), {}, "the refit with puls held first")
+    # the plain refit leaves the residual white: no held-first refit at all
+    loop = _loop(monkeypatch, made, _fit(621.0, 0.0))
+    new, _, _ = _Loop.refit_added(loop, PUMP, {}, ["dc"], 1)
+    assert loop.calls == ["plain"] and new is not made[0]
+    # it leaves structure: the held-first refit after it, kept where lower by the margin
+    loop = _loop(monkeypatch, made, _fit(621.0, 5.4))
+    new, _, _ = _Loop.refit_added(loop, PUMP, {}, ["dc"], 1)
+    assert loop.calls == ["plain", "held_first"] and new is made[0]
+
+
+def test_the_seal_near_the_configuration_or_first_takes_the_plain_refit(monkeypatch):
+    made = (_fit(100.0, 0.0), {}, "held first")
+    # the fit near the configuration (no robust start): the plain refit alone
+    loop = _loop(monkeypatch, made, _fit(621.0, 0.0))
+    _Loop.refit_added(loop, SEAL, {}, [], 1)
+    assert loop.calls == ["plain"]
+    # where the input noise biases the cost (no low-pass): the plain refit alone
+    loop = _loop(monkeypatch, made, _fit(621.0, 0.0))
+    loop.unbiased = False
+    _Loop.refit_added(loop, SEAL, {}, ["dc"], 1)
+    assert loop.calls == ["plain"]
+
+
+def test_not_white_with_the_baselines_holds_freed_the_polish_without_them_is_compared(
+        monkeypatch):
+    # the polish that freed the baseline's holds left structure: the one without them (the
+    # old rule's) is the one compared with the plain refit, and kept where lower
+    plain = _fit(5506.0, 59.0)
+    without = (_fit(5000.0, 40.0), {}, "held first", None)
+    freed = (_fit(5390.0, 59.0), {}, "held first and jc, ks free again", lambda: without)
+    loop = _loop(monkeypatch, freed, plain)
+    new, _, _ = _Loop.refit_added(loop, SEAL, {}, ["dc"], 2)
+    assert new is without[0]
+    # and where the one without them is not lower by the margin, the plain refit: the freed
+    # polish (2.1 % lower) is not the one compared
+    without = (_fit(5505.0, 40.0), {}, "held first", None)
+    loop = _loop(monkeypatch, freed, plain)
+    new, _, _ = _Loop.refit_added(loop, SEAL, {}, ["dc"], 2)
+    assert new is plain
+
+
+def _held_first_loop(monkeypatch, since_baseline: list[str]):
+    """A loop whose held-first search ends with the baseline's J_c pinned."""
+    pump = SimpleNamespace(params=("pc_force_n",), nominal=(40.0,), refit_extra=())
+    loop = SimpleNamespace(added=[SimpleNamespace(label="pump")], defs_all={"pump": pump},
+                           configured=np.zeros(N_PARAMS), test_model="half the sub-steps")
+    loop.held = {"jc": "ran to its bound", "c_rod": "ran to its bound",
+                 **{p: "held in the pulsation's round" for p in since_baseline}}
+    loop.base = SimpleNamespace(held={"jc": "ran to its bound", "c_rod": "ran to its bound"})
+    current = _fit(6000.0, 60.0)
+    current.free = ["dc", "pc_force_n"]
+    loop.current = current
+    loop.others_held = lambda: _Loop.others_held(loop)
+    loop.held_since_baseline = lambda: list(since_baseline)
+    polished: list[list[str]] = []
+
+    def refit(d, beta, robust=False, model=None):
+        first = _fit(5000.0, 40.0)
+        first.free = list(loop.current.free)
+        first.theta[IDX["jc"]], first.theta[IDX["c_rod"]] = 0.3, 50.0
+        return first, {}
+
+    def guarded(fitter, theta0, free, credible, **kw):
+        polished.append(list(free))
+        alt = _fit(4000.0, 0.0)
+        alt.free = list(free)
+        return alt, {}
+
+    # J_c's interval narrower than its value at the search's end, c_rod's not
+    fitter = SimpleNamespace(standard_errors=lambda theta, free, sigma: {"jc": 0.01,
+                                                                        "c_rod": 400.0})
+    loop.refit_with = refit
+    loop.refitter = lambda: fitter
+    loop.baseline_pinned = lambda f, fit, free: _Loop.baseline_pinned(loop, f, fit, free)
+    monkeypatch.setattr(pipeline, "guarded_fit", guarded)
+    return loop, polished
+
+
+def test_the_polish_frees_the_baselines_holds_the_search_pins(monkeypatch):
+    loop, polished = _held_first_loop(monkeypatch, [])
+    made = _Loop.held_first(loop, SEAL, {}, base_too=True)
+    assert "jc" in polished[-1] and "c_rod" not in polished[-1]
+    assert "jc free again" in made[2]
+    # its fallback: the polish without them, from the same search
+    made[3]()
+    assert "jc" not in polished[-1] and len(polished) == 2
+    # without base_too (the others_held_chosen rule), never
+    loop, polished = _held_first_loop(monkeypatch, [])
+    made = _Loop.held_first(loop, SEAL, {})
+    assert polished == [["dc", "pc_force_n"]] and made[3] is None
+
+
+def test_not_where_the_search_frees_a_later_rounds_hold(monkeypatch):
+    loop, polished = _held_first_loop(monkeypatch, ["ks"])
+    made = _Loop.held_first(loop, SEAL, {}, base_too=True)
+    assert "jc" not in polished[-1] and made[3] is None and len(polished) == 1
