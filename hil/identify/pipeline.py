@@ -1037,15 +1037,28 @@ class _Loop:
             was = now
             theta0 = new.theta.copy()
             free = list(new.free)
+        return self.restart_kept(current, new, held_now, ["ks", "jc"],
+                                 f"k_s at the record's piston resonance ({f_rec:.0f} Hz)",
+                                 "after the refit from the piston resonance")
+
+    def restart_kept(self, current: FitResult, new: FitResult, held_now: dict[str, str],
+                     freed: list[str], origin: str, why: str) -> bool:
+        """A restart's refit ``new`` of ``current`` (the fit so far) judged: kept where it
+        holds none of the effects' parameters, leaves no structure and lowers the
+        validation cost; its outcome recorded in :attr:`restarts` (``origin``: where it
+        started from), the parameters ``freed`` no longer held where ``new`` has them free,
+        ``new``'s own holds recorded with ``why``. True when kept (``current`` is then
+        ``new``)."""
+        own = {p for e in self.added for p in self.defs_all[e.label].params}
+        held_own = sorted(own.intersection(held_now))
         before = _val_cost(self.exp, current.outputs, self.sigma_ref)
         after = _val_cost(self.exp, new.outputs, self.sigma_ref)
         self.current = new
         left = self.structure_left()
-        held_own = sorted(own.intersection(held_now))
         kept = not held_own and not left and after < before
         self.restarts.append({
             "from_configured": ["ks"],
-            "from": f"k_s at the record's piston resonance ({f_rec:.0f} Hz)",
+            "from": origin,
             "validation_cost_change": after / before - 1.0 if before > 0 else float("nan"),
             "outcome": "kept" if kept else (
                 f"not kept ({held_own[0]} held)" if held_own else
@@ -1053,11 +1066,11 @@ class _Loop:
         if not kept:
             self.current = current
             return False
-        for p in ("ks", "jc"):
+        for p in freed:
             if p in new.free:
                 self.held.pop(p, None)
-        for p, why in held_now.items():
-            self.held[p] = f"after the refit from the piston resonance: {why}"
+        for p, held_why in held_now.items():
+            self.held[p] = f"{why}: {held_why}"
         return True
 
     def restart_slow_first(self) -> bool:
@@ -1103,29 +1116,10 @@ class _Loop:
         refitter.converged_gain = JUDGED_GAIN
         new, held_now = guarded_fit(refitter, theta1, free, theta1, sigma=current.sigma,
                                     configured=self.configured)
-        own = {p for e in self.added for p in self.defs_all[e.label].params}
-        held_own = sorted(own.intersection(held_now))
-        before = _val_cost(exp, current.outputs, self.sigma_ref)
-        after = _val_cost(exp, new.outputs, self.sigma_ref)
-        self.current = new
-        left = self.structure_left()
-        kept = not held_own and not left and after < before
-        self.restarts.append({
-            "from_configured": ["ks"],
-            "from": f"the pressures below the piston's line, then k_s at it ({f_rec:.0f} Hz)",
-            "validation_cost_change": after / before - 1.0 if before > 0 else float("nan"),
-            "outcome": "kept" if kept else (
-                f"not kept ({held_own[0]} held)" if held_own else
-                "not kept (structure left)" if left else "not kept (no lower validation cost)")})
-        if not kept:
-            self.current = current
-            return False
-        for p in extra + ["ks", "jc"]:
-            if p in new.free:
-                self.held.pop(p, None)
-        for p, why in held_now.items():
-            self.held[p] = f"after the refit below the piston's line: {why}"
-        return True
+        return self.restart_kept(
+            current, new, held_now, extra + ["ks", "jc"],
+            f"the pressures below the piston's line, then k_s at it ({f_rec:.0f} Hz)",
+            "after the refit below the piston's line")
 
     def better_configured(self) -> list[str]:
         """Free linear-model parameters (:data:`CONSISTENCY_JUDGED`) at whose configured
