@@ -159,6 +159,7 @@ def _resonance_loop(monkeypatch, excesses: list[float]):
                            refitter=lambda: SimpleNamespace(converged_gain=50.0))
     loop.judged = lambda f: (f, None)
     loop.structure_left = lambda: "structure" if loop.current.excess >= 1.0 else ""
+    loop.restart_kept = lambda *a: _Loop.restart_kept(loop, *a)  # the judgement as the loop's
     return loop, made, gains
 
 
