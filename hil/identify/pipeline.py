@@ -417,11 +417,11 @@ class _Loop:
         clean, noisy = self._held_noise
         return predicted_draws(clean.outputs(theta), [m.outputs(theta) for m in noisy])
 
-    def refitter(self) -> OutputErrorFit:
-        """A fitter with the nuisance parameters' and every library effect's scales: the one
-        the refits, the polish and the freeing use."""
-        return OutputErrorFit(self.model, {**NUISANCE_SCALES(self.exp.dt),
-                                           **_all_scales(self.defs_all)})
+    def refitter(self, model: FastModel | LowPassedPressures | None = None) -> OutputErrorFit:
+        """A fitter of ``model`` (default the loop's) with the nuisance parameters' and every
+        library effect's scales: the one the refits, the polish and the freeing use."""
+        return OutputErrorFit(model or self.model, {**NUISANCE_SCALES(self.exp.dt),
+                                                    **_all_scales(self.defs_all)})
 
     def robust_start(self, fit: FitResult) -> list[str]:
         """The parameters a refit with an effect in starts from their configured values: none
@@ -828,9 +828,7 @@ class _Loop:
                 and p not in free]
         if not held:
             return []
-        se = fitter.standard_errors(fit.theta, free + held, fit.sigma)
-        return [p for p in held if p not in CREDIBLE
-                or 2.0 * Z95 * se.get(p, np.inf) <= abs(fit.value(p))]
+        return pinned(fitter, fit, free, held)
 
     def held_since_baseline(self) -> list[str]:
         """Baseline parameters held by the guard in an effect's refit (not by the baseline
@@ -1105,8 +1103,7 @@ class _Loop:
             theta0[IDX["sf_eps_m_per_s"]] = exp.const.eps_seal
         self.say(f"refit of the effects found below the piston's line ({f_rec:.0f} Hz in the "
                  f"record, {f_mod:.0f} Hz in the model) first, then from k_s {ks:.4g} N/m")
-        scales = {**NUISANCE_SCALES(exp.dt), **_all_scales(self.defs_all)}
-        slow = OutputErrorFit(LowPassedPressures(self.model, SLOW_CUTOFF * f_rec), scales)
+        slow = self.refitter(LowPassedPressures(self.model, SLOW_CUTOFF * f_rec))
         free = list(current.free) + extra
         first = slow.fit(theta0, free, sigma=current.sigma, passes=2, max_nfev=PLAIN_NFEV)
         theta1 = first.theta.copy()
@@ -1293,11 +1290,10 @@ class _Loop:
         # current fit is still wider than its value would be held again by the guard, after
         # a refit with all of them free and another without it (a third of a 16 s record's
         # time, for the same fit)
-        se = fitter.standard_errors(current.theta, current.free + retry, current.sigma)
         # (a shape held at its start, where the rest of the model then sat, is tried at its
         # refit whatever its interval at that start)
-        retry = [p for p in retry if p in shapes or p not in CREDIBLE
-                 or 2.0 * Z95 * se.get(p, np.inf) <= abs(current.value(p))]
+        narrow = pinned(fitter, current, current.free, retry)
+        retry = [p for p in retry if p in shapes or p in narrow]
         if not retry:
             return False
         self.say(f"refit with {', '.join(retry)} free again")
@@ -1595,6 +1591,16 @@ RESONANCE_REFITS = 4
 #: piston line: 0.4 of the free piston's 1.24 kHz is 500 Hz; the fourth-order filter takes
 #: the line about 30 dB down.
 SLOW_CUTOFF = 0.4
+
+
+def pinned(fitter: OutputErrorFit, fit: FitResult, free: list[str], held: list[str]
+           ) -> list[str]:
+    """Of the ``held`` parameters, those the record pins at ``fit``: with them and ``free``
+    free, their 95 % interval narrower than their value (one Jacobian), or not held for
+    credibility at all (not in :data:`CREDIBLE`)."""
+    se = fitter.standard_errors(fit.theta, free + held, fit.sigma)
+    return [p for p in held if p not in CREDIBLE
+            or 2.0 * Z95 * se.get(p, np.inf) <= abs(fit.value(p))]
 
 
 def _material(a: ResidualAnalysis) -> list:

@@ -111,7 +111,7 @@ def _slow_loop(monkeypatch, left_after: bool, seal: bool = True, line=(1.84e7, 1
 
     def low_passed(model, cutoff_hz):
         calls["cutoff"].append(cutoff_hz)
-        return model
+        return SimpleNamespace(low_passed=model, cutoff_hz=cutoff_hz)
 
     monkeypatch.setattr(pipeline, "stiffness_at_line", lambda exp, theta, out: line)
     monkeypatch.setattr(pipeline, "pressures_finite", lambda exp: True)
@@ -136,7 +136,10 @@ def _slow_loop(monkeypatch, left_after: bool, seal: bool = True, line=(1.84e7, 1
                            exp=SimpleNamespace(dt=2e-4, const=SimpleNamespace(eps_seal=2e-3)),
                            model=None, configured=None, sigma_ref=None, restarts=[],
                            say=lambda msg: None,
-                           refitter=lambda: SimpleNamespace(converged_gain=50.0))
+                           # the loop's fitter of a given model (the low-passed one), else
+                           # the full band's
+                           refitter=lambda model=None: (Fitter(model, {}) if model is not None
+                                                        else SimpleNamespace(converged_gain=50.0)))
     loop.structure_left = lambda: "structure" if loop.current.left else ""
     from hil.identify.pipeline import _Loop
     loop.restart_kept = lambda *a: _Loop.restart_kept(loop, *a)  # the judgement as the loop's
