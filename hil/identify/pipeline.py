@@ -1079,14 +1079,19 @@ class _Loop:
         seed 3: both frictions in only as the joint search's pair, `K` held at the preset
         since the baseline, 1.17x the rig's, the seal's `eps` at the preset, `k_s` and
         `J_c` at the preset, the pressures' residual 76 % predictable, three quarters of
-        it at the line). Where the record shows the line and the model's is off it, refit
-        in two stages: the pressures low-passed below the line
-        (:class:`~hil.identify.slowfirst.LowPassedPressures`, :data:`SLOW_CUTOFF` of the
-        record's line), with the baseline's held parameters other than `k_s`, `J_c` freed
+        it at the line). Where the record shows the line and the model's is off it (or
+        rings above the record's band: the line is then looked for around the configured
+        resonance, :func:`~hil.identify.resonance.stiffness_at_line`), put the line there
+        with `J_c` at its configured value and refit in two stages: the pressures
+        low-passed below the line (:class:`~hil.identify.slowfirst.LowPassedPressures`,
+        :data:`SLOW_CUTOFF` of the record's line), `k_s` and `J_c` held, the loop's other
+        holds (the baseline's, the effects' law parameters held when they came in) freed
         and, with the seal in, its regularisation velocity; then the full band from there
-        with `k_s` at the line and `k_s`, `J_c` free. Kept only where it explains the
-        record, holds none of the effects' parameters and lowers the validation cost.
-        True when kept."""
+        with `k_s`, `J_c` free (a freed hold that then disagrees between parts of the record,
+        where nothing else is left, held again: :meth:`freed_disagreeing`). Kept only where
+        it explains the record, holds none of the effects' parameters and lowers the
+        validation cost. True when kept (docs/identify.md, "The free piston's two frictions
+        under the multisine at rig seeds 1 and 2")."""
         current, exp = self.current, self.exp
         if not self.added or not self.structure_left() or not pressures_finite(exp):
             return False
