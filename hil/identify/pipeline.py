@@ -1291,8 +1291,8 @@ class _Loop:
         friction "not excited", a realistic size 1.5 standard errors out of the residual, in
         every round, so never in a set; tested at the robust start it ranks second to the
         seal, and the pair explains the record). The candidates the rounds tested keep their
-        tests (at rig seed 3 the pump friction, significant in the rounds, is collinear at
-        the robust start, ``d_p`` put back)."""
+        tests (at rig seed 3 the pump friction, significant in the rounds, is not tested at
+        the robust start, ``d_p`` put back, when every candidate is tested again there)."""
         exp, current = self.exp, self.current
         far = self.robust_start(current)
         if not far or not self.rounds:
