@@ -8,8 +8,10 @@ off does better by not ringing at all, and its fit settles where the pressure se
 filters the line away while the slow parameters (the current's gain, the friction laws) take
 up what the ring leaves (docs/identify.md, *The free piston's two frictions under the
 multisine: four held values, one narrow basin*). Low-passed below the line, the pressures
-say nothing about ``k_s``, ``J_c`` or the lag, and the slow parameters find the record's
-values; the full band then needs only the line put where the record has it.
+cannot pin ``k_s``, ``J_c`` or the lag, and the slow parameters find the record's values;
+the full band then frees the line's two. The line's skirt still reaches below the cut-off
+(at 0.4 of the line the response is 1.2x the static one), so the line is put where the
+record has it before the slow part (docs/identify.md, *... at rig seeds 1 and 2*).
 
 The filter is causal and the same on the measured and the simulated pressures, so the
 residual is the full-band residual filtered: a fit's head (``n_stop``) has the same values

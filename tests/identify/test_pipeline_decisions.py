@@ -84,6 +84,7 @@ def _stub_loop(sets_pass: dict[tuple[str, ...], float]):
     loop.rounds = [[]]
     loop.structure = lambda: ("residual structure", "")
     loop.restart_far = lambda: False
+    loop.tests_for_sets = lambda: loop.rounds  # the pool is stubbed below
     loop.freed_at = None
     loop.current = FitResult(np.zeros(len(IDX)), [], {}, {}, {}, np.zeros((1, 1)))
     loop.exp = None

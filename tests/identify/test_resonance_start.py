@@ -64,3 +64,27 @@ def test_no_restart_without_a_line_on_a_fixed_piston_or_on_the_line():
     assert stiffness_at_line(_exp("fixed", rung), fit, model) is None
     assert stiffness_at_line(_exp("conrod", model["p_pump_a"]), fit, model) is None
     assert math.isfinite(undamped_hz(SimpleNamespace(load="conrod"), fit))
+
+
+def test_a_model_line_above_nyquist_is_looked_for_around_the_configured_resonance():
+    # the fit's J_c ran to 0.07x (its line at ~3.4 kHz, above the record's 2.5 kHz): the
+    # band around it holds no bin; around the configured resonance the record's line is
+    # found, and the model's undamped frequency stands for its line
+    rig, fit = _theta(1.93e7, jc=0.29, k_rod=0.0), _theta(1.013e7, jc=0.0217, k_rod=0.0)
+    configured = _theta(2.24e7, jc=0.295, k_rod=0.0)
+    f_rig = undamped_hz(SimpleNamespace(load="free"), rig)
+    exp = _exp("free", _rung(f_rig, 1))
+    model = _outputs(np.random.default_rng(4).normal(size=N))
+    assert undamped_hz(exp, fit) > FS / 2
+    assert stiffness_at_line(exp, fit, model) is None
+    line = stiffness_at_line(exp, fit, model, configured)
+    assert line is not None
+    ks, f_rec, f_mod = line
+    assert f_rec == pytest.approx(f_rig, rel=0.01)
+    assert f_mod == pytest.approx(undamped_hz(exp, fit))
+    # k_s that puts the line there with the fit's J_c
+    assert ks == pytest.approx(0.0217 * (2 * math.pi * f_rig) ** 2, rel=0.02)
+    # a model line inside the record's band is looked for around it, as before
+    near = _theta(2.24e7, k_rod=0.0)
+    assert stiffness_at_line(exp, near, _outputs(_rung(undamped_hz(exp, near), 2)),
+                             configured)[2] < FS / 2

@@ -7,6 +7,7 @@ from __future__ import annotations
 from types import SimpleNamespace
 
 import numpy as np
+import pytest
 
 FS = 5000.0
 N = 10000
@@ -86,34 +87,43 @@ def test_a_gap_in_a_pressure_is_refused():
 
 # --- the loop's step (:meth:`_Loop.restart_slow_first`), on stand-ins --------------------
 
-def _slow_loop(monkeypatch, left_after: bool, seal: bool = True, line=(1.84e7, 1241.0, 1371.0)):
+JC_CONFIGURED = 0.295
+
+
+def _slow_loop(monkeypatch, left_after: bool, seal: bool = True, line=(1.84e7, 1241.0, 1371.0),
+               jc: float = JC_CONFIGURED, disagree: tuple[str, ...] = ()):
     """A loop at the free piston's pair (``K``, ``d_s``, ``k_s``, ``J_c`` held since the
-    baseline); the full band's refit leaves structure where ``left_after``."""
+    baseline, the seal's Stribeck velocity held since it came in); the full band's refit
+    leaves structure where ``left_after``, and ``disagree`` (names) disagreeing between
+    parts of the record with the residual white, until a refit holds them."""
     from hil.identify import pipeline
     from hil.identify.model import IDX, N_PARAMS
 
-    calls: dict = {"slow": [], "full": [], "cutoff": []}
+    calls: dict = {"slow": [], "full": [], "cutoff": [], "model": []}
 
     class Fitter:
         def __init__(self, model, scales):
             self.model = model
 
         def fit(self, theta0, free, sigma=None, passes=2, max_nfev=40):
-            calls["slow"].append((theta0.copy(), list(free)))
+            calls["slow"].append((theta0.copy(), list(free), max_nfev))
             theta = theta0.copy()
             theta[IDX["gain_n_per_a"]] = 101.0  # the slow part's gain
             return SimpleNamespace(theta=theta, free=list(free))
 
-    def full(fitter, theta0, free, credible, sigma=None, configured=None):
-        calls["full"].append((theta0.copy(), list(free), fitter.converged_gain))
+    def full(fitter, theta0, free, credible, sigma=None, passes=2, configured=None):
+        calls["full"].append((theta0.copy(), list(free), fitter.converged_gain, passes))
+        bad = [p for p in disagree if p in free]
         return SimpleNamespace(theta=theta0.copy(), free=list(free), outputs=1.0,
-                               left=left_after), {}
+                               left=left_after or bool(bad), white=not left_after,
+                               bad=bad), {}
 
     def low_passed(model, cutoff_hz):
         calls["cutoff"].append(cutoff_hz)
+        calls["model"].append(model)
         return SimpleNamespace(low_passed=model, cutoff_hz=cutoff_hz)
 
-    monkeypatch.setattr(pipeline, "stiffness_at_line", lambda exp, theta, out: line)
+    monkeypatch.setattr(pipeline, "stiffness_at_line", lambda exp, theta, out, conf: line)
     monkeypatch.setattr(pipeline, "pressures_finite", lambda exp: True)
     monkeypatch.setattr(pipeline, "OutputErrorFit", Fitter)
     monkeypatch.setattr(pipeline, "LowPassedPressures", low_passed)
@@ -121,53 +131,114 @@ def _slow_loop(monkeypatch, left_after: bool, seal: bool = True, line=(1.84e7, 1
     monkeypatch.setattr(pipeline, "_all_scales", lambda defs: {})
     monkeypatch.setattr(pipeline, "guarded_fit", full)
     monkeypatch.setattr(pipeline, "_val_cost", lambda exp, out, sigma: float(out))
+    monkeypatch.setattr(pipeline, "_verdict", lambda a: (not a.white, ""))
     theta = np.zeros(N_PARAMS)
     theta[IDX["gain_n_per_a"]] = 119.4
     theta[IDX["ks"]] = 2.24e7
+    theta[IDX["jc"]] = jc
+    theta[IDX["ds"]] = 6.79e4
+    theta[IDX["sf_vs_m_per_s"]] = 5e-3
     current = SimpleNamespace(theta=theta, free=["dp", "jp", "sf_coulomb_n"], outputs=2.0,
                               sigma={}, left=True)
+    if jc != JC_CONFIGURED:
+        current.free.append("jc")  # run away with the line's ratio kept
+    configured = np.zeros(N_PARAMS)
+    configured[IDX["jc"]] = JC_CONFIGURED
     added = [SimpleNamespace(name="pump_coulomb_friction", label="pump_coulomb_friction")]
-    defs = {"pump_coulomb_friction": SimpleNamespace(params=("pc_force_n",))}
+    defs = {"pump_coulomb_friction": SimpleNamespace(params=("pc_force_n",), refit_extra=())}
     if seal:
         added.append(SimpleNamespace(name="seal_friction", label="seal_friction"))
-        defs["seal_friction"] = SimpleNamespace(params=("sf_coulomb_n", "sf_static_n"))
-    held = {p: "held at the preset" for p in ("gain_n_per_a", "ds", "ks", "jc")}
+        defs["seal_friction"] = SimpleNamespace(params=("sf_coulomb_n", "sf_static_n"),
+                                                refit_extra=(("sf_vs_m_per_s", None),))
+    held = {p: "held at the preset" for p in ("gain_n_per_a", "ds", "ks", "jc")
+            if p not in current.free}
+    if seal:
+        held["sf_vs_m_per_s"] = "after adding seal_friction: held at 0.005"
     loop = SimpleNamespace(current=current, added=added, defs_all=defs, held=held,
-                           exp=SimpleNamespace(dt=2e-4, const=SimpleNamespace(eps_seal=2e-3)),
-                           model=None, configured=None, sigma_ref=None, restarts=[],
-                           say=lambda msg: None,
+                           exp=SimpleNamespace(dt=2e-4, load="free",
+                                               const=SimpleNamespace(eps_seal=2e-3)),
+                           model="the loop's model", test_model="the half-step model",
+                           configured=configured, sigma_ref=None, restarts=[],
+                           freed_at=None, say=lambda msg: None,
                            # the loop's fitter of a given model (the low-passed one), else
                            # the full band's
                            refitter=lambda model=None: (Fitter(model, {}) if model is not None
                                                         else SimpleNamespace(converged_gain=50.0)))
     loop.structure_left = lambda: "structure" if loop.current.left else ""
+    loop.judged = lambda fit: (fit, SimpleNamespace(
+        inconsistent=[SimpleNamespace(name=p) for p in fit.bad]))
     from hil.identify.pipeline import _Loop
     loop.restart_kept = lambda *a: _Loop.restart_kept(loop, *a)  # the judgement as the loop's
+    loop.freed_disagreeing = lambda *a: _Loop.freed_disagreeing(loop, *a)
     return loop, calls
 
 
-def test_the_slow_part_frees_the_gain_and_the_seals_eps_then_the_line_frees_ks_jc(monkeypatch):
+def test_the_slow_part_frees_the_holds_with_the_line_placed_then_frees_ks_jc(monkeypatch):
     from hil.identify import pipeline
     from hil.identify.model import IDX
 
     loop, calls = _slow_loop(monkeypatch, left_after=False)
     before = loop.current
     assert pipeline._Loop.restart_slow_first(loop)
-    (theta0, free1), = calls["slow"]
-    # below the line: the held baseline parameters but the line's two, and the seal's eps
-    # from the preset
-    assert {"gain_n_per_a", "ds", "sf_eps_m_per_s"} <= set(free1)
+    (theta0, free1, nfev), = calls["slow"]
+    # below the line: the held baseline parameters but the line's two, the seal's Stribeck
+    # velocity held since it came in, and the seal's eps from the preset; the line already
+    # where the record has it (J_c at the preset here: k_s the line's), on the half-step
+    # model, with the Jacobians of a search
+    assert {"gain_n_per_a", "ds", "sf_vs_m_per_s", "sf_eps_m_per_s"} <= set(free1)
     assert not {"ks", "jc"} & set(free1)
     assert theta0[IDX["sf_eps_m_per_s"]] == 2e-3
+    assert theta0[IDX["ks"]] == 1.84e7 and theta0[IDX["jc"]] == JC_CONFIGURED
     assert calls["cutoff"] == [pipeline.SLOW_CUTOFF * 1241.0]
-    # the full band from the slow part's end, k_s at the line, k_s and J_c free, at the
-    # tight stop
-    (theta2, free2, gain), = calls["full"]
+    assert calls["model"] == ["the half-step model"] and nfev == pipeline.ROBUST_NFEV
+    # the full band from the slow part's end, k_s and J_c free, at the tight stop
+    (theta2, free2, gain, _), = calls["full"]
     assert theta2[IDX["gain_n_per_a"]] == 101.0 and theta2[IDX["ks"]] == 1.84e7
     assert {"ks", "jc"} <= set(free2) and gain == pipeline.JUDGED_GAIN
-    # kept: explained, cheaper; the freed parameters no longer held
+    # kept: explained, cheaper; the freed parameters no longer held; the freeing at the
+    # end not asked again of this fit
     assert loop.current is not before and not loop.held
     assert loop.restarts[-1]["outcome"] == "kept"
+    assert loop.freed_at is loop.current
+
+
+def test_a_run_away_piston_mass_goes_back_to_the_configured_one_on_the_line(monkeypatch):
+    from hil.identify import pipeline
+    from hil.identify.model import IDX
+
+    # the fit's J_c 2x the configured, its line at 1371 Hz: the record's at 1241 Hz is
+    # reached with J_c configured and k_s the line's ratio times it
+    loop, calls = _slow_loop(monkeypatch, left_after=False, jc=2 * JC_CONFIGURED)
+    assert pipeline._Loop.restart_slow_first(loop)
+    (theta0, free1, _), = calls["slow"]
+    assert theta0[IDX["jc"]] == JC_CONFIGURED
+    assert theta0[IDX["ks"]] == pytest.approx(1.84e7 / 2)
+    assert not {"ks", "jc"} & set(free1)
+    (theta2, free2, _, _), = calls["full"]
+    assert {"ks", "jc"} <= set(free2)
+
+
+def test_a_freed_hold_that_disagrees_between_parts_is_held_again(monkeypatch):
+    from hil.identify import pipeline
+    from hil.identify.model import IDX
+
+    loop, calls = _slow_loop(monkeypatch, left_after=False, disagree=("ds",))
+    assert pipeline._Loop.restart_slow_first(loop)
+    first, again = calls["full"]
+    assert "ds" in first[1] and "ds" not in again[1]
+    # from the first's end, d_s back at its hold, one pass
+    assert again[0][IDX["ds"]] == 6.79e4 and again[3] == 1
+    assert "ds" in loop.held and "once freed" in loop.held["ds"]
+    assert loop.restarts[-1]["outcome"] == "kept"
+
+
+def test_no_hold_again_where_the_disagreement_is_not_a_freed_holds(monkeypatch):
+    from hil.identify import pipeline
+
+    loop, calls = _slow_loop(monkeypatch, left_after=False, disagree=("dp",))
+    assert not pipeline._Loop.restart_slow_first(loop)
+    assert len(calls["full"]) == 1
+    assert loop.restarts[-1]["outcome"] == "not kept (structure left)"
 
 
 def test_the_slow_first_refit_is_not_kept_with_structure_left(monkeypatch):
@@ -178,6 +249,7 @@ def test_the_slow_first_refit_is_not_kept_with_structure_left(monkeypatch):
     assert not pipeline._Loop.restart_slow_first(loop)
     assert loop.current is before and loop.held == held
     assert loop.restarts[-1]["outcome"] == "not kept (structure left)"
+    assert loop.freed_at is None
 
 
 def test_no_line_no_refit_and_no_seal_no_eps(monkeypatch):
