@@ -640,7 +640,13 @@ class _Loop:
         CPU, and its residual analysis, 1.4 s, were made only to be compared with the
         held-first one, which explains the record); elsewhere the rule is as before, the
         held-first refit made once."""
-        chosen = bool(far and not self.added and self.unbiased)
+        # the two starts compared for the seal alone: its far minimum is the one they tell
+        # apart (conrod, seal friction, rig seeds 1 and 2); the first effect of any other kind
+        # ended in the plain refit's minimum from both (the conrod's pulsation 1e-4 apart,
+        # the pump friction 1e-5), the robust trial made for nothing (1.4 s of the conrod
+        # triple's 16 s record)
+        chosen = bool(far and not self.added and self.unbiased
+                      and STICK_SLIP.intersection(d.params))
         other = None
         # a friction that can hold the piston, after other effects: the held-first
         # refit first, and none plain where it leaves the residual white
