@@ -260,3 +260,23 @@ def test_the_lines_polish_is_kept_only_where_white_else_the_rule_as_before(
     assert made_before == ([] if line_white else ["polish from the search's end"])
     assert loop.calls == (["held_first, the baseline's holds too"]
                           + ([] if line_white or before_white else ["plain"]))
+
+
+@pytest.mark.parametrize("effect, compared", [(SEAL, True), (PUMP, False)])
+def test_the_first_effects_two_starts_are_compared_for_the_seal_alone(
+        monkeypatch, effect, compared):
+    # no effect in yet, the fit far, the cost unbiased: the seal's refit from the fit as it
+    # stands and from the robust start are compared (start_chosen); any other first effect
+    # (the conrod triple's pulsation) takes the plain refit alone
+    plain = _fit(621.0, 5.4)
+    loop = _loop(monkeypatch, None, plain)
+    loop.added = []
+
+    def start_chosen(d, beta, made, rnd):
+        loop.calls.append("start_chosen")
+        return *made, None
+
+    loop.start_chosen = start_chosen
+    new, _, _ = _Loop.refit_added(loop, effect, {}, ["dc"], 0)
+    assert new is plain
+    assert loop.calls == (["plain", "start_chosen"] if compared else ["plain"])
