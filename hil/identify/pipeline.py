@@ -655,6 +655,13 @@ class _Loop:
             # one without the baseline's holds freed (freed, it can come out a hair lower
             # and be kept where the old rule's was not: conrod triple, rig seed 2)
             made = made[3]()
+            if self.white_and_passes(d, made):
+                # white itself: kept as the first polish would have been, no plain refit
+                # (conrod, pump and seal friction, 16 s, rig seed 1: J_c freed took the
+                # polish to the far basin, the polish without it explains the record, and
+                # the plain refit, 3.5 s and its analysis, was made only to lose to it)
+                self.say(f"round {rnd}: {made[2]} leaves the residual white (no plain refit)")
+                return made[0], made[1], other
         if chosen:
             # from the baseline only, and only where the estimation cost is free of
             # the input noise's bias (it ranks the two minima; without the low-pass
