@@ -171,7 +171,8 @@ def _held_first_loop(monkeypatch, since_baseline: list[str]):
     loop.held_since_baseline = lambda: list(since_baseline)
     polished: list[list[str]] = []
 
-    def refit(d, beta, robust=False, model=None):
+    def refit(d, beta, robust=False, model=None, run_on=False):
+        assert run_on  # the search's guard runs on after a hold where it stopped at its budget
         first = _fit(5000.0, 40.0)
         first.free = list(loop.current.free)
         first.theta[IDX["jc"]], first.theta[IDX["c_rod"]] = 0.3, 50.0
