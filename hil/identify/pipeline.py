@@ -448,7 +448,8 @@ class _Loop:
 
     def refit_with(self, d: EffectDef | list[EffectDef], start: dict[str, float],
                    robust: bool = False, nfev: int | None = None, judged_alone: bool = False,
-                   model: FastModel | None = None) -> tuple[FitResult, dict[str, str]]:
+                   model: FastModel | None = None, run_on: bool = False
+                   ) -> tuple[FitResult, dict[str, str]]:
         """``current`` refitted with the effect ``d`` (or several at once) in, their
         parameters from ``start``. ``robust``: from the robust start (:meth:`robust_start`)
         where the fit without them is far from the configured values (the effects may have
@@ -460,7 +461,9 @@ class _Loop:
         ``refuse``; free piston, both frictions under ``slide``: the seal's static level
         held at 0, then two more holds and refits, 1.2 s of CPU, for a refused refit).
         ``model``: the model the refit simulates, in place of the loop's (a search whose end
-        is refitted on the loop's model, :meth:`others_held_chosen`)."""
+        is refitted on the loop's model, :meth:`others_held_chosen`). ``run_on``: the guard's
+        refit after a hold in a fit stopped at its budget has that budget
+        (:func:`~hil.identify.fit.guarded_fit`)."""
         exp, current, configured = self.exp, self.current, self.configured
         ds_ = d if isinstance(d, list) else [d]
         theta0 = current.theta.copy()
@@ -491,7 +494,8 @@ class _Loop:
             nfev = ROBUST_NFEV if moved else PLAIN_NFEV
         own = frozenset(p for e in ds_ for p in e.params) if judged_alone else frozenset()
         new, held_now = guarded_fit(refitter, theta0, new_free, credible, sigma=current.sigma,
-                                    configured=configured, max_nfev=nfev, refuse=own)
+                                    configured=configured, max_nfev=nfev, refuse=own,
+                                    run_on=run_on)
         if own.intersection(held_now):
             return new, held_now
         # a shape parameter that took the effect's law to a degenerate one: held at its
@@ -667,6 +671,13 @@ class _Loop:
             # one without the baseline's holds freed (freed, it can come out a hair lower
             # and be kept where the old rule's was not: conrod triple, rig seed 2)
             made = made[3]()
+            if self.white_and_passes(d, made):
+                # white itself: kept as the first polish would have been, no plain refit
+                # (conrod, pump and seal friction, 16 s, rig seed 1: J_c freed took the
+                # polish to the far basin, the polish without it explains the record, and
+                # the plain refit, 3.5 s and its analysis, was made only to lose to it)
+                self.say(f"round {rnd}: {made[2]} leaves the residual white (no plain refit)")
+                return made[0], made[1], other
         if chosen:
             # from the baseline only, and only where the estimation cost is free of
             # the input noise's bias (it ranks the two minima; without the low-pass
@@ -810,7 +821,13 @@ class _Loop:
             # basin at half the cost a simulation, and in fewer Jacobians (conrod, pump and
             # seal friction, 16 s, rig seed 3: 24 where 40 did not end the descent; the
             # polished fit's estimation cost 19155 against 19157, docs/identify.md)
-            first, held_first = self.refit_with(d, beta, robust=True, model=self.test_model)
+            # where it stops at its budget and its guard then holds a parameter (conrod, pump
+            # and seal friction, 16 s, rig seed 1: c_rod walked to its bound in the last 14 of
+            # 40 Jacobians, held back at 50), the refit after the hold runs on with the
+            # search's budget: three Jacobians left the end off the valley floor, and the
+            # polish with J_c freed from there went to the far basin
+            first, held_first = self.refit_with(d, beta, robust=True, model=self.test_model,
+                                                run_on=True)
         finally:
             self.current = current
         refitter = self.refitter()

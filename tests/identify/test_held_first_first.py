@@ -6,9 +6,9 @@ leaves the residual white and is kept. For the seal (``STICK_SLIP``) the held-fi
 made first; where it leaves the residual white and passes the verdict, no plain refit is
 made. Its polish frees the baseline's holds the search's end pins (``J_c``), unless the
 search freed a later round's hold; where that polish is not white, the one without them is
-the one compared with the plain refit, as before. Elsewhere the rule is as before: the
-plain refit, and the held-first one beside it where the plain one leaves structure, made
-once. No model is simulated: the rule alone, on stubs.
+kept where it is white itself (and passes the verdict), else compared with the plain refit,
+as before. Elsewhere the rule is as before: the plain refit, and the held-first one beside
+it where the plain one leaves structure, made once. No model is simulated: the rule alone, on stubs.
 """
 
 from __future__ import annotations
@@ -135,6 +135,27 @@ def test_not_white_with_the_baselines_holds_freed_the_polish_without_them_is_com
     assert new is plain
 
 
+@pytest.mark.parametrize("refused", ["", "the refit lowered the validation cost by less"])
+def test_the_polish_without_the_baselines_holds_kept_where_white_without_a_plain_refit(
+        monkeypatch, refused):
+    # the polish that freed J_c left structure, the one without it leaves the residual
+    # white (conrod, pump and seal friction, 16 s, rig seed 1): kept as the first polish
+    # would have been, with no plain refit, where it passes the verdict; refused by the
+    # verdict, compared with the plain refit as before
+    plain = _fit(4000.0, 0.0)
+    without = (_fit(14803.0, 0.0), {"c_rod": "held"}, "held first", None)
+    freed = (_fit(22859.0, 69.8), {}, "held first and jc free again", lambda: without)
+    loop = _loop(monkeypatch, freed, plain, refused)
+    new, held, other = _Loop.refit_added(loop, SEAL, {}, ["dc"], 1)
+    if refused:
+        assert loop.calls == ["held_first, the baseline's holds too", "plain"]
+        assert new is plain
+    else:
+        assert loop.calls == ["held_first, the baseline's holds too"]
+        assert new is without[0] and held == {"c_rod": "held"} and other is None
+        assert "white" in loop.said[-1]
+
+
 def _held_first_loop(monkeypatch, since_baseline: list[str]):
     """A loop whose held-first search ends with the baseline's J_c pinned."""
     pump = SimpleNamespace(params=("pc_force_n",), nominal=(40.0,), refit_extra=())
@@ -150,7 +171,8 @@ def _held_first_loop(monkeypatch, since_baseline: list[str]):
     loop.held_since_baseline = lambda: list(since_baseline)
     polished: list[list[str]] = []
 
-    def refit(d, beta, robust=False, model=None):
+    def refit(d, beta, robust=False, model=None, run_on=False):
+        assert run_on  # the search's guard runs on after a hold where it stopped at its budget
         first = _fit(5000.0, 40.0)
         first.free = list(loop.current.free)
         first.theta[IDX["jc"]], first.theta[IDX["c_rod"]] = 0.3, 50.0
