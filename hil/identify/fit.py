@@ -672,7 +672,7 @@ def guarded_fit(fitter: OutputErrorFit, theta0: np.ndarray, free: list[str],
                 credible: np.ndarray, sigma: dict[str, float] | None = None,
                 passes: int = 2, guard: list[str] | None = None, max_nfev: int = 40,
                 configured: np.ndarray | None = None, first: FitResult | None = None,
-                refuse: frozenset[str] = frozenset(),
+                refuse: frozenset[str] = frozenset(), run_on: bool = False,
                 ) -> tuple[FitResult, dict[str, str]]:
     """Fit, then hold every non-credible parameter (of ``guard``, default all free) at its
     last credible value (from ``credible``), worst first, refitting after each hold.
@@ -690,11 +690,16 @@ def guarded_fit(fitter: OutputErrorFit, theta0: np.ndarray, free: list[str],
     parameter not credible): the guard stops at the first such hold and returns the fit it
     held it in, the hold named; the further holds and refits would be thrown away with it.
 
+    ``run_on``: where the first fit stopped at its budget, not converged, each refit after a
+    hold has a pass of that budget (``max_nfev``) in place of the short one: a search whose
+    end is refitted elsewhere, where the hold's jump leaves that end off its valley floor.
+
     Returns the fit and ``{parameter: why it was held}``.
     """
     free = list(free)
     result = first if first is not None else fitter.fit(theta0, free, sigma=sigma,
                                                         passes=passes, max_nfev=max_nfev)
+    after_hold = max_nfev if run_on and not result.converged else 9
     held: dict[str, str] = {}
     for _ in range(len(free)):
         bad = fitter.offenders(result, guard)
@@ -721,7 +726,7 @@ def guarded_fit(fitter: OutputErrorFit, theta0: np.ndarray, free: list[str],
         theta[IDX[name]] = value
         if not free:
             break
-        result = fitter.fit(theta, free, sigma=result.sigma, passes=1, max_nfev=9)
+        result = fitter.fit(theta, free, sigma=result.sigma, passes=1, max_nfev=after_hold)
     return result, held
 
 

@@ -129,7 +129,7 @@ def test_a_later_effect_is_refitted_with_those_in_held_first(monkeypatch):
     plain = (_fit({}, 6000.0), {})
     seen = {}
 
-    def refit(d, beta, robust=False, nfev=None, model=None):
+    def refit(d, beta, robust=False, nfev=None, model=None, run_on=False):
         seen["free"], seen["robust"], seen["model"] = list(loop.current.free), robust, model
         return _fit({}, 5000.0), {"c_rod": "held"}
 
@@ -182,7 +182,7 @@ def test_a_parameter_held_in_an_earlier_effects_refit_is_free_in_the_held_first_
     assert loop.held_since_baseline() == ["ks"]
     seen = {}
 
-    def refit(d, beta, robust=False, nfev=None, model=None):
+    def refit(d, beta, robust=False, nfev=None, model=None, run_on=False):
         seen["free"] = list(loop.current.free)
         first = _fit({}, 5000.0)
         first.free = list(loop.current.free)
