@@ -730,6 +730,9 @@ def guarded_fit(fitter: OutputErrorFit, theta0: np.ndarray, free: list[str],
     return result, held
 
 
+#: What :func:`hold_unsupported` says of a far parameter it holds for absorbed structure
+#: (the identification loop's slow-first step keeps such a hold: ``restart_slow_first``).
+ABSORBED = "where it disagrees between parts of the record"
 #: Factor from a parameter's configured value beyond which the baseline checks that the
 #: data, not the optimiser's path, put it there (:func:`hold_unsupported`).
 PROFILE_FACTOR = 1.5
@@ -828,8 +831,8 @@ def hold_unsupported(fitter: OutputErrorFit, result: FitResult, configured: np.n
         if spread:
             s = max(spread, key=lambda s: (abs(np.log(far[s.name])), s.name))
             name = s.name
-            why = (f"the fit moved it to {far[name]:.2f}x the configured value, where it "
-                   f"disagrees between parts of the record ({s.describe(name)}): structure "
+            why = (f"the fit moved it to {far[name]:.2f}x the configured value, {ABSORBED}"
+                   f" ({s.describe(name)}): structure "
                    f"the linear model lacks, taken into it")
             alt = held_at_configured(result, name)
         else:

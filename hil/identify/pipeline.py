@@ -46,6 +46,7 @@ from hil.identify.csvdata import MeasuredData
 from hil.identify.effects import EFFECTS, ParamEstimate, library
 from hil.identify.experiment import Experiment, prepare, quantum
 from hil.identify.fit import (
+    ABSORBED,
     CREDIBLE,
     NUISANCE_SCALES,
     Z95,
@@ -1131,6 +1132,7 @@ class _Loop:
         low-passed below the line (:class:`~hil.identify.slowfirst.LowPassedPressures`,
         :data:`SLOW_CUTOFF` of the record's line), `k_s` and `J_c` held, the loop's other
         holds (the baseline's, the effects' law parameters held when they came in) freed
+        but a baseline's hold for absorbed structure (:data:`~hil.identify.fit.ABSORBED`)
         and, with the seal in, its regularisation velocity; then the full band from there
         with `k_s`, `J_c` free (a freed hold that then disagrees between parts of the record,
         where nothing else is left, held again: :meth:`freed_disagreeing`). Kept only where
@@ -1156,8 +1158,13 @@ class _Loop:
         # parameters held at their start when they came in (the seal's Stribeck velocity at
         # rig seed 1: held at the preset's 5 mm/s by the pair's refit, the rig's 4)
         shapes = {p for e in self.added for p, _ in self.defs_all[e.label].refit_extra}
+        # but not a baseline's hold for structure it had absorbed (far from its configured
+        # value, it disagreed between parts of the record): freed here, it disagrees again
+        # once the line is back (d_s at rig seed 1, held again after the full band's refit,
+        # a second refit and its judgement, 2 s of the record's CPU), so it stays held
         extra = [p for p in self.held if (p in BASELINE_LABELS or p in shapes)
-                 and p not in ("ks", "jc") and p not in current.free]
+                 and p not in ("ks", "jc") and p not in current.free
+                 and ABSORBED not in self.held[p]]
         if (any(e.name == "seal_friction" for e in self.added)
                 and "sf_eps_m_per_s" not in current.free):
             extra.append("sf_eps_m_per_s")
@@ -1183,9 +1190,10 @@ class _Loop:
                                     configured=self.configured)
         back = self.freed_disagreeing(new, extra)
         if back:
-            # a hold freed here that the record then says moves between its parts (d_s at
-            # rig seed 1, held by the baseline for that: 1.07x over the record at p = 7e-6,
-            # the residual white, the rig's basin; at its hold, explained): held again
+            # a hold freed here that the record then says moves between its parts (as d_s
+            # at rig seed 1 did when its hold for absorbed structure was freed: 1.07x over
+            # the record at p = 7e-6, the residual white, the rig's basin; at its hold,
+            # explained): held again
             self.say(f"{', '.join(back)} held again: freed, it disagrees between parts of "
                      "the record")
             theta2 = new.theta.copy()
@@ -1205,7 +1213,9 @@ class _Loop:
             "after the refit below the piston's line")
         if kept:
             # every hold was freed here, and those held again judged at this fit: the
-            # freeing at the end would ask the same question of the same fit
+            # freeing at the end would ask the same question of the same fit (a hold for
+            # absorbed structure, not freed here, is not asked there either: the record's
+            # parts disagreeing is what held it, and its interval is not that question)
             self.freed_at = self.current
         return kept
 

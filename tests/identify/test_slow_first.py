@@ -91,11 +91,13 @@ JC_CONFIGURED = 0.295
 
 
 def _slow_loop(monkeypatch, left_after: bool, seal: bool = True, line=(1.84e7, 1241.0, 1371.0),
-               jc: float = JC_CONFIGURED, disagree: tuple[str, ...] = ()):
+               jc: float = JC_CONFIGURED, disagree: tuple[str, ...] = (),
+               absorbed: tuple[str, ...] = ()):
     """A loop at the free piston's pair (``K``, ``d_s``, ``k_s``, ``J_c`` held since the
     baseline, the seal's Stribeck velocity held since it came in); the full band's refit
     leaves structure where ``left_after``, and ``disagree`` (names) disagreeing between
-    parts of the record with the residual white, until a refit holds them."""
+    parts of the record with the residual white, until a refit holds them; ``absorbed``
+    (names) held by the baseline for structure they had absorbed."""
     from hil.identify import pipeline
     from hil.identify.model import IDX, N_PARAMS
 
@@ -152,6 +154,10 @@ def _slow_loop(monkeypatch, left_after: bool, seal: bool = True, line=(1.84e7, 1
                                                 refit_extra=(("sf_vs_m_per_s", None),))
     held = {p: "held at the preset" for p in ("gain_n_per_a", "ds", "ks", "jc")
             if p not in current.free}
+    for p in absorbed:
+        held[p] = ("not identifiable from this record: the fit moved it to 0.01x the "
+                   f"configured value, {pipeline.ABSORBED} ({p} drifts): structure the "
+                   "linear model lacks, taken into it; held at 6.79e+04")
     if seal:
         held["sf_vs_m_per_s"] = "after adding seal_friction: held at 0.005"
     loop = SimpleNamespace(current=current, added=added, defs_all=defs, held=held,
@@ -230,6 +236,27 @@ def test_a_freed_hold_that_disagrees_between_parts_is_held_again(monkeypatch):
     assert again[0][IDX["ds"]] == 6.79e4 and again[3] == 1
     assert "ds" in loop.held and "once freed" in loop.held["ds"]
     assert loop.restarts[-1]["outcome"] == "kept"
+
+
+def test_a_hold_for_absorbed_structure_stays_held_through_the_step(monkeypatch):
+    from hil.identify import pipeline
+    from hil.identify.model import IDX
+
+    # d_s held by the baseline where, far from its preset, it disagreed between parts of the
+    # record: neither part frees it (freed, it would disagree again and be held again after
+    # a second full-band refit), so one full-band refit, at d_s's hold
+    loop, calls = _slow_loop(monkeypatch, left_after=False, disagree=("ds",),
+                             absorbed=("ds",))
+    why = loop.held["ds"]
+    assert pipeline._Loop.restart_slow_first(loop)
+    (theta0, free1, _), = calls["slow"]
+    assert "ds" not in free1 and "gain_n_per_a" in free1
+    assert theta0[IDX["ds"]] == 6.79e4
+    (theta2, free2, _, _), = calls["full"]
+    assert "ds" not in free2 and theta2[IDX["ds"]] == 6.79e4
+    assert loop.held == {"ds": why}
+    assert loop.restarts[-1]["outcome"] == "kept"
+    assert loop.freed_at is loop.current
 
 
 def test_no_hold_again_where_the_disagreement_is_not_a_freed_holds(monkeypatch):
