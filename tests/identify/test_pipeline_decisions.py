@@ -122,6 +122,28 @@ def test_joint_takes_the_first_set_that_passes(monkeypatch):
     assert added == [("a", "c")] and refitted == [("a", "b"), ("a", "c")]
 
 
+def test_joint_ranks_its_sets_by_the_tests_at_the_robust_start(monkeypatch):
+    """The pool is ranked from :meth:`~hil.identify.pipeline._Loop.tests_for_sets`, not from
+    the rounds alone: a candidate the rounds found not excited and the test at the robust
+    start found significant is in the first pair (free piston, both frictions under the
+    multisine, rig seed 1: the pump friction never entered a set)."""
+    from hil.identify.candidates import CandidateTest
+
+    def test(label, status, p=1.0, share=0.0):
+        return CandidateTest(label=label, name=label, params=[], status=status, p_holm=p,
+                             share_val=share)
+
+    monkeypatch.setattr(pipeline, "_single_pool", lambda *args: [])
+    monkeypatch.setattr(pipeline, "_val_cost", lambda exp, out, sigma: 100.0)
+    loop, refitted, added = _stub_loop({("a", "b"): 60.0})
+    loop.defs_all = {k: candidates.EffectDef(k, k, (), (), "") for k in "abc"}
+    loop.rounds = [[test("a", "tested", 1e-8, 0.2), test("b", "not_excited"),
+                    test("c", "tested", 1.0, 1e-4)]]
+    loop.tests_for_sets = lambda: [*loop.rounds, [test("b", "tested", 1e-6, 0.1)]]
+    loop.joint(6)
+    assert refitted[0] == ("a", "b") and added == [("a", "b")]
+
+
 def _split(name: str, bad: bool) -> ParameterSplit:
     parts = [PartEstimate("low", 1.0, 0.9, 1.1), PartEstimate("high", 1.3, 1.2, 1.4)]
     return ParameterSplit(name, "frequency", parts, 30.0, 1, 1e-7, 1e-7 if bad else 0.5,
