@@ -76,3 +76,51 @@ def test_run_on_only_where_the_short_refit_took_structure_off(monkeypatch):
     runs, (loop, before) = _loop(50.0, 60.0, monkeypatch)
     loop.finish_freed(None, before)
     assert runs == []
+
+
+def _freeing_loop(costs: dict[int, float], monkeypatch) -> tuple[object, FitResult, list]:
+    """A loop whose fit holds ``c_rod``; the short refit that frees it is ``again``, the
+    validation costs are ``costs[id(fit)]``; the run-on's and the judge's calls recorded."""
+    before = FitResult(np.zeros(3), ["ds"], {}, {}, {}, np.zeros((1, 1)))
+    again = FitResult(np.ones(3), ["ds", "c_rod"], {}, {}, {}, np.zeros((1, 1)))
+    costs = {id(before): costs["before"], id(again): costs["again"]}
+    calls = []
+
+    class Fitter:
+        def fit(self, *args, **kwargs):
+            return again
+
+        def offenders(self, fit):
+            return []
+
+    loop = object.__new__(pipeline._Loop)
+    loop.current, loop.held = before, {"c_rod": "held at the baseline"}
+    loop.rejected = []
+    loop.exp, loop.sigma_ref = None, {}
+    loop.say = lambda msg: None
+    loop.refitter = Fitter
+    loop.model = type("M", (), {"start_vector": lambda self: None})()
+    loop.added = [type("E", (), {"label": "x"})()]
+    loop.defs_all = {"x": type("D", (), {"refit_extra": ()})()}
+    loop.finish_freed = lambda fitter, fit: calls.append("run-on")
+    loop.structure_left = lambda: calls.append("judged") or ""
+    monkeypatch.setattr(pipeline, "pinned", lambda fitter, fit, free, retry: retry)
+    monkeypatch.setattr(pipeline, "guarded_fit", lambda *args, **kwargs: (again, {}))
+    monkeypatch.setattr(pipeline, "_val_cost", lambda exp, out, sigma: costs[id(
+        before if out is before.outputs else again)])
+    return loop, before, calls
+
+
+def test_a_freeing_that_raises_the_validation_cost_is_refused_unjudged(monkeypatch):
+    # the conrod's two frictions, rig seed 2: c_rod freed at the end, 668.612 vs 668.054
+    loop, before, calls = _freeing_loop({"before": 668.054, "again": 668.612}, monkeypatch)
+    assert loop._free_held_again() is False
+    assert calls == []  # neither run on nor judged
+    assert loop.current is before and "c_rod" in loop.held
+    assert loop.rejected == ["c_rod freed again: not kept (the validation cost rises, "
+                             "668.612 vs 668.054)"]
+    # a freeing that costs no more is run on and judged, and kept where it explains
+    loop, before, calls = _freeing_loop({"before": 668.612, "again": 668.054}, monkeypatch)
+    assert loop._free_held_again() is True
+    assert calls == ["run-on", "judged"]
+    assert loop.current is not before and "c_rod" not in loop.held
