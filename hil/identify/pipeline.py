@@ -658,11 +658,13 @@ class _Loop:
         made = (self.held_first(d, beta, base_too=True) if far and self.unbiased
                 and not chosen and STICK_SLIP.intersection(d.params) else None)
         if made is not None and made[4:] and not self.white_and_passes(d, made):
-            # the polish from the record's piston line left structure: the polish from the
-            # search's end, as before, and the rule goes on with it (compared as itself
+            # the polish from the record's piston line left structure: the same polish
+            # with J_c held first, kept only where white and passing; else the polish from
+            # the search's end, as before, and the rule goes on with it (compared as itself
             # with the plain refit, the line's polish turned the conrod triple's 6 s row at
             # rig seed 2 unexplained)
-            made = made[4]()
+            alt = made[5]() if made[5:] else None
+            made = alt if alt is not None and self.white_and_passes(d, alt) else made[4]()
         if made is not None and self.white_and_passes(d, made):
             self.say(f"round {rnd}: {made[2]} leaves the residual white (no plain refit)")
             new, held_now = made[0], made[1]
@@ -864,7 +866,29 @@ class _Loop:
         line = stiffness_at_line(self.exp, first.theta, first.outputs) if base_too else None
         if line is None:
             return as_before()
-        return (*polish(extra, line[0])[:3], None, as_before)
+
+        def jc_held_first() -> tuple | None:
+            # the line's polish with J_c freed at once can carry it off to the far basin
+            # (conrod triple, 16 s, rig seed 1: J_c 0.295 -> 0.625, the seal's shape 0.15,
+            # static 25.7 N, the pressure differences 68 % predictable); from the line with
+            # J_c held the polish walks into the rig's basin (shape 0.91, 40 Jacobians), and
+            # freed from there J_c settles at the rig's (0.310, white): what the plain refit
+            # and the resonance restart reached before, for 10 s more
+            if "jc" in free or "jc" in extra:
+                return None
+            start = first.theta.copy()
+            start[IDX["ks"]] = line[0]
+            held_jc, held_a = guarded_fit(refitter, start, free + extra + ["ks"], start,
+                                          sigma=current.sigma, configured=self.configured,
+                                          max_nfev=PLAIN_NFEV)
+            alt, held_alt = guarded_fit(refitter, held_jc.theta, free + extra + ["ks", "jc"],
+                                        held_jc.theta, sigma=current.sigma,
+                                        configured=self.configured, max_nfev=PLAIN_NFEV)
+            return (alt, {**held_first, **held_a, **held_alt},
+                    f"the refit with {', '.join(others)} held first, polished from k_s "
+                    f"{line[0]:.4g} N/m (the record's piston line) with J_c held, then free")
+
+        return (*polish(extra, line[0])[:3], None, as_before, jc_held_first)
 
     def baseline_pinned(self, fitter: OutputErrorFit, fit: FitResult, free: list[str]
                         ) -> list[str]:

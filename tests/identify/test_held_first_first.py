@@ -302,3 +302,43 @@ def test_the_first_effects_two_starts_are_compared_for_the_seal_alone(
     new, _, _ = _Loop.refit_added(loop, effect, {}, ["dc"], 0)
     assert new is plain
     assert loop.calls == (["plain", "start_chosen"] if compared else ["plain"])
+
+
+def test_off_the_line_the_polish_with_jc_held_first_then_freed(monkeypatch):
+    # the line's polish with J_c freed at once can run J_c off to the far basin (conrod
+    # triple, 16 s, rig seed 1: 0.295 -> 0.625, not white): its alternative starts from the
+    # same line with J_c held, then frees J_c from that end
+    loop, polished = _held_first_loop(monkeypatch, ["ks"])
+    monkeypatch.setattr(pipeline, "stiffness_at_line", lambda exp, theta, out:
+                        (1.95e7, 1346.0, 1432.0))
+    made = _Loop.held_first(loop, SEAL, {}, base_too=True)
+    assert len(polished) == 1 and "jc" in polished[-1]
+    alt = made[5]()
+    assert len(polished) == 3
+    assert "ks" in polished[1] and "jc" not in polished[1]
+    assert loop.starts[1][IDX["ks"]] == 1.95e7 and loop.starts[1][IDX["jc"]] == 0.3
+    assert "ks" in polished[2] and "jc" in polished[2]
+    assert alt[0].free == polished[2] and "J_c held, then free" in alt[2]
+
+
+@pytest.mark.parametrize("alt_white, kept", [(True, "alt"), (False, "before")])
+def test_the_jc_held_polish_is_kept_only_where_white(monkeypatch, alt_white, kept):
+    plain = _fit(9734.0, 64.0)
+    before = (_fit(8769.0, 0.0), {}, "held first", None)
+    alt = (_fit(150.0, 0.0 if alt_white else 10.0), {}, "J_c held, then free")
+    made: list[str] = []
+
+    def fallback():
+        made.append("before")
+        return before
+
+    def jc_held():
+        made.append("alt")
+        return alt
+
+    line = (_fit(100.0, 68.0), {}, "held first, from the line", None, fallback, jc_held)
+    loop = _loop(monkeypatch, line, plain)
+    new, _, _ = _Loop.refit_added(loop, SEAL, {}, ["dc"], 2)
+    assert new is {"alt": alt[0], "before": before[0]}[kept]
+    assert made == (["alt"] if alt_white else ["alt", "before"])
+    assert loop.calls == ["held_first, the baseline's holds too"]
