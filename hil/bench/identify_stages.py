@@ -147,10 +147,13 @@ def main(argv: list[str] | None = None) -> int:
                         choices=("fixed_piston", "free_piston", "conrod_fixed"))
     parser.add_argument("--profile", default="multisine",
                         choices=("multisine", "slide", "resonance"))
-    parser.add_argument("--effect", action="append", default=None)
+    from hil.cli.args import int_range, positive_float
+    from hil.identify.rig import RIG_EFFECTS
+
+    parser.add_argument("--effect", action="append", default=None, choices=RIG_EFFECTS)
     parser.add_argument("--seed", type=int, default=3)
-    parser.add_argument("--seconds", type=float, default=16.0)
-    parser.add_argument("--threads", type=int, default=None)
+    parser.add_argument("--seconds", type=positive_float(600, "s"), default=16.0)
+    parser.add_argument("--threads", type=int_range(1, 256), default=None)
     parser.add_argument("--json", action="store_true", help="print JSON")
     parser.add_argument("--fits", action="store_true",
                         help="also list every output-error fit (CPU, simulations, free "
@@ -186,4 +189,8 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    try:
+        sys.exit(main())
+    except KeyboardInterrupt:
+        print("identify_stages: interrupted; nothing was written", file=sys.stderr)
+        sys.exit(130)

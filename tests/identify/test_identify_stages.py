@@ -38,3 +38,13 @@ def test_the_table_is_every_multi_effect_record_once() -> None:
     rows = identify_stages.TABLE
     assert len(set(rows)) == len(rows)
     assert all(len(effects) >= 2 for _, _, effects in rows)
+
+
+@pytest.mark.parametrize("argv", [["--effect", "bogus"], ["--seconds", "-1"],
+                                  ["--threads", "0"]])
+def test_bad_arguments_are_one_line_and_exit_2(argv: list[str], capsys) -> None:
+    with pytest.raises(SystemExit) as stop:
+        identify_stages.main(argv)
+    assert stop.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1].startswith("python -m hil.bench.identify_stages: error: argument")
