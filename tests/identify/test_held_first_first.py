@@ -188,14 +188,17 @@ def _held_first_loop(monkeypatch, since_baseline: list[str]):
     fitter = SimpleNamespace(standard_errors=lambda theta, free, sigma: {"jc": 0.01,
                                                                         "c_rod": 400.0})
     loop.refit_with = refit
-    loop.refitter = lambda: fitter
+    # the loop's fitter, or one of another model (the test model's: half the sub-steps)
+    loop.refitter = lambda model=None: fitter if model is None else SimpleNamespace(model=model)
     loop.baseline_pinned = lambda f, fit, free: _Loop.baseline_pinned(loop, f, fit, free)
     loop.exp = SimpleNamespace(load="conrod")
     starts: list[np.ndarray] = []
     loop.starts = starts
+    loop.fitters = fitters = []
 
     def guarded_logged(fitter, theta0, free, credible, **kw):
         starts.append(theta0.copy())
+        fitters.append(fitter)
         return guarded(fitter, theta0, free, credible, **kw)
 
     monkeypatch.setattr(pipeline, "guarded_fit", guarded_logged)
@@ -319,6 +322,10 @@ def test_off_the_line_the_polish_with_jc_held_first_then_freed(monkeypatch):
     assert loop.starts[1][IDX["ks"]] == 1.95e7 and loop.starts[1][IDX["jc"]] == 0.3
     assert "ks" in polished[2] and "jc" in polished[2]
     assert alt[0].free == polished[2] and "J_c held, then free" in alt[2]
+    # the J_c-held polish is a search for the basin, on the test model (as the held-first
+    # search); the polish with J_c freed, the fit kept, on the loop's model
+    assert loop.fitters[1].model == "half the sub-steps"
+    assert loop.fitters[0] is loop.fitters[2] is loop.refitter()
 
 
 @pytest.mark.parametrize("alt_white, kept", [(True, "alt"), (False, "before")])
