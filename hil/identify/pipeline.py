@@ -23,6 +23,7 @@ import dataclasses
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 from scipy.optimize import minimize_scalar
@@ -342,6 +343,23 @@ def model_input(exp: Experiment, say: Callable[[str], None]) -> tuple[Experiment
     return experiment_with_current(exp, lowpass_current(exp.iq, fs, cut)), noise
 
 
+class HeldFirst(NamedTuple):
+    """A held-first refit of an effect (:meth:`_Loop.held_first`) and the refits it can
+    stand aside for, each made only when called."""
+
+    fit: FitResult
+    held: dict[str, str]
+    #: what it did, for the progress line
+    what: str
+    #: the polish without the baseline's holds freed (None: none were freed)
+    without_base: Callable[[], HeldFirst] | None = None
+    #: from the record's piston line: the polish from the search's end, as before
+    as_before: Callable[[], HeldFirst] | None = None
+    #: from the record's piston line: the polish with J_c held, then freed (it returns None
+    #: where J_c was free already)
+    jc_held: Callable[[], HeldFirst | None] | None = None
+
+
 class _Loop:
     """The state of one identification run, step by step: the baseline fit
     (:meth:`__init__`), effects added one at a time (:meth:`forward`), effects dropped that
@@ -657,30 +675,29 @@ class _Loop:
         # refit first, and none plain where it leaves the residual white
         made = (self.held_first(d, beta, base_too=True) if far and self.unbiased
                 and not chosen and STICK_SLIP.intersection(d.params) else None)
-        if made is not None and made[4:] and not self.white_and_passes(d, made):
+        if made is not None and made.as_before is not None and not self.white_and_passes(d, made):
             # the polish from the record's piston line left structure: the same polish
             # with J_c held first, kept only where white and passing; else the polish from
             # the search's end, as before, and the rule goes on with it (compared as itself
             # with the plain refit, the line's polish turned the conrod triple's 6 s row at
             # rig seed 2 unexplained)
-            alt = made[5]() if made[5:] else None
-            made = alt if alt is not None and self.white_and_passes(d, alt) else made[4]()
+            alt = made.jc_held() if made.jc_held is not None else None
+            made = alt if alt is not None and self.white_and_passes(d, alt) else made.as_before()
         if made is not None and self.white_and_passes(d, made):
-            self.say(f"round {rnd}: {made[2]} leaves the residual white (no plain refit)")
-            new, held_now = made[0], made[1]
-            return new, held_now, other
-        if made is not None and made[3:] and made[3] is not None:
+            self.say(f"round {rnd}: {made.what} leaves the residual white (no plain refit)")
+            return made.fit, made.held, other
+        if made is not None and made.without_base is not None:
             # not kept at once: the held-first refit the plain one is compared with is the
             # one without the baseline's holds freed (freed, it can come out a hair lower
             # and be kept where the old rule's was not: conrod triple, rig seed 2)
-            made = made[3]()
+            made = made.without_base()
             if self.white_and_passes(d, made):
                 # white itself: kept as the first polish would have been, no plain refit
                 # (conrod, pump and seal friction, 16 s, rig seed 1: J_c freed took the
                 # polish to the far basin, the polish without it explains the record, and
                 # the plain refit, 3.5 s and its analysis, was made only to lose to it)
-                self.say(f"round {rnd}: {made[2]} leaves the residual white (no plain refit)")
-                return made[0], made[1], other
+                self.say(f"round {rnd}: {made.what} leaves the residual white (no plain refit)")
+                return made.fit, made.held, other
         if chosen:
             # from the baseline only, and only where the estimation cost is free of
             # the input noise's bias (it ranks the two minima; without the low-pass
@@ -754,7 +771,7 @@ class _Loop:
 
     def others_held_chosen(self, d: EffectDef, beta: dict[str, float],
                            plain: tuple[FitResult, dict[str, str]], rnd: int,
-                           made: tuple[FitResult, dict[str, str], str] | None = None
+                           made: HeldFirst | None = None
                            ) -> tuple[FitResult, dict[str, str]]:
         """The refit of ``d`` where effects are in already and the fit without ``d`` is
         still far from the configuration (:meth:`forward`): besides the plain refit (made),
@@ -780,19 +797,18 @@ class _Loop:
         if alt is None:
             return plain
         mask = self.est_mask
-        if (self.weighted_ss(alt[0].outputs, mask)
+        if (self.weighted_ss(alt.fit.outputs, mask)
                 < (1.0 - START_MARGIN) * self.weighted_ss(plain[0].outputs, mask)):
-            self.say(f"round {rnd}: {alt[2]} ends lower")
-            return alt[0], alt[1]
+            self.say(f"round {rnd}: {alt.what} ends lower")
+            return alt.fit, alt.held
         return plain
 
-    def white_and_passes(self, d: EffectDef,
-                         made: tuple[FitResult, dict[str, str], str]) -> bool:
+    def white_and_passes(self, d: EffectDef, made: HeldFirst) -> bool:
         """The held-first refit of ``d`` (:meth:`held_first`) leaves the residual white
         (:func:`structure_excess` 0) and passes :meth:`verdict_on`: it is kept without the
         plain refit (:meth:`forward`)."""
-        return (structure_excess(self.analysis_of(made[0])) == 0.0
-                and not self.verdict_on([d], made[0], made[1]))
+        return (structure_excess(self.analysis_of(made.fit)) == 0.0
+                and not self.verdict_on([d], made.fit, made.held))
 
     def others_held(self) -> list[str]:
         """The free parameters of the effects in (:meth:`held_first` holds them first)."""
@@ -802,15 +818,16 @@ class _Loop:
                 if p in self.current.free]
 
     def held_first(self, d: EffectDef, beta: dict[str, float], base_too: bool = False
-                   ) -> tuple[FitResult, dict[str, str], str, Callable | None] | None:
+                   ) -> HeldFirst | None:
         """:meth:`others_held_chosen`'s refit of ``d`` with the effects in held first, then
-        polished with everything free: (fit, held parameters, what it did, for the
-        progress line, and None); None where no effect's parameter is free.
+        polished with everything free; None where no effect's parameter is free.
 
         ``base_too``: the polish also frees the parameters the baseline held whose interval
-        at the search's end is narrower than their value (:meth:`baseline_pinned`); the
-        fourth element then makes the polish without them (the refit of ``base_too``
-        False, from the same search), None where none was freed."""
+        at the search's end is narrower than their value (:meth:`baseline_pinned`);
+        :attr:`HeldFirst.without_base` then makes the polish without them (the refit of
+        ``base_too`` False, from the same search). Where the search's end rings off the
+        record's piston line, the polish starts from the stiffness at that line, and
+        :attr:`HeldFirst.as_before` and :attr:`HeldFirst.jc_held` make the others."""
         current = self.current
         others = self.others_held()
         if not others:
@@ -836,8 +853,7 @@ class _Loop:
         refitter = self.refitter()
         free = list(first.free) + [p for p in others if p not in first.free]
 
-        def polish(extra: list[str], at_line: float | None = None
-                   ) -> tuple[FitResult, dict[str, str], str, None]:
+        def polish(extra: list[str], at_line: float | None = None) -> HeldFirst:
             start, more = first.theta, []
             if at_line is not None:
                 start = first.theta.copy()
@@ -851,23 +867,23 @@ class _Loop:
                     + (f" and {', '.join(freed)} free again" if freed else "")
                     + (f", polished from k_s {at_line:.4g} N/m (the record's piston line)"
                        if at_line is not None else ""))
-            return alt, {**held_first, **held_alt}, what, None
+            return HeldFirst(alt, {**held_first, **held_alt}, what)
 
         # not where the search freed a later round's hold: the conrod triple's 16 s record
         # (k_s, held in the pulsation's round) freed J_c too in the polish, left structure
         # and cost a second polish, +4 s
         extra = self.baseline_pinned(refitter, first, free) if base_too and not again else []
 
-        def as_before() -> tuple:
+        def as_before() -> HeldFirst:
             if not extra:
                 return polish([])
-            return (*polish(extra)[:3], lambda: polish([]))
+            return polish(extra)._replace(without_base=lambda: polish([]))
 
         line = stiffness_at_line(self.exp, first.theta, first.outputs) if base_too else None
         if line is None:
             return as_before()
 
-        def jc_held_first() -> tuple | None:
+        def jc_held_first() -> HeldFirst | None:
             # the line's polish with J_c freed at once can carry it off to the far basin
             # (conrod triple, 16 s, rig seed 1: J_c 0.295 -> 0.625, the seal's shape 0.15,
             # static 25.7 N, the pressure differences 68 % predictable); from the line with
@@ -889,11 +905,12 @@ class _Loop:
             alt, held_alt = guarded_fit(refitter, held_jc.theta, free + extra + ["ks", "jc"],
                                         held_jc.theta, sigma=current.sigma,
                                         configured=self.configured, max_nfev=PLAIN_NFEV)
-            return (alt, {**held_first, **held_a, **held_alt},
-                    f"the refit with {', '.join(others)} held first, polished from k_s "
-                    f"{line[0]:.4g} N/m (the record's piston line) with J_c held, then free")
+            return HeldFirst(
+                alt, {**held_first, **held_a, **held_alt},
+                f"the refit with {', '.join(others)} held first, polished from k_s "
+                f"{line[0]:.4g} N/m (the record's piston line) with J_c held, then free")
 
-        return (*polish(extra, line[0])[:3], None, as_before, jc_held_first)
+        return polish(extra, line[0])._replace(as_before=as_before, jc_held=jc_held_first)
 
     def baseline_pinned(self, fitter: OutputErrorFit, fit: FitResult, free: list[str]
                         ) -> list[str]:

@@ -21,7 +21,7 @@ import pytest
 from hil.identify import pipeline
 from hil.identify.fit import FitResult
 from hil.identify.model import IDX, N_PARAMS
-from hil.identify.pipeline import START_MARGIN, STICK_SLIP, _Loop
+from hil.identify.pipeline import START_MARGIN, STICK_SLIP, HeldFirst, _Loop
 
 SEAL = SimpleNamespace(label="seal_friction", params=("sf_coulomb_n", "sf_static_extra_n"))
 PUMP = SimpleNamespace(label="pump_coulomb_friction", params=("pc_force_n",))
@@ -67,10 +67,10 @@ def test_the_seal_is_a_stick_slip_friction_and_the_pump_friction_is_not():
 
 
 def test_a_white_held_first_refit_of_the_seal_is_kept_without_a_plain_refit(monkeypatch):
-    made = (_fit(19155.0, 0.0), {"c_rod": "held"}, "the refit with pc_force_n held first")
+    made = HeldFirst(_fit(19155.0, 0.0), {"c_rod": "held"}, "the refit with pc_force_n held first")
     loop = _loop(monkeypatch, made, _fit(28600.0, 68.0))
     new, held, other = _Loop.refit_added(loop, SEAL, {}, ["dc"], 1)
-    assert new is made[0] and held == {"c_rod": "held"} and other is None
+    assert new is made.fit and held == {"c_rod": "held"} and other is None
     assert loop.calls == ["held_first, the baseline's holds too"]
     assert "white" in loop.said[-1]
 
@@ -85,11 +85,11 @@ def test_a_held_first_refit_that_leaves_structure_is_compared_with_the_plain_one
     if refused:
         cases.append((5000.0, 0.0, True))  # white, refused: compared, kept where lower
     for cost, excess, kept in cases:
-        made = (_fit(cost, excess), {}, "the refit with pc_force_n held first")
+        made = HeldFirst(_fit(cost, excess), {}, "the refit with pc_force_n held first")
         loop = _loop(monkeypatch, made, plain, refused)
         new, _, _ = _Loop.refit_added(loop, SEAL, {}, ["dc"], 1)
         assert loop.calls == ["held_first, the baseline's holds too", "plain"]
-        assert (new is made[0]) == kept, (cost, excess)
+        assert (new is made.fit) == kept, (cost, excess)
 
 
 @pytest.mark.parametrize("excess", [0.0, 5.4])
@@ -98,14 +98,14 @@ def test_other_effects_take_the_plain_refit_alone(monkeypatch, excess):
     # pump friction's (after the pulsation) was never kept, on the matrix's rows nor on the
     # 16 s records, and cost the conrod triple 2.3 s a record (a held-first refit that
     # would be lower is not looked for)
-    made = (_fit(100.0, 0.0), {}, "the refit with puls held first")
+    made = HeldFirst(_fit(100.0, 0.0), {}, "the refit with puls held first")
     loop = _loop(monkeypatch, made, _fit(621.0, excess))
     new, _, _ = _Loop.refit_added(loop, PUMP, {}, ["dc"], 1)
-    assert loop.calls == ["plain"] and new is not made[0]
+    assert loop.calls == ["plain"] and new is not made.fit
 
 
 def test_the_seal_near_the_configuration_or_first_takes_the_plain_refit(monkeypatch):
-    made = (_fit(100.0, 0.0), {}, "held first")
+    made = HeldFirst(_fit(100.0, 0.0), {}, "held first")
     # the fit near the configuration (no robust start): the plain refit alone
     loop = _loop(monkeypatch, made, _fit(621.0, 0.0))
     _Loop.refit_added(loop, SEAL, {}, [], 1)
@@ -122,14 +122,14 @@ def test_not_white_with_the_baselines_holds_freed_the_polish_without_them_is_com
     # the polish that freed the baseline's holds left structure: the one without them (the
     # old rule's) is the one compared with the plain refit, and kept where lower
     plain = _fit(5506.0, 59.0)
-    without = (_fit(5000.0, 40.0), {}, "held first", None)
-    freed = (_fit(5390.0, 59.0), {}, "held first and jc, ks free again", lambda: without)
+    without = HeldFirst(_fit(5000.0, 40.0), {}, "held first", None)
+    freed = HeldFirst(_fit(5390.0, 59.0), {}, "held first and jc, ks free again", lambda: without)
     loop = _loop(monkeypatch, freed, plain)
     new, _, _ = _Loop.refit_added(loop, SEAL, {}, ["dc"], 2)
-    assert new is without[0]
+    assert new is without.fit
     # and where the one without them is not lower by the margin, the plain refit: the freed
     # polish (2.1 % lower) is not the one compared
-    without = (_fit(5505.0, 40.0), {}, "held first", None)
+    without = HeldFirst(_fit(5505.0, 40.0), {}, "held first", None)
     loop = _loop(monkeypatch, freed, plain)
     new, _, _ = _Loop.refit_added(loop, SEAL, {}, ["dc"], 2)
     assert new is plain
@@ -143,8 +143,8 @@ def test_the_polish_without_the_baselines_holds_kept_where_white_without_a_plain
     # would have been, with no plain refit, where it passes the verdict; refused by the
     # verdict, compared with the plain refit as before
     plain = _fit(4000.0, 0.0)
-    without = (_fit(14803.0, 0.0), {"c_rod": "held"}, "held first", None)
-    freed = (_fit(22859.0, 69.8), {}, "held first and jc free again", lambda: without)
+    without = HeldFirst(_fit(14803.0, 0.0), {"c_rod": "held"}, "held first", None)
+    freed = HeldFirst(_fit(22859.0, 69.8), {}, "held first and jc free again", lambda: without)
     loop = _loop(monkeypatch, freed, plain, refused)
     new, held, other = _Loop.refit_added(loop, SEAL, {}, ["dc"], 1)
     if refused:
@@ -152,7 +152,7 @@ def test_the_polish_without_the_baselines_holds_kept_where_white_without_a_plain
         assert new is plain
     else:
         assert loop.calls == ["held_first, the baseline's holds too"]
-        assert new is without[0] and held == {"c_rod": "held"} and other is None
+        assert new is without.fit and held == {"c_rod": "held"} and other is None
         assert "white" in loop.said[-1]
 
 
@@ -211,20 +211,20 @@ def test_the_polish_frees_the_baselines_holds_the_search_pins(monkeypatch):
     loop, polished = _held_first_loop(monkeypatch, [])
     made = _Loop.held_first(loop, SEAL, {}, base_too=True)
     assert "jc" in polished[-1] and "c_rod" not in polished[-1]
-    assert "jc free again" in made[2]
+    assert "jc free again" in made.what
     # its fallback: the polish without them, from the same search
-    made[3]()
+    made.without_base()
     assert "jc" not in polished[-1] and len(polished) == 2
     # without base_too (the others_held_chosen rule), never
     loop, polished = _held_first_loop(monkeypatch, [])
     made = _Loop.held_first(loop, SEAL, {})
-    assert polished == [["dc", "pc_force_n"]] and made[3] is None
+    assert polished == [["dc", "pc_force_n"]] and made.without_base is None
 
 
 def test_not_where_the_search_frees_a_later_rounds_hold(monkeypatch):
     loop, polished = _held_first_loop(monkeypatch, ["ks"])
     made = _Loop.held_first(loop, SEAL, {}, base_too=True)
-    assert "jc" not in polished[-1] and made[3] is None and len(polished) == 1
+    assert "jc" not in polished[-1] and made.without_base is None and len(polished) == 1
 
 
 def test_the_polish_starts_from_the_stiffness_at_the_records_line(monkeypatch):
@@ -244,12 +244,12 @@ def test_the_polish_starts_from_the_stiffness_at_the_records_line(monkeypatch):
     assert seen == [0.3]  # read at the search's end
     assert loop.starts[-1][IDX["ks"]] == 1.73e7 and loop.starts[-1][IDX["jc"]] == 0.3
     assert "ks" in polished[-1] and "jc" in polished[-1]
-    assert made[0].free == polished[-1] and "piston line" in made[2]
+    assert made.fit.free == polished[-1] and "piston line" in made.what
     # its fallback, where it leaves structure: the polish from the search's end, as before
-    assert made[3] is None
-    before = made[4]()
+    assert made.without_base is None
+    before = made.as_before()
     assert loop.starts[-1][IDX["ks"]] == 0.0 and "jc" not in polished[-1]
-    assert before[0].free == polished[-1] and len(polished) == 2
+    assert before.fit.free == polished[-1] and len(polished) == 2
     # on the line: from the search's end, nothing more free
     loop, polished = _held_first_loop(monkeypatch, ["ks"])
     _Loop.held_first(loop, SEAL, {}, base_too=True)
@@ -270,18 +270,18 @@ def test_the_lines_polish_is_kept_only_where_white_else_the_rule_as_before(
     # the plain refit (the line's polish never is: compared, it turned the conrod triple's 6 s
     # row at rig seed 2 unexplained)
     plain = _fit(9734.0, 64.0)
-    before = (_fit(8769.0, 0.0 if before_white else 36.0), {}, "held first", None)
+    before = HeldFirst(_fit(8769.0, 0.0 if before_white else 36.0), {}, "held first", None)
     made_before: list[str] = []
 
     def fallback():
         made_before.append("polish from the search's end")
         return before
 
-    line = (_fit(100.0, 0.0 if line_white else 20.0), {}, "held first, from the line", None,
-            fallback)
+    line = HeldFirst(_fit(100.0, 0.0 if line_white else 20.0), {}, "held first, from the line",
+                     None, fallback)
     loop = _loop(monkeypatch, line, plain)
     new, _, _ = _Loop.refit_added(loop, SEAL, {}, ["dc"], 2)
-    assert new is {"line": line[0], "before": before[0]}[kept]
+    assert new is {"line": line.fit, "before": before.fit}[kept]
     assert made_before == ([] if line_white else ["polish from the search's end"])
     assert loop.calls == (["held_first, the baseline's holds too"]
                           + ([] if line_white or before_white else ["plain"]))
@@ -316,12 +316,12 @@ def test_off_the_line_the_polish_with_jc_held_first_then_freed(monkeypatch):
                         (1.95e7, 1346.0, 1432.0))
     made = _Loop.held_first(loop, SEAL, {}, base_too=True)
     assert len(polished) == 1 and "jc" in polished[-1]
-    alt = made[5]()
+    alt = made.jc_held()
     assert len(polished) == 3
     assert "ks" in polished[1] and "jc" not in polished[1]
     assert loop.starts[1][IDX["ks"]] == 1.95e7 and loop.starts[1][IDX["jc"]] == 0.3
     assert "ks" in polished[2] and "jc" in polished[2]
-    assert alt[0].free == polished[2] and "J_c held, then free" in alt[2]
+    assert alt.fit.free == polished[2] and "J_c held, then free" in alt.what
     # the J_c-held polish is a search for the basin, on the test model (as the held-first
     # search); the polish with J_c freed, the fit kept, on the loop's model
     assert loop.fitters[1].model == "half the sub-steps"
@@ -331,8 +331,8 @@ def test_off_the_line_the_polish_with_jc_held_first_then_freed(monkeypatch):
 @pytest.mark.parametrize("alt_white, kept", [(True, "alt"), (False, "before")])
 def test_the_jc_held_polish_is_kept_only_where_white(monkeypatch, alt_white, kept):
     plain = _fit(9734.0, 64.0)
-    before = (_fit(8769.0, 0.0), {}, "held first", None)
-    alt = (_fit(150.0, 0.0 if alt_white else 10.0), {}, "J_c held, then free")
+    before = HeldFirst(_fit(8769.0, 0.0), {}, "held first", None)
+    alt = HeldFirst(_fit(150.0, 0.0 if alt_white else 10.0), {}, "J_c held, then free")
     made: list[str] = []
 
     def fallback():
@@ -343,9 +343,9 @@ def test_the_jc_held_polish_is_kept_only_where_white(monkeypatch, alt_white, kep
         made.append("alt")
         return alt
 
-    line = (_fit(100.0, 68.0), {}, "held first, from the line", None, fallback, jc_held)
+    line = HeldFirst(_fit(100.0, 68.0), {}, "held first, from the line", None, fallback, jc_held)
     loop = _loop(monkeypatch, line, plain)
     new, _, _ = _Loop.refit_added(loop, SEAL, {}, ["dc"], 2)
-    assert new is {"alt": alt[0], "before": before[0]}[kept]
+    assert new is {"alt": alt.fit, "before": before.fit}[kept]
     assert made == (["alt"] if alt_white else ["alt", "before"])
     assert loop.calls == ["held_first, the baseline's holds too"]
