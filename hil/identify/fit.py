@@ -25,6 +25,8 @@ and named in :attr:`FitResult.held`.
 
 from __future__ import annotations
 
+import ctypes
+import platform
 import sys
 import threading
 from collections.abc import Callable
@@ -635,6 +637,37 @@ class _Kept:
 _BUFFERS = _Kept(6)
 #: A tangent column's states, one per thread filling columns at a time
 _COLUMN_STATES = _Kept(8)
+
+
+#: glibc's malloc set at import (:func:`_keep_freed_memory`): arrays up to its largest mmap
+#: threshold (32 MB) come from the heap, freed memory up to 256 MB stays there for the next
+#: array, and the threads share one arena. By default glibc gives an array above a moving
+#: threshold (128 kB at first) its own fresh pages and trims the heap's top as it frees:
+#: the sensor lags' transforms, the simulations' states and outputs (tenths of MB to a
+#: few MB each, thousands per record) each came back as new pages to zero (docs/identify.md).
+#: Off: glibc's defaults.
+KEEP_FREED_MEMORY = True
+#: mallopt's parameters (glibc's malloc.h)
+_M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD, _M_ARENA_MAX = -1, -3, -8
+
+
+def _keep_freed_memory() -> bool:
+    """Set glibc's malloc as :data:`KEEP_FREED_MEMORY` says; False where the C library is
+    not glibc's (nothing set) or it refused a setting."""
+    if not KEEP_FREED_MEMORY or platform.system() != "Linux" or platform.libc_ver()[0] != "glibc":
+        return False
+    try:
+        mallopt = ctypes.CDLL(None).mallopt
+    except (OSError, AttributeError):
+        return False
+    mallopt.argtypes = [ctypes.c_int, ctypes.c_int]
+    mallopt.restype = ctypes.c_int
+    return all(mallopt(p, v) == 1 for p, v in ((_M_MMAP_THRESHOLD, 32 << 20),
+                                               (_M_TRIM_THRESHOLD, 256 << 20),
+                                               (_M_ARENA_MAX, 1)))
+
+
+_keep_freed_memory()
 
 
 #: Rows of the Jacobian transposed at a time (:func:`_transposed`): a block of the
