@@ -25,6 +25,10 @@ and named in :attr:`FitResult.held`.
 
 from __future__ import annotations
 
+import ctypes
+import platform
+import sys
+import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
@@ -209,12 +213,14 @@ class OutputErrorFit:
 
     def _stack(self, theta: np.ndarray, sigma: dict[str, float], mask: np.ndarray,
                states: np.ndarray | None = None, only: frozenset[str] | None = None,
-               base: np.ndarray | None = None) -> np.ndarray:
+               base: np.ndarray | None = None, into: np.ndarray | None = None) -> np.ndarray:
         """The weighted residual on ``mask``; ``states``: the simulation of ``theta`` when
         the caller has it (only :data:`OUTPUT_ONLY` parameters differ from the ones that
         made it). ``only``: the channels ``theta`` changes from the point whose residual is
         ``base``; the others' rows are ``base``'s (the same computation on the same
-        states: the same bits, without their outputs and sensor lags)."""
+        states: the same bits, without their outputs and sensor lags). ``into``: the array
+        to write it into (of the residual's size), else a new one; the result is that
+        array unless the residual had a non-finite value (then a cleaned copy)."""
         n_stop, lo, hi = self._span(mask)
         if states is None:
             self.n_sims += 1
@@ -230,7 +236,12 @@ class OutputErrorFit:
             # the compared samples are one run (a fit's, a cost's): the residual is written
             # channel by channel into one array, no masked copy and concatenation of each
             m = hi - lo
-        r = np.empty(len(channels) * m) if only is None else base.copy()
+        if into is None:
+            r = np.empty(len(channels) * m) if only is None else base.copy()
+        else:
+            r = into
+            if only is not None:
+                np.copyto(r, base)
         for i, c in enumerate(channels):
             if only is not None and c not in only:
                 continue
@@ -286,8 +297,9 @@ class OutputErrorFit:
                        or self._linear_columns(x, free, theta0, steps, n_stop, z0))
 
             # one row per column, then one transposing copy: writing each column into
-            # the (rows x columns) array strides across all of it once per column
-            out_t = np.empty((x.size, r0.size))
+            # the (rows x columns) array strides across all of it once per column (both
+            # arrays kept from earlier Jacobians: _BUFFERS)
+            out_t = _BUFFERS.take((x.size, r0.size))
 
             def fill(i: int) -> None:
                 xx = x.copy()
@@ -307,19 +319,25 @@ class OutputErrorFit:
                     # on the samples the outputs read (elementwise: the same bits)
                     sens = tangent[i]
                     n_out = min(fast_stop(n_stop, self.exp.n), z0.shape[0])
-                    z = z0[:n_out].copy()
                     m = min(sens.shape[0], n_out)
-                    z[:m] += steps[i] * sens[:m]
+                    # z0 + step dz/dx into a kept array (the column's states are done with
+                    # once its residual is; the same bits as a copy of z0 stepped in place)
+                    z = _COLUMN_STATES.take((n_out, *z0.shape[1:]))
+                    np.multiply(sens[:m], steps[i], out=z[:m])
+                    np.add(z0[:m], z[:m], out=z[:m])
+                    z[m:] = z0[m:n_out]
                 else:
                     self.n_sims += 1
                     z = self.model.states(theta, n_stop, keep=False)
-                # (r - r0) / step written into the column's row: no temporaries
+                # the residual written into the column's row, then (r - r0) / step in place:
+                # no temporaries
                 row = out_t[i]
-                np.subtract(self._stack(theta, sigma, mask, z, only, r0), r0, out=row)
+                np.subtract(self._stack(theta, sigma, mask, z, only, r0, into=row), r0,
+                            out=row)
                 np.divide(row, steps[i], out=row)
 
             list(map_threads(fill, range(x.size)))
-            return _transposed(out_t)
+            return _transposed(out_t, _BUFFERS.take((r0.size, x.size)))
 
         return fun, jac
 
@@ -475,7 +493,7 @@ class OutputErrorFit:
                 n_t = int(iter_mask.sum())
                 scale = np.repeat([used[c] / sigma[c] for c in self.exp.channels], n_t)
                 r = r * scale
-                j = j * scale[:, None]
+                j = np.multiply(j, scale[:, None], out=_BUFFERS.take(j.shape))
             fun, jac = self._problem(free, theta0, sigma, iter_mask)
             max_jac = max(3, max_nfev // 3)
             if carried and k < passes - 1:
@@ -562,19 +580,111 @@ class OutputErrorFit:
         return se, cov
 
 
+#: A Jacobian, its rows before the transposing copy and a tangent column's states are
+#: written into arrays kept from earlier ones that nothing else holds any more
+#: (:class:`_Kept`), not into new ones. A new array of tens of MB comes from the kernel as
+#: fresh pages (numpy asks for huge ones), each zeroed by the kernel on its first write:
+#: on the conrod's three effects at rig seed 1 (184 Jacobians of 35-90 MB, twice: rows and
+#: transpose) that was ~1 s of system CPU (docs/identify.md). Off: new arrays, as before
+#: (the same bits either way: every element is written before it is read).
+REUSE_BUFFERS = True
+
+
+class _Kept:
+    """Float arrays kept for reuse: :meth:`take` hands out a view of a kept buffer that no
+    one else references any more (a Jacobian a fit result holds, or one the caller still
+    holds from the previous call, keeps its buffer busy: CPython's reference count, which
+    every view of the buffer raises), else of a new one, which it keeps (the ``keep`` most
+    recently used; an older idle one is dropped first). Thread-safe (a lock around the
+    choice: a tangent column's states are taken on the fill's threads)."""
+
+    def __init__(self, keep: int) -> None:
+        self.keep = keep
+        self._kept: list[np.ndarray] = []
+        #: arrays handed out, and of those the ones in a new buffer
+        self.taken = self.made = 0
+        self._lock = threading.Lock()
+
+    def take(self, shape: tuple[int, ...]) -> np.ndarray:
+        size = 1
+        for n in shape:
+            size *= int(n)
+        if not REUSE_BUFFERS:
+            return np.empty(shape)
+        with self._lock:
+            kept = self._kept
+            best = -1
+            for k in range(len(kept)):
+                # idle: referenced by the list and getrefcount's argument only
+                if (kept[k].size >= size and sys.getrefcount(kept[k]) == 2
+                        and (best < 0 or kept[k].size < kept[best].size)):
+                    best = k
+            self.taken += 1
+            if best >= 0:
+                buf = kept.pop(best)
+            else:
+                self.made += 1
+                buf = np.empty(max(size, 1))
+                if len(kept) >= self.keep:
+                    idle = [k for k in range(len(kept)) if sys.getrefcount(kept[k]) == 2]
+                    kept.pop(idle[0] if idle else 0)
+            kept.append(buf)  # the most recently used last
+            return buf[:size].reshape(shape)
+
+
+#: The Jacobians and their rows (a fit's iterations and its last step take two sizes, and
+#: a fit result holds its last Jacobian)
+_BUFFERS = _Kept(6)
+#: A tangent column's states, one per thread filling columns at a time
+_COLUMN_STATES = _Kept(8)
+
+
+#: glibc's malloc set at import (:func:`_keep_freed_memory`): arrays up to its largest mmap
+#: threshold (32 MB) come from the heap, freed memory up to 256 MB stays there for the next
+#: array, and the threads share one arena. By default glibc gives an array above a moving
+#: threshold (128 kB at first) its own fresh pages and trims the heap's top as it frees:
+#: the sensor lags' transforms, the simulations' states and outputs (tenths of MB to a
+#: few MB each, thousands per record) each came back as new pages to zero (docs/identify.md).
+#: Off: glibc's defaults.
+KEEP_FREED_MEMORY = True
+#: mallopt's parameters (glibc's malloc.h)
+_M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD, _M_ARENA_MAX = -1, -3, -8
+
+
+def _keep_freed_memory() -> bool:
+    """Set glibc's malloc as :data:`KEEP_FREED_MEMORY` says; False where the C library is
+    not glibc's (nothing set) or it refused a setting."""
+    if not KEEP_FREED_MEMORY or platform.system() != "Linux" or platform.libc_ver()[0] != "glibc":
+        return False
+    try:
+        mallopt = ctypes.CDLL(None).mallopt
+    except (OSError, AttributeError):
+        return False
+    mallopt.argtypes = [ctypes.c_int, ctypes.c_int]
+    mallopt.restype = ctypes.c_int
+    return all(mallopt(p, v) == 1 for p, v in ((_M_MMAP_THRESHOLD, 32 << 20),
+                                               (_M_TRIM_THRESHOLD, 256 << 20),
+                                               (_M_ARENA_MAX, 1)))
+
+
+_keep_freed_memory()
+
+
 #: Rows of the Jacobian transposed at a time (:func:`_transposed`): a block of the
 #: columns' rows and its transpose stay in the cache.
 TRANSPOSE_BLOCK = 4096
 
 
-def _transposed(a: np.ndarray) -> np.ndarray:
+def _transposed(a: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
     """``np.ascontiguousarray(a.T)`` (the same values: a copy), block by block of
-    :data:`TRANSPOSE_BLOCK` columns of ``a``. One transposing copy of a Jacobian (20 rows of
-    210,000 values) strides across the whole output once per row and misses the cache on
-    every write: 19 ms, against 5 ms by blocks (a fit takes one per Jacobian, 1.0 s of the
-    conrod's two frictions' 16 s record)."""
+    :data:`TRANSPOSE_BLOCK` columns of ``a``, into ``out`` (C-contiguous, of ``a.T``'s shape)
+    where given. One transposing copy of a Jacobian (20 rows of 210,000 values) strides
+    across the whole output once per row and misses the cache on every write: 19 ms,
+    against 5 ms by blocks (a fit takes one per Jacobian, 1.0 s of the conrod's two
+    frictions' 16 s record)."""
     rows, cols = a.shape
-    out = np.empty((cols, rows), dtype=a.dtype)
+    if out is None:
+        out = np.empty((cols, rows), dtype=a.dtype)
     for lo in range(0, cols, TRANSPOSE_BLOCK):
         out[lo:lo + TRANSPOSE_BLOCK] = a[:, lo:lo + TRANSPOSE_BLOCK].T
     return out
