@@ -62,8 +62,13 @@ MIN_MAGNITUDE = 0.2
 #: data, not the start, picks the law.
 FRICTION_SHAPE_START = 0.5
 #: The declared parameters' columns of a model that runs an effect from one tangent-linear
-#: simulation (:mod:`hil.identify.tangent`) rather than a simulation each.
-TANGENT = True
+#: simulation (:mod:`hil.identify.tangent`) rather than a simulation each. Off: on the
+#: score tests' model (half the sub-steps) the tangent of ~20 columns costs about what their
+#: simulations do (conrod triple, rig seed 3, round 3: 3.45 s / 32 simulations against
+#: 3.41 s / 53), and its columns (the first-order ones, not the forward difference's) move
+#: the seal's coefficient that starts its refit: that refit took 146 simulations for 81,
+#: the record 29.3 s of CPU for 20.8 s, the verdict the same (docs/identify.md).
+TANGENT = False
 #: Why a candidate judged at its own fit is not judged yet.
 DEFERRED = "judged at its own fit, in a round where no other candidate is selected"
 
