@@ -251,10 +251,10 @@ def test_candidates(
     it, it is left ``deferred`` for :func:`judge_deferred`. With ``states(theta)`` (the
     simulation alone, ``simulate(theta, states)`` mapping it to channels), a parameter that
     acts on the outputs only (:data:`~hil.identify.model.OUTPUT_ONLY`) is perturbed on the
-    base states, without a simulation of its own; and the declared parameters' columns of
-    a model that runs an effect come from one tangent-linear simulation (the states
-    ``z + step dz/dtheta``, mapped to channels as a simulated column's; :data:`TANGENT`)
-    of ``model``, or of the model ``states`` is a method of.
+    base states, without a simulation of its own; and, with :data:`TANGENT` on, the
+    declared parameters' columns of a model that runs an effect come from one
+    tangent-linear simulation (the states ``z + step dz/dtheta``, mapped to channels as a
+    simulated column's) of ``model``, or of the model ``states`` is a method of.
     """
     base_z = states(theta) if states is not None else None
     base_out = simulate(theta) if base_z is None else simulate(theta, base_z)
