@@ -46,7 +46,7 @@ import numpy as np
 
 from hil.identify import stats
 from hil.identify.experiment import Experiment
-from hil.identify.model import OUTPUT_ONLY, FastModel, map_threads
+from hil.identify.model import OUTPUT_ONLY, map_threads
 
 ALPHA = 0.01
 #: Retained norm share below which a signature column is collinear with declared terms.
@@ -61,14 +61,6 @@ MIN_MAGNITUDE = 0.2
 #: Where the friction laws' shape starts its refit: between tanh (0) and atan (1), so the
 #: data, not the start, picks the law.
 FRICTION_SHAPE_START = 0.5
-#: The declared parameters' columns of a model that runs an effect from one tangent-linear
-#: simulation (:mod:`hil.identify.tangent`) rather than a simulation each. Off: on the
-#: score tests' model (half the sub-steps) the tangent of ~20 columns costs about what their
-#: simulations do (conrod triple, rig seed 3, round 3: 3.45 s / 32 simulations against
-#: 3.41 s / 53), and its columns (the first-order ones, not the forward difference's) move
-#: the seal's coefficient that starts its refit: that refit took 146 simulations for 81,
-#: the record 29.3 s of CPU for 20.8 s, the verdict the same (docs/identify.md).
-TANGENT = False
 #: Why a candidate judged at its own fit is not judged yet.
 DEFERRED = "judged at its own fit, in a round where no other candidate is selected"
 
@@ -135,33 +127,10 @@ class CandidateTest:
         return self.status == "tested" and self.p_holm < ALPHA
 
 
-class _Projection:
-    """The least-squares projection onto the declared parameters' columns, the rows of
-    ``rows`` (parameters x samples): ``coef(x)`` is ``pinv(rows.T) @ x`` by the small Gram
-    matrix (columns scaled to unit norm, then an SVD of the p x p Gram matrix: the same as
-    ``np.linalg.pinv`` for the few well-scaled columns here), formed from ``rows @ x``,
-    without the pseudo-inverse's own samples-long matrix or a scaled copy of ``rows``."""
-
-    def __init__(self, rows: np.ndarray) -> None:
-        self.rows = rows
-        gram = rows @ rows.T
-        norms = np.sqrt(np.maximum(np.diag(gram), 0.0))
-        norms[norms == 0.0] = 1.0
-        self.norms = norms
-        self.gram_inv = (np.linalg.pinv(gram / np.outer(norms, norms), rcond=1e-12)
-                         if rows.shape[0] else np.zeros((0, 0)))
-
-    def coef(self, x: np.ndarray) -> np.ndarray:
-        """``pinv(rows.T) @ x`` for ``x`` (samples x k)."""
-        if self.rows.shape[0] == 0:
-            return np.zeros((0, x.shape[1]))
-        return (self.gram_inv @ ((self.rows @ x) / self.norms[:, None])) / self.norms[:, None]
-
-
 def _pinv(a: np.ndarray) -> np.ndarray:
     """Pseudo-inverse of a tall matrix by its small Gram matrix (columns scaled to unit norm,
-    then an SVD of the p x p Gram matrix): what :class:`_Projection` forms without it (kept
-    for the tests that hold the two to each other)."""
+    then an SVD of the p x p Gram matrix): the same as ``np.linalg.pinv`` for the few
+    well-scaled columns here, without an SVD of hundreds of thousands of rows."""
     if a.shape[1] == 0:
         return np.zeros((0, a.shape[0]))
     norms = np.linalg.norm(a, axis=0)
@@ -180,53 +149,6 @@ def _weighted(outputs: dict[str, np.ndarray], exp: Experiment, sigma: dict[str, 
     return np.concatenate(parts)
 
 
-def _weighted_into(row: np.ndarray, out: dict[str, np.ndarray], base: dict[str, np.ndarray],
-                   step: float, exp: Experiment, sigma: dict[str, float], sel: slice | np.ndarray,
-                   m: int) -> None:
-    """``_weighted({c: (out[c] - base[c]) / step}, ...)`` written into ``row`` (the same
-    elementwise operations on the selected samples: the same values)."""
-    for i, c in enumerate(exp.channels):
-        seg = row[i * m:(i + 1) * m]
-        np.subtract(out[c][sel], base[c][sel], out=seg)
-        seg /= step
-        seg /= sigma[c]
-        if not np.isfinite(seg).all():
-            np.nan_to_num(seg, copy=False)
-
-
-def _selector(mask: np.ndarray) -> slice | np.ndarray:
-    """A slice for a mask that is one run of samples (a view, no gather), else the mask."""
-    where = np.flatnonzero(mask)
-    if where.size and where[-1] + 1 - where[0] == where.size:
-        return slice(int(where[0]), int(where[-1]) + 1)
-    return mask
-
-
-def _tangent_jobs(model: FastModel | None, theta: np.ndarray, index: dict[str, int],
-                  jobs: list[tuple[str, float]]) -> list[int]:
-    """The declared parameters' jobs (indices into ``jobs``) whose states one tangent-linear
-    simulation gives (:mod:`hil.identify.tangent`): where the model runs an effect (only
-    then does it cost less than the columns' simulations) and the column keeps the kernel's
-    code paths over its step; empty when fewer than two (each is simulated)."""
-    if not TANGENT or model is None:
-        return []
-    from hil.identify.tangent import effects_on, on_path
-
-    if not effects_on(model, theta):
-        return []
-    cols = []
-    for k, (p, step) in enumerate(jobs):
-        if p in OUTPUT_ONLY:
-            continue
-        tp = theta.copy()
-        tp[index[p]] += step
-        tm = theta.copy()
-        tm[index[p]] -= step
-        if on_path(model, theta, tp, tm):
-            cols.append(k)
-    return cols if len(cols) >= 2 else []
-
-
 def test_candidates(
     defs: list[EffectDef],
     simulate: Callable[[np.ndarray], dict[str, np.ndarray]],
@@ -240,7 +162,6 @@ def test_candidates(
     jac_names: list[str],
     judge_at_fit: Callable[[EffectDef], FitJudgement] | None = None,
     states: Callable[[np.ndarray], np.ndarray] | None = None,
-    model: FastModel | None = None,
 ) -> list[CandidateTest]:
     """Test every candidate in ``defs`` against ``residual`` (measured - model per channel).
 
@@ -251,92 +172,35 @@ def test_candidates(
     it, it is left ``deferred`` for :func:`judge_deferred`. With ``states(theta)`` (the
     simulation alone, ``simulate(theta, states)`` mapping it to channels), a parameter that
     acts on the outputs only (:data:`~hil.identify.model.OUTPUT_ONLY`) is perturbed on the
-    base states, without a simulation of its own; and, with :data:`TANGENT` on, the
-    declared parameters' columns of a model that runs an effect come from one
-    tangent-linear simulation (the states ``z + step dz/dtheta``, mapped to channels as a
-    simulated column's) of ``model``, or of the model ``states`` is a method of.
+    base states, without a simulation of its own.
     """
     base_z = states(theta) if states is not None else None
     base_out = simulate(theta) if base_z is None else simulate(theta, base_z)
-    if model is None and base_z is not None:
-        owner = getattr(states, "__self__", None)
-        model = owner if isinstance(owner, FastModel) else None
     r_est = _weighted(residual, exp, sigma, est_mask)
     r_val = _weighted(residual, exp, sigma, val_mask)
     n_ch = len(exp.channels)
     n_t = int(est_mask.sum())
-    n_v = int(val_mask.sum())
-    sel_est, sel_val = _selector(est_mask), _selector(val_mask)
     # every perturbed simulation at once, on all cores: declared parameters, then signatures
-    # (a parameter listed twice among the fitted ones is one column: the same span)
-    jac_names = list(dict.fromkeys(jac_names))
     jobs: list[tuple[str, float]] = [(p, 1e-4 * abs(theta[index[p]]) or 1e-4)
                                      for p in jac_names]
     for d in defs:
         if not d.applicable(exp) and d.params and not d.judged_at_fit:
             jobs += [(p, 0.25 * nom) for p, nom in zip(d.params, d.nominal, strict=True)]
-    # one row per column (parameters x samples: each written contiguously), the declared
-    # parameters' first, then every signature's once (a job both is: in both blocks)
-    n_jac = len(jac_names)
-    rows: dict[tuple[str, float], list[int]] = {j: [k] for k, j in enumerate(jobs[:n_jac])}
-    sig_rows: dict[tuple[str, float], int] = {}
-    for j in jobs[n_jac:]:
-        if j not in sig_rows:
-            sig_rows[j] = n_jac + len(sig_rows)
-            rows.setdefault(j, []).append(sig_rows[j])
-    est = np.empty((n_jac + len(sig_rows), n_ch * n_t))
-    val = np.empty((n_jac + len(sig_rows), n_ch * n_v))
-    tangent_cols = _tangent_jobs(model, theta, index, jobs[: len(jac_names)])
-    tangent_set = {jobs[k] for k in tangent_cols}
-    sens: dict[tuple[str, float], np.ndarray] = {}
 
-    def column(job: tuple[str, float] | None) -> None:
-        if job is None:  # the tangent's states for its columns
-            from hil.identify.tangent import state_sensitivities
-
-            plus, minus, steps = [], [], []
-            for k in tangent_cols:
-                p, step = jobs[k]
-                tp = theta.copy()
-                tp[index[p]] += step
-                tm = theta.copy()
-                tm[index[p]] -= step
-                plus.append(tp)
-                minus.append(tm)
-                steps.append(step)
-            s = state_sensitivities(model, theta, plus, minus, np.array(steps), None)
-            sens.update(zip((jobs[k] for k in tangent_cols), s, strict=True))
-            return
+    def sens(job: tuple[str, float]) -> tuple[np.ndarray, np.ndarray]:
         p, step = job
         th = theta.copy()
         th[index[p]] += step
-        if job in tangent_set:
-            # the simulation at the step, to first order: the tangent's states
-            out = simulate(th, base_z + step * sens[job])
-        elif base_z is not None and p in OUTPUT_ONLY:
-            out = simulate(th, base_z)
-        else:
-            out = simulate(th)
-        i, *more = rows[job]
-        _weighted_into(est[i], out, base_out, step, exp, sigma, sel_est, n_t)
-        _weighted_into(val[i], out, base_out, step, exp, sigma, sel_val, n_v)
-        for k in more:
-            est[k] = est[i]
-            val[k] = val[i]
+        out = simulate(th, base_z) if base_z is not None and p in OUTPUT_ONLY else simulate(th)
+        diff = {c: (out[c] - base_out[c]) / step for c in exp.channels}
+        return _weighted(diff, exp, sigma, est_mask), _weighted(diff, exp, sigma, val_mask)
 
-    first = [None] if tangent_set else []
-    list(map_threads(column, first + [j for j in rows if j not in tangent_set]))
-    if tangent_set:
-        list(map_threads(column, [j for j in rows if j in tangent_set]))
-    jac_rows, jac_vrows = est[:n_jac], val[:n_jac]
-    projection = _Projection(jac_rows)
-    # every signature projected off the declared columns at once (two products with the
-    # declared rows, not two per candidate), on the estimation samples and, with the same
-    # coefficients, on the validation samples
-    sig, sig_v = est[n_jac:], val[n_jac:]
-    coef = projection.coef(sig.T)
-    sig_p = sig - coef.T @ jac_rows
-    sig_vp = sig_v - coef.T @ jac_vrows
+    done = dict(zip(jobs, map_threads(sens, jobs), strict=True))
+    j_est = [done[j][0] for j in jobs[: len(jac_names)]]
+    j_val = [done[j][1] for j in jobs[: len(jac_names)]]
+    jac = np.column_stack(j_est) if j_est else np.zeros((r_est.size, 0))
+    jac_v = np.column_stack(j_val) if j_val else np.zeros((r_val.size, 0))
+    jac_pinv = _pinv(jac)
     results: list[CandidateTest] = []
     for d in defs:
         t = CandidateTest(d.label, d.name, list(d.params), "tested")
@@ -352,22 +216,27 @@ def test_candidates(
                 _judged(t, d, judge_at_fit(d))
             results.append(t)
             continue
-        which = [sig_rows[(p, 0.25 * nom)] - n_jac
-                 for p, nom in zip(d.params, d.nominal, strict=True)]
-        steps = list(d.nominal)
-        x = sig[which].T
+        cols_est, cols_val, steps = [], [], []
+        for p, nom in zip(d.params, d.nominal, strict=True):
+            col_e, col_v = done[(p, 0.25 * nom)]
+            cols_est.append(col_e)
+            cols_val.append(col_v)
+            steps.append(nom)
+        x = np.column_stack(cols_est)
+        xv = np.column_stack(cols_val)
         norms = np.linalg.norm(x, axis=0)
-        names_d = jac_names
-        xp = sig_p[which].T
-        xvp = sig_vp[which].T
+        jac_d, jac_vd, names_d, pinv_d = jac, jac_v, jac_names, jac_pinv
+        proj = pinv_d @ x
+        xp = x - jac_d @ proj
+        xvp = xv - jac_vd @ proj
         kept_norm = np.linalg.norm(xp, axis=0)
         keep = []
         for j, p in enumerate(d.params):
             if norms[j] == 0.0:
                 continue
             if kept_norm[j] ** 2 < MIN_RETAINED * norms[j] ** 2 and not d.rescales_declared:
-                corr = (np.abs(jac_rows @ x[:, j])
-                        / (np.linalg.norm(jac_rows, axis=1) * norms[j] + 1e-300))
+                corr = (np.abs(jac_d.T @ x[:, j])
+                        / (np.linalg.norm(jac_d, axis=0) * norms[j] + 1e-300))
                 who = names_d[int(np.argmax(corr))] if names_d else "the model"
                 t.reason = f"{p} collinear with declared {who} (|corr| {corr.max():.3f})"
                 continue
