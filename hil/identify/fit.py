@@ -457,7 +457,10 @@ class OutputErrorFit:
         """Fit the parameters ``free`` starting from ``theta0``; others stay as given.
 
         ``max_nfev`` bounds the Jacobians (each one simulation per free parameter) per pass.
+        A parameter named twice in ``free`` is fitted once (two equal columns would make the
+        normal equations singular and every Jacobian one column dearer).
         """
+        free = list(dict.fromkeys(free))
         self._ref = {n: max(abs(theta0[IDX[n]]), 1e-12) for n in free if n in LOG_PARAMS}
         mask = self.fit_mask()
         # weights carried over from a fit without the effect now in are stale: re-estimated

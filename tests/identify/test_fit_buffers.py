@@ -91,3 +91,13 @@ def test_glibc_takes_the_malloc_settings():
     if platform.system() != "Linux" or platform.libc_ver()[0] != "glibc":
         pytest.skip("glibc's malloc only")
     assert fit_module._keep_freed_memory()
+
+
+def test_a_parameter_named_twice_is_fitted_once(model):
+    # (the seal's J_c-held polish named k_s twice where the search had freed it already: two
+    # equal Jacobian columns, singular normal equations, one column dearer every Jacobian)
+    once = _fitter(model).fit(_start(model), FREE, passes=1, max_nfev=6)
+    twice = _fitter(model).fit(_start(model), FREE + ["ks", "ds"], passes=1, max_nfev=6)
+    assert twice.free == FREE
+    assert twice.theta.tobytes() == once.theta.tobytes()
+    assert twice.jac.shape == once.jac.shape
