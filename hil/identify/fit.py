@@ -642,7 +642,8 @@ _BUFFERS = _Kept(6)
 _COLUMN_STATES = _Kept(8)
 
 
-#: glibc's malloc set at import (:func:`_keep_freed_memory`): arrays up to its largest mmap
+#: glibc's malloc as an identification sets it (:func:`keep_freed_memory`, called by
+#: :func:`hil.identify.pipeline.identify`, not at import): arrays up to its largest mmap
 #: threshold (32 MB) come from the heap, freed memory up to 256 MB stays there for the next
 #: array, and the threads share one arena. By default glibc gives an array above a moving
 #: threshold (128 kB at first) its own fresh pages and trims the heap's top as it frees:
@@ -654,9 +655,9 @@ KEEP_FREED_MEMORY = True
 _M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD, _M_ARENA_MAX = -1, -3, -8
 
 
-def _keep_freed_memory() -> bool:
-    """Set glibc's malloc as :data:`KEEP_FREED_MEMORY` says; False where the C library is
-    not glibc's (nothing set) or it refused a setting."""
+def keep_freed_memory() -> bool:
+    """Set glibc's malloc as :data:`KEEP_FREED_MEMORY` says, for the rest of the process;
+    False where the C library is not glibc's (nothing set) or it refused a setting."""
     if not KEEP_FREED_MEMORY or platform.system() != "Linux" or platform.libc_ver()[0] != "glibc":
         return False
     try:
@@ -669,8 +670,6 @@ def _keep_freed_memory() -> bool:
                                                (_M_TRIM_THRESHOLD, 256 << 20),
                                                (_M_ARENA_MAX, 1)))
 
-
-_keep_freed_memory()
 
 
 #: Rows of the Jacobian transposed at a time (:func:`_transposed`): a block of the

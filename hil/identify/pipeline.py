@@ -56,6 +56,7 @@ from hil.identify.fit import (
     baseline_free,
     fit_baseline,
     guarded_fit,
+    keep_freed_memory,
     lr_threshold,
 )
 from hil.identify.model import IDX, FastModel
@@ -308,7 +309,9 @@ def identify(
     The linear algebra runs on one BLAS thread: its products are tall and thin, OpenBLAS's
     extra threads spin between them (half again the CPU time for no shorter wall time), and
     the simulations already take a thread per core (:func:`~hil.identify.model.map_threads`).
+    glibc's malloc keeps freed memory from here on (:func:`~hil.identify.fit.keep_freed_memory`).
     """
+    keep_freed_memory()
     with threadpool_limits(limits=1, user_api="blas"):
         return _identify(data, cfg, max_effects, progress, intersample)
 

@@ -90,7 +90,7 @@ def test_glibc_takes_the_malloc_settings():
 
     if platform.system() != "Linux" or platform.libc_ver()[0] != "glibc":
         pytest.skip("glibc's malloc only")
-    assert fit_module._keep_freed_memory()
+    assert fit_module.keep_freed_memory()
 
 
 def test_a_parameter_named_twice_is_fitted_once(model):
