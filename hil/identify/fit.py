@@ -26,6 +26,7 @@ and named in :attr:`FitResult.held`.
 from __future__ import annotations
 
 import ctypes
+import math
 import platform
 import sys
 import threading
@@ -609,9 +610,7 @@ class _Kept:
         self._lock = threading.Lock()
 
     def take(self, shape: tuple[int, ...]) -> np.ndarray:
-        size = 1
-        for n in shape:
-            size *= int(n)
+        size = math.prod(int(n) for n in shape)
         if not REUSE_BUFFERS:
             return np.empty(shape)
         with self._lock:
@@ -669,7 +668,6 @@ def keep_freed_memory() -> bool:
     return all(mallopt(p, v) == 1 for p, v in ((_M_MMAP_THRESHOLD, 32 << 20),
                                                (_M_TRIM_THRESHOLD, 256 << 20),
                                                (_M_ARENA_MAX, 1)))
-
 
 
 #: Rows of the Jacobian transposed at a time (:func:`_transposed`): a block of the
