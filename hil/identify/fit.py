@@ -696,9 +696,13 @@ def _finite(x: np.ndarray) -> np.ndarray:
 
 
 #: Broyden updates of the Jacobian between exact ones (0: an exact Jacobian after every
-#: accepted step, as before). A Jacobian costs one simulation (or a tangent-linear pass and
-#: a residual) per free parameter, an update one product with it.
-BROYDEN_UPDATES = 2
+#: accepted step, the same bits as before the updates existed). A Jacobian costs one
+#: simulation (or a tangent-linear pass and a residual) per free parameter, an update one
+#: product with it. Off: at 2 the conrod triple at rig seed 1 took 107 Jacobians for 178
+#: and 22 s of CPU for 29, but the fits' other paths flipped five rows of the
+#: identify-check matrix and a record of the 16 s table, and doubled others' CPU
+#: (docs/identify.md, "Broyden updates of the Jacobian: measured, not taken").
+BROYDEN_UPDATES = 0
 #: An accepted step that gained less than this fraction of what its linearisation
 #: predicted is followed by an exact Jacobian, not an update (the model was poor there).
 BROYDEN_MIN_RATIO = 0.25
