@@ -695,6 +695,35 @@ def _finite(x: np.ndarray) -> np.ndarray:
     return x if np.isfinite(x).all() else np.nan_to_num(x)
 
 
+#: Broyden updates of the Jacobian between exact ones (0: an exact Jacobian after every
+#: accepted step, the same bits as before the updates existed). A Jacobian costs one
+#: simulation (or a tangent-linear pass and a residual) per free parameter, an update one
+#: product with it. Off: at 2 the conrod triple at rig seed 1 took 107 Jacobians for 178
+#: and 22 s of CPU for 29, but the fits' other paths flipped five rows of the
+#: identify-check matrix and a record of the 16 s table, and doubled others' CPU
+#: (docs/identify.md, "Broyden updates of the Jacobian: measured, not taken").
+BROYDEN_UPDATES = 0
+#: An accepted step that gained less than this fraction of what its linearisation
+#: predicted is followed by an exact Jacobian, not an update (the model was poor there).
+BROYDEN_MIN_RATIO = 0.25
+
+
+def _broyden(j: np.ndarray, dx: np.ndarray, dr: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """Broyden's rank-1 update of the Jacobian ``j`` after the step ``dx`` changed the
+    residual by ``dr``, in the variables scaled by the columns' norms ``d`` (as MINPACK's
+    hybrd): ``j + (dr - j dx) (D^2 dx)' / (dx' D^2 dx)``, so the secant condition
+    ``j_new dx = dr`` holds. Written block by block into a kept array (a new one: the
+    caller may still hold ``j``)."""
+    w = d * d * dx
+    v = w / float(dx @ w)
+    u = dr - j @ dx
+    out = _BUFFERS.take(j.shape)
+    for lo in range(0, j.shape[0], TRANSPOSE_BLOCK):
+        hi = lo + TRANSPOSE_BLOCK
+        np.add(j[lo:hi], np.multiply.outer(u[lo:hi], v), out=out[lo:hi])
+    return out
+
+
 def levenberg_marquardt(
     fun: Callable[[np.ndarray], np.ndarray],
     jac: Callable[[np.ndarray], np.ndarray],
@@ -706,27 +735,43 @@ def levenberg_marquardt(
     j0: np.ndarray | None = None,
     final_jac: bool = True,
     converged_gain: float | None = None,
+    updates: int | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
     """Minimise ``|fun(x)|^2`` within the box ``lo <= x <= hi``; returns ``(x, r, J,
-    converged)``, ``converged`` False when it stopped at ``max_jac`` Jacobians.
+    converged)``, ``converged`` False when it stopped at ``max_jac`` linearisations.
 
     Levenberg-Marquardt on the normal equations: the residual has hundreds of thousands of
     rows and the parameters a dozen, so each step costs one product ``J'J`` (a library solver
     takes an SVD of ``J`` per step, and most of the fit's time with it). Steps leaving the box
     are clipped to it. Stops when no step lowers the cost, an accepted one lowers it by no
     more than ``converged_gain`` residual variances (default :data:`CONVERGED_GAIN`; within
-    the first :data:`LOOSE_AFTER_JACOBIANS` Jacobians: one variance), the step is below
-    1e-8, or after ``max_jac`` Jacobians. ``final_jac=False`` returns the last
-    Jacobian computed rather than one at the returned point (for a last small step).
+    the first :data:`LOOSE_AFTER_JACOBIANS` steps: one variance), the step is below
+    1e-8, or after ``max_jac`` linearisations (steps from a Jacobian, exact or updated).
+
+    After an accepted step the Jacobian is updated (Broyden, :func:`_broyden`) rather than
+    computed, up to ``updates`` times in a row (default :data:`BROYDEN_UPDATES`) and while
+    the last step gained at least :data:`BROYDEN_MIN_RATIO` of its predicted gain. Only an
+    exact Jacobian decides the end: a step from an updated one that is refused, or whose
+    gain would end the pass, is followed by an exact Jacobian at the point it reached; the
+    pass then ends there only if the step that Jacobian gives is predicted to gain no more
+    than the stop's limit (else it goes on from there). The returned ``J`` is the exact
+    Jacobian at the returned point unless ``final_jac=False``, which returns the last
+    linearisation (exact or updated) rather than compute one there (for a last small step).
     """
     if converged_gain is None:
         converged_gain = CONVERGED_GAIN
+    if updates is None:
+        updates = BROYDEN_UPDATES
     x = np.clip(np.asarray(x0, dtype=float), lo, hi)
     r = fun(x) if r0 is None else r0
     j = jac(x) if j0 is None else j0
     cost = float(r @ r)
     lam = 1e-3
-    n_jac = 1
+    n_lin = 1  # linearisations the steps came from (the budget)
+    in_row = 0  # updates since the last exact Jacobian (0: ``j`` is exact at ``x``)
+    judge = False  # ``j`` was refreshed after an updated step's small gain: judge the end
+    budget_left = True
+    gain = 0.0
     while True:
         a = j.T @ j
         g = j.T @ r
@@ -742,8 +787,13 @@ def levenberg_marquardt(
         at_hi = (hi - x <= 1e-9 * span) & (gn < 0)
         move = ~(at_lo | at_hi)
         if not move.any():
+            if in_row:
+                j, in_row = jac(x), 0
+                continue
             return x, r, j, True
         an_m = an[np.ix_(move, move)]
+        limit = (cost / r.size) * (converged_gain if n_lin > LOOSE_AFTER_JACOBIANS
+                                   else min(converged_gain, 1.0))
         for _ in range(12):
             step = np.zeros_like(x)
             try:
@@ -753,29 +803,61 @@ def levenberg_marquardt(
                 lam *= 10.0
                 continue
             x_new = np.clip(x + step, lo, hi)
+            dx = x_new - x
+            # the gain the linearisation predicts: cost - |r + J dx|^2
+            predicted = -float(2.0 * (g @ dx) + dx @ (a @ dx))
+            if judge:
+                judge = False
+                if predicted <= limit:
+                    # the exact Jacobian here says the next step would end the pass
+                    return x, r, j, True
+                if not budget_left:
+                    return x, r, j, False
             r_new = fun(x_new)
             cost_new = float(r_new @ r_new)
             if np.isfinite(cost_new) and cost_new < cost:
                 gain = cost - cost_new
+                dr = r_new - r
                 x, r, cost = x_new, r_new, cost_new
-                lam = max(lam / 5.0, 1e-9)
+                if not in_row:
+                    # (a step from an updated Jacobian leaves the damping as it was: its
+                    # success says less of the linearisation's; relaxing it there made the
+                    # next exact step fail several trials first)
+                    lam = max(lam / 5.0, 1e-9)
                 improved = True
                 break
+            if in_row:
+                break  # the update's fault, not the damping's: an exact Jacobian first
             lam *= 8.0
+        if not improved:
+            if in_row:
+                j, in_row = jac(x), 0
+                continue
+            return x, r, j, True
         # a cost change below one residual variance moves no parameter by more than about
         # one standard error of white residuals: a fraction of the real one, the residuals
         # being correlated over tens of samples (the covariance is HAC for that reason).
         # (a looser stop only after LOOSE_AFTER_JACOBIANS: a slow start is no end)
-        variance = cost / r.size if improved else 0.0
-        limit = variance * (converged_gain if n_jac > LOOSE_AFTER_JACOBIANS
-                            else min(converged_gain, 1.0))
-        converged = (not improved or gain <= limit or np.max(np.abs(step)) < 1e-8)
-        if converged or n_jac >= max_jac:
-            if improved and final_jac:
+        small = gain <= (cost / r.size) * (converged_gain if n_lin > LOOSE_AFTER_JACOBIANS
+                                           else min(converged_gain, 1.0))
+        small = small or np.max(np.abs(step)) < 1e-8
+        if small and in_row:
+            # from an updated Jacobian a small gain may be the update's: an exact one here
+            # judges it (the Jacobian the caller needs if the pass ends here)
+            j, in_row, judge = jac(x), 0, True
+            budget_left = n_lin < max_jac
+            n_lin += 1
+            continue
+        if small or n_lin >= max_jac:
+            if final_jac:
                 j = jac(x)  # the Jacobian at the returned point, for the covariance
-            return x, r, j, converged
-        j = jac(x)
-        n_jac += 1
+            return x, r, j, small
+        n_lin += 1
+        if in_row < updates and gain >= BROYDEN_MIN_RATIO * predicted:
+            j = _broyden(j, dx, dr, d)
+            in_row += 1
+        else:
+            j, in_row = jac(x), 0
 
 
 def guarded_fit(fitter: OutputErrorFit, theta0: np.ndarray, free: list[str],

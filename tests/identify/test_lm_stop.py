@@ -1,5 +1,7 @@
 """A Levenberg-Marquardt pass ends at the first accepted step that lowers the cost by no more
-than :data:`~hil.identify.fit.CONVERGED_GAIN` residual variances, and not before."""
+than :data:`~hil.identify.fit.CONVERGED_GAIN` residual variances, and not before (steps from
+exact Jacobians: a step from a Broyden update that gains that little is judged by an exact
+Jacobian first, tests/identify/test_lm_broyden.py)."""
 
 from __future__ import annotations
 
@@ -27,7 +29,8 @@ def test_a_pass_stops_at_the_first_step_below_the_gain_and_not_before():
         return (scale * weights * 5.0 * x[0] ** 4)[:, None]
 
     x, r, _, converged = fit.levenberg_marquardt(fun, jac, np.array([2.0]), np.array([-10.0]),
-                                                 np.array([10.0]), max_jac=40)
+                                                 np.array([10.0]), max_jac=40,
+                                                 updates=0)
     # the accepted steps: each cost lower than every one before it
     accepted = [costs[0]]
     for c in costs[1:]:
