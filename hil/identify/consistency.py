@@ -326,13 +326,16 @@ def consistency(fit: FitResult, exp: Experiment, mask: np.ndarray,
     # each column's transform along its own contiguous row, then the bins kept as
     # (bin, channel, parameter), their real and imaginary parts apart: every per-bin sum
     # below is then a batched real matrix product (BLAS) in place of a complex einsum
-    jf_t = np.zeros((n_ch, p, span))
-    jf_t[:, :, rows - rows[0]] = jac.transpose(0, 2, 1)
-    jf = np.fft.rfft(jf_t, axis=-1)[:, :, :k_max]
-    del jf_t
-    jr = np.ascontiguousarray(jf.real.transpose(2, 0, 1))
-    ji = np.ascontiguousarray(jf.imag.transpose(2, 0, 1))
-    del jf
+    # (one channel at a time: a tenth of a record's Jacobian in flight, not all of it)
+    jr = np.empty((k_max, n_ch, p))
+    ji = np.empty((k_max, n_ch, p))
+    col_t = np.zeros((p, span))
+    for c in range(n_ch):
+        col_t[:, rows - rows[0]] = jac[c].T
+        jf = np.fft.rfft(col_t, axis=-1)[:, :k_max]
+        jr[:, c, :] = jf.real.T
+        ji[:, c, :] = jf.imag.T
+    del col_t, jf
     rf_t = np.zeros((n_ch, span))
     rf_t[:, rows - rows[0]] = res
     rf = np.fft.rfft(rf_t, axis=-1)[:, :k_max]
