@@ -230,12 +230,13 @@ def choose_intersample(data: MeasuredData, cfg: Config, given: str | None,
                        say: Callable[[str], None]) -> tuple[Experiment, np.ndarray | None]:
     """The experiment with the input's intersample behaviour: as given, else estimated.
 
-    Estimated: the baseline is fitted with the current held between samples (``zoh``) and
-    the timing skew free over a whole sample. A current that was applied as a staircase fits
-    that with a skew near 0. A sampled continuous current fits it only about half a sample
-    early (a held sample is, on average, half a sample late), so a skew below -T/4 says
-    "continuous"; then ``foh`` and ``bl`` are compared at that fit, each with the skew that
-    suits it best, and the lower cost wins (a tie goes to the one needing the smaller skew).
+    Estimated: the baseline is fitted with the current band-limited between samples
+    (``bl``) and the timing skew free over a whole sample (the provisional fit). Then
+    ``bl``, ``foh`` and ``zoh`` are compared at that fit, each with the skew that suits it
+    best, searched over 1.5 samples around the provisional skew (for ``zoh`` half a sample
+    earlier: a held sample is, on average, a band-limited one half a sample late). The
+    lower cost wins; costs within :data:`INTERSAMPLE_TIE` tie, and so does a mode whose best
+    skew lies on its search's edge; a tie goes to ``bl``, then ``foh``.
     Returns the experiment and the parameter vector to start the baseline from.
     """
     if given is not None:
@@ -251,6 +252,7 @@ def choose_intersample(data: MeasuredData, cfg: Config, given: str | None,
     say("intersample: provisional fit, skew free over one sample")
     prov = fitter.fit(model.start_vector(), baseline_free(exp), passes=1, max_nfev=20)
     results: dict[str, tuple[float, float]] = {}
+    bounded: set[str] = set()
     for mode in ("bl", "foh", "zoh"):
         f_mode = OutputErrorFit(FastModel(dataclasses.replace(exp, intersample=mode)))
 
@@ -259,19 +261,26 @@ def choose_intersample(data: MeasuredData, cfg: Config, given: str | None,
             th[IDX["skew_s"]] = sk
             return f_mode.cost(th, prov.sigma)
 
-        centre = prov.value("skew_s") + (0.5 * exp.dt if mode == "zoh" else 0.0)
-        sol = minimize_scalar(cost, bounds=(centre - 0.75 * exp.dt, centre + 0.75 * exp.dt),
-                              method="bounded", options={"xatol": exp.dt / 200, "maxiter": 20})
+        centre = prov.value("skew_s") - (0.5 * exp.dt if mode == "zoh" else 0.0)
+        lo, hi = centre - 0.75 * exp.dt, centre + 0.75 * exp.dt
+        sol = minimize_scalar(cost, bounds=(lo, hi), method="bounded",
+                              options={"xatol": exp.dt / 200, "maxiter": 20})
         results[mode] = (float(sol.fun), float(sol.x))
+        if min(sol.x - lo, hi - sol.x) <= exp.dt / 50:
+            bounded.add(mode)
     ref = min(c for c, _ in results.values())
     # Below a few hundred hertz a staircase is a band-limited signal half a sample late, and
     # the costs tie: then the data cannot tell, and a logged current is taken for what a log
-    # of a measured current is, a sampled continuous signal (bl before foh before zoh).
-    best = next(m for m in ("bl", "foh", "zoh")
-                if results[m][0] <= (1.0 + INTERSAMPLE_TIE) * ref)
-    tie = [m for m in results if results[m][0] <= (1.0 + INTERSAMPLE_TIE) * ref]
-    detail = ", ".join(f"{m} {results[m][0] / ref:.5f} (skew {results[m][1] * 1e6:+.0f} us)"
-                       for m in results)
+    # of a measured current is, a sampled continuous signal (bl before foh before zoh). A
+    # mode whose best skew is on its search's edge has a lower cost beyond it: it ties with
+    # any that beat it there (the skew on the edge is a model that lacks something taking
+    # the timing for it, where the provisional fit stopped; by the last bits of the
+    # arithmetic, a zoh would otherwise "fit best" a continuous current by half a per cent).
+    tie = [m for m in results
+           if results[m][0] <= (1.0 + INTERSAMPLE_TIE) * ref or m in bounded]
+    best = next(m for m in ("bl", "foh", "zoh") if m in tie)
+    detail = ", ".join(f"{m} {results[m][0] / ref:.5f} (skew {results[m][1] * 1e6:+.0f} us"
+                       f"{', on its search edge' if m in bounded else ''})" for m in results)
     if len(tie) > 1:
         why = (f"{' and '.join(tie)} fit equally well (a staircase and a continuous current "
                f"half a sample apart look alike below a few hundred hertz); taken as "
