@@ -266,7 +266,7 @@ def choose_intersample(data: MeasuredData, cfg: Config, given: str | None,
         sol = minimize_scalar(cost, bounds=(lo, hi), method="bounded",
                               options={"xatol": exp.dt / 200, "maxiter": 20})
         results[mode] = (float(sol.fun), float(sol.x))
-        if min(sol.x - lo, hi - sol.x) <= exp.dt / 50:
+        if min(sol.x - lo, hi - sol.x) <= exp.dt / 50:  # within four of the search's steps
             bounded.add(mode)
     ref = min(c for c, _ in results.values())
     # Below a few hundred hertz a staircase is a band-limited signal half a sample late, and
