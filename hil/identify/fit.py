@@ -772,6 +772,13 @@ def levenberg_marquardt(
     judge = False  # ``j`` was refreshed after an updated step's small gain: judge the end
     budget_left = True
     gain = 0.0
+
+    def stop_limit(c: float) -> float:
+        """The gain that ends the pass at cost ``c``, in residual variances (one within the
+        first :data:`LOOSE_AFTER_JACOBIANS` steps)."""
+        return (c / r.size) * (converged_gain if n_lin > LOOSE_AFTER_JACOBIANS
+                               else min(converged_gain, 1.0))
+
     while True:
         a = j.T @ j
         g = j.T @ r
@@ -792,8 +799,7 @@ def levenberg_marquardt(
                 continue
             return x, r, j, True
         an_m = an[np.ix_(move, move)]
-        limit = (cost / r.size) * (converged_gain if n_lin > LOOSE_AFTER_JACOBIANS
-                                   else min(converged_gain, 1.0))
+        limit = stop_limit(cost)
         for _ in range(12):
             step = np.zeros_like(x)
             try:
@@ -838,8 +844,7 @@ def levenberg_marquardt(
         # one standard error of white residuals: a fraction of the real one, the residuals
         # being correlated over tens of samples (the covariance is HAC for that reason).
         # (a looser stop only after LOOSE_AFTER_JACOBIANS: a slow start is no end)
-        small = gain <= (cost / r.size) * (converged_gain if n_lin > LOOSE_AFTER_JACOBIANS
-                                           else min(converged_gain, 1.0))
+        small = gain <= stop_limit(cost)
         small = small or np.max(np.abs(step)) < 1e-8
         if small and in_row:
             # from an updated Jacobian a small gain may be the update's: an exact one here
