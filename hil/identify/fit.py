@@ -687,6 +687,29 @@ def keep_freed_memory() -> bool:
                                                (_M_ARENA_MAX, 1)))
 
 
+#: numpy asks the kernel to back each array of 4 MB or more with 2 MB pages (``madvise``
+#: ``MADV_HUGEPAGE``). Where transparent huge pages are on for such requests, with direct
+#: defragmentation (this machine kind's ``madvise``/``madvise`` setting), each array's first
+#: touch has the kernel compact memory into huge pages: on the conrod triple's 16 s record at
+#: rig seed 2, 2.3 s of system CPU in 22.6 s; without the advice 0.8 s, and the same bits
+#: (docs/identify.md). An identification turns the advice off for the rest of the process
+#: (:func:`small_pages`); False: numpy's default.
+SMALL_PAGES = True
+
+
+def small_pages() -> bool:
+    """Turn numpy's huge-page advice off for the rest of the process, as :data:`SMALL_PAGES`
+    says; False where it is not asked for or this numpy has no switch for it."""
+    if not SMALL_PAGES:
+        return False
+    core = getattr(np, "_core", None) or getattr(np, "core", None)
+    switch = getattr(getattr(core, "multiarray", None), "_set_madvise_hugepage", None)
+    if switch is None:
+        return False
+    switch(False)
+    return True
+
+
 #: Rows of the Jacobian transposed at a time (:func:`_transposed`): a block of the
 #: columns' rows and its transpose stay in the cache.
 TRANSPOSE_BLOCK = 4096

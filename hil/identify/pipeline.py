@@ -58,6 +58,7 @@ from hil.identify.fit import (
     guarded_fit,
     keep_freed_memory,
     lr_threshold,
+    small_pages,
 )
 from hil.identify.model import IDX, FastModel
 from hil.identify.noise import (
@@ -318,9 +319,11 @@ def identify(
     The linear algebra runs on one BLAS thread: its products are tall and thin, OpenBLAS's
     extra threads spin between them (half again the CPU time for no shorter wall time), and
     the simulations already take a thread per core (:func:`~hil.identify.model.map_threads`).
-    glibc's malloc keeps freed memory from here on (:func:`~hil.identify.fit.keep_freed_memory`).
+    glibc's malloc keeps freed memory from here on (:func:`~hil.identify.fit.keep_freed_memory`),
+    and numpy no longer asks for huge pages (:func:`~hil.identify.fit.small_pages`).
     """
     keep_freed_memory()
+    small_pages()
     with threadpool_limits(limits=1, user_api="blas"):
         return _identify(data, cfg, max_effects, progress, intersample)
 
