@@ -156,6 +156,9 @@ class FitResult:
     weights: dict[str, float] = field(default_factory=dict)  # sigma the Jacobian is scaled by
     #: the last pass stopped at its gain (False: at its Jacobian limit, still descending)
     converged: bool = True
+    #: stopped where the fitter's :attr:`OutputErrorFit.leave` said the descent had left the
+    #: region it was started to search (``theta`` is where: no optimum, no intervals)
+    left: bool = False
 
     def value(self, name: str) -> float:
         return float(self.theta[IDX[name]])
@@ -177,6 +180,9 @@ class OutputErrorFit:
         self.skew_limit = SKEW_LIMIT
         #: residual variances a step must gain for a pass to go on (:func:`levenberg_marquardt`)
         self.converged_gain = CONVERGED_GAIN
+        #: ``leave(theta)`` True: a descent that reached ``theta`` has left the region it was
+        #: started in to search, and the fit stops there (``FitResult.left``); None: never
+        self.leave: Callable[[np.ndarray], bool] | None = None
         # Samples on a channel's clip plateau say only "at least the level": until the
         # saturation effect models the clip, they count only where the model is below it
         # (a censored residual), so the clip does not bias the linear fit.
@@ -488,6 +494,8 @@ class OutputErrorFit:
             iter_mask = mask.copy()
             iter_mask[where[ITERATION_SAMPLES]:] = False
         converged = False
+        stop = None if self.leave is None else (
+            lambda xx: self.leave(self._to_theta(xx, free, theta0)))
         for k in range(passes):
             if k > 0:
                 if converged and all(abs(sigma[c] / used[c] - 1.0) < WEIGHTS_SETTLED
@@ -505,9 +513,18 @@ class OutputErrorFit:
             # the last pass's Jacobian at its optimum is needed only if no step on all the
             # samples follows (that step takes its own)
             final_jac = iter_mask is mask or k < passes - 1
-            x, r, j, converged = levenberg_marquardt(fun, jac, x, lo, hi, max_jac=max_jac,
-                                                     r0=r, j0=j, final_jac=final_jac,
-                                                     converged_gain=self.converged_gain)
+            try:
+                x, r, j, converged = levenberg_marquardt(fun, jac, x, lo, hi, max_jac=max_jac,
+                                                         r0=r, j0=j, final_jac=final_jac,
+                                                         converged_gain=self.converged_gain,
+                                                         leave=stop)
+            except LeftRegion as gone:
+                theta = self._to_theta(gone.x, free, theta0)
+                states = self.model.states(theta)
+                return FitResult(theta, list(free), {}, sigma,
+                                 self.model.outputs(theta, states), states,
+                                 n_sims=self.n_sims, weights=dict(sigma), converged=False,
+                                 left=True)
             used = sigma
             theta = self._to_theta(x, free, theta0)
             out = self.model.outputs(theta)
@@ -670,6 +687,29 @@ def keep_freed_memory() -> bool:
                                                (_M_ARENA_MAX, 1)))
 
 
+#: numpy asks the kernel to back each array of 4 MB or more with 2 MB pages (``madvise``
+#: ``MADV_HUGEPAGE``). Where transparent huge pages are on for such requests, with direct
+#: defragmentation (this machine kind's ``madvise``/``madvise`` setting), each array's first
+#: touch has the kernel compact memory into huge pages: on the conrod triple's 16 s record at
+#: rig seed 2, 2.3 s of system CPU in 22.6 s; without the advice 0.8 s, and the same bits
+#: (docs/identify.md). An identification turns the advice off for the rest of the process
+#: (:func:`small_pages`); False: numpy's default.
+SMALL_PAGES = True
+
+
+def small_pages() -> bool:
+    """Turn numpy's huge-page advice off for the rest of the process, as :data:`SMALL_PAGES`
+    says; False where it is not asked for or this numpy has no switch for it."""
+    if not SMALL_PAGES:
+        return False
+    core = getattr(np, "_core", None) or getattr(np, "core", None)
+    switch = getattr(getattr(core, "multiarray", None), "_set_madvise_hugepage", None)
+    if switch is None:
+        return False
+    switch(False)
+    return True
+
+
 #: Rows of the Jacobian transposed at a time (:func:`_transposed`): a block of the
 #: columns' rows and its transpose stay in the cache.
 TRANSPOSE_BLOCK = 4096
@@ -724,6 +764,14 @@ def _broyden(j: np.ndarray, dx: np.ndarray, dr: np.ndarray, d: np.ndarray) -> np
     return out
 
 
+class LeftRegion(Exception):
+    """A descent left the region its caller started it to search (``x``: where)."""
+
+    def __init__(self, x: np.ndarray) -> None:
+        super().__init__("the descent left the region searched")
+        self.x = x
+
+
 def levenberg_marquardt(
     fun: Callable[[np.ndarray], np.ndarray],
     jac: Callable[[np.ndarray], np.ndarray],
@@ -736,6 +784,7 @@ def levenberg_marquardt(
     final_jac: bool = True,
     converged_gain: float | None = None,
     updates: int | None = None,
+    leave: Callable[[np.ndarray], bool] | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
     """Minimise ``|fun(x)|^2`` within the box ``lo <= x <= hi``; returns ``(x, r, J,
     converged)``, ``converged`` False when it stopped at ``max_jac`` linearisations.
@@ -757,6 +806,9 @@ def levenberg_marquardt(
     than the stop's limit (else it goes on from there). The returned ``J`` is the exact
     Jacobian at the returned point unless ``final_jac=False``, which returns the last
     linearisation (exact or updated) rather than compute one there (for a last small step).
+
+    ``leave(x)`` True after an accepted step raises :class:`LeftRegion` with that ``x``: the
+    descent has left the region the caller started it to search.
     """
     if converged_gain is None:
         converged_gain = CONVERGED_GAIN
@@ -825,6 +877,8 @@ def levenberg_marquardt(
                 gain = cost - cost_new
                 dr = r_new - r
                 x, r, cost = x_new, r_new, cost_new
+                if leave is not None and leave(x):
+                    raise LeftRegion(x)
                 if not in_row:
                     # (a step from an updated Jacobian leaves the damping as it was: its
                     # success says less of the linearisation's; relaxing it there made the
@@ -896,6 +950,8 @@ def guarded_fit(fitter: OutputErrorFit, theta0: np.ndarray, free: list[str],
     free = list(free)
     result = first if first is not None else fitter.fit(theta0, free, sigma=sigma,
                                                         passes=passes, max_nfev=max_nfev)
+    if result.left:
+        return result, {}  # no optimum to judge the parameters' credibility at
     after_hold = max_nfev if run_on and not result.converged else 9
     held: dict[str, str] = {}
     for _ in range(len(free)):
@@ -924,6 +980,8 @@ def guarded_fit(fitter: OutputErrorFit, theta0: np.ndarray, free: list[str],
         if not free:
             break
         result = fitter.fit(theta, free, sigma=result.sigma, passes=1, max_nfev=after_hold)
+        if result.left:
+            break
     return result, held
 
 

@@ -58,6 +58,7 @@ from hil.identify.fit import (
     guarded_fit,
     keep_freed_memory,
     lr_threshold,
+    small_pages,
 )
 from hil.identify.model import IDX, FastModel
 from hil.identify.noise import (
@@ -73,7 +74,7 @@ from hil.identify.noise import (
     predicted_residual,
 )
 from hil.identify.residuals import ResidualAnalysis, analyse
-from hil.identify.resonance import stiffness_at_line
+from hil.identify.resonance import line_left, stiffness_at_line
 from hil.identify.slowfirst import LowPassedPressures, pressures_finite
 from plant.config import Config
 
@@ -318,9 +319,11 @@ def identify(
     The linear algebra runs on one BLAS thread: its products are tall and thin, OpenBLAS's
     extra threads spin between them (half again the CPU time for no shorter wall time), and
     the simulations already take a thread per core (:func:`~hil.identify.model.map_threads`).
-    glibc's malloc keeps freed memory from here on (:func:`~hil.identify.fit.keep_freed_memory`).
+    glibc's malloc keeps freed memory from here on (:func:`~hil.identify.fit.keep_freed_memory`),
+    and numpy no longer asks for huge pages (:func:`~hil.identify.fit.small_pages`).
     """
     keep_freed_memory()
+    small_pages()
     with threadpool_limits(limits=1, user_api="blas"):
         return _identify(data, cfg, max_effects, progress, intersample)
 
@@ -819,7 +822,7 @@ class _Loop:
         """The held-first refit of ``d`` (:meth:`held_first`) leaves the residual white
         (:func:`structure_excess` 0) and passes :meth:`verdict_on`: it is kept without the
         plain refit (:meth:`forward`)."""
-        return (structure_excess(self.analysis_of(made.fit)) == 0.0
+        return (not made.fit.left and structure_excess(self.analysis_of(made.fit)) == 0.0
                 and not self.verdict_on([d], made.fit, made.held))
 
     def others_held(self) -> list[str]:
@@ -866,12 +869,14 @@ class _Loop:
         free = list(first.free) + [p for p in others if p not in first.free]
 
         def polish(extra: list[str], at_line: float | None = None) -> HeldFirst:
-            start, more = first.theta, []
+            start, more, fitter = first.theta, [], refitter
             if at_line is not None:
                 start = first.theta.copy()
                 start[IDX["ks"]] = at_line
                 more = [p for p in ("ks", "jc") if p not in free and p not in extra]
-            alt, held_alt = guarded_fit(refitter, start, free + extra + more, start,
+                fitter = self.refitter()
+                fitter.leave = line_left(self.exp, start)
+            alt, held_alt = guarded_fit(fitter, start, free + extra + more, start,
                                         sigma=current.sigma, configured=self.configured,
                                         max_nfev=PLAIN_NFEV)
             freed = [p for p in again + extra + more if p in alt.free]

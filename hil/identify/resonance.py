@@ -15,6 +15,7 @@ onto the record's reaches the rig's basin (docs/identify.md, *The conrod triple 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 from scipy.signal import welch
@@ -29,6 +30,12 @@ BAND = 0.3
 MIN_LINE_RATIO = 20.0
 #: The model's line within this share of the record's: nothing to move.
 SAME_LINE = 0.01
+#: A descent started with the model's line on the record's has left it once the model's
+#: undamped resonance is this share away from where it started (:func:`line_left`): the
+#: polishes that keep the line move it by a few per cent (conrod triple, 16 s, rig seed 3:
+#: at most 3.5 %), the one that went to the far basin by 28 % in its second step (seed 1:
+#: ``J_c`` 2.1x, ``k_s`` 1.07x).
+LINE_KEPT = 0.15
 
 
 def spectral_line(y: np.ndarray, fs: float, lo: float, hi: float) -> tuple[float, float]:
@@ -48,6 +55,16 @@ def undamped_hz(exp: Experiment, theta: np.ndarray) -> float:
     """The model's piston resonance without damping (Hz): ``k_s`` and the rod on ``J_c``."""
     k_rod = theta[IDX["k_rod"]] if exp.load == "conrod" else 0.0
     return math.sqrt((theta[IDX["ks"]] + k_rod) / theta[IDX["jc"]]) / (2.0 * math.pi)
+
+
+def line_left(exp: Experiment, start: np.ndarray) -> Callable[[np.ndarray], bool]:
+    """For a fit started at ``start`` with the model's piston line on the record's: a test
+    of a parameter vector, True where its undamped resonance (:func:`undamped_hz`) is more
+    than :data:`LINE_KEPT` from the start's. Such a fit trades the line for another basin
+    (``J_c`` taking up the seal's friction: the model's line far below the record's) and is
+    stopped there rather than run to that basin's end."""
+    f_start = undamped_hz(exp, start)
+    return lambda theta: abs(undamped_hz(exp, theta) / f_start - 1.0) > LINE_KEPT
 
 
 def stiffness_at_line(exp: Experiment, theta: np.ndarray, outputs: dict[str, np.ndarray],
@@ -86,4 +103,4 @@ def stiffness_at_line(exp: Experiment, theta: np.ndarray, outputs: dict[str, np.
     return (float(ks), f_rec, f_mod) if ks > 0 else None
 
 
-__all__ = ["spectral_line", "stiffness_at_line", "undamped_hz"]
+__all__ = ["line_left", "spectral_line", "stiffness_at_line", "undamped_hz"]

@@ -101,3 +101,20 @@ def test_a_parameter_named_twice_is_fitted_once(model):
     assert twice.free == FREE
     assert twice.theta.tobytes() == once.theta.tobytes()
     assert twice.jac.shape == once.jac.shape
+
+
+def test_small_pages_turns_numpy_huge_page_advice_off():
+    # numpy's switch returns the advice as it was: off after small_pages, whatever before
+    switch = getattr(np._core.multiarray, "_set_madvise_hugepage", None)
+    if switch is None:
+        pytest.skip("this numpy has no huge-page switch")
+    before = switch(True)
+    try:
+        assert fit_module.small_pages()
+        assert switch(True) is False
+        fit_module.SMALL_PAGES = False
+        assert not fit_module.small_pages()
+        assert switch(True) is True  # left as it was
+    finally:
+        fit_module.SMALL_PAGES = True
+        switch(before)
