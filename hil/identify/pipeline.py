@@ -874,6 +874,8 @@ class _Loop:
                 start = first.theta.copy()
                 start[IDX["ks"]] = at_line
                 more = [p for p in ("ks", "jc") if p not in free and p not in extra]
+                # a descent from the line that leaves it is on its way to another basin
+                # (J_c taking up the seal's friction): stopped there, not run to its end
                 fitter = self.refitter()
                 fitter.leave = line_left(self.exp, start)
             alt, held_alt = guarded_fit(fitter, start, free + extra + more, start,
