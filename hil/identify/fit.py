@@ -875,7 +875,7 @@ def levenberg_marquardt(
             cost_new = float(r_new @ r_new)
             if np.isfinite(cost_new) and cost_new < cost:
                 gain = cost - cost_new
-                dr = r_new - r
+                dr = r_new - r if updates else None  # (for a Broyden update only)
                 x, r, cost = x_new, r_new, cost_new
                 if leave is not None and leave(x):
                     raise LeftRegion(x)
